@@ -1,0 +1,99 @@
+#include "protocol/candump_log.hpp"
+
+#include <gtest/gtest.h>
+
+namespace pumptherm::protocol {
+namespace {
+
+TEST(CandumpLog, ParsesClassicFrame) {
+  const auto p = ParseCandumpLine("(1436509052.249713) vcan0 044#2A366C2BBA");
+  ASSERT_TRUE(p.ok) << p.error;
+  EXPECT_EQ(p.record.time_us, 1436509052249713);
+  EXPECT_EQ(p.record.interface, "vcan0");
+  EXPECT_EQ(p.record.frame.id, 0x044U);
+  EXPECT_FALSE(p.record.frame.extended);
+  ASSERT_EQ(p.record.frame.len, 5);
+  EXPECT_EQ(p.record.frame.data[0], 0x2A);
+  EXPECT_EQ(p.record.frame.data[4], 0xBA);
+}
+
+TEST(CandumpLog, ParsesExtendedRemoteFdAndErrorFrames) {
+  auto p = ParseCandumpLine("(0.000001) can1 1F334455#R");
+  ASSERT_TRUE(p.ok) << p.error;
+  EXPECT_TRUE(p.record.frame.extended);
+  EXPECT_TRUE(p.record.frame.remote);
+  EXPECT_EQ(p.record.frame.id, 0x1F334455U);
+
+  p = ParseCandumpLine("(1.5) can0 123##1" + std::string(24, 'A'));
+  ASSERT_TRUE(p.ok) << p.error;
+  EXPECT_TRUE(p.record.frame.fd);
+  EXPECT_EQ(p.record.frame.fd_flags, 1);
+  EXPECT_EQ(p.record.frame.len, 12);
+  EXPECT_EQ(p.record.time_us, 1500000);
+
+  p = ParseCandumpLine("(1.000000) can0 20000080#0000000000000000");
+  ASSERT_TRUE(p.ok) << p.error;
+  EXPECT_TRUE(p.record.frame.error);
+  EXPECT_EQ(p.record.frame.id, 0x80U);
+}
+
+TEST(CandumpLog, SkipsBlankAndCommentLines) {
+  EXPECT_TRUE(ParseCandumpLine("").skip);
+  EXPECT_TRUE(ParseCandumpLine("   ").skip);
+  EXPECT_TRUE(ParseCandumpLine("# recorded on the bench").skip);
+}
+
+TEST(CandumpLog, ErrorsNameTheColumn) {
+  struct Case {
+    const char* line;
+    std::size_t column;
+  };
+  const Case cases[] = {
+      {"1436509052.249713) vcan0 044#00", 1},      // no '('
+      {"(1436509052.249713 vcan0 044#00", 19},     // no ')'
+      {"(1.0) vcan0 04G#00", 15},                  // bad hex in the id
+      {"(1.0) vcan0 0444#00", 13},                 // 4-digit id
+      {"(1.0) vcan0 800#00", 13},                  // 11-bit id out of range
+      {"(1.0) vcan0 044#0", 18},                   // half a byte
+      {"(1.0) vcan0 044#000102030405060708", 33},  // 9 bytes classic
+      {"(1.0) vcan0 044", 16},                     // no '#'
+      {"(1.0) vcan0 123##1001122", 25},            // FD length 3 ok, 3 bytes + flags
+  };
+  for (const auto& c : cases) {
+    const auto p = ParseCandumpLine(c.line);
+    if (std::string_view(c.line) == "(1.0) vcan0 123##1001122") {
+      EXPECT_TRUE(p.ok) << c.line;
+      continue;
+    }
+    EXPECT_FALSE(p.ok) << c.line;
+    EXPECT_EQ(p.column, c.column) << c.line << ": " << p.error;
+    EXPECT_STRNE(p.error, "") << c.line;
+  }
+}
+
+TEST(CandumpLog, FormatRoundTrips) {
+  const char* lines[] = {
+      "(1436509052.249713) vcan0 044#2A366C2BBA",
+      "(0000000001.000000) can0 1F334455#R",
+      "(0000000002.000000) can0 123##1AABBCCDDEEFF0011223344556677",
+      "(0000000003.000000) can0 7FF#",
+  };
+  for (const char* line : lines) {
+    const auto p = ParseCandumpLine(line);
+    ASSERT_TRUE(p.ok) << line << ": " << p.error;
+    const std::string out = FormatCandumpLine(p.record.time_us, p.record.interface, p.record.frame);
+    const auto q = ParseCandumpLine(out);
+    ASSERT_TRUE(q.ok) << out;
+    EXPECT_EQ(q.record.time_us, p.record.time_us);
+    EXPECT_EQ(q.record.frame.id, p.record.frame.id);
+    EXPECT_EQ(q.record.frame.len, p.record.frame.len);
+    EXPECT_EQ(q.record.frame.data, p.record.frame.data);
+    EXPECT_EQ(q.record.frame.fd, p.record.frame.fd);
+    EXPECT_EQ(q.record.frame.remote, p.record.frame.remote);
+  }
+  EXPECT_EQ(FormatCandumpLine(1436509052249713, "vcan0", ParseCandumpLine("(1.0) x 044#2A366C2BBA").record.frame),
+            "(1436509052.249713) vcan0 044#2A366C2BBA");
+}
+
+}  // namespace
+}  // namespace pumptherm::protocol
