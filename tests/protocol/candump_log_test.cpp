@@ -75,7 +75,7 @@ TEST(CandumpLog, FormatRoundTrips) {
   const char* lines[] = {
       "(1436509052.249713) vcan0 044#2A366C2BBA",
       "(0000000001.000000) can0 1F334455#R",
-      "(0000000002.000000) can0 123##1AABBCCDDEEFF0011223344556677",
+      "(0000000002.000000) can0 123##1AABBCCDDEEFF001122334455",
       "(0000000003.000000) can0 7FF#",
   };
   for (const char* line : lines) {
