@@ -1,0 +1,62 @@
+#include "tools/common/csv.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace pumptherm::tools {
+namespace {
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const CsvError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Csv, ReadsColumnsByName) {
+  const auto t = CsvTable::Parse("time_s, iq_A ,x\n0,1.5,a\n1,-2e-3,b\n\n", "t.csv");
+  EXPECT_EQ(t.rows(), 2U);
+  EXPECT_EQ(t.Column("iq_A"), (std::vector<double>{1.5, -2e-3}));
+  EXPECT_EQ(t.Time(), (std::vector<double>{0.0, 1.0}));
+  EXPECT_TRUE(t.Has("x"));
+  EXPECT_FALSE(t.Has("y"));
+}
+
+TEST(Csv, ErrorsNameFileRowAndColumn) {
+  const auto t = CsvTable::Parse("time_s,iq_A\n0,1\n1,abc\n2,nan\n3,inf\n", "t.csv");
+  EXPECT_EQ(ErrorOf([&] { t.Column("iq_A"); }), "t.csv: row 3, column 'iq_A': 'abc' is not a number");
+  EXPECT_EQ(ErrorOf([&] { t.Column("uq_V"); }),
+            "t.csv: missing column 'uq_V' (the header has: time_s, iq_A)");
+  const auto u = CsvTable::Parse("time_s,iq_A\n0,1\n1,nan\n", "u.csv");
+  EXPECT_EQ(ErrorOf([&] { u.Column("iq_A"); }),
+            "u.csv: row 3, column 'iq_A': 'nan' is not a finite number");
+  EXPECT_TRUE(std::isnan(u.ColumnAllowingNaN("iq_A")[1]));
+  const auto v = CsvTable::Parse("time_s,iq_A\n0,1\n2,1\n1,1\n", "v.csv");
+  EXPECT_EQ(ErrorOf([&] { v.Time(); }), "v.csv: row 4, column 'time_s': time 1 does not advance past 2");
+  EXPECT_EQ(ErrorOf([] { CsvTable::Parse("a,b\n1\n", "w.csv"); }),
+            "w.csv: row 2: 1 cells, but the header has 2 columns");
+  EXPECT_EQ(ErrorOf([] { CsvTable::Parse("a,a\n", "d.csv"); }),
+            "d.csv:1: column 'a' appears twice in the header");
+  EXPECT_EQ(ErrorOf([] { CsvTable::Parse("\n\n", "e.csv"); }), "e.csv: empty file: expected a header row");
+  EXPECT_NE(ErrorOf([] { CsvTable::Read("/nonexistent/x.csv"); }).find("cannot open"), std::string::npos);
+}
+
+TEST(Csv, WriterRoundTrips) {
+  const std::string path = ::testing::TempDir() + "/csv_writer_test.csv";
+  {
+    CsvWriter w(path, {"time_s", "frame_C"});
+    w.Row({0.0, 25.125});
+    w.Row({0.1, std::nan("")});
+    w.Close();
+  }
+  const auto t = CsvTable::Read(path);
+  EXPECT_EQ(t.Column("time_s"), (std::vector<double>{0.0, 0.1}));
+  EXPECT_EQ(t.ColumnAllowingNaN("frame_C")[0], 25.125);
+  EXPECT_TRUE(std::isnan(t.ColumnAllowingNaN("frame_C")[1]));
+}
+
+}  // namespace
+}  // namespace pumptherm::tools

@@ -1,0 +1,88 @@
+#pragma once
+/// Numeric CSV tables for the tools (docs/architecture.md, "data for tools"): a header row,
+/// then one row of numbers per line; units in the column names (`time_s`, `iq_A`, `frame_C`).
+///
+/// Reading checks every cell as it is asked for and throws `CsvError` naming the file, the row
+/// (1-based line number in the file) and the column name. Nothing is silently converted.
+
+#include <cstddef>
+#include <cstdio>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace pumptherm::tools {
+
+/// Bad CSV input: the message names file, row and column. Subcommands turn it into exit code 2.
+class CsvError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// A parsed CSV file: column names and rows of cells, all text until a column is asked for.
+class CsvTable {
+ public:
+  /// Parses `text`; `source` names it in errors (a path, or "<stdin>").
+  /// Throws CsvError: empty text, no header, duplicate column name, a row with a different
+  /// number of cells than the header.
+  static CsvTable Parse(std::string_view text, std::string source);
+
+  /// Reads and parses the file at `path` ("-" reads standard input).
+  /// Throws CsvError when it cannot be read (with errno's text) or does not parse.
+  static CsvTable Read(const std::string& path);
+
+  const std::string& source() const { return source_; }
+  const std::vector<std::string>& columns() const { return columns_; }
+  std::size_t rows() const { return rows_.size(); }
+  bool Has(std::string_view column) const { return Index(column).has_value(); }
+
+  /// Every value of a required numeric column. Throws CsvError when the column is missing, or a
+  /// cell is empty, not a number, NaN or infinite (naming the row and column).
+  std::vector<double> Column(std::string_view column) const;
+
+  /// Like Column(), but an empty or "nan" cell gives NaN ("not measured"); still rejects text
+  /// that is not a number and infinities.
+  std::vector<double> ColumnAllowingNaN(std::string_view column) const;
+
+  /// The `time_s` column (or `column`), checked to be strictly increasing; throws CsvError
+  /// naming the first row where time does not advance.
+  std::vector<double> Time(std::string_view column = "time_s") const;
+
+  /// File line number (1-based) of data row `row` (0-based), for error messages.
+  std::size_t LineOf(std::size_t row) const { return lines_[row]; }
+
+ private:
+  std::optional<std::size_t> Index(std::string_view column) const;
+  std::vector<double> Numbers(std::string_view column, bool allow_nan) const;
+
+  std::string source_;
+  std::vector<std::string> columns_;
+  std::vector<std::vector<std::string>> rows_;
+  std::vector<std::size_t> lines_;
+};
+
+/// Writes a CSV file: header, then rows of numbers with `%.9g`-style shortest round-trip text.
+class CsvWriter {
+ public:
+  /// Opens `path` for writing ("-" is standard output). Throws std::system_error on failure.
+  CsvWriter(const std::string& path, std::vector<std::string> columns);
+  ~CsvWriter();
+  CsvWriter(const CsvWriter&) = delete;
+  CsvWriter& operator=(const CsvWriter&) = delete;
+
+  /// Appends one row; `values.size()` must equal the number of columns (else std::logic_error).
+  void Row(const std::vector<double>& values);
+  /// Flushes and closes; throws std::system_error when the data could not be written.
+  void Close();
+
+ private:
+  std::FILE* file_ = nullptr;
+  bool owned_ = false;
+  std::string path_;
+  std::size_t columns_ = 0;
+  std::string line_;
+};
+
+}  // namespace pumptherm::tools
