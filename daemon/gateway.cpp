@@ -1,0 +1,82 @@
+#include "daemon/gateway.hpp"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <limits>
+
+namespace pumptherm::daemon {
+
+std::size_t Gateway::Interface(std::string_view name) {
+  for (std::size_t i = 0; i < interfaces_.size(); ++i) {
+    if (interfaces_[i].name == name) return i;
+  }
+  interfaces_.push_back(InterfaceCounters{.name = std::string(name)});
+  return interfaces_.size() - 1;
+}
+
+void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& timed) {
+  InterfaceCounters& c = interfaces_[iface];
+  if (timed.frame.error) {
+    ++c.rx_error_frames;
+    return;
+  }
+  ++c.rx_frames;
+  ++total_rx_;
+  ++counts_[CountKey{iface, timed.frame.extended, timed.frame.id}];
+}
+
+std::optional<protocol::CanFrame> Gateway::HeartbeatDue(std::int64_t now_us) {
+  if (config_.heartbeat_period_s <= 0.0) return std::nullopt;
+  if (start_us_ < 0) {
+    start_us_ = now_us;
+    next_heartbeat_us_ = now_us;
+  }
+  if (now_us < next_heartbeat_us_) return std::nullopt;
+  const auto period_us = static_cast<std::int64_t>(std::llround(config_.heartbeat_period_s * 1e6));
+  next_heartbeat_us_ += period_us;
+  // After a stall longer than a period, skip the missed beats instead of bursting them.
+  if (next_heartbeat_us_ <= now_us) next_heartbeat_us_ = now_us + period_us;
+  protocol::CanFrame f;
+  f.id = config_.heartbeat_id;
+  f.len = 8;
+  const auto uptime_s = static_cast<std::uint32_t>((now_us - start_us_) / 1000000);
+  const auto rx = static_cast<std::uint32_t>(total_rx_);
+  for (int k = 0; k < 4; ++k) {
+    f.data[k] = static_cast<std::uint8_t>(uptime_s >> (8 * k));
+    f.data[4 + k] = static_cast<std::uint8_t>(rx >> (8 * k));
+  }
+  return f;
+}
+
+std::int64_t Gateway::NextHeartbeatUs() const {
+  if (config_.heartbeat_period_s <= 0.0) return std::numeric_limits<std::int64_t>::max();
+  return next_heartbeat_us_ < 0 ? 0 : next_heartbeat_us_;
+}
+
+std::string Gateway::StatusLine() const {
+  std::uint64_t drops = 0;
+  std::uint64_t tx = 0;
+  std::uint64_t tx_dropped = 0;
+  std::string states;
+  for (const auto& c : interfaces_) {
+    drops += c.rx_queue_drops;
+    tx += c.tx_frames;
+    tx_dropped += c.tx_dropped;
+    states += fmt::format(" {}:{}", c.name, c.up ? "up" : "DOWN");
+  }
+  return fmt::format("rx {} frames, {} IDs, {} rx drops; tx {} frames, {} tx dropped;{}",
+                     total_rx_, counts_.size(), drops, tx, tx_dropped, states);
+}
+
+std::string Gateway::CountTable() const {
+  std::string out = fmt::format("{:<16} {:>8} {:>12}\n", "interface", "can_id", "frames");
+  for (const auto& [key, n] : counts_) {
+    const auto& [iface, extended, id] = key;
+    out += fmt::format("{:<16} {:>8} {:>12}\n", interfaces_[iface].name,
+                       extended ? fmt::format("{:08X}", id) : fmt::format("{:03X}", id), n);
+  }
+  return out;
+}
+
+}  // namespace pumptherm::daemon

@@ -1,0 +1,71 @@
+#pragma once
+/// The gateway's per-frame work, independent of where frames come from (live sockets or a
+/// candump log) and of the clock (time enters as an argument). For now it counts frames per
+/// interface and CAN ID and produces the heartbeat; later issues add the per-pump pipeline.
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <tuple>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "protocol/can_frame.hpp"
+
+namespace pumptherm::daemon {
+
+/// Counters of one interface.
+struct InterfaceCounters {
+  std::string name;
+  std::uint64_t rx_frames = 0;
+  std::uint64_t rx_queue_drops = 0;   ///< frames the kernel dropped (SO_RXQ_OVFL)
+  std::uint64_t rx_error_frames = 0;
+  std::uint64_t tx_frames = 0;
+  std::uint64_t tx_dropped = 0;       ///< ENOBUFS/EAGAIN/ENETDOWN on send: counted, not fatal
+  bool up = true;
+};
+
+class Gateway {
+ public:
+  explicit Gateway(GatewayConfig config) : config_(std::move(config)) {}
+
+  /// Index of the interface called `name`, registered on first use.
+  std::size_t Interface(std::string_view name);
+
+  /// Counts one received frame on interface `iface` (from Interface()).
+  void OnFrame(std::size_t iface, const protocol::TimedFrame& frame);
+
+  /// The heartbeat frame to send at monotonic time `now_us`, if one is due. The first is due at
+  /// the first call; then every heartbeat_period_s without drift.
+  /// Layout (8 bytes, little endian): uptime in s (u32), frames received in all (u32, wraps).
+  std::optional<protocol::CanFrame> HeartbeatDue(std::int64_t now_us);
+
+  /// Next monotonic time a heartbeat is due (INT64_MAX when disabled).
+  std::int64_t NextHeartbeatUs() const;
+
+  InterfaceCounters& counters(std::size_t iface) { return interfaces_[iface]; }
+  const std::vector<InterfaceCounters>& interfaces() const { return interfaces_; }
+
+  /// Frames per (interface index, extended, CAN ID).
+  using CountKey = std::tuple<std::size_t, bool, std::uint32_t>;
+  const std::map<CountKey, std::uint64_t>& counts() const { return counts_; }
+  std::uint64_t total_rx() const { return total_rx_; }
+
+  /// One line for systemd's STATUS= and the journal: totals, drops and interface states.
+  std::string StatusLine() const;
+
+  /// The per-ID count table (fixed-width columns, one row per interface and CAN ID).
+  std::string CountTable() const;
+
+ private:
+  GatewayConfig config_;
+  std::vector<InterfaceCounters> interfaces_;
+  std::map<CountKey, std::uint64_t> counts_;
+  std::uint64_t total_rx_ = 0;
+  std::int64_t start_us_ = -1;
+  std::int64_t next_heartbeat_us_ = -1;
+};
+
+}  // namespace pumptherm::daemon

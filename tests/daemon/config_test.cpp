@@ -1,0 +1,80 @@
+#include "daemon/config.hpp"
+
+#include <gtest/gtest.h>
+
+namespace pumptherm::daemon {
+namespace {
+
+std::string ErrorOf(const std::string& text) {
+  try {
+    ParseConfig(text, "p.toml");
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Config, ParsesGatewayAndInterfaces) {
+  const auto c = ParseConfig(R"(
+[gateway]
+name = "bench"
+heartbeat_id = 0x7F1
+heartbeat_period_s = 0.5
+status_period_s = 1
+
+[[can]]
+interface = "vcan0"
+
+[[can]]
+interface = "can1"
+error_frames = true
+)",
+                             "p.toml");
+  EXPECT_EQ(c.gateway.name, "bench");
+  EXPECT_EQ(c.gateway.heartbeat_id, 0x7F1U);
+  EXPECT_DOUBLE_EQ(c.gateway.heartbeat_period_s, 0.5);
+  EXPECT_DOUBLE_EQ(c.gateway.status_period_s, 1.0);
+  ASSERT_EQ(c.interfaces.size(), 2U);
+  EXPECT_EQ(c.interfaces[0].name, "vcan0");
+  EXPECT_FALSE(c.interfaces[0].error_frames);
+  EXPECT_TRUE(c.interfaces[1].error_frames);
+}
+
+TEST(Config, EmptyFileGivesDefaults) {
+  const auto c = ParseConfig("", "p.toml");
+  EXPECT_EQ(c.gateway.heartbeat_id, 0x7F0U);
+  EXPECT_TRUE(c.interfaces.empty());
+}
+
+TEST(Config, ErrorsNameFileLineAndKey) {
+  EXPECT_EQ(ErrorOf("[gateway]\nheartbeat_period_s = \"1\"\n"),
+            "p.toml:2: key 'gateway.heartbeat_period_s': expected a number");
+  EXPECT_EQ(ErrorOf("[gateway]\n\nheartbeat_id = 0x800\n"),
+            "p.toml:3: key 'gateway.heartbeat_id': 2048 is outside [0, 2047]");
+  EXPECT_EQ(ErrorOf("[gateway]\nheartbeat_periods = 1\n"),
+            "p.toml:2: key 'gateway.heartbeat_periods': unknown key");
+  EXPECT_EQ(ErrorOf("[[can]]\nerror_frames = true\n"),
+            "p.toml:1: key 'can[0].interface': missing (required)");
+  EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"vcan0\"\n[[can]]\ninterface = \"vcan0\"\n"),
+            "p.toml:4: key 'can[1].interface': 'vcan0' is listed twice");
+  EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"a/b\"\n"),
+            "p.toml:2: key 'can[0].interface': 'a/b' is not an interface name (1 to 15 "
+            "characters, no '/' or space)");
+  EXPECT_EQ(ErrorOf("[gateway]\nstatus_period_s = nan\n"),
+            "p.toml:2: key 'gateway.status_period_s': expected a finite number");
+  EXPECT_EQ(ErrorOf("[gateway\n"),
+            "p.toml:1:9: Error while parsing table header: expected ']', saw '\\n'");
+  EXPECT_EQ(ErrorOf("gateway = 3\n"), "p.toml:1: key 'gateway': expected a table [gateway]");
+}
+
+TEST(Config, UnreadableFileIsAConfigError) {
+  try {
+    LoadConfig("/nonexistent/pumpthermd.toml");
+    FAIL() << "no error";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()), "/nonexistent/pumpthermd.toml: cannot open: No such file or directory");
+  }
+}
+
+}  // namespace
+}  // namespace pumptherm::daemon

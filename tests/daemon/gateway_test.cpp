@@ -1,0 +1,102 @@
+#include "daemon/gateway.hpp"
+
+#include <gtest/gtest.h>
+
+#include <sstream>
+
+#include "daemon/offline.hpp"
+
+namespace pumptherm::daemon {
+namespace {
+
+protocol::TimedFrame Frame(std::uint32_t id, bool extended = false) {
+  protocol::TimedFrame f;
+  f.frame.id = id;
+  f.frame.extended = extended;
+  f.frame.len = 8;
+  return f;
+}
+
+TEST(Gateway, CountsPerInterfaceAndId) {
+  Gateway g({});
+  const auto a = g.Interface("can0");
+  const auto b = g.Interface("can1");
+  EXPECT_EQ(g.Interface("can0"), a);
+  g.OnFrame(a, Frame(0x181));
+  g.OnFrame(a, Frame(0x181));
+  g.OnFrame(b, Frame(0x181));
+  g.OnFrame(a, Frame(0x181, true));
+  auto err = Frame(0x80);
+  err.frame.error = true;
+  g.OnFrame(a, err);
+  EXPECT_EQ(g.total_rx(), 4U);
+  EXPECT_EQ(g.counts().at({a, false, 0x181}), 2U);
+  EXPECT_EQ(g.counts().at({b, false, 0x181}), 1U);
+  EXPECT_EQ(g.counts().at({a, true, 0x181}), 1U);
+  EXPECT_EQ(g.counters(a).rx_error_frames, 1U);
+  EXPECT_EQ(g.CountTable(),
+            "interface          can_id       frames\n"
+            "can0                  181            2\n"
+            "can0             00000181            1\n"
+            "can1                  181            1\n");
+}
+
+TEST(Gateway, HeartbeatKeepsItsPeriodWithoutDrift) {
+  GatewayConfig c;
+  c.heartbeat_period_s = 0.1;
+  c.heartbeat_id = 0x7F0;
+  Gateway g(c);
+  int beats = 0;
+  // Ticks arrive late and irregularly (every 7 ms); beats still come 10 per second.
+  for (std::int64_t t = 0; t <= 10'000'000; t += 7000) {
+    if (auto f = g.HeartbeatDue(t)) {
+      ++beats;
+      EXPECT_EQ(f->id, 0x7F0U);
+      EXPECT_EQ(f->len, 8);
+    }
+  }
+  // The last tick is at 9.996 s: beats due at 0, 0.1, ..., 9.9 s, and no more.
+  EXPECT_EQ(beats, 100);
+}
+
+TEST(Gateway, HeartbeatCarriesUptimeAndFrameCount) {
+  GatewayConfig c;
+  c.heartbeat_period_s = 1.0;
+  Gateway g(c);
+  ASSERT_TRUE(g.HeartbeatDue(5'000'000));
+  const auto i = g.Interface("can0");
+  for (int k = 0; k < 300; ++k) g.OnFrame(i, Frame(0x100));
+  const auto f = g.HeartbeatDue(8'000'000);
+  ASSERT_TRUE(f);
+  EXPECT_EQ(f->data[0], 3);                      // uptime 3 s
+  EXPECT_EQ(f->data[4] | (f->data[5] << 8), 300);
+  EXPECT_FALSE(g.HeartbeatDue(8'500'000));
+}
+
+TEST(Gateway, DisabledHeartbeatNeverComes) {
+  GatewayConfig c;
+  c.heartbeat_period_s = 0.0;
+  Gateway g(c);
+  EXPECT_FALSE(g.HeartbeatDue(0));
+  EXPECT_FALSE(g.HeartbeatDue(100'000'000));
+}
+
+TEST(Offline, CountsFramesAndSkipsMalformedLines) {
+  std::istringstream log(
+      "(1.000000) can0 181#0102\n"
+      "garbage\n"
+      "\n"
+      "(1.010000) can0 181#0102\n"
+      "(1.020000) can1 18FF5001#00\n"
+      "(1.030000) can0 181#01020\n");
+  Gateway g({});
+  const auto r = RunOffline(log, "t.log", g);
+  EXPECT_EQ(r.lines, 6U);
+  EXPECT_EQ(r.frames, 3U);
+  EXPECT_EQ(r.bad_lines, 2U);
+  EXPECT_EQ(g.counts().at({g.Interface("can0"), false, 0x181}), 2U);
+  EXPECT_EQ(g.counts().at({g.Interface("can1"), true, 0x18FF5001}), 1U);
+}
+
+}  // namespace
+}  // namespace pumptherm::daemon

@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# pumpthermd's command line: each bad input gives one clear line and the documented exit code;
+# the offline run of the bundled recording prints the per-ID counts the log really holds.
+set -u
+bin=$1
+data=$2
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+fail=0
+expect() {  # expect CODE PATTERN -- command...
+  local code=$1 pattern=$2
+  shift 3
+  local out rc
+  out=$("$@" 2>&1)
+  rc=$?
+  if [[ $rc -ne $code ]] || ! grep -qE -- "$pattern" <<<"$out"; then
+    echo "FAIL: $* -> exit $rc (want $code), output:"; echo "$out" | sed 's/^/    /'
+    echo "    wanted a line matching: $pattern"
+    fail=1
+  else
+    echo "ok: $* -> exit $rc: $(head -n1 <<<"$out")"
+  fi
+}
+
+printf '[gateway]\nheartbeat_period_s = "fast"\n' > "$tmp/bad.toml"
+expect 2 "bad.toml:2: key 'gateway.heartbeat_period_s': expected a number" -- "$bin" --config "$tmp/bad.toml"
+expect 2 "bad.toml:2: key 'gateway.heartbeat_period_s'" -- "$bin" --check-config "$tmp/bad.toml"
+printf '[[can]]\ninterface = "pt_nosuch0"\n' > "$tmp/missing.toml"
+expect 0 "missing.toml: OK \(1 interface\)" -- "$bin" --check-config "$tmp/missing.toml"
+# A missing interface: "cannot find it" where the kernel has CAN, "no SocketCAN" where not.
+expect 1 "interface 'pt_nosuch0': cannot (find it|open a CAN socket)" -- "$bin" --config "$tmp/missing.toml"
+expect 1 "nonexistent.log: cannot read the log: No such file or directory" -- "$bin" -r "$tmp/nonexistent.log"
+expect 2 "nothing to do" -- "$bin"
+
+# Offline counts equal what the log holds, counted independently here with awk.
+"$bin" -r "$data/skeleton.log" > "$tmp/offline.txt" 2> "$tmp/offline.err" || { echo "FAIL: offline run"; fail=1; }
+awk '{split($3, a, "#"); n[$2 " " a[1]]++} END {for (k in n) print k, n[k]}' "$data/skeleton.log" | sort > "$tmp/want.txt"
+awk 'NR > 2 {print $1, $2, $3}' "$tmp/offline.txt" | sort > "$tmp/got.txt"
+if diff -u "$tmp/want.txt" "$tmp/got.txt"; then echo "ok: offline per-ID counts match the log ($(wc -l < "$tmp/got.txt") IDs)"; else echo "FAIL: offline counts differ"; fail=1; fi
+grep -q "2210 frames, 5 CAN IDs, 0 malformed lines skipped" "$tmp/offline.txt" || { echo "FAIL: summary line"; cat "$tmp/offline.txt"; fail=1; }
+
+# Malformed lines are reported with file:line:column and counted; the run goes on.
+{ head -n 5 "$data/skeleton.log"; echo "(1.0) can0 1G1#00"; tail -n 5 "$data/skeleton.log"; } > "$tmp/bad.log"
+expect 0 "bad.log:6:13: expected a hexadecimal CAN ID; line skipped" -- "$bin" -r "$tmp/bad.log"
+"$bin" -r "$tmp/bad.log" 2>/dev/null | grep -q "10 frames, .* 1 malformed lines skipped" || { echo "FAIL: bad line not counted"; fail=1; }
+# From stdin, as in `candump -L can0 | pumpthermd -r -`.
+"$bin" -r - < "$data/skeleton.log" | grep -q "<stdin>: 2210 frames" || { echo "FAIL: stdin"; fail=1; }
+exit $fail
