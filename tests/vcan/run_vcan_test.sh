@@ -236,9 +236,11 @@ $ip link set lo up && $ip link set lo multicast on && $ip route add 224.0.0.0/4 
 export BIN_DIR=/opt/bin DATA_DIR=/opt/data WORK_DIR=/tmp/work OUT_DIR=/tmp/out VCAN_MODE=guest
 export PATH="$BIN_DIR:$PATH"
 mkdir -p "$WORK_DIR" "$OUT_DIR"
+say "vcan0 and lo are up; running the scenario of test $TEST_NAME"
 echo "@@PUMPTHERM-VCAN-BEGIN kernel=$kver@@" >"$out"
 (cd "$WORK_DIR" && exec /bin/sh /opt/scenario.sh) </dev/null >"$out" 2>&1
 rc=$?
+say "the scenario exited with code $rc"
 # Whatever the scenario left running goes now, so that the marker below is the last writer and
 # closing the port waits until every byte has left the guest.
 kill -9 -1 2>/dev/null
@@ -268,7 +270,9 @@ find_kernel() {
   local v
   kernel_version=$(for v in "$kernel_root"/boot/vmlinuz-*; do
     v=${v##*/vmlinuz-}
-    [[ -r "$kernel_root/boot/vmlinuz-$v" && -d "$kernel_root/lib/modules/$v/kernel" ]] && echo "$v"
+    if [[ -r "$kernel_root/boot/vmlinuz-$v" && -d "$kernel_root/lib/modules/$v/kernel" ]]; then
+      echo "$v"
+    fi
   done | sort -V | tail -n 1)
   [[ -n "$kernel_version" ]] ||
     cannot_run "no guest kernel with its modules under $kernel_root (run tools/setup.sh)"
@@ -382,6 +386,8 @@ build_base() {
     chmod 755 "$stage/init"
     write_cpio "$stage" "$base_cpio.tmp.$$"
     mv "$base_cpio.tmp.$$" "$base_cpio"
+    # Bases made by older harnesses or from older packages are of no further use.
+    find "$cache_dir" -maxdepth 1 -name 'base-*.cpio.gz' ! -path "$base_cpio" -delete
   ) 9>"$cache_dir/.lock" || { err "building the guest's base initramfs failed"; exit 1; }
 }
 
@@ -506,7 +512,7 @@ run_guest() {
   done
   # The guest powers off right after the marker; give it a moment, then make sure.
   local i
-  for ((i = 0; i < 50; i++)); do kill -0 "$qemu_pid" 2>/dev/null || break; sleep 0.1; done
+  for ((i = 0; i < 50 && !timed_out; i++)); do kill -0 "$qemu_pid" 2>/dev/null || break; sleep 0.1; done
   kill "$qemu_pid" 2>/dev/null || true
   wait "$qemu_pid" 2>/dev/null || true
   trap - EXIT INT TERM
