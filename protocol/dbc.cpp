@@ -161,6 +161,13 @@ class Lexer {
     if (IsDigit(c) || signed_number || (c == '.' && IsDigit(At(pos_ + 1)))) {
       if (signed_number) Advance();
       while (IsDigit(At(pos_))) Advance();
+      if (!signed_number && IsDigit(c) && IsIdentStart(At(pos_)) && At(pos_) != 'e' && At(pos_) != 'E') {
+        // Real files name things "2017_5" or "5_SEC_TIMER": digits then letters is a name.
+        while (IsIdentChar(At(pos_))) Advance();
+        t.kind = TokenKind::kIdentifier;
+        t.text = text_.substr(start, pos_ - start);
+        return t;
+      }
       if (At(pos_) == '.') {
         Advance();
         while (IsDigit(At(pos_))) Advance();
@@ -377,7 +384,7 @@ class Parser {
     const std::uint64_t size = Unsigned("the message length in bytes");
     const Token tx = Expect(TokenKind::kIdentifier, "the transmitting node");
     current_message_ = -1;
-    if (raw_id == kIndependentSignalsId) {
+    if (raw_id == kIndependentSignalsId || name.text == "VECTOR__INDEPENDENT_SIG_MSG") {
       skipping_signals_ = true;  // signals of the pseudo-message are not on any bus
       return;
     }
@@ -390,8 +397,14 @@ class Parser {
       FailAt(kw.line, kw.column, fmt::format("extended message ID {:#x} above 29 bits", m.id));
     }
     if (!m.extended && m.id > 0x7FFu) {
-      FailAt(kw.line, kw.column,
-             fmt::format("standard message ID {:#x} above 11 bits (bit 31 marks 29-bit IDs)", m.id));
+      if (m.id > 0x1FFFFFFFu) {
+        FailAt(kw.line, kw.column, fmt::format("message ID {:#x} above 29 bits", m.id));
+      }
+      // Some writers omit bit 31; such an ID can only be a 29-bit one.
+      Problem(kw.line, fmt::format("message ID {:#x} above 11 bits without bit 31 set: read as "
+                                   "a 29-bit ID",
+                                   m.id));
+      m.extended = true;
     }
     if (dbc_.FindMessage(m.id, m.extended) != nullptr) {
       FailAt(kw.line, kw.column, fmt::format("duplicate message ID {:#x}", m.id));
@@ -417,6 +430,10 @@ class Parser {
       std::string_view v = ind.text;
       if (v == "M") {
         s.is_multiplexer = true;
+      } else if (v == "m") {
+        // vw_pq.dbc (opendbc) writes a lone lower-case "m" for the multiplexer.
+        s.is_multiplexer = true;
+        Problem(ind.line, fmt::format("multiplexer indicator 'm' of {} read as 'M'", s.name));
       } else if (v.size() >= 2 && v[0] == 'm' && IsDigit(v[1])) {
         v.remove_prefix(1);
         if (v.back() == 'M') {
@@ -487,6 +504,11 @@ class Parser {
     std::map<std::int64_t, std::string> out;
     while (!AcceptPunct(';')) {
       const Token& t = lex_.Peek();
+      if ((t.kind == TokenKind::kIdentifier && IsKeyword(t.text)) || t.kind == TokenKind::kEnd) {
+        Problem(t.line, t.kind == TokenKind::kEnd ? "missing ';' at the end of the file"
+                                                  : "missing ';' before this line");
+        break;
+      }
       if (t.kind != TokenKind::kNumber) Fail(t, "a raw value or ';'");
       // Values may be written as "1" or "1.0"; some tools write huge unsigned values.
       const Token num = lex_.Next();
