@@ -53,6 +53,7 @@ struct Options {
   std::vector<std::string> nodes{"frame", "yoke", "teeth", "slot_winding", "end_winding", "rotor", "shaft"};
   double telemetry_rate_Hz = 10.0;
   double duration_s = 0.0;
+  double clear_period_s = 10.0;
   std::uint32_t seed = 1;
 };
 
@@ -176,7 +177,7 @@ int Run(const Options& options) {
       alarm.level = alarm.conditions.empty() ? pumptherm::alarm_t::LEVEL_NORMAL : pumptherm::alarm_t::LEVEL_WARNING;
       Publish(lcm, base + "ALARM", alarm, sent, failures);
 
-      if (tick % (10 * ticks_per_s) == 0) {
+      if (tick % std::max(1L, std::lround(options.clear_period_s * options.telemetry_rate_Hz)) == 0) {
         pumptherm::alarm_clear_t clear;
         clear.utime = utime;
         clear.pump = pump;
@@ -228,7 +229,7 @@ int Run(const Options& options) {
 int main(int argc, char** argv) {
   CLI::App app{"Publish every pumptherm LCM type with made-up values (a demo, not estimates)"};
   app.footer(
-      "Example (one process, no network):\n"
+      "Example (multicast on loopback only; run it in a network namespace, see docs/lcm.md):\n"
       "  pumptherm-lcm-demo --lcm-url 'udpm://239.255.76.67:7667?ttl=0' --duration-s 30\n"
       "Channels: PREFIX/<pump>/TELEMETRY, TEMPS, ALARM, ALARM_CLEAR; PREFIX/GATEWAY/HEALTH.\n"
       "Prints the number of messages per channel at the end.");
@@ -242,6 +243,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--duration-s", options.duration_s, "stop after this time; 0 runs until SIGINT/SIGTERM")
       ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  app.add_option("--clear-period-s", options.clear_period_s, "period of the alarm-clear command")
+      ->check(CLI::PositiveNumber)
       ->capture_default_str();
   app.add_option("--seed", options.seed, "seed of the noise")->capture_default_str();
   try {

@@ -1,0 +1,148 @@
+#!/bin/sh
+# pumptherm-spy under Xvfb, fed by pumptherm-lcm-demo, both inside a network namespace made
+# here (multicast on its loopback only, ttl=0: nothing leaves the namespace).
+#
+#   spy_screenshot.sh BUILD_DIR [OUT.png]   screenshot of the spy with decoded messages open
+#                                           (default docs/img/pumptherm-spy.png)
+#   spy_screenshot.sh --check BUILD_DIR     smoke test: the spy finds every type of
+#                                           protocol/lcm and opens a decoded view per type
+#
+# Needs root (ip netns), Xvfb, xdotool, java; for the screenshot also xwd (x11-apps) and
+# ImageMagick's convert. Exits 77 (skip) when something is missing, 1 on failure.
+set -eu
+
+mode=shot
+if [ "${1:-}" = "--check" ]; then
+  mode=check
+  shift
+fi
+if [ $# -lt 1 ]; then
+  echo "usage: $0 [--check] BUILD_DIR [OUT.png]" >&2
+  exit 2
+fi
+source_dir=$(CDPATH= cd -- "$(dirname -- "$0")/../.." && pwd)
+build_dir=$(CDPATH= cd -- "$1" && pwd)
+out=${2:-$source_dir/docs/img/pumptherm-spy.png}
+
+work=""
+skip() {
+  echo "SKIP: $*"
+  exit 77
+}
+fail() {
+  echo "FAIL: $*" >&2
+  [ -n "$work" ] && [ -f "$work/spy.log" ] && sed 's/^/  spy: /' "$work/spy.log" >&2
+  exit 1
+}
+
+[ "$(id -u)" = 0 ] || skip "needs root to create a network namespace (ip netns)"
+tools="ip Xvfb xdotool java"
+[ "$mode" = shot ] && tools="$tools xwd convert"
+for tool in $tools; do
+  command -v "$tool" > /dev/null 2>&1 || skip "$tool is not installed (packages: iproute2 xvfb xdotool default-jre x11-apps imagemagick)"
+done
+spy=$build_dir/tools/pumptherm-spy
+demo=$build_dir/tools/pumptherm-lcm-demo
+[ -x "$spy" ] && [ -x "$demo" ] || fail "build $spy and $demo first (targets pumptherm_lcm_demo, pumptherm_lcm_types_jar)"
+
+work=$(mktemp -d /tmp/pumptherm-spy.XXXXXX)
+ns=pumptherm-spy-$$
+pids=""
+cleanup() {
+  for pid in $pids; do
+    kill "$pid" 2> /dev/null || true
+  done
+  for pid in $pids; do
+    wait "$pid" 2> /dev/null || true
+  done
+  ip netns del "$ns" 2> /dev/null || true
+  rm -rf "$work"
+}
+trap cleanup EXIT
+trap 'exit 1' INT TERM
+
+ip netns add "$ns" 2> "$work/netns.log" || skip "cannot create a network namespace: $(cat "$work/netns.log")"
+in_ns() { ip netns exec "$ns" "$@"; }
+in_ns ip link set lo up
+in_ns ip link set lo multicast on
+in_ns ip route add 224.0.0.0/4 dev lo
+url='udpm://239.255.76.67:7667?ttl=0'
+
+# Background processes are started by `ip netns exec` itself (not through in_ns), so that $!
+# is the process (ip execs the command) and cleanup can kill it.
+# Xvfb picks a free display and writes its number to the file.
+ip netns exec "$ns" Xvfb -displayfd 1 -screen 0 1920x1200x24 -nolisten tcp > "$work/display" 2> "$work/xvfb.log" &
+pids="$! $pids"
+for _ in $(seq 100); do
+  [ -s "$work/display" ] && break
+  sleep 0.2
+done
+[ -s "$work/display" ] || fail "Xvfb did not start: $(cat "$work/xvfb.log")"
+DISPLAY=:$(head -n 1 "$work/display")
+export DISPLAY
+
+ip netns exec "$ns" "$demo" --lcm-url "$url" --pumps tmp1,tmp2 --clear-period-s 2 \
+  --duration-s 600 > "$work/demo.log" 2>&1 &
+pids="$! $pids"
+ip netns exec "$ns" "$spy" --lcm-url="$url" > "$work/spy.log" 2>&1 &
+pids="$! $pids"
+
+# Polls until `xdotool search --name PATTERN` finds a window; prints its id.
+wait_window() {
+  for _ in $(seq 300); do
+    id=$(xdotool search --name "$1" 2> /dev/null | head -n 1) || true
+    if [ -n "$id" ]; then
+      echo "$id"
+      return 0
+    fi
+    sleep 0.2
+  done
+  return 1
+}
+
+main=$(wait_window '^LCM Spy$') || fail "lcm-spy's window did not appear"
+types=$(ls "$source_dir"/protocol/lcm/*.lcm | wc -l)
+grep -q "Found $types LCM types" "$work/spy.log" || fail "lcm-spy did not find the $types pumptherm types"
+
+# The spy lists channels sorted by name, one table row each. Wait until the demo's clear
+# command (every 2 s here) has arrived too, so that all nine channels are listed.
+channels="PUMPTHERM/GATEWAY/HEALTH
+PUMPTHERM/tmp1/ALARM
+PUMPTHERM/tmp1/ALARM_CLEAR
+PUMPTHERM/tmp1/TELEMETRY
+PUMPTHERM/tmp1/TEMPS
+PUMPTHERM/tmp2/ALARM
+PUMPTHERM/tmp2/ALARM_CLEAR
+PUMPTHERM/tmp2/TELEMETRY
+PUMPTHERM/tmp2/TEMPS"
+sleep 5
+xdotool windowmove "$main" 0 0 windowsize "$main" 940 240
+sleep 1
+
+# Opens the decoded view of CHANNEL (double click on its row) and places it at X Y W H.
+row_top_px=19  # height of the table header
+row_px=16      # height of a row
+open_view() {
+  channel=$1
+  row=$(printf '%s\n' "$channels" | grep -n -x "$channel" | cut -d: -f1)
+  y=$((row_top_px + row_px * (row - 1) + row_px / 2))
+  xdotool mousemove 90 "$y" click --repeat 2 --delay 100 1
+  view=$(wait_window "^$channel\$") || fail "no decoded view opened for $channel"
+  xdotool windowmove "$view" "$2" "$3" windowsize "$view" "$4" "$5"
+}
+open_view PUMPTHERM/tmp2/TEMPS 945 0 975 640
+open_view PUMPTHERM/tmp2/ALARM 0 245 940 470
+open_view PUMPTHERM/tmp1/TELEMETRY 945 645 975 555
+open_view PUMPTHERM/GATEWAY/HEALTH 0 720 940 480
+sleep 3
+
+if grep -q -i -E "exception|error" "$work/spy.log"; then
+  fail "lcm-spy reported errors"
+fi
+if [ "$mode" = check ]; then
+  echo "pumptherm-spy found $types types and opened decoded views of 4 channels"
+  exit 0
+fi
+mkdir -p "$(dirname "$out")"
+xwd -root -silent | convert xwd:- "png:$out"
+echo "wrote $out"
