@@ -45,4 +45,6 @@ expect 0 "bad.log:6:13: expected a hexadecimal CAN ID; line skipped" -- "$bin" -
 "$bin" -r "$tmp/bad.log" 2>/dev/null | grep -q "10 frames, .* 1 malformed lines skipped" || { echo "FAIL: bad line not counted"; fail=1; }
 # From stdin, as in `candump -L can0 | pumpthermd -r -`.
 "$bin" -r - < "$data/skeleton.log" | grep -q "<stdin>: 2210 frames" || { echo "FAIL: stdin"; fail=1; }
+# The example configuration shipped in systemd/ is valid.
+expect 0 "pumpthermd.toml: OK \(1 interface\)" -- "$bin" --check-config "$data/../../systemd/pumpthermd.toml"
 exit $fail

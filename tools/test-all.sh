@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Builds pumptherm and runs every test layer: unit tests, the unit tests again under
+# AddressSanitizer + UndefinedBehaviorSanitizer, short fuzz runs, and the vcan tests (natively
+# where the kernel has vcan, otherwise in a QEMU guest). Ends with CTest's summary of the main
+# build (unit + vcan). Run tools/setup.sh first (the README's command does).
+#
+# Environment: PUMPTHERM_JOBS (default: number of cores), PUMPTHERM_FUZZ_SECONDS (default 60),
+# CI=true makes a vcan test that can run neither natively nor in the guest fail, not skip.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+jobs=${PUMPTHERM_JOBS:-$(nproc)}
+fuzz_seconds=${PUMPTHERM_FUZZ_SECONDS:-60}
+start=$(date +%s)
+stage() { printf '\n=== %s (%ds)\n' "$*" $(( $(date +%s) - start )); }
+
+stage "build (warnings are errors)"
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPUMPTHERM_WERROR=ON
+cmake --build build -j "$jobs"
+
+stage "unit tests"
+ctest --test-dir build -L unit -j "$jobs" --output-on-failure
+
+stage "unit tests under AddressSanitizer + UndefinedBehaviorSanitizer"
+cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=Debug -DPUMPTHERM_WERROR=ON \
+  -DPUMPTHERM_SANITIZE=ON -DPUMPTHERM_BUILD_BENCHMARKS=OFF
+cmake --build build-asan -j "$jobs"
+ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+  ctest --test-dir build-asan -L unit -j "$jobs" --output-on-failure
+
+if [[ -x tests/fuzz/run.sh ]]; then
+  stage "fuzz targets, ${fuzz_seconds} s each"
+  CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    -DPUMPTHERM_FUZZ=ON -DPUMPTHERM_BUILD_BENCHMARKS=OFF
+  cmake --build build-fuzz -j "$jobs"
+  tests/fuzz/run.sh build-fuzz "$fuzz_seconds"
+fi
+
+stage "all tests of the main build: unit and vcan"
+ctest --test-dir build -j "$jobs" --output-on-failure
+stage "done"
