@@ -3,7 +3,8 @@
 # on PATH, the binaries under test in $BIN_DIR, data files in $DATA_DIR and a writable $WORK_DIR.
 #
 # Mode "native": the host kernel has vcan; the scenario runs in a fresh network namespace of its
-# own (its own vcan0 and loopback), or on the host's existing vcan0 when no namespace can be made.
+# own (its own vcan0 and loopback), or on the host's existing vcan0 when no namespace can be made
+# (mode "host" asks for the latter).
 # Mode "guest": the host kernel has no CAN; the scenario runs in a QEMU guest (TCG) booted from
 # Debian's kernel (unpacked by tools/setup.sh under $PUMPTHERM_CACHE, default
 # /var/cache/pumptherm) with an initramfs holding busybox, the CAN modules, can-utils, ip, the
@@ -40,7 +41,9 @@ options:
   --bin PATH        a binary under test, put in $BIN_DIR with its shared libraries (repeatable)
   --file PATH       a data file or directory, put in $DATA_DIR (repeatable)
   --timeout S       give up after S seconds (default $PUMPTHERM_VCAN_TIMEOUT or 300)
-  --mode M          auto | native | guest (default $PUMPTHERM_VCAN_MODE or auto)
+  --mode M          auto | native | host | guest (default $PUMPTHERM_VCAN_MODE or auto):
+                    native = a network namespace with its own vcan0, else the host's vcan0;
+                    host = the host's existing vcan0 only (e.g. to watch it with candump)
   --cache-dir DIR   where the guest's base initramfs is cached and runs are staged
                     (default $PUMPTHERM_VCAN_CACHE or ~/.cache/pumptherm-vcan)
   --out-dir DIR     copy the files the scenario wrote under $OUT_DIR back to DIR
@@ -110,7 +113,10 @@ if [[ -z "$scenario" ]]; then err "no SCENARIO given (see --help)"; exit 2; fi
 if [[ ! "$timeout_s" =~ ^[1-9][0-9]*$ ]]; then
   err "--timeout: '$timeout_s' is not a positive whole number of seconds"; exit 2
 fi
-case "$mode" in auto | native | guest) ;; *) err "--mode: '$mode' is not auto, native or guest"; exit 2 ;; esac
+case "$mode" in
+  auto | native | host | guest) ;;
+  *) err "--mode: '$mode' is not auto, native, host or guest"; exit 2 ;;
+esac
 if [[ ! -r "$scenario" ]]; then err "scenario '$scenario' is not a readable file"; exit 2; fi
 for b in "${bins[@]}"; do
   if [[ ! -f "$b" || ! -x "$b" ]]; then err "--bin '$b' is not an executable file"; exit 2; fi
@@ -118,7 +124,7 @@ done
 for f in "${files[@]}"; do
   if [[ ! -r "$f" ]]; then err "--file '$f' is not readable"; exit 2; fi
 done
-if ((shell)) && [[ "$mode" == "native" ]]; then err "--shell needs the guest mode"; exit 2; fi
+if ((shell)) && [[ "$mode" == "native" || "$mode" == "host" ]]; then err "--shell needs the guest mode"; exit 2; fi
 
 abspath() { (cd "$(dirname "$1")" && printf '%s/%s\n' "$(pwd -P)" "$(basename "$1")"); }
 scenario=$(abspath "$scenario")
@@ -143,7 +149,7 @@ ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev
 native_kind() {
   local unshare_args=(--net)
   ((EUID == 0)) || unshare_args+=(--map-root-user)
-  if command -v unshare >/dev/null 2>&1 && command -v ip >/dev/null 2>&1 &&
+  if [[ "$mode" != "host" ]] && command -v unshare >/dev/null 2>&1 && command -v ip >/dev/null 2>&1 &&
     unshare "${unshare_args[@]}" sh -c 'ip link add dev vcan0 type vcan' >/dev/null 2>&1; then
     echo netns
   elif command -v ip >/dev/null 2>&1 && ip link show dev vcan0 >/dev/null 2>&1; then
@@ -555,4 +561,5 @@ kind=""
 if [[ "$mode" != "guest" ]]; then kind=$(native_kind); fi
 if [[ -n "$kind" ]]; then run_native "$kind"; fi
 if [[ "$mode" == "native" ]]; then cannot_run "--mode native, but the host has no usable vcan"; fi
+if [[ "$mode" == "host" ]]; then cannot_run "--mode host, but the host has no vcan0"; fi
 run_guest
