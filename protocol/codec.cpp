@@ -58,12 +58,23 @@ MessageCodec::MessageCodec(const DbcMessage& message)
       p.raw_min = 0.0;
       p.raw_max = std::ldexp(1.0, static_cast<int>(s.length_bits)) - 1.0;
     }
+    p.raw_max_uint = p.mask;
+    p.raw_max_int = static_cast<std::int64_t>(p.mask >> 1);
+    p.raw_min_int = -p.raw_max_int - 1;
     if (s.not_available_raw) {
       p.has_sna = true;
       p.sna_bits = static_cast<std::uint64_t>(*s.not_available_raw) & p.mask;
-      const double sna = static_cast<double>(*s.not_available_raw);
-      if (sna == p.raw_max) p.raw_max -= 1.0;
-      if (sna == p.raw_min) p.raw_min += 1.0;
+      const std::int64_t sna = *s.not_available_raw;
+      if (s.is_signed) {
+        if (sna == p.raw_max_int) --p.raw_max_int;
+        if (sna == p.raw_min_int) ++p.raw_min_int;
+        p.raw_max = std::min(p.raw_max, static_cast<double>(p.raw_max_int));
+        p.raw_min = std::max(p.raw_min, static_cast<double>(p.raw_min_int));
+      } else {
+        if (static_cast<std::uint64_t>(sna) == p.raw_max_uint) --p.raw_max_uint;
+        if (sna == 0) p.raw_min = 1.0;
+        p.raw_max = std::min(p.raw_max, static_cast<double>(p.raw_max_uint));
+      }
     }
     if (!s.multiplexer_switch.empty()) {
       const int sw = message.FindSignal(s.multiplexer_switch);
@@ -174,9 +185,10 @@ std::uint64_t MessageCodec::ToRaw(const SignalPlan& p, double value, EncodeResul
   if (p.sign_bit != 0) {
     const std::int64_t r = x >= kTwoTo63 ? std::numeric_limits<std::int64_t>::max()
                                          : static_cast<std::int64_t>(x);
-    return static_cast<std::uint64_t>(r) & p.mask;
+    return static_cast<std::uint64_t>(std::clamp(r, p.raw_min_int, p.raw_max_int)) & p.mask;
   }
-  return x >= kTwoTo64 ? ~std::uint64_t{0} : static_cast<std::uint64_t>(x);
+  const std::uint64_t u = x >= kTwoTo64 ? ~std::uint64_t{0} : static_cast<std::uint64_t>(x);
+  return std::min(u, p.raw_max_uint);
 }
 
 bool MessageCodec::InRanges(const SignalPlan& p, std::uint64_t switch_bits) const noexcept {

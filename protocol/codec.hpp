@@ -80,6 +80,9 @@ class MessageCodec {
     double offset = 0.0;
     double raw_min = 0.0;        ///< saturation range for encoding (integers only)
     double raw_max = 0.0;
+    std::int64_t raw_min_int = 0;   ///< the same range as integers: doubles round above 2^53
+    std::int64_t raw_max_int = 0;   ///< (signed signals)
+    std::uint64_t raw_max_uint = 0; ///< (unsigned signals)
     std::uint32_t first_range = 0;  ///< into ranges_
     std::uint32_t range_count = 0;
     std::int32_t switch_index = -1;
