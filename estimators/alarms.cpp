@@ -1,0 +1,203 @@
+#include "estimators/alarms.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace pumptherm::estimators {
+namespace {
+
+bool Known(double v) { return !std::isnan(v); }
+
+}  // namespace
+
+const char* AlarmReasonName(AlarmReason reason) {
+  switch (reason) {
+    case AlarmReason::kNone: return "none";
+    case AlarmReason::kOverTemperature: return "over_temperature";
+    case AlarmReason::kRateOfRise: return "rate_of_rise";
+    case AlarmReason::kStaleTelemetry: return "stale_telemetry";
+    case AlarmReason::kSensorOutOfRange: return "sensor_out_of_range";
+    case AlarmReason::kSensorStuck: return "sensor_stuck";
+    case AlarmReason::kSensorDisagrees: return "sensor_disagrees";
+    case AlarmReason::kEstimatorNotConverged: return "estimator_not_converged";
+    case AlarmReason::kForecast: return "forecast";
+  }
+  return "unknown";
+}
+
+const char* AlarmLevelName(AlarmLevel level) {
+  switch (level) {
+    case AlarmLevel::kNone: return "none";
+    case AlarmLevel::kWarning: return "warning";
+    case AlarmLevel::kTrip: return "trip";
+  }
+  return "unknown";
+}
+
+AlarmMonitor::AlarmMonitor(AlarmConfig config, std::vector<TemperatureLimits> limits,
+                           TemperatureLimits sensor_limits)
+    : config_(config), limits_(std::move(limits)), sensor_limits_(sensor_limits) {
+  auto check = [](const TemperatureLimits& l, const char* what) {
+    if (l.trip_degC < l.warning_degC) {
+      throw std::invalid_argument(std::string(what) + ": trip level below warning level");
+    }
+  };
+  for (const auto& l : limits_) check(l, "node limits");
+  check(sensor_limits_, "sensor limits");
+  if (!(config_.hysteresis_K >= 0.0) || !(config_.hold_s >= 0.0) ||
+      !(config_.rate_window_s > 0.0)) {
+    throw std::invalid_argument("alarm config: hysteresis and hold must be >= 0, window > 0");
+  }
+  over_.resize(limits_.size());
+  rise_.resize(limits_.size());
+  window_start_degC_.assign(limits_.size(), std::nan(""));
+  window_start_s_.assign(limits_.size(), 0.0);
+  rise_K_per_min_.assign(limits_.size(), std::nan(""));
+}
+
+void AlarmMonitor::Update(Channel& ch, AlarmLevel want, double value, double now_s,
+                          double hold_s) {
+  if (ch.latched && want < AlarmLevel::kTrip) want = AlarmLevel::kTrip;
+  // A trip cleared while its condition is still there latches again at once.
+  if (want == AlarmLevel::kTrip && ch.level == AlarmLevel::kTrip) ch.latched = true;
+  if (want == ch.level) {
+    ch.pending = want;
+    ch.pending_since_s = std::nan("");
+    return;
+  }
+  if (ch.pending != want || std::isnan(ch.pending_since_s)) {
+    ch.pending = want;
+    ch.pending_since_s = now_s;
+  }
+  if (now_s - ch.pending_since_s < hold_s) return;
+  const bool raising = want > ch.level;
+  ch.level = want;
+  ch.pending_since_s = std::nan("");
+  if (raising) {
+    ch.value = value;
+    ch.raised_at_s = now_s;
+    if (want == AlarmLevel::kTrip) ch.latched = true;
+  }
+}
+
+AlarmLevel AlarmMonitor::OverLevel(const Channel& ch, double t, const TemperatureLimits& lim) const {
+  if (std::isnan(t)) return ch.level;
+  const double h = config_.hysteresis_K;
+  if (t >= lim.trip_degC) return AlarmLevel::kTrip;
+  if (ch.level == AlarmLevel::kTrip && t > lim.trip_degC - h) return AlarmLevel::kTrip;
+  if (t >= lim.warning_degC) return AlarmLevel::kWarning;
+  if (ch.level >= AlarmLevel::kWarning && t > lim.warning_degC - h) return AlarmLevel::kWarning;
+  return AlarmLevel::kNone;
+}
+
+const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
+  if (std::isnan(start_s_)) start_s_ = now_s;
+  const double hold = config_.hold_s;
+
+  for (std::size_t i = 0; i < limits_.size(); ++i) {
+    const double t = in.node_degC ? in.node_degC[i] : std::nan("");
+    Update(over_[i], OverLevel(over_[i], t, limits_[i]), t, now_s, hold);
+    // Rate of rise over consecutive windows of rate_window_s.
+    if (Known(t)) {
+      if (std::isnan(window_start_degC_[i])) {
+        window_start_degC_[i] = t;
+        window_start_s_[i] = now_s;
+      } else if (now_s - window_start_s_[i] >= config_.rate_window_s) {
+        rise_K_per_min_[i] = (t - window_start_degC_[i]) / (now_s - window_start_s_[i]) * 60.0;
+        window_start_degC_[i] = t;
+        window_start_s_[i] = now_s;
+      }
+    }
+    const double r = rise_K_per_min_[i];
+    AlarmLevel want = rise_[i].level;
+    if (Known(r)) {
+      const bool over = r > config_.max_rise_K_per_min;
+      const bool still = rise_[i].level != AlarmLevel::kNone && r > 0.8 * config_.max_rise_K_per_min;
+      want = (over || still) ? AlarmLevel::kWarning : AlarmLevel::kNone;
+    }
+    Update(rise_[i], want, r, now_s, 0.0);
+  }
+
+  Update(sensor_over_, OverLevel(sensor_over_, in.sensor_degC, sensor_limits_), in.sensor_degC,
+         now_s, hold);
+  Update(stale_, in.telemetry_age_s > config_.stale_after_s ? AlarmLevel::kWarning : AlarmLevel::kNone,
+         in.telemetry_age_s, now_s, 0.0);
+
+  if (Known(in.sensor_degC)) {
+    const bool out = in.sensor_degC < config_.sensor_min_degC || in.sensor_degC > config_.sensor_max_degC;
+    Update(range_, out ? AlarmLevel::kWarning : AlarmLevel::kNone, in.sensor_degC, now_s, hold);
+    // Stuck: the same reading while the model's estimate of that node moves.
+    if (in.sensor_degC != stuck_value_) {
+      stuck_value_ = in.sensor_degC;
+      stuck_since_s_ = now_s;
+      stuck_model_min_ = stuck_model_max_ = in.sensor_model_degC;
+    } else if (Known(in.sensor_model_degC)) {
+      if (std::isnan(stuck_model_min_)) stuck_model_min_ = stuck_model_max_ = in.sensor_model_degC;
+      stuck_model_min_ = std::min(stuck_model_min_, in.sensor_model_degC);
+      stuck_model_max_ = std::max(stuck_model_max_, in.sensor_model_degC);
+    }
+    const bool stuck = now_s - stuck_since_s_ >= config_.stuck_after_s &&
+                       stuck_model_max_ - stuck_model_min_ > config_.stuck_model_move_K;
+    Update(stuck_, stuck ? AlarmLevel::kWarning : AlarmLevel::kNone, in.sensor_degC, now_s, 0.0);
+  }
+  if (Known(in.sensor_nis)) {
+    Update(disagree_, in.sensor_nis > config_.nis_limit ? AlarmLevel::kWarning : AlarmLevel::kNone,
+           in.sensor_nis, now_s, config_.disagree_hold_s);
+  }
+  const bool not_converged =
+      !in.estimators_converged && now_s - start_s_ >= config_.not_converged_grace_s;
+  Update(converged_, not_converged ? AlarmLevel::kWarning : AlarmLevel::kNone, 0.0, now_s, hold);
+
+  {
+    const double ttt = in.time_to_trip_s;
+    AlarmLevel want = AlarmLevel::kNone;
+    if (ttt < config_.forecast_horizon_s) want = AlarmLevel::kWarning;
+    if (forecast_.level != AlarmLevel::kNone && ttt < 1.1 * config_.forecast_horizon_s) {
+      want = AlarmLevel::kWarning;
+    }
+    if (std::isnan(ttt)) want = forecast_.level;
+    Update(forecast_, want, ttt, now_s, hold);
+  }
+
+  // Publish the most severe alarm; among equals the one raised first.
+  AlarmState s;
+  s.time_to_trip_s = in.time_to_trip_s;
+  double best_raised = 0.0;
+  auto consider = [&](const Channel& ch, AlarmReason reason, int node) {
+    if (ch.latched) s.trip_latched = true;
+    if (ch.level == AlarmLevel::kNone) return;
+    s.active_reasons |= static_cast<std::uint16_t>(1U << static_cast<unsigned>(reason));
+    if (ch.level > s.level || (ch.level == s.level && ch.raised_at_s < best_raised)) {
+      s.level = ch.level;
+      s.reason = reason;
+      s.node = node;
+      s.value = ch.value;
+      best_raised = ch.raised_at_s;
+    }
+  };
+  for (std::size_t i = 0; i < over_.size(); ++i) consider(over_[i], AlarmReason::kOverTemperature, static_cast<int>(i));
+  consider(sensor_over_, AlarmReason::kOverTemperature, config_.sensor_node);
+  for (std::size_t i = 0; i < rise_.size(); ++i) consider(rise_[i], AlarmReason::kRateOfRise, static_cast<int>(i));
+  consider(stale_, AlarmReason::kStaleTelemetry, -1);
+  consider(range_, AlarmReason::kSensorOutOfRange, config_.sensor_node);
+  consider(stuck_, AlarmReason::kSensorStuck, config_.sensor_node);
+  consider(disagree_, AlarmReason::kSensorDisagrees, config_.sensor_node);
+  consider(converged_, AlarmReason::kEstimatorNotConverged, -1);
+  consider(forecast_, AlarmReason::kForecast, in.time_to_trip_node);
+  state_ = s;
+  return state_;
+}
+
+bool AlarmMonitor::Clear() {
+  bool any = false;
+  auto clear = [&](Channel& ch) {
+    any = any || ch.latched;
+    ch.latched = false;
+  };
+  for (auto& ch : over_) clear(ch);
+  clear(sensor_over_);
+  state_.trip_latched = false;
+  return any;
+}
+
+}  // namespace pumptherm::estimators

@@ -1,0 +1,154 @@
+#pragma once
+/// Overtemperature and health alarms of one pump (issue 6): levels with hysteresis and a hold
+/// time on estimated and measured temperatures, rate of rise, stale telemetry, implausible
+/// sensor (out of range, stuck, disagreeing with the model), estimator not converged, and the
+/// time-to-trip forecast. Pure logic: time enters as an argument, nothing is logged.
+///
+/// Semantics (docs/alarms.md):
+/// - A condition must hold continuously for `hold_s` before its alarm asserts (a single noisy
+///   sample never trips). A warning clears when the value falls below its level minus
+///   `hysteresis_K` (after the same hold); a trip latches until Clear() is called and its
+///   condition is gone.
+/// - NaN inputs mean "not measured yet": they neither assert nor clear anything.
+/// - The published state is the most severe active alarm (trip over warning; among equals the
+///   one raised first), plus a bit set of every active reason.
+
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace pumptherm::estimators {
+
+enum class AlarmLevel : std::uint8_t { kNone = 0, kWarning = 1, kTrip = 2 };
+
+/// Reason codes as published on CAN and LCM (values are part of the interface; do not renumber).
+enum class AlarmReason : std::uint8_t {
+  kNone = 0,
+  kOverTemperature = 1,        ///< a node above its warning or trip level
+  kRateOfRise = 2,             ///< a node warming faster than allowed
+  kStaleTelemetry = 3,         ///< no telemetry for longer than allowed
+  kSensorOutOfRange = 4,       ///< measured temperature outside its plausible range
+  kSensorStuck = 5,            ///< measured temperature frozen while the model says it moves
+  kSensorDisagrees = 6,        ///< innovation test failed persistently (model vs sensor)
+  kEstimatorNotConverged = 7,  ///< an estimator has not converged (or lost convergence)
+  kForecast = 8,               ///< time to trip at the present load below the horizon
+};
+inline constexpr std::size_t kAlarmReasonCount = 9;
+
+/// Name of a reason code ("over_temperature", ...), for logs and LCM.
+const char* AlarmReasonName(AlarmReason reason);
+const char* AlarmLevelName(AlarmLevel level);
+
+/// Levels of one temperature (a node estimate or a measured sensor), degC.
+struct TemperatureLimits {
+  double warning_degC = std::numeric_limits<double>::infinity();
+  double trip_degC = std::numeric_limits<double>::infinity();
+};
+
+struct AlarmConfig {
+  double hysteresis_K = 2.0;       ///< a warning clears below level - hysteresis
+  double hold_s = 2.0;             ///< a condition must persist this long to (de)assert
+  /// Rate of rise: warning above this many K per minute, measured over `rate_window_s`.
+  double max_rise_K_per_min = std::numeric_limits<double>::infinity();
+  double rate_window_s = 60.0;
+  double stale_after_s = 2.0;      ///< telemetry older than this: stale (warning)
+  double sensor_min_degC = -40.0;  ///< plausible range of the measured sensor
+  double sensor_max_degC = 250.0;
+  /// Stuck: the sensor's value unchanged for this long while the model's estimate of the same
+  /// node moved by more than `stuck_model_move_K`.
+  double stuck_after_s = 120.0;
+  double stuck_model_move_K = 2.0;
+  /// Disagreement: normalised innovation squared above this (chi-square, 1 dof: 10.83 is the
+  /// 0.1 % tail) for `disagree_hold_s`.
+  double nis_limit = 10.83;
+  double disagree_hold_s = 30.0;
+  double not_converged_grace_s = 600.0;  ///< after start, "not converged" is not yet an alarm
+  double forecast_horizon_s = 600.0;     ///< warn when time to trip drops below this
+  int sensor_node = -1;                  ///< node index the measured sensor sits on (reports)
+};
+
+/// What the pipeline knows at one alarm evaluation.
+struct AlarmInputs {
+  /// Temperatures watched for over-temperature and rate of rise, one per configured node (NaN =
+  /// not known yet). Order and count as in AlarmMonitor's constructor.
+  const double* node_degC = nullptr;
+  double sensor_degC = std::numeric_limits<double>::quiet_NaN();   ///< the measured node
+  double sensor_model_degC = std::numeric_limits<double>::quiet_NaN();  ///< model estimate there
+  double sensor_nis = std::numeric_limits<double>::quiet_NaN();    ///< last innovation test
+  double telemetry_age_s = 0.0;          ///< time since the last telemetry frame
+  bool estimators_converged = true;
+  double time_to_trip_s = std::numeric_limits<double>::infinity();  ///< from the forecast
+  int time_to_trip_node = -1;
+};
+
+/// The published alarm state of one pump.
+struct AlarmState {
+  AlarmLevel level = AlarmLevel::kNone;
+  AlarmReason reason = AlarmReason::kNone;
+  int node = -1;                         ///< node index (-1: the pump as a whole)
+  double value = std::numeric_limits<double>::quiet_NaN();  ///< value that raised it (unit per reason)
+  std::uint16_t active_reasons = 0;      ///< bit (1 << reason) for every active alarm
+  bool trip_latched = false;
+  double time_to_trip_s = std::numeric_limits<double>::infinity();
+  bool operator==(const AlarmState&) const = default;
+};
+
+class AlarmMonitor {
+ public:
+  /// `limits[i]` applies to node i; the sensor's own over-temperature check uses
+  /// `sensor_limits`. Throws std::invalid_argument for trip below warning or a negative
+  /// hysteresis/hold.
+  AlarmMonitor(AlarmConfig config, std::vector<TemperatureLimits> limits,
+               TemperatureLimits sensor_limits);
+
+  /// Evaluates at time `now_s` (monotonic, s). Returns the new state.
+  const AlarmState& Step(double now_s, const AlarmInputs& in);
+
+  /// Clears a latched trip. The trip re-asserts (after hold) if its condition is still there.
+  /// Returns true when a trip was latched.
+  bool Clear();
+
+  const AlarmState& state() const { return state_; }
+
+ private:
+  /// One alarm condition with hold time and latch.
+  struct Channel {
+    AlarmLevel level = AlarmLevel::kNone;  ///< asserted level
+    double pending_since_s = std::numeric_limits<double>::quiet_NaN();
+    AlarmLevel pending = AlarmLevel::kNone;
+    double value = std::numeric_limits<double>::quiet_NaN();
+    double raised_at_s = 0.0;
+    bool latched = false;
+  };
+  /// Moves `ch` toward `want` (with hold), `want` computed by the caller with hysteresis.
+  void Update(Channel& ch, AlarmLevel want, double value, double now_s, double hold_s);
+  AlarmLevel OverLevel(const Channel& ch, double t_degC, const TemperatureLimits& lim) const;
+
+  AlarmConfig config_;
+  std::vector<TemperatureLimits> limits_;
+  TemperatureLimits sensor_limits_;
+  std::vector<Channel> over_;        // per node
+  std::vector<Channel> rise_;        // per node
+  Channel sensor_over_;
+  Channel stale_;
+  Channel range_;
+  Channel stuck_;
+  Channel disagree_;
+  Channel converged_;
+  Channel forecast_;
+  // Rate of rise: per node, the value at the start of the current window.
+  std::vector<double> window_start_degC_;
+  std::vector<double> window_start_s_;
+  std::vector<double> rise_K_per_min_;
+  // Stuck detection.
+  double stuck_value_ = std::numeric_limits<double>::quiet_NaN();
+  double stuck_since_s_ = 0.0;
+  double stuck_model_min_ = 0.0;
+  double stuck_model_max_ = 0.0;
+  double start_s_ = std::numeric_limits<double>::quiet_NaN();
+  AlarmState state_;
+};
+
+}  // namespace pumptherm::estimators

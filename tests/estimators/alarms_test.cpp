@@ -1,0 +1,246 @@
+#include "estimators/alarms.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace pumptherm::estimators {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+AlarmConfig Config() {
+  AlarmConfig c;
+  c.hysteresis_K = 2.0;
+  c.hold_s = 2.0;
+  c.not_converged_grace_s = 10.0;
+  c.forecast_horizon_s = 300.0;
+  c.sensor_node = 0;
+  return c;
+}
+
+struct Fixture {
+  AlarmMonitor m{Config(), {{80.0, 100.0}, {120.0, 140.0}}, {70.0, 90.0}};
+  double nodes[2] = {kNaN, kNaN};
+  AlarmInputs in;
+  Fixture() { in.node_degC = nodes; }
+  const AlarmState& At(double t) { return m.Step(t, in); }
+};
+
+TEST(Alarms, QuietBelowLevels) {
+  Fixture f;
+  f.nodes[0] = 79.9;
+  f.nodes[1] = 20.0;
+  f.in.sensor_degC = 60.0;
+  for (double t = 0; t < 100; t += 1) EXPECT_EQ(f.At(t).level, AlarmLevel::kNone) << t;
+}
+
+TEST(Alarms, WarningNeedsTheHoldTimeAndASpikeDoesNothing) {
+  Fixture f;
+  f.nodes[1] = 20.0;
+  f.nodes[0] = 50.0;
+  f.At(0);
+  f.nodes[0] = 150.0;  // one wild sample, then back
+  EXPECT_EQ(f.At(1).level, AlarmLevel::kNone);
+  f.nodes[0] = 50.0;
+  EXPECT_EQ(f.At(2).level, AlarmLevel::kNone);
+  EXPECT_EQ(f.At(10).level, AlarmLevel::kNone);
+  f.nodes[0] = 85.0;
+  EXPECT_EQ(f.At(11).level, AlarmLevel::kNone);
+  EXPECT_EQ(f.At(12).level, AlarmLevel::kNone);  // 1 s of 2 s hold
+  const auto& s = f.At(13);
+  EXPECT_EQ(s.level, AlarmLevel::kWarning);
+  EXPECT_EQ(s.reason, AlarmReason::kOverTemperature);
+  EXPECT_EQ(s.node, 0);
+  EXPECT_DOUBLE_EQ(s.value, 85.0);
+}
+
+TEST(Alarms, WarningClearsOnlyBelowLevelMinusHysteresis) {
+  Fixture f;
+  f.nodes[1] = 20.0;
+  f.nodes[0] = 85.0;
+  f.At(0);
+  ASSERT_EQ(f.At(2).level, AlarmLevel::kWarning);
+  f.nodes[0] = 78.5;  // below 80 but above 80 - 2
+  for (double t = 3; t < 30; t += 1) EXPECT_EQ(f.At(t).level, AlarmLevel::kWarning) << t;
+  f.nodes[0] = 77.9;
+  f.At(30);
+  EXPECT_EQ(f.At(31).level, AlarmLevel::kWarning);  // hold applies to clearing too
+  EXPECT_EQ(f.At(32).level, AlarmLevel::kNone);
+}
+
+TEST(Alarms, TripLatchesUntilClearedAndReassertsWhenStillHot) {
+  Fixture f;
+  f.nodes[1] = 20.0;
+  f.nodes[0] = 101.0;
+  f.At(0);
+  const auto s = f.At(2);
+  EXPECT_EQ(s.level, AlarmLevel::kTrip);
+  EXPECT_TRUE(s.trip_latched);
+  f.nodes[0] = 30.0;  // cooled down: still latched
+  for (double t = 3; t < 60; t += 1) EXPECT_EQ(f.At(t).level, AlarmLevel::kTrip) << t;
+  EXPECT_TRUE(f.m.Clear());
+  f.At(60);
+  f.At(61);
+  EXPECT_EQ(f.At(62).level, AlarmLevel::kNone);
+  EXPECT_FALSE(f.m.Clear());
+  // Clearing while still hot: the trip comes back after the hold time.
+  f.nodes[0] = 105.0;
+  f.At(70);
+  ASSERT_EQ(f.At(72).level, AlarmLevel::kTrip);
+  EXPECT_TRUE(f.m.Clear());
+  EXPECT_FALSE(f.m.state().trip_latched);
+  EXPECT_EQ(f.At(73).level, AlarmLevel::kTrip);
+  EXPECT_TRUE(f.At(74).trip_latched);
+
+}
+
+TEST(Alarms, MeasuredSensorHasItsOwnLevels) {
+  Fixture f;
+  f.nodes[0] = 60.0;
+  f.nodes[1] = 60.0;
+  f.in.sensor_degC = 91.0;
+  f.At(0);
+  const auto& s = f.At(2);
+  EXPECT_EQ(s.level, AlarmLevel::kTrip);
+  EXPECT_EQ(s.node, 0);
+  EXPECT_DOUBLE_EQ(s.value, 91.0);
+}
+
+TEST(Alarms, TripOutranksAnEarlierWarning) {
+  Fixture f;
+  f.nodes[0] = 85.0;
+  f.nodes[1] = 20.0;
+  f.At(0);
+  ASSERT_EQ(f.At(2).level, AlarmLevel::kWarning);
+  f.nodes[1] = 141.0;
+  f.At(3);
+  const auto& s = f.At(5);
+  EXPECT_EQ(s.level, AlarmLevel::kTrip);
+  EXPECT_EQ(s.node, 1);
+  EXPECT_EQ(s.active_reasons, 1U << static_cast<unsigned>(AlarmReason::kOverTemperature));
+}
+
+TEST(Alarms, NaNNeitherRaisesNorClears) {
+  Fixture f;
+  f.nodes[1] = 20.0;
+  f.nodes[0] = 85.0;
+  f.At(0);
+  ASSERT_EQ(f.At(2).level, AlarmLevel::kWarning);
+  f.nodes[0] = kNaN;
+  for (double t = 3; t < 20; t += 1) EXPECT_EQ(f.At(t).level, AlarmLevel::kWarning);
+}
+
+TEST(Alarms, RateOfRise) {
+  AlarmConfig c = Config();
+  c.max_rise_K_per_min = 3.0;
+  c.rate_window_s = 60.0;
+  AlarmMonitor m(c, {{200.0, 250.0}}, {200.0, 250.0});
+  double node = 20.0;
+  AlarmInputs in;
+  in.node_degC = &node;
+  // 2 K/min for 5 minutes: quiet; then 6 K/min: warning at the end of the next window.
+  double t = 0;
+  for (; t <= 300; t += 1) {
+    node = 20.0 + 2.0 * t / 60.0;
+    EXPECT_EQ(m.Step(t, in).level, AlarmLevel::kNone) << t;
+  }
+  bool warned = false;
+  for (; t <= 430; t += 1) {
+    node = 30.0 + 6.0 * (t - 300.0) / 60.0;
+    const auto& s = m.Step(t, in);
+    if (s.level == AlarmLevel::kWarning) {
+      EXPECT_EQ(s.reason, AlarmReason::kRateOfRise);
+      EXPECT_NEAR(s.value, 6.0, 1e-9);
+      warned = true;
+      break;
+    }
+  }
+  EXPECT_TRUE(warned);
+  EXPECT_LE(t, 421);  // within one window (+1 s) of the change
+}
+
+TEST(Alarms, StaleTelemetryIsImmediateAndClearsWhenFramesReturn) {
+  Fixture f;
+  f.in.telemetry_age_s = 1.0;
+  EXPECT_EQ(f.At(0).level, AlarmLevel::kNone);
+  f.in.telemetry_age_s = 2.5;
+  const auto s = f.At(1);
+  EXPECT_EQ(s.level, AlarmLevel::kWarning);
+  EXPECT_EQ(s.reason, AlarmReason::kStaleTelemetry);
+  f.in.telemetry_age_s = 0.01;
+  EXPECT_EQ(f.At(2).level, AlarmLevel::kNone);
+}
+
+TEST(Alarms, SensorOutOfRangeStuckAndDisagreeing) {
+  Fixture f;
+  f.in.sensor_degC = -60.0;
+  f.At(0);
+  EXPECT_EQ(f.At(2).reason, AlarmReason::kSensorOutOfRange);
+  f.in.sensor_degC = 40.0;
+  f.At(3);
+  EXPECT_EQ(f.At(5).level, AlarmLevel::kNone);
+
+  // Stuck: the reading frozen at 40.0 since t = 3 while the model moves 5 K in 120 s: the
+  // alarm comes once the reading has been frozen for 120 s (t = 123) and the model moved > 2 K.
+  for (double t = 6; t < 123; t += 1) {
+    f.in.sensor_model_degC = 40.0 + 5.0 * (t - 6) / 120.0;
+    EXPECT_EQ(f.At(t).level, AlarmLevel::kNone) << t;
+  }
+  f.in.sensor_model_degC = 44.9;
+  EXPECT_EQ(f.At(123).reason, AlarmReason::kSensorStuck);
+  f.in.sensor_degC = 40.1;
+  EXPECT_EQ(f.At(124).level, AlarmLevel::kNone);
+
+  // Disagreement: NIS above 10.83 for 30 s.
+  f.in.sensor_nis = 25.0;
+  f.At(130);
+  EXPECT_EQ(f.At(159).level, AlarmLevel::kNone);
+  EXPECT_EQ(f.At(160).reason, AlarmReason::kSensorDisagrees);
+}
+
+// A steady motor gives a steady reading: frozen while the model is flat too is not "stuck".
+TEST(Alarms, FrozenSensorWithAFlatModelIsNotStuck) {
+  Fixture f;
+  f.in.sensor_degC = 40.0;
+  f.in.sensor_model_degC = 40.0;
+  for (double t = 0; t < 1000; t += 1) {
+    f.in.sensor_model_degC = 40.0 + 0.5 * std::sin(t / 50.0);
+    EXPECT_EQ(f.At(t).level, AlarmLevel::kNone) << t;
+  }
+}
+
+TEST(Alarms, NotConvergedOnlyAfterTheGracePeriod) {
+  Fixture f;
+  f.in.estimators_converged = false;
+  EXPECT_EQ(f.At(0).level, AlarmLevel::kNone);
+  EXPECT_EQ(f.At(9).level, AlarmLevel::kNone);
+  f.At(10);
+  EXPECT_EQ(f.At(12).reason, AlarmReason::kEstimatorNotConverged);
+}
+
+TEST(Alarms, ForecastWarnsBelowTheHorizonWithHysteresis) {
+  Fixture f;
+  f.in.time_to_trip_s = 400.0;
+  f.At(0);
+  EXPECT_EQ(f.At(5).level, AlarmLevel::kNone);
+  f.in.time_to_trip_s = 250.0;
+  f.in.time_to_trip_node = 1;
+  f.At(6);
+  const auto s = f.At(8);
+  EXPECT_EQ(s.reason, AlarmReason::kForecast);
+  EXPECT_EQ(s.node, 1);
+  EXPECT_DOUBLE_EQ(s.time_to_trip_s, 250.0);
+  f.in.time_to_trip_s = 320.0;  // above 300 but below 330: stays
+  EXPECT_EQ(f.At(20).level, AlarmLevel::kWarning);
+  f.in.time_to_trip_s = std::numeric_limits<double>::infinity();
+  f.At(21);
+  EXPECT_EQ(f.At(23).level, AlarmLevel::kNone);
+}
+
+TEST(Alarms, RejectsTripBelowWarning) {
+  EXPECT_THROW(AlarmMonitor(Config(), {{100.0, 90.0}}, {}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace pumptherm::estimators
