@@ -26,6 +26,8 @@ class UniqueFd {
 
   int get() const noexcept { return fd_; }
   bool valid() const noexcept { return fd_ >= 0; }
+  /// Gives up ownership without closing (e.g. to close it once and check the result).
+  int Release() noexcept { return std::exchange(fd_, -1); }
   /// Closes the descriptor (if any); close errors are ignored, as nothing can be done then.
   void Reset() noexcept {
     if (fd_ >= 0) ::close(fd_);

@@ -21,7 +21,7 @@ stage "unit tests"
 ctest --test-dir build -L unit -j "$jobs" --output-on-failure
 
 stage "unit tests under AddressSanitizer + UndefinedBehaviorSanitizer"
-cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=Debug -DPUMPTHERM_WERROR=ON \
+cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPUMPTHERM_WERROR=ON \
   -DPUMPTHERM_SANITIZE=ON -DPUMPTHERM_BUILD_BENCHMARKS=OFF
 cmake --build build-asan -j "$jobs"
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
