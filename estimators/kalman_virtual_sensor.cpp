@@ -1,0 +1,86 @@
+#include "estimators/kalman_virtual_sensor.hpp"
+
+#include <fmt/core.h>
+
+#include <cmath>
+#include <stdexcept>
+
+namespace pumptherm::estimators {
+
+VirtualThermalSensor::VirtualThermalSensor(const ThermalModel& model, VirtualSensorConfig config)
+    : model_(model),
+      config_(std::move(config)),
+      discretiser_(config_.relinearise_tolerance),
+      filter_(model.StateCount()) {
+  for (const std::string& node : config_.measured_nodes) {
+    const int s = model_.StateIndex(node);
+    if (s < 0) {
+      throw std::invalid_argument(fmt::format(
+          "measured node '{}' is not a node with heat capacity of model '{}'", node, model_.Name()));
+    }
+    measured_states_.push_back(s);
+  }
+  if (!(config_.measurement_sd_K > 0.0) || !(config_.process_sd_K > 0.0) ||
+      !(config_.initial_sd_K > 0.0) || !(config_.winding_measurement_sd_K > 0.0) ||
+      !(config_.process_period_s > 0.0)) {
+    throw std::invalid_argument("virtual sensor: standard deviations and periods must be positive");
+  }
+  const int n = model_.StateCount();
+  bu_.resize(n);
+  sp_.resize(n, n);
+  Initialise(Eigen::VectorXd::Constant(n, 25.0));
+}
+
+void VirtualThermalSensor::Initialise(const Eigen::VectorXd& x0_degC) {
+  const int n = model_.StateCount();
+  filter_.Reset(x0_degC, Eigen::MatrixXd::Identity(n, n) * config_.initial_sd_K * config_.initial_sd_K);
+}
+
+const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs, double dt_s,
+                                                     const Eigen::VectorXd& measured_degC,
+                                                     double winding_degC) {
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
+    throw std::domain_error("virtual sensor: the period must be positive and finite");
+  }
+  model_.Linearise(inputs, lin_);
+  discretiser_.Update(lin_, dt_s);
+  const ThermalDiscreteModel& d = discretiser_.Current();
+  bu_.noalias() = d.phi_s * lin_.f_K_per_s;
+  if (dt_s != sp_dt_s_) {
+    const double var = config_.process_sd_K * config_.process_sd_K * dt_s / config_.process_period_s;
+    sp_.setIdentity();
+    sp_ *= var;
+    sp_dt_s_ = dt_s;
+  }
+  filter_.Predict(d.ad, bu_, sp_);
+
+  const int n = model_.StateCount();
+  int m = 0;
+  for (Eigen::Index i = 0; i < measured_degC.size() && i < static_cast<Eigen::Index>(measured_states_.size()); ++i) {
+    if (std::isfinite(measured_degC(i))) ++m;
+  }
+  const bool winding = std::isfinite(winding_degC) && model_.WindingWeights().sum() > 0.0;
+  if (winding) ++m;
+  c_.resize(m, n);
+  y_.resize(m);
+  sm_.resize(m, m);
+  c_.setZero();
+  sm_.setZero();
+  int row = 0;
+  const double var_m = config_.measurement_sd_K * config_.measurement_sd_K;
+  for (Eigen::Index i = 0; i < measured_degC.size() && i < static_cast<Eigen::Index>(measured_states_.size()); ++i) {
+    if (!std::isfinite(measured_degC(i))) continue;
+    c_(row, measured_states_[static_cast<std::size_t>(i)]) = 1.0;
+    y_(row) = measured_degC(i);
+    sm_(row, row) = var_m;
+    ++row;
+  }
+  if (winding) {
+    c_.row(row) = model_.WindingWeights().transpose();
+    y_(row) = winding_degC;
+    sm_(row, row) = config_.winding_measurement_sd_K * config_.winding_measurement_sd_K;
+  }
+  return filter_.Update(c_, y_, sm_, config_.covariance_update);
+}
+
+}  // namespace pumptherm::estimators

@@ -1,0 +1,98 @@
+// Discrete Kalman filter (Saheba 2010 eqs. 18-34): closed-form gain, Joseph vs textbook update.
+#include "estimators/kalman_filter.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+namespace pe = pumptherm::estimators;
+
+// Local level model x(k+1) = x(k) + w, y = x + v, var(w) = q, var(v) = r. Its steady-state prior
+// variance solves P = P r / (P + r) + q, i.e. P = (q + sqrt(q^2 + 4 q r)) / 2, and the gain is
+// K = P / (P + r): J. Durbin and S. J. Koopman, "Time Series Analysis by State Space Methods",
+// 2nd ed., Oxford 2012, section 2.11 (steady state of the local level model).
+TEST(KalmanFilter, LocalLevelGainConvergesToClosedForm) {
+  const double q = 0.0894 * 0.0894, r = 0.0557 * 0.0557;
+  pe::KalmanFilter kf(1);
+  kf.Reset(Eigen::VectorXd::Zero(1), Eigen::MatrixXd::Constant(1, 1, 100.0));
+  const Eigen::MatrixXd a = Eigen::MatrixXd::Identity(1, 1);
+  const Eigen::MatrixXd qm = Eigen::MatrixXd::Constant(1, 1, q);
+  const Eigen::MatrixXd rm = Eigen::MatrixXd::Constant(1, 1, r);
+  const Eigen::MatrixXd c = Eigen::MatrixXd::Identity(1, 1);
+  for (int k = 0; k < 200; ++k) {
+    kf.Predict(a, Eigen::VectorXd::Zero(1), qm);
+    kf.Update(c, Eigen::VectorXd::Zero(1), rm);
+  }
+  const double p = (q + std::sqrt(q * q + 4 * q * r)) / 2.0;
+  EXPECT_NEAR(kf.Gain()(0, 0), p / (p + r), 1e-12);
+  EXPECT_NEAR(kf.Covariance()(0, 0), p * r / (p + r), 1e-14);
+}
+
+TEST(KalmanFilter, OneStepGainMatchesFormula) {
+  // K = S C^T (C S C^T + Sm)^-1 (eq. 34) written out for a 2-state, 1-measurement case.
+  pe::KalmanFilter kf(2);
+  Eigen::Matrix2d s;
+  s << 4.0, 1.0, 1.0, 2.0;
+  kf.Reset(Eigen::Vector2d(1.0, 2.0), s);
+  Eigen::MatrixXd c(1, 2);
+  c << 1.0, 0.0;
+  const auto& rep = kf.Update(c, Eigen::VectorXd::Constant(1, 3.0), Eigen::MatrixXd::Constant(1, 1, 1.0));
+  EXPECT_NEAR(kf.Gain()(0, 0), 4.0 / 5.0, 1e-15);
+  EXPECT_NEAR(kf.Gain()(1, 0), 1.0 / 5.0, 1e-15);
+  EXPECT_NEAR(rep.innovation(0), 2.0, 1e-15);
+  EXPECT_NEAR(rep.nis, 4.0 / 5.0, 1e-15);
+  EXPECT_NEAR(kf.State()(0), 1.0 + 1.6, 1e-15);
+  EXPECT_NEAR(kf.State()(1), 2.0 + 0.4, 1e-15);
+}
+
+TEST(KalmanFilter, JosephAndTextbookUpdatesAgree) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> nd;
+  const int n = 7, m = 2;
+  Eigen::MatrixXd l(n, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) l(i, j) = nd(rng);
+  const Eigen::MatrixXd s0 = l * l.transpose() + Eigen::MatrixXd::Identity(n, n);
+  Eigen::MatrixXd a(n, n), c(m, n);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) a(i, j) = 0.1 * nd(rng) + (i == j ? 0.9 : 0.0);
+  for (int i = 0; i < m; ++i)
+    for (int j = 0; j < n; ++j) c(i, j) = nd(rng);
+  const Eigen::MatrixXd q = 0.01 * Eigen::MatrixXd::Identity(n, n);
+  const Eigen::MatrixXd r = 0.3 * Eigen::MatrixXd::Identity(m, m);
+  pe::KalmanFilter joseph(n), textbook(n);
+  joseph.Reset(Eigen::VectorXd::Zero(n), s0);
+  textbook.Reset(Eigen::VectorXd::Zero(n), s0);
+  for (int k = 0; k < 50; ++k) {
+    Eigen::VectorXd y(m), u(n);
+    for (int i = 0; i < m; ++i) y(i) = nd(rng);
+    for (int i = 0; i < n; ++i) u(i) = nd(rng);
+    joseph.Predict(a, u, q);
+    textbook.Predict(a, u, q);
+    const auto rj = joseph.Update(c, y, r, pe::CovarianceUpdate::kJoseph);
+    const auto rt = textbook.Update(c, y, r, pe::CovarianceUpdate::kTextbook);
+    EXPECT_NEAR(rj.nis, rt.nis, 1e-9 * (1 + rt.nis));
+  }
+  EXPECT_LT((joseph.Covariance() - textbook.Covariance()).cwiseAbs().maxCoeff(), 1e-10);
+  EXPECT_LT((joseph.State() - textbook.State()).cwiseAbs().maxCoeff(), 1e-10);
+  // The Joseph form stays exactly symmetric.
+  EXPECT_EQ((joseph.Covariance() - joseph.Covariance().transpose()).cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(KalmanFilter, NoMeasurementLeavesTheStateAndReportsZero) {
+  pe::KalmanFilter kf(2);
+  kf.Reset(Eigen::Vector2d(1, 2), Eigen::Matrix2d::Identity());
+  const auto& rep = kf.Update(Eigen::MatrixXd(0, 2), Eigen::VectorXd(0), Eigen::MatrixXd(0, 0));
+  EXPECT_EQ(rep.measurements, 0);
+  EXPECT_EQ(kf.State(), Eigen::Vector2d(1, 2));
+}
+
+TEST(KalmanFilter, IndefiniteInnovationCovarianceIsReportedNotThrown) {
+  pe::KalmanFilter kf(1);
+  kf.Reset(Eigen::VectorXd::Zero(1), Eigen::MatrixXd::Constant(1, 1, 1.0));
+  const auto& rep = kf.Update(Eigen::MatrixXd::Identity(1, 1), Eigen::VectorXd::Ones(1),
+                              Eigen::MatrixXd::Constant(1, 1, -2.0));
+  EXPECT_FALSE(rep.ok);
+  EXPECT_EQ(kf.State()(0), 0.0);
+}

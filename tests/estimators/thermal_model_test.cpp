@@ -1,0 +1,236 @@
+// Thermal network: model-file validation, KCL assembly with Kron reduction (Saheba 2010 eq. S25),
+// losses (eqs. 1-8), steady state against hand-solved networks.
+#include "estimators/thermal_model.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+namespace pe = pumptherm::estimators;
+
+namespace {
+
+std::string ReadModel(const std::string& name) {
+  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
+  const std::string path = std::string(src ? src : ".") + "/estimators/models/" + name + ".toml";
+  std::ifstream f(path);
+  EXPECT_TRUE(f.good()) << path;
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+// Two capacitive nodes a, b joined through a massless star node m, which leads to ambient:
+//   a --R1-- m --R3-- ambient,  b --R2-- m.  Loss pa on a, pb on b.
+// Solved by hand: Tm = Ta + (pa + pb) R3, Ta_node = Tm + pa R1, Tb = Tm + pb R2 (steady state);
+// and in general m = (xa/R1 + xb/R2 + Ta/R3) / (1/R1 + 1/R2 + 1/R3) (KCL at m).
+constexpr const char* kStar = R"(
+[model]
+name = "star"
+[parameters]
+pa = 10.0
+[[node]]
+name = "a"
+capacity_J_per_K = 100
+[[node]]
+name = "b"
+capacity_J_per_K = 50
+[[node]]
+name = "m"
+capacity_J_per_K = 0
+[[edge]]
+between = ["a", "m"]
+resistance_K_per_W = 0.5
+[[edge]]
+between = ["b", "m"]
+resistance_K_per_W = -0.1
+[[edge]]
+between = ["m", "ambient"]
+resistance_K_per_W = 2.0
+[[loss]]
+name = "a"
+power_W = "pa"
+shares = { a = 1 }
+[[loss]]
+name = "b"
+power_W = "0.01 * speed_rpm"
+shares = { b = 1 }
+)";
+
+std::string ExpectParseError(const std::string& text) {
+  try {
+    pe::ThermalModel::Parse(text, "test.toml");
+  } catch (const pe::ThermalModelError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "no error for:\n" << text;
+  return {};
+}
+
+}  // namespace
+
+TEST(ThermalModel, StarNetworkSteadyStateMatchesHandSolution) {
+  const auto m = pe::ThermalModel::Parse(kStar, "star");
+  ASSERT_EQ(m.StateCount(), 2);
+  pe::ThermalInputs in;
+  in.speed_rpm = 500.0;  // pb = 5 W
+  in.ambient_degC = 20.0;
+  const Eigen::VectorXd x = m.SteadyState_degC(in);
+  const double tm = 20.0 + (10.0 + 5.0) * 2.0;
+  EXPECT_NEAR(x(0), tm + 10.0 * 0.5, 1e-9);
+  EXPECT_NEAR(x(1), tm + 5.0 * -0.1, 1e-9);
+  const Eigen::VectorXd all = m.AllTemperatures_degC(in, x);
+  EXPECT_NEAR(all(2), tm, 1e-9);
+}
+
+TEST(ThermalModel, ReducedModelEqualsFullNetworkWithMasslessNode) {
+  const auto m = pe::ThermalModel::Parse(kStar, "star");
+  pe::ThermalInputs in;
+  in.speed_rpm = 300.0;
+  in.ambient_degC = 15.0;
+  pe::ThermalLinearModel lin;
+  m.Linearise(in, lin);
+  const double r1 = 0.5, r2 = -0.1, r3 = 2.0, pa = 10.0, pb = 3.0;
+  for (const auto& [xa, xb] : {std::pair{30.0, 40.0}, std::pair{-5.0, 80.0}, std::pair{15.0, 15.0}}) {
+    // Full network: solve KCL at the massless node, then the capacitive nodes' balances.
+    const double zm = (xa / r1 + xb / r2 + in.ambient_degC / r3) / (1 / r1 + 1 / r2 + 1 / r3);
+    const double dxa = ((zm - xa) / r1 + pa) / 100.0;
+    const double dxb = ((zm - xb) / r2 + pb) / 50.0;
+    const Eigen::Vector2d x(xa, xb);
+    const Eigen::VectorXd dx = lin.a_per_s * x + lin.f_K_per_s;
+    EXPECT_NEAR(dx(0), dxa, 1e-12);
+    EXPECT_NEAR(dx(1), dxb, 1e-12);
+    EXPECT_NEAR(m.AllTemperatures_degC(in, x)(2), zm, 1e-12);
+  }
+}
+
+TEST(ThermalModel, ShippedSahebaModelsHaveThePaperNodes) {
+  for (const char* name : {"saheba2010-baseline", "saheba2010-improved"}) {
+    const auto m = pe::ThermalModel::Parse(ReadModel(name), name);
+    EXPECT_EQ(m.Name(), name);
+    const std::vector<std::string> states{"frame", "yoke", "teeth", "slot_winding",
+                                          "end_winding", "rotor", "shaft"};
+    EXPECT_EQ(m.StateNames(), states);
+    EXPECT_EQ(m.Nodes().size(), 13u);
+    EXPECT_FALSE(m.ResistancesVary());
+    EXPECT_DOUBLE_EQ(m.WindingWeights()(3), 0.5);
+    EXPECT_DOUBLE_EQ(m.WindingWeights()(4), 0.5);
+  }
+  EXPECT_DOUBLE_EQ(pe::ThermalModel::Parse(ReadModel("saheba2010-improved"), "i").Capacities_J_per_K()(0), 4478.0);
+}
+
+TEST(ThermalModel, SahebaSteadyStateBalancesEnergyThroughTheFrame) {
+  // In steady state every watt leaves through R1a (the only edge to ambient): an oracle that
+  // checks the whole reduced 13-node network, the losses and the copper law together.
+  const auto m = pe::ThermalModel::Parse(ReadModel("saheba2010-improved"), "improved");
+  pe::ThermalInputs in;
+  in.speed_rpm = 800.0;
+  in.iq_A = 50.0;
+  in.ambient_degC = 22.0;
+  const Eigen::VectorXd x = m.SteadyState_degC(in);
+  const double total_loss_W = m.NodeLosses_W(in, x).sum();
+  EXPECT_NEAR((x(0) - 22.0) / 0.1884, total_loss_W, 1e-8 * total_loss_W);
+  // Copper loss per eq. 1-3 at the steady winding temperatures.
+  const double r_ohm = 0.022 * (1.0 + 0.00393 * ((x(3) + x(4)) / 2.0 - 22.0));
+  const double w_e = 6.0 * 800.0 * 2.0 * M_PI / 60.0;
+  const double p_fe = 2.0e-5 * w_e * w_e + 0.012 * w_e;
+  EXPECT_NEAR(total_loss_W, 1.5 * 50.0 * 50.0 * r_ohm + p_fe, 1e-9 * total_loss_W);
+  // Every state above ambient, the windings the hottest (Fig. 4 shape).
+  for (int i = 0; i < 7; ++i) EXPECT_GT(x(i), 22.0) << i;
+  EXPECT_GT(x(3), x(0));
+}
+
+TEST(ThermalModel, CopperLossFollowsTheTemperatureOfItsNodes) {
+  const auto m = pe::ThermalModel::Parse(ReadModel("saheba2010-baseline"), "baseline");
+  pe::ThermalInputs in;
+  in.id_A = 30.0;
+  in.iq_A = 40.0;  // |i| = 50 A, i2 = 3750 A^2
+  in.ambient_degC = 20.0;
+  Eigen::VectorXd x = Eigen::VectorXd::Constant(7, 20.0);
+  x(3) = 60.0;
+  x(4) = 80.0;
+  const Eigen::VectorXd p = m.NodeLosses_W(in, x);
+  const double p_cu = 3750.0 * 0.022 * (1.0 + 0.00393 * 50.0);
+  EXPECT_NEAR(p(3), 0.6 * p_cu, 1e-9);
+  EXPECT_NEAR(p(4), 0.4 * p_cu, 1e-9);
+  EXPECT_NEAR(p(1) + p(2), 0.0, 1e-12);  // standstill: no iron loss
+}
+
+TEST(ThermalModel, WallscheidModelParsesWithSpeedDependentResistances) {
+  const auto m = pe::ThermalModel::Parse(ReadModel("wallscheid2017-4node"), "w");
+  const std::vector<std::string> states{"pm", "stator_yoke", "stator_tooth", "stator_winding"};
+  EXPECT_EQ(m.StateNames(), states);
+  EXPECT_TRUE(m.UsesCoolant());
+  EXPECT_TRUE(m.ResistancesVary());
+}
+
+TEST(ThermalModelValidation, NegativeCapacityNamesNodeAndLine) {
+  std::string t = kStar;
+  t.replace(t.find("capacity_J_per_K = 50"), 21, "capacity_J_per_K = -5");
+  const std::string e = ExpectParseError(t);
+  EXPECT_NE(e.find("node 'b'"), std::string::npos) << e;
+  EXPECT_NE(e.find("test.toml:11"), std::string::npos) << e;
+}
+
+TEST(ThermalModelValidation, UnknownNodeInEdgeNamesTheEdge) {
+  std::string t = kStar;
+  t.replace(t.find("[\"b\", \"m\"]"), 10, "[\"b\", \"q\"]");
+  const std::string e = ExpectParseError(t);
+  EXPECT_NE(e.find("edge b-q"), std::string::npos) << e;
+  EXPECT_NE(e.find("unknown node 'q'"), std::string::npos) << e;
+}
+
+TEST(ThermalModelValidation, DisconnectedNodeIsNamed) {
+  const std::string e = ExpectParseError(std::string(kStar) + "[[node]]\nname = \"lonely\"\ncapacity_J_per_K = 1\n");
+  EXPECT_NE(e.find("node 'lonely'"), std::string::npos) << e;
+  EXPECT_NE(e.find("not connected"), std::string::npos) << e;
+}
+
+TEST(ThermalModelValidation, IslandWithoutBoundaryIsNamed) {
+  const std::string e = ExpectParseError(std::string(kStar) +
+                                         "[[node]]\nname = \"c\"\ncapacity_J_per_K = 1\n"
+                                         "[[node]]\nname = \"d\"\ncapacity_J_per_K = 1\n"
+                                         "[[edge]]\nbetween = [\"c\", \"d\"]\nresistance_K_per_W = 1\n");
+  EXPECT_NE(e.find("node 'c'"), std::string::npos) << e;
+  EXPECT_NE(e.find("no path to a boundary"), std::string::npos) << e;
+}
+
+TEST(ThermalModelValidation, SingularMasslessSubNetworkIsNamed) {
+  // m2's conductances cancel: +1 W/K to a, -1 W/K to ambient, so its KCL row of Y22 is zero.
+  const std::string e = ExpectParseError(std::string(kStar) +
+                                         "[[node]]\nname = \"m2\"\ncapacity_J_per_K = 0\n"
+                                         "[[edge]]\nbetween = [\"m2\", \"a\"]\nresistance_K_per_W = 1\n"
+                                         "[[edge]]\nbetween = [\"m2\", \"ambient\"]\nresistance_K_per_W = -1\n");
+  EXPECT_NE(e.find("'m2'"), std::string::npos) << e;
+  EXPECT_NE(e.find("singular"), std::string::npos) << e;
+}
+
+TEST(ThermalModelValidation, NegativeResistanceIsLegal) {
+  EXPECT_NO_THROW(pe::ThermalModel::Parse(kStar, "star"));  // b-m is -0.1 K/W
+}
+
+TEST(ThermalModelValidation, UnknownKeyAndBadExpressionAreNamed) {
+  std::string t = kStar;
+  t.replace(t.find("resistance_K_per_W = 2.0"), 24, "resistence_K_per_W = 2.0");
+  std::string e = ExpectParseError(t);
+  EXPECT_NE(e.find("unknown key 'resistence_K_per_W'"), std::string::npos) << e;
+  t = kStar;
+  t.replace(t.find("\"0.01 * speed_rpm\""), 18, "\"0.01 * sped_rpm\"");
+  e = ExpectParseError(t);
+  EXPECT_NE(e.find("power_W"), std::string::npos) << e;
+  EXPECT_NE(e.find("sped_rpm"), std::string::npos) << e;
+  e = ExpectParseError("[[node]]\nname = \"a\"\ncapacity_J_per_K = 1\n[[edge\n");
+  EXPECT_NE(e.find("test.toml:4"), std::string::npos) << e;
+}
+
+TEST(ThermalModel, NonFiniteInputsAreRejected) {
+  const auto m = pe::ThermalModel::Parse(kStar, "star");
+  pe::ThermalInputs in;
+  in.iq_A = std::nan("");
+  pe::ThermalLinearModel lin;
+  EXPECT_THROW(m.Linearise(in, lin), std::domain_error);
+}

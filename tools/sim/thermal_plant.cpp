@@ -1,0 +1,21 @@
+#include "tools/sim/thermal_plant.hpp"
+
+#include <cmath>
+
+namespace pumptherm::sim {
+
+ThermalPlant::ThermalPlant(const estimators::ThermalModel& model, const Eigen::VectorXd& x0_degC,
+                           ThermalPlantConfig config, std::uint64_t seed)
+    : model_(model), config_(config), x_(x0_degC), next_(x0_degC.size()), rng_(seed) {}
+
+const Eigen::VectorXd& ThermalPlant::Step(const estimators::ThermalInputs& inputs, double dt_s) {
+  model_.Linearise(inputs, lin_);
+  discretiser_.Update(lin_, dt_s);
+  discretiser_.Propagate(x_, lin_, next_);
+  const double sd = config_.process_sd_K * std::sqrt(dt_s / config_.process_period_s);
+  for (Eigen::Index i = 0; i < next_.size(); ++i) next_(i) += sd * normal_(rng_);
+  x_ = next_;
+  return x_;
+}
+
+}  // namespace pumptherm::sim
