@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -216,6 +217,42 @@ TEST(DbcTest, EveryRealDbcLoads) {
           EXPECT_GE(m.FindSignal(s.multiplexer_switch), 0);
         }
       }
+    }
+  }
+}
+
+TEST(DbcTest, PumpthermFrameSetIsCompleteAndConsistent) {
+  const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "protocol/pumptherm.dbc");
+  EXPECT_TRUE(dbc.problems.empty()) << dbc.problems.front().line << ": " << dbc.problems.front().message;
+  EXPECT_EQ(dbc.messages.size(), 8u);
+  for (const auto& m : dbc.messages) {
+    SCOPED_TRACE(m.name);
+    ASSERT_TRUE(m.cycle_time_ms.has_value());
+    EXPECT_GT(*m.cycle_time_ms, 0.0);
+    EXPECT_FALSE(m.comment.empty());
+    EXPECT_EQ(m.id % 16, 0u) << "node IDs 0..15 are added to the ID";
+    EXPECT_LE(m.size_bytes, 8u);  // classic CAN
+    for (const auto& s : m.signals) {
+      SCOPED_TRACE(s.name);
+      EXPECT_FALSE(s.comment.empty()) << "resolution and range rationale";
+      EXPECT_LE(SignalEndByte(s), m.size_bytes);
+      // The declared physical range lies inside what the raw field can carry, and the
+      // "not available" raw value lies outside the declared range.
+      const double raw_lo = s.is_signed ? -std::ldexp(1.0, static_cast<int>(s.length_bits) - 1) : 0.0;
+      const double raw_hi = s.is_signed ? std::ldexp(1.0, static_cast<int>(s.length_bits) - 1) - 1
+                                        : std::ldexp(1.0, static_cast<int>(s.length_bits)) - 1;
+      EXPECT_GE(s.minimum, raw_lo * s.factor + s.offset - 1e-9);
+      EXPECT_LE(s.maximum, raw_hi * s.factor + s.offset + 1e-9);
+      if (s.not_available_raw) {
+        const double sna = static_cast<double>(*s.not_available_raw) * s.factor + s.offset;
+        EXPECT_TRUE(sna < s.minimum - 1e-9 || sna > s.maximum + 1e-9) << sna;
+      }
+    }
+  }
+  // No two messages of different pumps collide: blocks of 16 IDs are disjoint.
+  for (std::size_t i = 0; i < dbc.messages.size(); ++i) {
+    for (std::size_t j = i + 1; j < dbc.messages.size(); ++j) {
+      EXPECT_NE(dbc.messages[i].id / 16, dbc.messages[j].id / 16);
     }
   }
 }
