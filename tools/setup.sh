@@ -13,7 +13,7 @@ packages=(
   libsystemd-dev libtomlplusplus-dev libcli11-dev libfmt-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang libclang-rt-14-dev
-  can-utils iproute2 kmod cpio gzip busybox-static qemu-system-x86
+  can-utils iproute2 kmod cpio gzip busybox-static qemu-system-x86 debootstrap e2fsprogs
   gnuplot-nox default-jdk-headless libjchart2d-java xvfb xauth
 )
 
