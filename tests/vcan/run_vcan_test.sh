@@ -284,6 +284,49 @@ find_kernel() {
     cannot_run "no guest kernel with its modules under $kernel_root (run tools/setup.sh)"
 }
 
+# Sets guest_kernel_image: the uncompressed vmlinux (cached), which QEMU boots through its PVH
+# entry point, or the compressed vmlinuz when that cannot be had. Under TCG, decompressing the
+# kernel costs more than the rest of the boot (see docs/testing-vcan.md); PUMPTHERM_VCAN_PVH=0
+# always boots the vmlinuz.
+prepare_kernel_image() {
+  local vmlinuz=$kernel_root/boot/vmlinuz-$kernel_version
+  guest_kernel_image=$vmlinuz
+  [[ "${PUMPTHERM_VCAN_PVH:-1}" != 0 ]] || return 0
+  command -v readelf >/dev/null 2>&1 || return 0
+  local key
+  key=$(stat -L -c '%n %s %Y' "$vmlinuz" | sha256sum | cut -c1-16)
+  local vmlinux=$cache_dir/vmlinux-$kernel_version-$key
+  if [[ ! -s "$vmlinux" ]]; then
+    (
+      flock 9
+      [[ -s "$vmlinux" ]] && exit 0
+      local tmp=$vmlinux.tmp.$$ magic off tool notes
+      trap 'rm -f "$tmp"' EXIT
+      # The payload of a bzImage is a compressed ELF vmlinux: find the first stream that is one.
+      for magic in xz gzip zstd; do
+        case $magic in
+          xz) off=$(LC_ALL=C grep -abo $'\xfd7zXZ\x00' "$vmlinuz" | head -n 1); tool=(xz -dc --single-stream) ;;
+          gzip) off=$(LC_ALL=C grep -abo $'\x1f\x8b\x08' "$vmlinuz" | head -n 1); tool=(gzip -dc) ;;
+          zstd) off=$(LC_ALL=C grep -abo $'\x28\xb5\x2f\xfd' "$vmlinuz" | head -n 1); tool=(zstd -qdc) ;;
+        esac
+        [[ -n "$off" ]] || continue
+        command -v "${tool[0]}" >/dev/null 2>&1 || continue
+        tail -c +$((${off%%:*} + 1)) "$vmlinuz" | "${tool[@]}" >"$tmp" 2>/dev/null || true
+        # An ELF with the PVH entry note (XEN_ELFNOTE_PHYS32_ENTRY, type 0x12).
+        notes=$(readelf -n "$tmp" 2>/dev/null || true)
+        if [[ "$(head -c 4 "$tmp")" == $'\x7fELF' && "$notes" == *"(0x00000012)"* ]]; then
+          mv "$tmp" "$vmlinux"
+          find "$cache_dir" -maxdepth 1 -name 'vmlinux-*' ! -path "$vmlinux" -delete
+          exit 0
+        fi
+      done
+      exit 0
+    ) 9>"$cache_dir/.lock"
+  fi
+  [[ -s "$vmlinux" ]] && guest_kernel_image=$vmlinux
+  return 0
+}
+
 # Copies an executable and every shared library it needs (ldd) into the staging root $1, at the
 # same absolute paths, so the dynamic loader and any RPATH find them.
 stage_libraries() {
@@ -295,9 +338,11 @@ stage_libraries() {
     mkdir -p "$root$(dirname "$lib")"
     cp -L "$lib" "$root$lib"
   done < <(ldd "$exe" 2>/dev/null | awk '/=> \//{print $3} /^[[:space:]]*\/[^ ]+ \(/{print $1}')
-  if ldd "$exe" 2>/dev/null | grep -q 'not found'; then
+  local missing
+  missing=$(ldd "$exe" 2>/dev/null | grep 'not found' || true)
+  if [[ -n "$missing" ]]; then
     err "$exe needs libraries ldd cannot find:"
-    ldd "$exe" | grep 'not found' >&2
+    printf '%s\n' "$missing" >&2
     return 1
   fi
 }
@@ -435,6 +480,7 @@ run_guest() {
   find_kernel
   mkdir -p "$cache_dir/runs"
   build_base
+  prepare_kernel_image
   run_dir=$(mktemp -d "$cache_dir/runs/${name//[^A-Za-z0-9_.-]/_}.XXXXXX")
   build_run_part
   local initrd=$run_dir/initrd.cpio.gz
@@ -443,7 +489,7 @@ run_guest() {
   rm -f "$run_cpio"
 
   local qemu=(qemu-system-x86_64 -m 512 -no-reboot -nodefaults -no-user-config -display none
-    -kernel "$kernel_root/boot/vmlinuz-$kernel_version" -initrd "$initrd"
+    -kernel "$guest_kernel_image" -initrd "$initrd"
     -append "console=ttyS0 quiet panic=-1")
   if ((shell)); then
     say "mode=guest kernel=${kernel_version} test=${name} (interactive shell; Ctrl-a x kills QEMU)"

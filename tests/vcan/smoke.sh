@@ -106,7 +106,7 @@ if [ -s "$WORK_DIR/candump.err" ]; then
   sed 's/^/  /' "$WORK_DIR/candump.err"
 fi
 # Leave vcan0 as found (it may be the host's own in --mode host).
-ip link set dev vcan0 down && ip link set dev vcan0 mtu 72 && ip link set dev vcan0 up ||
+{ ip link set dev vcan0 down && ip link set dev vcan0 mtu 72 && ip link set dev vcan0 up; } ||
   fail "could not restore vcan0 to mtu 72"
 cp "$log" "$OUT_DIR/candump.log"
 echo "smoke: PASS"
