@@ -1,5 +1,5 @@
 # pumptherm_vcan_test(NAME <name> SCENARIO <file> [BINARIES <targets or paths>...]
-#                     [FILES <files>...] [TIMEOUT <s>])
+#                     [FILES <files>...] [TIMEOUT <s>] [OUT_DIR <dir>])
 #
 # Adds the CTest test vcan.<name> (label "vcan", SKIP_RETURN_CODE 77) that runs SCENARIO with
 # tests/vcan/run_vcan_test.sh: natively where the kernel has vcan, otherwise in a QEMU guest.
@@ -7,7 +7,8 @@
 # $BIN_DIR with their shared libraries. FILES land in $DATA_DIR. Relative paths are taken from the
 # calling CMakeLists.txt's source directory. TIMEOUT (default 300 s) bounds the harness; CTest's
 # own timeout is 60 s longer so that the harness reports a hang itself. The guest's base
-# initramfs is cached in <build>/tests/vcan-cache. See docs/testing-vcan.md.
+# initramfs is cached in <build>/tests/vcan-cache. OUT_DIR (relative to the current binary
+# directory) receives what the scenario wrote under $OUT_DIR. See docs/testing-vcan.md.
 #
 # Include this file from any CMakeLists.txt that adds vcan tests.
 include_guard(GLOBAL)
@@ -15,7 +16,7 @@ include_guard(GLOBAL)
 set(PUMPTHERM_VCAN_HARNESS "${CMAKE_CURRENT_LIST_DIR}/run_vcan_test.sh")
 
 function(pumptherm_vcan_test)
-  cmake_parse_arguments(ARG "" "NAME;SCENARIO;TIMEOUT" "BINARIES;FILES" ${ARGN})
+  cmake_parse_arguments(ARG "" "NAME;SCENARIO;TIMEOUT;OUT_DIR" "BINARIES;FILES" ${ARGN})
   if(ARG_UNPARSED_ARGUMENTS)
     message(FATAL_ERROR "pumptherm_vcan_test: unknown arguments '${ARG_UNPARSED_ARGUMENTS}'")
   endif()
@@ -36,6 +37,10 @@ function(pumptherm_vcan_test)
 
   set(args --name "${ARG_NAME}" --timeout "${ARG_TIMEOUT}"
            --cache-dir "${PROJECT_BINARY_DIR}/tests/vcan-cache")
+  if(ARG_OUT_DIR)
+    get_filename_component(out "${ARG_OUT_DIR}" ABSOLUTE BASE_DIR "${CMAKE_CURRENT_BINARY_DIR}")
+    list(APPEND args --out-dir "${out}")
+  endif()
   foreach(bin IN LISTS ARG_BINARIES)
     if(TARGET "${bin}")
       list(APPEND args --bin "$<TARGET_FILE:${bin}>")

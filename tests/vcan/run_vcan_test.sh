@@ -56,6 +56,8 @@ options:
 
 environment:
   PUMPTHERM_CACHE   where tools/setup.sh unpacked the guest kernel (default /var/cache/pumptherm)
+  PUMPTHERM_VCAN_VERBOSE=1, PUMPTHERM_VCAN_KEEP=1   as --verbose and --keep (e.g. under ctest)
+  PUMPTHERM_VCAN_PVH=0   boot the compressed vmlinuz, not the cached uncompressed vmlinux
   CI=true           a run that is possible neither way fails instead of skipping (exit 77)
 
 example:
@@ -84,8 +86,8 @@ mode=${PUMPTHERM_VCAN_MODE:-auto}
 cache_dir=${PUMPTHERM_VCAN_CACHE:-${XDG_CACHE_HOME:-${HOME:-/tmp}/.cache}/pumptherm-vcan}
 out_dir=""
 name=""
-verbose=0
-keep=0
+verbose=${PUMPTHERM_VCAN_VERBOSE:-0}
+keep=${PUMPTHERM_VCAN_KEEP:-0}
 shell=0
 scenario=""
 
