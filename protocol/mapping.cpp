@@ -1,0 +1,198 @@
+#include "protocol/mapping.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace pumptherm::protocol {
+
+namespace {
+
+constexpr std::array<std::string_view, kMappingInputCount> kInputNames = {
+    "id_A",          "iq_A",          "ud_V",       "uq_V",
+    "speed_elec_rad_per_s", "speed_mech_rpm", "rolling_counter", "drive_state",
+    "frame_temp_degC", "ambient_temp_degC", "dc_link_V"};
+
+constexpr std::array<std::string_view, kMappingOutputCount> kOutputNames = {
+    "winding_res_temp_degC", "rs_ohm",         "flux_Wb",       "rs_status",
+    "flux_status",           "alarm_level",    "alarm_reason",  "alarm_node",
+    "alarm_value_degC",      "time_to_trip_s", "uptime_s",      "frame_rate_Hz",
+    "drops",                 "bus_state"};
+
+std::string Where(const toml::source_region& r) {
+  const std::string file = r.path ? *r.path : std::string("<mapping>");
+  return fmt::format("{}:{}:{}", file, r.begin.line, r.begin.column);
+}
+
+[[noreturn]] void Fail(const toml::node& at, const std::string& key, const std::string& what) {
+  throw MappingError(fmt::format("{}: key {}: {}", Where(at.source()), key, what));
+}
+
+double NumberOr(const toml::table& t, std::string_view name, double fallback, const std::string& key) {
+  const toml::node* n = t.get(name);
+  if (n == nullptr) return fallback;
+  if (auto v = n->value<double>()) {
+    if (!std::isfinite(*v)) Fail(*n, key + "." + std::string(name), "must be finite");
+    return *v;
+  }
+  Fail(*n, key + "." + std::string(name), "expected a number");
+}
+
+SignalRef Resolve(const toml::node& node, const std::string& key, const Dbc& dbc) {
+  const toml::table* t = node.as_table();
+  if (t == nullptr) Fail(node, key, "expected a table { message = \"...\", signal = \"...\" }");
+  for (const auto& [k, v] : *t) {
+    if (k != "message" && k != "signal" && k != "scale" && k != "offset") {
+      Fail(v, key + "." + std::string(k.str()), "unknown key (message, signal, scale, offset)");
+    }
+  }
+  SignalRef ref;
+  const toml::node* msg = t->get("message");
+  const toml::node* sig = t->get("signal");
+  if (msg == nullptr || !msg->is_string()) Fail(node, key + ".message", "expected the DBC message name");
+  if (sig == nullptr || !sig->is_string()) Fail(node, key + ".signal", "expected the DBC signal name");
+  ref.message = **msg->as_string();
+  ref.signal = **sig->as_string();
+  const DbcMessage* m = dbc.FindMessage(ref.message);
+  if (m == nullptr) {
+    Fail(*msg, key + ".message", fmt::format("unknown message {} in {}", ref.message, dbc.file_name));
+  }
+  ref.message_index = static_cast<int>(m - dbc.messages.data());
+  ref.signal_index = m->FindSignal(ref.signal);
+  if (ref.signal_index < 0) {
+    Fail(*sig, key + ".signal", fmt::format("unknown signal {} in message {} of {}", ref.signal,
+                                           ref.message, dbc.file_name));
+  }
+  ref.scale = NumberOr(*t, "scale", 1.0, key);
+  ref.offset = NumberOr(*t, "offset", 0.0, key);
+  return ref;
+}
+
+template <std::size_t N, typename Slot>
+void ResolveSection(const toml::table& root, std::string_view section,
+                    const std::array<std::string_view, N>& names, std::array<Slot, N>& out,
+                    const Dbc& dbc, const toml::table** nested_nodes) {
+  const toml::node* n = root.get(section);
+  if (n == nullptr) return;
+  const toml::table* t = n->as_table();
+  if (t == nullptr) Fail(*n, std::string(section), "expected a table");
+  for (const auto& [k, v] : *t) {
+    const std::string key = fmt::format("{}.{}", section, k.str());
+    if (nested_nodes != nullptr && k == "nodes") {
+      *nested_nodes = v.as_table();
+      if (*nested_nodes == nullptr) Fail(v, key, "expected a table of node name = { message, signal }");
+      continue;
+    }
+    const auto it = std::find(names.begin(), names.end(), k.str());
+    if (it == names.end()) {
+      std::string known;
+      for (auto name : names) known += fmt::format("{}{}", known.empty() ? "" : ", ", name);
+      Fail(v, key, fmt::format("unknown {} (known: {}{})", section, known,
+                               nested_nodes != nullptr ? ", nodes" : ""));
+    }
+    out[static_cast<std::size_t>(it - names.begin())] = Resolve(v, key, dbc);
+  }
+}
+
+}  // namespace
+
+std::string_view MappingInputName(MappingInput input) noexcept {
+  return kInputNames[static_cast<std::size_t>(input)];
+}
+
+std::string_view MappingOutputName(MappingOutput output) noexcept {
+  return kOutputNames[static_cast<std::size_t>(output)];
+}
+
+std::uint32_t SignalMapping::CanId(const Dbc& dbc, int message_index, std::uint32_t node_id) const {
+  if (node_id >= node_id_limit) {
+    throw std::out_of_range(fmt::format("node ID {} not below node_id_limit {}", node_id, node_id_limit));
+  }
+  return dbc.messages.at(static_cast<std::size_t>(message_index)).id + node_id;
+}
+
+SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
+  SignalMapping mapping;
+  for (const auto& [k, v] : table) {
+    if (k != "node_id_limit" && k != "inputs" && k != "outputs") {
+      Fail(v, std::string(k.str()), "unknown key (node_id_limit, inputs, outputs)");
+    }
+  }
+  if (const toml::node* n = table.get("node_id_limit")) {
+    const auto v = n->value<std::int64_t>();
+    if (!v || *v < 1 || *v > 65536) Fail(*n, "node_id_limit", "expected an integer from 1 to 65536");
+    mapping.node_id_limit = static_cast<std::uint32_t>(*v);
+  }
+  ResolveSection(table, "inputs", kInputNames, mapping.inputs, dbc, nullptr);
+  const toml::table* nodes = nullptr;
+  ResolveSection(table, "outputs", kOutputNames, mapping.outputs, dbc, &nodes);
+  if (nodes != nullptr) {
+    for (const auto& [k, v] : *nodes) {
+      mapping.node_temperatures.emplace(std::string(k.str()),
+                                        Resolve(v, fmt::format("outputs.nodes.{}", k.str()), dbc));
+    }
+  }
+
+  // The estimators cannot run without the dq quantities and a speed.
+  std::vector<std::string> missing;
+  for (MappingInput i : {MappingInput::kIdA, MappingInput::kIqA, MappingInput::kUdV, MappingInput::kUqV}) {
+    if (!mapping.input(i)) missing.emplace_back(MappingInputName(i));
+  }
+  if (!mapping.input(MappingInput::kSpeedElecRadPerS) && !mapping.input(MappingInput::kSpeedMechRpm)) {
+    missing.emplace_back("speed_elec_rad_per_s or speed_mech_rpm");
+  }
+  if (!missing.empty()) {
+    std::string list;
+    for (const auto& m : missing) list += fmt::format("{}{}", list.empty() ? "" : ", ", m);
+    const toml::node* inputs = table.get("inputs");
+    Fail(inputs != nullptr ? *inputs : static_cast<const toml::node&>(table), "inputs",
+         "missing required input " + list);
+  }
+
+  // Every mapped message owns IDs [id, id + node_id_limit); they must fit and not overlap.
+  std::vector<int> used;
+  const auto note = [&](const std::optional<SignalRef>& r) {
+    if (r && std::find(used.begin(), used.end(), r->message_index) == used.end()) {
+      used.push_back(r->message_index);
+    }
+  };
+  for (const auto& r : mapping.inputs) note(r);
+  for (const auto& r : mapping.outputs) note(r);
+  for (const auto& [name, r] : mapping.node_temperatures) note(r);
+  for (std::size_t a = 0; a < used.size(); ++a) {
+    const DbcMessage& ma = dbc.messages[static_cast<std::size_t>(used[a])];
+    const std::uint64_t top = std::uint64_t{ma.id} + mapping.node_id_limit - 1;
+    if (top > (ma.extended ? 0x1FFFFFFFu : 0x7FFu)) {
+      Fail(table, "node_id_limit",
+           fmt::format("message {} (ID {:#x}) plus node IDs up to {} leaves the {}-bit ID range",
+                       ma.name, ma.id, mapping.node_id_limit - 1, ma.extended ? 29 : 11));
+    }
+    for (std::size_t b = a + 1; b < used.size(); ++b) {
+      const DbcMessage& mb = dbc.messages[static_cast<std::size_t>(used[b])];
+      if (ma.extended != mb.extended) continue;
+      const std::uint32_t lo = std::min(ma.id, mb.id);
+      const std::uint32_t hi = std::max(ma.id, mb.id);
+      if (hi - lo < mapping.node_id_limit) {
+        Fail(table, "node_id_limit",
+             fmt::format("messages {} ({:#x}) and {} ({:#x}) are closer than node_id_limit {}: "
+                         "one pump's frame would carry another's ID",
+                         ma.name, ma.id, mb.name, mb.id, mapping.node_id_limit));
+      }
+    }
+  }
+  return mapping;
+}
+
+SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name, const Dbc& dbc) {
+  toml::table table;
+  try {
+    table = toml::parse(toml_text, source_name);
+  } catch (const toml::parse_error& e) {
+    throw MappingError(fmt::format("{}: {}", Where(e.source()), e.description()));
+  }
+  return MappingFromTable(table, dbc);
+}
+
+}  // namespace pumptherm::protocol

@@ -1,0 +1,123 @@
+#pragma once
+/// The signal mapping: which DBC message and signal carries each estimator input and output.
+///
+/// The frame layout is configuration: a pump controller with its own DBC needs only its own
+/// mapping. The mapping is TOML (a file of its own, or a table inside the daemon config):
+///
+///     node_id_limit = 16                  # pumps have node IDs 0..15
+///     [inputs]
+///     id_A = { message = "PUMP_FAST_I", signal = "Id_A" }
+///     speed_elec_rad_per_s = { message = "PUMP_FAST_I", signal = "SpeedElec_rad_per_s" }
+///     frame_temp_degC = { message = "PUMP_STATUS", signal = "FrameTemp_degC", scale = 1.0, offset = 0.0 }
+///     [outputs]
+///     winding_res_temp_degC = { message = "GW_TEMPS_A", signal = "WindingRes_degC" }
+///     [outputs.nodes]                     # thermal-model node name -> signal, degC
+///     frame = { message = "GW_TEMPS_A", signal = "Frame_degC" }
+///
+/// Node ID rule: the DBC defines each message for node ID 0; pump n uses CAN ID = DBC ID + n,
+/// with 0 <= n < node_id_limit (docs/protocol.md). Each mapped message therefore owns a block of
+/// node_id_limit IDs, and the blocks must not overlap.
+///
+/// Value rule: estimator value = scale * DBC value + offset (defaults 1 and 0), so a DBC in other
+/// units (mA, rpm for an electrical speed, ...) maps without recompiling.
+
+#include <array>
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+
+#include <toml++/toml.h>
+
+#include "protocol/dbc.hpp"
+
+namespace pumptherm::protocol {
+
+/// What the daemon reads from a pump drive. Speeds: electrical angular speed (pole pairs times
+/// mechanical, rad/s) and mechanical speed (r/min); at least one of the two must be mapped.
+enum class MappingInput {
+  kIdA,                 ///< id_A: d-axis current, amplitude-invariant dq, A
+  kIqA,                 ///< iq_A: q-axis current, A
+  kUdV,                 ///< ud_V: d-axis voltage, V
+  kUqV,                 ///< uq_V: q-axis voltage, V
+  kSpeedElecRadPerS,    ///< speed_elec_rad_per_s: electrical speed, rad/s
+  kSpeedMechRpm,        ///< speed_mech_rpm: mechanical speed, r/min
+  kRollingCounter,      ///< rolling_counter: counter of the fast telemetry frames
+  kDriveState,          ///< drive_state: 0 stopped, 1 accelerating, 2 steady, 3 braking, 4 fault
+  kFrameTempDegC,       ///< frame_temp_degC: frame temperature sensor
+  kAmbientTempDegC,     ///< ambient_temp_degC: ambient or coolant temperature
+  kDcLinkV,             ///< dc_link_V: DC-link voltage
+};
+inline constexpr std::size_t kMappingInputCount = 11;
+
+/// What the daemon writes per pump (besides the node temperatures, which are named by the
+/// thermal model and listed in SignalMapping::node_temperatures).
+enum class MappingOutput {
+  kWindingResTempDegC,  ///< winding_res_temp_degC: resistance-based winding temperature
+  kRsOhm,               ///< rs_ohm: identified stator resistance
+  kFluxWb,              ///< flux_Wb: identified magnet flux linkage
+  kRsStatus,            ///< rs_status
+  kFluxStatus,          ///< flux_status
+  kAlarmLevel,          ///< alarm_level
+  kAlarmReason,         ///< alarm_reason
+  kAlarmNode,           ///< alarm_node: index of the node that set the level
+  kAlarmValueDegC,      ///< alarm_value_degC
+  kTimeToTripS,         ///< time_to_trip_s
+  kUptimeS,             ///< uptime_s: gateway health
+  kFrameRateHz,         ///< frame_rate_Hz
+  kDrops,               ///< drops
+  kBusState,            ///< bus_state
+};
+inline constexpr std::size_t kMappingOutputCount = 14;
+
+/// The TOML key of an input or output.
+std::string_view MappingInputName(MappingInput input) noexcept;
+std::string_view MappingOutputName(MappingOutput output) noexcept;
+
+/// One binding, resolved against the DBC.
+struct SignalRef {
+  std::string message;
+  std::string signal;
+  int message_index = -1;  ///< into Dbc::messages
+  int signal_index = -1;   ///< into DbcMessage::signals
+  double scale = 1.0;      ///< estimator value = scale * DBC value + offset
+  double offset = 0.0;
+};
+
+/// A validated mapping.
+struct SignalMapping {
+  std::array<std::optional<SignalRef>, kMappingInputCount> inputs;
+  std::array<std::optional<SignalRef>, kMappingOutputCount> outputs;
+  std::map<std::string, SignalRef, std::less<>> node_temperatures;  ///< node name -> signal, degC
+  std::uint32_t node_id_limit = 16;
+
+  const std::optional<SignalRef>& input(MappingInput i) const noexcept {
+    return inputs[static_cast<std::size_t>(i)];
+  }
+  const std::optional<SignalRef>& output(MappingOutput o) const noexcept {
+    return outputs[static_cast<std::size_t>(o)];
+  }
+  /// CAN ID of DBC message `message_index` for the pump with `node_id` (DBC ID + node_id).
+  /// Throws std::out_of_range if node_id >= node_id_limit.
+  std::uint32_t CanId(const Dbc& dbc, int message_index, std::uint32_t node_id) const;
+};
+
+/// An error in a mapping, naming where (source:line:column) and the key.
+class MappingError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Parses and validates a mapping from TOML text. `source_name` labels errors.
+/// Throws MappingError for a TOML syntax error, an unknown key, a missing message/signal key,
+/// a message or signal the DBC does not have, a missing required input (id_A, iq_A, ud_V, uq_V
+/// and one speed), a node_id_limit outside 1..65536, or ID blocks that overflow or overlap.
+SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name, const Dbc& dbc);
+
+/// The same, from a table already parsed (e.g. the `[mapping]` table of the daemon config);
+/// errors name the table's source file, line and column.
+SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc);
+
+}  // namespace pumptherm::protocol

@@ -1,0 +1,118 @@
+// Signal mapping: the shipped mapping of pumptherm.dbc resolves; every kind of bad mapping is an
+// error naming the source, line, column and key.
+#include "protocol/mapping.hpp"
+
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "tests/protocol/dbc_files.hpp"
+
+namespace pumptherm::protocol {
+namespace {
+
+Dbc PumpthermDbc() { return ParseDbc(test::ReadFile(test::PumpthermDbc()), "pumptherm.dbc"); }
+
+constexpr const char* kMinimal = R"(
+[inputs]
+id_A = { message = "PUMP_FAST_I", signal = "Id_A" }
+iq_A = { message = "PUMP_FAST_I", signal = "Iq_A" }
+ud_V = { message = "PUMP_FAST_U", signal = "Ud_V" }
+uq_V = { message = "PUMP_FAST_U", signal = "Uq_V" }
+)";
+
+/// Expects ParseMapping(text) to throw a MappingError whose text contains every needle.
+void ExpectMappingError(const std::string& text, const Dbc& dbc, std::initializer_list<const char*> needles) {
+  try {
+    ParseMapping(text, "m.toml", dbc);
+    ADD_FAILURE() << "no error for:\n" << text;
+  } catch (const MappingError& e) {
+    for (const char* n : needles) {
+      EXPECT_NE(std::string(e.what()).find(n), std::string::npos) << e.what() << "\nlacks: " << n;
+    }
+  }
+}
+
+TEST(MappingTest, ShippedMappingResolvesEverySignal) {
+  const Dbc dbc = PumpthermDbc();
+  const auto path = test::SourceDir() / "protocol" / "mapping_pumptherm.toml";
+  const SignalMapping m = ParseMapping(test::ReadFile(path), path.string(), dbc);
+  EXPECT_EQ(m.node_id_limit, 16u);
+  for (std::size_t i = 0; i < kMappingInputCount; ++i) {
+    EXPECT_TRUE(m.inputs[i].has_value()) << MappingInputName(static_cast<MappingInput>(i));
+  }
+  for (std::size_t i = 0; i < kMappingOutputCount; ++i) {
+    EXPECT_TRUE(m.outputs[i].has_value()) << MappingOutputName(static_cast<MappingOutput>(i));
+  }
+  EXPECT_EQ(m.node_temperatures.size(), 7u);
+  const SignalRef& id = *m.input(MappingInput::kIdA);
+  const DbcMessage& fast = dbc.messages[static_cast<std::size_t>(id.message_index)];
+  EXPECT_EQ(fast.name, "PUMP_FAST_I");
+  EXPECT_EQ(fast.signals[static_cast<std::size_t>(id.signal_index)].name, "Id_A");
+  EXPECT_EQ(id.scale, 1.0);
+  const SignalRef& rotor = m.node_temperatures.at("rotor");
+  EXPECT_EQ(dbc.messages[static_cast<std::size_t>(rotor.message_index)].signals[static_cast<std::size_t>(rotor.signal_index)].name,
+            "Rotor_degC");
+  // Pump 3's fast frame: 0x100 + 3.
+  EXPECT_EQ(m.CanId(dbc, id.message_index, 3), 0x103u);
+  EXPECT_THROW(m.CanId(dbc, id.message_index, 16), std::out_of_range);
+}
+
+TEST(MappingTest, ScaleAndOffsetAreRead) {
+  const Dbc dbc = PumpthermDbc();
+  const SignalMapping m = ParseMapping(
+      std::string(kMinimal) +
+          "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\", scale = 0.5, offset = -1 }\n",
+      "m.toml", dbc);
+  EXPECT_EQ(m.input(MappingInput::kSpeedMechRpm)->scale, 0.5);
+  EXPECT_EQ(m.input(MappingInput::kSpeedMechRpm)->offset, -1.0);
+  EXPECT_FALSE(m.input(MappingInput::kDcLinkV).has_value());
+}
+
+TEST(MappingTest, UnknownMessageOrSignalIsNamed) {
+  const Dbc dbc = PumpthermDbc();
+  const std::string speed = "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
+  ExpectMappingError(std::string(kMinimal) + speed +
+                         "dc_link_V = { message = \"PUMP_STATUSS\", signal = \"DcLink_V\" }\n",
+                     dbc, {"m.toml:8:", "inputs.dc_link_V.message", "unknown message PUMP_STATUSS"});
+  ExpectMappingError(std::string(kMinimal) + speed +
+                         "dc_link_V = { message = \"PUMP_STATUS\", signal = \"DcLink\" }\n",
+                     dbc, {"m.toml:8:", "inputs.dc_link_V.signal", "unknown signal DcLink in message PUMP_STATUS"});
+  ExpectMappingError(std::string(kMinimal) + speed + "[outputs.nodes]\nrotor = { message = \"GW_TEMPS_B\" }\n", dbc,
+                     {"outputs.nodes.rotor.signal", "expected the DBC signal name"});
+}
+
+TEST(MappingTest, UnknownKeysAndMissingInputsAreErrors) {
+  const Dbc dbc = PumpthermDbc();
+  const std::string speed = "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
+  ExpectMappingError(std::string(kMinimal) + speed + "speed_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n",
+                     dbc, {"m.toml:8:1", "inputs.speed_rpm", "unknown inputs"});
+  ExpectMappingError(std::string(kMinimal) + speed + "dc_link_V = { message = \"PUMP_STATUS\", signal = \"DcLink_V\", gain = 2 }\n",
+                     dbc, {"inputs.dc_link_V.gain", "unknown key"});
+  ExpectMappingError(std::string("nodeid_limit = 3\n") + kMinimal + speed, dbc, {"m.toml:1:1", "nodeid_limit"});
+  ExpectMappingError(kMinimal, dbc, {"missing required input speed_elec_rad_per_s or speed_mech_rpm"});
+  ExpectMappingError("[inputs]\nid_A = { message = \"PUMP_FAST_I\", signal = \"Id_A\" }\n", dbc,
+                     {"missing required input iq_A, ud_V, uq_V, speed_elec_rad_per_s or speed_mech_rpm"});
+  ExpectMappingError("[inputs\n", dbc, {"m.toml:1:"});
+}
+
+TEST(MappingTest, NodeIdBlocksMustNotOverlapOrOverflow) {
+  const Dbc dbc = PumpthermDbc();
+  const std::string speed = "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
+  // PUMP_FAST_I (0x100) and PUMP_FAST_U (0x110) are 16 apart: 17 pumps would collide.
+  ExpectMappingError(std::string("node_id_limit = 17\n") + kMinimal + speed, dbc,
+                     {"PUMP_FAST_I", "PUMP_FAST_U", "closer than node_id_limit 17"});
+  ExpectMappingError(std::string("node_id_limit = 0\n") + kMinimal + speed, dbc, {"1 to 65536"});
+  const Dbc high = ParseDbc(
+      "BO_ 2040 F: 8 X\n SG_ I : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ Q : 8|8@1+ (1,0) [0|0] \"\" X\n"
+      " SG_ D : 16|8@1+ (1,0) [0|0] \"\" X\n SG_ U : 24|8@1+ (1,0) [0|0] \"\" X\n SG_ W : 32|8@1+ (1,0) [0|0] \"\" X\n",
+      "high.dbc");
+  ExpectMappingError(
+      "[inputs]\nid_A = { message = \"F\", signal = \"I\" }\niq_A = { message = \"F\", signal = \"Q\" }\n"
+      "ud_V = { message = \"F\", signal = \"D\" }\nuq_V = { message = \"F\", signal = \"U\" }\n"
+      "speed_elec_rad_per_s = { message = \"F\", signal = \"W\" }\n",
+      high, {"leaves the 11-bit ID range"});
+}
+
+}  // namespace
+}  // namespace pumptherm::protocol
