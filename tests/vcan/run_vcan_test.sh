@@ -146,6 +146,19 @@ elapsed_s() { awk -v a="$1" -v b="$(now_s)" 'BEGIN { printf "%.1f", b - a }'; }
 readonly kNamespaceSetup='ip link add dev vcan0 type vcan && ip link set vcan0 up &&
 ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo'
 
+# Runs the scenario ($0) in a session of its own and, when it exits (or we are terminated), ends
+# whatever it left running in that session, as the guest does.
+# shellcheck disable=SC2016 # expanded by the child shell
+readonly kNativeRun='cd "$WORK_DIR" || exit 1
+setsid sh "$0" </dev/null &
+pid=$!
+trap '"'"'kill -TERM -$pid 2>/dev/null; sleep 1; kill -KILL -$pid 2>/dev/null; exit 143'"'"' TERM INT
+wait "$pid"
+rc=$?
+kill -TERM -$pid 2>/dev/null && sleep 0.2
+kill -KILL -$pid 2>/dev/null
+exit $rc'
+
 # Prints how native mode can run here: "netns" (a namespace of our own), "host" (the host's
 # vcan0, already present) or nothing.
 native_kind() {
@@ -179,14 +192,12 @@ run_native() {
   say "mode=native (${kind}) kernel=$(uname -r) test=${name}"
   local start
   start=$(now_s)
-  # shellcheck disable=SC2016 # $0 and $WORK_DIR expand in the child shell.
-  local cmd=(sh -c 'cd "$WORK_DIR" && exec sh "$0" </dev/null' "$scenario")
+  local cmd=(sh -c "${kNativeRun}" "$scenario")
   if [[ "$kind" == "netns" ]]; then
     local unshare_args=(--net)
     ((EUID == 0)) || unshare_args+=(--map-root-user)
-    # shellcheck disable=SC2016 # as above
-    cmd=(unshare "${unshare_args[@]}" sh -c "${kNamespaceSetup}"' || exit 1
-cd "$WORK_DIR" && exec sh "$0" </dev/null' "$scenario")
+    cmd=(unshare "${unshare_args[@]}" sh -c "${kNamespaceSetup} || exit 1
+${kNativeRun}" "$scenario")
   fi
   local rc=0
   env PATH="$work/bin:$PATH" BIN_DIR="$work/bin" DATA_DIR="$work/data" WORK_DIR="$work/work" \
