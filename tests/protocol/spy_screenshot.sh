@@ -87,9 +87,10 @@ pids="$! $pids"
 ip netns exec "$ns" "$spy" --lcm-url="$url" > "$work/spy.log" 2>&1 &
 pids="$! $pids"
 
-# Polls until `xdotool search --name PATTERN` finds a window; prints its id.
+# Polls until `xdotool search --name PATTERN` finds a window, at most TRIES (300) times 0.2 s;
+# prints its id.
 wait_window() {
-  for _ in $(seq 300); do
+  for _ in $(seq "${2:-300}"); do
     id=$(xdotool search --name "$1" 2> /dev/null | head -n 1) || true
     if [ -n "$id" ]; then
       echo "$id"
@@ -102,6 +103,10 @@ wait_window() {
 
 main=$(wait_window '^LCM Spy$') || fail "lcm-spy's window did not appear"
 types=$(ls "$source_dir"/protocol/lcm/*.lcm | wc -l)
+for _ in $(seq 50); do
+  grep -q "Found $types LCM types" "$work/spy.log" && break
+  sleep 0.2
+done
 grep -q "Found $types LCM types" "$work/spy.log" || fail "lcm-spy did not find the $types pumptherm types"
 
 # The spy lists channels sorted by name, one table row each. Wait until the demo's clear
@@ -126,8 +131,13 @@ open_view() {
   channel=$1
   row=$(printf '%s\n' "$channels" | grep -n -x "$channel" | cut -d: -f1)
   y=$((row_top_px + row_px * (row - 1) + row_px / 2))
-  xdotool mousemove 90 "$y" click --repeat 2 --delay 100 1
-  view=$(wait_window "^$channel\$") || fail "no decoded view opened for $channel"
+  # A busy machine can lose a click: try again while no view has opened.
+  view=""
+  for _ in 1 2 3 4 5 6 7 8 9 10; do
+    xdotool mousemove 90 "$y" click --repeat 2 --delay 100 1
+    view=$(wait_window "^$channel\$" 25) && break
+  done
+  [ -n "$view" ] || fail "no decoded view opened for $channel after 10 double clicks"
   xdotool windowmove "$view" "$2" "$3" windowsize "$view" "$4" "$5"
 }
 open_view PUMPTHERM/tmp2/TEMPS 945 0 975 640
