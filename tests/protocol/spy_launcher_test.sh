@@ -51,10 +51,11 @@ cp=$(classpath)
 [ "$(readlink -f "${cp##*:}")" = "$(readlink -f "$work/prefix/share/pumptherm/java/pumptherm_lcm_types.jar")" ] ||
   fail "installed class path: $cp"
 
-# 3. The jar holds a class for every .lcm file.
+# 3. The jar holds a class for every .lcm file (listed with the JDK's jar tool).
+jar_listing=$(jar tf "$build_jar")
 for lcm in "$source_dir"/protocol/lcm/*.lcm; do
   type=$(basename "$lcm" .lcm)
-  unzip -l "$build_jar" | grep -q " pumptherm/$type.class\$" || fail "pumptherm/$type.class missing from the jar"
+  printf '%s\n' "$jar_listing" | grep -q -x "pumptherm/$type.class" || fail "pumptherm/$type.class missing from the jar"
 done
 
 # 4. Errors: no jar found, or an override naming a missing file: exit 2 and a message.
