@@ -21,7 +21,7 @@ VirtualThermalSensor::VirtualThermalSensor(const ThermalModel& model, VirtualSen
     measured_states_.push_back(s);
   }
   if (!(config_.measurement_sd_K > 0.0) || !(config_.process_sd_K > 0.0) ||
-      !(config_.initial_sd_K > 0.0) || !(config_.winding_measurement_sd_K > 0.0) ||
+      !(config_.initial_sd_K >= 0.0) || !(config_.initial_spread_sd_K > 0.0) || !(config_.winding_measurement_sd_K > 0.0) ||
       !(config_.process_period_s > 0.0)) {
     throw std::invalid_argument("virtual sensor: standard deviations and periods must be positive");
   }
@@ -33,7 +33,10 @@ VirtualThermalSensor::VirtualThermalSensor(const ThermalModel& model, VirtualSen
 
 void VirtualThermalSensor::Initialise(const Eigen::VectorXd& x0_degC) {
   const int n = model_.StateCount();
-  filter_.Reset(x0_degC, Eigen::MatrixXd::Identity(n, n) * config_.initial_sd_K * config_.initial_sd_K);
+  const double common = config_.initial_sd_K * config_.initial_sd_K;
+  const double spread = config_.initial_spread_sd_K * config_.initial_spread_sd_K;
+  filter_.Reset(x0_degC, Eigen::MatrixXd::Constant(n, n, common) +
+                             Eigen::MatrixXd::Identity(n, n) * spread);
 }
 
 const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs, double dt_s,

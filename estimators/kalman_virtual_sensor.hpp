@@ -30,8 +30,13 @@ struct VirtualSensorConfig {
   double process_period_s = 1.0;
   /// Standard deviation of the resistance-based winding temperature, K, when it is fused.
   double winding_measurement_sd_K = 2.0;
-  /// Standard deviation of the initial estimate, K: large, for unknown initial temperatures.
+  /// Initial covariance for unknown initial temperatures, K:
+  ///   S(0) = initial_sd_K^2 (1 1^T) + initial_spread_sd_K^2 I,
+  /// a large uncertainty common to all nodes (the machine's temperature level) plus a smaller
+  /// independent one per node (how far the nodes may be apart). The common part lets one
+  /// sensor correct the level of every node at the first update.
   double initial_sd_K = 20.0;
+  double initial_spread_sd_K = 5.0;
   /// Relative change of the continuous system matrix that triggers a new discretisation.
   double relinearise_tolerance = 1e-3;
   CovarianceUpdate covariance_update = CovarianceUpdate::kJoseph;
@@ -43,7 +48,7 @@ class VirtualThermalSensor {
   /// a non-positive standard deviation. Keeps a reference to `model`, which must outlive it.
   VirtualThermalSensor(const ThermalModel& model, VirtualSensorConfig config);
 
-  /// Starts from `x0_degC` (n) with covariance initial_sd_K^2 I.
+  /// Starts from `x0_degC` (n) with the configured initial covariance.
   void Initialise(const Eigen::VectorXd& x0_degC);
 
   /// Advances one period of `dt_s` with `inputs` held over it, then corrects with
