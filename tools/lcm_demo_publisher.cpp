@@ -3,23 +3,22 @@
 /// The values come from a toy warm-up curve plus seeded noise; they are not estimates of any
 /// motor. Channels are those of docs/lcm.md.
 
-#include <lcm/lcm-cpp.hpp>
-#include <pumptherm/alarm_clear_t.hpp>
-#include <pumptherm/alarm_t.hpp>
-#include <pumptherm/gateway_health_t.hpp>
-#include <pumptherm/telemetry_t.hpp>
-#include <pumptherm/temperatures_t.hpp>
-
-#include <CLI/CLI.hpp>
 #include <fmt/core.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdint>
+#include <lcm/lcm-cpp.hpp>
 #include <limits>
 #include <map>
+#include <pumptherm/alarm_clear_t.hpp>
+#include <pumptherm/alarm_t.hpp>
+#include <pumptherm/gateway_health_t.hpp>
+#include <pumptherm/telemetry_t.hpp>
+#include <pumptherm/temperatures_t.hpp>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -50,7 +49,8 @@ struct Options {
   std::string lcm_url;
   std::string prefix = "PUMPTHERM";
   std::vector<std::string> pumps{"tmp1", "tmp2"};
-  std::vector<std::string> nodes{"frame", "yoke", "teeth", "slot_winding", "end_winding", "rotor", "shaft"};
+  std::vector<std::string> nodes{"frame",       "yoke",  "teeth", "slot_winding",
+                                 "end_winding", "rotor", "shaft"};
   double telemetry_rate_Hz = 10.0;
   double duration_s = 0.0;
   double clear_period_s = 10.0;
@@ -91,11 +91,14 @@ int Run(const Options& options) {
     if (options.duration_s > 0.0 && t_s > options.duration_s) {
       break;
     }
-    std::this_thread::sleep_until(start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(period * tick));
-    const std::int64_t utime = std::chrono::duration_cast<std::chrono::microseconds>(
-                                   (wall_start + std::chrono::duration_cast<std::chrono::system_clock::duration>(period * tick))
-                                       .time_since_epoch())
-                                   .count();
+    std::this_thread::sleep_until(
+        start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(period * tick));
+    const std::int64_t utime =
+        std::chrono::duration_cast<std::chrono::microseconds>(
+            (wall_start +
+             std::chrono::duration_cast<std::chrono::system_clock::duration>(period * tick))
+                .time_since_epoch())
+            .count();
     const bool once_per_s = tick % ticks_per_s == 0;
 
     for (std::size_t p = 0; p < options.pumps.size(); ++p) {
@@ -104,7 +107,8 @@ int Run(const Options& options) {
       // Speed: linear ramp to rated, then steady; the load current follows a slow gas-load swing.
       const double speed_rpm = motor.rated_rpm * std::min(1.0, t_s / motor.ramp_s);
       const bool ramping = t_s < motor.ramp_s;
-      const double iq_A = (ramping ? 4.0 : 1.5 + 0.5 * std::sin(2.0 * kPi * t_s / 120.0)) + 0.2 * static_cast<double>(p);
+      const double iq_A = (ramping ? 4.0 : 1.5 + 0.5 * std::sin(2.0 * kPi * t_s / 120.0)) +
+                          0.2 * static_cast<double>(p);
       const double we_rad_per_s = motor.pole_pairs * speed_rpm * 2.0 * kPi / 60.0;
       // Warm-up: winding heats towards 40 K above ambient with a 10-minute time constant.
       const double ambient_degC = 22.0;
@@ -142,16 +146,20 @@ int Run(const Options& options) {
       temps.flux_sd_Wb = 5e-5;
       temps.resistance_winding_degC = winding_degC + 0.5 * unit_noise(rng);
       temps.resistance_winding_sd_K = 1.5;
-      temps.ident_status = ramping ? pumptherm::temperatures_t::IDENT_CONVERGING : pumptherm::temperatures_t::IDENT_CONVERGED;
+      temps.ident_status = ramping ? pumptherm::temperatures_t::IDENT_CONVERGING
+                                   : pumptherm::temperatures_t::IDENT_CONVERGED;
       temps.num_nodes = static_cast<std::int32_t>(options.nodes.size());
       for (std::size_t n = 0; n < options.nodes.size(); ++n) {
-        const double share = 0.4 + 0.6 * static_cast<double>(n) / static_cast<double>(std::max<std::size_t>(1, options.nodes.size() - 1));
+        const double share =
+            0.4 + 0.6 * static_cast<double>(n) /
+                      static_cast<double>(std::max<std::size_t>(1, options.nodes.size() - 1));
         temps.node_names.push_back(options.nodes[n]);
         temps.node_degC.push_back(ambient_degC + share * rise_K);
         temps.node_sd_K.push_back(0.3 + 0.2 * static_cast<double>(n));
       }
       temps.nis = std::pow(unit_noise(rng), 2);
-      temps.filter_status = t_s < 30.0 ? pumptherm::temperatures_t::FILTER_CONVERGING : pumptherm::temperatures_t::FILTER_TRACKING;
+      temps.filter_status = t_s < 30.0 ? pumptherm::temperatures_t::FILTER_CONVERGING
+                                       : pumptherm::temperatures_t::FILTER_TRACKING;
       Publish(lcm, base + "TEMPS", temps, sent, failures);
 
       pumptherm::alarm_t alarm;
@@ -174,10 +182,12 @@ int Run(const Options& options) {
         alarm.time_to_trip_s = 3600.0 - t_s;
       }
       alarm.num_conditions = static_cast<std::int32_t>(alarm.conditions.size());
-      alarm.level = alarm.conditions.empty() ? pumptherm::alarm_t::LEVEL_NORMAL : pumptherm::alarm_t::LEVEL_WARNING;
+      alarm.level = alarm.conditions.empty() ? pumptherm::alarm_t::LEVEL_NORMAL
+                                             : pumptherm::alarm_t::LEVEL_WARNING;
       Publish(lcm, base + "ALARM", alarm, sent, failures);
 
-      if (tick % std::max(1L, std::lround(options.clear_period_s * options.telemetry_rate_Hz)) == 0) {
+      if (tick % std::max(1L, std::lround(options.clear_period_s * options.telemetry_rate_Hz)) ==
+          0) {
         pumptherm::alarm_clear_t clear;
         clear.utime = utime;
         clear.pump = pump;
@@ -234,14 +244,19 @@ int main(int argc, char** argv) {
       "Channels: PREFIX/<pump>/TELEMETRY, TEMPS, ALARM, ALARM_CLEAR; PREFIX/GATEWAY/HEALTH.\n"
       "Prints the number of messages per channel at the end.");
   Options options;
-  app.add_option("--lcm-url", options.lcm_url, "LCM URL (default: LCM_DEFAULT_URL or LCM's default)");
+  app.add_option("--lcm-url", options.lcm_url,
+                 "LCM URL (default: LCM_DEFAULT_URL or LCM's default)");
   app.add_option("--prefix", options.prefix, "channel prefix")->capture_default_str();
   app.add_option("--pumps", options.pumps, "pump names")->delimiter(',')->capture_default_str();
-  app.add_option("--nodes", options.nodes, "thermal-network node names")->delimiter(',')->capture_default_str();
-  app.add_option("--rate-hz", options.telemetry_rate_Hz, "telemetry rate; the other types go at 1 Hz")
+  app.add_option("--nodes", options.nodes, "thermal-network node names")
+      ->delimiter(',')
+      ->capture_default_str();
+  app.add_option("--rate-hz", options.telemetry_rate_Hz,
+                 "telemetry rate; the other types go at 1 Hz")
       ->check(CLI::Range(0.1, 1000.0))
       ->capture_default_str();
-  app.add_option("--duration-s", options.duration_s, "stop after this time; 0 runs until SIGINT/SIGTERM")
+  app.add_option("--duration-s", options.duration_s,
+                 "stop after this time; 0 runs until SIGINT/SIGTERM")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   app.add_option("--clear-period-s", options.clear_period_s, "period of the alarm-clear command")

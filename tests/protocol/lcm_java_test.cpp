@@ -4,8 +4,6 @@
 // Paths come from the build: PUMPTHERM_JAVA, PUMPTHERM_LCM_JAR, PUMPTHERM_LCM_TYPES_JAR,
 // PUMPTHERM_LCM_JAVA_DUMP_JAR.
 
-#include "lcm_test_messages.hpp"
-
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -18,6 +16,8 @@
 #include <map>
 #include <string>
 #include <vector>
+
+#include "lcm_test_messages.hpp"
 
 namespace pumptherm::test {
 namespace {
@@ -52,7 +52,9 @@ struct Flat {
   void Bool(const std::string& path, bool value) { text[path] = value ? "true" : "false"; }
 };
 
-std::string Index(const std::string& path, std::size_t i) { return path + "[" + std::to_string(i) + "]"; }
+std::string Index(const std::string& path, std::size_t i) {
+  return path + "[" + std::to_string(i) + "]";
+}
 
 void FlattenInto(Flat& f, const std::string& p, const telemetry_t& m) {
   f.Integer(p + ".utime", m.utime);
@@ -158,7 +160,8 @@ struct Case {
 class LcmJava : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() / ("pumptherm_lcm_java_" + std::to_string(::getpid()));
+    dir_ = std::filesystem::temp_directory_path() /
+           ("pumptherm_lcm_java_" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir_);
   }
   void TearDown() override { std::filesystem::remove_all(dir_); }
@@ -169,8 +172,10 @@ class LcmJava : public ::testing::Test {
     c.type = Message::getTypeName();
     c.name = std::to_string(cases_.size()) + "_" + c.type;
     c.bytes.resize(static_cast<std::size_t>(message.getEncodedSize()));
-    ASSERT_EQ(message.encode(c.bytes.data(), 0, static_cast<int>(c.bytes.size())), static_cast<int>(c.bytes.size()));
-    std::ofstream(dir_ / (c.name + ".in"), std::ios::binary).write(c.bytes.data(), static_cast<std::streamsize>(c.bytes.size()));
+    ASSERT_EQ(message.encode(c.bytes.data(), 0, static_cast<int>(c.bytes.size())),
+              static_cast<int>(c.bytes.size()));
+    std::ofstream(dir_ / (c.name + ".in"), std::ios::binary)
+        .write(c.bytes.data(), static_cast<std::streamsize>(c.bytes.size()));
     FlattenInto(expected_.emplace_back(), c.type, message);
     cases_.push_back(c);
   }
@@ -179,10 +184,11 @@ class LcmJava : public ::testing::Test {
   std::vector<std::map<std::string, std::string>> RunJava() {
     const std::filesystem::path dump = dir_ / "dump.txt";
     std::string command = std::string("'") + PUMPTHERM_JAVA + "' -cp '" + PUMPTHERM_LCM_JAR + ":" +
-                          PUMPTHERM_LCM_TYPES_JAR + ":" + PUMPTHERM_LCM_JAVA_DUMP_JAR + "' LcmJavaDump '" +
-                          dump.string() + "'";
+                          PUMPTHERM_LCM_TYPES_JAR + ":" + PUMPTHERM_LCM_JAVA_DUMP_JAR +
+                          "' LcmJavaDump '" + dump.string() + "'";
     for (const Case& c : cases_) {
-      command += " " + c.type + " '" + (dir_ / (c.name + ".in")).string() + "' '" + (dir_ / (c.name + ".out")).string() + "'";
+      command += " " + c.type + " '" + (dir_ / (c.name + ".in")).string() + "' '" +
+                 (dir_ / (c.name + ".out")).string() + "'";
     }
     const int status = std::system(command.c_str());
     EXPECT_EQ(status, 0) << command;
@@ -232,7 +238,8 @@ TEST_F(LcmJava, JavaDecodesWhatCppEncodesAndEncodesItBack) {
   ASSERT_EQ(dumped.size(), cases_.size());
   for (std::size_t i = 0; i < cases_.size(); ++i) {
     SCOPED_TRACE(cases_[i].name);
-    EXPECT_EQ(ReadBytes(dir_ / (cases_[i].name + ".out")), cases_[i].bytes) << "Java re-encoding differs";
+    EXPECT_EQ(ReadBytes(dir_ / (cases_[i].name + ".out")), cases_[i].bytes)
+        << "Java re-encoding differs";
     const Flat& want = expected_[i];
     const std::map<std::string, std::string>& got = dumped[i];
     EXPECT_EQ(got.size(), want.text.size() + want.numbers.size()) << "field count";
@@ -244,7 +251,8 @@ TEST_F(LcmJava, JavaDecodesWhatCppEncodesAndEncodesItBack) {
     for (const auto& [key, value] : want.numbers) {
       const auto it = got.find(key);
       ASSERT_NE(it, got.end()) << key << " missing from Java's dump";
-      EXPECT_TRUE(SameBits(value, std::strtod(it->second.c_str(), nullptr))) << key << " = " << it->second;
+      EXPECT_TRUE(SameBits(value, std::strtod(it->second.c_str(), nullptr)))
+          << key << " = " << it->second;
     }
   }
 }
@@ -254,11 +262,13 @@ TEST_F(LcmJava, JavaRefusesTheWrongType) {
   const alarm_clear_t clear = SampleAlarmClear();
   std::vector<char> bytes(static_cast<std::size_t>(clear.getEncodedSize()));
   ASSERT_GT(clear.encode(bytes.data(), 0, static_cast<int>(bytes.size())), 0);
-  std::ofstream(dir_ / "clear.in", std::ios::binary).write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  const std::string command = std::string("'") + PUMPTHERM_JAVA + "' -cp '" + PUMPTHERM_LCM_JAR + ":" +
-                              PUMPTHERM_LCM_TYPES_JAR + ":" + PUMPTHERM_LCM_JAVA_DUMP_JAR + "' LcmJavaDump '" +
-                              (dir_ / "dump.txt").string() + "' alarm_t '" + (dir_ / "clear.in").string() + "' '" +
-                              (dir_ / "clear.out").string() + "' 2>/dev/null";
+  std::ofstream(dir_ / "clear.in", std::ios::binary)
+      .write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  const std::string command = std::string("'") + PUMPTHERM_JAVA + "' -cp '" + PUMPTHERM_LCM_JAR +
+                              ":" + PUMPTHERM_LCM_TYPES_JAR + ":" + PUMPTHERM_LCM_JAVA_DUMP_JAR +
+                              "' LcmJavaDump '" + (dir_ / "dump.txt").string() + "' alarm_t '" +
+                              (dir_ / "clear.in").string() + "' '" + (dir_ / "clear.out").string() +
+                              "' 2>/dev/null";
   const int status = std::system(command.c_str());
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 1);

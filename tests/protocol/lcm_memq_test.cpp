@@ -1,14 +1,13 @@
 // Publish/subscribe of every pumptherm LCM type through LCM's in-process memq:// provider
 // (LCM 1.3: handler class methods, handleTimeout), on the channels of docs/lcm.md.
 
-#include "lcm_test_messages.hpp"
-
-#include <lcm/lcm-cpp.hpp>
-
 #include <gtest/gtest.h>
 
+#include <lcm/lcm-cpp.hpp>
 #include <string>
 #include <vector>
+
+#include "lcm_test_messages.hpp"
 
 namespace pumptherm::test {
 namespace {
@@ -20,7 +19,8 @@ class Collector {
     telemetry.push_back(*m);
     channels.push_back(channel);
   }
-  void OnTemperatures(const lcm::ReceiveBuffer*, const std::string& channel, const temperatures_t* m) {
+  void OnTemperatures(const lcm::ReceiveBuffer*, const std::string& channel,
+                      const temperatures_t* m) {
     temperatures.push_back(*m);
     channels.push_back(channel);
   }
@@ -32,7 +32,8 @@ class Collector {
     clears.push_back(*m);
     channels.push_back(channel);
   }
-  void OnGatewayHealth(const lcm::ReceiveBuffer*, const std::string& channel, const gateway_health_t* m) {
+  void OnGatewayHealth(const lcm::ReceiveBuffer*, const std::string& channel,
+                       const gateway_health_t* m) {
     health.push_back(*m);
     channels.push_back(channel);
   }
@@ -62,11 +63,15 @@ TEST(LcmMemq, EveryTypeArrivesOnItsChannel) {
   lcm::LCM lcm("memq://");
   ASSERT_TRUE(lcm.good());
   Collector collector;
-  ASSERT_NE(lcm.subscribe("PUMPTHERM/tmp-07/TELEMETRY", &Collector::OnTelemetry, &collector), nullptr);
-  ASSERT_NE(lcm.subscribe("PUMPTHERM/tmp-07/TEMPS", &Collector::OnTemperatures, &collector), nullptr);
+  ASSERT_NE(lcm.subscribe("PUMPTHERM/tmp-07/TELEMETRY", &Collector::OnTelemetry, &collector),
+            nullptr);
+  ASSERT_NE(lcm.subscribe("PUMPTHERM/tmp-07/TEMPS", &Collector::OnTemperatures, &collector),
+            nullptr);
   ASSERT_NE(lcm.subscribe("PUMPTHERM/tmp-07/ALARM", &Collector::OnAlarm, &collector), nullptr);
-  ASSERT_NE(lcm.subscribe("PUMPTHERM/tmp-07/ALARM_CLEAR", &Collector::OnAlarmClear, &collector), nullptr);
-  ASSERT_NE(lcm.subscribe("PUMPTHERM/GATEWAY/HEALTH", &Collector::OnGatewayHealth, &collector), nullptr);
+  ASSERT_NE(lcm.subscribe("PUMPTHERM/tmp-07/ALARM_CLEAR", &Collector::OnAlarmClear, &collector),
+            nullptr);
+  ASSERT_NE(lcm.subscribe("PUMPTHERM/GATEWAY/HEALTH", &Collector::OnGatewayHealth, &collector),
+            nullptr);
 
   const telemetry_t telemetry = SampleTelemetry();
   const temperatures_t temperatures = SampleTemperatures();
@@ -95,8 +100,9 @@ TEST(LcmMemq, EveryTypeArrivesOnItsChannel) {
   ExpectSame(clear, collector.clears[0]);
   ExpectSame(health, collector.health[0]);
   EXPECT_EQ(collector.channels,
-            (std::vector<std::string>{"PUMPTHERM/tmp-07/TELEMETRY", "PUMPTHERM/tmp-07/TEMPS", "PUMPTHERM/tmp-07/ALARM",
-                                      "PUMPTHERM/tmp-07/ALARM_CLEAR", "PUMPTHERM/GATEWAY/HEALTH"}));
+            (std::vector<std::string>{"PUMPTHERM/tmp-07/TELEMETRY", "PUMPTHERM/tmp-07/TEMPS",
+                                      "PUMPTHERM/tmp-07/ALARM", "PUMPTHERM/tmp-07/ALARM_CLEAR",
+                                      "PUMPTHERM/GATEWAY/HEALTH"}));
 }
 
 // A subscriber of many pumps uses a channel regular expression; order and content survive a burst.
@@ -128,12 +134,14 @@ TEST(LcmMemq, WrongTypeOnAChannelIsNotDelivered) {
   lcm::LCM lcm("memq://");
   ASSERT_TRUE(lcm.good());
   Collector collector;
-  ASSERT_NE(lcm.subscribe("PUMPTHERM/tmp-07/ALARM_CLEAR", &Collector::OnAlarmClear, &collector), nullptr);
+  ASSERT_NE(lcm.subscribe("PUMPTHERM/tmp-07/ALARM_CLEAR", &Collector::OnAlarmClear, &collector),
+            nullptr);
   const alarm_t alarm = SampleAlarm(1);
   ASSERT_EQ(lcm.publish("PUMPTHERM/tmp-07/ALARM_CLEAR", &alarm), 0);
   const alarm_clear_t clear = SampleAlarmClear();
   ASSERT_EQ(lcm.publish("PUMPTHERM/tmp-07/ALARM_CLEAR", &clear), 0);
-  // The first handle() dispatches the undecodable message (handler skipped), the second the good one.
+  // The first handle() dispatches the undecodable message (handler skipped), the second the good
+  // one.
   for (int i = 0; i < 2; ++i) {
     ASSERT_GT(lcm.handleTimeout(1000), 0);
   }

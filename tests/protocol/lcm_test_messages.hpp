@@ -4,17 +4,16 @@
 /// The samples exercise the awkward values: NaN (not measured), +/-Inf, -0.0, extreme
 /// integers, empty and non-ASCII strings, empty and non-empty arrays, nested types.
 
-#include <pumptherm/alarm_clear_t.hpp>
-#include <pumptherm/alarm_t.hpp>
-#include <pumptherm/gateway_health_t.hpp>
-#include <pumptherm/telemetry_t.hpp>
-#include <pumptherm/temperatures_t.hpp>
-
 #include <gtest/gtest.h>
 
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <pumptherm/alarm_clear_t.hpp>
+#include <pumptherm/alarm_t.hpp>
+#include <pumptherm/gateway_health_t.hpp>
+#include <pumptherm/telemetry_t.hpp>
+#include <pumptherm/temperatures_t.hpp>
 #include <string>
 #include <vector>
 
@@ -75,8 +74,9 @@ inline void ExpectSame(const telemetry_t& e, const telemetry_t& a) {
 }
 
 /// `nodes`: thermal-network node names (the Saheba 2010 seven by default; may be empty).
-inline temperatures_t SampleTemperatures(
-    std::vector<std::string> nodes = {"frame", "yoke", "teeth", "slot_winding", "end_winding", "rotor", "shaft"}) {
+inline temperatures_t SampleTemperatures(std::vector<std::string> nodes = {
+                                             "frame", "yoke", "teeth", "slot_winding",
+                                             "end_winding", "rotor", "shaft"}) {
   temperatures_t m;
   m.utime = 1'763'776'801'000'000;
   m.pump = "tmp-07";
@@ -131,7 +131,8 @@ inline alarm_t SampleAlarm(int conditions = 2) {
   for (int i = 0; i < conditions; ++i) {
     alarm_condition_t c;
     c.level = i == 0 ? alarm_t::LEVEL_TRIP : alarm_t::LEVEL_WARNING;
-    c.reason = i == 0 ? alarm_condition_t::REASON_ESTIMATED_OVER_TEMPERATURE : alarm_condition_t::REASON_STALE_TELEMETRY;
+    c.reason = i == 0 ? alarm_condition_t::REASON_ESTIMATED_OVER_TEMPERATURE
+                      : alarm_condition_t::REASON_STALE_TELEMETRY;
     c.node = i == 0 ? "end_winding" : "telemetry";
     c.value_degC = i == 0 ? 131.7 : kNaN;
     c.threshold_degC = i == 0 ? 130.0 : kNaN;
@@ -195,7 +196,8 @@ inline gateway_health_t SampleGatewayHealth(int interfaces = 2) {
   for (int i = 0; i < interfaces; ++i) {
     interface_health_t h;
     h.name = "can" + std::to_string(i);
-    h.bus_state = i == 0 ? interface_health_t::BUS_STATE_ERROR_ACTIVE : interface_health_t::BUS_STATE_DOWN;
+    h.bus_state =
+        i == 0 ? interface_health_t::BUS_STATE_ERROR_ACTIVE : interface_health_t::BUS_STATE_DOWN;
     h.rx_frames_per_s = 3520.0 - i;
     h.tx_frames_per_s = 320.0 + i;
     h.rx_frames = 304'128'000 + i;
