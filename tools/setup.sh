@@ -59,3 +59,18 @@ if ((want_guest)); then
   fi
   echo "setup: guest kernel $(ls "$cache/kernel/boot" | grep vmlinuz)"
 fi
+
+# --- candied for the DBC cross-check (issue 3) ---
+# tests/protocol/codec_candied_test.cpp decodes frames with npm's candied as an independent
+# decoder. `npm ci` installs exactly what tests/protocol/candied/package-lock.json pins; it runs
+# as the invoking user (not through sudo) and only when the installed version differs.
+candied_dir="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/tests/protocol/candied"
+candied_want=$(sed -n 's/.*"candied": "\([0-9.]*\)".*/\1/p' "$candied_dir/package.json" | head -n 1)
+candied_have=$( (sed -n 's/^ *"version": "\([^"]*\)".*/\1/p' "$candied_dir/node_modules/candied/package.json" 2>/dev/null || true) | head -n 1)
+if [[ "$candied_have" != "$candied_want" ]]; then
+  echo "setup: npm ci in $candied_dir (candied $candied_want)"
+  (cd "$candied_dir" && npm ci --no-audit --no-fund --loglevel=error)
+else
+  echo "setup: candied $candied_have present"
+fi
+# --- end candied (issue 3) ---
