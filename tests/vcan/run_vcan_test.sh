@@ -517,7 +517,11 @@ run_guest() {
   : >"$result"
   local start
   start=$(now_s)
-  "${qemu[@]}" -serial "file:$console" -serial "file:$result" </dev/null >"$run_dir/qemu.log" 2>&1 &
+  # QEMU dies with the harness, even when the harness is killed outright (CTest's timeout).
+  local reaper=()
+  if command -v setpriv >/dev/null 2>&1; then reaper=(setpriv --pdeathsig KILL); fi
+  "${reaper[@]}" "${qemu[@]}" -serial "file:$console" -serial "file:$result" </dev/null \
+    >"$run_dir/qemu.log" 2>&1 &
   local qemu_pid=$!
   # shellcheck disable=SC2064
   trap "kill $qemu_pid 2>/dev/null || true" EXIT INT TERM
@@ -542,11 +546,17 @@ run_guest() {
           *"$kMarker-SETUP-FAILED "*)
             setup_failure=${line#*FAILED }
             setup_failure=${setup_failure%@@} ;;
-          *"$kMarker-OUT-BEGIN@@"*) state=out; : >"$out_b64" ;;
+          *"$kMarker-OUT-BEGIN@@"*)
+            # A last scenario line without its newline shares the line with the marker.
+            [[ "$line" == "$kMarker"* ]] || printf '%s\n' "${line%%"$kMarker"*}"
+            state=out
+            : >"$out_b64" ;;
           *"$kMarker-OUT-END@@"*) state=run ;;
           *"$kMarker-EXIT "*)
+            [[ "$state" != run || "$line" == "$kMarker"* ]] || printf '%s\n' "${line%%"$kMarker"*}"
             exit_code=${line#*EXIT }
-            exit_code=${exit_code%@@} ;;
+            exit_code=${exit_code%@@}
+            [[ "$exit_code" =~ ^[0-9]+$ ]] || { err "garbled exit marker: $line"; exit_code=1; } ;;
           out:*) printf '%s\n' "$line" >>"$out_b64" ;;
           run:*) printf '%s\n' "$line" ;;
           *) printf 'guest: %s\n' "$line" ;;
