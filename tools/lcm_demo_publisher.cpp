@@ -25,6 +25,8 @@
 #include <thread>
 #include <vector>
 
+#include "protocol/lcm/channels.hpp"
+
 namespace {
 
 volatile std::sig_atomic_t g_stop = 0;
@@ -103,7 +105,8 @@ int Run(const Options& options) {
 
     for (std::size_t p = 0; p < options.pumps.size(); ++p) {
       const std::string& pump = options.pumps[p];
-      const std::string base = options.prefix + "/" + pump + "/";
+      using pumptherm::lcm_channels::PumpChannel;
+      using pumptherm::lcm_channels::PumpChannelName;
       // Speed: linear ramp to rated, then steady; the load current follows a slow gas-load swing.
       const double speed_rpm = motor.rated_rpm * std::min(1.0, t_s / motor.ramp_s);
       const bool ramping = t_s < motor.ramp_s;
@@ -131,7 +134,8 @@ int Run(const Options& options) {
       telemetry.coolant_degC = kNaN;
       telemetry.dc_link_V = 48.0 + 0.1 * unit_noise(rng);
       telemetry.status_age_s = 0.05;
-      Publish(lcm, base + "TELEMETRY", telemetry, sent, failures);
+      Publish(lcm, PumpChannelName(options.prefix, pump, PumpChannel::kTelemetry), telemetry, sent,
+              failures);
 
       if (!once_per_s) {
         continue;
@@ -160,7 +164,8 @@ int Run(const Options& options) {
       temps.nis = std::pow(unit_noise(rng), 2);
       temps.filter_status = t_s < 30.0 ? pumptherm::temperatures_t::FILTER_CONVERGING
                                        : pumptherm::temperatures_t::FILTER_TRACKING;
-      Publish(lcm, base + "TEMPS", temps, sent, failures);
+      Publish(lcm, PumpChannelName(options.prefix, pump, PumpChannel::kTemperatures), temps, sent,
+              failures);
 
       pumptherm::alarm_t alarm;
       alarm.utime = utime;
@@ -184,7 +189,8 @@ int Run(const Options& options) {
       alarm.num_conditions = static_cast<std::int32_t>(alarm.conditions.size());
       alarm.level = alarm.conditions.empty() ? pumptherm::alarm_t::LEVEL_NORMAL
                                              : pumptherm::alarm_t::LEVEL_WARNING;
-      Publish(lcm, base + "ALARM", alarm, sent, failures);
+      Publish(lcm, PumpChannelName(options.prefix, pump, PumpChannel::kAlarm), alarm, sent,
+              failures);
 
       if (tick % std::max(1L, std::lround(options.clear_period_s * options.telemetry_rate_Hz)) ==
           0) {
@@ -194,7 +200,8 @@ int Run(const Options& options) {
         clear.node = "";
         clear.source = "pumptherm-lcm-demo";
         clear.comment = "demo clear command";
-        Publish(lcm, base + "ALARM_CLEAR", clear, sent, failures);
+        Publish(lcm, PumpChannelName(options.prefix, pump, PumpChannel::kAlarmClear), clear, sent,
+                failures);
       }
     }
 
@@ -220,7 +227,8 @@ int Run(const Options& options) {
         health.interfaces.push_back(interface);
       }
       health.num_interfaces = static_cast<std::int32_t>(health.interfaces.size());
-      Publish(lcm, options.prefix + "/GATEWAY/HEALTH", health, sent, failures);
+      Publish(lcm, pumptherm::lcm_channels::GatewayHealthChannelName(options.prefix), health, sent,
+              failures);
     }
   }
 
@@ -268,6 +276,18 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& error) {
     const int code = app.exit(error);
     return code == 0 ? 0 : 2;
+  }
+  // Names become channel names: refuse bad ones before opening LCM (exit code 2).
+  for (const std::string& pump : options.pumps) {
+    if (!pumptherm::lcm_channels::IsValidPumpName(pump)) {
+      fmt::print(stderr, "pumptherm-lcm-demo: --pumps: invalid pump name '{}'\n", pump);
+      return 2;
+    }
+  }
+  if (!pumptherm::lcm_channels::IsValidPrefix(options.prefix)) {
+    fmt::print(stderr, "pumptherm-lcm-demo: --prefix: invalid channel prefix '{}'\n",
+               options.prefix);
+    return 2;
   }
   try {
     return Run(options);
