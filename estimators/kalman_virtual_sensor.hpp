@@ -50,6 +50,9 @@ class VirtualThermalSensor {
 
   /// Starts from `x0_degC` (n) with the configured initial covariance.
   void Initialise(const Eigen::VectorXd& x0_degC);
+  /// Continues from a saved estimate `x_degC` (n) and covariance `s_K2` (n x n), e.g. restored
+  /// by the daemon after a restart.
+  void Restore(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) { filter_.Reset(x_degC, s_K2); }
 
   /// Advances one period of `dt_s` with `inputs` held over it, then corrects with
   /// `measured_degC` (one per configured measured node, NaN = not measured) and, if finite,
