@@ -781,6 +781,8 @@ class Parser {
       }
     }
     for (auto& m : dbc_.messages) CheckMessage(m);
+    std::stable_sort(dbc_.problems.begin(), dbc_.problems.end(),
+                     [](const DbcProblem& a, const DbcProblem& b) { return a.line < b.line; });
   }
 
   void ApplyAttribute(PendingAttribute& a) {

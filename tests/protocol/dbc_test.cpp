@@ -179,11 +179,12 @@ TEST(DbcTest, SkipsUnusedSectionsAndReportsDanglingReferences) {
       "odd.dbc");
   ASSERT_EQ(dbc.messages.size(), 1u);
   ASSERT_EQ(dbc.problems.size(), 3u);
-  EXPECT_EQ(dbc.problems[0].line, 6);
-  EXPECT_NE(dbc.problems[0].message.find("Missing"), std::string::npos);
-  EXPECT_EQ(dbc.problems[1].line, 7);
-  EXPECT_EQ(dbc.problems[2].line, 2);  // 12 bits in a 1-byte message
-  EXPECT_NE(dbc.problems[2].message.find("message is 1 bytes"), std::string::npos);
+  // Sorted by line.
+  EXPECT_EQ(dbc.problems[0].line, 2);  // 12 bits in a 1-byte message
+  EXPECT_NE(dbc.problems[0].message.find("message is 1 bytes"), std::string::npos);
+  EXPECT_EQ(dbc.problems[1].line, 6);
+  EXPECT_NE(dbc.problems[1].message.find("Missing"), std::string::npos);
+  EXPECT_EQ(dbc.problems[2].line, 7);
 }
 
 TEST(DbcTest, ReadsAnIdAbove11BitsWithoutTheFlagAs29Bit) {
