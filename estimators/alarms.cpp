@@ -1,5 +1,6 @@
 #include "estimators/alarms.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -13,12 +14,11 @@ bool Known(double v) { return !std::isnan(v); }
 const char* AlarmReasonName(AlarmReason reason) {
   switch (reason) {
     case AlarmReason::kNone: return "none";
-    case AlarmReason::kOverTemperature: return "over_temperature";
+    case AlarmReason::kEstimatedOverTemperature: return "estimated_over_temperature";
+    case AlarmReason::kMeasuredOverTemperature: return "measured_over_temperature";
     case AlarmReason::kRateOfRise: return "rate_of_rise";
     case AlarmReason::kStaleTelemetry: return "stale_telemetry";
-    case AlarmReason::kSensorOutOfRange: return "sensor_out_of_range";
-    case AlarmReason::kSensorStuck: return "sensor_stuck";
-    case AlarmReason::kSensorDisagrees: return "sensor_disagrees";
+    case AlarmReason::kImplausibleSensor: return "implausible_sensor";
     case AlarmReason::kEstimatorNotConverged: return "estimator_not_converged";
     case AlarmReason::kForecast: return "forecast";
   }
@@ -157,35 +157,55 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
     }
     if (std::isnan(ttt)) want = forecast_.level;
     Update(forecast_, want, ttt, now_s, hold);
+    if (forecast_.level != AlarmLevel::kNone && in.time_to_trip_node >= 0) forecast_node_ = in.time_to_trip_node;
   }
 
   // Publish the most severe alarm; among equals the one raised first.
-  AlarmState s;
-  s.time_to_trip_s = in.time_to_trip_s;
-  double best_raised = 0.0;
-  auto consider = [&](const Channel& ch, AlarmReason reason, int node) {
-    if (ch.latched) s.trip_latched = true;
-    if (ch.level == AlarmLevel::kNone) return;
-    s.active_reasons |= static_cast<std::uint16_t>(1U << static_cast<unsigned>(reason));
-    if (ch.level > s.level || (ch.level == s.level && ch.raised_at_s < best_raised)) {
-      s.level = ch.level;
-      s.reason = reason;
-      s.node = node;
-      s.value = ch.value;
-      best_raised = ch.raised_at_s;
+  AlarmState st;
+  st.time_to_trip_s = in.time_to_trip_s;
+  for (const AlarmCondition& c : ActiveConditions()) {
+    st.active_reasons |= static_cast<std::uint16_t>(1U << static_cast<unsigned>(c.reason));
+    if (c.level > st.level) {
+      st.level = c.level;
+      st.reason = c.reason;
+      st.node = c.node;
+      st.value = c.value;
     }
-  };
-  for (std::size_t i = 0; i < over_.size(); ++i) consider(over_[i], AlarmReason::kOverTemperature, static_cast<int>(i));
-  consider(sensor_over_, AlarmReason::kOverTemperature, config_.sensor_node);
-  for (std::size_t i = 0; i < rise_.size(); ++i) consider(rise_[i], AlarmReason::kRateOfRise, static_cast<int>(i));
-  consider(stale_, AlarmReason::kStaleTelemetry, -1);
-  consider(range_, AlarmReason::kSensorOutOfRange, config_.sensor_node);
-  consider(stuck_, AlarmReason::kSensorStuck, config_.sensor_node);
-  consider(disagree_, AlarmReason::kSensorDisagrees, config_.sensor_node);
-  consider(converged_, AlarmReason::kEstimatorNotConverged, -1);
-  consider(forecast_, AlarmReason::kForecast, in.time_to_trip_node);
-  state_ = s;
+  }
+  st.trip_latched = sensor_over_.latched;
+  for (const auto& ch : over_) st.trip_latched = st.trip_latched || ch.latched;
+  state_ = st;
   return state_;
+}
+
+std::vector<AlarmCondition> AlarmMonitor::ActiveConditions() const {
+  std::vector<AlarmCondition> out;
+  auto add = [&](const Channel& ch, AlarmReason reason, const char* detail, int node, double threshold) {
+    if (ch.level == AlarmLevel::kNone) return;
+    out.push_back({ch.level, reason, detail, node, ch.value, threshold, ch.raised_at_s, ch.latched});
+  };
+  for (std::size_t i = 0; i < over_.size(); ++i) {
+    const auto& l = limits_[i];
+    add(over_[i], AlarmReason::kEstimatedOverTemperature, "", static_cast<int>(i),
+        over_[i].level == AlarmLevel::kTrip ? l.trip_degC : l.warning_degC);
+  }
+  add(sensor_over_, AlarmReason::kMeasuredOverTemperature, "", config_.sensor_node,
+      sensor_over_.level == AlarmLevel::kTrip ? sensor_limits_.trip_degC : sensor_limits_.warning_degC);
+  for (std::size_t i = 0; i < rise_.size(); ++i) {
+    add(rise_[i], AlarmReason::kRateOfRise, "", static_cast<int>(i), std::nan(""));
+  }
+  add(stale_, AlarmReason::kStaleTelemetry, "", -1, std::nan(""));
+  add(range_, AlarmReason::kImplausibleSensor, "out of range", config_.sensor_node, std::nan(""));
+  add(stuck_, AlarmReason::kImplausibleSensor, "stuck", config_.sensor_node, std::nan(""));
+  add(disagree_, AlarmReason::kImplausibleSensor, "disagrees with the model", config_.sensor_node, std::nan(""));
+  add(converged_, AlarmReason::kEstimatorNotConverged, "", -1, std::nan(""));
+  add(forecast_, AlarmReason::kForecast, "", forecast_node_, std::nan(""));
+  // Most severe first; among equals the one raised first.
+  std::stable_sort(out.begin(), out.end(), [](const AlarmCondition& a, const AlarmCondition& b) {
+    if (a.level != b.level) return a.level > b.level;
+    return a.raised_at_s < b.raised_at_s;
+  });
+  return out;
 }
 
 bool AlarmMonitor::Clear() {

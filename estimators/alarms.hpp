@@ -23,21 +23,21 @@ namespace pumptherm::estimators {
 
 enum class AlarmLevel : std::uint8_t { kNone = 0, kWarning = 1, kTrip = 2 };
 
-/// Reason codes as published on CAN and LCM (values are part of the interface; do not renumber).
+/// Reason codes as published on CAN (pumptherm.dbc AlarmReason) and LCM (alarm_condition_t
+/// REASON_*): the values are part of the interface; do not renumber.
 enum class AlarmReason : std::uint8_t {
   kNone = 0,
-  kOverTemperature = 1,        ///< a node above its warning or trip level
-  kRateOfRise = 2,             ///< a node warming faster than allowed
-  kStaleTelemetry = 3,         ///< no telemetry for longer than allowed
-  kSensorOutOfRange = 4,       ///< measured temperature outside its plausible range
-  kSensorStuck = 5,            ///< measured temperature frozen while the model says it moves
-  kSensorDisagrees = 6,        ///< innovation test failed persistently (model vs sensor)
-  kEstimatorNotConverged = 7,  ///< an estimator has not converged (or lost convergence)
-  kForecast = 8,               ///< time to trip at the present load below the horizon
+  kEstimatedOverTemperature = 1,  ///< a node's estimate above its warning or trip level
+  kMeasuredOverTemperature = 2,   ///< the measured sensor above its level
+  kRateOfRise = 3,                ///< a node warming faster than allowed
+  kStaleTelemetry = 4,            ///< no telemetry for longer than allowed
+  kImplausibleSensor = 5,         ///< sensor out of range, stuck, or disagreeing with the model
+  kEstimatorNotConverged = 6,     ///< an estimator has not converged (or lost convergence)
+  kForecast = 7,                  ///< time to trip at the present load below the horizon
 };
-inline constexpr std::size_t kAlarmReasonCount = 9;
+inline constexpr std::size_t kAlarmReasonCount = 8;
 
-/// Name of a reason code ("over_temperature", ...), for logs and LCM.
+/// Name of a reason code ("estimated_over_temperature", ...), for logs.
 const char* AlarmReasonName(AlarmReason reason);
 const char* AlarmLevelName(AlarmLevel level);
 
@@ -95,6 +95,18 @@ struct AlarmState {
   bool operator==(const AlarmState&) const = default;
 };
 
+/// One active alarm condition.
+struct AlarmCondition {
+  AlarmLevel level = AlarmLevel::kNone;
+  AlarmReason reason = AlarmReason::kNone;
+  const char* detail = "";   ///< e.g. "stuck" for an implausible sensor
+  int node = -1;             ///< node index (-1: the pump as a whole)
+  double value = std::numeric_limits<double>::quiet_NaN();  ///< value when it was raised
+  double threshold = std::numeric_limits<double>::quiet_NaN();  ///< level it crossed (degC)
+  double raised_at_s = 0.0;
+  bool latched = false;
+};
+
 class AlarmMonitor {
  public:
   /// `limits[i]` applies to node i; the sensor's own over-temperature check uses
@@ -111,6 +123,9 @@ class AlarmMonitor {
   bool Clear();
 
   const AlarmState& state() const { return state_; }
+
+  /// Every active condition, most severe first (allocates; for publishing, not per frame).
+  std::vector<AlarmCondition> ActiveConditions() const;
 
  private:
   /// One alarm condition with hold time and latch.
@@ -148,6 +163,7 @@ class AlarmMonitor {
   double stuck_model_min_ = 0.0;
   double stuck_model_max_ = 0.0;
   double start_s_ = std::numeric_limits<double>::quiet_NaN();
+  int forecast_node_ = -1;
   AlarmState state_;
 };
 

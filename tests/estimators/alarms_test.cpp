@@ -50,7 +50,7 @@ TEST(Alarms, WarningNeedsTheHoldTimeAndASpikeDoesNothing) {
   EXPECT_EQ(f.At(12).level, AlarmLevel::kNone);  // 1 s of 2 s hold
   const auto& s = f.At(13);
   EXPECT_EQ(s.level, AlarmLevel::kWarning);
-  EXPECT_EQ(s.reason, AlarmReason::kOverTemperature);
+  EXPECT_EQ(s.reason, AlarmReason::kEstimatedOverTemperature);
   EXPECT_EQ(s.node, 0);
   EXPECT_DOUBLE_EQ(s.value, 85.0);
 }
@@ -103,8 +103,13 @@ TEST(Alarms, MeasuredSensorHasItsOwnLevels) {
   f.At(0);
   const auto& s = f.At(2);
   EXPECT_EQ(s.level, AlarmLevel::kTrip);
+  EXPECT_EQ(s.reason, AlarmReason::kMeasuredOverTemperature);
   EXPECT_EQ(s.node, 0);
   EXPECT_DOUBLE_EQ(s.value, 91.0);
+  const auto active = f.m.ActiveConditions();
+  ASSERT_EQ(active.size(), 1U);
+  EXPECT_DOUBLE_EQ(active[0].threshold, 90.0);
+  EXPECT_TRUE(active[0].latched);
 }
 
 TEST(Alarms, TripOutranksAnEarlierWarning) {
@@ -118,7 +123,15 @@ TEST(Alarms, TripOutranksAnEarlierWarning) {
   const auto& s = f.At(5);
   EXPECT_EQ(s.level, AlarmLevel::kTrip);
   EXPECT_EQ(s.node, 1);
-  EXPECT_EQ(s.active_reasons, 1U << static_cast<unsigned>(AlarmReason::kOverTemperature));
+  EXPECT_EQ(s.active_reasons, 1U << static_cast<unsigned>(AlarmReason::kEstimatedOverTemperature));
+  // Both conditions are listed, the trip first.
+  const auto active = f.m.ActiveConditions();
+  ASSERT_EQ(active.size(), 2U);
+  EXPECT_EQ(active[0].level, AlarmLevel::kTrip);
+  EXPECT_EQ(active[0].node, 1);
+  EXPECT_DOUBLE_EQ(active[0].threshold, 140.0);
+  EXPECT_EQ(active[1].level, AlarmLevel::kWarning);
+  EXPECT_EQ(active[1].node, 0);
 }
 
 TEST(Alarms, NaNNeitherRaisesNorClears) {
@@ -176,7 +189,7 @@ TEST(Alarms, SensorOutOfRangeStuckAndDisagreeing) {
   Fixture f;
   f.in.sensor_degC = -60.0;
   f.At(0);
-  EXPECT_EQ(f.At(2).reason, AlarmReason::kSensorOutOfRange);
+  EXPECT_EQ(f.At(2).reason, AlarmReason::kImplausibleSensor);
   f.in.sensor_degC = 40.0;
   f.At(3);
   EXPECT_EQ(f.At(5).level, AlarmLevel::kNone);
@@ -188,7 +201,7 @@ TEST(Alarms, SensorOutOfRangeStuckAndDisagreeing) {
     EXPECT_EQ(f.At(t).level, AlarmLevel::kNone) << t;
   }
   f.in.sensor_model_degC = 44.9;
-  EXPECT_EQ(f.At(123).reason, AlarmReason::kSensorStuck);
+  EXPECT_EQ(f.At(123).reason, AlarmReason::kImplausibleSensor);
   f.in.sensor_degC = 40.1;
   EXPECT_EQ(f.At(124).level, AlarmLevel::kNone);
 
@@ -196,7 +209,7 @@ TEST(Alarms, SensorOutOfRangeStuckAndDisagreeing) {
   f.in.sensor_nis = 25.0;
   f.At(130);
   EXPECT_EQ(f.At(159).level, AlarmLevel::kNone);
-  EXPECT_EQ(f.At(160).reason, AlarmReason::kSensorDisagrees);
+  EXPECT_EQ(f.At(160).reason, AlarmReason::kImplausibleSensor);
 }
 
 // A steady motor gives a steady reading: frozen while the model is flat too is not "stuck".
