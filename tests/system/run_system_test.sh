@@ -27,12 +27,16 @@ readonly kSuite=bookworm
 # The guest's packages. The libraries are those of pumpthermd, pumptherm and the LCM tools (found
 # with ldd + dpkg -S on the host), so that the binaries under test, and later the project's .deb,
 # install without a network: the guest has none.
-readonly kPackages=(systemd systemd-sysv udev kmod iproute2 procps can-utils
+# libnss-systemd resolves DynamicUser= names (ps, ls -l, getent).
+readonly kPackages=(systemd systemd-sysv libnss-systemd udev kmod iproute2 procps can-utils
   libc6 libstdc++6 libgcc-s1 libsystemd0 libfmt9 libtomlplusplus3 liblcm1 liblcm-bin libglib2.0-0)
 # Loaded by the initramfs, with their dependencies from modules.dep; crc32c is ext4's checksum
 # (a soft dependency, which modules.dep does not list).
 readonly kBootModules=(virtio_pci virtio_blk crc32c_generic ext4)
 readonly kGuestMemory_MiB=1024
+# mitigations=off: the page-table isolation and speculation barriers the emulated CPU would get
+# only slow TCG down, in a throw-away guest that runs nothing but the test.
+readonly kKernelCmdline="console=ttyS0 quiet panic=-1 systemd.show_status=1 net.ifnames=0 mitigations=off"
 
 usage() {
   cat <<'EOF'
@@ -188,23 +192,42 @@ until [ -b /dev/vda ]; do
 done
 mkdir -p /newroot
 mount -t ext4 -o rw,noatime /dev/vda /newroot || fail "mount -t ext4 /dev/vda"
-[ -x /newroot/sbin/init ] || fail "/dev/vda has no /sbin/init"
+# /sbin/init is an absolute symlink into the new root: test the link, not its target here.
+[ -L /newroot/sbin/init ] || [ -e /newroot/sbin/init ] || fail "/dev/vda has no /sbin/init"
 umount /proc /sys /dev
 exec switch_root /newroot /sbin/init
 EOF
 }
 
-# The runner in the guest, run by pumptherm-system-test.service once the boot has reached
-# multi-user.target. Installs what the second disk (/dev/vdb) holds, runs the scenario, reports
-# on /dev/ttyS1 and powers off.
+# The base image's part of the runner, run by pumptherm-system-test.service once the boot has
+# reached multi-user.target: mounts the test's disk (/dev/vdb) and runs the runner it holds, so
+# that changing the runner does not need a new base image.
+guest_boot_hook() {
+  cat <<'EOF'
+#!/bin/sh
+# Mounts the system test's disk and runs its runner (written by run_system_test.sh).
+mnt=/opt/pumptherm-test
+mkdir -p "$mnt"
+if ! mount -o ro /dev/vdb "$mnt" || [ ! -r "$mnt/runner.sh" ]; then
+  echo "pumptherm-system: cannot mount /dev/vdb (the test's disk) or it has no runner.sh"
+  echo "@@PUMPTHERM-SYSTEM-SETUP-FAILED mount /dev/vdb (the test's disk)@@" >/dev/ttyS1
+  systemctl poweroff --force
+  exit 1
+fi
+exec /bin/sh "$mnt/runner.sh" "$mnt"
+EOF
+}
+
+# The runner in the guest (on the test's disk): installs what the disk holds, runs the scenario,
+# reports on /dev/ttyS1 and powers off.
 guest_runner() {
   cat <<'EOF'
 #!/bin/sh
-# Runs the system test that /dev/vdb holds (written by tests/system/run_system_test.sh).
+# Runs the system test that this disk holds (written by tests/system/run_system_test.sh).
 export PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin HOME=/root LANG=C.UTF-8
+mnt=$1
 out=/dev/ttyS1
 stty -F "$out" raw -echo 2>/dev/null
-mnt=/opt/pumptherm-test
 say() { echo "pumptherm-system-runner: $*"; }
 setup_failed() {
   say "setup failed: $*"
@@ -212,8 +235,6 @@ setup_failed() {
   systemctl poweroff --force
   exit 1
 }
-mkdir -p "$mnt"
-mount -o ro /dev/vdb "$mnt" || setup_failed "mount /dev/vdb (the test's disk)"
 . "$mnt/run.conf"
 [ "$SHELL_MODE" = 1 ] && out=/dev/console
 # Shared libraries the base image lacks, at their host paths.
@@ -272,7 +293,7 @@ After=multi-user.target
 
 [Service]
 Type=oneshot
-ExecStart=/usr/local/libexec/pumptherm-system-runner
+ExecStart=/usr/local/libexec/pumptherm-system-boot
 StandardOutput=journal+console
 StandardError=journal+console
 TimeoutStartSec=infinity
@@ -293,15 +314,22 @@ configure_root() {
   sed -i 's/^root:[^:]*:/root::/' "$r/etc/shadow"
   # Timers and jobs that only cost boot time in a guest that lives for a minute.
   local u
+  # Under TCG every process started at boot costs a fraction of a second.
   for u in apt-daily.timer apt-daily-upgrade.timer dpkg-db-backup.timer e2scrub_all.timer \
-    e2scrub_reap.service fstrim.timer systemd-tmpfiles-clean.timer; do
+    e2scrub_reap.service fstrim.timer systemd-tmpfiles-clean.timer \
+    modprobe@dm_mod.service modprobe@efi_pstore.service modprobe@fuse.service \
+    modprobe@loop.service dev-hugepages.mount sys-kernel-debug.mount sys-kernel-tracing.mount \
+    sys-fs-fuse-connections.mount; do
     ln -sf /dev/null "$r/etc/systemd/system/$u"
   done
+  # The journal stays in /run: nothing to flush to the disk at boot.
+  mkdir -p "$r/etc/systemd/journald.conf.d"
+  printf '[Journal]\nStorage=volatile\n' >"$r/etc/systemd/journald.conf.d/pumptherm-test.conf"
   mkdir -p "$r/etc/systemd/system.conf.d"
   printf '[Manager]\nDefaultTimeoutStopSec=15s\n' >"$r/etc/systemd/system.conf.d/pumptherm-test.conf"
   mkdir -p "$r/usr/local/libexec"
-  guest_runner >"$r/usr/local/libexec/pumptherm-system-runner"
-  chmod 755 "$r/usr/local/libexec/pumptherm-system-runner"
+  guest_boot_hook >"$r/usr/local/libexec/pumptherm-system-boot"
+  chmod 755 "$r/usr/local/libexec/pumptherm-system-boot"
   guest_runner_unit >"$r/etc/systemd/system/pumptherm-system-test.service"
   mkdir -p "$r/etc/systemd/system/multi-user.target.wants"
   ln -sf ../pumptherm-system-test.service \
@@ -340,14 +368,32 @@ choose_cache_dir() {
   fi
 }
 
-base_key() {
+# Three cached layers, each keyed by a hash of what it is made of, so that changing one part
+# rebuilds only that part: the debootstrap tree (a tar; minutes, needs the mirror), the disk image
+# (tree + configure_root + kernel modules; seconds) and the boot initramfs (seconds).
+debootstrap_key() {
   {
-    echo "$kHarnessVersion $kSuite $kernel_version ${PUMPTHERM_DEBIAN_MIRROR:-}"
-    printf '%s\n' "${kPackages[@]}" "${kBootModules[@]}"
+    echo "debootstrap $kHarnessVersion $kSuite ${PUMPTHERM_DEBIAN_MIRROR:-}"
+    printf '%s\n' "${kPackages[@]}"
+  } | sha256sum | cut -c1-16
+}
+
+image_key() {
+  {
+    echo "image $1 $kernel_version"
     declare -f configure_root
-    guest_init
-    guest_runner
+    guest_boot_hook
     guest_runner_unit
+    ls -lL "$kernel_root/boot/vmlinuz-$kernel_version"
+  } | sha256sum | cut -c1-16
+}
+
+initrd_key() {
+  {
+    echo "initrd $kernel_version"
+    printf '%s\n' "${kBootModules[@]}"
+    guest_init
+    declare -f build_initramfs module_closure
     ls -lL "$kernel_root/boot/vmlinuz-$kernel_version" "$(command -v busybox)"
   } | sha256sum | cut -c1-16
 }
@@ -369,22 +415,26 @@ module_closure() {
   }
   local m path
   for m in "$@"; do
-    path=$(grep -m1 -E "(^|/)${m//_/[_-]}\.ko(\.xz|\.zst|\.gz)?:" "$dep_file" | cut -d: -f1) ||
-      { err "module $m not found in $dep_file"; return 1; }
+    path=$(grep -m1 -E "(^|/)${m//_/[_-]}\.ko(\.xz|\.zst|\.gz)?:" "$dep_file" | cut -d: -f1)
+    [[ -n "$path" ]] || { err "module $m not found in $dep_file"; return 1; }
     visit "$path" || return 1
   done
   printf '%s\n' "${order[@]}"
 }
 
-# Builds the boot initramfs $2 from the module tree $1 (lib/modules/<ver> of the base root).
+# Builds the boot initramfs $1: busybox, kBootModules with their dependencies (modules.dep made
+# by depmod over a tree of symbolic links to the unpacked kernel's modules), guest_init.
 build_initramfs() {
-  local modroot=$1 dst=$2 stage m
+  local dst=$1 stage m
   stage=$(mktemp -d)
-  mkdir -p "$stage"/{bin,dev,proc,sys,newroot,modules}
+  mkdir -p "$stage"/{bin,dev,proc,sys,newroot,modules} "$stage/tree/lib/modules"
   cp -L "$(command -v busybox)" "$stage/bin/busybox"
   if ldd "$stage/bin/busybox" >/dev/null 2>&1; then
     err "$(command -v busybox) is not static (install busybox-static)"; rm -rf "$stage"; return 1
   fi
+  local modroot=$stage/tree/lib/modules/$kernel_version
+  cp -as "$kernel_root/lib/modules/$kernel_version" "$stage/tree/lib/modules/"
+  depmod -b "$stage/tree" "$kernel_version" || { err "depmod failed"; rm -rf "$stage"; return 1; }
   local mods
   mods=$(module_closure "$modroot" "${kBootModules[@]}") || { rm -rf "$stage"; return 1; }
   : >"$stage/modules/order"
@@ -392,83 +442,112 @@ build_initramfs() {
     local base
     base=$(basename "$m")
     case "$m" in
-      *.ko) cp "$modroot/$m" "$stage/modules/$base" ;;
+      *.ko) cp -L "$modroot/$m" "$stage/modules/$base" ;;
       *.ko.xz) xz -dc "$modroot/$m" >"$stage/modules/${base%.xz}"; base=${base%.xz} ;;
       *.ko.zst) zstd -qdc "$modroot/$m" >"$stage/modules/${base%.zst}"; base=${base%.zst} ;;
       *.ko.gz) gzip -dc "$modroot/$m" >"$stage/modules/${base%.gz}"; base=${base%.gz} ;;
     esac
     echo "$base" >>"$stage/modules/order"
   done <<<"$mods"
+  rm -rf "$stage/tree"
   guest_init >"$stage/init"
   chmod 755 "$stage/init"
   (cd "$stage" && find . -mindepth 1 | LC_ALL=C sort | cpio --quiet -o -H newc -R 0:0 | gzip -4) >"$dst"
   rm -rf "$stage"
 }
 
+# Makes the debootstrap tarball $1 (run under the cache lock). Exits 3 when debootstrap fails.
+build_debootstrap_tar() {
+  local tar=$1 stage start
+  start=$(now_s)
+  stage=$(mktemp -d "$cache_dir/system-stage.XXXXXX")
+  local mirror=${PUMPTHERM_DEBIAN_MIRROR:-http://deb.debian.org/debian}
+  local include
+  include=$(IFS=,; echo "${kPackages[*]}")
+  say "debootstrap $kSuite from $mirror (once; a few minutes)"
+  if ! debootstrap --variant=minbase --include="$include" "$kSuite" "$stage/root" "$mirror" \
+    >"$stage/debootstrap.log" 2>&1; then
+    err "debootstrap failed; last lines of its log:"
+    tail -n 20 "$stage/debootstrap.log" >&2
+    [[ -f "$stage/root/debootstrap/debootstrap.log" ]] &&
+      tail -n 20 "$stage/root/debootstrap/debootstrap.log" >&2
+    rm -rf "$stage"
+    exit 3
+  fi
+  rm -rf "$stage/root/var/cache/apt/archives/"*.deb
+  tar --numeric-owner --xattrs -C "$stage/root" -cf "$tar.tmp" . && mv "$tar.tmp" "$tar"
+  rm -rf "$stage"
+  say "debootstrap took $(elapsed_s "$start") s: $tar"
+}
+
+# Makes the disk image $2 and its file list $3 from the debootstrap tarball $1.
+build_image() {
+  local tar=$1 img=$2 files=$3 stage start
+  start=$(now_s)
+  stage=$(mktemp -d "$cache_dir/system-stage.XXXXXX")
+  mkdir "$stage/root"
+  tar --numeric-owner --xattrs -C "$stage/root" -xf "$tar" || { rm -rf "$stage"; return 1; }
+  configure_root "$stage/root"
+  mkdir -p "$stage/root/usr/lib/modules"
+  cp -a "$kernel_root/lib/modules/$kernel_version" "$stage/root/usr/lib/modules/"
+  depmod -b "$stage/root/usr" "$kernel_version" ||
+    { err "depmod of the guest's modules failed"; rm -rf "$stage"; return 1; }
+  # Every path in the base, for the per-test check of which libraries the guest lacks.
+  (cd "$stage/root" && find . -mindepth 1 -printf '/%P\n' | LC_ALL=C sort) >"$stage/files"
+  local used_MiB
+  used_MiB=$(du -sm "$stage/root" | cut -f1)
+  # Room for what the tests install and write (QEMU's snapshot overlay takes the writes).
+  local size_MiB=$((used_MiB + 1536))
+  truncate -s "${size_MiB}M" "$stage/base.img"
+  if ! mke2fs -q -F -t ext4 -L pumptherm-root -d "$stage/root" "$stage/base.img"; then
+    err "mke2fs -d of the base image failed"; rm -rf "$stage"; return 1
+  fi
+  chmod 0444 "$stage/base.img"
+  mv "$stage/files" "$files"
+  mv "$stage/base.img" "$img"
+  rm -rf "$stage"
+  say "base image: ${used_MiB} MiB of files in a ${size_MiB} MiB ext4 image, made in $(elapsed_s "$start") s"
+}
+
 # Finds or builds the cached base: sets base_img, base_initrd, base_files.
 build_base() {
-  local key
-  key=$(base_key)
-  base_img=$cache_dir/system-base-$key.img
-  base_initrd=$cache_dir/system-base-$key.initrd.gz
-  base_files=$cache_dir/system-base-$key.files
-  if [[ -s "$base_img" && -s "$base_initrd" && -s "$base_files" ]]; then
+  local dkey ikey rkey
+  dkey=$(debootstrap_key)
+  ikey=$(image_key "$dkey")
+  rkey=$(initrd_key)
+  local tar=$cache_dir/system-debootstrap-$dkey.tar
+  base_img=$cache_dir/system-base-$ikey.img
+  base_files=$cache_dir/system-base-$ikey.files
+  base_initrd=$cache_dir/system-initrd-$rkey.cpio.gz
+  if [[ -s "$base_img" && -s "$base_files" && -s "$base_initrd" ]]; then
     say "base image $base_img (cached)"
     return 0
   fi
   ((EUID == 0)) || cannot_run "the base image $base_img does not exist and building it needs root (debootstrap): run 'sudo $0 --build-base --cache-dir $cache_dir' once"
   local t
-  for t in debootstrap mke2fs cpio gzip depmod; do
+  for t in debootstrap mke2fs cpio gzip depmod tar; do
     PATH="/usr/sbin:/sbin:$PATH" command -v "$t" >/dev/null 2>&1 ||
       cannot_run "$t is not installed (tools/setup.sh installs debootstrap, e2fsprogs, cpio, kmod)"
   done
   mkdir -p "$cache_dir" || cannot_run "cannot create the cache directory $cache_dir"
+  local rc=0
   (
     flock 9
-    [[ -s "$base_img" && -s "$base_initrd" && -s "$base_files" ]] && exit 0
     export PATH="/usr/sbin:/sbin:$PATH"
-    local stage start
     start=$(now_s)
-    stage=$(mktemp -d "$cache_dir/system-stage.XXXXXX")
-    trap 'rm -rf "$stage"' EXIT
-    local mirror=${PUMPTHERM_DEBIAN_MIRROR:-http://deb.debian.org/debian}
-    local include
-    include=$(IFS=,; echo "${kPackages[*]}")
-    say "building the base image (once): debootstrap $kSuite from $mirror"
-    if ! debootstrap --variant=minbase --include="$include" "$kSuite" "$stage/root" "$mirror" \
-      >"$stage/debootstrap.log" 2>&1; then
-      err "debootstrap failed; last lines of its log:"
-      tail -n 20 "$stage/debootstrap.log" >&2
-      [[ -f "$stage/root/debootstrap/debootstrap.log" ]] &&
-        tail -n 20 "$stage/root/debootstrap/debootstrap.log" >&2
-      exit 3
+    [[ -s "$tar" ]] || build_debootstrap_tar "$tar"
+    if [[ ! -s "$base_img" || ! -s "$base_files" ]]; then
+      build_image "$tar" "$base_img" "$base_files" || exit 1
     fi
-    say "debootstrap took $(elapsed_s "$start") s"
-    configure_root "$stage/root"
-    local modsrc=$kernel_root/lib/modules/$kernel_version
-    mkdir -p "$stage/root/usr/lib/modules"
-    cp -a "$modsrc" "$stage/root/usr/lib/modules/"
-    depmod -b "$stage/root/usr" "$kernel_version" ||
-      { err "depmod of the guest's modules failed"; exit 1; }
-    build_initramfs "$stage/root/usr/lib/modules/$kernel_version" "$stage/initrd.gz" || exit 1
-    # Every path in the base, for the per-test check of which libraries the guest lacks.
-    (cd "$stage/root" && find . -mindepth 1 -printf '/%P\n' | LC_ALL=C sort) >"$stage/files"
-    local used_MiB
-    used_MiB=$(du -sm "$stage/root" | cut -f1)
-    # Room for what the tests install and write: the overlay of each run grows into it.
-    local size_MiB=$((used_MiB + 1536))
-    say "mke2fs: ${used_MiB} MiB of files, ${size_MiB} MiB image"
-    mke2fs -q -t ext4 -L pumptherm-root -d "$stage/root" "$stage/base.img" "${size_MiB}M" ||
-      { err "mke2fs -d of the base image failed"; exit 1; }
-    chmod 0444 "$stage/base.img"
-    mv "$stage/files" "$base_files"
-    mv "$stage/initrd.gz" "$base_initrd"
-    mv "$stage/base.img" "$base_img"
-    say "base image built in $(elapsed_s "$start") s: $base_img"
-    # Bases made by older harnesses, kernels or package lists are of no further use.
-    find "$cache_dir" -maxdepth 1 -name 'system-base-*' ! -name "system-base-$key.*" -delete
-  ) 9>"$cache_dir/.lock"
-  local rc=$?
+    if [[ ! -s "$base_initrd" ]]; then
+      build_initramfs "$base_initrd.tmp" && mv "$base_initrd.tmp" "$base_initrd" || exit 1
+    fi
+    say "base ready in $(elapsed_s "$start") s"
+    # Layers made by older harnesses, kernels or package lists are of no further use.
+    find "$cache_dir" -maxdepth 1 \( -name 'system-debootstrap-*' -o -name 'system-base-*' \
+      -o -name 'system-initrd-*' -o -name 'system-stage.*' \) ! -path "$tar" \
+      ! -path "$base_img" ! -path "$base_files" ! -path "$base_initrd" -exec rm -rf {} +
+  ) 9>"$cache_dir/.lock" || rc=$?
   if ((rc == 3)); then cannot_run "debootstrap of the base image failed (no mirror reachable?)"; fi
   ((rc == 0)) || { err "building the base image failed"; exit 1; }
 }
@@ -537,6 +616,7 @@ build_test_disk() {
   for u in "${units[@]}"; do cp "$u" "$stage/units/"; done
   for f in "${files[@]}"; do cp -rL "$f" "$stage/data/"; done
   cp "$scenario" "$stage/scenario.sh"
+  guest_runner >"$stage/runner.sh"
   {
     echo "TEST_NAME='${name//\'/}'"
     echo "SHELL_MODE=$shell"
@@ -546,8 +626,9 @@ build_test_disk() {
   local used_MiB
   used_MiB=$(du -sm "$stage" | cut -f1)
   test_img=$run_dir/test.img
-  PATH="/usr/sbin:/sbin:$PATH" mke2fs -q -t ext4 -L pumptherm-test -d "$stage" "$test_img" \
-    "$((used_MiB * 2 + 16))M" || { err "mke2fs -d of the test's disk failed"; exit 1; }
+  truncate -s "$((used_MiB * 2 + 16))M" "$test_img"
+  PATH="/usr/sbin:/sbin:$PATH" mke2fs -q -F -t ext4 -L pumptherm-test -d "$stage" "$test_img" ||
+    { err "mke2fs -d of the test's disk failed"; exit 1; }
   rm -rf "$stage"
 }
 
@@ -570,7 +651,7 @@ run_guest() {
   local qemu=(qemu-system-x86_64 -m "$kGuestMemory_MiB" -smp 1 -no-reboot -nodefaults
     -no-user-config -display none -nic none
     -kernel "$kernel_root/boot/vmlinuz-$kernel_version" -initrd "$base_initrd"
-    -append "console=ttyS0 quiet panic=-1 systemd.show_status=1 net.ifnames=0"
+    -append "$kKernelCmdline"
     -drive "file=$base_img,format=raw,if=virtio,snapshot=on"
     -drive "file=$test_img,format=raw,if=virtio,readonly=on")
   if ((shell)); then

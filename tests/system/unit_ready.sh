@@ -77,6 +77,10 @@ user=$(ps -o user= -p "$pid" | tr -d ' ')
 uid=$(ps -o uid= -p "$pid" | tr -d ' ')
 echo "$T: pumpthermd runs as user '$user' (uid $uid)"
 [ "$uid" != 0 ] || fail "pumpthermd runs as root"
+# DynamicUser= without User= names the user after the unit (nss-systemd resolves it).
+[ "$user" = pumpthermd ] || fail "user '$user', want the dynamic user 'pumpthermd'"
+[ "$(getent passwd pumpthermd | cut -d: -f3)" = "$uid" ] ||
+  fail "getent passwd pumpthermd gives '$(getent passwd pumpthermd)', not uid $uid"
 # systemd allocates DynamicUser= uids in 61184..65519.
 [ "$uid" -ge 61184 ] && [ "$uid" -le 65519 ] || fail "uid $uid is not a dynamic user's (61184..65519)"
 caps=$(awk '/^CapEff:/ { print $2 }' "/proc/$pid/status")
