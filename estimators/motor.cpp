@@ -1,0 +1,176 @@
+#include "estimators/motor.hpp"
+
+#include <fmt/core.h>
+
+#include <cmath>
+#include <numbers>
+#include <optional>
+#include <toml++/toml.h>
+
+namespace pumptherm::estimators {
+namespace {
+
+// Kept identical to estimators/motors/han2019-tmp.toml (motor_description_test checks it).
+constexpr std::string_view kHan2019Tmp = R"(# Motor of the self-built maglev turbo-molecular pump of Han, Xiong, Mao, "Estimation of
+# temperature in turbo-molecular pump based on motor resistance online identification",
+# Vacuum 169 (2019) 108935, Table 1. Format: docs/resistance-identification.md.
+name = "han2019-tmp"
+pole_pairs = 1
+rated_speed_rpm = 21000.0
+flux_Wb = 0.0182
+inductance_H = 0.24e-3
+
+[resistance]
+# Table 1 gives 0.28 ohm as the "static value" (the winding at room temperature with the motor
+# stopped); the paper's room temperature during the Pt100 calibration was 27.2 degC, used here.
+r0_ohm = 0.28
+t0_degC = 27.2
+# Han 2019 section 3.1 (eq. 2): alpha_Cu = 4.1e-3 1/degC.
+alpha_per_K = 4.1e-3
+plausible_min_degC = -20.0
+plausible_max_degC = 180.0
+)";
+
+std::string Where(std::string_view source, const toml::source_region& region) {
+  if (region.begin.line == 0) return std::string(source);
+  return fmt::format("{}:{}", source, region.begin.line);
+}
+
+// Reads a number (integer or float) at `key` of `table`; `path` is the dotted key for errors.
+std::optional<double> Number(const toml::table& table, std::string_view key, std::string_view path,
+                             std::string_view source, bool required) {
+  const toml::node* node = table.get(key);
+  if (node == nullptr) {
+    if (!required) return std::nullopt;
+    throw MotorDescriptionError(
+        fmt::format("{}:{}: missing key '{}'", source, table.source().begin.line, path));
+  }
+  if (const auto v = node->value<double>(); v && node->is_number()) {
+    if (!std::isfinite(*v)) {
+      throw MotorDescriptionError(
+          fmt::format("{}: key '{}' is not a finite number", Where(source, node->source()), path));
+    }
+    return *v;
+  }
+  throw MotorDescriptionError(
+      fmt::format("{}: key '{}' must be a number", Where(source, node->source()), path));
+}
+
+void RejectUnknownKeys(const toml::table& table, std::initializer_list<std::string_view> known,
+                       std::string_view prefix, std::string_view source) {
+  for (const auto& [key, node] : table) {
+    bool ok = false;
+    for (auto k : known) ok = ok || key.str() == k;
+    if (!ok) {
+      throw MotorDescriptionError(fmt::format("{}: unknown key '{}{}'",
+                                              Where(source, node.source()), prefix, key.str()));
+    }
+  }
+}
+
+void RequirePositive(double value, const toml::table& table, std::string_view key,
+                     std::string_view path, std::string_view source) {
+  if (value > 0.0) return;
+  const toml::node* node = table.get(key);
+  throw MotorDescriptionError(fmt::format("{}: key '{}' must be positive, got {}",
+                                          Where(source, node->source()), path, value));
+}
+
+}  // namespace
+
+MotorDescription ParseMotorDescription(std::string_view text, std::string_view source) {
+  toml::table root;
+  try {
+    root = toml::parse(text, std::string(source));
+  } catch (const toml::parse_error& e) {
+    throw MotorDescriptionError(fmt::format("{}:{}:{}: {}", source, e.source().begin.line,
+                                            e.source().begin.column, e.description()));
+  }
+  RejectUnknownKeys(root,
+                    {"name", "pole_pairs", "rated_speed_rpm", "flux_Wb", "inductance_H",
+                     "resistance"},
+                    "", source);
+  MotorDescription m;
+  if (const toml::node* name = root.get("name")) {
+    if (!name->is_string()) {
+      throw MotorDescriptionError(
+          fmt::format("{}: key 'name' must be a string", Where(source, name->source())));
+    }
+    m.name = *name->value<std::string>();
+  }
+  const toml::node* pp = root.get("pole_pairs");
+  if (pp == nullptr) {
+    throw MotorDescriptionError(fmt::format("{}:1: missing key 'pole_pairs'", source));
+  }
+  if (!pp->is_integer() || *pp->value<std::int64_t>() < 1 || *pp->value<std::int64_t>() > 1000) {
+    throw MotorDescriptionError(fmt::format("{}: key 'pole_pairs' must be an integer >= 1",
+                                            Where(source, pp->source())));
+  }
+  m.pole_pairs = static_cast<int>(*pp->value<std::int64_t>());
+  m.rated_speed_rpm = *Number(root, "rated_speed_rpm", "rated_speed_rpm", source, true);
+  RequirePositive(m.rated_speed_rpm, root, "rated_speed_rpm", "rated_speed_rpm", source);
+  m.flux_Wb = *Number(root, "flux_Wb", "flux_Wb", source, true);
+  RequirePositive(m.flux_Wb, root, "flux_Wb", "flux_Wb", source);
+  m.inductance_H = *Number(root, "inductance_H", "inductance_H", source, true);
+  RequirePositive(m.inductance_H, root, "inductance_H", "inductance_H", source);
+
+  const toml::node* res_node = root.get("resistance");
+  if (res_node == nullptr || !res_node->is_table()) {
+    throw MotorDescriptionError(fmt::format(
+        "{}: missing table [resistance]",
+        res_node ? Where(source, res_node->source()) : std::string(source) + ":1"));
+  }
+  const toml::table& res = *res_node->as_table();
+  RejectUnknownKeys(res,
+                    {"r0_ohm", "t0_degC", "alpha_per_K", "plausible_min_degC",
+                     "plausible_max_degC"},
+                    "resistance.", source);
+  m.copper.r0_ohm = *Number(res, "r0_ohm", "resistance.r0_ohm", source, true);
+  RequirePositive(m.copper.r0_ohm, res, "r0_ohm", "resistance.r0_ohm", source);
+  m.copper.t0_degC = *Number(res, "t0_degC", "resistance.t0_degC", source, true);
+  m.copper.alpha_per_K = *Number(res, "alpha_per_K", "resistance.alpha_per_K", source, true);
+  RequirePositive(m.copper.alpha_per_K, res, "alpha_per_K", "resistance.alpha_per_K", source);
+  if (auto v = Number(res, "plausible_min_degC", "resistance.plausible_min_degC", source, false)) {
+    m.plausible_min_degC = *v;
+  }
+  if (auto v = Number(res, "plausible_max_degC", "resistance.plausible_max_degC", source, false)) {
+    m.plausible_max_degC = *v;
+  }
+  if (!(m.plausible_min_degC < m.plausible_max_degC) ||
+      PlausibleMinResistance_ohm(m) <= 0.0) {
+    throw MotorDescriptionError(fmt::format(
+        "{}:{}: keys 'resistance.plausible_min_degC' ({}) and 'resistance.plausible_max_degC' "
+        "({}) must give a band of positive resistances",
+        source, res.source().begin.line, m.plausible_min_degC, m.plausible_max_degC));
+  }
+  return m;
+}
+
+std::string_view MotorPresetText(std::string_view name) noexcept {
+  if (name == "han2019-tmp") return kHan2019Tmp;
+  return {};
+}
+
+std::vector<std::string> MotorPresetNames() { return {"han2019-tmp"}; }
+
+MotorDescription MotorPreset(std::string_view name) {
+  const std::string_view text = MotorPresetText(name);
+  if (text.empty()) {
+    throw MotorDescriptionError(fmt::format("unknown motor preset '{}' (known: han2019-tmp)", name));
+  }
+  return ParseMotorDescription(text, fmt::format("preset {}", name));
+}
+
+double ElectricalSpeed_rad_per_s(const MotorDescription& motor, double speed_rpm) noexcept {
+  return speed_rpm * (2.0 * std::numbers::pi / 60.0) * motor.pole_pairs;
+}
+
+double PlausibleMinResistance_ohm(const MotorDescription& motor) noexcept {
+  return ResistanceAt(motor.copper, motor.plausible_min_degC);
+}
+
+double PlausibleMaxResistance_ohm(const MotorDescription& motor) noexcept {
+  return ResistanceAt(motor.copper, motor.plausible_max_degC);
+}
+
+}  // namespace pumptherm::estimators

@@ -1,0 +1,71 @@
+#pragma once
+/// Motor description: the electrical parameters the resistance identifier needs.
+///
+/// The file format is TOML (docs/resistance-identification.md, "Motor description file"):
+///
+///     name = "han2019-tmp"
+///     pole_pairs = 1
+///     rated_speed_rpm = 21000.0
+///     flux_Wb = 0.0182              # permanent-magnet flux linkage psi_f at t0_degC
+///     inductance_H = 0.24e-3        # Ls (d and q axis, surface PM)
+///     [resistance]
+///     r0_ohm = 0.28                 # phase resistance at t0_degC (Han 2019 eq. 2)
+///     t0_degC = 27.2
+///     alpha_per_K = 4.1e-3
+///     plausible_min_degC = -20.0    # band outside which an identified Rs is "implausible"
+///     plausible_max_degC = 180.0
+///
+/// Every key is required except `name` and the two plausibility keys; unknown keys are errors
+/// (a misspelt key must not silently fall back to a default).
+
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "estimators/copper.hpp"
+
+namespace pumptherm::estimators {
+
+/// A motor description that does not parse or is out of range. The message names the source,
+/// the line (when known) and the key.
+class MotorDescriptionError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Electrical description of a surface permanent-magnet synchronous motor.
+struct MotorDescription {
+  std::string name;                 ///< free text, e.g. "han2019-tmp"
+  int pole_pairs = 1;               ///< electrical speed = pole_pairs * mechanical speed
+  double rated_speed_rpm = 0.0;     ///< mechanical, r/min
+  double flux_Wb = 0.0;             ///< PM flux linkage psi_f (amplitude-invariant dq)
+  double inductance_H = 0.0;        ///< Ls, equal on d and q axes
+  CopperLaw copper;                 ///< R0, T0, alpha of Han 2019 eq. 2
+  double plausible_min_degC = -20.0;  ///< lower end of the plausible winding temperature
+  double plausible_max_degC = 180.0;  ///< upper end of the plausible winding temperature
+};
+
+/// Parses a motor description from TOML `text`; `source` names it in errors (a path or
+/// "preset han2019-tmp"). Throws MotorDescriptionError naming source, line and key for a
+/// syntax error, a missing, unknown or mistyped key, or a value out of range
+/// (pole_pairs < 1, non-positive speed, flux, inductance, r0 or alpha, empty band).
+MotorDescription ParseMotorDescription(std::string_view text, std::string_view source);
+
+/// The TOML text of a built-in preset, or an empty view when `name` is not a preset.
+std::string_view MotorPresetText(std::string_view name) noexcept;
+
+/// Names of the built-in presets ("han2019-tmp": Han, Xiong, Mao 2019, Table 1).
+std::vector<std::string> MotorPresetNames();
+
+/// The parsed built-in preset `name`; throws MotorDescriptionError for an unknown name.
+MotorDescription MotorPreset(std::string_view name);
+
+/// Electrical angular speed w_r in rad/s from a mechanical speed in r/min.
+double ElectricalSpeed_rad_per_s(const MotorDescription& motor, double speed_rpm) noexcept;
+
+/// Resistance band [R(plausible_min_degC), R(plausible_max_degC)] (Han 2019 eq. 2), ohm.
+double PlausibleMinResistance_ohm(const MotorDescription& motor) noexcept;
+double PlausibleMaxResistance_ohm(const MotorDescription& motor) noexcept;
+
+}  // namespace pumptherm::estimators

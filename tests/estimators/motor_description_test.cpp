@@ -1,0 +1,122 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <numbers>
+#include <sstream>
+#include <string>
+
+#include "estimators/motor.hpp"
+
+namespace pumptherm::estimators {
+namespace {
+
+// Parses `text` and returns the error message, or "" when it parsed.
+std::string ErrorOf(const std::string& text) {
+  try {
+    ParseMotorDescription(text, "m.toml");
+  } catch (const MotorDescriptionError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+constexpr const char* kValid = R"(name = "test"
+pole_pairs = 2
+rated_speed_rpm = 3000
+flux_Wb = 0.1
+inductance_H = 1e-3
+[resistance]
+r0_ohm = 0.5
+t0_degC = 20.0
+alpha_per_K = 3.93e-3
+)";
+
+// Han, Xiong, Mao 2019, Table 1, and section 3.1 for alpha.
+TEST(MotorDescription, PresetHasTable1Values) {
+  const MotorDescription m = MotorPreset("han2019-tmp");
+  EXPECT_EQ(m.name, "han2019-tmp");
+  EXPECT_EQ(m.pole_pairs, 1);
+  EXPECT_DOUBLE_EQ(m.rated_speed_rpm, 21000.0);
+  EXPECT_DOUBLE_EQ(m.flux_Wb, 0.0182);
+  EXPECT_DOUBLE_EQ(m.inductance_H, 0.24e-3);
+  EXPECT_DOUBLE_EQ(m.copper.r0_ohm, 0.28);
+  EXPECT_DOUBLE_EQ(m.copper.alpha_per_K, 4.1e-3);
+  EXPECT_DOUBLE_EQ(m.copper.t0_degC, 27.2);
+  EXPECT_EQ(MotorPresetNames(), std::vector<std::string>{"han2019-tmp"});
+}
+
+TEST(MotorDescription, ShippedPresetFileMatchesBuiltInPreset) {
+  const char* root = std::getenv("PUMPTHERM_SOURCE_DIR");
+  ASSERT_NE(root, nullptr) << "CTest sets PUMPTHERM_SOURCE_DIR";
+  std::ifstream in(std::string(root) + "/estimators/motors/han2019-tmp.toml");
+  ASSERT_TRUE(in) << "estimators/motors/han2019-tmp.toml not found";
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  EXPECT_EQ(buffer.str(), std::string(MotorPresetText("han2019-tmp")));
+}
+
+TEST(MotorDescription, ParsesAValidFileWithIntegersForFloats) {
+  const MotorDescription m = ParseMotorDescription(kValid, "m.toml");
+  EXPECT_EQ(m.pole_pairs, 2);
+  EXPECT_DOUBLE_EQ(m.rated_speed_rpm, 3000.0);
+  EXPECT_DOUBLE_EQ(m.plausible_min_degC, -20.0);  // defaults
+  EXPECT_DOUBLE_EQ(m.plausible_max_degC, 180.0);
+  // 3000 r/min with 2 pole pairs: 2 * 3000 * 2 pi / 60 = 628.3 rad/s.
+  EXPECT_NEAR(ElectricalSpeed_rad_per_s(m, 3000.0), 200.0 * std::numbers::pi, 1e-12);
+  EXPECT_NEAR(PlausibleMaxResistance_ohm(m), 0.5 * (1.0 + 3.93e-3 * 160.0), 1e-12);
+}
+
+TEST(MotorDescription, MissingKeyNamesLineAndKey) {
+  std::string text = kValid;
+  text.replace(text.find("flux_Wb = 0.1\n"), 14, "");
+  const std::string err = ErrorOf(text);
+  EXPECT_NE(err.find("m.toml:1"), std::string::npos) << err;
+  EXPECT_NE(err.find("'flux_Wb'"), std::string::npos) << err;
+  std::string no_r0 = kValid;
+  no_r0.replace(no_r0.find("r0_ohm = 0.5\n"), 13, "");
+  const std::string err2 = ErrorOf(no_r0);
+  EXPECT_NE(err2.find("m.toml:6"), std::string::npos) << err2;  // the [resistance] table
+  EXPECT_NE(err2.find("'resistance.r0_ohm'"), std::string::npos) << err2;
+}
+
+TEST(MotorDescription, UnknownKeyNamesLineAndKey) {
+  const std::string err = ErrorOf(std::string(kValid) + "alpha_per_k = 1.0\n");
+  EXPECT_NE(err.find("m.toml:10"), std::string::npos) << err;
+  EXPECT_NE(err.find("'resistance.alpha_per_k'"), std::string::npos) << err;
+}
+
+TEST(MotorDescription, WrongTypeNamesLineAndKey) {
+  std::string text = kValid;
+  text.replace(text.find("inductance_H = 1e-3"), 19, "inductance_H = \"1 mH\"");
+  const std::string err = ErrorOf(text);
+  EXPECT_NE(err.find("m.toml:5"), std::string::npos) << err;
+  EXPECT_NE(err.find("'inductance_H' must be a number"), std::string::npos) << err;
+}
+
+TEST(MotorDescription, OutOfRangeValuesAreErrors) {
+  std::string pp = kValid;
+  pp.replace(pp.find("pole_pairs = 2"), 14, "pole_pairs = 0");
+  EXPECT_NE(ErrorOf(pp).find("m.toml:2: key 'pole_pairs'"), std::string::npos) << ErrorOf(pp);
+  std::string neg = kValid;
+  neg.replace(neg.find("r0_ohm = 0.5"), 12, "r0_ohm = -0.5");
+  EXPECT_NE(ErrorOf(neg).find("m.toml:7: key 'resistance.r0_ohm' must be positive"),
+            std::string::npos)
+      << ErrorOf(neg);
+  const std::string band = std::string(kValid) + "plausible_min_degC = 100.0\nplausible_max_degC = 50.0\n";
+  EXPECT_NE(ErrorOf(band).find("plausible_min_degC"), std::string::npos) << ErrorOf(band);
+}
+
+TEST(MotorDescription, SyntaxErrorNamesLine) {
+  const std::string err = ErrorOf("pole_pairs = 1\nflux_Wb = = 3\n");
+  EXPECT_NE(err.find("m.toml:2:"), std::string::npos) << err;
+}
+
+TEST(MotorDescription, UnknownPresetThrows) {
+  EXPECT_THROW(MotorPreset("no-such-motor"), MotorDescriptionError);
+  EXPECT_TRUE(MotorPresetText("no-such-motor").empty());
+}
+
+}  // namespace
+}  // namespace pumptherm::estimators

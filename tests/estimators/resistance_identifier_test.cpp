@@ -1,0 +1,222 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <set>
+
+#include "estimators/motor.hpp"
+#include "estimators/resistance_identifier.hpp"
+#include "tools/sim/tmp_drive.hpp"
+
+namespace pumptherm::estimators {
+namespace {
+
+constexpr double kDt_s = 0.01;
+
+// Noise-free q-axis sample of Han 2019 eq. 6 with id = 0.
+DqSample Exact(double rs_ohm, double psi_Wb, double iq_A, double w_rad_per_s) {
+  return {0.0, iq_A, -0.24e-3 * w_rad_per_s * iq_A, rs_ohm * iq_A + psi_Wb * w_rad_per_s,
+          w_rad_per_s};
+}
+
+// Load current that changes every 30 s (1.0 to 4.0 A), as gas-load changes do.
+double SteppedCurrent_A(long k) { return 1.0 + 3.0 * std::abs(std::sin(0.7 * (k / 3000))); }
+
+const double kRated_rad_per_s = 21000.0 * 2.0 * std::numbers::pi / 60.0;
+
+TEST(ResistanceIdentifier, NoiseFreeDataGiveTrueParameters) {
+  const MotorDescription motor = MotorPreset("han2019-tmp");
+  ResistanceIdentifier id(motor, {});
+  const double rs = 0.30, psi = 0.0180;  // away from the nameplate 0.28 ohm / 0.0182 Wb
+  ResistanceEstimate e;
+  for (long k = 0; k < 2L * 3600 * 100; ++k) {
+    e = id.Update(Exact(rs, psi, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  }
+  EXPECT_NEAR(e.resistance_ohm, rs, 1e-9 * rs);
+  EXPECT_NEAR(e.flux_Wb, psi, 1e-9 * psi);
+  EXPECT_NEAR(e.winding_degC, TemperatureAt(motor.copper, rs), 1e-6);
+  EXPECT_EQ(e.status, ResistanceStatus::kTracking);
+}
+
+// Convergence on the simulated TMP drive with noise, quantisation and gas-load steps: a short
+// run (2-minute ramp, 20 minutes at rated speed) with the winding warming 10 K.
+TEST(ResistanceIdentifier, ConvergesOnSimulatedDrive) {
+  const MotorDescription motor = MotorPreset("han2019-tmp");
+  sim::TmpDriveConfig cfg;
+  cfg.motor = motor;
+  cfg.ramp_s = 120.0;
+  cfg.duration_s = 120.0 + 20.0 * 60.0;
+  cfg.load_steps = true;
+  cfg.load_step_mean_interval_s = 60.0;
+  cfg.winding_degC = [](double t) { return 30.0 + 10.0 * t / 1320.0; };
+  cfg.seed = 7;
+  sim::TmpDrive plant(cfg);
+  ResistanceIdentifier id(motor, {});
+  std::set<ResistanceStatus> seen;
+  double max_err_rel = 0.0, max_err_K = 0.0;
+  while (plant.Running()) {
+    const sim::TmpDriveSample s = plant.Step();
+    const ResistanceEstimate e = id.Update(
+        {s.id_A, s.iq_A, s.ud_V, s.uq_V, ElectricalSpeed_rad_per_s(motor, s.speed_rpm)}, kDt_s);
+    seen.insert(e.status);
+    if (s.time_s >= 120.0 + 600.0) {
+      max_err_rel = std::max(max_err_rel, std::abs(e.resistance_ohm / s.true_resistance_ohm - 1));
+      max_err_K = std::max(max_err_K, std::abs(e.winding_degC - s.true_winding_degC));
+    }
+  }
+  EXPECT_LT(max_err_rel, 0.005) << "max |Rs error| in the last 10 min, relative";
+  EXPECT_LT(max_err_K, 1.5) << "max winding temperature error in the last 10 min, K";
+  EXPECT_TRUE(seen.count(ResistanceStatus::kTracking));
+}
+
+TEST(ResistanceIdentifier, StatusesInitialisingConvergingTrackingInvalid) {
+  const MotorDescription motor = MotorPreset("han2019-tmp");
+  ResistanceIdentifier id(motor, {});
+  std::set<ResistanceStatus> seen;
+  ResistanceEstimate e = id.Update(Exact(0.29, 0.0182, 6.0, 100.0), kDt_s);
+  EXPECT_EQ(e.status, ResistanceStatus::kInitialising);
+  EXPECT_EQ(e.resistance_ohm, motor.copper.r0_ohm);  // nameplate until the first block
+  // Acceleration ramp (w_r rising at constant iq separates Rs from psi_f), then load changes.
+  for (long k = 1; k < 60000; ++k) {
+    const double w = std::min(1.0, k / 48000.0) * kRated_rad_per_s;
+    const double iq = k < 48000 ? 6.0 : SteppedCurrent_A(k);
+    seen.insert(id.Update(Exact(0.29, 0.0182, iq, w), kDt_s).status);
+  }
+  EXPECT_TRUE(seen.count(ResistanceStatus::kConverging));
+  EXPECT_TRUE(seen.count(ResistanceStatus::kTracking));
+  EXPECT_FALSE(seen.count(ResistanceStatus::kImplausible));
+  const double before = id.estimate().resistance_ohm;
+  DqSample bad = Exact(0.29, 0.0182, 2.0, kRated_rad_per_s);
+  bad.uq_V = std::numeric_limits<double>::quiet_NaN();
+  e = id.Update(bad, kDt_s);
+  EXPECT_EQ(e.status, ResistanceStatus::kInvalidInput);
+  EXPECT_EQ(e.resistance_ohm, before);
+  bad = Exact(0.29, 0.0182, 2.0, kRated_rad_per_s);
+  e = id.Update(bad, std::numeric_limits<double>::infinity());
+  EXPECT_EQ(e.status, ResistanceStatus::kInvalidInput);
+  // The next good sample carries the estimate's own status again.
+  EXPECT_NE(id.Update(bad, kDt_s).status, ResistanceStatus::kInvalidInput);
+}
+
+// Constant iq at constant speed: Rs and psi_f cannot be told apart. The identifier says so,
+// holds Rs, and explains a change of uq (here a 1 % flux drop) by psi_f alone.
+TEST(ResistanceIdentifier, HoldsResistanceWhenNotIdentifiable) {
+  const MotorDescription motor = MotorPreset("han2019-tmp");
+  ResistanceIdentifier id(motor, {});
+  long k = 0;
+  for (; k < 30L * 60 * 100; ++k) {
+    id.Update(Exact(0.30, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  }
+  ResistanceEstimate e;
+  const long constant_until = k + 2L * 3600 * 100;
+  for (; k < constant_until; ++k) e = id.Update(Exact(0.30, 0.0182, 2.0, kRated_rad_per_s), kDt_s);
+  ASSERT_EQ(e.status, ResistanceStatus::kNotIdentifiable);
+  const double held = e.resistance_ohm;
+  EXPECT_NEAR(held, 0.30, 1e-6);
+  for (long j = 0; j < 30L * 60 * 100; ++j) {
+    e = id.Update(Exact(0.30, 0.0182 * 0.99, 2.0, kRated_rad_per_s), kDt_s);
+    ASSERT_EQ(e.status, ResistanceStatus::kNotIdentifiable) << "sample " << j;
+  }
+  EXPECT_NEAR(e.resistance_ohm, held, 1e-7);
+  EXPECT_NEAR(e.flux_Wb, 0.0182 * 0.99, 1e-9);
+}
+
+TEST(ResistanceIdentifier, NotIdentifiableFromTheStartWithoutExcitation) {
+  ResistanceIdentifier id(MotorPreset("han2019-tmp"), {});
+  ResistanceEstimate e;
+  for (int k = 0; k < 1000; ++k) e = id.Update(Exact(0.30, 0.0182, 2.0, kRated_rad_per_s), kDt_s);
+  EXPECT_EQ(e.status, ResistanceStatus::kNotIdentifiable);
+  EXPECT_EQ(e.resistance_ohm, 0.28);  // nameplate held
+}
+
+// 300 degC is outside the preset's plausible band (-20 to 180 degC).
+TEST(ResistanceIdentifier, ImplausibleOutsideBand) {
+  const MotorDescription motor = MotorPreset("han2019-tmp");
+  const double rs_hot = ResistanceAt(motor.copper, 300.0);
+  ResistanceIdentifier id(motor, {});
+  ResistanceEstimate e;
+  for (long k = 0; k < 3600L * 100; ++k) {
+    e = id.Update(Exact(rs_hot, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  }
+  EXPECT_EQ(e.status, ResistanceStatus::kImplausible);
+  EXPECT_NEAR(e.resistance_ohm, rs_hot, 1e-3 * rs_hot);  // reported, not clipped
+}
+
+TEST(ResistanceIdentifier, SaveRestoreContinuesIdentically) {
+  const MotorDescription motor = MotorPreset("han2019-tmp");
+  ResistanceIdentifier a(motor, {});
+  ResistanceIdentifier b(motor, {});
+  long k = 0;
+  for (; k < 100L * 100; ++k) a.Update(Exact(0.31, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  ASSERT_TRUE(b.Restore(a.Save()));  // at a block boundary: nothing pending
+  // A restored identifier says "converging" until its first block confirms the state.
+  EXPECT_EQ(b.estimate().status, ResistanceStatus::kConverging);
+  for (const long start = k; k < 400L * 100; ++k) {
+    const DqSample s = Exact(0.31, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s);
+    const ResistanceEstimate ea = a.Update(s, kDt_s);
+    const ResistanceEstimate eb = b.Update(s, kDt_s);
+    ASSERT_EQ(ea.resistance_ohm, eb.resistance_ohm) << k;
+    ASSERT_EQ(ea.flux_Wb, eb.flux_Wb) << k;
+    if (k >= start + 99) {
+      ASSERT_EQ(ea.status, eb.status) << k;
+    }
+  }
+}
+
+TEST(ResistanceIdentifier, RestoreRejectsBrokenStateAndResetReturnsToNameplate) {
+  const MotorDescription motor = MotorPreset("han2019-tmp");
+  ResistanceIdentifier id(motor, {});
+  for (long k = 0; k < 6000; ++k) id.Update(Exact(0.31, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  const ResistanceIdentifierState good = id.Save();
+  ResistanceIdentifierState nan_state = good;
+  nan_state.x(kStateResistance) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(id.Restore(nan_state));
+  ResistanceIdentifierState not_pd = good;
+  not_pd.p(kStateFlux, kStateFlux) = -1.0;
+  EXPECT_FALSE(id.Restore(not_pd));
+  EXPECT_EQ(id.Save().x, good.x);  // unchanged by the refused restores
+  id.Reset();
+  EXPECT_EQ(id.estimate().status, ResistanceStatus::kInitialising);
+  EXPECT_EQ(id.estimate().resistance_ohm, motor.copper.r0_ohm);
+  EXPECT_EQ(id.estimate().flux_Wb, motor.flux_Wb);
+}
+
+// A state saved while the motor was in another condition (here Rs 30 % off, with a confident
+// covariance): its predictions are rejected, the covariance is re-opened after
+// reacquire_after_rejections blocks, and the estimate converges again.
+TEST(ResistanceIdentifier, StaleRestoredStateIsReacquired) {
+  const MotorDescription motor = MotorPreset("han2019-tmp");
+  ResistanceIdentifier id(motor, {});
+  for (long k = 0; k < 600L * 100; ++k) id.Update(Exact(0.30, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  ResistanceIdentifierState stale = id.Save();
+  stale.x(kStateResistance) = 0.39;
+  ASSERT_TRUE(id.Restore(stale));
+  bool rejected = false;
+  ResistanceEstimate e;
+  for (long k = 0; k < 600L * 100; ++k) {
+    e = id.Update(Exact(0.30, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+    rejected = rejected || (k % 100 == 99 && e.weight == 0.0);
+  }
+  EXPECT_TRUE(rejected);
+  EXPECT_NEAR(e.resistance_ohm, 0.30, 1e-4);
+  EXPECT_EQ(e.status, ResistanceStatus::kTracking);
+}
+
+TEST(ResistanceIdentifier, ConfigOutOfRangeThrows) {
+  ResistanceIdentifierConfig c;
+  c.block_samples = 0;
+  EXPECT_THROW(ResistanceIdentifier(MotorPreset("han2019-tmp"), c), std::invalid_argument);
+}
+
+TEST(ResistanceStatus, Names) {
+  EXPECT_EQ(ToString(ResistanceStatus::kInitialising), "initialising");
+  EXPECT_EQ(ToString(ResistanceStatus::kConverging), "converging");
+  EXPECT_EQ(ToString(ResistanceStatus::kTracking), "tracking");
+  EXPECT_EQ(ToString(ResistanceStatus::kNotIdentifiable), "not_identifiable");
+  EXPECT_EQ(ToString(ResistanceStatus::kImplausible), "implausible");
+  EXPECT_EQ(ToString(ResistanceStatus::kInvalidInput), "invalid_input");
+}
+
+}  // namespace
+}  // namespace pumptherm::estimators
