@@ -29,9 +29,19 @@ skip() {
   echo "SKIP: $*"
   exit 77
 }
-fail() {
+failed=""
+# Prints FAIL and the logs of the spy and of Xvfb, without exiting.
+report() {
+  failed=1
   echo "FAIL: $*" >&2
-  [ -n "$work" ] && [ -f "$work/spy.log" ] && sed 's/^/  spy: /' "$work/spy.log" >&2
+  if [ -n "$work" ]; then
+    [ -f "$work/spy.log" ] && sed 's/^/  spy: /' "$work/spy.log" >&2
+    [ -s "$work/xvfb.log" ] && sed 's/^/  Xvfb: /' "$work/xvfb.log" >&2
+  fi
+  return 0
+}
+fail() {
+  report "$@"
   exit 1
 }
 
@@ -49,6 +59,10 @@ work=$(mktemp -d /tmp/pumptherm-spy.XXXXXX)
 ns=pumptherm-spy-$$
 pids=""
 cleanup() {
+  status=$?
+  if [ "$status" -ne 0 ] && [ "$status" -ne 77 ] && [ -z "$failed" ]; then
+    report "a step failed (exit $status); see the messages above"
+  fi
   for pid in $pids; do
     kill "$pid" 2> /dev/null || true
   done
@@ -81,17 +95,18 @@ done
 DISPLAY=:$(head -n 1 "$work/display")
 export DISPLAY
 
-ip netns exec "$ns" "$demo" --lcm-url "$url" --pumps tmp1,tmp2 --clear-period-s 2 \
-  --duration-s 600 > "$work/demo.log" 2>&1 &
-pids="$! $pids"
 ip netns exec "$ns" "$spy" --lcm-url="$url" > "$work/spy.log" 2>&1 &
 pids="$! $pids"
+
+# X clients run in the namespace too: the X server's abstract socket is only reachable there,
+# and a client outside could reach another display of the same number through its own.
+xdo() { ip netns exec "$ns" xdotool "$@"; }
 
 # Polls until `xdotool search --name PATTERN` finds a window, at most TRIES (300) times 0.2 s;
 # prints its id.
 wait_window() {
   for _ in $(seq "${2:-300}"); do
-    id=$(xdotool search --name "$1" 2> /dev/null | head -n 1) || true
+    id=$(xdo search --name "$1" 2> /dev/null | head -n 1) || true
     if [ -n "$id" ]; then
       echo "$id"
       return 0
@@ -109,8 +124,13 @@ for _ in $(seq 50); do
 done
 grep -q "Found $types LCM types" "$work/spy.log" || fail "lcm-spy did not find the $types pumptherm types"
 
-# The spy lists channels sorted by name, one table row each. Wait until the demo's clear
-# command (every 2 s here) has arrived too, so that all nine channels are listed.
+# The publisher starts once the spy listens: its first tick carries every channel (the clear
+# command included), so all nine rows are there from the start and stay in place.
+ip netns exec "$ns" "$demo" --lcm-url "$url" --pumps tmp1,tmp2 --clear-period-s 2 \
+  --duration-s 600 > "$work/demo.log" 2>&1 &
+pids="$! $pids"
+
+# The spy lists channels sorted by name, one table row each.
 channels="PUMPTHERM/GATEWAY/HEALTH
 PUMPTHERM/tmp1/ALARM
 PUMPTHERM/tmp1/ALARM_CLEAR
@@ -120,8 +140,8 @@ PUMPTHERM/tmp2/ALARM
 PUMPTHERM/tmp2/ALARM_CLEAR
 PUMPTHERM/tmp2/TELEMETRY
 PUMPTHERM/tmp2/TEMPS"
-sleep 5
-xdotool windowmove "$main" 0 0 windowsize "$main" 940 240
+sleep 4
+xdo windowmove "$main" 0 0 windowsize "$main" 940 240
 sleep 1
 
 # Opens the decoded view of CHANNEL (double click on its row) and places it at X Y W H.
@@ -131,20 +151,54 @@ open_view() {
   channel=$1
   row=$(printf '%s\n' "$channels" | grep -n -x "$channel" | cut -d: -f1)
   y=$((row_top_px + row_px * (row - 1) + row_px / 2))
-  # A busy machine can lose a click: try again while no view has opened.
+  # A busy machine can lose a click: try again while no view has opened. A view of another
+  # channel (a click that hit the wrong row) would open over the table: move it aside.
   view=""
   for _ in 1 2 3 4 5 6 7 8 9 10; do
-    xdotool mousemove 90 "$y" click --repeat 2 --delay 100 1
+    # Java may place a new view itself after we moved it: keep the table on top for the click.
+    xdo windowraise "$main"
+    sleep 0.3
+    xdo mousemove 90 "$y" click --repeat 2 --delay 100 1
     view=$(wait_window "^$channel\$" 25) && break
+    for stray in $(xdo search --name '^PUMPTHERM/' 2> /dev/null); do
+      case " $placed " in
+        *" $stray "*) ;;
+        *) xdo windowmove "$stray" 1300 1000 ;;
+      esac
+    done
   done
-  [ -n "$view" ] || fail "no decoded view opened for $channel after 10 double clicks"
-  xdotool windowmove "$view" "$2" "$3" windowsize "$view" "$4" "$5"
+  if [ -z "$view" ]; then
+    for w in $(xdo search --name . 2> /dev/null); do
+      echo "  window: $(xdo getwindowname "$w")" >&2
+    done
+    fail "no decoded view opened for $channel after 10 double clicks"
+  fi
+  placed="$placed $view"
+  layout="$layout$view $2 $3 $4 $5
+"
+  apply_layout
 }
+# Moves every placed view to its place and waits until the X server reports it there (Java
+# may move a window it has just shown once more).
+apply_layout() {
+  printf '%s' "$layout" | while read -r id x y w h; do
+    for _ in $(seq 25); do
+      xdo windowmove "$id" "$x" "$y" windowsize "$id" "$w" "$h"
+      sleep 0.2
+      xdo getwindowgeometry "$id" | grep -q "Position: $x,$y " && break
+    done
+  done
+}
+placed=""
+layout=""
 open_view PUMPTHERM/tmp2/TEMPS 945 0 975 640
 open_view PUMPTHERM/tmp2/ALARM 0 245 940 470
 open_view PUMPTHERM/tmp1/TELEMETRY 945 645 975 555
 open_view PUMPTHERM/GATEWAY/HEALTH 0 720 940 480
 sleep 3
+xdo windowraise "$main"
+apply_layout
+sleep 1
 
 if grep -q -i -E "exception|error" "$work/spy.log"; then
   fail "lcm-spy reported errors"
@@ -154,5 +208,5 @@ if [ "$mode" = check ]; then
   exit 0
 fi
 mkdir -p "$(dirname "$out")"
-xwd -root -silent | convert xwd:- "png:$out"
+ip netns exec "$ns" xwd -root -silent | convert xwd:- "png:$out"
 echo "wrote $out"
