@@ -605,15 +605,30 @@ void ThermalModel::Linearise(const ThermalInputs& in, ThermalLinearModel& out) c
   const Impl& m = *impl_;
   m.SetInputs(in);
   const Reduced& r = m.Current();
-  m.LossModel();
   const Eigen::Vector2d tb(m.vars->ambient_C, m.vars->coolant_C);
   out.a_per_s.resize(m.n(), m.n());
   out.f_K_per_s.resize(m.n());
-  out.a_per_s.noalias() = r.g * m.d;
-  out.a_per_s += r.a_red;
-  out.a_per_s.array().colwise() *= m.inv_capacity.array();
+  out.a_per_s = r.a_red;
   out.f_K_per_s.noalias() = r.b_b * tb;
-  out.f_K_per_s.noalias() += r.g * m.p0;
+  // A + G D and B_b T_b + G p0, one loss term at a time: each term touches only the columns of
+  // G of its share nodes and the columns of A of its temperature nodes (cheaper than G * D).
+  for (const LossTerm& t : m.losses) {
+    const double p = t.power_W.Eval();
+    double scale0 = 1.0;
+    if (t.alpha_per_K != 0.0) {
+      const double ref = t.reference == 0 ? t.reference_degC : m.Boundary(t.reference);
+      scale0 = 1.0 - t.alpha_per_K * ref;
+    }
+    for (const auto& [node, share] : t.shares) {
+      out.f_K_per_s += r.g.col(node) * (share * p * scale0);
+      if (t.alpha_per_K != 0.0) {
+        const double w =
+            share * p * t.alpha_per_K / static_cast<double>(t.temperature_states.size());
+        for (int st : t.temperature_states) out.a_per_s.col(st) += r.g.col(node) * w;
+      }
+    }
+  }
+  out.a_per_s.array().colwise() *= m.inv_capacity.array();
   out.f_K_per_s.array() *= m.inv_capacity.array();
 }
 

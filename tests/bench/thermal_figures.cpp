@@ -260,8 +260,8 @@ int main(int argc, char** argv) {
           const std::string csv = (work / fmt::format("fig{}.csv", fig)).string();
           WriteTrace(csv, r, names);
           Plot(KalmanPlot(fmt::format("{}/thermal_fig{}.png", out_dir, fig), csv,
-                          fmt::format("Fig. {} set-up (800 r/min): lines truth (improved model + process "
-                                      "noise), points virtual sensor (frame sensor only, started 10 K off)",
+                          fmt::format("Fig. {} set-up, 800 r/min: lines truth (improved + process noise), "
+                                      "points estimate (frame only, 10 K off)",
                                       fig)));
         }
       }
