@@ -319,7 +319,7 @@ configure_root() {
     e2scrub_reap.service fstrim.timer systemd-tmpfiles-clean.timer \
     modprobe@dm_mod.service modprobe@efi_pstore.service modprobe@fuse.service \
     modprobe@loop.service dev-hugepages.mount sys-kernel-debug.mount sys-kernel-tracing.mount \
-    sys-fs-fuse-connections.mount; do
+    sys-fs-fuse-connections.mount getty-static.service getty@tty1.service; do
     ln -sf /dev/null "$r/etc/systemd/system/$u"
   done
   # The journal stays in /run: nothing to flush to the disk at boot.
