@@ -1,0 +1,385 @@
+// The plant simulator end to end on short scenarios: determinism, the frames decode back through
+// the DBC to the simulated values, rolling counters, jitter bounds, faults, cooling failure.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "protocol/candump_log.hpp"
+#include "protocol/codec.hpp"
+#include "protocol/dbc.hpp"
+#include "tools/common/csv.hpp"
+#include "tools/plant/plant.hpp"
+
+namespace pumptherm::plant {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string ReadFile(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+std::string SourceDir() {
+  const char* d = std::getenv("PUMPTHERM_SOURCE_DIR");
+  return d != nullptr ? d : ".";
+}
+
+PlantResources Resources() {
+  PlantResources r;
+  r.model = [](const std::string& ref) {
+    const fs::path p = fs::path(SourceDir()) / "estimators" / "models" / (ref + ".toml");
+    if (!fs::exists(p)) throw std::runtime_error("no model " + p.string());
+    return LoadedText{ReadFile(p), p.string()};
+  };
+  r.motor_file = [](const std::string& ref) -> LoadedText { throw std::runtime_error("no motor file " + ref); };
+  const fs::path proto = fs::path(SourceDir()) / "protocol";
+  r.dbc = {ReadFile(proto / "pumptherm.dbc"), "pumptherm.dbc"};
+  r.mapping = {ReadFile(proto / "mapping_pumptherm.toml"), "mapping_pumptherm.toml"};
+  return r;
+}
+
+fs::path OutDir(const std::string& name) {
+  const fs::path d = fs::path(testing::TempDir()) / ("pumptherm_plant_" + name);
+  fs::remove_all(d);
+  return d;
+}
+
+/// Two pumps on can0, one on can1, 30 s: a run-up and a load step; `faults` go to pump "a".
+std::string Scenario(const std::string& faults = "", const std::string& extra = "", int seed = 7) {
+  return R"(
+[scenario]
+name = "t"
+duration_s = 30
+seed = )" + std::to_string(seed) + R"(
+jitter_sd_us = 100
+jitter_max_us = 300
+[defaults]
+model = "tmp-generic"
+initial_C = 40
+[profile.p]
+segments = [ { duration_s = 10, speed_rpm = 21000, iq_A = 3.0 }, { duration_s = 20, iq_A = 2.0 } ]
+[[pump]]
+name = "a"
+node_id = 1
+profile = "p"
+faults = [ )" + faults + R"( ]
+[[pump]]
+name = "b"
+node_id = 2
+profile = "p"
+[[pump]]
+name = "c"
+interface = "can1"
+node_id = 1
+profile = "p"
+)" + extra;
+}
+
+PlantResult Run(const std::string& text, const fs::path& out) {
+  const plant::Scenario sc = ParseScenario(text, "test.toml");
+  return RunPlant(sc, Resources(), out.string());
+}
+
+/// A decoded frame of the log.
+struct Decoded {
+  std::int64_t time_us;
+  std::string interface;
+  std::uint32_t id;
+  std::string message;
+  std::map<std::string, double> values;
+};
+
+std::vector<Decoded> DecodeLog(const fs::path& path) {
+  const protocol::Dbc dbc = protocol::ParseDbc(ReadFile(fs::path(SourceDir()) / "protocol" / "pumptherm.dbc"), "dbc");
+  const protocol::DbcCodec codec(dbc);
+  std::vector<Decoded> out;
+  std::ifstream f(path);
+  std::string line;
+  while (std::getline(f, line)) {
+    const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
+    EXPECT_TRUE(p.ok) << line << ": " << p.error;
+    if (!p.ok) continue;
+    // Pump n sends at the DBC's ID + n: find the message by the ID's block of 16.
+    const std::uint32_t base = p.record.frame.id & ~0xFu;
+    const int mi = codec.Find(base, false);
+    EXPECT_GE(mi, 0) << line;
+    if (mi < 0) continue;
+    const auto& msg = dbc.messages[static_cast<std::size_t>(mi)];
+    std::vector<double> v(msg.signals.size());
+    EXPECT_EQ(codec.message(static_cast<std::size_t>(mi)).Decode(
+                  std::span<const std::uint8_t>(p.record.frame.data.data(), p.record.frame.len), v),
+              protocol::CodecStatus::kOk);
+    Decoded d{p.record.time_us, std::string(p.record.interface), p.record.frame.id, msg.name, {}};
+    for (std::size_t i = 0; i < v.size(); ++i) d.values[msg.signals[i].name] = v[i];
+    out.push_back(std::move(d));
+  }
+  return out;
+}
+
+std::vector<Decoded> Select(const std::vector<Decoded>& all, const std::string& iface, std::uint32_t id) {
+  std::vector<Decoded> out;
+  for (const Decoded& d : all) {
+    if (d.interface == iface && d.id == id) out.push_back(d);
+  }
+  return out;
+}
+
+constexpr std::int64_t kEpochUs = 1767225600LL * 1000000;
+
+TEST(Plant, SameSeedSameBytesOtherSeedOtherBytes) {
+  const fs::path a = OutDir("det_a"), b = OutDir("det_b"), c = OutDir("det_c");
+  Run(Scenario(), a);
+  Run(Scenario(), b);
+  Run(Scenario("", "", 8), c);
+  for (const char* f : {"t.log", "a.truth.csv", "a.measured.csv", "c.truth.csv", "summary.json"}) {
+    const std::string x = ReadFile(a / f), y = ReadFile(b / f);
+    ASSERT_FALSE(x.empty()) << f;
+    EXPECT_EQ(std::hash<std::string>{}(x), std::hash<std::string>{}(y)) << f;
+  }
+  EXPECT_NE(std::hash<std::string>{}(ReadFile(a / "t.log")), std::hash<std::string>{}(ReadFile(c / "t.log")));
+}
+
+TEST(Plant, FramesDecodeToTheSimulatedValues) {
+  const fs::path out = OutDir("decode");
+  const PlantResult r = Run(Scenario(), out);
+  const auto frames = DecodeLog(out / "t.log");
+  EXPECT_EQ(frames.size(), r.frames_written);
+  // 3 pumps x 30 s x (100 + 100 + 10) frames per second.
+  EXPECT_EQ(frames.size(), 3u * 30u * 210u);
+  const tools::CsvTable measured = tools::CsvTable::Read((out / "a.measured.csv").string());
+  const auto t = measured.Time();
+  const auto iq = measured.Column("iq_A");
+  const auto id = measured.Column("id_A");
+  const auto speed = measured.Column("speed_rpm");
+  const auto frame = measured.Column("frame_C");
+  const auto fast = Select(frames, "can0", 0x100 + 1);
+  const auto volts = Select(frames, "can0", 0x110 + 1);
+  const auto status = Select(frames, "can0", 0x180 + 1);
+  ASSERT_EQ(fast.size(), 3000u);
+  ASSERT_EQ(volts.size(), 3000u);
+  ASSERT_EQ(status.size(), 300u);
+  for (std::size_t row = 0; row < t.size(); ++row) {
+    const auto k = static_cast<std::size_t>(std::llround(t[row] / 0.01));
+    const Decoded& f = fast[k];
+    // Within half a DBC step (5 mA, 0.01 rad/s, 0.1 K) of what the drive reported.
+    EXPECT_NEAR(f.values.at("Iq_A"), iq[row], 0.0025 + 1e-9) << "t " << t[row];
+    EXPECT_NEAR(f.values.at("Id_A"), id[row], 0.0025 + 1e-9) << "t " << t[row];
+    EXPECT_NEAR(f.values.at("SpeedElec_rad_per_s"), speed[row] * 2.0 * M_PI / 60.0, 0.005 + 1e-9);
+    const Decoded& s = status[k / 10];
+    EXPECT_NEAR(s.values.at("FrameTemp_degC"), frame[row], 0.05 + 1e-9) << "t " << t[row];
+    EXPECT_NEAR(s.values.at("SpeedMech_rpm"), speed[row], 1.0 + 1e-9);
+  }
+  // The physics behind the frames: at rated speed uq is the back-EMF w psi plus Rs iq
+  // (Han 2019 eq. 4), within the voltage noise and quantisation.
+  const tools::CsvTable truth = tools::CsvTable::Read((out / "a.truth.csv").string());
+  const auto rs = truth.Column("resistance_ohm");
+  const auto tt = truth.Time();
+  for (std::size_t row = 15; row < tt.size(); ++row) {
+    const auto k = static_cast<std::size_t>(std::llround(tt[row] / 0.01));
+    const double w = fast[k].values.at("SpeedElec_rad_per_s");
+    const double expected = rs[row] * fast[k].values.at("Iq_A") + w * 0.0182;
+    EXPECT_NEAR(volts[k].values.at("Uq_V"), expected, 0.08) << "t " << tt[row];
+  }
+  // Drive state: accelerating during the run-up, then steady.
+  EXPECT_EQ(status[20].values.at("DriveState"), 1.0);
+  EXPECT_EQ(status[200].values.at("DriveState"), 2.0);
+}
+
+TEST(Plant, RollingCountersIncrementAndWrap) {
+  const fs::path out = OutDir("counter");
+  Run(Scenario(), out);
+  const auto frames = DecodeLog(out / "t.log");
+  for (std::uint32_t base : {0x100u, 0x180u}) {
+    const auto f = Select(frames, "can0", base + 2);
+    ASSERT_GT(f.size(), 100u);
+    int wraps = 0;
+    for (std::size_t i = 1; i < f.size(); ++i) {
+      const double prev = f[i - 1].values.at("RollingCounter"), cur = f[i].values.at("RollingCounter");
+      EXPECT_EQ(cur, std::fmod(prev + 1.0, 16.0)) << "frame " << i;
+      if (cur == 0.0) ++wraps;
+    }
+    EXPECT_GT(wraps, 0);
+  }
+  // PUMP_FAST_U carries the counter of the PUMP_FAST_I of the same control step.
+  const auto fi = Select(frames, "can0", 0x102), fu = Select(frames, "can0", 0x112);
+  ASSERT_EQ(fi.size(), fu.size());
+  for (std::size_t i = 0; i < fi.size(); ++i) {
+    ASSERT_EQ(fi[i].values.at("RollingCounter"), fu[i].values.at("RollingCounter"));
+    ASSERT_GT(fu[i].time_us, fi[i].time_us);
+  }
+}
+
+TEST(Plant, JitterStaysWithinBoundsAndLogIsTimeOrdered) {
+  const fs::path out = OutDir("jitter");
+  Run(Scenario(), out);
+  const auto frames = DecodeLog(out / "t.log");
+  for (std::size_t i = 1; i < frames.size(); ++i) ASSERT_GE(frames[i].time_us, frames[i - 1].time_us) << i;
+  const auto f = Select(frames, "can1", 0x101);
+  ASSERT_EQ(f.size(), 3000u);
+  // Nominal time of step k: epoch + k 10 ms + a fixed phase; the phase is the mean offset.
+  double mean = 0.0;
+  for (std::size_t k = 0; k < f.size(); ++k) mean += static_cast<double>(f[k].time_us - kEpochUs - static_cast<std::int64_t>(k) * 10000);
+  mean /= static_cast<double>(f.size());
+  double max_dev = 0.0, sum2 = 0.0;
+  for (std::size_t k = 0; k < f.size(); ++k) {
+    const double dev = static_cast<double>(f[k].time_us - kEpochUs - static_cast<std::int64_t>(k) * 10000) - mean;
+    max_dev = std::max(max_dev, std::abs(dev));
+    sum2 += dev * dev;
+  }
+  const double sd = std::sqrt(sum2 / static_cast<double>(f.size()));
+  EXPECT_LE(max_dev, 300.0 + 5.0);  // bound 300 us, the mean estimate off by a few us
+  EXPECT_NEAR(sd, 100.0, 15.0);     // jitter_sd_us = 100, slightly less for the clamping
+  EXPECT_GE(mean, -1.0);
+  EXPECT_LT(mean, 10000.0);
+}
+
+TEST(Plant, DroppedFramesAreMissing) {
+  const fs::path out = OutDir("dropped");
+  const PlantResult r = Run(Scenario(R"({ kind = "dropped_frames", start_s = 5, end_s = 10, probability = 1.0 },
+      { kind = "dropped_frames", start_s = 20, end_s = 25, probability = 0.3 })"), out);
+  const auto frames = DecodeLog(out / "t.log");
+  const auto a = Select(frames, "can0", 0x101);
+  const auto b = Select(frames, "can0", 0x102);
+  EXPECT_EQ(b.size(), 3000u);
+  std::size_t in_full = 0, in_partial = 0, gaps = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const double t_s = static_cast<double>(a[i].time_us - kEpochUs) / 1e6;
+    if (t_s >= 5.01 && t_s < 9.99) ++in_full;
+    if (t_s >= 20.01 && t_s < 24.99) ++in_partial;
+    if (i > 0 && a[i].values.at("RollingCounter") != std::fmod(a[i - 1].values.at("RollingCounter") + 1.0, 16.0)) ++gaps;
+  }
+  EXPECT_EQ(in_full, 0u);
+  EXPECT_NEAR(static_cast<double>(in_partial), 0.7 * 500.0, 50.0);
+  EXPECT_GT(gaps, 50u);  // the counter shows the losses
+  EXPECT_GT(r.pumps[0].frames_suppressed, 0u);
+  EXPECT_EQ(r.pumps[1].frames_suppressed, 0u);
+}
+
+TEST(Plant, StaleSensorStopsStatusFrames) {
+  const fs::path out = OutDir("stale");
+  Run(Scenario(R"({ kind = "stale_sensor", start_s = 12, end_s = 20 })"), out);
+  const auto frames = DecodeLog(out / "t.log");
+  std::size_t during = 0, after = 0;
+  for (const Decoded& d : Select(frames, "can0", 0x181)) {
+    const double t_s = static_cast<double>(d.time_us - kEpochUs) / 1e6;
+    if (t_s >= 12.01 && t_s < 19.99) ++during;
+    if (t_s >= 20.01) ++after;
+  }
+  EXPECT_EQ(during, 0u);
+  EXPECT_GT(after, 90u);
+  EXPECT_EQ(Select(frames, "can0", 0x182).size(), 300u);  // pump b unaffected
+  EXPECT_EQ(Select(frames, "can0", 0x101).size(), 3000u);  // fast frames continue
+  const tools::CsvTable m = tools::CsvTable::Read((out / "a.measured.csv").string());
+  const auto frame = m.ColumnAllowingNaN("frame_C");
+  EXPECT_TRUE(std::isnan(frame[15]));
+  EXPECT_FALSE(std::isnan(frame[25]));
+}
+
+TEST(Plant, StuckSensorHoldsItsValueWhileTheFrameHeats) {
+  const fs::path out = OutDir("stuck");
+  Run(Scenario(R"({ kind = "stuck_sensor", start_s = 10 })",
+               "", 7), out);
+  const auto frames = DecodeLog(out / "t.log");
+  std::vector<double> stuck, free_running;
+  for (const Decoded& d : Select(frames, "can0", 0x181)) {
+    if (static_cast<double>(d.time_us - kEpochUs) / 1e6 > 10.05) stuck.push_back(d.values.at("FrameTemp_degC"));
+  }
+  for (const Decoded& d : Select(frames, "can0", 0x182)) {
+    if (static_cast<double>(d.time_us - kEpochUs) / 1e6 > 10.05) free_running.push_back(d.values.at("FrameTemp_degC"));
+  }
+  ASSERT_GT(stuck.size(), 150u);
+  for (double v : stuck) EXPECT_EQ(v, stuck.front());
+  const auto [lo, hi] = std::minmax_element(free_running.begin(), free_running.end());
+  EXPECT_GT(*hi - *lo, 0.1);  // the healthy sensor moves (noise and heating)
+}
+
+TEST(Plant, BusOffSilencesEveryPumpOnTheInterface) {
+  const fs::path out = OutDir("busoff");
+  Run(Scenario("", "[[bus_off]]\ninterface = \"can0\"\nstart_s = 14\nend_s = 16.5\n"), out);
+  const auto frames = DecodeLog(out / "t.log");
+  std::int64_t last_before = 0, first_after = INT64_MAX;
+  std::size_t can1_during = 0;
+  for (const Decoded& d : frames) {
+    const double t_s = static_cast<double>(d.time_us - kEpochUs) / 1e6;
+    if (d.interface == "can0") {
+      ASSERT_FALSE(t_s >= 14.02 && t_s < 16.49) << "frame at " << t_s;
+      if (t_s < 14.02) last_before = std::max(last_before, d.time_us);
+      if (t_s >= 16.49) first_after = std::min(first_after, d.time_us);
+    } else if (t_s >= 14.02 && t_s < 16.49) {
+      ++can1_during;
+    }
+  }
+  EXPECT_GE(first_after - last_before, 2'400'000);  // a gap of about 2.5 s
+  EXPECT_GT(can1_during, 400u);                      // can1 unaffected
+}
+
+TEST(Plant, CoolingFailureRaisesTemperatures) {
+  const fs::path ok = OutDir("cool_ok"), failed = OutDir("cool_failed");
+  Run(Scenario(), ok);
+  Run(Scenario(R"({ kind = "cooling_failure", start_s = 5, edge = "cooling", factor = 20 })"), failed);
+  const tools::CsvTable a = tools::CsvTable::Read((ok / "a.truth.csv").string());
+  const tools::CsvTable b = tools::CsvTable::Read((failed / "a.truth.csv").string());
+  const double frame_ok = a.Column("frame_C").back(), frame_failed = b.Column("frame_C").back();
+  // 25 s of lost cooling: the frame keeps its heat (tens of W on 300 J/K: about 1 K more).
+  EXPECT_GT(frame_failed - frame_ok, 0.5) << frame_ok << " vs " << frame_failed;
+  EXPECT_EQ(b.Column("cooling_model").back(), 1.0);
+  EXPECT_EQ(b.Column("cooling_model").front(), 0.0);
+}
+
+TEST(Plant, WindingTemperatureFeedsTheResistance) {
+  const fs::path out = OutDir("rs");
+  Run(Scenario(), out);
+  const tools::CsvTable t = tools::CsvTable::Read((out / "b.truth.csv").string());
+  const auto rs = t.Column("resistance_ohm");
+  const auto tw = t.Column("winding_res_C");
+  const auto winding = t.Column("winding_C");
+  for (std::size_t i = 0; i < rs.size(); ++i) {
+    EXPECT_NEAR(rs[i], 0.28 * (1.0 + 4.1e-3 * (tw[i] - 27.2)), 1e-9);  // Han 2019 eq. 2
+    EXPECT_NEAR(tw[i], winding[i], 1e-9);  // tmp-generic: one winding node
+  }
+}
+
+TEST(Plant, ScaleEdgeResistance) {
+  const std::string model = R"(
+[[node]]
+name = "x"
+capacity_J_per_K = 1
+[[edge]]
+name = "e"
+between = ["x", "ambient"]
+resistance_K_per_W = 2.0
+[[edge]]
+between = ["x", "y"]
+resistance_K_per_W = "1 + speed_rpm"
+)";
+  EXPECT_NE(ScaleEdgeResistance(model, "m", "e", 3.0).find("resistance_K_per_W = 6.0"), std::string::npos);
+  EXPECT_NE(ScaleEdgeResistance(model, "m", "y-x", 3.0).find("(1 + speed_rpm) * 3"), std::string::npos);
+  try {
+    ScaleEdgeResistance(model, "m", "z", 3.0);
+    FAIL();
+  } catch (const ScenarioError& e) {
+    EXPECT_NE(std::string(e.what()).find("no edge named 'z' (edges: e, x-y)"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Plant, UnknownNodeIsAnError) {
+  const fs::path out = OutDir("badnode");
+  std::string text = Scenario();
+  text.replace(text.find("initial_C = 40"), 14, "initial_C = 40\nframe_sensor = { node = \"housing\" }");
+  try {
+    Run(text, out);
+    FAIL();
+  } catch (const ScenarioError& e) {
+    EXPECT_NE(std::string(e.what()).find("has no node 'housing'"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace pumptherm::plant
