@@ -3,13 +3,14 @@
 #
 # Adds the CTest test system.<name> (label "system", SKIP_RETURN_CODE 77) that runs SCENARIO as
 # root in a Debian 12 guest with systemd (tests/system/run_system_test.sh, QEMU TCG).
-# BINARIES are CMake targets (their $<TARGET_FILE>, and a dependency) or paths; each is installed
-# where an ExecStart= of one of the UNITS names a program of its name (/usr/sbin/pumpthermd for
-# systemd/pumpthermd.service), else in /usr/local/bin; shared libraries the guest lacks go with
-# it. UNITS are installed in /etc/systemd/system. FILES land in $DATA_DIR. Relative paths are
-# taken from the calling CMakeLists.txt's source directory. vcan0 is created before the scenario
-# unless NO_VCAN. TIMEOUT (default 600 s) bounds one guest run; CTest's own timeout is 60 s
-# longer so that the harness reports a hang itself.
+# BINARIES are CMake targets (their $<TARGET_FILE>; CTest does not build them: build first) or
+# paths; each is installed where an ExecStart= of one of the UNITS names a program of its name
+# (/usr/sbin/pumpthermd for systemd/pumpthermd.service), else in /usr/local/bin; shared libraries
+# the guest lacks go with it. UNITS are installed in /etc/systemd/system. FILES land in
+# $DATA_DIR. Relative paths are taken from the calling CMakeLists.txt's source directory. vcan0
+# is created before the scenario unless NO_VCAN. What the scenario writes to $OUT_DIR comes back
+# to <build>/tests/system-out/<name>/. TIMEOUT (default 600 s) bounds one guest run; CTest's own
+# timeout is 60 s longer so that the harness reports a hang itself.
 #
 # The cached base image (debootstrap, built once, needs root) is made by the fixture test
 # system.base_image that every system test requires, so that its few minutes do not count against
@@ -49,7 +50,8 @@ function(pumptherm_system_test)
     message(FATAL_ERROR "pumptherm_system_test(${ARG_NAME}): SCENARIO '${scenario}' does not exist")
   endif()
 
-  set(args --name "${ARG_NAME}" --timeout "${ARG_TIMEOUT}")
+  set(args --name "${ARG_NAME}" --timeout "${ARG_TIMEOUT}"
+           --out-dir "${PROJECT_BINARY_DIR}/tests/system-out/${ARG_NAME}")
   if(ARG_NO_VCAN)
     list(APPEND args --no-vcan)
   endif()

@@ -381,7 +381,7 @@ debootstrap_key() {
 image_key() {
   {
     echo "image $1 $kernel_version"
-    declare -f configure_root
+    declare -f configure_root build_image
     guest_boot_hook
     guest_runner_unit
     ls -lL "$kernel_root/boot/vmlinuz-$kernel_version"
@@ -482,7 +482,7 @@ build_debootstrap_tar() {
 
 # Makes the disk image $2 and its file list $3 from the debootstrap tarball $1.
 build_image() {
-  local tar=$1 img=$2 files=$3 stage start
+  local tar=$1 img=$2 file_list=$3 stage start
   start=$(now_s)
   stage=$(mktemp -d "$cache_dir/system-stage.XXXXXX")
   mkdir "$stage/root"
@@ -503,7 +503,7 @@ build_image() {
     err "mke2fs -d of the base image failed"; rm -rf "$stage"; return 1
   fi
   chmod 0444 "$stage/base.img"
-  mv "$stage/files" "$files"
+  mv "$stage/files" "$file_list"
   mv "$stage/base.img" "$img"
   rm -rf "$stage"
   say "base image: ${used_MiB} MiB of files in a ${size_MiB} MiB ext4 image, made in $(elapsed_s "$start") s"

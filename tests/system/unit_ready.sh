@@ -19,9 +19,9 @@ fail() {
   journalctl -u "$unit" --no-pager -o short-monotonic 2>&1 | tail -n 40 | sed 's/^/  /' || true
   exit 1
 }
-# wait_for SECONDS DESCRIPTION COMMAND...: polls COMMAND every 0.2 s until it succeeds.
+# wait_for SECONDS COMMAND...: polls COMMAND every 0.2 s until it succeeds, for up to SECONDS.
 wait_for() {
-  limit=$(($1 * 5)); what=$2; shift 2
+  limit=$(($1 * 5)); shift
   n=0
   until "$@"; do
     n=$((n + 1))
@@ -88,12 +88,12 @@ caps=$(awk '/^CapEff:/ { print $2 }' "/proc/$pid/status")
 
 # 4. Frames sent with cansend are counted in the STATUS line.
 status_has() { show StatusText | grep -q "$1"; }
-wait_for 10 "status line" status_has '^rx 0 frames' ||
+wait_for 10 status_has '^rx 0 frames' ||
   fail "StatusText '$(show StatusText)' never showed 'rx 0 frames'"
 for data in 0011223344556677 01 0203; do cansend vcan0 "181#$data"; done
 cansend vcan0 281#AABBCCDD
 cansend vcan0 281#AABBCCDE
-wait_for 10 "status line" status_has '^rx 5 frames, 2 IDs' ||
+wait_for 10 status_has '^rx 5 frames, 2 IDs' ||
   fail "StatusText '$(show StatusText)' never showed 'rx 5 frames, 2 IDs' after 5 frames on 2 IDs"
 echo "$T: StatusText=$(show StatusText)"
 
