@@ -68,7 +68,9 @@ struct ThermalNodeInfo {
   int line = 0;  ///< line in the model file
 };
 
-/// A thermal network. Not copyable (it owns compiled expressions); movable.
+/// A thermal network. Not copyable (it owns compiled expressions); movable. The const member
+/// functions share internal scratch space (expression variables, the reduced network for
+/// input-dependent resistances): use one model object per thread.
 class ThermalModel {
  public:
   /// Parses and validates a model file. `source` names it in error messages (a path, or the
