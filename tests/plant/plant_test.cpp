@@ -52,7 +52,7 @@ fs::path OutDir(const std::string& name) {
 }
 
 /// Two pumps on can0, one on can1, 30 s: a run-up and a load step; `faults` go to pump "a".
-std::string Scenario(const std::string& faults = "", const std::string& extra = "", int seed = 7) {
+std::string ScenarioText(const std::string& faults = "", const std::string& extra = "", int seed = 7) {
   return R"(
 [scenario]
 name = "t"
@@ -82,7 +82,7 @@ profile = "p"
 )" + extra;
 }
 
-PlantResult Run(const std::string& text, const fs::path& out) {
+PlantResult RunScenario(const std::string& text, const fs::path& out) {
   const plant::Scenario sc = ParseScenario(text, "test.toml");
   return RunPlant(sc, Resources(), out.string());
 }
@@ -135,9 +135,9 @@ constexpr std::int64_t kEpochUs = 1767225600LL * 1000000;
 
 TEST(Plant, SameSeedSameBytesOtherSeedOtherBytes) {
   const fs::path a = OutDir("det_a"), b = OutDir("det_b"), c = OutDir("det_c");
-  Run(Scenario(), a);
-  Run(Scenario(), b);
-  Run(Scenario("", "", 8), c);
+  RunScenario(ScenarioText(), a);
+  RunScenario(ScenarioText(), b);
+  RunScenario(ScenarioText("", "", 8), c);
   for (const char* f : {"t.log", "a.truth.csv", "a.measured.csv", "c.truth.csv", "summary.json"}) {
     const std::string x = ReadFile(a / f), y = ReadFile(b / f);
     ASSERT_FALSE(x.empty()) << f;
@@ -148,7 +148,7 @@ TEST(Plant, SameSeedSameBytesOtherSeedOtherBytes) {
 
 TEST(Plant, FramesDecodeToTheSimulatedValues) {
   const fs::path out = OutDir("decode");
-  const PlantResult r = Run(Scenario(), out);
+  const PlantResult r = RunScenario(ScenarioText(), out);
   const auto frames = DecodeLog(out / "t.log");
   EXPECT_EQ(frames.size(), r.frames_written);
   // 3 pumps x 30 s x (100 + 100 + 10) frames per second.
@@ -194,7 +194,7 @@ TEST(Plant, FramesDecodeToTheSimulatedValues) {
 
 TEST(Plant, RollingCountersIncrementAndWrap) {
   const fs::path out = OutDir("counter");
-  Run(Scenario(), out);
+  RunScenario(ScenarioText(), out);
   const auto frames = DecodeLog(out / "t.log");
   for (std::uint32_t base : {0x100u, 0x180u}) {
     const auto f = Select(frames, "can0", base + 2);
@@ -218,7 +218,7 @@ TEST(Plant, RollingCountersIncrementAndWrap) {
 
 TEST(Plant, JitterStaysWithinBoundsAndLogIsTimeOrdered) {
   const fs::path out = OutDir("jitter");
-  Run(Scenario(), out);
+  RunScenario(ScenarioText(), out);
   const auto frames = DecodeLog(out / "t.log");
   for (std::size_t i = 1; i < frames.size(); ++i) ASSERT_GE(frames[i].time_us, frames[i - 1].time_us) << i;
   const auto f = Select(frames, "can1", 0x101);
@@ -242,7 +242,7 @@ TEST(Plant, JitterStaysWithinBoundsAndLogIsTimeOrdered) {
 
 TEST(Plant, DroppedFramesAreMissing) {
   const fs::path out = OutDir("dropped");
-  const PlantResult r = Run(Scenario(R"({ kind = "dropped_frames", start_s = 5, end_s = 10, probability = 1.0 },
+  const PlantResult r = RunScenario(ScenarioText(R"({ kind = "dropped_frames", start_s = 5, end_s = 10, probability = 1.0 },
       { kind = "dropped_frames", start_s = 20, end_s = 25, probability = 0.3 })"), out);
   const auto frames = DecodeLog(out / "t.log");
   const auto a = Select(frames, "can0", 0x101);
@@ -264,7 +264,7 @@ TEST(Plant, DroppedFramesAreMissing) {
 
 TEST(Plant, StaleSensorStopsStatusFrames) {
   const fs::path out = OutDir("stale");
-  Run(Scenario(R"({ kind = "stale_sensor", start_s = 12, end_s = 20 })"), out);
+  RunScenario(ScenarioText(R"({ kind = "stale_sensor", start_s = 12, end_s = 20 })"), out);
   const auto frames = DecodeLog(out / "t.log");
   std::size_t during = 0, after = 0;
   for (const Decoded& d : Select(frames, "can0", 0x181)) {
@@ -284,7 +284,7 @@ TEST(Plant, StaleSensorStopsStatusFrames) {
 
 TEST(Plant, StuckSensorHoldsItsValueWhileTheFrameHeats) {
   const fs::path out = OutDir("stuck");
-  Run(Scenario(R"({ kind = "stuck_sensor", start_s = 10 })",
+  RunScenario(ScenarioText(R"({ kind = "stuck_sensor", start_s = 10 })",
                "", 7), out);
   const auto frames = DecodeLog(out / "t.log");
   std::vector<double> stuck, free_running;
@@ -302,7 +302,7 @@ TEST(Plant, StuckSensorHoldsItsValueWhileTheFrameHeats) {
 
 TEST(Plant, BusOffSilencesEveryPumpOnTheInterface) {
   const fs::path out = OutDir("busoff");
-  Run(Scenario("", "[[bus_off]]\ninterface = \"can0\"\nstart_s = 14\nend_s = 16.5\n"), out);
+  RunScenario(ScenarioText("", "[[bus_off]]\ninterface = \"can0\"\nstart_s = 14\nend_s = 16.5\n"), out);
   const auto frames = DecodeLog(out / "t.log");
   std::int64_t last_before = 0, first_after = INT64_MAX;
   std::size_t can1_during = 0;
@@ -322,8 +322,8 @@ TEST(Plant, BusOffSilencesEveryPumpOnTheInterface) {
 
 TEST(Plant, CoolingFailureRaisesTemperatures) {
   const fs::path ok = OutDir("cool_ok"), failed = OutDir("cool_failed");
-  Run(Scenario(), ok);
-  Run(Scenario(R"({ kind = "cooling_failure", start_s = 5, edge = "cooling", factor = 20 })"), failed);
+  RunScenario(ScenarioText(), ok);
+  RunScenario(ScenarioText(R"({ kind = "cooling_failure", start_s = 5, edge = "cooling", factor = 20 })"), failed);
   const tools::CsvTable a = tools::CsvTable::Read((ok / "a.truth.csv").string());
   const tools::CsvTable b = tools::CsvTable::Read((failed / "a.truth.csv").string());
   const double frame_ok = a.Column("frame_C").back(), frame_failed = b.Column("frame_C").back();
@@ -335,7 +335,7 @@ TEST(Plant, CoolingFailureRaisesTemperatures) {
 
 TEST(Plant, WindingTemperatureFeedsTheResistance) {
   const fs::path out = OutDir("rs");
-  Run(Scenario(), out);
+  RunScenario(ScenarioText(), out);
   const tools::CsvTable t = tools::CsvTable::Read((out / "b.truth.csv").string());
   const auto rs = t.Column("resistance_ohm");
   const auto tw = t.Column("winding_res_C");
@@ -371,10 +371,10 @@ resistance_K_per_W = "1 + speed_rpm"
 
 TEST(Plant, UnknownNodeIsAnError) {
   const fs::path out = OutDir("badnode");
-  std::string text = Scenario();
+  std::string text = ScenarioText();
   text.replace(text.find("initial_C = 40"), 14, "initial_C = 40\nframe_sensor = { node = \"housing\" }");
   try {
-    Run(text, out);
+    RunScenario(text, out);
     FAIL();
   } catch (const ScenarioError& e) {
     EXPECT_NE(std::string(e.what()).find("has no node 'housing'"), std::string::npos) << e.what();

@@ -36,6 +36,7 @@ struct PlotOptions {
   double warning_degC = std::nan("");
   double trip_degC = std::nan("");
   std::string level_node;
+  std::string estimate_name = "estimate";
   int width_px = 1200;
   int row_height_px = 320;
   bool keep_script = false;
@@ -73,17 +74,15 @@ std::vector<double> Times(const CsvTable& t) {
   }
 }
 
+/// A gnuplot single-quoted string (no escapes inside; a quote is doubled). The terminals are
+/// set `noenhanced`, so underscores in node names print as they are.
 std::string Quote(std::string_view s) {
-  std::string out = "\"";
+  std::string out = "'";
   for (char c : s) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (c == '_') {
-      out += "\\\\_";  // gnuplot's enhanced text would subscript it
-      continue;
-    }
+    if (c == '\'') out += '\'';
     out += c;
   }
-  return out + "\"";
+  return out + "'";
 }
 
 /// Writes columns as a whitespace data file for gnuplot (NaN stays "NaN": a gap in the line).
@@ -196,8 +195,8 @@ int RunPlot(const PlotOptions& o) {
       WriteData(file, cols);
       for (std::size_t c = 0; c < names.size(); ++c) {
         const std::size_t colour = 1 + std::find(nodes.begin(), nodes.end(), names[c]) - nodes.begin();
-        lines += fmt::format("{}'{}' using 1:{} with lines lc {} dt {} lw 2 title {}", lines.empty() ? "" : ", ",
-                             file.string(), c + 2, colour, dash, Quote(names[c] + " " + tag));
+        lines += fmt::format("{}{} using 1:{} with lines lc {} dt {} lw 2 title {}", lines.empty() ? "" : ", ",
+                             Quote(file.string()), c + 2, colour, dash, Quote(names[c] + " " + tag));
       }
     };
     if (s.truth) {
@@ -209,7 +208,7 @@ int RunPlot(const PlotOptions& o) {
         if (std::isfinite(o.trip_degC)) s.truth_trip_s = FirstAtOrAbove(t, v, o.trip_degC);
       }
     }
-    if (s.estimate) add_table(*s.estimate, "estimate", "2");
+    if (s.estimate) add_table(*s.estimate, o.estimate_name, "2");
     std::string marks;
     if (s.events) {
       any_events = true;
@@ -244,8 +243,8 @@ int RunPlot(const PlotOptions& o) {
       for (double& v : cols[1]) v += 0.04 * static_cast<double>(i);  // keep overlapping steps apart
       const fs::path file = dir / fmt::format("p{}_alarm.dat", i);
       WriteData(file, cols);
-      lines += fmt::format("{}'{}' using 1:2 with steps lw 2 lc {} title {}", lines.empty() ? "" : ", ",
-                           file.string(), i + 1, Quote(series[i].label));
+      lines += fmt::format("{}{} using 1:2 with steps lw 2 lc {} title {}", lines.empty() ? "" : ", ",
+                           Quote(file.string()), i + 1, Quote(series[i].label));
     }
     plots += "unset arrow\nunset label\nset title 'alarm level'\nset ylabel 'level'\n"
              "set yrange [-0.2:2.5]\nset ytics ('normal' 0, 'warning' 1, 'trip' 2)\n"
@@ -256,9 +255,9 @@ int RunPlot(const PlotOptions& o) {
   const int height = o.row_height_px * rows + 60;
   std::string script;
   if (ext == ".png") {
-    script += fmt::format("set terminal pngcairo size {},{} font 'sans,10'\n", o.width_px, height);
+    script += fmt::format("set terminal pngcairo size {},{} font 'sans,10' noenhanced\n", o.width_px, height);
   } else {
-    script += fmt::format("set terminal svg size {},{} dynamic font 'sans,10'\n", o.width_px, height);
+    script += fmt::format("set terminal svg size {},{} dynamic font 'sans,10' noenhanced\n", o.width_px, height);
   }
   script += fmt::format("set output {}\n", Quote(fs::absolute(o.out).string()));
   script += fmt::format("set multiplot layout {},1 title {}\n", rows, Quote(o.title));
@@ -271,6 +270,7 @@ int RunPlot(const PlotOptions& o) {
     f << script;
     if (!f) throw std::system_error(errno, std::generic_category(), "writing the gnuplot script");
   }
+  // The script path is ours (temp dir + pid); the executable name is the user's own option.
   const std::string cmd = fmt::format("{} '{}' 2>&1", o.gnuplot, script_path.string());
   std::FILE* pipe = popen(cmd.c_str(), "r");
   if (pipe == nullptr) throw std::system_error(errno, std::generic_category(), "starting gnuplot");
@@ -317,6 +317,9 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--trip-C", o->trip_degC, "Trip level, degC: drawn, and its true crossing marked");
       app.add_option("--level-node", o->level_node, "Node whose truth is checked against the levels (default: the first of --nodes)");
       app.add_option("--title", o->title, "Title of the figure");
+      app.add_option("--estimate-name", o->estimate_name,
+                     "What the --estimate series are called in the legend (e.g. RTD for a measured CSV)")
+          ->capture_default_str();
       app.add_option("--out,-o", o->out, "Output file, .png or .svg")->required();
       app.add_option("--width", o->width_px, "Width in pixels")->capture_default_str();
       app.add_option("--row-height", o->row_height_px, "Height of one panel in pixels")->capture_default_str();
