@@ -161,8 +161,9 @@ int RunPlantCommand(const PlantOptions& o) {
     if (!r.log_path.empty()) fmt::print("  candump log: {} ({} frames)\n", r.log_path, r.frames_written);
     for (const plant::PumpSummary& p : r.pumps) {
       auto when = [](double t) { return t < 0.0 ? std::string("never") : fmt::format("{:.0f} s", t); };
-      fmt::print("  {:<10} {}:{:<2}  max {} {:.1f} degC at {:.0f} s, warning ({} degC) {}, trip ({} degC) {}\n",
-                 p.name, p.interface, p.node_id, sc.levels.node, p.max_level_node_degC, p.max_level_time_s,
+      const std::string where = sc.can_log ? fmt::format("{}:{}", p.interface, p.node_id) : std::string("-");
+      fmt::print("  {:<10} {:<7} max {} {:.1f} degC at {:.0f} s, warning ({} degC) {}, trip ({} degC) {}\n",
+                 p.name, where, sc.levels.node, p.max_level_node_degC, p.max_level_time_s,
                  sc.levels.warning_degC, when(p.warning_crossed_s), sc.levels.trip_degC, when(p.trip_crossed_s));
     }
     fmt::print("  truth, measured CSVs and summary.json in {}\n", o.out_dir);

@@ -217,16 +217,19 @@ int RunPlot(const PlotOptions& o) {
       s.first_warning_s = FirstAtOrAbove(t, level, 1.0);
       s.first_trip_s = FirstAtOrAbove(t, level, 2.0);
     }
-    auto vline = [&](double t_s, const char* colour, const char* dash, const std::string& text) {
+    // Alarm moments: solid lines, labels right of them at the top; true crossings: dotted
+    // lines, labels left of them lower down, so the two never overlap.
+    auto vline = [&](double t_s, const char* colour, const char* dash, const std::string& text, bool alarm) {
       if (!std::isfinite(t_s)) return;
       marks += fmt::format("set arrow from {0},graph 0 to {0},graph 1 nohead lc rgb '{1}' dt {2} lw 2 front\n"
-                           "set label {3} at {0},graph 0.97 right offset -0.5,0 tc rgb '{1}' front\n",
-                           t_s / 60.0, colour, dash, Quote(text));
+                           "set label {3} at {0},graph {4} {5} tc rgb '{1}' front\n",
+                           t_s / 60.0, colour, dash, Quote(text), alarm ? 0.95 : 0.85,
+                           alarm ? "left offset 0.5,0" : "right offset -0.5,0");
     };
-    vline(s.first_warning_s, "#e69f00", "1", fmt::format("warning {:.0f} s", s.first_warning_s));
-    vline(s.first_trip_s, "#d00000", "1", fmt::format("trip {:.0f} s", s.first_trip_s));
-    vline(s.truth_warning_s, "#e69f00", "3", fmt::format("true > warning {:.0f} s", s.truth_warning_s));
-    vline(s.truth_trip_s, "#d00000", "3", fmt::format("true > trip {:.0f} s", s.truth_trip_s));
+    vline(s.first_warning_s, "#e69f00", "1", fmt::format("warning {:.0f} s", s.first_warning_s), true);
+    vline(s.first_trip_s, "#d00000", "1", fmt::format("trip {:.0f} s", s.first_trip_s), true);
+    vline(s.truth_warning_s, "#e69f00", "3", fmt::format("true > warning {:.0f} s", s.truth_warning_s), false);
+    vline(s.truth_trip_s, "#d00000", "3", fmt::format("true > trip {:.0f} s", s.truth_trip_s), false);
     std::string levels;
     if (std::isfinite(o.warning_degC)) levels += fmt::format(", {} with lines lc rgb '#e69f00' dt 4 title 'warning level'", o.warning_degC);
     if (std::isfinite(o.trip_degC)) levels += fmt::format(", {} with lines lc rgb '#d00000' dt 4 title 'trip level'", o.trip_degC);
@@ -241,6 +244,10 @@ int RunPlot(const PlotOptions& o) {
       std::vector<std::vector<double>> cols{std::vector<double>(t.size()), Col(*series[i].events, "alarm_level")};
       for (std::size_t r = 0; r < t.size(); ++r) cols[0][r] = t[r] / 60.0;
       for (double& v : cols[1]) v += 0.04 * static_cast<double>(i);  // keep overlapping steps apart
+      if (!t.empty() && cols[0].back() < t_max_min) {  // hold the last level to the plot's end
+        cols[0].push_back(t_max_min);
+        cols[1].push_back(cols[1].back());
+      }
       const fs::path file = dir / fmt::format("p{}_alarm.dat", i);
       WriteData(file, cols);
       lines += fmt::format("{}{} using 1:2 with steps lw 2 lc {} title {}", lines.empty() ? "" : ", ",
@@ -261,7 +268,10 @@ int RunPlot(const PlotOptions& o) {
   }
   script += fmt::format("set output {}\n", Quote(fs::absolute(o.out).string()));
   script += fmt::format("set multiplot layout {},1 title {}\n", rows, Quote(o.title));
-  script += fmt::format("set grid\nset key outside right top\nset xlabel 'time (min)'\nset xrange [0:{}]\n", t_max_min);
+  // Fixed margins so the panels' time axes line up whatever the tick labels and keys.
+  script += fmt::format("set grid\nset key outside right top\nset xlabel 'time (min)'\nset xrange [0:{}]\n"
+                        "set lmargin at screen 0.08\nset rmargin at screen 0.80\n",
+                        t_max_min);
   script += plots;
   script += "unset multiplot\n";
   const fs::path script_path = dir / "plot.gp";
