@@ -1,0 +1,121 @@
+// `pumptherm dbc check|decode` end to end: the built binary on protocol/pumptherm.dbc and on a
+// candump log whose frames our encoder wrote.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+#include "protocol/candump_log.hpp"
+#include "protocol/codec.hpp"
+#include "protocol/dbc.hpp"
+#include "tests/protocol/dbc_files.hpp"
+
+namespace pumptherm::protocol {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RunResult {
+  int exit_code = -1;
+  std::string out;  ///< stdout and stderr
+};
+
+RunResult RunPumptherm(const std::string& args, const std::string& stdin_file = "") {
+  std::string command = std::string("'") + PUMPTHERM_BIN + "' " + args + " 2>&1";
+  if (!stdin_file.empty()) command += " < '" + stdin_file + "'";
+  RunResult r;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return r;
+  char buf[4096];
+  std::size_t n;
+  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) r.out.append(buf, n);
+  const int status = pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+fs::path TempFile(const std::string& name) {
+  return fs::temp_directory_path() / ("pumptherm_cli_" + std::to_string(getpid()) + "_" + name);
+}
+
+TEST(DbcCliTest, CheckListsThePumpthermFrameSet) {
+  const RunResult r = RunPumptherm("dbc check '" + test::PumpthermDbc().string() + "'");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("8 messages, 37 signals, 3 nodes"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0x100 PUMP_FAST_I 8 bytes, 10 ms, from PumpDrive"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("n/a raw -32768"), std::string::npos) << r.out;
+}
+
+TEST(DbcCliTest, CheckNamesWhereAFileIsBroken) {
+  const fs::path bad = TempFile("bad.dbc");
+  std::ofstream(bad) << "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0 [0|0] \"\" X\n";
+  const RunResult r = RunPumptherm("dbc check '" + bad.string() + "'");
+  fs::remove(bad);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.out.find(bad.string() + ":2:22: expected ')'"), std::string::npos) << r.out;
+}
+
+TEST(DbcCliTest, DecodeGivesBackWhatTheEncoderWrote) {
+  const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "pumptherm.dbc");
+  const DbcMessage& fast = *dbc.FindMessage("PUMP_FAST_I");
+  const MessageCodec codec(fast);
+  CanFrame f;
+  f.id = fast.id + 3;  // pump 3
+  f.len = 8;
+  const std::vector<double> values = {12.345, -0.5, 2199.11, 7};
+  ASSERT_EQ(codec.Encode(values, std::span<std::uint8_t>(f.data.data(), 8)).status, CodecStatus::kOk);
+  CanFrame short_frame = f;
+  short_frame.len = 4;
+  CanFrame unknown = f;
+  unknown.id = 0x7FF;
+  const fs::path log = TempFile("run.log");
+  {
+    std::ofstream out(log);
+    out << FormatCandumpLine(1700000000123456, "vcan0", f) << '\n'
+        << FormatCandumpLine(1700000000133456, "vcan0", short_frame) << '\n'
+        << FormatCandumpLine(1700000000143456, "vcan0", unknown) << '\n';
+  }
+  const std::string dbc_arg = " --dbc '" + test::PumpthermDbc().string() + "' ";
+  RunResult r = RunPumptherm("dbc decode --node-id-limit 16" + dbc_arg + "'" + log.string() + "'");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  // 12.345 A at 5 mA per step -> raw 2469 -> 12.345; 2199.11 rad/s at 0.01 -> 2199.11.
+  EXPECT_NE(r.out.find(R"({"time_s":1700000000.123456,"interface":"vcan0","can_id":"0x103","node":3,)"
+                       R"("message":"PUMP_FAST_I","signals":{"Id_A":12.345,"Iq_A":-0.5,)"
+                       R"("SpeedElec_rad_per_s":2199.11,"RollingCounter":7}})"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("1 frames decoded, 1 with IDs not in"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("1 shorter than their message"), std::string::npos) << r.out;
+
+  // CSV from stdin, one message selected.
+  r = RunPumptherm("dbc decode --format csv --message PUMP_FAST_I --node-id-limit 16" + dbc_arg, log.string());
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("time_s,interface,can_id,node,message,PUMP_FAST_I.Id_A,PUMP_FAST_I.Iq_A,"
+                       "PUMP_FAST_I.SpeedElec_rad_per_s,PUMP_FAST_I.RollingCounter\n"
+                       "1700000000.123456,vcan0,0x103,3,PUMP_FAST_I,12.345,-0.5,2199.11,7\n"),
+            std::string::npos)
+      << r.out;
+
+  // Without the node ID rule, pump 3's frame is not in the DBC.
+  r = RunPumptherm("dbc decode" + dbc_arg + "'" + log.string() + "'");
+  EXPECT_NE(r.out.find("0 frames decoded, 3 with IDs not in"), std::string::npos) << r.out;
+  fs::remove(log);
+}
+
+TEST(DbcCliTest, DecodeNamesABadLogLine) {
+  const fs::path log = TempFile("bad.log");
+  std::ofstream(log) << "(1.000000) vcan0 100#0011223344556677\n(2.0) vcan0 10Z#00\n";
+  const RunResult r = RunPumptherm("dbc decode --dbc '" + test::PumpthermDbc().string() + "' '" + log.string() + "'");
+  fs::remove(log);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.out.find(log.string() + ":2:"), std::string::npos) << r.out;
+}
+
+}  // namespace
+}  // namespace pumptherm::protocol
