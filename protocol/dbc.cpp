@@ -481,7 +481,7 @@ class Parser {
     while (lex_.Peek().kind == TokenKind::kIdentifier && lex_.Peek().line == kw.line &&
            !IsKeyword(lex_.Peek().text)) {
       s.receivers.emplace_back(lex_.Next().text);
-      if (!AcceptPunct(',')) continue;
+      AcceptPunct(',');
     }
     if (length == 0 || length > 64) {
       FailAt(len_tok.line, len_tok.column, "signal length must be 1 to 64 bits");
