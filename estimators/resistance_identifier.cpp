@@ -49,6 +49,7 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
       !(config.magnet_drift_K_per_sqrt_h >= 0.0) ||
       !(config.winding_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
       !(config.magnet_rate_walk_K_per_h_per_sqrt_h >= 0.0) || !(config.rate_time_constant_s > 0.0) ||
+      !(config.min_current_A >= 0.0) ||
       config.reacquire_after_rejections < 1) {
     throw std::invalid_argument("ResistanceIdentifierConfig: a value is out of range");
   }
@@ -198,6 +199,11 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   // Measurement row: y = iq Rs + w_r psi_f (Han 2019 eq. 6), h = [iq, 0, w_r, 0].
   const Eigen::Vector4d hrow(iq, 0.0, w, 0.0);
   const double eps = y - hrow.dot(x);
+  if (std::abs(iq) < config_.min_current_A) {
+    // Too little current for the voltage model (dead-time knee): no measurement update.
+    Publish(Classify(false), eps, 0.0);
+    return;
+  }
   const Eigen::Vector4d p_h = p * hrow;
   const double s = hrow.dot(p_h) + r;
   const double weight = NormalisedWeight(std::abs(eps) / std::sqrt(s));

@@ -42,7 +42,8 @@ enum class ResistanceStatus : std::uint8_t {
   kInitialising = 0,     ///< fewer than one block seen since start or reset: nameplate values
   kConverging = 1,       ///< identifiable, but the Rs standard deviation is above the target
   kTracking = 2,         ///< identifiable, converged, inside the plausible band
-  kNotIdentifiable = 3,  ///< iq and w_r carry no independent information: Rs held, psi_f tracked
+  kNotIdentifiable = 3,  ///< iq and w_r carry no independent information (or |iq| is below
+                         ///< min_current_A): Rs held (psi_f tracked unless below min_current_A)
   kImplausible = 4,      ///< the Rs estimate is outside the plausible band of the motor
   kInvalidInput = 5,     ///< this sample had a NaN or infinite value and was ignored
 };
@@ -69,6 +70,10 @@ struct ResistanceIdentifierConfig {
   double identifiable_sigma_rel = 0.005;  ///< Rs std (relative) the window must support
   double converged_sigma_rel = 0.003;     ///< Rs std (relative) for "tracking"
   int reacquire_after_rejections = 30;    ///< consecutive rejected blocks before P is re-opened
+  /// Blocks whose mean |iq| is below this are not used at all (0 = use all). The inverter's
+  /// dead-time voltage error is nearly constant (absorbed into psi_f) only well above its
+  /// knee; below it, its slope against iq looks like resistance. About 3x the drive's knee.
+  double min_current_A = 0.0;
 };
 
 /// One raw telemetry sample in SI units.

@@ -203,6 +203,23 @@ TEST(ResistanceIdentifier, StaleRestoredStateIsReacquired) {
   EXPECT_EQ(e.status, ResistanceStatus::kTracking);
 }
 
+// Below min_current_A a block is not used at all (the dead-time knee): nothing moves.
+TEST(ResistanceIdentifier, BlocksBelowMinimumCurrentAreNotUsed) {
+  ResistanceIdentifierConfig config;
+  config.min_current_A = 1.5;
+  ResistanceIdentifier id(MotorPreset("han2019-tmp"), config);
+  for (long k = 0; k < 600L * 100; ++k) {
+    id.Update(Exact(0.30, 0.0182, 1.5 + SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  }
+  const ResistanceIdentifierState before = id.Save();
+  ResistanceEstimate e;
+  for (int k = 0; k < 1000; ++k) e = id.Update(Exact(0.30, 0.0175, 1.0, kRated_rad_per_s), kDt_s);
+  EXPECT_EQ(e.status, ResistanceStatus::kNotIdentifiable);
+  // Only the learnt trend moves psi_f (by ~1e-10 Wb here); the 4 % step (7e-4 Wb) is not used.
+  EXPECT_NEAR(e.flux_Wb, before.x(kStateFlux), 1e-8);
+  EXPECT_NEAR(e.resistance_ohm, 0.30, 1e-6);
+}
+
 TEST(ResistanceIdentifier, ConfigOutOfRangeThrows) {
   ResistanceIdentifierConfig c;
   c.block_samples = 0;

@@ -40,7 +40,7 @@ est::MotorDescription LoadMotor(const std::string& file_or_preset) {
 }
 
 int Run(const std::string& input, const std::string& output, const std::string& motor_arg,
-        int block_samples) {
+        int block_samples, double min_current_A) {
   const est::MotorDescription motor = LoadMotor(motor_arg);
   std::vector<double> t, id, iq, ud, uq, rpm;
   try {
@@ -58,6 +58,7 @@ int Run(const std::string& input, const std::string& output, const std::string& 
 
   est::ResistanceIdentifierConfig config;
   config.block_samples = block_samples;
+  config.min_current_A = min_current_A;
   est::ResistanceIdentifier identifier(motor, config);
   CsvWriter out(output, {"time_s", "resistance_ohm", "flux_Wb", "winding_degC", "status"});
   // The first sample's period is taken from the second (the data give no earlier time).
@@ -83,6 +84,7 @@ const SubcommandRegistrar kRegistrar{
       struct Options {
         std::string input, output, motor = "han2019-tmp";
         int block_samples = 100;
+        double min_current_A = 0.0;
       };
       auto opt = std::make_shared<Options>();
       app.add_option("--input", opt->input,
@@ -100,13 +102,20 @@ const SubcommandRegistrar kRegistrar{
                      "samples averaged per identification step (100 at 10 ms = 1 s)")
           ->check(CLI::Range(1, 1000000))
           ->capture_default_str();
+      app.add_option("--min-current", opt->min_current_A,
+                     "A: ignore blocks with a smaller mean |iq| (about 3x the inverter's "
+                     "dead-time knee; 0 uses all)")
+          ->check(CLI::Range(0.0, 1000.0))
+          ->capture_default_str();
       app.footer(
           "status codes: 0 initialising, 1 converging, 2 tracking, 3 not_identifiable (Rs held),\n"
           "4 implausible (outside the motor's plausible band), 5 invalid_input (sample ignored).\n"
           "Bad input (missing column, non-numeric cell, NaN, time not increasing): exit code 2.\n"
           "Example:\n"
           "  pumptherm identify --input telemetry.csv --motor han2019-tmp --output rs.csv");
-      return [opt]() { return Run(opt->input, opt->output, opt->motor, opt->block_samples); };
+      return [opt]() {
+        return Run(opt->input, opt->output, opt->motor, opt->block_samples, opt->min_current_A);
+      };
     }};
 
 }  // namespace

@@ -93,6 +93,7 @@ TmpDriveSample TmpDrive::Step() {
   s.uq_V = Quantise(uq + Noise(config_.voltage_noise_V), u_lsb, -config_.dc_link_V, config_.dc_link_V);
   s.speed_rpm = set_rpm + Noise(config_.speed_noise_rpm);
   s.true_iq_A = iq_A_;
+  s.load_target_A = target_A;
   s.true_speed_rpm = true_rpm;
   s.true_resistance_ohm = rs;
   s.true_flux_Wb = psi;

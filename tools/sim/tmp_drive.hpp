@@ -73,6 +73,7 @@ struct TmpDriveSample {
   double speed_rpm = 0.0;  ///< mechanical
   // Truth.
   double true_iq_A = 0.0;
+  double load_target_A = 0.0;  ///< the torque current the load asks for (changes at load steps)
   double true_speed_rpm = 0.0;
   double true_resistance_ohm = 0.0;
   double true_flux_Wb = 0.0;
