@@ -29,7 +29,8 @@ readonly kSuite=bookworm
 # install without a network: the guest has none.
 # libnss-systemd resolves DynamicUser= names (ps, ls -l, getent).
 readonly kPackages=(systemd systemd-sysv libnss-systemd udev kmod iproute2 procps can-utils
-  libc6 libstdc++6 libgcc-s1 libsystemd0 libfmt9 libtomlplusplus3 liblcm1 liblcm-bin libglib2.0-0)
+  libc6 libstdc++6 libgcc-s1 libsystemd0 libfmt9 libtomlplusplus3 libmuparser2v5 libgomp1
+  liblcm1 liblcm-bin libglib2.0-0)
 # Loaded by the initramfs, with their dependencies from modules.dep; crc32c is ext4's checksum
 # (a soft dependency, which modules.dep does not list).
 readonly kBootModules=(virtio_pci virtio_blk crc32c_generic ext4)
@@ -237,8 +238,12 @@ setup_failed() {
 }
 . "$mnt/run.conf"
 [ "$SHELL_MODE" = 1 ] && out=/dev/console
-# Shared libraries the base image lacks, at their host paths.
-if [ -d "$mnt/libs" ]; then cp -a "$mnt/libs/." / || setup_failed "copying libraries"; ldconfig; fi
+# Shared libraries the base image lacks, at their host paths (through the merged-/usr links:
+# /lib is a symbolic link to usr/lib and stays one).
+if [ -d "$mnt/libs" ]; then
+  tar -C "$mnt/libs" -cf - . | tar -C / --keep-directory-symlink -xf - || setup_failed "copying libraries"
+  ldconfig
+fi
 while read -r bin dest; do
   install -D -m 0755 "$mnt/bin/$bin" "$dest" || setup_failed "installing $bin as $dest"
   if ldd "$dest" 2>/dev/null | grep -q 'not found'; then
