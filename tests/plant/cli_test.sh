@@ -19,6 +19,16 @@ done
 [ "$(sha256sum < "$tmp/a/demo.log")" != "$(sha256sum < "$tmp/c/demo.log")" ] || fail "another seed gave the same log"
 [ "$(wc -l < "$tmp/a/demo.log")" -eq $((3 * 20 * 210)) ] || fail "frame count of 3 pumps x 20 s"
 
+# Progress bar: on a terminal only (util-linux `script` gives the command a pseudo-terminal).
+"$exe" plant demo --duration-s 3 --out "$tmp/d" > /dev/null 2> "$tmp/err.txt" || fail "plant demo run d"
+[ ! -s "$tmp/err.txt" ] || { cat "$tmp/err.txt"; fail "stderr not empty without a terminal"; }
+if command -v script > /dev/null 2>&1; then
+  script -qec "$exe plant demo --duration-s 3 --out $tmp/e" /dev/null | tr '\r' '\n' > "$tmp/tty.txt"
+  grep -a -q "demo \[#*\.*\] *100 %" "$tmp/tty.txt" || { cat "$tmp/tty.txt"; fail "no progress bar on a terminal"; }
+else
+  echo "note: util-linux script not found, progress bar on a terminal not checked"
+fi
+
 # Bad input: exit 2, the message names the file, the line and the key.
 printf '[scenario]\nname = "x"\nduration_s = 10\n[[pump]]\nmodel = "tmp-generic"\nspeed = 3\n' > "$tmp/bad.toml"
 "$exe" plant "$tmp/bad.toml" --out "$tmp/bad" > "$tmp/out.txt" 2>&1
