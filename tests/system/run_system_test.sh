@@ -6,10 +6,11 @@
 # How (docs/testing-system.md):
 # - A base disk image is built once and cached: debootstrap (minbase) of Debian bookworm with
 #   systemd, udev, kmod, iproute2, procps, can-utils and the run-time libraries of our binaries,
-#   the guest kernel's modules (unpacked by tools/setup.sh), and a oneshot unit that runs the test
-#   after boot; then `mke2fs -t ext4 -d` (no loop mount). A small busybox initramfs loads
-#   virtio/ext4 from the same modules and switch_roots to /dev/vda. Building it needs root and the
-#   Debian mirror; it is keyed by a hash of everything it is made of.
+#   the guest kernel's modules (unpacked by tools/setup.sh), and a oneshot unit that runs the
+#   test's runner from the test's disk after boot; then `mke2fs -t ext4 -d` (no loop mount). A
+#   small busybox initramfs loads virtio/ext4 from the same modules and switch_roots to /dev/vda.
+#   Building it needs root and the Debian mirror. Three cached layers (debootstrap tarball, disk
+#   image, initramfs), each keyed by a hash of what it is made of.
 # - Each run boots the base with QEMU's snapshot=on (writes go to a temporary qcow2 overlay in
 #   $TMPDIR or /var/tmp that QEMU deletes; the base is never written) plus a second small
 #   ext4 disk (mke2fs -d) holding the scenario, binaries, units, data and any shared library the
@@ -18,7 +19,8 @@
 #
 # Exit status: the scenario's own status; 1 when the harness fails (guest never reports, setup in
 # the guest fails, timeout); 2 for bad arguments; 77 when the test cannot run here (no QEMU, no
-# kernel, no base image and not root) and CI is not "true". With CI=true such a run fails instead.
+# kernel, no base image and not root, debootstrap failing) and CI is not "true". With CI=true such
+# a run fails instead.
 set -euo pipefail
 
 readonly kHarnessVersion=1
