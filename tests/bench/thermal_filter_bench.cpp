@@ -110,6 +110,35 @@ void BM_Rediscretise7(benchmark::State& state) {
 }
 BENCHMARK(BM_Rediscretise7);
 
+/// `--fixed-steps N`: N steps of the virtual sensor and nothing else, for an instruction count
+/// that does not depend on the machine's load:
+///   valgrind --tool=callgrind thermal_filter_bench --fixed-steps 0      (set-up only)
+///   valgrind --tool=callgrind thermal_filter_bench --fixed-steps 2000
+/// (difference / 2000 = instructions per step).
+int FixedSteps(long steps) {
+  const auto model = Load("saheba2010-improved");
+  pe::VirtualThermalSensor vts(model, {});
+  vts.Initialise(Eigen::VectorXd::Constant(7, 30.0));
+  pe::ThermalInputs in;
+  in.speed_rpm = 800.0;
+  in.iq_A = 50.0;
+  in.ambient_degC = 22.0;
+  Eigen::VectorXd y = Eigen::VectorXd::Constant(1, 30.0);
+  for (int k = 0; k < 100; ++k) vts.Step(in, 1.0, y, std::nan(""));
+  double nis = 0.0;
+  for (long k = 0; k < steps; ++k) {
+    y(0) = 30.0 + 1e-3 * static_cast<double>(k & 7);
+    nis += vts.Step(in, 1.0, y, std::nan("")).nis;
+  }
+  return nis > 1e300 ? 1 : 0;
+}
+
 }  // namespace
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  if (argc == 3 && std::string(argv[1]) == "--fixed-steps") return FixedSteps(std::atol(argv[2]));
+  benchmark::Initialize(&argc, argv);
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}
