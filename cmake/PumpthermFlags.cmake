@@ -8,6 +8,9 @@ endfunction()
 
 if(PUMPTHERM_SANITIZE)
   # Applied to the whole build so that libraries and tests agree on the runtime.
-  add_compile_options(-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined)
+  # vptr: GCC 12 reports a false positive on LCM 1.3's dispatch to subscribed handler methods
+  # (docs/lcm.md); every other UBSan check stays on.
+  add_compile_options(-fsanitize=address,undefined -fno-sanitize=vptr -fno-omit-frame-pointer
+                      -fno-sanitize-recover=undefined)
   add_link_options(-fsanitize=address,undefined)
 endif()

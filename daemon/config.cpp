@@ -6,11 +6,16 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <toml++/toml.h>
 
+#include "daemon/resources.hpp"
+
 namespace pumptherm::daemon {
 namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
 
 /// Reads a table's keys, remembering which were used, so unknown keys (typos) are reported.
 class TableReader {
@@ -26,10 +31,20 @@ class TableReader {
   std::string Join(std::string_view key) const {
     return path_.empty() ? std::string(key) : fmt::format("{}.{}", path_, key);
   }
+  const std::string& path() const { return path_; }
+  const toml::table& table() const { return table_; }
 
   const toml::node* Get(std::string_view key) {
     used_.emplace_back(key);
     return table_.get(key);
+  }
+
+  const toml::table* Table(std::string_view key) {
+    const toml::node* n = Get(key);
+    if (!n) return nullptr;
+    const toml::table* t = n->as_table();
+    if (!t) Fail(n, key, fmt::format("expected a table [{}]", Join(key)));
+    return t;
   }
 
   double Number(std::string_view key, double fallback, double min, double max) {
@@ -43,7 +58,7 @@ class TableReader {
     } else {
       Fail(n, key, "expected a number");
     }
-    if (!std::isfinite(v)) Fail(n, key, "expected a finite number");
+    if (std::isnan(v)) Fail(n, key, "expected a finite number");
     if (v < min || v > max) Fail(n, key, fmt::format("{} is outside [{}, {}]", v, min, max));
     return v;
   }
@@ -69,6 +84,20 @@ class TableReader {
     auto s = n->as_string();
     if (!s) Fail(n, key, "expected a string");
     return s->get();
+  }
+
+  std::vector<std::string> Strings(std::string_view key) {
+    std::vector<std::string> out;
+    const toml::node* n = Get(key);
+    if (!n) return out;
+    const toml::array* a = n->as_array();
+    if (!a) Fail(n, key, "expected an array of strings");
+    for (const auto& e : *a) {
+      auto s = e.as_string();
+      if (!s) Fail(&e, key, "expected an array of strings");
+      out.push_back(s->get());
+    }
+    return out;
   }
 
   bool Bool(std::string_view key, bool fallback) {
@@ -107,24 +136,107 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
   }
   DaemonConfig config;
   config.source = source;
+  config.dbc.base_dir = DirectoryOf(source);
   TableReader top(root, "", source);
 
-  if (const toml::node* g = top.Get("gateway")) {
-    const toml::table* t = g->as_table();
-    if (!t) top.Fail(g, "gateway", "expected a table [gateway]");
+  // Alarm levels: a table of node -> { warning_degC, trip_degC }.
+  auto read_levels = [&](TableReader& r, AlarmsConfig& a) {
+    const toml::table* levels = r.Table("levels");
+    if (!levels) return;
+    for (const auto& [k, v] : *levels) {
+      const std::string node(k.str());
+      const toml::table* t = v.as_table();
+      if (!t) r.Fail(&v, "levels." + node, "expected { warning_degC = ..., trip_degC = ... }");
+      TableReader nr(*t, r.Join("levels." + node), source);
+      LevelsConfig lc = a.levels.count(node) ? a.levels[node] : LevelsConfig{};
+      lc.limits.warning_degC = nr.Number("warning_degC", lc.limits.warning_degC, -273.0, kInf);
+      lc.limits.trip_degC = nr.Number("trip_degC", lc.limits.trip_degC, -273.0, kInf);
+      // A trip level alone warns at the same level.
+      if (!t->get("warning_degC") && t->get("trip_degC") && !(lc.limits.warning_degC <= lc.limits.trip_degC)) {
+        lc.limits.warning_degC = lc.limits.trip_degC;
+      }
+      if (lc.limits.trip_degC < lc.limits.warning_degC) {
+        nr.Fail(t->get("trip_degC"), "trip_degC", "below warning_degC");
+      }
+      nr.RejectUnknown();
+      lc.line = static_cast<int>(v.source().begin.line);
+      a.levels[node] = lc;
+    }
+  };
+
+  if (const toml::table* t = top.Table("gateway")) {
     TableReader r(*t, "gateway", source);
-    const std::string default_name = config.gateway.name;
-    config.gateway.name = r.String("name", &default_name);
-    config.gateway.heartbeat_id =
-        static_cast<std::uint32_t>(r.Integer("heartbeat_id", config.gateway.heartbeat_id, 0, 0x7FF));
-    config.gateway.heartbeat_period_s =
-        r.Number("heartbeat_period_s", config.gateway.heartbeat_period_s, 0.0, 3600.0);
-    if (config.gateway.heartbeat_period_s > 0.0 && config.gateway.heartbeat_period_s < 0.01) {
+    GatewayConfig& g = config.gateway;
+    const std::string default_name = g.name;
+    g.name = r.String("name", &default_name);
+    g.heartbeat_id = static_cast<std::uint32_t>(r.Integer("heartbeat_id", g.heartbeat_id, 0, 0x7FF));
+    g.heartbeat_period_s = r.Number("heartbeat_period_s", g.heartbeat_period_s, 0.0, 3600.0);
+    if (g.heartbeat_period_s > 0.0 && g.heartbeat_period_s < 0.01) {
       r.Fail(t->get("heartbeat_period_s"), "heartbeat_period_s", "below 0.01 s (100 Hz)");
     }
-    config.gateway.status_period_s =
-        r.Number("status_period_s", config.gateway.status_period_s, 0.1, 3600.0);
+    g.status_period_s = r.Number("status_period_s", g.status_period_s, 0.1, 3600.0);
+    g.thermal_period_s = r.Number("thermal_period_s", g.thermal_period_s, 0.01, 60.0);
+    const std::string empty;
+    g.state_directory = r.String("state_directory", &empty);
+    g.state_save_period_s = r.Number("state_save_period_s", g.state_save_period_s, 1.0, 86400.0);
+    g.test_hang_switch = r.Bool("test_hang_switch", false);
     r.RejectUnknown();
+  }
+
+  if (const toml::table* t = top.Table("dbc")) {
+    TableReader r(*t, "dbc", source);
+    config.dbc.file = r.String("file", &config.dbc.file);
+    config.dbc.mapping = r.String("mapping", &config.dbc.mapping);
+    r.RejectUnknown();
+  }
+
+  if (const toml::table* t = top.Table("lcm")) {
+    TableReader r(*t, "lcm", source);
+    const std::string empty;
+    config.lcm.url = r.String("url", &empty);
+    config.lcm.channel_prefix = r.String("channel_prefix", &config.lcm.channel_prefix);
+    if (config.lcm.channel_prefix.empty() ||
+        config.lcm.channel_prefix.find_first_of(" \t/") != std::string::npos) {
+      r.Fail(t->get("channel_prefix"), "channel_prefix", "must be non-empty, without spaces or '/'");
+    }
+    config.lcm.period_s = r.Number("period_s", config.lcm.period_s, 0.01, 3600.0);
+    config.lcm.health_period_s = r.Number("health_period_s", config.lcm.health_period_s, 0.1, 3600.0);
+    r.RejectUnknown();
+  }
+
+  if (const toml::table* t = top.Table("output_periods_s")) {
+    for (const auto& [k, v] : *t) {
+      TableReader r(*t, "output_periods_s", source);
+      const std::string key(k.str());
+      config.output_periods_s[key] = r.Number(key, 1.0, 0.001, 3600.0);
+    }
+  }
+
+  if (const toml::table* t = top.Table("alarms")) {
+    TableReader r(*t, "alarms", source);
+    AlarmsConfig a = config.alarms;
+    auto& m = a.monitor;
+    m.hysteresis_K = r.Number("hysteresis_K", m.hysteresis_K, 0.0, 100.0);
+    m.hold_s = r.Number("hold_s", m.hold_s, 0.0, 3600.0);
+    m.max_rise_K_per_min = r.Number("max_rise_K_per_min", m.max_rise_K_per_min, 0.0, kInf);
+    m.rate_window_s = r.Number("rate_window_s", m.rate_window_s, 1.0, 3600.0);
+    m.stale_after_s = r.Number("stale_after_s", m.stale_after_s, 0.05, 3600.0);
+    m.sensor_min_degC = r.Number("sensor_min_degC", m.sensor_min_degC, -273.0, 1000.0);
+    m.sensor_max_degC = r.Number("sensor_max_degC", m.sensor_max_degC, -273.0, 1000.0);
+    if (m.sensor_max_degC <= m.sensor_min_degC) {
+      r.Fail(t->get("sensor_max_degC"), "sensor_max_degC", "must be above sensor_min_degC");
+    }
+    m.stuck_after_s = r.Number("stuck_after_s", m.stuck_after_s, 1.0, 86400.0);
+    m.stuck_model_move_K = r.Number("stuck_model_move_K", m.stuck_model_move_K, 0.0, 100.0);
+    m.nis_limit = r.Number("nis_limit", m.nis_limit, 0.0, kInf);
+    m.disagree_hold_s = r.Number("disagree_hold_s", m.disagree_hold_s, 0.0, 86400.0);
+    m.not_converged_grace_s = r.Number("not_converged_grace_s", m.not_converged_grace_s, 0.0, 86400.0);
+    m.forecast_horizon_s = r.Number("forecast_horizon_s", m.forecast_horizon_s, 0.0, 86400.0);
+    a.clear_can_interfaces = r.Strings("clear_can_interfaces");
+    a.clear_lcm_sources = r.Strings("clear_lcm_sources");
+    read_levels(r, a);
+    r.RejectUnknown();
+    config.alarms = a;
   }
 
   if (const toml::node* c = top.Get("can")) {
@@ -150,6 +262,46 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       iface.error_frames = r.Bool("error_frames", false);
       r.RejectUnknown();
       config.interfaces.push_back(std::move(iface));
+    }
+  }
+
+  if (const toml::node* p = top.Get("pump")) {
+    const toml::array* arr = p->as_array();
+    if (!arr) top.Fail(p, "pump", "expected an array of tables [[pump]]");
+    for (std::size_t i = 0; i < arr->size(); ++i) {
+      const toml::table* t = (*arr)[i].as_table();
+      if (!t) top.Fail(&(*arr)[i], "pump", "expected a table [[pump]]");
+      TableReader r(*t, fmt::format("pump[{}]", i), source);
+      PumpConfig pc;
+      pc.line = static_cast<int>(t->source().begin.line);
+      pc.name = r.String("name", nullptr);
+      if (pc.name.empty() || pc.name.find_first_of(" \t/") != std::string::npos) {
+        r.Fail(t->get("name"), "name", "must be non-empty, without spaces or '/' (it names LCM channels)");
+      }
+      pc.node_id = static_cast<std::uint32_t>(r.Integer("node_id", 0, 0, 65535));
+      if (!t->get("node_id")) r.Fail(nullptr, "node_id", "missing (required)");
+      const std::string first_interface = config.interfaces.empty() ? "" : config.interfaces[0].name;
+      pc.interface = r.String("interface", &first_interface);
+      pc.motor = r.String("motor", &pc.motor);
+      pc.thermal_model = r.String("thermal_model", &pc.thermal_model);
+      pc.measured_node = r.String("measured_node", &pc.measured_node);
+      pc.fuse_winding = r.Bool("fuse_winding", pc.fuse_winding);
+      pc.winding_sd_K = r.Number("winding_sd_K", pc.winding_sd_K, 0.01, 100.0);
+      pc.alarms = config.alarms;
+      if (const toml::table* at = r.Table("alarms")) {
+        TableReader ar(*at, r.Join("alarms"), source);
+        read_levels(ar, pc.alarms);
+        ar.RejectUnknown();
+      }
+      for (const auto& other : config.pumps) {
+        if (other.name == pc.name) r.Fail(t->get("name"), "name", fmt::format("pump '{}' is listed twice", pc.name));
+        if (other.node_id == pc.node_id && other.interface == pc.interface) {
+          r.Fail(t->get("node_id"), "node_id",
+                 fmt::format("node {} on '{}' is already pump '{}'", pc.node_id, pc.interface, other.name));
+        }
+      }
+      r.RejectUnknown();
+      config.pumps.push_back(std::move(pc));
     }
   }
   top.RejectUnknown();

@@ -1,11 +1,23 @@
 #pragma once
-/// The daemon's configuration file (TOML; documented in docs/configuration.md, an example in
-/// systemd/pumpthermd.toml). Loading validates everything; an error names file, line and key.
+/// The daemon's configuration file (TOML; every key in docs/daemon.md, an example in
+/// systemd/pumpthermd.toml). Loading checks types and ranges and rejects unknown keys; an error
+/// names file, line and key. Checks that need the referenced files (model node names, DBC
+/// signals) happen when the gateway is built from the configuration, with the same naming.
 
 #include <cstdint>
+#include <map>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "estimators/alarms.hpp"
+
+namespace toml {
+inline namespace v3 {
+class table;
+}
+}  // namespace toml
 
 namespace pumptherm::daemon {
 
@@ -26,15 +38,65 @@ struct GatewayConfig {
   std::uint32_t heartbeat_id = 0x7F0;     ///< 11-bit CAN ID of the heartbeat frame
   double heartbeat_period_s = 1.0;        ///< 0 disables the heartbeat
   double status_period_s = 2.0;           ///< systemd STATUS= and journal summary period
+  double thermal_period_s = 1.0;          ///< virtual thermal sensor period (frame time)
+  std::string state_directory;            ///< empty: $STATE_DIRECTORY, else no saved state
+  double state_save_period_s = 60.0;      ///< how often estimator state is saved
+  bool test_hang_switch = false;          ///< tests only: SIGUSR1 makes the loop hang
+};
+
+/// Where the frame layout comes from.
+struct DbcConfig {
+  std::string file = "pumptherm.dbc";           ///< path or shipped name
+  std::string mapping = "mapping_pumptherm.toml";  ///< path or shipped name of the mapping
+  std::string base_dir = ".";                   ///< directory of the config file
+};
+
+struct LcmConfig {
+  std::string url;                        ///< empty: LCM off
+  std::string channel_prefix = "PUMPTHERM";
+  double period_s = 1.0;                  ///< temperatures/identification publishing period
+  double health_period_s = 5.0;
+};
+
+/// Alarm levels of one node (or of the measured sensor, key "sensor").
+struct LevelsConfig {
+  estimators::TemperatureLimits limits;
+  int line = 0;
+};
+
+struct AlarmsConfig {
+  estimators::AlarmConfig monitor;        ///< timing and plausibility (sensor_node set per pump)
+  std::map<std::string, LevelsConfig> levels;  ///< node name (or "sensor") -> levels
+  std::vector<std::string> clear_can_interfaces;  ///< clear command frames accepted from these
+  std::vector<std::string> clear_lcm_sources;     ///< alarm_clear_t.source values accepted
+};
+
+struct PumpConfig {
+  std::string name;
+  std::uint32_t node_id = 0;
+  std::string interface;                  ///< which [[can]] interface (or log interface)
+  std::string motor = "han2019-tmp";      ///< motor description: path or preset name
+  std::string thermal_model = "tmp-generic";  ///< thermal model: path or shipped name
+  std::string measured_node = "frame";    ///< the node the frame sensor measures
+  bool fuse_winding = true;               ///< feed the resistance-based winding temperature
+  double winding_sd_K = 3.0;              ///< its standard deviation in the filter
+  AlarmsConfig alarms;                    ///< the gateway's [alarms] with this pump's overrides
+  int line = 0;                           ///< line of the [[pump]] table
 };
 
 struct DaemonConfig {
   std::string source;               ///< file it came from, for messages
   GatewayConfig gateway;
+  DbcConfig dbc;
+  LcmConfig lcm;
+  AlarmsConfig alarms;              ///< defaults for every pump
+  std::map<std::string, double> output_periods_s;  ///< DBC message name -> period override
   std::vector<InterfaceConfig> interfaces;
+  std::vector<PumpConfig> pumps;
 };
 
-/// Parses configuration text; `source` names it in errors. Throws ConfigError.
+/// Parses configuration text; `source` names it in errors and its directory is the base of
+/// relative paths. Throws ConfigError.
 DaemonConfig ParseConfig(const std::string& text, const std::string& source);
 
 /// Reads and parses a configuration file. Throws ConfigError (also when unreadable).

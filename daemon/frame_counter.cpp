@@ -1,4 +1,4 @@
-#include "daemon/gateway.hpp"
+#include "daemon/frame_counter.hpp"
 
 #include <fmt/format.h>
 
@@ -7,7 +7,7 @@
 
 namespace pumptherm::daemon {
 
-std::size_t Gateway::Interface(std::string_view name) {
+std::size_t FrameCounter::Interface(std::string_view name) {
   for (std::size_t i = 0; i < interfaces_.size(); ++i) {
     if (interfaces_[i].name == name) return i;
   }
@@ -15,7 +15,7 @@ std::size_t Gateway::Interface(std::string_view name) {
   return interfaces_.size() - 1;
 }
 
-void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& timed) {
+void FrameCounter::OnFrame(std::size_t iface, const protocol::TimedFrame& timed) {
   InterfaceCounters& c = interfaces_[iface];
   if (timed.frame.error) {
     ++c.rx_error_frames;
@@ -26,7 +26,7 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& timed) {
   ++counts_[CountKey{iface, timed.frame.extended, timed.frame.id}];
 }
 
-std::optional<protocol::CanFrame> Gateway::HeartbeatDue(std::int64_t now_us) {
+std::optional<protocol::CanFrame> FrameCounter::HeartbeatDue(std::int64_t now_us) {
   if (config_.heartbeat_period_s <= 0.0) return std::nullopt;
   if (start_us_ < 0) {
     start_us_ = now_us;
@@ -49,12 +49,12 @@ std::optional<protocol::CanFrame> Gateway::HeartbeatDue(std::int64_t now_us) {
   return f;
 }
 
-std::int64_t Gateway::NextHeartbeatUs() const {
+std::int64_t FrameCounter::NextHeartbeatUs() const {
   if (config_.heartbeat_period_s <= 0.0) return std::numeric_limits<std::int64_t>::max();
   return next_heartbeat_us_ < 0 ? 0 : next_heartbeat_us_;
 }
 
-std::string Gateway::StatusLine() const {
+std::string FrameCounter::StatusLine() const {
   std::uint64_t drops = 0;
   std::uint64_t tx = 0;
   std::uint64_t tx_dropped = 0;
@@ -69,7 +69,7 @@ std::string Gateway::StatusLine() const {
                      total_rx_, counts_.size(), drops, tx, tx_dropped, states);
 }
 
-std::string Gateway::CountTable() const {
+std::string FrameCounter::CountTable() const {
   std::string out = fmt::format("{:<16} {:>8} {:>12}\n", "interface", "can_id", "frames");
   for (const auto& [key, n] : counts_) {
     const auto& [iface, extended, id] = key;

@@ -1,7 +1,7 @@
 #pragma once
-/// The gateway's per-frame work, independent of where frames come from (live sockets or a
-/// candump log) and of the clock (time enters as an argument). For now it counts frames per
-/// interface and CAN ID and produces the heartbeat; later issues add the per-pump pipeline.
+/// Frame and interface counters and the heartbeat, independent of where frames come from (live
+/// sockets or a candump log) and of the clock (time enters as an argument): frames per
+/// interface and CAN ID, drops, interface states, and the gateway heartbeat frame.
 
 #include <cstdint>
 #include <map>
@@ -24,12 +24,13 @@ struct InterfaceCounters {
   std::uint64_t rx_error_frames = 0;
   std::uint64_t tx_frames = 0;
   std::uint64_t tx_dropped = 0;       ///< ENOBUFS/EAGAIN/ENETDOWN on send: counted, not fatal
+  std::uint64_t reopens = 0;          ///< times the socket was reopened after the interface vanished
   bool up = true;
 };
 
-class Gateway {
+class FrameCounter {
  public:
-  explicit Gateway(GatewayConfig config) : config_(std::move(config)) {}
+  explicit FrameCounter(GatewayConfig config) : config_(std::move(config)) {}
 
   /// Index of the interface called `name`, registered on first use.
   std::size_t Interface(std::string_view name);

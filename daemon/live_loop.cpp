@@ -5,65 +5,93 @@
 #include <sys/signalfd.h>
 #include <sys/timerfd.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <system_error>
 #include <vector>
 
 #include "daemon/can_socket.hpp"
+#include "daemon/gateway.hpp"
+#include "daemon/lcm_bridge.hpp"
 #include "daemon/log.hpp"
+#include "daemon/state_store.hpp"
 #include "daemon/systemd_notify.hpp"
 #include "daemon/unique_fd.hpp"
+#include "pumptherm/alarm_clear_t.hpp"
 
 namespace pumptherm::daemon {
 namespace {
 
 constexpr std::uint64_t kSignalTag = 0;
 constexpr std::uint64_t kTimerTag = 1;
-constexpr std::uint64_t kFirstSocketTag = 2;
-constexpr std::int64_t kReopenPeriodUs = 1000000;   // retry a removed interface every second
+constexpr std::uint64_t kLcmTag = 2;
+constexpr std::uint64_t kFirstSocketTag = 3;
+constexpr std::int64_t kReopenPeriodUs = 1000000;   // check and reopen interfaces every second
+constexpr std::int64_t kMaxTickUs = 10000;          // outputs are due at 10 ms granularity
 constexpr int kRxBudget = 256;                      // frames per socket per wake-up (fairness)
 
 [[noreturn]] void ThrowErrno(const char* what) {
   throw std::system_error(errno, std::generic_category(), what);
 }
 
-std::int64_t MonotonicUs() {
+std::int64_t ClockUs(clockid_t clock) {
   timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
+  clock_gettime(clock, &ts);
   return static_cast<std::int64_t>(ts.tv_sec) * 1000000 + ts.tv_nsec / 1000;
 }
 
 }  // namespace
 
-struct LiveLoop::Impl {
-  const DaemonConfig& config;
-  Gateway& gateway;
+struct LiveLoop::Impl : OutputSink {
+  DaemonConfig config;
+  std::string config_path;
+  std::unique_ptr<Gateway> gateway;
+  std::unique_ptr<LcmBridge> lcm;
   UniqueFd epoll;
   UniqueFd signal_fd;
   UniqueFd timer_fd;
   std::vector<CanSocket> sockets;          // one per configured interface, same order
   std::vector<std::size_t> gateway_index;  // gateway interface index per socket
+  std::vector<int> socket_of_iface;        // gateway interface index -> socket (-1)
   std::vector<std::uint32_t> last_drop_total;
   SystemdNotifier notifier;
   std::int64_t next_status_us = 0;
   std::int64_t next_reopen_us = 0;
+  std::int64_t next_save_us = 0;
+  std::string state_path;
   bool stop = false;
+  bool hang = false;
 
-  Impl(const DaemonConfig& c, Gateway& g) : config(c), gateway(g) {}
+  // OutputSink: frames to the pump's socket, LCM to the bridge.
+  void SendFrame(std::size_t iface, std::int64_t, const protocol::CanFrame& frame) override {
+    if (iface >= socket_of_iface.size() || socket_of_iface[iface] < 0) return;
+    const auto i = static_cast<std::size_t>(socket_of_iface[iface]);
+    if (!sockets[i].is_open()) return;
+    InterfaceCounters& c = gateway->counter().counters(iface);
+    switch (sockets[i].Send(frame)) {
+      case TxStatus::kSent: ++c.tx_frames; break;
+      case TxStatus::kDown: ++c.tx_dropped; MarkUp(i, false); break;
+      default: ++c.tx_dropped; break;
+    }
+  }
+  bool PublishLcm(const std::string& channel, std::int64_t, const std::vector<std::uint8_t>& bytes) override {
+    return lcm ? lcm->Publish(channel, bytes) : true;
+  }
 
-  void Watch(std::size_t i) {
+  void Watch(int fd, std::uint64_t tag) {
     epoll_event ev{};
     ev.events = EPOLLIN;
-    ev.data.u64 = kFirstSocketTag + i;
-    if (epoll_ctl(epoll.get(), EPOLL_CTL_ADD, sockets[i].fd(), &ev) < 0) ThrowErrno("epoll_ctl(CAN socket)");
+    ev.data.u64 = tag;
+    if (epoll_ctl(epoll.get(), EPOLL_CTL_ADD, fd, &ev) < 0) ThrowErrno("epoll_ctl");
   }
 
   void MarkUp(std::size_t i, bool up) {
-    InterfaceCounters& c = gateway.counters(gateway_index[i]);
+    InterfaceCounters& c = gateway->counter().counters(gateway_index[i]);
     if (c.up == up) return;
     c.up = up;
     if (up) {
@@ -73,6 +101,41 @@ struct LiveLoop::Impl {
     }
   }
 
+  /// Opens the sockets of `config.interfaces` and maps them to the gateway's interfaces.
+  void OpenSockets() {
+    sockets.clear();
+    gateway_index.clear();
+    last_drop_total.clear();
+    for (const InterfaceConfig& iface : config.interfaces) {
+      sockets.push_back(CanSocket::Open(iface.name, iface.error_frames));
+      last_drop_total.push_back(0);
+    }
+    MapSockets();
+    for (std::size_t i = 0; i < sockets.size(); ++i) Watch(sockets[i].fd(), kFirstSocketTag + i);
+  }
+
+  void MapSockets() {
+    gateway_index.clear();
+    socket_of_iface.clear();
+    for (std::size_t i = 0; i < config.interfaces.size(); ++i) {
+      const std::size_t g = gateway->Interface(config.interfaces[i].name);
+      gateway_index.push_back(g);
+      if (socket_of_iface.size() <= g) socket_of_iface.resize(g + 1, -1);
+      socket_of_iface[g] = static_cast<int>(i);
+    }
+  }
+
+  void StartLcm() {
+    lcm.reset();
+    if (config.lcm.url.empty()) return;
+    lcm = std::make_unique<LcmBridge>(config.lcm.url, config.lcm.channel_prefix,
+                                      [this](const std::string& channel, const pumptherm::alarm_clear_t& m) {
+                                        (void)channel;
+                                        gateway->Clear(m.pump, m.source, m.comment);
+                                      });
+    Watch(lcm->fd(), kLcmTag);
+  }
+
   void Drain(std::size_t i) {
     CanSocket& s = sockets[i];
     protocol::TimedFrame tf;
@@ -80,13 +143,13 @@ struct LiveLoop::Impl {
       std::uint32_t drops_total = last_drop_total[i];
       switch (s.Receive(&tf, &drops_total)) {
         case RxStatus::kFrame: {
-          InterfaceCounters& c = gateway.counters(gateway_index[i]);
+          InterfaceCounters& c = gateway->counter().counters(gateway_index[i]);
           if (drops_total != last_drop_total[i]) {
             c.rx_queue_drops += drops_total - last_drop_total[i];  // unsigned wrap is right
             last_drop_total[i] = drops_total;
           }
           MarkUp(i, true);
-          gateway.OnFrame(gateway_index[i], tf);
+          gateway->OnFrame(gateway_index[i], tf);
           break;
         }
         case RxStatus::kEmpty:
@@ -95,9 +158,8 @@ struct LiveLoop::Impl {
           MarkUp(i, false);
           return;
         case RxStatus::kGone:
-          Log(LogLevel::kWarning, "{}: interface was removed; will reopen it when it returns",
-              s.name());
-          gateway.counters(gateway_index[i]).up = false;
+          Log(LogLevel::kWarning, "{}: interface was removed; will reopen it when it returns", s.name());
+          gateway->counter().counters(gateway_index[i]).up = false;
           s.Close();  // closing also removes it from the epoll set
           return;
         case RxStatus::kError:
@@ -116,7 +178,8 @@ struct LiveLoop::Impl {
       try {
         sockets[i] = CanSocket::Open(config.interfaces[i].name, config.interfaces[i].error_frames);
         last_drop_total[i] = 0;
-        Watch(i);
+        Watch(sockets[i].fd(), kFirstSocketTag + i);
+        ++gateway->counter().counters(gateway_index[i]).reopens;
         Log(LogLevel::kNotice, "{}: interface is back; socket reopened", sockets[i].name());
         MarkUp(i, sockets[i].InterfaceUp());
       } catch (const std::system_error&) {
@@ -125,11 +188,11 @@ struct LiveLoop::Impl {
     }
   }
 
-  void SendHeartbeat(std::int64_t now_us) {
-    while (auto frame = gateway.HeartbeatDue(now_us)) {
+  void SendHeartbeat(std::int64_t mono_us) {
+    while (auto frame = gateway->counter().HeartbeatDue(mono_us)) {
       for (std::size_t i = 0; i < sockets.size(); ++i) {
         if (!sockets[i].is_open()) continue;
-        InterfaceCounters& c = gateway.counters(gateway_index[i]);
+        InterfaceCounters& c = gateway->counter().counters(gateway_index[i]);
         switch (sockets[i].Send(*frame)) {
           case TxStatus::kSent: ++c.tx_frames; break;
           case TxStatus::kDown: ++c.tx_dropped; MarkUp(i, false); break;
@@ -139,11 +202,99 @@ struct LiveLoop::Impl {
     }
   }
 
-  void ArmTimer(std::int64_t now_us) {
-    std::int64_t next = std::min({gateway.NextHeartbeatUs(), next_status_us, next_reopen_us});
+  void SaveState() {
+    if (state_path.empty()) return;
+    try {
+      WriteFileAtomically(state_path, gateway->SaveState());
+    } catch (const std::exception& e) {
+      Log(LogLevel::kWarning, "state not saved: {}", e.what());
+    }
+  }
+
+  void RestoreState() {
+    std::string dir = config.gateway.state_directory;
+    if (dir.empty()) {
+      if (const char* env = std::getenv("STATE_DIRECTORY")) {
+        dir = env;
+        dir = dir.substr(0, dir.find(':'));
+      }
+    }
+    if (dir.empty()) {
+      state_path.clear();
+      return;
+    }
+    state_path = dir + "/state.toml";
+    try {
+      const auto text = ReadFileIfExists(state_path);
+      if (!text) {
+        Log(LogLevel::kNotice, "no saved state in {}; starting cold", state_path);
+        return;
+      }
+      std::string warning;
+      const int n = gateway->RestoreState(*text, ClockUs(CLOCK_REALTIME), &warning);
+      if (!warning.empty()) Log(LogLevel::kWarning, "{}: {}", state_path, warning);
+      Log(LogLevel::kNotice, "restored the state of {} pump(s) from {}", n, state_path);
+    } catch (const std::exception& e) {
+      Log(LogLevel::kWarning, "saved state ignored: {}", e.what());
+    }
+  }
+
+  void Reload() {
+    DaemonConfig next;
+    std::unique_ptr<Gateway> next_gateway;
+    try {
+      next = LoadConfig(config_path);
+      next_gateway = std::make_unique<Gateway>(next);
+    } catch (const std::exception& e) {
+      Log(LogLevel::kError, "reload refused, the running configuration stays: {}", e.what());
+      return;
+    }
+    const bool same_interfaces = [&] {
+      if (next.interfaces.size() != config.interfaces.size()) return false;
+      for (std::size_t i = 0; i < next.interfaces.size(); ++i) {
+        if (next.interfaces[i].name != config.interfaces[i].name ||
+            next.interfaces[i].error_frames != config.interfaces[i].error_frames) return false;
+      }
+      return true;
+    }();
+    std::vector<CanSocket> new_sockets;
+    if (!same_interfaces) {
+      try {
+        for (const InterfaceConfig& iface : next.interfaces) new_sockets.push_back(CanSocket::Open(iface.name, iface.error_frames));
+      } catch (const std::exception& e) {
+        Log(LogLevel::kError, "reload refused, the running configuration stays: {}", e.what());
+        return;
+      }
+    }
+    // Carry every pump's estimate over (pumps of the same name and model).
+    std::string warning;
+    const int carried = next_gateway->RestoreState(gateway->SaveState(), ClockUs(CLOCK_REALTIME), &warning);
+    const bool lcm_changed = next.lcm.url != config.lcm.url || next.lcm.channel_prefix != config.lcm.channel_prefix;
+    config = std::move(next);
+    gateway = std::move(next_gateway);
+    if (!same_interfaces) {
+      sockets = std::move(new_sockets);
+      last_drop_total.assign(sockets.size(), 0);
+      for (std::size_t i = 0; i < sockets.size(); ++i) Watch(sockets[i].fd(), kFirstSocketTag + i);
+    }
+    MapSockets();
+    if (lcm_changed) {
+      try {
+        StartLcm();
+      } catch (const std::exception& e) {
+        Log(LogLevel::kError, "LCM after reload: {}; LCM is off until the next reload", e.what());
+      }
+    }
+    Log(LogLevel::kNotice, "configuration reloaded from {}: {} pumps ({} carried their estimates over)",
+        config_path, gateway->pumps().size(), carried);
+  }
+
+  void ArmTimer(std::int64_t mono_now) {
+    std::int64_t next = std::min({gateway->counter().NextHeartbeatUs(), next_status_us, next_reopen_us,
+                                  next_save_us, mono_now + kMaxTickUs});
     const std::int64_t wd = notifier.watchdog_half_period_us();
-    if (wd > 0) next = std::min(next, now_us + wd);
-    next = std::max(next, now_us + 1000);  // at least 1 ms ahead
+    if (wd > 0) next = std::min(next, mono_now + wd);
+    next = std::max(next, mono_now + 1000);  // at least 1 ms ahead
     itimerspec its{};
     its.it_value.tv_sec = next / 1000000;
     its.it_value.tv_nsec = (next % 1000000) * 1000;
@@ -155,18 +306,23 @@ struct LiveLoop::Impl {
     if (::read(timer_fd.get(), &expirations, sizeof expirations) < 0 && errno != EAGAIN) {
       Log(LogLevel::kWarning, "timerfd read: {}", std::strerror(errno));
     }
-    const std::int64_t now = MonotonicUs();
-    SendHeartbeat(now);
-    if (now >= next_reopen_us) {
+    const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
+    gateway->Advance(ClockUs(CLOCK_REALTIME), *this);
+    SendHeartbeat(mono);
+    if (mono >= next_reopen_us) {
       Reopen();
-      next_reopen_us = now + kReopenPeriodUs;
+      next_reopen_us = mono + kReopenPeriodUs;
     }
-    if (now >= next_status_us) {
-      notifier.Status(gateway.StatusLine());
-      next_status_us = now + static_cast<std::int64_t>(config.gateway.status_period_s * 1e6);
+    if (mono >= next_status_us) {
+      notifier.Status(gateway->StatusLine());
+      next_status_us = mono + static_cast<std::int64_t>(config.gateway.status_period_s * 1e6);
     }
-    notifier.KickWatchdog(now);
-    ArmTimer(now);
+    if (mono >= next_save_us) {
+      SaveState();
+      next_save_us = mono + static_cast<std::int64_t>(config.gateway.state_save_period_s * 1e6);
+    }
+    notifier.KickWatchdog(mono);
+    ArmTimer(mono);
   }
 
   void OnSignal() {
@@ -179,8 +335,14 @@ struct LiveLoop::Impl {
           stop = true;
           break;
         case SIGHUP:
-          Log(LogLevel::kNotice, "SIGHUP received: configuration reload is not implemented yet; "
-                                 "the running configuration stays");
+          notifier.Reloading();
+          Log(LogLevel::kNotice, "SIGHUP received: reloading {}", config_path);
+          Reload();
+          notifier.Ready(gateway->StatusLine());
+          break;
+        case SIGUSR1:
+          Log(LogLevel::kWarning, "SIGUSR1 with test_hang_switch: the loop hangs now (tests only)");
+          hang = true;
           break;
         default:
           break;
@@ -189,13 +351,15 @@ struct LiveLoop::Impl {
   }
 };
 
-LiveLoop::LiveLoop(const DaemonConfig& config, Gateway& gateway)
-    : impl_(std::make_unique<Impl>(config, gateway)) {
+LiveLoop::LiveLoop(const DaemonConfig& config, std::string config_path) : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
+  m.config = config;
+  m.config_path = std::move(config_path);
   if (config.interfaces.empty()) {
     throw std::system_error(EINVAL, std::generic_category(),
                             config.source + ": no [[can]] interface configured (use -r LOG for a log)");
   }
+  m.gateway = std::make_unique<Gateway>(m.config);
   m.epoll = UniqueFd(epoll_create1(EPOLL_CLOEXEC));
   if (!m.epoll.valid()) ThrowErrno("epoll_create1");
 
@@ -204,60 +368,71 @@ LiveLoop::LiveLoop(const DaemonConfig& config, Gateway& gateway)
   sigaddset(&mask, SIGTERM);
   sigaddset(&mask, SIGINT);
   sigaddset(&mask, SIGHUP);
+  if (config.gateway.test_hang_switch) sigaddset(&mask, SIGUSR1);
   if (sigprocmask(SIG_BLOCK, &mask, nullptr) < 0) ThrowErrno("sigprocmask");
   m.signal_fd = UniqueFd(signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC));
   if (!m.signal_fd.valid()) ThrowErrno("signalfd");
   m.timer_fd = UniqueFd(timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC));
   if (!m.timer_fd.valid()) ThrowErrno("timerfd_create");
-
-  epoll_event ev{};
-  ev.events = EPOLLIN;
-  ev.data.u64 = kSignalTag;
-  if (epoll_ctl(m.epoll.get(), EPOLL_CTL_ADD, m.signal_fd.get(), &ev) < 0) ThrowErrno("epoll_ctl(signalfd)");
-  ev.data.u64 = kTimerTag;
-  if (epoll_ctl(m.epoll.get(), EPOLL_CTL_ADD, m.timer_fd.get(), &ev) < 0) ThrowErrno("epoll_ctl(timerfd)");
-
-  for (const InterfaceConfig& iface : config.interfaces) {
-    m.sockets.push_back(CanSocket::Open(iface.name, iface.error_frames));
-    m.gateway_index.push_back(gateway.Interface(iface.name));
-    m.last_drop_total.push_back(0);
-    m.Watch(m.sockets.size() - 1);
-  }
+  m.Watch(m.signal_fd.get(), kSignalTag);
+  m.Watch(m.timer_fd.get(), kTimerTag);
+  m.OpenSockets();
+  m.StartLcm();
+  m.RestoreState();
 }
 
 LiveLoop::~LiveLoop() = default;
 
+std::string LiveLoop::Summary() const {
+  return impl_->gateway->StatusLine() + "\n" + impl_->gateway->counter().CountTable();
+}
+
 int LiveLoop::Run() {
   Impl& m = *impl_;
-  const std::int64_t start = MonotonicUs();
+  const std::int64_t start = ClockUs(CLOCK_MONOTONIC);
   m.next_status_us = start;
   m.next_reopen_us = start + kReopenPeriodUs;
+  m.next_save_us = start + static_cast<std::int64_t>(m.config.gateway.state_save_period_s * 1e6);
   std::string names;
   for (const auto& s : m.sockets) names += (names.empty() ? "" : ", ") + s.name();
-  Log(LogLevel::kNotice, "listening on {}", names);
+  Log(LogLevel::kNotice, "listening on {} for {} pump(s){}", names, m.gateway->pumps().size(),
+      m.lcm ? ", LCM on " + m.config.lcm.url : "");
   m.notifier.Ready("listening on " + names);
   m.ArmTimer(start);
 
   epoll_event events[16];
   while (!m.stop) {
+    if (m.hang) {
+      ::pause();  // tests only: no watchdog kicks from here on
+      continue;
+    }
     const int n = epoll_wait(m.epoll.get(), events, 16, -1);
     if (n < 0) {
       if (errno == EINTR) continue;
       Log(LogLevel::kError, "epoll_wait: {}", std::strerror(errno));
       return 1;
     }
+    bool frames = false;
     for (int k = 0; k < n; ++k) {
       const std::uint64_t tag = events[k].data.u64;
       if (tag == kSignalTag) {
         m.OnSignal();
       } else if (tag == kTimerTag) {
         m.OnTimer();
+      } else if (tag == kLcmTag) {
+        if (m.lcm) m.lcm->Handle();
       } else {
-        m.Drain(static_cast<std::size_t>(tag - kFirstSocketTag));
+        const auto i = static_cast<std::size_t>(tag - kFirstSocketTag);
+        if (i < m.sockets.size()) {
+          m.Drain(i);
+          frames = true;
+        }
       }
     }
+    if (frames) m.gateway->Advance(ClockUs(CLOCK_REALTIME), m);
   }
   m.notifier.Stopping();
+  m.SaveState();
   return 0;
 }
 

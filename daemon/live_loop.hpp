@@ -1,27 +1,33 @@
 #pragma once
 /// Live mode: one thread, one epoll loop over the CAN sockets, a timerfd for periodic work
-/// (heartbeat, systemd status and watchdog, reopening lost interfaces) and a signalfd
-/// (SIGTERM/SIGINT stop, SIGHUP). Expected events in the loop are counted, never thrown.
+/// (gateway outputs, heartbeat, systemd status and watchdog, state saving, reopening lost
+/// interfaces), a signalfd (SIGTERM/SIGINT stop, SIGHUP reload) and LCM's descriptor.
+/// Expected events in the loop are counted, never thrown.
 
 #include <memory>
+#include <string>
 
 #include "daemon/config.hpp"
-#include "daemon/gateway.hpp"
 
 namespace pumptherm::daemon {
 
 class LiveLoop {
  public:
-  /// Opens every configured interface, the epoll, timer and signal descriptors. Throws
-  /// std::system_error naming the interface or resource that failed. Blocks SIGTERM, SIGINT
-  /// and SIGHUP for the calling thread (they are read from the signalfd).
-  LiveLoop(const DaemonConfig& config, Gateway& gateway);
+  /// Builds the gateway from `config` (loaded from `config_path`, which SIGHUP re-reads), opens
+  /// every configured interface, LCM, the epoll, timer and signal descriptors, and restores the
+  /// saved state. Throws ConfigError for a configuration that does not fit its files, and
+  /// std::system_error / std::runtime_error naming the interface or resource that failed.
+  /// Blocks SIGTERM, SIGINT, SIGHUP (and SIGUSR1 with the test hang switch) for this thread.
+  LiveLoop(const DaemonConfig& config, std::string config_path);
   ~LiveLoop();
   LiveLoop(const LiveLoop&) = delete;
   LiveLoop& operator=(const LiveLoop&) = delete;
 
   /// Runs until SIGTERM or SIGINT. Returns the process exit code (0 on a clean stop).
   int Run();
+
+  /// The final summary (status line and per-ID counts), for stdout at exit.
+  std::string Summary() const;
 
  private:
   struct Impl;

@@ -1,22 +1,152 @@
 #include "daemon/offline.hpp"
 
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <lcm/lcm-cpp.hpp>
+#include <stdexcept>
+#include <thread>
+
 #include "daemon/log.hpp"
 #include "protocol/candump_log.hpp"
 
 namespace pumptherm::daemon {
+namespace {
+
+struct File {
+  std::FILE* f = nullptr;
+  std::string path;
+  File(const std::string& p, const char* mode) : path(p) {
+    if (p.empty()) return;
+    f = std::fopen(p.c_str(), mode);
+    if (!f) throw std::runtime_error(fmt::format("{}: cannot create: {}", p, std::strerror(errno)));
+  }
+  ~File() {
+    if (f) std::fclose(f);
+  }
+  File(const File&) = delete;
+  File& operator=(const File&) = delete;
+  void Close() {
+    if (!f) return;
+    const bool bad = std::fflush(f) != 0 || std::ferror(f);
+    std::fclose(f);
+    f = nullptr;
+    if (bad) throw std::runtime_error(fmt::format("{}: write error", path));
+  }
+};
+
+/// Frames to a candump log, LCM messages to an LCM log.
+class LogSink : public OutputSink {
+ public:
+  LogSink(const OfflineOptions& o, const Gateway& g) : frames_(o.output_log, "w"), gateway_(g) {
+    if (!o.lcm_log.empty()) {
+      lcm_ = std::make_unique<lcm::LogFile>(o.lcm_log, "w");
+      if (!lcm_->good()) throw std::runtime_error(fmt::format("{}: cannot create the LCM log", o.lcm_log));
+    }
+  }
+  void SendFrame(std::size_t iface, std::int64_t time_us, const protocol::CanFrame& frame) override {
+    ++frames_out;
+    if (!frames_.f) return;
+    const std::string line = protocol::FormatCandumpLine(time_us, gateway_.counter().interfaces()[iface].name, frame);
+    std::fputs(line.c_str(), frames_.f);
+    std::fputc('\n', frames_.f);
+  }
+  bool PublishLcm(const std::string& channel, std::int64_t time_us, const std::vector<std::uint8_t>& bytes) override {
+    ++lcm_out;
+    if (!lcm_) return true;
+    lcm::LogEvent ev;
+    ev.eventnum = 0;
+    ev.timestamp = time_us;
+    ev.channel = channel;
+    ev.datalen = static_cast<std::int32_t>(bytes.size());
+    ev.data = const_cast<std::uint8_t*>(bytes.data());
+    return lcm_->writeEvent(&ev) == 0;
+  }
+  void Close() {
+    frames_.Close();
+    lcm_.reset();
+  }
+  std::uint64_t frames_out = 0;
+  std::uint64_t lcm_out = 0;
+
+ private:
+  File frames_;
+  const Gateway& gateway_;
+  std::unique_ptr<lcm::LogFile> lcm_;
+};
+
+/// One CSV per pump, a row per thermal step.
+class CsvSink {
+ public:
+  CsvSink(const std::string& dir, const Gateway& g) {
+    if (dir.empty()) return;
+    for (const auto& p : g.pumps()) {
+      files_.push_back(std::make_unique<File>(fmt::format("{}/{}.csv", dir, p->config().name), "w"));
+      std::string header = "time_s";
+      for (const auto& n : p->model().StateNames()) header += fmt::format(",{}_C,{}_sd_K", n, n);
+      header += ",winding_resistance_C,resistance_ohm,flux_Wb,ident_status,frame_measured_C,ambient_C,"
+                "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s\n";
+      std::fputs(header.c_str(), files_.back()->f);
+      last_.push_back(-1);
+    }
+  }
+  void Write(const Gateway& g) {
+    for (std::size_t i = 0; i < files_.size(); ++i) {
+      const PumpSnapshot& s = g.pumps()[i]->snapshot();
+      if (!s.initialised || s.time_us == last_[i]) continue;
+      last_[i] = s.time_us;
+      std::string row = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6);
+      for (std::size_t k = 0; k < s.node_degC.size(); ++k) row += fmt::format(",{:.4f},{:.4f}", s.node_degC[k], s.node_sd_K[k]);
+      const auto& r = s.resistance;
+      row += fmt::format(",{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f}\n",
+                         s.winding_resistance_degC, r.resistance_ohm, r.flux_Wb, static_cast<int>(r.status),
+                         s.frame_measured_degC, s.ambient_degC, s.speed_rpm, s.nis,
+                         static_cast<int>(s.alarm.level), static_cast<int>(s.alarm.reason), s.alarm.node,
+                         std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : -1.0);
+      std::fputs(row.c_str(), files_[i]->f);
+    }
+  }
+  void Close() {
+    for (auto& f : files_) f->Close();
+  }
+
+ private:
+  std::vector<std::unique_ptr<File>> files_;
+  std::vector<std::int64_t> last_;
+};
+
+}  // namespace
 
 OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& gateway,
-                         std::uint64_t max_reported) {
+                         const OfflineOptions& options) {
   OfflineResult r;
+  LogSink sink(options, gateway);
+  CsvSink csv(options.csv_dir, gateway);
   std::string line;
   std::string last_interface;
   std::size_t last_index = 0;
+  std::int64_t last_time_us = -1;
+  std::int64_t next_table_us = -1;
+  const bool tty = ::isatty(STDERR_FILENO) == 1;
+  const auto wall_start = std::chrono::steady_clock::now();
+  std::int64_t log_start_us = -1;
+  auto show_table = [&](std::int64_t t_us) {
+    const double minutes = static_cast<double>(t_us - log_start_us) * 1e-6 / 60.0;
+    std::string text = fmt::format("log time {:6.1f} min\n{}", minutes, gateway.PumpTable());
+    if (tty) text = "\x1b[H\x1b[2J" + text;  // redraw in place on a terminal
+    std::fputs(text.c_str(), stderr);
+    std::fflush(stderr);
+  };
   while (std::getline(in, line)) {
     ++r.lines;
     const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
     if (p.skip) continue;
     if (!p.ok) {
-      if (++r.bad_lines <= max_reported) {
+      if (++r.bad_lines <= options.max_reported) {
         Log(LogLevel::kWarning, "{}:{}:{}: {}; line skipped", source, r.lines, p.column, p.error);
       }
       continue;
@@ -25,12 +155,36 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       last_interface = p.record.interface;
       last_index = gateway.Interface(last_interface);
     }
-    gateway.OnFrame(last_index, protocol::TimedFrame{p.record.time_us, p.record.frame});
+    const std::int64_t t = p.record.time_us;
+    if (log_start_us < 0) log_start_us = t;
+    // Time runs forward: a frame stamped before its predecessor is processed at the later time.
+    const std::int64_t now = std::max(t, last_time_us);
+    gateway.OnFrame(last_index, protocol::TimedFrame{now, p.record.frame});
+    gateway.Advance(now, sink);
+    csv.Write(gateway);
+    last_time_us = now;
     ++r.frames;
+    if (options.pace > 0.0) {
+      const auto due = wall_start + std::chrono::microseconds(static_cast<std::int64_t>(
+                                        static_cast<double>(now - log_start_us) / options.pace));
+      std::this_thread::sleep_until(due);
+    }
+    if (options.table) {
+      if (next_table_us < 0) next_table_us = now;
+      if (now >= next_table_us) {
+        show_table(now);
+        next_table_us = now + static_cast<std::int64_t>(options.table_period_s * 1e6);
+      }
+    }
   }
-  if (r.bad_lines > max_reported) {
-    Log(LogLevel::kWarning, "{}: {} more malformed lines skipped", source, r.bad_lines - max_reported);
+  if (r.bad_lines > options.max_reported) {
+    Log(LogLevel::kWarning, "{}: {} more malformed lines skipped", source, r.bad_lines - options.max_reported);
   }
+  if (options.table && last_time_us >= 0) show_table(last_time_us);
+  sink.Close();
+  csv.Close();
+  r.frames_out = sink.frames_out;
+  r.lcm_out = sink.lcm_out;
   return r;
 }
 

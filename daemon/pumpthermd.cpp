@@ -23,19 +23,30 @@ constexpr int kExitBadInput = 2;
 
 int main(int argc, char** argv) {
   using namespace pumptherm::daemon;
-  CLI::App app{"pumpthermd: pump thermal gateway (SocketCAN in, temperatures and alarms out)"};
+  CLI::App app{"pumpthermd: pump thermal gateway (SocketCAN telemetry in; temperatures and alarms "
+               "out on CAN and LCM)"};
   std::string config_path;
   std::string log_path;
   std::string check_path;
+  OfflineOptions offline;
   app.add_option("-c,--config", config_path, "configuration file (TOML)");
   app.add_option("-r,--read", log_path,
-                 "process a candump log (FILE, or - for stdin) instead of live interfaces, "
-                 "as fast as possible, with the log's timestamps as the clock");
-  app.add_option("--check-config", check_path, "validate a configuration file and exit");
+                 "process a candump log (FILE, or - for stdin) instead of live interfaces, as fast "
+                 "as possible, with the log's timestamps as the clock");
+  app.add_option("--check-config", check_path, "validate a configuration file (and the files it names) and exit");
+  app.add_option("--output-log", offline.output_log, "with -r: write the frames the gateway sends as a candump log");
+  app.add_option("--lcm-log", offline.lcm_log, "with -r: write the LCM messages as an LCM log file (lcm-logplayer plays it)");
+  app.add_option("--csv-dir", offline.csv_dir, "with -r: write <pump>.csv per pump, a row per thermal step");
+  app.add_flag("--table", offline.table, "with -r: print a table of the pumps while running");
+  app.add_option("--table-period", offline.table_period_s, "with --table: log seconds between tables")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--pace", offline.pace, "with -r: log seconds per wall-clock second (0 = as fast as possible)")
+      ->check(CLI::NonNegativeNumber);
   app.set_version_flag("--version", "pumpthermd " PUMPTHERM_VERSION);
   app.footer(
       "Examples:\n"
       "  pumpthermd --config /etc/pumptherm/pumpthermd.toml     live, as the service runs it\n"
+      "  pumpthermd --config c.toml -r rec.log --csv-dir out    offline, estimates per pump\n"
       "  pumpthermd -r recording.log                            offline, per-ID frame counts\n"
       "  candump -L vcan0 | pumpthermd -r -                     offline from a pipe\n"
       "  pumpthermd --check-config pumpthermd.toml              validate and exit\n"
@@ -50,8 +61,9 @@ int main(int argc, char** argv) {
   if (!check_path.empty()) {
     try {
       const DaemonConfig c = LoadConfig(check_path);
-      fmt::print("{}: OK ({} interface{})\n", check_path, c.interfaces.size(),
-                 c.interfaces.size() == 1 ? "" : "s");
+      const Gateway g(c);  // also checks the DBC, mapping, motors and models it names
+      fmt::print("{}: OK ({} interface{}, {} pump{})\n", check_path, c.interfaces.size(),
+                 c.interfaces.size() == 1 ? "" : "s", c.pumps.size(), c.pumps.size() == 1 ? "" : "s");
       return 0;
     } catch (const ConfigError& e) {
       Log(LogLevel::kError, "{}", e.what());
@@ -66,9 +78,15 @@ int main(int argc, char** argv) {
     Log(LogLevel::kError, "{}", e.what());
     return kExitBadInput;
   }
-  Gateway gateway(config.gateway);
 
   if (!log_path.empty()) {
+    std::unique_ptr<Gateway> gateway;
+    try {
+      gateway = std::make_unique<Gateway>(config);
+    } catch (const ConfigError& e) {
+      Log(LogLevel::kError, "{}", e.what());
+      return kExitBadInput;
+    }
     std::ifstream file;
     std::istream* in = &std::cin;
     const std::string source = log_path == "-" ? "<stdin>" : log_path;
@@ -80,14 +98,25 @@ int main(int argc, char** argv) {
       }
       in = &file;
     }
-    const OfflineResult r = RunOffline(*in, source, gateway);
+    OfflineResult r;
+    try {
+      r = RunOffline(*in, source, *gateway, offline);
+    } catch (const std::exception& e) {
+      Log(LogLevel::kError, "{}", e.what());
+      return kExitRunFailed;
+    }
     if (in->bad()) {
       Log(LogLevel::kError, "{}: read error: {}", source, std::strerror(errno));
       return kExitRunFailed;
     }
     fmt::print("{}: {} frames, {} CAN IDs, {} malformed lines skipped\n", source, r.frames,
-               gateway.counts().size(), r.bad_lines);
-    fmt::print("{}", gateway.CountTable());
+               gateway->counter().counts().size(), r.bad_lines);
+    fmt::print("{}", gateway->counter().CountTable());
+    if (!gateway->pumps().empty()) {
+      fmt::print("sent {} frames and {} LCM messages; {} unknown-ID and {} short frames ignored\n",
+                 r.frames_out, r.lcm_out, gateway->counters().rx_unknown_id, gateway->counters().rx_bad_length);
+      fmt::print("{}", gateway->PumpTable());
+    }
     return 0;
   }
 
@@ -96,12 +125,15 @@ int main(int argc, char** argv) {
     return kExitBadInput;
   }
   try {
-    LiveLoop loop(config, gateway);
+    LiveLoop loop(config, config_path);
     const int code = loop.Run();
-    fmt::print("{}\n{}", gateway.StatusLine(), gateway.CountTable());
+    fmt::print("{}", loop.Summary());
     std::fflush(stdout);
     return code;
-  } catch (const std::system_error& e) {
+  } catch (const ConfigError& e) {
+    Log(LogLevel::kError, "{}", e.what());
+    return kExitBadInput;
+  } catch (const std::exception& e) {
     Log(LogLevel::kError, "{}", e.what());
     return kExitRunFailed;
   }

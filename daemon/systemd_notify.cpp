@@ -21,6 +21,8 @@ void SystemdNotifier::Status(std::string_view status) {
 
 void SystemdNotifier::Stopping() { sd_notify(0, "STOPPING=1\nSTATUS=stopping"); }
 
+void SystemdNotifier::Reloading() { sd_notify(0, "RELOADING=1\nSTATUS=reloading"); }
+
 void SystemdNotifier::KickWatchdog(std::int64_t now_us) {
   if (watchdog_half_us_ <= 0) return;
   if (last_kick_us_ >= 0 && now_us - last_kick_us_ < watchdog_half_us_) return;

@@ -14,6 +14,8 @@ class SystemdNotifier {
   void Ready(std::string_view status);
   void Status(std::string_view status);
   void Stopping();
+  /// RELOADING=1 (systemd then waits for the next READY=1).
+  void Reloading();
   /// Sends WATCHDOG=1 when at least half the watchdog interval has passed since the last one.
   /// `now_us` is monotonic time.
   void KickWatchdog(std::int64_t now_us);

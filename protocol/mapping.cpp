@@ -13,7 +13,7 @@ namespace {
 constexpr std::array<std::string_view, kMappingInputCount> kInputNames = {
     "id_A",          "iq_A",          "ud_V",       "uq_V",
     "speed_elec_rad_per_s", "speed_mech_rpm", "rolling_counter", "drive_state",
-    "frame_temp_degC", "ambient_temp_degC", "dc_link_V"};
+    "frame_temp_degC", "ambient_temp_degC", "dc_link_V", "alarm_clear"};
 
 constexpr std::array<std::string_view, kMappingOutputCount> kOutputNames = {
     "winding_res_temp_degC", "rs_ohm",         "flux_Wb",       "rs_status",

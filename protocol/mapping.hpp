@@ -49,8 +49,9 @@ enum class MappingInput {
   kFrameTempDegC,       ///< frame_temp_degC: frame temperature sensor
   kAmbientTempDegC,     ///< ambient_temp_degC: ambient or coolant temperature
   kDcLinkV,             ///< dc_link_V: DC-link voltage
+  kAlarmClear,          ///< alarm_clear: a command frame; 1 clears the pump's latched trips
 };
-inline constexpr std::size_t kMappingInputCount = 11;
+inline constexpr std::size_t kMappingInputCount = 12;
 
 /// What the daemon writes per pump (besides the node temperatures, which are named by the
 /// thermal model and listed in SignalMapping::node_temperatures).

@@ -14,7 +14,7 @@ packages=(
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang libclang-rt-14-dev
   can-utils iproute2 kmod cpio gzip busybox-static qemu-system-x86 debootstrap e2fsprogs
-  gnuplot-nox default-jdk-headless libjchart2d-java xvfb xauth
+  gnuplot-nox default-jdk-headless libjchart2d-java xvfb xauth xdotool x11-apps imagemagick
 )
 
 want_guest=1

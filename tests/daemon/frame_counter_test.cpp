@@ -1,9 +1,10 @@
-#include "daemon/gateway.hpp"
+#include "daemon/frame_counter.hpp"
 
 #include <gtest/gtest.h>
 
 #include <sstream>
 
+#include "daemon/gateway.hpp"
 #include "daemon/offline.hpp"
 
 namespace pumptherm::daemon {
@@ -17,8 +18,8 @@ protocol::TimedFrame Frame(std::uint32_t id, bool extended = false) {
   return f;
 }
 
-TEST(Gateway, CountsPerInterfaceAndId) {
-  Gateway g({});
+TEST(FrameCounter, CountsPerInterfaceAndId) {
+  FrameCounter g({});
   const auto a = g.Interface("can0");
   const auto b = g.Interface("can1");
   EXPECT_EQ(g.Interface("can0"), a);
@@ -41,11 +42,11 @@ TEST(Gateway, CountsPerInterfaceAndId) {
             "can1                  181            1\n");
 }
 
-TEST(Gateway, HeartbeatKeepsItsPeriodWithoutDrift) {
+TEST(FrameCounter, HeartbeatKeepsItsPeriodWithoutDrift) {
   GatewayConfig c;
   c.heartbeat_period_s = 0.1;
   c.heartbeat_id = 0x7F0;
-  Gateway g(c);
+  FrameCounter g(c);
   int beats = 0;
   // Ticks arrive late and irregularly (every 7 ms); beats still come 10 per second.
   for (std::int64_t t = 0; t <= 10'000'000; t += 7000) {
@@ -59,10 +60,10 @@ TEST(Gateway, HeartbeatKeepsItsPeriodWithoutDrift) {
   EXPECT_EQ(beats, 100);
 }
 
-TEST(Gateway, HeartbeatCarriesUptimeAndFrameCount) {
+TEST(FrameCounter, HeartbeatCarriesUptimeAndFrameCount) {
   GatewayConfig c;
   c.heartbeat_period_s = 1.0;
-  Gateway g(c);
+  FrameCounter g(c);
   ASSERT_TRUE(g.HeartbeatDue(5'000'000));
   const auto i = g.Interface("can0");
   for (int k = 0; k < 300; ++k) g.OnFrame(i, Frame(0x100));
@@ -73,10 +74,10 @@ TEST(Gateway, HeartbeatCarriesUptimeAndFrameCount) {
   EXPECT_FALSE(g.HeartbeatDue(8'500'000));
 }
 
-TEST(Gateway, DisabledHeartbeatNeverComes) {
+TEST(FrameCounter, DisabledHeartbeatNeverComes) {
   GatewayConfig c;
   c.heartbeat_period_s = 0.0;
-  Gateway g(c);
+  FrameCounter g(c);
   EXPECT_FALSE(g.HeartbeatDue(0));
   EXPECT_FALSE(g.HeartbeatDue(100'000'000));
 }
@@ -89,13 +90,13 @@ TEST(Offline, CountsFramesAndSkipsMalformedLines) {
       "(1.010000) can0 181#0102\n"
       "(1.020000) can1 18FF5001#00\n"
       "(1.030000) can0 181#01020\n");
-  Gateway g({});
+  Gateway g(DaemonConfig{});  // no pumps: frames are only counted
   const auto r = RunOffline(log, "t.log", g);
   EXPECT_EQ(r.lines, 6U);
   EXPECT_EQ(r.frames, 3U);
   EXPECT_EQ(r.bad_lines, 2U);
-  EXPECT_EQ(g.counts().at({g.Interface("can0"), false, 0x181}), 2U);
-  EXPECT_EQ(g.counts().at({g.Interface("can1"), true, 0x18FF5001}), 1U);
+  EXPECT_EQ(g.counter().counts().at({g.Interface("can0"), false, 0x181}), 2U);
+  EXPECT_EQ(g.counter().counts().at({g.Interface("can1"), true, 0x18FF5001}), 1U);
 }
 
 }  // namespace

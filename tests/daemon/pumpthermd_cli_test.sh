@@ -26,7 +26,7 @@ printf '[gateway]\nheartbeat_period_s = "fast"\n' > "$tmp/bad.toml"
 expect 2 "bad.toml:2: key 'gateway.heartbeat_period_s': expected a number" -- "$bin" --config "$tmp/bad.toml"
 expect 2 "bad.toml:2: key 'gateway.heartbeat_period_s'" -- "$bin" --check-config "$tmp/bad.toml"
 printf '[[can]]\ninterface = "pt_nosuch0"\n' > "$tmp/missing.toml"
-expect 0 "missing.toml: OK \(1 interface\)" -- "$bin" --check-config "$tmp/missing.toml"
+expect 0 "missing.toml: OK \(1 interface, 0 pumps\)" -- "$bin" --check-config "$tmp/missing.toml"
 # A missing interface: "cannot find it" where the kernel has CAN, "no SocketCAN" where not.
 expect 1 "interface 'pt_nosuch0': cannot (find it|open a CAN socket)" -- "$bin" --config "$tmp/missing.toml"
 expect 1 "nonexistent.log: cannot read the log: No such file or directory" -- "$bin" -r "$tmp/nonexistent.log"
@@ -46,5 +46,5 @@ expect 0 "bad.log:6:13: expected a hexadecimal CAN ID; line skipped" -- "$bin" -
 # From stdin, as in `candump -L can0 | pumpthermd -r -`.
 "$bin" -r - < "$data/skeleton.log" | grep -q "<stdin>: 2210 frames" || { echo "FAIL: stdin"; fail=1; }
 # The example configuration shipped in systemd/ is valid.
-expect 0 "pumpthermd.toml: OK \(1 interface\)" -- "$bin" --check-config "$data/../../systemd/pumpthermd.toml"
+expect 0 "pumpthermd.toml: OK \(1 interface, 1 pump\)" -- "$bin" --check-config "$data/../../systemd/pumpthermd.toml"
 exit $fail

@@ -1,0 +1,703 @@
+#include "daemon/gateway.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <toml++/toml.h>
+
+#include "daemon/log.hpp"
+#include "daemon/resources.hpp"
+#include "pumptherm/alarm_t.hpp"
+#include "pumptherm/gateway_health_t.hpp"
+#include "pumptherm/telemetry_t.hpp"
+#include "pumptherm/temperatures_t.hpp"
+#include "protocol/lcm/channels.hpp"
+
+namespace pumptherm::daemon {
+namespace {
+
+using protocol::MappingInput;
+using protocol::MappingOutput;
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+constexpr std::uint64_t RouteKey(std::size_t iface, bool extended, std::uint32_t id) {
+  return (static_cast<std::uint64_t>(iface) << 33) | (static_cast<std::uint64_t>(extended) << 32) | id;
+}
+
+bool IsCurrentInput(MappingInput i) {
+  return i == MappingInput::kIdA || i == MappingInput::kIqA;
+}
+bool IsVoltageInput(MappingInput i) {
+  return i == MappingInput::kUdV || i == MappingInput::kUqV;
+}
+bool IsStatusInput(MappingInput i) {
+  return i == MappingInput::kSpeedMechRpm || i == MappingInput::kDriveState ||
+         i == MappingInput::kFrameTempDegC || i == MappingInput::kAmbientTempDegC ||
+         i == MappingInput::kDcLinkV;
+}
+
+template <typename Message>
+std::vector<std::uint8_t> Encode(const Message& m) {
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(m.getEncodedSize()));
+  m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  return bytes;
+}
+
+}  // namespace
+
+Gateway::Gateway(const DaemonConfig& config) : config_(config), counter_(config.gateway) {
+  auto fail = [&](int line, const std::string& key, const std::string& what) -> ConfigError {
+    return ConfigError(fmt::format("{}:{}: key '{}': {}", config_.source, line, key, what));
+  };
+  // Without pumps the gateway only counts frames: no frame layout is needed.
+  if (config_.pumps.empty()) return;
+  // The frame layout: DBC and mapping.
+  std::string dbc_path;
+  try {
+    dbc_path = ResolveResource(ResourceKind::kDbc, config_.dbc.file, config_.dbc.base_dir);
+    dbc_ = protocol::ParseDbc(ReadTextFile(dbc_path), dbc_path);
+  } catch (const std::exception& e) {
+    throw fail(0, "dbc.file", e.what());
+  }
+  try {
+    const std::string path = ResolveResource(ResourceKind::kDbc, config_.dbc.mapping, config_.dbc.base_dir);
+    mapping_ = protocol::ParseMapping(ReadTextFile(path), path, dbc_);
+  } catch (const std::exception& e) {
+    throw fail(0, "dbc.mapping", e.what());
+  }
+  codec_ = std::make_unique<protocol::DbcCodec>(dbc_);
+  std::size_t max_signals = 1;
+  for (const auto& m : dbc_.messages) max_signals = std::max(max_signals, m.signals.size());
+  values_.assign(max_signals, kNaN);
+
+  // Input messages and the inputs each carries.
+  for (std::size_t i = 0; i < protocol::kMappingInputCount; ++i) {
+    const auto& ref = mapping_.inputs[i];
+    if (!ref) continue;
+    const auto input = static_cast<MappingInput>(i);
+    auto it = std::find_if(inputs_.begin(), inputs_.end(),
+                           [&](const InputMessage& m) { return m.message_index == ref->message_index; });
+    if (it == inputs_.end()) {
+      inputs_.push_back(InputMessage{ref->message_index, {}});
+      it = inputs_.end() - 1;
+    }
+    it->signals.push_back({input, ref->signal_index, ref->scale, ref->offset});
+    it->currents = it->currents || IsCurrentInput(input);
+    it->voltages = it->voltages || IsVoltageInput(input);
+    it->status = it->status || IsStatusInput(input);
+    it->clear = it->clear || input == MappingInput::kAlarmClear;
+  }
+
+  // Temperatures in the order the CAN alarm node index counts them: by message ID, then start bit.
+  struct TempOut {
+    std::uint32_t id;
+    std::uint32_t bit;
+    std::string node;
+  };
+  std::vector<TempOut> temp_order;
+  if (const auto& w = mapping_.output(MappingOutput::kWindingResTempDegC)) {
+    temp_order.push_back({dbc_.messages[static_cast<std::size_t>(w->message_index)].id,
+                          dbc_.messages[static_cast<std::size_t>(w->message_index)].signals[static_cast<std::size_t>(w->signal_index)].start_bit,
+                          "winding_resistance"});
+  }
+  for (const auto& [node, ref] : mapping_.node_temperatures) {
+    const auto& msg = dbc_.messages[static_cast<std::size_t>(ref.message_index)];
+    temp_order.push_back({msg.id, msg.signals[static_cast<std::size_t>(ref.signal_index)].start_bit, node});
+  }
+  std::sort(temp_order.begin(), temp_order.end(),
+            [](const TempOut& a, const TempOut& b) { return std::tie(a.id, a.bit) < std::tie(b.id, b.bit); });
+  for (const auto& t : temp_order) alarm_node_order_.push_back(t.node);
+
+  // Pumps.
+  std::map<std::string, std::shared_ptr<const estimators::ThermalModel>> models;
+  for (std::size_t p = 0; p < config_.pumps.size(); ++p) {
+    const PumpConfig& pc = config_.pumps[p];
+    const std::string key = fmt::format("pump[{}]", p);
+    if (pc.node_id >= mapping_.node_id_limit) {
+      throw fail(pc.line, key + ".node_id",
+                 fmt::format("{} is not below the mapping's node_id_limit {}", pc.node_id, mapping_.node_id_limit));
+    }
+    bool known_interface = config_.interfaces.empty();
+    for (const auto& i : config_.interfaces) known_interface = known_interface || i.name == pc.interface;
+    if (!known_interface || pc.interface.empty()) {
+      throw fail(pc.line, key + ".interface", fmt::format("'{}' is not a configured [[can]] interface", pc.interface));
+    }
+    estimators::MotorDescription motor;
+    try {
+      if (!estimators::MotorPresetText(pc.motor).empty()) {
+        motor = estimators::MotorPreset(pc.motor);
+      } else {
+        const std::string path = ResolveResource(ResourceKind::kMotor, pc.motor, config_.dbc.base_dir);
+        motor = estimators::ParseMotorDescription(ReadTextFile(path), path);
+      }
+    } catch (const std::exception& e) {
+      throw fail(pc.line, key + ".motor", e.what());
+    }
+    std::shared_ptr<const estimators::ThermalModel> model;
+    try {
+      const std::string path = ResolveResource(ResourceKind::kModel, pc.thermal_model, config_.dbc.base_dir);
+      auto it = models.find(path);
+      if (it == models.end()) {
+        it = models.emplace(path, std::make_shared<const estimators::ThermalModel>(
+                                      estimators::ThermalModel::Parse(ReadTextFile(path), path)))
+                 .first;
+      }
+      model = it->second;
+    } catch (const std::exception& e) {
+      throw fail(pc.line, key + ".thermal_model", e.what());
+    }
+    try {
+      pumps_.push_back(std::make_unique<Pump>(pc, motor, model, config_.gateway.thermal_period_s));
+    } catch (const std::exception& e) {
+      throw fail(pc.line, key, e.what());
+    }
+    PumpIo io;
+    io.iface = counter_.Interface(pc.interface);
+    for (double& v : io.inputs) v = kNaN;
+    // Output plans, one per output message.
+    auto plan_for = [&](int message_index) -> OutputPlan& {
+      for (auto& plan : io.outputs) {
+        if (plan.message_index == message_index) return plan;
+      }
+      const auto& msg = dbc_.messages[static_cast<std::size_t>(message_index)];
+      OutputPlan plan;
+      plan.message_index = message_index;
+      auto over = config_.output_periods_s.find(msg.name);
+      const double period_s = over != config_.output_periods_s.end() ? over->second
+                              : msg.cycle_time_ms && *msg.cycle_time_ms > 0 ? *msg.cycle_time_ms / 1000.0
+                                                                             : 1.0;
+      plan.period_us = std::max<std::int64_t>(1000, std::llround(period_s * 1e6));
+      io.outputs.push_back(std::move(plan));
+      return io.outputs.back();
+    };
+    for (std::size_t o = 0; o < protocol::kMappingOutputCount; ++o) {
+      const auto& ref = mapping_.outputs[o];
+      if (!ref) continue;
+      OutputPlan& plan = plan_for(ref->message_index);
+      plan.signals.push_back({ref->signal_index, OutputSource::kMapped, static_cast<MappingOutput>(o), -1,
+                              ref->scale, ref->offset});
+      plan.alarm = plan.alarm || static_cast<MappingOutput>(o) == MappingOutput::kAlarmLevel;
+    }
+    for (const auto& [node, ref] : mapping_.node_temperatures) {
+      OutputPlan& plan = plan_for(ref.message_index);
+      // A node this pump's model does not have stays "not available" in the frame.
+      plan.signals.push_back({ref.signal_index, OutputSource::kNode, MappingOutput::kWindingResTempDegC,
+                              model->StateIndex(node), ref.scale, ref.offset});
+    }
+    for (auto& plan : io.outputs) {
+      const auto& msg = dbc_.messages[static_cast<std::size_t>(plan.message_index)];
+      const int rc = msg.FindSignal("RollingCounter");
+      const bool mapped = std::any_of(plan.signals.begin(), plan.signals.end(),
+                                      [&](const OutputSignal& s) { return s.signal_index == rc; });
+      if (rc >= 0 && !mapped) plan.signals.push_back({rc, OutputSource::kRollingCounter, MappingOutput::kUptimeS, -1, 1.0, 0.0});
+    }
+    // Routes of this pump's input frames.
+    for (std::size_t m = 0; m < inputs_.size(); ++m) {
+      const auto& msg = dbc_.messages[static_cast<std::size_t>(inputs_[m].message_index)];
+      const std::uint32_t id = mapping_.CanId(dbc_, inputs_[m].message_index, pc.node_id);
+      const auto route_key = RouteKey(io.iface, msg.extended, id);
+      if (routes_.count(route_key)) {
+        throw fail(pc.line, key + ".node_id", fmt::format("CAN ID {:X} on '{}' is already used", id, pc.interface));
+      }
+      routes_[route_key] = Route{static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(m)};
+    }
+    io_.push_back(std::move(io));
+  }
+}
+
+std::size_t Gateway::Interface(std::string_view name) { return counter_.Interface(name); }
+
+void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
+  counter_.OnFrame(iface, tf);
+  if (tf.frame.error || tf.frame.remote) return;
+  const auto it = routes_.find(RouteKey(iface, tf.frame.extended, tf.frame.id));
+  if (it == routes_.end()) {
+    ++counters_.rx_unknown_id;
+    return;
+  }
+  const Route r = it->second;
+  const InputMessage& im = inputs_[r.message];
+  const auto& codec = codec_->message(static_cast<std::size_t>(im.message_index));
+  if (codec.Decode(std::span<const std::uint8_t>(tf.frame.data.data(), tf.frame.len), values_) !=
+      protocol::CodecStatus::kOk) {
+    ++counters_.rx_bad_length;
+    return;
+  }
+  double v[protocol::kMappingInputCount];
+  for (double& x : v) x = kNaN;
+  PumpIo& io = io_[r.pump];
+  for (const InputSignal& s : im.signals) {
+    const double x = s.scale * values_[static_cast<std::size_t>(s.signal_index)] + s.offset;
+    v[static_cast<std::size_t>(s.input)] = x;
+    io.inputs[static_cast<std::size_t>(s.input)] = x;
+  }
+  io.inputs_us = tf.time_us;
+  Pump& pump = *pumps_[r.pump];
+  auto at = [&](MappingInput i) { return v[static_cast<std::size_t>(i)]; };
+  if (im.currents) {
+    pump.OnCurrents(tf.time_us, at(MappingInput::kIdA), at(MappingInput::kIqA),
+                    at(MappingInput::kSpeedElecRadPerS), at(MappingInput::kRollingCounter));
+  }
+  if (im.voltages) {
+    pump.OnVoltages(tf.time_us, at(MappingInput::kUdV), at(MappingInput::kUqV),
+                    im.currents ? at(MappingInput::kRollingCounter) : kNaN);
+  }
+  if (im.clear) {
+    // A command, not telemetry. Held buttons repeat it: act at most every 2 s.
+    const double c = at(MappingInput::kAlarmClear);
+    if (c >= 0.5 && (io.last_clear_us < 0 || tf.time_us - io.last_clear_us >= 2'000'000)) {
+      io.last_clear_us = tf.time_us;
+      Clear(pump.config().name, "can:" + counter_.interfaces()[iface].name, "PUMP_CLEAR frame");
+    }
+    return;
+  }
+  if (im.status) {
+    io.status_us = tf.time_us;
+    pump.OnStatus(tf.time_us, at(MappingInput::kSpeedMechRpm), at(MappingInput::kDriveState),
+                  at(MappingInput::kFrameTempDegC), at(MappingInput::kAmbientTempDegC));
+  }
+}
+
+double Gateway::OutputValue(std::size_t p, MappingOutput output) const {
+  const Pump& pump = *pumps_[p];
+  const PumpSnapshot& s = pump.snapshot();
+  const bool ident = s.resistance.status != estimators::ResistanceStatus::kInitialising &&
+                     s.resistance.status != estimators::ResistanceStatus::kInvalidInput;
+  switch (output) {
+    case MappingOutput::kWindingResTempDegC: return s.winding_resistance_degC;
+    case MappingOutput::kRsOhm: return ident ? s.resistance.resistance_ohm : kNaN;
+    case MappingOutput::kFluxWb: return ident ? s.resistance.flux_Wb : kNaN;
+    case MappingOutput::kRsStatus: return static_cast<double>(s.resistance.status);
+    case MappingOutput::kFluxStatus:
+      // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
+      return static_cast<double>(s.resistance.status == estimators::ResistanceStatus::kNotIdentifiable
+                                     ? estimators::ResistanceStatus::kTracking
+                                     : s.resistance.status);
+    case MappingOutput::kAlarmLevel: return s.initialised ? static_cast<double>(s.alarm.level) : kNaN;
+    case MappingOutput::kAlarmReason: return s.initialised ? static_cast<double>(s.alarm.reason) : kNaN;
+    case MappingOutput::kAlarmNode: {
+      if (!s.initialised || (s.alarm.node < 0 && s.alarm.reason != estimators::AlarmReason::kEstimatedOverTemperature)) return kNaN;
+      const auto& names = pump.model().StateNames();
+      const std::string name = s.alarm.node >= 0 && s.alarm.node < static_cast<int>(names.size())
+                                   ? names[static_cast<std::size_t>(s.alarm.node)]
+                                   : "winding_resistance";
+      const auto it = std::find(alarm_node_order_.begin(), alarm_node_order_.end(), name);
+      return it == alarm_node_order_.end() ? kNaN : static_cast<double>(it - alarm_node_order_.begin());
+    }
+    case MappingOutput::kAlarmValueDegC: {
+      const auto r = s.alarm.reason;
+      const bool temp = r == estimators::AlarmReason::kEstimatedOverTemperature ||
+                        r == estimators::AlarmReason::kMeasuredOverTemperature;
+      return s.initialised && temp ? s.alarm.value : kNaN;
+    }
+    case MappingOutput::kTimeToTripS:
+      return std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : kNaN;
+    case MappingOutput::kUptimeS:
+      return last_now_us_ >= start_us_ ? static_cast<double>(last_now_us_ - start_us_) * 1e-6 : 0.0;
+    case MappingOutput::kFrameRateHz: return io_[p].frame_rate_Hz;
+    case MappingOutput::kDrops: return static_cast<double>(pump.counters().lost_frames);
+    case MappingOutput::kBusState: return counter_.interfaces()[io_[p].iface].up ? 0.0 : 3.0;
+  }
+  return kNaN;
+}
+
+void Gateway::Emit(std::size_t p, OutputPlan& plan, std::int64_t time_us, OutputSink& sink) {
+  const auto& msg = dbc_.messages[static_cast<std::size_t>(plan.message_index)];
+  const auto& codec = codec_->message(static_cast<std::size_t>(plan.message_index));
+  std::fill(values_.begin(), values_.begin() + static_cast<std::ptrdiff_t>(codec.signal_count()), kNaN);
+  const PumpSnapshot& s = pumps_[p]->snapshot();
+  for (const OutputSignal& o : plan.signals) {
+    double v = kNaN;
+    switch (o.source) {
+      case OutputSource::kMapped: v = OutputValue(p, o.output); break;
+      case OutputSource::kNode:
+        v = s.initialised && o.state >= 0 ? s.node_degC[static_cast<std::size_t>(o.state)] : kNaN;
+        break;
+      case OutputSource::kRollingCounter: v = plan.counter; break;
+    }
+    values_[static_cast<std::size_t>(o.signal_index)] = std::isnan(v) ? v : (v - o.offset) / o.scale;
+  }
+  plan.counter = static_cast<std::uint8_t>((plan.counter + 1) & 0x0F);
+  protocol::CanFrame f;
+  f.id = mapping_.CanId(dbc_, plan.message_index, pumps_[p]->config().node_id);
+  f.extended = msg.extended;
+  f.fd = msg.size_bytes > 8;
+  f.len = static_cast<std::uint8_t>(codec.min_bytes());
+  const auto r = codec.Encode(std::span<const double>(values_.data(), codec.signal_count()),
+                              std::span<std::uint8_t>(f.data.data(), f.len));
+  counters_.tx_saturated += r.saturated;
+  sink.SendFrame(io_[p].iface, time_us, f);
+}
+
+void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
+  if (start_us_ < 0) {
+    start_us_ = now_us;
+    next_health_us_ = now_us;
+  }
+  last_now_us_ = now_us;
+  const auto lcm_period_us = static_cast<std::int64_t>(std::llround(config_.lcm.period_s * 1e6));
+  const std::string& prefix = config_.lcm.channel_prefix;
+  for (std::size_t p = 0; p < pumps_.size(); ++p) {
+    Pump& pump = *pumps_[p];
+    PumpIo& io = io_[p];
+    pump.Advance(now_us);
+    if (pump.last_frame_us() < 0) continue;  // nothing heard from this pump yet: nothing to say
+    const bool alarm_changed = pump.snapshot().alarm_changes != io.alarm_changes_sent;
+    for (OutputPlan& plan : io.outputs) {
+      if (plan.next_due_us < 0) plan.next_due_us = now_us;
+      if (now_us >= plan.next_due_us || (plan.alarm && alarm_changed)) {
+        Emit(p, plan, now_us, sink);
+        plan.next_due_us += plan.period_us;
+        if (plan.next_due_us <= now_us) plan.next_due_us = now_us + plan.period_us;
+      }
+    }
+    if (io.next_lcm_us < 0) io.next_lcm_us = now_us;
+    const std::string& name = pump.config().name;
+    auto publish = [&](lcm_channels::PumpChannel ch, const std::vector<std::uint8_t>& bytes) {
+      if (sink.PublishLcm(lcm_channels::PumpChannelName(prefix, name, ch), now_us, bytes)) {
+        ++counters_.lcm_published;
+      } else {
+        ++counters_.lcm_failed;
+      }
+    };
+    if (alarm_changed) {
+      io.alarm_changes_sent = pump.snapshot().alarm_changes;
+      publish(lcm_channels::PumpChannel::kAlarm, EncodeAlarm(pump));
+      const auto& a = pump.snapshot().alarm;
+      Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning,
+          "pump {}: alarm {} ({}){}", name, estimators::AlarmLevelName(a.level),
+          estimators::AlarmReasonName(a.reason),
+          std::isfinite(a.value) ? fmt::format(", value {:.2f}", a.value) : std::string());
+    }
+    if (now_us >= io.next_lcm_us) {
+      publish(lcm_channels::PumpChannel::kTelemetry, EncodeTelemetry(p));
+      if (pump.snapshot().initialised) publish(lcm_channels::PumpChannel::kTemperatures, EncodeTemperatures(pump));
+      if (!alarm_changed) publish(lcm_channels::PumpChannel::kAlarm, EncodeAlarm(pump));
+      io.next_lcm_us += lcm_period_us;
+      if (io.next_lcm_us <= now_us) io.next_lcm_us = now_us + lcm_period_us;
+    }
+  }
+  if (now_us >= next_health_us_) {
+    const double dt_s = static_cast<double>(now_us - (next_health_us_ - static_cast<std::int64_t>(config_.lcm.health_period_s * 1e6))) * 1e-6;
+    for (std::size_t p = 0; p < pumps_.size(); ++p) {
+      PumpIo& io = io_[p];
+      const auto& c = pumps_[p]->counters();
+      const std::uint64_t frames = c.fast_frames + c.status_frames;
+      if (io.last_health_us >= 0 && now_us > io.last_health_us) {
+        io.frame_rate_Hz = static_cast<double>(frames - io.frames_at_last_health) /
+                           (static_cast<double>(now_us - io.last_health_us) * 1e-6);
+      }
+      io.frames_at_last_health = frames;
+      io.last_health_us = now_us;
+    }
+    (void)dt_s;
+    if (sink.PublishLcm(lcm_channels::GatewayHealthChannelName(prefix), now_us, EncodeHealth(now_us))) {
+      ++counters_.lcm_published;
+    } else {
+      ++counters_.lcm_failed;
+    }
+    next_health_us_ = now_us + static_cast<std::int64_t>(std::llround(config_.lcm.health_period_s * 1e6));
+  }
+}
+
+std::vector<std::uint8_t> Gateway::EncodeTemperatures(const Pump& pump) const {
+  const PumpSnapshot& s = pump.snapshot();
+  pumptherm::temperatures_t m;
+  m.utime = s.time_us;
+  m.pump = pump.config().name;
+  const auto& r = s.resistance;
+  const bool ident = r.status != estimators::ResistanceStatus::kInitialising;
+  m.resistance_ohm = ident ? r.resistance_ohm : kNaN;
+  m.resistance_sd_ohm = ident ? r.resistance_sigma_ohm : kNaN;
+  m.flux_Wb = ident ? r.flux_Wb : kNaN;
+  m.flux_sd_Wb = kNaN;
+  m.resistance_winding_degC = s.winding_resistance_degC;
+  // Standard deviation of eq. 3 applied to the resistance: sd_R / (R0 alpha).
+  const auto& law = pump.motor().copper;
+  m.resistance_winding_sd_K = std::isfinite(s.winding_resistance_degC)
+                                  ? r.resistance_sigma_ohm / (law.r0_ohm * law.alpha_per_K)
+                                  : kNaN;
+  m.ident_status = static_cast<std::int8_t>(r.status);
+  const auto& names = pump.model().StateNames();
+  m.num_nodes = static_cast<std::int32_t>(names.size());
+  m.node_names = names;
+  m.node_degC = s.node_degC;
+  m.node_sd_K = s.node_sd_K;
+  m.nis = s.nis;
+  double max_sd = 0.0;
+  for (double sd : s.node_sd_K) max_sd = std::max(max_sd, sd);
+  if (!s.initialised) {
+    m.filter_status = pumptherm::temperatures_t::FILTER_NOT_STARTED;
+  } else if (max_sd > 5.0) {
+    m.filter_status = pumptherm::temperatures_t::FILTER_CONVERGING;
+  } else if (std::isfinite(s.nis) && s.nis > pump.config().alarms.monitor.nis_limit) {
+    m.filter_status = pumptherm::temperatures_t::FILTER_REJECTING;
+  } else {
+    m.filter_status = pumptherm::temperatures_t::FILTER_TRACKING;
+  }
+  return Encode(m);
+}
+
+std::vector<std::uint8_t> Gateway::EncodeTelemetry(std::size_t p) const {
+  const PumpIo& io = io_[p];
+  const Pump& pump = *pumps_[p];
+  auto at = [&](MappingInput i) { return io.inputs[static_cast<std::size_t>(i)]; };
+  pumptherm::telemetry_t m;
+  m.utime = io.inputs_us;
+  m.pump = pump.config().name;
+  m.node_id = static_cast<std::int32_t>(pump.config().node_id);
+  m.id_A = at(MappingInput::kIdA);
+  m.iq_A = at(MappingInput::kIqA);
+  m.ud_V = at(MappingInput::kUdV);
+  m.uq_V = at(MappingInput::kUqV);
+  m.speed_rpm = at(MappingInput::kSpeedMechRpm);
+  const double counter = at(MappingInput::kRollingCounter);
+  m.rolling_counter = static_cast<std::int16_t>(std::isfinite(counter) ? counter : -1);
+  const double state = at(MappingInput::kDriveState);
+  m.drive_state = static_cast<std::int8_t>(std::isfinite(state) ? state : -1);
+  m.frame_degC = at(MappingInput::kFrameTempDegC);
+  m.ambient_degC = at(MappingInput::kAmbientTempDegC);
+  m.coolant_degC = kNaN;
+  m.dc_link_V = at(MappingInput::kDcLinkV);
+  m.status_age_s = io.status_us >= 0 ? static_cast<double>(io.inputs_us - io.status_us) * 1e-6 : kNaN;
+  return Encode(m);
+}
+
+std::vector<std::uint8_t> Gateway::EncodeAlarm(const Pump& pump) const {
+  const PumpSnapshot& s = pump.snapshot();
+  pumptherm::alarm_t m;
+  m.utime = s.time_us;
+  m.pump = pump.config().name;
+  m.level = static_cast<std::int8_t>(s.alarm.level);
+  m.time_to_trip_s = s.alarm.time_to_trip_s;
+  const auto& names = pump.model().StateNames();
+  auto node_name = [&](int node) -> std::string {
+    if (node >= 0 && node < static_cast<int>(names.size())) return names[static_cast<std::size_t>(node)];
+    if (node == static_cast<int>(names.size())) return "winding_resistance";
+    return "";
+  };
+  m.forecast_node = std::isfinite(s.alarm.time_to_trip_s) ? node_name(s.time_to_trip_node) : "";
+  for (const auto& c : pump.ActiveConditions()) {
+    pumptherm::alarm_condition_t ac;
+    ac.level = static_cast<std::int8_t>(c.level);
+    ac.reason = static_cast<std::int8_t>(c.reason);
+    ac.node = c.node < 0 ? (c.reason == estimators::AlarmReason::kStaleTelemetry ? "telemetry" : "") : node_name(c.node);
+    const bool temp = c.reason == estimators::AlarmReason::kEstimatedOverTemperature ||
+                      c.reason == estimators::AlarmReason::kMeasuredOverTemperature;
+    ac.value_degC = temp ? c.value : kNaN;
+    ac.threshold_degC = c.threshold;
+    ac.rate_K_per_s = c.reason == estimators::AlarmReason::kRateOfRise ? c.value / 60.0 : kNaN;
+    ac.since_utime = static_cast<std::int64_t>(c.raised_at_s * 1e6);
+    ac.latched = c.latched;
+    m.conditions.push_back(std::move(ac));
+  }
+  m.num_conditions = static_cast<std::int32_t>(m.conditions.size());
+  return Encode(m);
+}
+
+std::vector<std::uint8_t> Gateway::EncodeHealth(std::int64_t now_us) const {
+  pumptherm::gateway_health_t m;
+  m.utime = now_us;
+  m.uptime_s = static_cast<double>(now_us - start_us_) * 1e-6;
+  m.num_pumps = static_cast<std::int32_t>(pumps_.size());
+  m.lcm_publish_failures = static_cast<std::int64_t>(counters_.lcm_failed);
+  for (const auto& c : counter_.interfaces()) {
+    pumptherm::interface_health_t h;
+    h.name = c.name;
+    h.bus_state = c.up ? pumptherm::interface_health_t::BUS_STATE_ERROR_ACTIVE
+                       : pumptherm::interface_health_t::BUS_STATE_DOWN;
+    h.rx_frames_per_s = kNaN;
+    h.tx_frames_per_s = kNaN;
+    h.rx_frames = static_cast<std::int64_t>(c.rx_frames);
+    h.tx_frames = static_cast<std::int64_t>(c.tx_frames);
+    h.rx_dropped = static_cast<std::int64_t>(c.rx_queue_drops);
+    h.tx_dropped = static_cast<std::int64_t>(c.tx_dropped);
+    h.rx_rejected = static_cast<std::int64_t>(counters_.rx_bad_length + counters_.rx_unknown_id);
+    h.error_frames = static_cast<std::int64_t>(c.rx_error_frames);
+    h.reopens = static_cast<std::int64_t>(c.reopens);
+    m.interfaces.push_back(std::move(h));
+  }
+  m.num_interfaces = static_cast<std::int32_t>(m.interfaces.size());
+  return Encode(m);
+}
+
+bool Gateway::Clear(const std::string& pump_name, const std::string& source, const std::string& comment) {
+  for (auto& pump : pumps_) {
+    if (pump->config().name != pump_name) continue;
+    const auto& a = pump->config().alarms;
+    bool allowed = false;
+    if (source.rfind("can:", 0) == 0) {
+      const std::string iface = source.substr(4);
+      allowed = std::find(a.clear_can_interfaces.begin(), a.clear_can_interfaces.end(), iface) !=
+                a.clear_can_interfaces.end();
+    } else {
+      allowed = std::find(a.clear_lcm_sources.begin(), a.clear_lcm_sources.end(), source) !=
+                a.clear_lcm_sources.end();
+    }
+    if (!allowed) {
+      ++counters_.clears_refused;
+      Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' refused (not a configured source){}",
+          pump_name, source, comment.empty() ? "" : ": " + comment);
+      return false;
+    }
+    ++counters_.clears_accepted;
+    const bool was = pump->ClearTrips();
+    Log(LogLevel::kNotice, "pump {}: alarm clear from '{}' accepted ({}){}", pump_name, source,
+        was ? "latched trip cleared" : "nothing was latched", comment.empty() ? "" : ": " + comment);
+    return true;
+  }
+  ++counters_.clears_refused;
+  Log(LogLevel::kWarning, "alarm clear for unknown pump '{}' from '{}' ignored", pump_name, source);
+  return false;
+}
+
+std::string Gateway::StatusLine() const {
+  int warnings = 0;
+  int trips = 0;
+  for (const auto& p : pumps_) {
+    warnings += p->snapshot().alarm.level == estimators::AlarmLevel::kWarning;
+    trips += p->snapshot().alarm.level == estimators::AlarmLevel::kTrip;
+  }
+  return fmt::format("{} pumps, {} warning, {} trip; {}; {} unknown, {} bad length", pumps_.size(),
+                     warnings, trips, counter_.StatusLine(), counters_.rx_unknown_id,
+                     counters_.rx_bad_length);
+}
+
+std::string Gateway::PumpTable() const {
+  std::string out = fmt::format("{:<12} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8}  {}\n", "pump", "speed",
+                                "frame_C", "hottest", "at_C", "wind_R_C", "Rs_ohm", "alarm");
+  for (const auto& p : pumps_) {
+    const PumpSnapshot& s = p->snapshot();
+    int hottest = -1;
+    for (std::size_t i = 0; i < s.node_degC.size(); ++i) {
+      if (std::isfinite(s.node_degC[i]) && (hottest < 0 || s.node_degC[i] > s.node_degC[static_cast<std::size_t>(hottest)])) {
+        hottest = static_cast<int>(i);
+      }
+    }
+    auto num = [](double v, int prec) { return std::isfinite(v) ? fmt::format("{:.{}f}", v, prec) : std::string("-"); };
+    std::string alarm = estimators::AlarmLevelName(s.alarm.level);
+    if (s.alarm.level != estimators::AlarmLevel::kNone) {
+      alarm += fmt::format(" ({})", estimators::AlarmReasonName(s.alarm.reason));
+    }
+    if (s.alarm.trip_latched) alarm += " LATCHED";
+    out += fmt::format("{:<12} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8}  {}\n", p->config().name,
+                       num(s.speed_rpm, 0), num(s.frame_measured_degC, 1),
+                       hottest >= 0 ? p->model().StateNames()[static_cast<std::size_t>(hottest)] : "-",
+                       hottest >= 0 ? num(s.node_degC[static_cast<std::size_t>(hottest)], 1) : "-",
+                       num(s.winding_resistance_degC, 1),
+                       s.resistance.status == estimators::ResistanceStatus::kInitialising ? "-" : num(s.resistance.resistance_ohm, 4),
+                       s.initialised ? alarm : "no estimate yet");
+  }
+  return out;
+}
+
+std::string Gateway::SaveState() const {
+  toml::table root;
+  root.insert("version", 1);
+  toml::table pumps;
+  for (const auto& p : pumps_) {
+    if (!p->snapshot().initialised) continue;
+    const PumpSavedState s = p->Save();
+    toml::table t;
+    t.insert("model", s.model_name);
+    t.insert("time_us", s.time_us);
+    toml::array x, cov;
+    for (int i = 0; i < s.x_degC.size(); ++i) x.push_back(s.x_degC(i));
+    for (int i = 0; i < s.s_K2.rows(); ++i) {
+      for (int j = 0; j < s.s_K2.cols(); ++j) cov.push_back(s.s_K2(i, j));
+    }
+    t.insert("x_degC", x);
+    t.insert("s_K2", cov);
+    t.insert("inputs", toml::table{{"speed_rpm", s.inputs.speed_rpm}, {"id_A", s.inputs.id_A},
+                                   {"iq_A", s.inputs.iq_A}, {"ambient_degC", s.inputs.ambient_degC},
+                                   {"coolant_degC", s.inputs.coolant_degC}});
+    toml::array rx, rp, rm;
+    for (int i = 0; i < 4; ++i) rx.push_back(s.resistance.x(i));
+    for (int i = 0; i < 16; ++i) rp.push_back(s.resistance.p(i / 4, i % 4));
+    for (int i = 0; i < 4; ++i) rm.push_back(s.resistance.moments(i / 2, i % 2));
+    t.insert("resistance_x", rx);
+    t.insert("resistance_p", rp);
+    t.insert("resistance_moments", rm);
+    t.insert("resistance_blocks", static_cast<std::int64_t>(s.resistance.blocks));
+    t.insert("resistance_rejections", s.resistance.consecutive_rejections);
+    pumps.insert(p->config().name, std::move(t));
+  }
+  root.insert("pump", std::move(pumps));
+  std::ostringstream ss;
+  ss << "# pumpthermd saved state: written atomically; safe to delete (the daemon starts cold).\n"
+     << root << "\n";
+  return ss.str();
+}
+
+int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::string* warning) {
+  toml::table root;
+  try {
+    root = toml::parse(std::string_view(text), std::string_view("saved state"));
+  } catch (const toml::parse_error& e) {
+    *warning = fmt::format("saved state does not parse (line {}): {}; starting cold",
+                           e.source().begin.line, e.description());
+    return 0;
+  }
+  if (root["version"].value_or(0) != 1) {
+    *warning = "saved state has an unknown version; starting cold";
+    return 0;
+  }
+  int restored = 0;
+  std::string ignored;
+  const toml::table* pumps = root["pump"].as_table();
+  for (auto& pump : pumps_) {
+    const toml::table* t = pumps ? (*pumps)[pump->config().name].as_table() : nullptr;
+    if (!t) continue;
+    auto numbers = [&](const char* key, std::size_t n, std::vector<double>& out) {
+      const toml::array* a = (*t)[key].as_array();
+      if (!a || a->size() != n) return false;
+      out.clear();
+      for (const auto& e : *a) {
+        auto v = e.value<double>();
+        if (!v || !std::isfinite(*v)) return false;
+        out.push_back(*v);
+      }
+      return true;
+    };
+    const int n = pump->model().StateCount();
+    PumpSavedState s;
+    s.model_name = (*t)["model"].value_or(std::string());
+    s.time_us = (*t)["time_us"].value_or<std::int64_t>(0);
+    std::vector<double> x, cov, rx, rp, rm;
+    bool ok = numbers("x_degC", static_cast<std::size_t>(n), x) &&
+              numbers("s_K2", static_cast<std::size_t>(n * n), cov) && numbers("resistance_x", 4, rx) &&
+              numbers("resistance_p", 16, rp) && numbers("resistance_moments", 4, rm) && s.time_us > 0 &&
+              s.time_us <= now_us + 60'000'000;
+    if (ok) {
+      s.x_degC = Eigen::Map<const Eigen::VectorXd>(x.data(), n);
+      s.s_K2 = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(cov.data(), n, n);
+      s.inputs.speed_rpm = (*t)["inputs"]["speed_rpm"].value_or(0.0);
+      s.inputs.id_A = (*t)["inputs"]["id_A"].value_or(0.0);
+      s.inputs.iq_A = (*t)["inputs"]["iq_A"].value_or(0.0);
+      s.inputs.ambient_degC = (*t)["inputs"]["ambient_degC"].value_or(25.0);
+      s.inputs.coolant_degC = (*t)["inputs"]["coolant_degC"].value_or(25.0);
+      for (int i = 0; i < 4; ++i) s.resistance.x(i) = rx[static_cast<std::size_t>(i)];
+      for (int i = 0; i < 16; ++i) s.resistance.p(i / 4, i % 4) = rp[static_cast<std::size_t>(i)];
+      for (int i = 0; i < 4; ++i) s.resistance.moments(i / 2, i % 2) = rm[static_cast<std::size_t>(i)];
+      s.resistance.blocks = static_cast<std::uint64_t>((*t)["resistance_blocks"].value_or<std::int64_t>(0));
+      s.resistance.consecutive_rejections = (*t)["resistance_rejections"].value_or(0);
+      ok = pump->Restore(s, std::max(now_us, s.time_us));
+    }
+    if (ok) {
+      ++restored;
+    } else {
+      ignored += (ignored.empty() ? "" : ", ") + pump->config().name;
+    }
+  }
+  if (!ignored.empty()) {
+    *warning = fmt::format("saved state of pump(s) {} does not fit the configuration or is damaged; "
+                           "they start cold", ignored);
+  }
+  return restored;
+}
+
+}  // namespace pumptherm::daemon

@@ -1,0 +1,157 @@
+#pragma once
+/// The gateway: frames in, per-pump estimation, frames and LCM messages out. It does not know
+/// where frames come from or go (live sockets or log files: OutputSink) nor what time it is
+/// (frame timestamps and Advance(now) bring time in), which is what makes an offline run of a
+/// recording equal a live run of it (docs/architecture.md, "Data flow of the daemon").
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "daemon/frame_counter.hpp"
+#include "daemon/pump.hpp"
+#include "protocol/codec.hpp"
+#include "protocol/dbc.hpp"
+#include "protocol/mapping.hpp"
+
+namespace pumptherm::daemon {
+
+/// Where the gateway's output goes.
+class OutputSink {
+ public:
+  virtual ~OutputSink() = default;
+  /// A frame for interface `iface` (FrameCounter index) at time `time_us`.
+  virtual void SendFrame(std::size_t iface, std::int64_t time_us, const protocol::CanFrame& frame) = 0;
+  /// An encoded LCM message for `channel`. Returns false when it could not be sent (counted).
+  virtual bool PublishLcm(const std::string& channel, std::int64_t time_us,
+                          const std::vector<std::uint8_t>& bytes) = 0;
+};
+
+/// Gateway-wide counters beyond the per-interface ones.
+struct GatewayCounters {
+  std::uint64_t rx_unknown_id = 0;     ///< frames whose ID no configured pump uses
+  std::uint64_t rx_bad_length = 0;     ///< frames shorter than their message: rejected
+  std::uint64_t tx_saturated = 0;      ///< output values clamped to a signal's range
+  std::uint64_t lcm_published = 0;
+  std::uint64_t lcm_failed = 0;
+  std::uint64_t clears_accepted = 0;
+  std::uint64_t clears_refused = 0;
+};
+
+class Gateway {
+ public:
+  /// Builds every pump from `config`: reads the DBC, the mapping, motor descriptions and thermal
+  /// models it names. Throws ConfigError naming the config file, the line and the key (or the
+  /// referenced file and its own position) for anything that does not fit.
+  explicit Gateway(const DaemonConfig& config);
+
+  /// Index of the interface called `name` (registered on first use; routes frames to the pumps
+  /// configured on it).
+  std::size_t Interface(std::string_view name);
+
+  /// One received frame: counted, decoded through the DBC and the mapping, fed to its pump.
+  /// No allocation in steady state, never throws.
+  void OnFrame(std::size_t iface, const protocol::TimedFrame& frame);
+
+  /// Brings every pump up to time `now_us` (thermal steps, alarms), and sends the outputs that
+  /// are due through `sink`. Live: called from the loop's timer; offline: after each frame.
+  void Advance(std::int64_t now_us, OutputSink& sink);
+
+  /// An alarm-clear command for pump `pump` from `source` (an LCM source name, or
+  /// "can:<interface>"). Accepted only from configured sources; every attempt is logged.
+  /// Returns true when accepted.
+  bool Clear(const std::string& pump, const std::string& source, const std::string& comment);
+
+  FrameCounter& counter() { return counter_; }
+  const FrameCounter& counter() const { return counter_; }
+  const GatewayCounters& counters() const { return counters_; }
+  const std::vector<std::unique_ptr<Pump>>& pumps() const { return pumps_; }
+  const DaemonConfig& config() const { return config_; }
+
+  /// Saved state of every pump as text (TOML; docs/daemon.md "State").
+  std::string SaveState() const;
+  /// Restores the pumps found in `text` (saved by SaveState), aged to `now_us`. Returns the
+  /// number of pumps restored; `warning` says what was ignored and why. Never throws.
+  int RestoreState(const std::string& text, std::int64_t now_us, std::string* warning);
+
+  /// One line for systemd's STATUS=: frames, pumps, alarms, drops.
+  std::string StatusLine() const;
+  /// A terminal table of the pumps: temperatures, resistance, alarm.
+  std::string PumpTable() const;
+
+  /// Encodes one LCM message of each kind for pump `p` (used by Advance and by tests).
+  std::vector<std::uint8_t> EncodeTemperatures(const Pump& p) const;
+  std::vector<std::uint8_t> EncodeTelemetry(std::size_t pump_index) const;
+  std::vector<std::uint8_t> EncodeAlarm(const Pump& p) const;
+  std::vector<std::uint8_t> EncodeHealth(std::int64_t now_us) const;
+
+ private:
+  struct InputSignal {
+    protocol::MappingInput input;
+    int signal_index;
+    double scale, offset;
+  };
+  struct InputMessage {
+    int message_index;
+    std::vector<InputSignal> signals;
+    bool currents = false, voltages = false, status = false, clear = false;
+  };
+  enum class OutputSource : std::uint8_t { kMapped, kNode, kRollingCounter };
+  struct OutputSignal {
+    int signal_index;
+    OutputSource source;
+    protocol::MappingOutput output;  // kMapped
+    int state;                       // kNode
+    double scale, offset;
+  };
+  struct OutputPlan {
+    int message_index;
+    std::int64_t period_us;
+    std::int64_t next_due_us = -1;
+    std::uint8_t counter = 0;
+    std::vector<OutputSignal> signals;
+    bool alarm = false;              // sent at once when the alarm changes
+  };
+  struct PumpIo {
+    std::size_t iface = 0;           // FrameCounter index
+    std::vector<OutputPlan> outputs;
+    std::int64_t next_lcm_us = -1;
+    std::uint64_t alarm_changes_sent = 0;
+    // Latest decoded inputs, for telemetry_t.
+    double inputs[protocol::kMappingInputCount];
+    std::int64_t inputs_us = -1;
+    std::int64_t status_us = -1;
+    std::uint64_t frames_at_last_health = 0;
+    std::int64_t last_health_us = -1;
+    double frame_rate_Hz = 0.0;
+    std::int64_t last_clear_us = -1;  // last clear command frame acted on
+  };
+  struct Route {
+    std::uint32_t pump;
+    std::uint32_t message;  // into inputs_
+  };
+
+  void Emit(std::size_t pump, OutputPlan& plan, std::int64_t time_us, OutputSink& sink);
+  double OutputValue(std::size_t pump, protocol::MappingOutput output) const;
+
+  DaemonConfig config_;
+  protocol::Dbc dbc_;
+  std::unique_ptr<protocol::DbcCodec> codec_;
+  protocol::SignalMapping mapping_;
+  FrameCounter counter_;
+  GatewayCounters counters_;
+  std::vector<InputMessage> inputs_;
+  std::vector<std::unique_ptr<Pump>> pumps_;
+  std::vector<PumpIo> io_;
+  std::unordered_map<std::uint64_t, Route> routes_;
+  std::vector<double> values_;   // decode/encode buffer (largest message)
+  std::vector<std::string> alarm_node_order_;  // CAN AlarmNode index -> node name
+  std::int64_t start_us_ = -1;
+  std::int64_t next_health_us_ = -1;
+  std::int64_t last_now_us_ = -1;
+};
+
+}  // namespace pumptherm::daemon

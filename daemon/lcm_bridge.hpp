@@ -1,0 +1,45 @@
+#pragma once
+/// The daemon's LCM side: publishes encoded messages and receives alarm-clear commands.
+/// LCM 1.3 (no lambda subscriptions): a handler method; its file descriptor sits in the
+/// daemon's own epoll loop (getFileno), and Handle() is called when it is readable.
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace lcm {
+class LCM;
+}
+
+namespace pumptherm {
+class alarm_clear_t;
+}
+
+namespace pumptherm::daemon {
+
+class LcmBridge {
+ public:
+  using ClearHandler = std::function<void(const std::string& channel, const pumptherm::alarm_clear_t&)>;
+
+  /// Connects to `url` (e.g. "udpm://239.255.76.67:7667?ttl=0", or "memq://" in tests) and
+  /// subscribes to <prefix>/<pump>/ALARM_CLEAR. Throws std::runtime_error when LCM cannot start.
+  LcmBridge(const std::string& url, const std::string& prefix, ClearHandler on_clear);
+  ~LcmBridge();
+  LcmBridge(const LcmBridge&) = delete;
+  LcmBridge& operator=(const LcmBridge&) = delete;
+
+  /// The descriptor to poll for incoming messages.
+  int fd();
+  /// Dispatches whatever is waiting, without blocking.
+  void Handle();
+  /// Publishes raw encoded bytes; false when LCM refused (counted by the caller).
+  bool Publish(const std::string& channel, const std::vector<std::uint8_t>& bytes);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace pumptherm::daemon

@@ -1,0 +1,159 @@
+#pragma once
+/// One pump's estimation pipeline: the decoded telemetry in SI units goes to the resistance
+/// identifier at telemetry rate and to the virtual thermal sensor once per thermal period
+/// (timed by the frames' timestamps), then to the alarm monitor and the time-to-trip forecast.
+/// No I/O here: the gateway decodes frames and publishes what this produces.
+
+#include <Eigen/Dense>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "estimators/alarms.hpp"
+#include "estimators/kalman_virtual_sensor.hpp"
+#include "estimators/motor.hpp"
+#include "estimators/resistance_identifier.hpp"
+#include "estimators/thermal_discretisation.hpp"
+#include "estimators/thermal_model.hpp"
+
+namespace pumptherm::daemon {
+
+inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+/// Counters of one pump's inputs (what was dropped is counted, never silent).
+struct PumpCounters {
+  std::uint64_t fast_frames = 0;
+  std::uint64_t status_frames = 0;
+  std::uint64_t samples = 0;             ///< paired current+voltage samples identified
+  std::uint64_t unpaired = 0;            ///< half-samples whose partner never came
+  std::uint64_t lost_frames = 0;         ///< gaps in the rolling counter
+  std::uint64_t rejected_values = 0;     ///< NaN/Inf or out-of-range decoded values
+  std::uint64_t thermal_steps = 0;
+};
+
+/// Everything published about one pump at one moment.
+struct PumpSnapshot {
+  std::int64_t time_us = 0;
+  bool initialised = false;               ///< false until the first thermal step: publish "n/a"
+  std::vector<double> node_degC;          ///< per thermal state (model order); NaN before init
+  std::vector<double> node_sd_K;
+  estimators::ResistanceEstimate resistance;
+  double winding_resistance_degC = kNaN;  ///< NaN unless the identifier is tracking
+  double frame_measured_degC = kNaN;
+  double ambient_degC = kNaN;
+  double speed_rpm = kNaN;
+  double innovation_K = kNaN;
+  double nis = kNaN;
+  estimators::AlarmState alarm;
+  int time_to_trip_node = -1;             ///< state index the forecast is about (-1: none)
+  std::uint64_t alarm_changes = 0;        ///< increments whenever `alarm` changes
+};
+
+/// Saved state of one pump (the state store writes it; docs/daemon.md "State").
+struct PumpSavedState {
+  std::string model_name;
+  std::int64_t time_us = 0;
+  Eigen::VectorXd x_degC;
+  Eigen::MatrixXd s_K2;
+  estimators::ThermalInputs inputs;       ///< the last inputs (held while the daemon is down)
+  estimators::ResistanceIdentifierState resistance;
+  bool trip_latched = false;
+};
+
+class Pump {
+ public:
+  /// Throws std::invalid_argument naming the pump and the problem (unknown measured node, a
+  /// level for a node the model lacks, bad estimator settings).
+  Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
+       std::shared_ptr<const estimators::ThermalModel> model, double thermal_period_s);
+
+  const PumpConfig& config() const { return config_; }
+  const estimators::ThermalModel& model() const { return *model_; }
+  const estimators::MotorDescription& motor() const { return motor_; }
+  /// Every active alarm condition, most severe first.
+  std::vector<estimators::AlarmCondition> ActiveConditions() const { return alarms_.ActiveConditions(); }
+
+  /// Fast telemetry halves (NaN for what the mapping does not carry), paired into one
+  /// identifier sample when they arrive within 50 ms of each other with equal rolling counters
+  /// (or when either half carries no counter).
+  void OnCurrents(std::int64_t t_us, double id_A, double iq_A, double w_e_rad_per_s, double counter);
+  void OnVoltages(std::int64_t t_us, double ud_V, double uq_V, double counter);
+  /// Slow status (NaN for what is not mapped or not available).
+  void OnStatus(std::int64_t t_us, double speed_rpm, double drive_state, double frame_degC,
+                double ambient_degC);
+
+  /// Runs every thermal step whose period ended at or before `t_us`, with alarms and the
+  /// forecast. Returns true when the alarm state changed.
+  bool Advance(std::int64_t t_us);
+
+  /// Clears latched trips (from an accepted clear command). Returns true if one was latched.
+  bool ClearTrips() { return alarms_.Clear(); }
+
+  const PumpSnapshot& snapshot() const { return snapshot_; }
+  const PumpCounters& counters() const { return counters_; }
+  /// Time of the last telemetry frame (fast or status), us; -1 before any.
+  std::int64_t last_frame_us() const { return last_frame_us_; }
+
+  PumpSavedState Save() const;
+  /// Continues from `state` saved at state.time_us, aged to `now_us` by the thermal model with
+  /// the last inputs held (a motor that kept running stays hot) and the covariance grown by the
+  /// process noise over the gap. Returns false (nothing changes) when the state does not fit
+  /// this pump's model.
+  bool Restore(const PumpSavedState& state, std::int64_t now_us);
+
+ private:
+  void ThermalStep(std::int64_t step_end_us);
+  double TimeToTrip_s(const estimators::ThermalInputs& in, int* node);
+  void Identify(std::int64_t t_us);
+
+  PumpConfig config_;
+  std::shared_ptr<const estimators::ThermalModel> model_;
+  estimators::MotorDescription motor_;
+  double period_s_;
+  std::int64_t period_us_;
+  estimators::ResistanceIdentifier identifier_;
+  estimators::VirtualThermalSensor sensor_;
+  estimators::AlarmMonitor alarms_;
+  int measured_state_ = -1;
+  std::vector<int> level_states_;        // state index of each alarm node (n states + winding)
+  PumpCounters counters_;
+  PumpSnapshot snapshot_;
+
+  // Pairing of the fast halves.
+  struct Half {
+    std::int64_t t_us = -1;
+    double a = kNaN, b = kNaN, c = kNaN;
+    double counter = kNaN;
+  };
+  Half currents_, voltages_;
+  double last_counter_ = kNaN;
+  std::int64_t last_sample_us_ = -1;
+  double w_e_rad_per_s_ = kNaN;          // latest electrical speed (fast frame or status)
+
+  // Status values.
+  double frame_degC_ = kNaN;
+  std::int64_t frame_us_ = -1;
+  double ambient_degC_ = kNaN;
+  double speed_rpm_ = kNaN;
+  std::int64_t last_frame_us_ = -1;
+
+  // Inputs averaged over the current thermal period.
+  double sum_id2_ = 0.0, sum_iq2_ = 0.0, sum_speed_ = 0.0;
+  int n_inputs_ = 0;
+  estimators::ThermalInputs held_inputs_;
+  bool have_inputs_ = false;
+  std::int64_t next_step_us_ = -1;
+  bool initialised_ = false;
+
+  // Forecast.
+  estimators::ThermalLinearModel forecast_lin_;
+  estimators::ThermalDiscretiser forecast_disc_{1e-3};
+  Eigen::VectorXd forecast_x_, forecast_next_;
+  std::vector<double> alarm_values_;
+};
+
+}  // namespace pumptherm::daemon

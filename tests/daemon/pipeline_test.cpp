@@ -1,0 +1,345 @@
+// The gateway pipeline on recorded frames: a pump's telemetry, synthesised from a thermal truth
+// through the shipped DBC, goes through decode, resistance identification, the virtual thermal
+// sensor, alarms, CAN encoding and LCM encoding.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <lcm/lcm-cpp.hpp>
+#include <map>
+#include <numbers>
+#include <sstream>
+
+#include "daemon/gateway.hpp"
+#include "daemon/lcm_bridge.hpp"
+#include "daemon/resources.hpp"
+#include "protocol/codec.hpp"
+#include "protocol/dbc.hpp"
+#include "pumptherm/alarm_clear_t.hpp"
+#include "pumptherm/alarm_t.hpp"
+#include "pumptherm/gateway_health_t.hpp"
+#include "pumptherm/telemetry_t.hpp"
+#include "pumptherm/temperatures_t.hpp"
+#include "tools/sim/thermal_plant.hpp"
+
+namespace pumptherm::daemon {
+namespace {
+
+constexpr double kPsi_Wb = 0.0182;
+constexpr double kR_ohm = 0.28;
+
+/// Records what the gateway sends.
+struct RecordingSink : OutputSink {
+  std::vector<std::pair<std::int64_t, protocol::CanFrame>> frames;
+  std::multimap<std::string, std::vector<std::uint8_t>> lcm;
+  void SendFrame(std::size_t, std::int64_t t, const protocol::CanFrame& f) override { frames.emplace_back(t, f); }
+  bool PublishLcm(const std::string& ch, std::int64_t, const std::vector<std::uint8_t>& b) override {
+    lcm.emplace(ch, b);
+    return true;
+  }
+};
+
+std::string Config(const std::string& extra = "") {
+  return R"(
+[gateway]
+heartbeat_period_s = 0
+
+[[can]]
+interface = "can0"
+
+[alarms]
+hold_s = 2
+clear_lcm_sources = ["panel"]
+
+[[pump]]
+name = "tmp1"
+node_id = 1
+interface = "can0"
+motor = "han2019-tmp"
+thermal_model = "saheba2010-improved"
+measured_node = "frame"
+)" + extra;
+}
+
+/// Drives a gateway with 100 Hz fast frames and 10 Hz status frames of a pump at 800 r/min and
+/// `iq_A`, whose temperatures come from the improved Saheba model (the filter's own model).
+class Bench {
+ public:
+  explicit Bench(const std::string& config_text)
+      : config_(ParseConfig(config_text, std::string(PUMPTHERM_SOURCE_DIR) + "/tests/daemon/pipeline.toml")),
+        gateway_(config_),
+        dbc_(protocol::ParseDbc(ReadTextFile(ResolveResource(ResourceKind::kDbc, "pumptherm.dbc")), "pumptherm.dbc")),
+        codec_(dbc_),
+        model_(estimators::ThermalModel::Parse(
+            ReadTextFile(ResolveResource(ResourceKind::kModel, "saheba2010-improved")), "improved")),
+        plant_(model_, Eigen::VectorXd::Constant(model_.StateCount(), 25.0), {.process_sd_K = 0.0}, 7) {
+    iface_ = gateway_.Interface("can0");
+  }
+
+  void Frame(const char* message, std::int64_t t_us, const std::map<std::string, double>& values) {
+    const protocol::DbcMessage* m = dbc_.FindMessage(message);
+    ASSERT_NE(m, nullptr);
+    const int index = static_cast<int>(m - dbc_.messages.data());
+    const auto& codec = codec_.message(static_cast<std::size_t>(index));
+    std::vector<double> v(codec.signal_count(), 0.0);
+    for (const auto& [name, value] : values) v[static_cast<std::size_t>(m->FindSignal(name))] = value;
+    protocol::TimedFrame tf;
+    tf.time_us = t_us;
+    tf.frame.id = m->id + 1;  // node 1
+    tf.frame.len = static_cast<std::uint8_t>(codec.min_bytes());
+    codec.Encode(v, std::span<std::uint8_t>(tf.frame.data.data(), tf.frame.len));
+    gateway_.OnFrame(iface_, tf);
+    gateway_.Advance(t_us, sink);
+  }
+
+  /// Runs `seconds` at `iq_A`.
+  void Run(double seconds, double iq_A) {
+    const double w = 800.0 / 60.0 * 2.0 * std::numbers::pi;  // one pole pair
+    const int steps = static_cast<int>(seconds * 100.0);
+    for (int k = 0; k < steps; ++k) {
+      const std::int64_t t = t_us_ + 10'000;
+      t_us_ = t;
+      // The winding resistance follows the truth's winding temperature (Han 2019 eq. 2 with the
+      // han2019-tmp preset's R0 at T0 and alpha), so identification and model agree.
+      const double t_w = truth_.size() ? 0.5 * (truth_(3) + truth_(4)) : 25.0;
+      const double r_ohm = kR_ohm * (1.0 + 4.1e-3 * (t_w - 27.2));
+      const double uq = r_ohm * iq_A + w * kPsi_Wb;
+      const double c = counter_++ % 16;
+      Frame("PUMP_FAST_I", t, {{"Id_A", 0.0}, {"Iq_A", iq_A}, {"SpeedElec_rad_per_s", w}, {"RollingCounter", c}});
+      Frame("PUMP_FAST_U", t + 200, {{"Ud_V", -w * 0.24e-3 * iq_A}, {"Uq_V", uq}, {"RollingCounter", c}});
+      if (k % 10 == 0) {
+        plant_.Step({.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = 25.0}, 0.1);
+        truth_ = plant_.State_degC();
+        Frame("PUMP_STATUS", t + 400, {{"SpeedMech_rpm", 800.0}, {"DriveState", 2.0},
+                                        {"FrameTemp_degC", truth_(0)}, {"AmbientTemp_degC", 25.0},
+                                        {"DcLink_V", 48.0}, {"RollingCounter", static_cast<double>(k / 10 % 16)}});
+      } else {
+        plant_.Step({.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = 25.0}, 0.0 + 1e-9);
+      }
+    }
+  }
+
+  DaemonConfig config_;
+  Gateway gateway_;
+  protocol::Dbc dbc_;
+  protocol::DbcCodec codec_;
+  estimators::ThermalModel model_;
+  sim::ThermalPlant plant_;
+  RecordingSink sink;
+  Eigen::VectorXd truth_;
+  std::size_t iface_ = 0;
+  std::int64_t t_us_ = 1'763'776'800'000'000;
+  int counter_ = 0;
+};
+
+TEST(Pipeline, EstimatesFollowTheTruthAndGoOutOnCanAndLcm) {
+  Bench b(Config());
+  b.Run(900.0, 40.0);
+  const Pump& pump = *b.gateway_.pumps()[0];
+  const PumpSnapshot& s = pump.snapshot();
+  ASSERT_TRUE(s.initialised);
+  EXPECT_EQ(pump.counters().lost_frames, 0U);
+  EXPECT_EQ(pump.counters().unpaired, 0U);
+  EXPECT_GE(pump.counters().thermal_steps, 895U);
+  for (int i = 0; i < b.truth_.size(); ++i) {
+    EXPECT_NEAR(s.node_degC[static_cast<std::size_t>(i)], b.truth_(i), 1.5)
+        << pump.model().StateNames()[static_cast<std::size_t>(i)];
+  }
+  // The resistance identifier sees the resistance of the synthetic drive's winding.
+  const double t_w = 0.5 * (b.truth_(3) + b.truth_(4));
+  EXPECT_NEAR(s.resistance.resistance_ohm, kR_ohm * (1.0 + 4.1e-3 * (t_w - 27.2)), 0.01)
+      << estimators::ToString(s.resistance.status);
+
+  // GW_TEMPS_A for node 1 (ID 0x401) at 1 Hz, decoding to the estimates.
+  const protocol::DbcMessage* temps = b.dbc_.FindMessage("GW_TEMPS_A");
+  int count = 0;
+  protocol::CanFrame last{};
+  for (const auto& [t, f] : b.sink.frames) {
+    if (f.id == temps->id + 1) {
+      ++count;
+      last = f;
+    }
+  }
+  EXPECT_NEAR(count, 900, 2);
+  const auto& codec = b.codec_.message(static_cast<std::size_t>(temps - b.dbc_.messages.data()));
+  std::vector<double> v(codec.signal_count());
+  ASSERT_EQ(codec.Decode(std::span<const std::uint8_t>(last.data.data(), last.len), v), protocol::CodecStatus::kOk);
+  EXPECT_NEAR(v[static_cast<std::size_t>(temps->FindSignal("Frame_degC"))], s.node_degC[0], 0.02);
+  EXPECT_NEAR(v[static_cast<std::size_t>(temps->FindSignal("Teeth_degC"))], s.node_degC[2], 0.02);
+
+  // Every LCM type, decodable, with the node names of the model.
+  ASSERT_TRUE(b.sink.lcm.count("PUMPTHERM/tmp1/TEMPS"));
+  ASSERT_TRUE(b.sink.lcm.count("PUMPTHERM/tmp1/TELEMETRY"));
+  ASSERT_TRUE(b.sink.lcm.count("PUMPTHERM/tmp1/ALARM"));
+  ASSERT_TRUE(b.sink.lcm.count("PUMPTHERM/GATEWAY/HEALTH"));
+  const auto& bytes = std::prev(b.sink.lcm.upper_bound("PUMPTHERM/tmp1/TEMPS"))->second;
+  pumptherm::temperatures_t m;
+  ASSERT_GT(m.decode(bytes.data(), 0, static_cast<int>(bytes.size())), 0);
+  EXPECT_EQ(m.pump, "tmp1");
+  ASSERT_EQ(m.num_nodes, 7);
+  EXPECT_EQ(m.node_names[3], "slot_winding");
+  EXPECT_NEAR(m.node_degC[3], s.node_degC[3], 1e-9);
+  EXPECT_EQ(m.filter_status, pumptherm::temperatures_t::FILTER_TRACKING);
+}
+
+TEST(Pipeline, NothingIsPublishedAsATemperatureBeforeTheFirstEstimate) {
+  Bench b(Config());
+  b.Run(0.5, 40.0);  // less than one thermal period
+  EXPECT_FALSE(b.gateway_.pumps()[0]->snapshot().initialised);
+  const protocol::DbcMessage* temps = b.dbc_.FindMessage("GW_TEMPS_A");
+  const auto& codec = b.codec_.message(static_cast<std::size_t>(temps - b.dbc_.messages.data()));
+  int seen = 0;
+  for (const auto& [t, f] : b.sink.frames) {
+    if (f.id != temps->id + 1) continue;
+    ++seen;
+    std::vector<double> v(codec.signal_count());
+    codec.Decode(std::span<const std::uint8_t>(f.data.data(), f.len), v);
+    for (double x : v) EXPECT_TRUE(std::isnan(x)) << "a temperature was sent before any estimate";
+  }
+  EXPECT_GE(seen, 1);
+  EXPECT_EQ(b.sink.lcm.count("PUMPTHERM/tmp1/TEMPS"), 0U);
+}
+
+TEST(Pipeline, OverheatingTripsLatchesAndClearsOnlyFromAConfiguredSource) {
+  Bench b(Config(R"(
+[pump.alarms.levels]
+slot_winding = { warning_degC = 50, trip_degC = 55 }
+)"));
+  b.Run(300.0, 40.0);
+  EXPECT_EQ(b.gateway_.pumps()[0]->snapshot().alarm.level, estimators::AlarmLevel::kNone);
+  b.Run(2400.0, 60.0);  // heats past 55 degC
+  const auto& s = b.gateway_.pumps()[0]->snapshot();
+  ASSERT_GT(b.truth_(3), 57.0);
+  EXPECT_EQ(s.alarm.level, estimators::AlarmLevel::kTrip);
+  EXPECT_EQ(s.alarm.reason, estimators::AlarmReason::kEstimatedOverTemperature);
+  EXPECT_EQ(s.alarm.node, 3);
+  EXPECT_TRUE(s.alarm.trip_latched);
+  // The alarm frame says so, with the node index of the CAN layout (slot_winding = 4).
+  const protocol::DbcMessage* alarm = b.dbc_.FindMessage("GW_ALARM");
+  const auto& codec = b.codec_.message(static_cast<std::size_t>(alarm - b.dbc_.messages.data()));
+  protocol::CanFrame last{};
+  for (const auto& [t, f] : b.sink.frames) {
+    if (f.id == alarm->id + 1) last = f;
+  }
+  std::vector<double> v(codec.signal_count());
+  codec.Decode(std::span<const std::uint8_t>(last.data.data(), last.len), v);
+  EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0);
+  EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmReason"))], 1.0);
+  EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmNode"))], 4.0);
+
+  // Cool down: still latched. A clear from an unknown source is refused, from "panel" accepted.
+  b.Run(3600.0, 0.0);
+  ASSERT_LT(b.truth_(3), 45.0);
+  EXPECT_EQ(b.gateway_.pumps()[0]->snapshot().alarm.level, estimators::AlarmLevel::kTrip);
+  EXPECT_FALSE(b.gateway_.Clear("tmp1", "intruder", ""));
+  EXPECT_TRUE(b.gateway_.Clear("tmp1", "panel", "checked the pump"));
+  b.Run(10.0, 0.0);
+  EXPECT_EQ(b.gateway_.pumps()[0]->snapshot().alarm.level, estimators::AlarmLevel::kNone);
+  EXPECT_EQ(b.gateway_.counters().clears_refused, 1U);
+  EXPECT_EQ(b.gateway_.counters().clears_accepted, 1U);
+}
+
+TEST(Pipeline, ForecastSaysWhenTheTripLevelWillBeReached) {
+  Bench b(Config(R"(
+[pump.alarms.levels]
+slot_winding = { warning_degC = 50, trip_degC = 55 }
+)"));
+  b.Run(60.0, 60.0);
+  const auto& s = b.gateway_.pumps()[0]->snapshot();
+  ASSERT_TRUE(std::isfinite(s.alarm.time_to_trip_s));
+  // Check against the truth: run on and see when the slot winding crosses 55 degC.
+  const double forecast_s = s.alarm.time_to_trip_s;
+  double crossed_s = -1.0;
+  for (int k = 1; k <= 600 && crossed_s < 0; ++k) {
+    b.Run(10.0, 60.0);
+    if (b.truth_(3) >= 55.0) crossed_s = 10.0 * k;
+  }
+  ASSERT_GT(crossed_s, 0.0);
+  EXPECT_NEAR(forecast_s, crossed_s, 0.1 * crossed_s + 20.0) << "forecast " << forecast_s << " s";
+}
+
+TEST(Pipeline, StateRoundTripsThroughText) {
+  Bench a(Config());
+  a.Run(300.0, 40.0);
+  const std::string text = a.gateway_.SaveState();
+  Bench b(Config());
+  std::string warning;
+  EXPECT_EQ(b.gateway_.RestoreState(text, a.gateway_.pumps()[0]->snapshot().time_us, &warning), 1) << warning;
+  EXPECT_TRUE(warning.empty()) << warning;
+  const auto& x = a.gateway_.pumps()[0]->snapshot().node_degC;
+  const auto& y = b.gateway_.pumps()[0]->snapshot().node_degC;
+  for (std::size_t i = 0; i < x.size(); ++i) EXPECT_NEAR(x[i], y[i], 1e-6);
+  // Aged by an hour with the motor at the same load: hotter, not reset to cold.
+  Bench c(Config());
+  EXPECT_EQ(c.gateway_.RestoreState(text, a.gateway_.pumps()[0]->snapshot().time_us + 3'600'000'000LL, &warning), 1);
+  EXPECT_GT(c.gateway_.pumps()[0]->snapshot().node_degC[3], x[3] + 1.0);
+  // Damaged or foreign state: ignored with a warning, never a crash.
+  Bench d(Config());
+  EXPECT_EQ(d.gateway_.RestoreState("version = 1\n[pump.tmp1]\nmodel = \"other\"\n", 0, &warning), 0);
+  EXPECT_NE(warning.find("tmp1"), std::string::npos);
+  EXPECT_EQ(d.gateway_.RestoreState("\x01\x02 not toml", 0, &warning), 0);
+  EXPECT_NE(warning.find("does not parse"), std::string::npos);
+}
+
+TEST(Pipeline, LcmOverMemqCarriesEveryTypeAndAcceptsClearCommands) {
+  Bench b(Config());
+  b.Run(5.0, 40.0);
+  std::vector<std::string> cleared;
+  LcmBridge bridge("memq://", "PUMPTHERM", [&](const std::string&, const pumptherm::alarm_clear_t& m) {
+    cleared.push_back(m.pump + "/" + m.source);
+  });
+  struct Counter {
+    std::map<std::string, int> n;
+    void On(const lcm::ReceiveBuffer*, const std::string& ch) { ++n[ch]; }
+  } counter;
+  lcm::LCM listener("memq://");
+  // memq is per LCM instance: the bridge's own instance receives what it publishes.
+  (void)listener;
+  for (const auto& [ch, bytes] : b.sink.lcm) EXPECT_TRUE(bridge.Publish(ch, bytes)) << ch;
+  pumptherm::alarm_clear_t clear;
+  clear.utime = 0;
+  clear.pump = "tmp1";
+  clear.node = "";
+  clear.source = "panel";
+  clear.comment = "test";
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(clear.getEncodedSize()));
+  clear.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  EXPECT_TRUE(bridge.Publish("PUMPTHERM/tmp1/ALARM_CLEAR", bytes));
+  bridge.Handle();
+  ASSERT_EQ(cleared.size(), 1U);
+  EXPECT_EQ(cleared[0], "tmp1/panel");
+}
+
+TEST(Pipeline, ConfigurationErrorsNameTheKey) {
+  auto error_of = [](const std::string& extra) {
+    try {
+      Gateway g(ParseConfig(Config(extra), "p.toml"));
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n")
+                .find("p.toml:12: key 'pump[0]': pump 'tmp1': alarm levels (line 20) for node 'winding', which model 'saheba2010-improved' does not have"),
+            std::string::npos)
+      << error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n");
+  const std::string bad_model = [] {
+    try {
+      Gateway g(ParseConfig(std::string(R"(
+[[can]]
+interface = "can0"
+[[pump]]
+name = "p"
+node_id = 1
+thermal_model = "no-such-model"
+)"), "p.toml"));
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  }();
+  EXPECT_NE(bad_model.find("p.toml:4: key 'pump[0].thermal_model': 'no-such-model': no such models file"), std::string::npos) << bad_model;
+}
+
+}  // namespace
+}  // namespace pumptherm::daemon
