@@ -82,7 +82,7 @@ class LogSink : public OutputSink {
 /// One CSV per pump, a row per thermal step.
 class CsvSink {
  public:
-  CsvSink(const std::string& dir, const Gateway& g) {
+  CsvSink(const std::string& dir, double origin_s, const Gateway& g) : origin_s_(origin_s) {
     if (dir.empty()) return;
     for (const auto& p : g.pumps()) {
       files_.push_back(std::make_unique<File>(fmt::format("{}/{}.csv", dir, p->config().name), "w"));
@@ -99,7 +99,7 @@ class CsvSink {
       const PumpSnapshot& s = g.pumps()[i]->snapshot();
       if (!s.initialised || s.time_us == last_[i]) continue;
       last_[i] = s.time_us;
-      std::string row = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6);
+      std::string row = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6 - origin_s_);
       for (std::size_t k = 0; k < s.node_degC.size(); ++k) row += fmt::format(",{:.4f},{:.4f}", s.node_degC[k], s.node_sd_K[k]);
       const auto& r = s.resistance;
       row += fmt::format(",{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f}\n",
@@ -115,6 +115,7 @@ class CsvSink {
   }
 
  private:
+  double origin_s_;
   std::vector<std::unique_ptr<File>> files_;
   std::vector<std::int64_t> last_;
 };
@@ -125,7 +126,7 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
                          const OfflineOptions& options) {
   OfflineResult r;
   LogSink sink(options, gateway);
-  CsvSink csv(options.csv_dir, gateway);
+  CsvSink csv(options.csv_dir, options.csv_time_origin_s, gateway);
   std::string line;
   std::string last_interface;
   std::size_t last_index = 0;

@@ -17,6 +17,7 @@ struct OfflineOptions {
   std::string output_log;   ///< candump log of the frames the gateway sends ("" = none)
   std::string lcm_log;      ///< LCM log file of the messages it publishes ("" = none)
   std::string csv_dir;      ///< per-pump CSV of every thermal step ("" = none)
+  double csv_time_origin_s = 0.0;  ///< subtracted from the Unix time in the CSV's time_s
   bool table = false;       ///< print the pump table while running
   double table_period_s = 60.0;  ///< of log time between tables
   double pace = 0.0;        ///< log seconds per wall second (0 = as fast as possible)

@@ -37,6 +37,8 @@ int main(int argc, char** argv) {
   app.add_option("--output-log", offline.output_log, "with -r: write the frames the gateway sends as a candump log");
   app.add_option("--lcm-log", offline.lcm_log, "with -r: write the LCM messages as an LCM log file (lcm-logplayer plays it)");
   app.add_option("--csv-dir", offline.csv_dir, "with -r: write <pump>.csv per pump, a row per thermal step");
+  app.add_option("--csv-time-origin", offline.csv_time_origin_s,
+                 "with --csv-dir: Unix time (s) that becomes time_s = 0 in the CSV files");
   app.add_flag("--table", offline.table, "with -r: print a table of the pumps while running");
   app.add_option("--table-period", offline.table_period_s, "with --table: log seconds between tables")
       ->check(CLI::PositiveNumber);
