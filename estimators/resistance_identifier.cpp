@@ -9,6 +9,8 @@ namespace pumptherm::estimators {
 namespace {
 
 constexpr double kSecondsPerHour = 3600.0;
+// Share of the needed information one block must add to count as a fresh load change.
+constexpr double kFreshExcitationShare = 0.01;
 
 // Four confidence levels in the spirit of Han 2019 eq. 23, on the normalised innovation
 // z = |eps| / sqrt(S) (S = phi^T P phi + r, the innovation variance) instead of |eps| / |y|.
@@ -194,7 +196,14 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   const double s_ww = state_.moments(1, 1);
   const double info_r = s_ww > 0.0 ? s_ii - s_iw * s_iw / s_ww : s_ii;  // A^2 (block units)
   const double sigma_target = config_.identifiable_sigma_rel * motor_.copper.r0_ohm;
-  const bool identifiable = info_r > 0.0 && r / info_r <= sigma_target * sigma_target;
+  const double info_needed = r / (sigma_target * sigma_target);
+  // Information this block alone adds: its iq's distance from the window's iq at this speed
+  // (Schur complement of the previous moments updated by one block). A load change makes the
+  // block count at once, so its information is not spent on psi_f while the window catches up.
+  const double mean_iq = s_ww > 0.0 ? s_iw / s_ww * w : 0.0;
+  const double block_info = (iq - mean_iq) * (iq - mean_iq);
+  const bool identifiable = info_r > 0.0 && (info_r >= info_needed ||
+                                             block_info >= kFreshExcitationShare * info_needed);
 
   // Measurement row: y = iq Rs + w_r psi_f (Han 2019 eq. 6), h = [iq, 0, w_r, 0].
   const Eigen::Vector4d hrow(iq, 0.0, w, 0.0);
