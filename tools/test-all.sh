@@ -4,12 +4,12 @@
 # where the kernel has vcan, otherwise in a QEMU guest). Ends with CTest's summary of the main
 # build (unit + vcan). Run tools/setup.sh first (the README's command does).
 #
-# Environment: PUMPTHERM_JOBS (default: number of cores), PUMPTHERM_FUZZ_SECONDS (default 60),
+# Environment: PUMPTHERM_JOBS (default: number of cores), PUMPTHERM_FUZZ_SECONDS (default 30),
 # CI=true makes a vcan test that can run neither natively nor in the guest fail, not skip.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=${PUMPTHERM_JOBS:-$(nproc)}
-fuzz_seconds=${PUMPTHERM_FUZZ_SECONDS:-60}
+fuzz_seconds=${PUMPTHERM_FUZZ_SECONDS:-30}
 start=$(date +%s)
 stage() { printf '\n=== %s (%ds)\n' "$*" $(( $(date +%s) - start )); }
 
@@ -31,10 +31,10 @@ if [[ -x tests/fuzz/run.sh ]]; then
   stage "fuzz targets, ${fuzz_seconds} s each"
   CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
     -DPUMPTHERM_FUZZ=ON -DPUMPTHERM_BUILD_BENCHMARKS=OFF
-  cmake --build build-fuzz -j "$jobs"
+  cmake --build build-fuzz -j "$jobs" --target pumptherm_fuzz_all
   tests/fuzz/run.sh build-fuzz "$fuzz_seconds"
 fi
 
-stage "all tests of the main build: unit and vcan"
+stage "all tests of the main build: unit, vcan (QEMU guest) and system (Debian guest with systemd)"
 ctest --test-dir build -j "$jobs" --output-on-failure
 stage "done"
