@@ -38,7 +38,7 @@ std::string ReadText(const fs::path& path) {
   return ss.str();
 }
 
-/// Directories searched for bundled files of kind `sub` ("scenarios", "protocol"): the installed
+/// Directories searched for bundled files of kind `sub` ("scenarios"): the installed
 /// share directory beside the executable, then the source tree.
 std::vector<fs::path> SearchDirs(std::string_view sub, const char* source_dir) {
   std::vector<fs::path> dirs;
@@ -136,11 +136,16 @@ int RunPlantCommand(const PlantOptions& o) {
     return plant::LoadedText{ReadText(p), p.string()};
   };
   if (sc.can_log) {
-    const fs::path dbc = o.dbc.empty() ? FindBundled("pumptherm.dbc", "protocol", PUMPTHERM_PROTOCOL_SOURCE_DIR, "DBC")
-                                       : fs::path(o.dbc);
-    const fs::path map = o.mapping.empty()
-                             ? FindBundled("mapping_pumptherm.toml", "protocol", PUMPTHERM_PROTOCOL_SOURCE_DIR, "mapping")
-                             : fs::path(o.mapping);
+    // The shipped frame layout, found as the daemon finds it (daemon/resources.hpp).
+    auto shipped = [](const char* name) {
+      try {
+        return fs::path(daemon::ResolveResource(daemon::ResourceKind::kDbc, name));
+      } catch (const std::runtime_error& e) {
+        throw InputError(e.what());
+      }
+    };
+    const fs::path dbc = o.dbc.empty() ? shipped("pumptherm.dbc") : fs::path(o.dbc);
+    const fs::path map = o.mapping.empty() ? shipped("mapping_pumptherm.toml") : fs::path(o.mapping);
     res.dbc = {ReadText(dbc), dbc.string()};
     res.mapping = {ReadText(map), map.string()};
   }
