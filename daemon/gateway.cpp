@@ -382,7 +382,6 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
     }
   }
   if (now_us >= next_health_us_) {
-    const double dt_s = static_cast<double>(now_us - (next_health_us_ - static_cast<std::int64_t>(config_.lcm.health_period_s * 1e6))) * 1e-6;
     for (std::size_t p = 0; p < pumps_.size(); ++p) {
       PumpIo& io = io_[p];
       const auto& c = pumps_[p]->counters();
@@ -394,7 +393,6 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
       io.frames_at_last_health = frames;
       io.last_health_us = now_us;
     }
-    (void)dt_s;
     if (sink.PublishLcm(lcm_channels::GatewayHealthChannelName(prefix), now_us, EncodeHealth(now_us))) {
       ++counters_.lcm_published;
     } else {
