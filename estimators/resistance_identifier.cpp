@@ -51,7 +51,7 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
       !(config.magnet_drift_K_per_sqrt_h >= 0.0) ||
       !(config.winding_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
       !(config.magnet_rate_walk_K_per_h_per_sqrt_h >= 0.0) || !(config.rate_time_constant_s > 0.0) ||
-      !(config.min_current_A >= 0.0) ||
+      !(config.min_current_A >= 0.0) || !(config.idle_current_A >= 0.0) ||
       config.reacquire_after_rejections < 1) {
     throw std::invalid_argument("ResistanceIdentifierConfig: a value is out of range");
   }
@@ -173,8 +173,18 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   add_pair(kStateResistance, kStateResistanceRate, q_resistance_ohm2_per_s_,
            q_resistance_rate_ohm2_per_s3_);
   add_pair(kStateFlux, kStateFluxRate, q_flux_Wb2_per_s_, q_flux_rate_Wb2_per_s3_);
+  // Idle: with |iq| below idle_current_A there is no copper loss to drive the winding's
+  // temperature and no resistive drop to see it by. The trend learnt under load no longer
+  // applies (the winding cools), so Rs is held where it is, not extrapolated: its rate is
+  // dropped (zero rows in F) and re-opened to its stationary prior for the next load.
+  const bool idle = std::abs(iq) < config_.idle_current_A;
+  if (idle) {
+    f(kStateResistance, kStateResistanceRate) = 0.0;
+    f(kStateResistanceRate, kStateResistanceRate) = 0.0;
+  }
   x = f * x;
   p = f * p * f.transpose() + q;
+  if (idle) p(kStateResistanceRate, kStateResistanceRate) = p0_(kStateResistanceRate, kStateResistanceRate);
   // Bound the growth while nothing is learnt: scale row and column i together (a congruence
   // with a diagonal matrix), which keeps P symmetric positive definite.
   for (int i = 0; i < 4; ++i) {
@@ -202,8 +212,8 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   // block count at once, so its information is not spent on psi_f while the window catches up.
   const double mean_iq = s_ww > 0.0 ? s_iw / s_ww * w : 0.0;
   const double block_info = (iq - mean_iq) * (iq - mean_iq);
-  const bool identifiable = info_r > 0.0 && (info_r >= info_needed ||
-                                             block_info >= kFreshExcitationShare * info_needed);
+  const bool identifiable = !idle && info_r > 0.0 &&
+                            (info_r >= info_needed || block_info >= kFreshExcitationShare * info_needed);
 
   // Measurement row: y = iq Rs + w_r psi_f (Han 2019 eq. 6), h = [iq, 0, w_r, 0].
   const Eigen::Vector4d hrow(iq, 0.0, w, 0.0);

@@ -43,7 +43,8 @@ enum class ResistanceStatus : std::uint8_t {
   kConverging = 1,       ///< identifiable, but the Rs standard deviation is above the target
   kTracking = 2,         ///< identifiable, converged, inside the plausible band
   kNotIdentifiable = 3,  ///< iq and w_r carry no independent information (or |iq| is below
-                         ///< min_current_A): Rs held (psi_f tracked unless below min_current_A)
+                         ///< min_current_A or idle_current_A): Rs held (psi_f tracked unless
+                         ///< below min_current_A)
   kImplausible = 4,      ///< the Rs estimate is outside the plausible band of the motor
   kInvalidInput = 5,     ///< this sample had a NaN or infinite value and was ignored
 };
@@ -74,6 +75,10 @@ struct ResistanceIdentifierConfig {
   /// dead-time voltage error is nearly constant (absorbed into psi_f) only well above its
   /// knee; below it, its slope against iq looks like resistance. About 3x the drive's knee.
   double min_current_A = 0.0;
+  /// Blocks whose mean |iq| is below this count as idle (no copper loss, no resistive drop to
+  /// see): Rs is held without extrapolating its rate, the rate is dropped, psi_f is tracked,
+  /// and the status is not_identifiable (0 = off).
+  double idle_current_A = 0.2;
 };
 
 /// One raw telemetry sample in SI units.

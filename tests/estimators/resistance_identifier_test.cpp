@@ -220,6 +220,42 @@ TEST(ResistanceIdentifier, BlocksBelowMinimumCurrentAreNotUsed) {
   EXPECT_NEAR(e.resistance_ohm, 0.30, 1e-6);
 }
 
+// At zero current (the pump coasting, or held at speed with no gas load) the winding cools and
+// nothing in uq shows its resistance. The identifier must not extrapolate the warming trend it
+// learnt under load, nor claim to track: it holds Rs, says not_identifiable, and identifies
+// again at the next load.
+TEST(ResistanceIdentifier, HoldsWithoutExtrapolatingAtZeroCurrent) {
+  const MotorDescription motor = MotorPreset("han2019-tmp");
+  ResistanceIdentifier id(motor, {});
+  // 1 h of load changes while the winding warms: Rs 0.28 -> 0.30 ohm, a rate of 0.02 ohm/h.
+  const long warm = 3600L * 100;
+  const auto rs_warming = [&](long k) { return 0.28 + 0.02 * static_cast<double>(k) / warm; };
+  long k = 0;
+  for (; k < warm; ++k) id.Update(Exact(rs_warming(k), 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  ASSERT_EQ(id.estimate().status, ResistanceStatus::kTracking);
+  ASSERT_GT(id.Save().x(kStateResistanceRate), 0.5 * 0.02 / 3600.0) << "the warming trend was learnt";
+  const double at_idle = id.estimate().resistance_ohm;
+  ASSERT_NEAR(at_idle, 0.30, 1e-4);
+  // 30 min at rated speed with iq = 0 while the winding cools back to 0.29 ohm.
+  const long idle = 1800L * 100;
+  ResistanceEstimate e;
+  for (long j = 0; j < idle; ++j, ++k) {
+    const double rs = 0.30 - 0.01 * static_cast<double>(j) / idle;
+    e = id.Update(Exact(rs, 0.0182, 0.0, kRated_rad_per_s), kDt_s);
+    if (j >= 100) {
+      ASSERT_EQ(e.status, ResistanceStatus::kNotIdentifiable) << "idle sample " << j;
+      // Before the fix it said "tracking" here (and kept the learnt upward trend).
+      ASSERT_NEAR(e.resistance_ohm, at_idle, 1e-6) << "idle sample " << j;
+    }
+  }
+  EXPECT_NEAR(e.flux_Wb, 0.0182, 1e-9);  // the flux is still tracked at zero current
+  EXPECT_EQ(id.Save().x(kStateResistanceRate), 0.0);
+  // Load again (winding at 0.29 ohm): identified at once, tracking within 5 minutes.
+  for (long j = 0; j < 300L * 100; ++j, ++k) e = id.Update(Exact(0.29, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  EXPECT_NEAR(e.resistance_ohm, 0.29, 1e-4);
+  EXPECT_EQ(e.status, ResistanceStatus::kTracking);
+}
+
 TEST(ResistanceIdentifier, ConfigOutOfRangeThrows) {
   ResistanceIdentifierConfig c;
   c.block_samples = 0;
