@@ -143,7 +143,9 @@ Gateway::Gateway(const DaemonConfig& config) : config_(config), counter_(config.
       auto it = models.find(path);
       if (it == models.end()) {
         it = models.emplace(path, std::make_shared<const estimators::ThermalModel>(
-                                      estimators::ThermalModel::Parse(ReadTextFile(path), path)))
+                                      estimators::ThermalModel::Parse(
+                                      ReadTextFile(path), path,
+                                      estimators::ThermalModelFiles{DirectoryOf(path), &ReadTextFile})))
                  .first;
       }
       model = it->second;

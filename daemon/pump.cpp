@@ -297,7 +297,7 @@ double Pump::TimeToTrip_s(const estimators::ThermalInputs& in, int* node) {
     bool reaches = false;
     for (std::size_t i = 0; i < names.size(); ++i) reaches = reaches || ss(static_cast<Eigen::Index>(i)) >= trip_of(i);
     if (!reaches) return std::numeric_limits<double>::infinity();
-    model_->Linearise(in, forecast_lin_);
+    model_->Linearise(in, forecast_x_, forecast_lin_);
     forecast_disc_.Update(forecast_lin_, kForecastStep_s);
   } catch (const std::exception&) {
     return std::numeric_limits<double>::infinity();
@@ -342,7 +342,7 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   if (gap_s > 0.0) {
     try {
       estimators::ThermalLinearModel lin;
-      model_->Linearise(state.inputs, lin);
+      model_->Linearise(state.inputs, x, lin);
       estimators::ThermalDiscreteModel d;
       estimators::DiscretiseZoh(lin.a_per_s, gap_s, d);
       x = d.ad * x + d.phi_s * lin.f_K_per_s;

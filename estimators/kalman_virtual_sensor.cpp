@@ -45,7 +45,8 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
     throw std::domain_error("virtual sensor: the period must be positive and finite");
   }
-  model_.Linearise(inputs, lin_);
+  // Terms that read node temperatures are evaluated at the current estimate.
+  model_.Linearise(inputs, filter_.State(), lin_);
   discretiser_.Update(lin_, dt_s);
   const ThermalDiscreteModel& d = discretiser_.Current();
   bu_.noalias() = d.phi_s * lin_.f_K_per_s;

@@ -4,7 +4,10 @@
 #include <fmt/format.h>
 
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <deque>
 #include <map>
 #include <muParser.h>
 #include <optional>
@@ -29,13 +32,163 @@ struct ExpressionVariables {
   double i2_A2 = 0.0;
   double ambient_C = 25.0;
   double coolant_C = 25.0;
+  std::deque<double> node_C;    ///< `<node>_C` of the states (deque: stable addresses)
+  std::deque<double> quantity;  ///< values of the input-dependent `[[quantity]]` entries
 };
+
+/// A loss map (2-D, over a row axis and a column axis) or curve (1-D) read from a CSV file, and
+/// its lookup rule. Outside the grid the value at the nearest edge is taken (no extrapolation).
+struct Table {
+  std::string name;
+  bool linear = true;       ///< linear interpolation, else rounding to the nearest grid point
+  std::vector<double> x;    ///< row axis (first column), strictly increasing
+  std::vector<double> y;    ///< column axis (header of a map), strictly increasing; empty: curve
+  std::vector<double> v;    ///< values, row-major: v[i * max(1, y.size()) + j]
+
+  /// Index and weight of the upper neighbour along `axis` (linear), or the nearest index with
+  /// weight 0 (rounding; a tie goes to the point farther from zero, as MATLAB's round does).
+  static void Locate(const std::vector<double>& axis, double q, bool linear, std::size_t& i0,
+                     double& w) {
+    const std::size_t n = axis.size();
+    w = 0.0;
+    if (n == 1 || q <= axis.front()) {
+      i0 = 0;
+      return;
+    }
+    if (q >= axis.back()) {
+      i0 = n - 1;
+      return;
+    }
+    const std::size_t hi = static_cast<std::size_t>(
+        std::upper_bound(axis.begin(), axis.end(), q) - axis.begin());  // axis[hi-1] <= q < axis[hi]
+    const std::size_t lo = hi - 1;
+    const double span = axis[hi] - axis[lo];
+    const double f = (q - axis[lo]) / span;
+    if (linear) {
+      i0 = lo;
+      w = f;
+      return;
+    }
+    const double mid = 0.5 * (axis[lo] + axis[hi]);
+    if (q == mid) {
+      i0 = std::abs(axis[hi]) >= std::abs(axis[lo]) ? hi : lo;
+    } else {
+      i0 = q > mid ? hi : lo;
+    }
+  }
+
+  double At(std::size_t i, std::size_t j) const { return v[i * std::max<std::size_t>(1, y.size()) + j]; }
+
+  double Curve(double q) const {
+    std::size_t i = 0;
+    double w = 0.0;
+    Locate(x, q, linear, i, w);
+    return w == 0.0 ? At(i, 0) : (1.0 - w) * At(i, 0) + w * At(i + 1, 0);
+  }
+
+  double Map(double qr, double qc) const {
+    std::size_t i = 0, j = 0;
+    double wi = 0.0, wj = 0.0;
+    Locate(x, qr, linear, i, wi);
+    Locate(y, qc, linear, j, wj);
+    const std::size_t i1 = wi == 0.0 ? i : i + 1, j1 = wj == 0.0 ? j : j + 1;
+    return (1.0 - wi) * ((1.0 - wj) * At(i, j) + wj * At(i, j1)) +
+           wi * ((1.0 - wj) * At(i1, j) + wj * At(i1, j1));
+  }
+
+  static double CurveCallback(void* self, double q) { return static_cast<const Table*>(self)->Curve(q); }
+  static double MapCallback(void* self, double qr, double qc) {
+    return static_cast<const Table*>(self)->Map(qr, qc);
+  }
+};
+
+/// A number parsed from the whole of `cell` (surrounding blanks allowed).
+std::optional<double> ParseNumber(std::string_view cell, bool allow_suffix) {
+  std::string s(cell);
+  const auto b = s.find_first_not_of(" \t\r");
+  if (b == std::string::npos) return std::nullopt;
+  s = s.substr(b);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r')) s.pop_back();
+  char* end = nullptr;
+  const double v = std::strtod(s.c_str(), &end);
+  if (end == s.c_str() || !std::isfinite(v)) return std::nullopt;
+  if (!allow_suffix && *end != '\0') return std::nullopt;
+  return v;
+}
+
+/// Parses a table's CSV text (a header, then rows of numbers). A curve has two columns: x, then
+/// the value. A map's first column is the row axis; the header of every further column starts
+/// with that column's axis value (a unit may follow: "100rpm"). Throws std::runtime_error naming
+/// `where` (the file), the line and the column.
+void ParseTableCsv(std::string_view text, const std::string& where, bool map, Table& t) {
+  std::vector<std::vector<std::string_view>> rows;
+  std::vector<int> lines;
+  int line = 0;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    std::size_t eol = text.find('\n', pos);
+    if (eol == std::string_view::npos) eol = text.size();
+    std::string_view l = text.substr(pos, eol - pos);
+    pos = eol + 1;
+    ++line;
+    if (!l.empty() && l.back() == '\r') l.remove_suffix(1);
+    if (l.find_first_not_of(" \t") == std::string_view::npos) continue;
+    std::vector<std::string_view> cells;
+    std::size_t c = 0;
+    while (true) {
+      const std::size_t comma = l.find(',', c);
+      cells.push_back(l.substr(c, comma == std::string_view::npos ? std::string_view::npos : comma - c));
+      if (comma == std::string_view::npos) break;
+      c = comma + 1;
+    }
+    rows.push_back(std::move(cells));
+    lines.push_back(line);
+  }
+  auto fail = [&](int l, std::size_t col, const std::string& what) {
+    throw std::runtime_error(fmt::format("{}:{}: column {}: {}", where, l, col + 1, what));
+  };
+  if (rows.size() < 2) throw std::runtime_error(fmt::format("{}: needs a header and at least one row", where));
+  const std::size_t cols = rows[0].size();
+  if (!map && cols != 2) fail(lines[0], 0, fmt::format("a curve has 2 columns (x, value), found {}", cols));
+  if (map && cols < 2) fail(lines[0], 0, "a map needs the row axis and at least one value column");
+  if (map) {
+    for (std::size_t j = 1; j < cols; ++j) {
+      auto v = ParseNumber(rows[0][j], true);
+      if (!v) fail(lines[0], j, fmt::format("header '{}' does not start with the column's axis value", rows[0][j]));
+      if (!t.y.empty() && !(*v > t.y.back())) fail(lines[0], j, "column axis values must increase strictly");
+      t.y.push_back(*v);
+    }
+  }
+  for (std::size_t r = 1; r < rows.size(); ++r) {
+    if (rows[r].size() != cols) {
+      fail(lines[r], std::min(rows[r].size(), cols) - 1,
+           fmt::format("{} cells where the header has {}", rows[r].size(), cols));
+    }
+    for (std::size_t j = 0; j < cols; ++j) {
+      auto v = ParseNumber(rows[r][j], false);
+      if (!v) fail(lines[r], j, fmt::format("'{}' is not a finite number", rows[r][j]));
+      if (j == 0) {
+        if (!t.x.empty() && !(*v > t.x.back())) fail(lines[r], j, "row axis values must increase strictly");
+        t.x.push_back(*v);
+      } else {
+        t.v.push_back(*v);
+      }
+    }
+  }
+}
+
+/// `directory`/`path` as text (no file system access); absolute paths unchanged.
+std::string JoinPath(const std::string& directory, const std::string& path) {
+  if (path.empty() || path.front() == '/' || directory.empty()) return path;
+  return directory.back() == '/' ? directory + path : directory + "/" + path;
+}
 
 /// A number, or a muParser expression of the parameters and (where allowed) the inputs.
 struct Expression {
   double value = 0.0;                  ///< the value when constant
   std::unique_ptr<mu::Parser> parser;  ///< set only when the expression reads an input
   std::string text;
+  bool reads_nodes = false;            ///< reads a node temperature `<node>_C`
 
   bool Varies() const { return parser != nullptr; }
   double Eval() const { return parser ? parser->Eval() : value; }
@@ -92,6 +245,14 @@ struct ThermalModel::Impl {
   Eigen::VectorXd inv_capacity;
   std::vector<Edge> edges;
   std::vector<LossTerm> losses;
+  std::vector<std::unique_ptr<Table>> tables;  ///< unique_ptr: muParser holds their addresses
+  struct Quantity {
+    std::string name;
+    Expression value;
+    double* slot = nullptr;  ///< in vars->quantity when the value varies
+  };
+  std::vector<Quantity> quantities;
+  bool uses_node_temperatures = false;
   bool uses_coolant = false;
   bool resistances_vary = false;
   Eigen::VectorXd winding_weights;
@@ -125,7 +286,25 @@ struct ThermalModel::Impl {
       auto p = std::make_unique<mu::Parser>();
       try {
         for (const auto& [k, val] : parameters) p->DefineConst(k, val);
+        for (const auto& t : tables) {
+          if (t->y.empty()) {
+            p->DefineFunUserData(t->name, &Table::CurveCallback, t.get());
+          } else {
+            p->DefineFunUserData(t->name, &Table::MapCallback, t.get());
+          }
+        }
+        for (const Quantity& q : quantities) {
+          if (q.slot) {
+            if (inputs_allowed) p->DefineVar(q.name, q.slot);
+          } else {
+            p->DefineConst(q.name, q.value.value);
+          }
+        }
         if (inputs_allowed) {
+          for (int st = 0; st < static_cast<int>(node_of_state.size()); ++st) {
+            p->DefineVar(state_names[static_cast<std::size_t>(st)] + "_C",
+                         &vars->node_C[static_cast<std::size_t>(st)]);
+          }
           p->DefineVar("speed_rpm", &vars->speed_rpm);
           p->DefineVar("speed_rad_per_s", &vars->speed_rad_per_s);
           p->DefineVar("id_A", &vars->id_A);
@@ -137,10 +316,19 @@ struct ThermalModel::Impl {
         }
         p->SetExpr(*s);
         e.value = p->Eval();
-        if (!p->GetUsedVar().empty()) e.parser = std::move(p);
+        const auto used = p->GetUsedVar();
+        for (const auto& [used_name, ptr] : used) {
+          for (const std::string& st : state_names) e.reads_nodes = e.reads_nodes || used_name == st + "_C";
+          for (const Quantity& q : quantities) {
+            e.reads_nodes = e.reads_nodes || (used_name == q.name && q.value.reads_nodes);
+          }
+        }
+        if (!used.empty()) e.parser = std::move(p);
       } catch (const mu::Parser::exception_type& err) {
-        Fail(LineOf(n), fmt::format("key '{}': expression \"{}\": {}{}", key, *s, err.GetMsg(),
-                                    inputs_allowed ? "" : " (only parameters may be used here)"));
+        Fail(LineOf(n),
+             fmt::format("key '{}': expression \"{}\": {} (at position {}){}", key, *s, err.GetMsg(),
+                         err.GetPos() + 1,
+                         inputs_allowed ? "" : " (only parameters and tables may be used here)"));
       }
     } else {
       Fail(LineOf(n), fmt::format("key '{}' must be a number or an expression string", key));
@@ -164,6 +352,22 @@ struct ThermalModel::Impl {
     vars->i2_A2 = PhaseCurrentSquareSum_A2(in.id_A, in.iq_A);
     vars->ambient_C = in.ambient_degC;
     vars->coolant_C = uses_coolant ? in.coolant_degC : in.ambient_degC;
+    EvaluateQuantities();
+  }
+
+  /// Sets the node temperatures that expressions read (`<node>_C`).
+  void SetTemperatures(const Eigen::VectorXd& x_degC) const {
+    if (x_degC.size() != n() || !x_degC.allFinite()) {
+      throw std::domain_error("thermal model: state temperatures must be finite, one per state");
+    }
+    for (int st = 0; st < n(); ++st) vars->node_C[static_cast<std::size_t>(st)] = x_degC(st);
+  }
+
+  /// `[[quantity]]` values in file order (each may read the ones before it).
+  void EvaluateQuantities() const {
+    for (const Quantity& q : quantities) {
+      if (q.slot) *q.slot = q.value.Eval();
+    }
   }
 
   double Boundary(int code) const { return code == kAmbient ? vars->ambient_C : vars->coolant_C; }
@@ -276,7 +480,8 @@ void CheckKeys(const toml::table& t, std::initializer_list<const char*> allowed,
 
 }  // namespace
 
-ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& source) {
+ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& source,
+                                 const ThermalModelFiles& files) {
   auto impl = std::make_unique<Impl>();
   Impl& m = *impl;
   m.source = source;
@@ -287,7 +492,8 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
     throw ThermalModelError(fmt::format("{}: {}", Where(source, static_cast<int>(e.source().begin.line)),
                                         e.description()));
   }
-  CheckKeys(root, {"model", "parameters", "node", "edge", "loss"}, "top level", source);
+  CheckKeys(root, {"model", "parameters", "table", "quantity", "node", "edge", "loss"}, "top level",
+            source);
 
   if (const toml::table* model = root["model"].as_table()) {
     CheckKeys(*model, {"name", "description", "source"}, "[model]", source);
@@ -349,6 +555,91 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
   m.capacity_J_per_K.resize(m.n());
   for (int s = 0; s < m.n(); ++s) m.capacity_J_per_K(s) = caps[m.node_of_state[s]];
   m.inv_capacity = m.capacity_J_per_K.cwiseInverse();
+  m.vars->node_C.assign(static_cast<std::size_t>(m.n()), 25.0);
+
+  // Tables: loss maps and curves from CSV files named relative to the model file.
+  std::set<std::string> names_taken;
+  for (const auto& [k, v] : m.parameters) names_taken.insert(k);
+  for (const auto& st : m.state_names) names_taken.insert(st + "_C");
+  for (const char* v : {"speed_rpm", "speed_rad_per_s", "id_A", "iq_A", "is_A", "i2_A2", "ambient_C",
+                        "coolant_C"}) {
+    names_taken.insert(v);
+  }
+  auto check_name = [&](const std::string& what, const std::string& nm, int line) {
+    static const std::string kFirst = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_";
+    static const std::string kRest = kFirst + "0123456789";
+    if (nm.empty() || kFirst.find(nm[0]) == std::string::npos ||
+        nm.find_first_not_of(kRest) != std::string::npos) {
+      m.Fail(line, fmt::format("{} '{}': a name is letters, digits and '_', not starting with a digit", what, nm));
+    }
+    if (!names_taken.insert(nm).second) {
+      m.Fail(line, fmt::format("{} '{}': the name is already a parameter, input, node temperature, table "
+                               "or quantity",
+                               what, nm));
+    }
+  };
+  if (const toml::node* tv = root.get("table")) {
+    const toml::array* ta = tv->as_array();
+    if (!ta) m.Fail(LineOf(*tv), "'table' must be an array of tables ([[table]])");
+    for (const toml::node& e : *ta) {
+      const toml::table* tt = e.as_table();
+      const int line = LineOf(e);
+      if (!tt) m.Fail(line, "[[table]] entries must be tables");
+      CheckKeys(*tt, {"name", "file", "kind", "lookup", "description"}, "[[table]]", source);
+      auto t = std::make_unique<Table>();
+      t->name = (*tt)["name"].value_or(std::string{});
+      check_name("table", t->name, line);
+      const std::string kind = (*tt)["kind"].value_or(std::string{});
+      if (kind != "map" && kind != "curve") {
+        m.Fail(line, fmt::format("table '{}': kind must be \"map\" (2-D over rows and columns) or "
+                                 "\"curve\" (1-D)",
+                                 t->name));
+      }
+      const std::string lookup = (*tt)["lookup"].value_or(std::string{});
+      if (lookup != "linear" && lookup != "nearest") {
+        m.Fail(line, fmt::format("table '{}': lookup must be \"linear\" (interpolation) or \"nearest\" "
+                                 "(rounding to the grid)",
+                                 t->name));
+      }
+      t->linear = lookup == "linear";
+      const std::string file = (*tt)["file"].value_or(std::string{});
+      if (file.empty()) m.Fail(line, fmt::format("table '{}': missing file = \"<path relative to the model file>\"", t->name));
+      if (!files.read) {
+        m.Fail(line, fmt::format("table '{}': this model names a file ({}) but no file reader was given "
+                                 "to the parser",
+                                 t->name, file));
+      }
+      const std::string path = JoinPath(files.directory, file);
+      try {
+        ParseTableCsv(files.read(path), path, kind == "map", *t);
+      } catch (const std::exception& err) {
+        m.Fail(line, fmt::format("table '{}': {}", t->name, err.what()));
+      }
+      m.tables.push_back(std::move(t));
+    }
+  }
+  // Quantities: named expressions of the operating point, evaluated in file order.
+  if (const toml::node* qv = root.get("quantity")) {
+    const toml::array* qa = qv->as_array();
+    if (!qa) m.Fail(LineOf(*qv), "'quantity' must be an array of tables ([[quantity]])");
+    for (const toml::node& e : *qa) {
+      const toml::table* qt = e.as_table();
+      const int line = LineOf(e);
+      if (!qt) m.Fail(line, "[[quantity]] entries must be tables");
+      CheckKeys(*qt, {"name", "value", "description"}, "[[quantity]]", source);
+      Impl::Quantity q;
+      q.name = (*qt)["name"].value_or(std::string{});
+      check_name("quantity", q.name, line);
+      const toml::node* val = qt->get("value");
+      if (!val) m.Fail(line, fmt::format("quantity '{}': missing value", q.name));
+      q.value = m.Compile(*val, fmt::format("quantity {}.value", q.name), true);
+      if (q.value.Varies()) {
+        m.vars->quantity.push_back(q.value.value);
+        q.slot = &m.vars->quantity.back();
+      }
+      m.quantities.push_back(std::move(q));
+    }
+  }
 
   auto end_of = [&](const std::string& nm, int line, const std::string& label) {
     if (nm == "ambient") return kAmbient;
@@ -391,6 +682,7 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
       m.Fail(LineOf(*r), fmt::format("edge {}: zero resistance (merge the two nodes instead)", label));
     }
     m.resistances_vary = m.resistances_vary || e.resistance_K_per_W.Varies();
+    m.uses_node_temperatures = m.uses_node_temperatures || e.resistance_K_per_W.reads_nodes;
     if (e.b < 0) {
       touches_boundary[e.a] = true;
       m.uses_coolant = m.uses_coolant || e.b == kCoolant;
@@ -454,6 +746,7 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
       const toml::node* p = tt->get("power_W");
       if (!p) m.Fail(line, fmt::format("loss '{}': missing power_W", t.name));
       t.power_W = m.Compile(*p, "power_W", true);
+      m.uses_node_temperatures = m.uses_node_temperatures || t.power_W.reads_nodes;
       const toml::table* shares = (*tt)["shares"].as_table();
       if (!shares || shares->empty()) {
         m.Fail(line, fmt::format("loss '{}': missing shares = {{ node = fraction, ... }}", t.name));
@@ -601,6 +894,14 @@ bool ThermalModel::UsesCoolant() const { return impl_->uses_coolant; }
 bool ThermalModel::ResistancesVary() const { return impl_->resistances_vary; }
 const Eigen::VectorXd& ThermalModel::WindingWeights() const { return impl_->winding_weights; }
 
+bool ThermalModel::UsesNodeTemperatures() const { return impl_->uses_node_temperatures; }
+
+void ThermalModel::Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_degC,
+                             ThermalLinearModel& out) const {
+  impl_->SetTemperatures(x_degC);
+  Linearise(in, out);
+}
+
 void ThermalModel::Linearise(const ThermalInputs& in, ThermalLinearModel& out) const {
   const Impl& m = *impl_;
   m.SetInputs(in);
@@ -635,6 +936,7 @@ void ThermalModel::Linearise(const ThermalInputs& in, ThermalLinearModel& out) c
 Eigen::VectorXd ThermalModel::NodeLosses_W(const ThermalInputs& in,
                                            const Eigen::VectorXd& x_degC) const {
   const Impl& m = *impl_;
+  m.SetTemperatures(x_degC);
   m.SetInputs(in);
   m.LossModel();
   return m.p0 + m.d * x_degC;
@@ -643,6 +945,7 @@ Eigen::VectorXd ThermalModel::NodeLosses_W(const ThermalInputs& in,
 Eigen::VectorXd ThermalModel::AllTemperatures_degC(const ThermalInputs& in,
                                                    const Eigen::VectorXd& x_degC) const {
   const Impl& m = *impl_;
+  m.SetTemperatures(x_degC);
   m.SetInputs(in);
   const Reduced& r = m.Current();
   m.LossModel();

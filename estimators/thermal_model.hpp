@@ -21,6 +21,7 @@
 /// Pure library: parses text handed to it, does no I/O.
 
 #include <Eigen/Dense>
+#include <functional>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -49,6 +50,17 @@ struct ThermalInputs {
 inline double PhaseCurrentSquareSum_A2(double id_A, double iq_A) {
   return 1.5 * (id_A * id_A + iq_A * iq_A);
 }
+
+/// How the parser reaches the files a model names (loss maps and curves, `[[table]]`). The
+/// parser stays pure: it joins `directory` (the model file's directory; empty = none) and the
+/// relative path as text, and asks `read` for the file's contents. `read` throws (any
+/// std::exception) when the file cannot be read; the parser turns that into a ThermalModelError
+/// naming the model file, the line and the table. Without `read`, a model with tables is an
+/// error.
+struct ThermalModelFiles {
+  std::string directory;
+  std::function<std::string(const std::string& path)> read;
+};
 
 /// The network linearised at one operating point: dx/dt = a x + f, with
 ///  a (n x n, 1/s) = C^-1 (A_red + G D)        (eq. S25, eqs. 12-16)
@@ -79,7 +91,10 @@ class ThermalModel {
   /// zero resistance, a node without any edge, a group of nodes without a path to a boundary,
   /// a singular massless sub-network, bad expressions. Negative resistances are legal (the
   /// T-equivalent conduction elements of Saheba 2010 Table 2 need them).
-  static ThermalModel Parse(std::string_view toml_text, const std::string& source);
+  /// Tables (`[[table]]`) are read through `files` (paths relative to `files.directory`); their
+  /// CSV errors name the table file, its line and column.
+  static ThermalModel Parse(std::string_view toml_text, const std::string& source,
+                            const ThermalModelFiles& files = {});
 
   ThermalModel(ThermalModel&&) noexcept;
   ThermalModel& operator=(ThermalModel&&) noexcept;
@@ -105,10 +120,22 @@ class ThermalModel {
   /// temperature-dependent loss.
   const Eigen::VectorXd& WindingWeights() const;
 
+  /// Whether any expression reads a node temperature (`<node>_C`). Such terms are evaluated at
+  /// the temperatures handed to Linearise(in, x, out) and held over the step (their dependence on
+  /// temperature is not part of `a`; the `temperature_coefficient_per_K` terms are).
+  bool UsesNodeTemperatures() const;
+
   /// Linearises the network at `in` into `out` (resized on first use; no allocation afterwards
-  /// when the resistances are constant). Throws std::domain_error when an input is not finite or
-  /// the massless sub-network becomes singular at this operating point.
+  /// when the resistances are constant). Expressions reading node temperatures see the
+  /// temperatures of the last call that gave them (25 degC before any). Throws std::domain_error
+  /// when an input is not finite or the massless sub-network becomes singular at this operating
+  /// point.
   void Linearise(const ThermalInputs& in, ThermalLinearModel& out) const;
+
+  /// As above, with the states' temperatures `x_degC` (n) for expressions that read node
+  /// temperatures. Throws std::domain_error also when `x_degC` is not finite or not of size n.
+  void Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_degC,
+                 ThermalLinearModel& out) const;
 
   /// Losses per node (all nodes, file order), W, at temperatures `x_degC` of the states.
   Eigen::VectorXd NodeLosses_W(const ThermalInputs& in, const Eigen::VectorXd& x_degC) const;

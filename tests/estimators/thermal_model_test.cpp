@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 
 namespace pe = pumptherm::estimators;
@@ -160,8 +161,31 @@ TEST(ThermalModel, CopperLossFollowsTheTemperatureOfItsNodes) {
   EXPECT_NEAR(p(1) + p(2), 0.0, 1e-12);  // standstill: no iron loss
 }
 
+TEST(ThermalModel, WallscheidModelWithoutFileReaderNamesTheTable) {
+  try {
+    pe::ThermalModel::Parse(ReadModel("wallscheid2017-4node"), "w");
+    ADD_FAILURE() << "expected ThermalModelError";
+  } catch (const pe::ThermalModelError& e) {
+    EXPECT_NE(std::string(e.what()).find("table 'total_loss_W'"), std::string::npos) << e.what();
+  }
+}
+
 TEST(ThermalModel, WallscheidModelParsesWithSpeedDependentResistances) {
-  const auto m = pe::ThermalModel::Parse(ReadModel("wallscheid2017-4node"), "w");
+  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
+  const std::string models = std::string(src ? src : ".") + "/estimators/models";
+  const std::string map = models + "/../../../shared/reference/wallscheid-losses/total_loss_W.csv";
+  if (!std::ifstream(map).good()) {
+    GTEST_SKIP() << "the Wallscheid loss map is not at " << map
+                 << " (it stays outside the project; see docs/thermal-model.md)";
+  }
+  pe::ThermalModelFiles files{models, [](const std::string& path) {
+                                std::ifstream f(path);
+                                if (!f) throw std::runtime_error("cannot read " + path);
+                                std::stringstream ss;
+                                ss << f.rdbuf();
+                                return ss.str();
+                              }};
+  const auto m = pe::ThermalModel::Parse(ReadModel("wallscheid2017-4node"), "w", files);
   const std::vector<std::string> states{"pm", "stator_yoke", "stator_tooth", "stator_winding"};
   EXPECT_EQ(m.StateNames(), states);
   EXPECT_TRUE(m.UsesCoolant());

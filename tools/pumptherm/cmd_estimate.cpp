@@ -8,6 +8,7 @@
 #include "estimators/kalman_virtual_sensor.hpp"
 #include "tools/common/csv.hpp"
 #include "tools/pumptherm/model_files.hpp"
+#include "tools/pumptherm/thermal_columns.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
 namespace pumptherm::tools {
@@ -20,6 +21,8 @@ struct EstimateOptions {
   std::string measure = "frame";
   std::string winding_column;
   double initial_degC = std::nan("");
+  std::string initial = "measured";
+  std::string columns;  ///< column preset ("" or "paderborn")
   estimators::VirtualSensorConfig config;
 };
 
@@ -40,15 +43,25 @@ int RunEstimate(EstimateOptions& o) {
   }
   std::vector<double> t, speed, id, iq, amb, cool, winding;
   std::vector<std::vector<double>> measured;
+  Eigen::VectorXd x_first;
+  if (o.initial != "measured" && o.initial != "first-row") {
+    throw InputError(fmt::format("--initial: '{}' is neither 'measured' nor 'first-row'", o.initial));
+  }
   try {
     const CsvTable csv = CsvTable::Read(o.input);
+    auto col = [&](const std::string& standard) { return csv.Column(InputColumn(o.columns, standard)); };
     t = csv.Time();
-    speed = csv.Column("speed_rpm");
-    id = csv.Column("id_A");
-    iq = csv.Column("iq_A");
-    amb = csv.Column("ambient_C");
-    cool = model.UsesCoolant() ? csv.Column("coolant_C") : amb;
-    for (const auto& node : o.config.measured_nodes) measured.push_back(csv.ColumnAllowingNaN(node + "_C"));
+    speed = col("speed_rpm");
+    id = col("id_A");
+    iq = col("iq_A");
+    amb = col("ambient_C");
+    cool = model.UsesCoolant() ? col("coolant_C") : amb;
+    for (const auto& node : o.config.measured_nodes) {
+      measured.push_back(csv.ColumnAllowingNaN(InputColumn(o.columns, node + "_C")));
+    }
+    if (!t.empty() && o.initial == "first-row" && std::isnan(o.initial_degC)) {
+      x_first = InitialTemperatures_degC(model, csv, o.columns, o.initial, o.initial_degC, amb[0]);
+    }
     if (!o.winding_column.empty()) winding = csv.ColumnAllowingNaN(o.winding_column);
   } catch (const CsvError& e) {
     throw InputError(e.what());
@@ -80,7 +93,7 @@ int RunEstimate(EstimateOptions& o) {
     }
     x0 = count > 0 ? sum / count : amb[0];
   }
-  vts.Initialise(Eigen::VectorXd::Constant(n, x0));
+  vts.Initialise(x_first.size() == n ? x_first : Eigen::VectorXd::Constant(n, x0));
 
   std::vector<std::string> columns{"time_s"};
   for (const auto& node : model.Nodes()) columns.push_back(node.name + "_C");
@@ -146,10 +159,20 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--initial-spread-sd-K", o->config.initial_spread_sd_K,
                      "Initial uncertainty of each node on its own")->capture_default_str();
       app.add_option("--initial-C", o->initial_degC,
-                     "Initial estimate of every node (default: mean of the first measurements)");
+                     "Initial estimate of every node, degC (overrides --initial)");
+      app.add_option("--initial", o->initial,
+                     "Initial estimate: 'measured' (every node at the mean of the first measured "
+                     "values) or 'first-row' (each node at its <node>_C of the first row, measured "
+                     "or not: a known start); the initial covariance is the configured one either way")
+          ->capture_default_str();
+      app.add_option("--columns", o->columns,
+                     "Column names of a known data set: 'paderborn' (motor_speed, i_d, i_q, ambient, "
+                     "coolant, <node>)");
       app.footer(
           "Example:\n  pumptherm estimate --model saheba2010-improved --input measured.csv "
-          "--measure frame --output est.csv");
+          "--measure frame --output est.csv\n"
+          "  pumptherm estimate --model wallscheid2017-4node --columns paderborn --measure "
+          "stator_yoke --input profile46.csv");
       return [o] { return RunEstimate(*o); };
     }};
 

@@ -1,11 +1,13 @@
 // pumptherm simulate: the thermal network alone over a recorded or made-up load profile.
 #include <fmt/core.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "estimators/thermal_discretisation.hpp"
 #include "tools/common/csv.hpp"
 #include "tools/pumptherm/model_files.hpp"
+#include "tools/pumptherm/thermal_columns.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
 namespace pumptherm::tools {
@@ -16,19 +18,32 @@ struct SimulateOptions {
   std::string input;
   std::string output = "-";
   double initial_degC = std::nan("");
+  std::string initial = "ambient";
+  std::string columns;            ///< column preset ("" or "paderborn")
+  double max_step_s = 0.0;        ///< 0: one step per row
+  std::string interpolation = "hold";
 };
 
 int RunSimulate(const SimulateOptions& o) {
   const estimators::ThermalModel model = LoadThermalModel(o.model);
+  if (o.interpolation != "hold" && o.interpolation != "linear") {
+    throw InputError(fmt::format("--inputs: '{}' is neither 'hold' nor 'linear'", o.interpolation));
+  }
+  if (!(o.max_step_s >= 0.0) || !std::isfinite(o.max_step_s)) {
+    throw InputError("--max-step-s: must be a finite number >= 0");
+  }
   std::vector<double> t, speed, id, iq, amb, cool;
+  Eigen::VectorXd x;
   try {
     const CsvTable csv = CsvTable::Read(o.input);
+    auto col = [&](const std::string& standard) { return csv.Column(InputColumn(o.columns, standard)); };
     t = csv.Time();
-    speed = csv.Column("speed_rpm");
-    id = csv.Column("id_A");
-    iq = csv.Column("iq_A");
-    amb = csv.Column("ambient_C");
-    cool = model.UsesCoolant() ? csv.Column("coolant_C") : amb;
+    speed = col("speed_rpm");
+    id = col("id_A");
+    iq = col("iq_A");
+    amb = col("ambient_C");
+    cool = model.UsesCoolant() ? col("coolant_C") : amb;
+    if (!t.empty()) x = InitialTemperatures_degC(model, csv, o.columns, o.initial, o.initial_degC, amb[0]);
   } catch (const CsvError& e) {
     throw InputError(e.what());
   }
@@ -42,8 +57,20 @@ int RunSimulate(const SimulateOptions& o) {
     in.coolant_degC = cool[k];
     return in;
   };
+  // Inputs a fraction w of the way from row k-1 to row k (held at row k-1 unless linear).
+  auto between = [&](std::size_t k, double w) {
+    estimators::ThermalInputs a = inputs(k - 1);
+    if (o.interpolation == "hold") return a;
+    const estimators::ThermalInputs b = inputs(k);
+    auto mix = [w](double p, double q) { return p + w * (q - p); };
+    a.speed_rpm = mix(a.speed_rpm, b.speed_rpm);
+    a.id_A = mix(a.id_A, b.id_A);
+    a.iq_A = mix(a.iq_A, b.iq_A);
+    a.ambient_degC = mix(a.ambient_degC, b.ambient_degC);
+    a.coolant_degC = mix(a.coolant_degC, b.coolant_degC);
+    return a;
+  };
   const int n = model.StateCount();
-  Eigen::VectorXd x = Eigen::VectorXd::Constant(n, std::isnan(o.initial_degC) ? amb[0] : o.initial_degC);
   std::vector<std::string> columns{"time_s"};
   for (const auto& node : model.Nodes()) columns.push_back(node.name + "_C");
   CsvWriter out(o.output, columns);
@@ -53,10 +80,14 @@ int RunSimulate(const SimulateOptions& o) {
   Eigen::VectorXd next(n);
   for (std::size_t k = 0; k < t.size(); ++k) {
     if (k > 0) {
-      model.Linearise(inputs(k - 1), lin);
-      disc.Update(lin, t[k] - t[k - 1]);
-      disc.Propagate(x, lin, next);
-      x = next;
+      const double dt_s = t[k] - t[k - 1];
+      const int steps = o.max_step_s > 0.0 ? std::max(1, static_cast<int>(std::ceil(dt_s / o.max_step_s - 1e-9))) : 1;
+      for (int j = 0; j < steps; ++j) {
+        model.Linearise(between(k, static_cast<double>(j) / steps), x, lin);
+        disc.Update(lin, dt_s / steps);
+        disc.Propagate(x, lin, next);
+        x = next;
+      }
     }
     const Eigen::VectorXd all = model.AllTemperatures_degC(inputs(k), x);
     row[0] = t[k];
@@ -78,11 +109,27 @@ const SubcommandRegistrar kRegistrar{
           ->required();
       app.add_option("--output,-o", o->output, "CSV to write: time_s and <node>_C per node ('-' = stdout)");
       app.add_option("--initial-C", o->initial_degC,
-                     "Initial temperature of every node, degC (default: the first ambient_C)");
+                     "Initial temperature of every node, degC (overrides --initial)");
+      app.add_option("--initial", o->initial,
+                     "Initial temperatures: 'ambient' (every node at the first ambient_C) or "
+                     "'first-row' (each node at its <node>_C of the first row)")
+          ->capture_default_str();
+      app.add_option("--columns", o->columns,
+                     "Column names of a known data set: 'paderborn' (motor_speed, i_d, i_q, ambient, "
+                     "coolant, <node>)");
+      app.add_option("--max-step-s", o->max_step_s,
+                     "Longest integration step, s; rows further apart are split (0 = one step per row)")
+          ->capture_default_str();
+      app.add_option("--inputs", o->interpolation,
+                     "Inputs between rows: 'hold' (the earlier row's) or 'linear' (interpolated at "
+                     "the start of each step)")
+          ->capture_default_str();
       app.footer(
-          "Inputs are held over each interval (zero-order hold, exact discretisation).\n"
-          "Example:\n  pumptherm simulate --model saheba2010-improved --input profile.csv "
-          "--output temps.csv");
+          "Each step is discretised exactly (zero-order hold) with its inputs held over it.\n"
+          "Examples:\n  pumptherm simulate --model saheba2010-improved --input profile.csv "
+          "--output temps.csv\n"
+          "  pumptherm simulate --model wallscheid2017-4node --columns paderborn --initial first-row "
+          "--input profile46.csv");
       return [o] { return RunSimulate(*o); };
     }};
 

@@ -37,7 +37,9 @@ inline estimators::ThermalModel LoadThermalModel(const std::string& model) {
   std::stringstream ss;
   ss << f.rdbuf();
   try {
-    return estimators::ThermalModel::Parse(ss.str(), path);
+    // Tables the model names (loss maps, curves) are read relative to the model file.
+    return estimators::ThermalModel::Parse(
+        ss.str(), path, estimators::ThermalModelFiles{daemon::DirectoryOf(path), &daemon::ReadTextFile});
   } catch (const estimators::ThermalModelError& e) {
     throw InputError(e.what());
   }

@@ -9,7 +9,7 @@ ThermalPlant::ThermalPlant(const estimators::ThermalModel& model, const Eigen::V
     : model_(model), config_(config), x_(x0_degC), next_(x0_degC.size()), rng_(seed) {}
 
 const Eigen::VectorXd& ThermalPlant::Step(const estimators::ThermalInputs& inputs, double dt_s) {
-  model_.Linearise(inputs, lin_);
+  model_.Linearise(inputs, x_, lin_);
   discretiser_.Update(lin_, dt_s);
   discretiser_.Propagate(x_, lin_, next_);
   const double sd = config_.process_sd_K * std::sqrt(dt_s / config_.process_period_s);
