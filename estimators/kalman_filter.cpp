@@ -1,6 +1,68 @@
 #include "estimators/kalman_filter.hpp"
 
 namespace pumptherm::estimators {
+namespace {
+
+// Fixed-size versions for the state counts of the shipped models (4: wallscheid2017-4node,
+// 7: saheba2010-*): Eigen unrolls fixed-size products on the stack, where its dynamic-size
+// products spend most of their instructions dispatching (docs/virtual-sensor.md, benchmark).
+// They map the dynamic members in place (column-major, contiguous) and compute the same
+// equations.
+
+template <int N>
+void PredictFixed(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu, const Eigen::MatrixXd& sp,
+                  Eigen::VectorXd& x, Eigen::MatrixXd& s) {
+  using M = Eigen::Matrix<double, N, N>;
+  using V = Eigen::Matrix<double, N, 1>;
+  const Eigen::Map<const M> a(ad.data());
+  Eigen::Map<V> xm(x.data());
+  Eigen::Map<M> sm(s.data());
+  const V xn = a * xm + Eigen::Map<const V>(bu.data());
+  xm = xn;
+  const M as = a * sm;
+  sm.noalias() = as * a.transpose();
+  sm += Eigen::Map<const M>(sp.data());
+}
+
+/// One scalar measurement (m = 1): the innovation covariance is a number, so its "Cholesky
+/// solve" is a division (fails, like LLT, when it is not positive).
+template <int N>
+void UpdateFixed1(const Eigen::MatrixXd& c, const Eigen::VectorXd& y, const Eigen::MatrixXd& sm,
+                  CovarianceUpdate form, Eigen::VectorXd& x, Eigen::MatrixXd& s, Eigen::MatrixXd& k,
+                  KalmanUpdateReport& report) {
+  using M = Eigen::Matrix<double, N, N>;
+  using V = Eigen::Matrix<double, N, 1>;
+  using R = Eigen::Matrix<double, 1, N>;
+  const Eigen::Map<const R> cr(c.data());
+  Eigen::Map<V> xm(x.data());
+  Eigen::Map<M> sx(s.data());
+  const double nu = y(0) - cr.dot(xm.transpose());
+  const V h = sx * cr.transpose();
+  const double r = sm(0, 0);
+  const double s_nu = cr.dot(h.transpose()) + r;
+  report.innovation(0) = nu;
+  report.innovation_var(0) = s_nu;
+  if (!(s_nu > 0.0)) {
+    report.ok = false;
+    return;
+  }
+  const V gain = h / s_nu;  // eq. 34
+  report.nis = nu * nu / s_nu;
+  xm += gain * nu;  // eq. 32
+  k = gain;
+  const M ikc = M::Identity() - gain * cr;
+  if (form == CovarianceUpdate::kJoseph) {
+    const M t = ikc * sx;
+    M sn = t * ikc.transpose();
+    sn += (r * gain) * gain.transpose();
+    sx = 0.5 * (sn + sn.transpose());
+  } else {
+    const M t = ikc * sx;  // eq. 33
+    sx = t;
+  }
+}
+
+}  // namespace
 
 KalmanFilter::KalmanFilter(int n)
     : x_(Eigen::VectorXd::Zero(n)),
@@ -22,6 +84,8 @@ void KalmanFilter::Reset(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
 
 void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
                            const Eigen::MatrixXd& sp) {
+  if (x_.size() == 7) return PredictFixed<7>(ad, bu, sp, x_, s_);
+  if (x_.size() == 4) return PredictFixed<4>(ad, bu, sp, x_, s_);
   xtmp_.noalias() = ad * x_;
   x_ = xtmp_ + bu;
   ntmp_.noalias() = ad * s_;
@@ -39,6 +103,12 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
   report_.innovation.resize(m);
   report_.innovation_var.resize(m);
   if (m == 0) return report_;
+  if (m == 1 && (n == 7 || n == 4)) {
+    k_.resize(n, 1);
+    if (n == 7) UpdateFixed1<7>(c, y, sm, form, x_, s_, k_, report_);
+    if (n == 4) UpdateFixed1<4>(c, y, sm, form, x_, s_, k_, report_);
+    return report_;
+  }
   sct_.resize(n, m);
   innov_cov_.resize(m, m);
   k_.resize(n, m);

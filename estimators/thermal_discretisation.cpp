@@ -22,13 +22,32 @@ void DiscretiseZoh(const Eigen::MatrixXd& a_per_s, double dt_s, ThermalDiscreteM
   out.dt_s = dt_s;
 }
 
+namespace {
+
+/// || a0^-1 (a - a0) ||_F with fixed-size matrices (unrolled products; see kalman_filter.cpp).
+template <int N>
+double RelativeChangeFixed(const Eigen::MatrixXd& a0_inv, const Eigen::MatrixXd& a0, const Eigen::MatrixXd& a) {
+  using M = Eigen::Matrix<double, N, N>;
+  const M d = Eigen::Map<const M>(a.data()) - Eigen::Map<const M>(a0.data());
+  const M r = Eigen::Map<const M>(a0_inv.data()) * d;
+  return r.norm();
+}
+
+}  // namespace
+
+double ThermalDiscretiser::RelativeChange(const Eigen::MatrixXd& a_per_s) {
+  if (a_per_s.rows() == 7) return RelativeChangeFixed<7>(a_last_inv_, a_last_, a_per_s);
+  if (a_per_s.rows() == 4) return RelativeChangeFixed<4>(a_last_inv_, a_last_, a_per_s);
+  diff_ = a_per_s - a_last_;
+  rel_.noalias() = a_last_inv_ * diff_;
+  return rel_.norm();
+}
+
 bool ThermalDiscretiser::Update(const ThermalLinearModel& lin, double dt_s) {
   const bool same_shape = a_last_.rows() == lin.a_per_s.rows() && a_last_.cols() == lin.a_per_s.cols();
   if (same_shape && discrete_.dt_s > 0.0 &&
       std::abs(dt_s - discrete_.dt_s) <= 1e-9 * discrete_.dt_s) {
-    diff_ = lin.a_per_s - a_last_;
-    rel_.noalias() = a_last_inv_ * diff_;
-    if (rel_.norm() <= relative_tolerance_) return false;
+    if (RelativeChange(lin.a_per_s) <= relative_tolerance_) return false;
   }
   DiscretiseZoh(lin.a_per_s, dt_s, discrete_);
   a_last_ = lin.a_per_s;
@@ -46,6 +65,14 @@ bool ThermalDiscretiser::Update(const ThermalLinearModel& lin, double dt_s) {
 
 void ThermalDiscretiser::Propagate(const Eigen::VectorXd& x_degC, const ThermalLinearModel& lin,
                                    Eigen::VectorXd& x_next_degC) const {
+  if (x_degC.size() == 7 && x_next_degC.size() == 7) {
+    using M = Eigen::Matrix<double, 7, 7>;
+    using V = Eigen::Matrix<double, 7, 1>;
+    Eigen::Map<V>(x_next_degC.data()) =
+        Eigen::Map<const M>(discrete_.ad.data()) * Eigen::Map<const V>(x_degC.data()) +
+        Eigen::Map<const M>(discrete_.phi_s.data()) * Eigen::Map<const V>(lin.f_K_per_s.data());
+    return;
+  }
   x_next_degC.noalias() = discrete_.ad * x_degC;
   x_next_degC.noalias() += discrete_.phi_s * lin.f_K_per_s;
 }

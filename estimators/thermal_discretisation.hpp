@@ -50,6 +50,9 @@ class ThermalDiscretiser {
   long Recomputations() const { return recomputations_; }
 
  private:
+  /// || a0^-1 (a - a0) ||_F against the last discretised a0 (same shape).
+  double RelativeChange(const Eigen::MatrixXd& a_per_s);
+
   double relative_tolerance_;
   Eigen::MatrixXd a_last_, a_last_inv_, diff_, rel_;
   ThermalDiscreteModel discrete_;

@@ -372,11 +372,21 @@ struct ThermalModel::Impl {
 
   double Boundary(int code) const { return code == kAmbient ? vars->ambient_C : vars->coolant_C; }
 
+  /// Workspace of Reduce: sized on first use, so re-assembling a network with input-dependent
+  /// resistances allocates nothing afterwards unless it has massless nodes (their LU inverse
+  /// allocates).
+  struct ReduceScratch {
+    Eigen::MatrixXd y, yb, y11, y12, y21, y22, b1, b2, sel_x, sel_z;
+  };
+  mutable ReduceScratch rs;
+
   /// Assembles KCL and reduces it (eq. S25) at the current variable values.
   bool Reduce(Reduced& r) const {
     const int nn = N(), ns = n(), nm = nz();
-    Eigen::MatrixXd y = Eigen::MatrixXd::Zero(nn, nn);
-    Eigen::MatrixXd yb = Eigen::MatrixXd::Zero(nn, 2);
+    rs.y.setZero(nn, nn);
+    rs.yb.setZero(nn, 2);
+    Eigen::MatrixXd& y = rs.y;
+    Eigen::MatrixXd& yb = rs.yb;
     for (const Edge& e : edges) {
       const double g = 1.0 / e.resistance_K_per_W.Eval();
       if (e.b < 0) {
@@ -389,40 +399,46 @@ struct ThermalModel::Impl {
         y(e.b, e.a) += g;
       }
     }
-    Eigen::MatrixXd y11(ns, ns), y12(ns, nm), y21(nm, ns), y22(nm, nm), b1(ns, 2), b2(nm, 2);
+    rs.y11.resize(ns, ns);
+    rs.y12.resize(ns, nm);
+    rs.y21.resize(nm, ns);
+    rs.y22.resize(nm, nm);
+    rs.b1.resize(ns, 2);
+    rs.b2.resize(nm, 2);
     for (int i = 0; i < ns; ++i) {
       const int ni = node_of_state[i];
-      for (int j = 0; j < ns; ++j) y11(i, j) = y(ni, node_of_state[j]);
-      for (int j = 0; j < nm; ++j) y12(i, j) = y(ni, node_of_massless[j]);
-      b1.row(i) = yb.row(ni);
+      for (int j = 0; j < ns; ++j) rs.y11(i, j) = y(ni, node_of_state[j]);
+      for (int j = 0; j < nm; ++j) rs.y12(i, j) = y(ni, node_of_massless[j]);
+      rs.b1.row(i) = yb.row(ni);
     }
     for (int i = 0; i < nm; ++i) {
       const int ni = node_of_massless[i];
-      for (int j = 0; j < ns; ++j) y21(i, j) = y(ni, node_of_state[j]);
-      for (int j = 0; j < nm; ++j) y22(i, j) = y(ni, node_of_massless[j]);
-      b2.row(i) = yb.row(ni);
+      for (int j = 0; j < ns; ++j) rs.y21(i, j) = y(ni, node_of_state[j]);
+      for (int j = 0; j < nm; ++j) rs.y22(i, j) = y(ni, node_of_massless[j]);
+      rs.b2.row(i) = yb.row(ni);
     }
     // Loss injection: states take their own loss; massless nodes' losses pass through Y22^-1.
-    Eigen::MatrixXd sel_x = Eigen::MatrixXd::Zero(ns, nn), sel_z = Eigen::MatrixXd::Zero(nm, nn);
-    for (int i = 0; i < ns; ++i) sel_x(i, node_of_state[i]) = 1.0;
-    for (int i = 0; i < nm; ++i) sel_z(i, node_of_massless[i]) = 1.0;
+    rs.sel_x.setZero(ns, nn);
+    rs.sel_z.setZero(nm, nn);
+    for (int i = 0; i < ns; ++i) rs.sel_x(i, node_of_state[i]) = 1.0;
+    for (int i = 0; i < nm; ++i) rs.sel_z(i, node_of_massless[i]) = 1.0;
     if (nm > 0) {
-      Eigen::FullPivLU<Eigen::MatrixXd> lu(y22);
+      Eigen::FullPivLU<Eigen::MatrixXd> lu(rs.y22);
       if (!lu.isInvertible()) return false;
       const Eigen::MatrixXd inv = lu.inverse();
-      r.m_z = -inv * y21;
-      r.m_zb = -inv * b2;
-      r.g_z = -inv * sel_z;
-      r.a_red = y11 + y12 * r.m_z;
-      r.b_b = b1 + y12 * r.m_zb;
-      r.g = sel_x + y12 * r.g_z;
+      r.m_z = -inv * rs.y21;
+      r.m_zb = -inv * rs.b2;
+      r.g_z = -inv * rs.sel_z;
+      r.a_red = rs.y11 + rs.y12 * r.m_z;
+      r.b_b = rs.b1 + rs.y12 * r.m_zb;
+      r.g = rs.sel_x + rs.y12 * r.g_z;
     } else {
       r.m_z.resize(0, ns);
       r.m_zb.resize(0, 2);
       r.g_z.resize(0, nn);
-      r.a_red = y11;
-      r.b_b = b1;
-      r.g = sel_x;
+      r.a_red = rs.y11;
+      r.b_b = rs.b1;
+      r.g = rs.sel_x;
     }
     return true;
   }
