@@ -17,7 +17,8 @@
 # a test's TIMEOUT. See docs/testing-system.md.
 include_guard(GLOBAL)
 
-set(PUMPTHERM_SYSTEM_HARNESS "${CMAKE_CURRENT_LIST_DIR}/run_system_test.sh")
+# A cache variable, so that pumptherm_system_test() works from any directory (include_guard).
+set(PUMPTHERM_SYSTEM_HARNESS "${CMAKE_CURRENT_LIST_DIR}/run_system_test.sh" CACHE INTERNAL "system test harness")
 
 # The fixture: finds or builds the base image (debootstrap + mke2fs; a few minutes, once).
 add_test(NAME system.base_image
