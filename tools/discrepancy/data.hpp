@@ -1,0 +1,39 @@
+#pragma once
+/// The discrepancy workflow's data (issue 7): inputs and measured node temperatures over time,
+/// read from and written to its CSV format (time_s, speed_rpm, id_A + iq_A or
+/// phase_current_rms_A, ambient_C, coolant_C where the model has a coolant, <node>_C per
+/// measured node; other columns ignored).
+
+#include <string>
+#include <vector>
+
+#include "estimators/thermal_model.hpp"
+
+namespace pumptherm::tools::discrepancy {
+
+/// One measured node's series.
+struct MeasuredNode {
+  std::string node;
+  std::vector<double> value_degC;
+};
+
+/// A data set: every vector has one value per row.
+struct Data {
+  std::string source;  ///< file name for messages
+  std::vector<double> time_s, speed_rpm, id_A, iq_A, ambient_degC, coolant_degC;
+  std::vector<MeasuredNode> measured;  ///< in the model's node order
+
+  std::size_t size() const { return time_s.size(); }
+  estimators::ThermalInputs Inputs(std::size_t k) const;
+};
+
+/// Reads a CSV for `model`. Throws CsvError (file, row, column) for bad cells or a missing
+/// input column, and CsvError when no column `<node>_C` matches a node of the model or there are
+/// fewer than 3 rows. phase_current_rms_A (when id_A/iq_A are absent) becomes id = 0,
+/// iq = sqrt(2) I_rms (amplitude-invariant dq, same copper loss).
+Data ReadData(const std::string& path, const estimators::ThermalModel& model);
+
+/// Writes `data` as the workflow's CSV (id_A/iq_A; coolant_C only when `with_coolant`).
+void WriteData(const std::string& path, const Data& data, bool with_coolant);
+
+}  // namespace pumptherm::tools::discrepancy
