@@ -169,8 +169,17 @@ std::string EffectNotApplicable(const EffectSpec& effect, const EffectTargets& t
 }
 
 std::string ApplyModelEffects(std::string_view toml_text, const std::string& source,
-                              const std::vector<Effect>& effects) {
+                              const std::vector<Effect>& effects,
+                              const std::string& table_directory) {
   toml::table root = ParseOrThrow(toml_text, source);
+  if (toml::array* tables = root["table"].as_array(); tables != nullptr && !table_directory.empty()) {
+    for (toml::node& tv : *tables) {
+      toml::table* tt = tv.as_table();
+      if (tt == nullptr) continue;
+      const std::string file = (*tt)["file"].value_or(std::string{});
+      if (!file.empty() && file.front() != '/') tt->insert_or_assign("file", table_directory + "/" + file);
+    }
+  }
   const EffectTargets t = FindEffectTargets(toml_text, source);
   if (!root.contains("parameters")) root.insert("parameters", toml::table{});
   toml::table& params = *root["parameters"].as_table();

@@ -83,9 +83,11 @@ std::string EffectNotApplicable(const EffectSpec& effect, const EffectTargets& t
 /// as parameters `sensor_lag_s__<node>`, `sensor_offset_K__<node>`). Each effect may appear
 /// once (sensor effects once per node). The model's name gains "+effects". Throws
 /// ThermalModelError: not TOML, unknown effect, wrong number of values, an effect that does not
-/// apply, a parameter name already taken.
+/// apply, a parameter name already taken. With `table_directory` set, relative `file` paths of
+/// [[table]]s are made absolute from it, so the text loads from any directory.
 std::string ApplyModelEffects(std::string_view toml_text, const std::string& source,
-                              const std::vector<Effect>& effects);
+                              const std::vector<Effect>& effects,
+                              const std::string& table_directory = {});
 
 /// Applies a sensor effect to the series `value` (one measured node) sampled at `time_s`
 /// (strictly increasing, same length): sensor_offset adds b; sensor_lag filters with the exact

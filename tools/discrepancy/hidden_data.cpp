@@ -20,7 +20,7 @@ Data MakeHiddenEffectData(const HiddenDataConfig& c) {
   }
   const estimators::ThermalModel truth = estimators::ThermalModel::Parse(
       estimators::ApplyModelEffects(c.model_text, c.model_source, model_effects),
-      c.model_source + " (truth)");
+      c.model_source + " (truth)", c.files);
   std::vector<int> states;
   for (const std::string& n : c.measured_nodes) {
     const int i = truth.StateIndex(n);

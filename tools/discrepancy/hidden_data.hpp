@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "estimators/model_effects.hpp"
+#include "estimators/thermal_model.hpp"
 #include "tools/discrepancy/data.hpp"
 
 namespace pumptherm::tools::discrepancy {
@@ -18,6 +19,7 @@ namespace pumptherm::tools::discrepancy {
 struct HiddenDataConfig {
   std::string model_text;    ///< the model file's text (the workflow's model before effects)
   std::string model_source;  ///< names it in errors
+  estimators::ThermalModelFiles files;  ///< how tables the model names are read
   std::vector<estimators::Effect> hidden;  ///< effects switched on in the truth (may be empty)
   std::vector<std::string> measured_nodes{"frame", "yoke", "slot_winding", "end_winding", "rotor"};
 

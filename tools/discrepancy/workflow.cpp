@@ -138,8 +138,9 @@ std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const G
 /// value_e = neutral_e + typical_e p_e.
 class Evaluator {
  public:
-  Evaluator(const std::string& text, const std::string& source, std::vector<pe::Effect> effects)
-      : text_(text), source_(source), effects_(std::move(effects)) {
+  Evaluator(const std::string& text, const std::string& source, const pe::ThermalModelFiles& files,
+            std::vector<pe::Effect> effects)
+      : text_(text), source_(source), files_(files), effects_(std::move(effects)) {
     for (const auto& e : effects_) specs_.push_back(pe::FindEffect(e.name));
   }
   std::size_t size() const { return effects_.size(); }
@@ -168,7 +169,7 @@ class Evaluator {
     Cache& c = cache_[&g];
     if (!c.valid || c.key != key) {
       const pe::ThermalModel m =
-          pe::ThermalModel::Parse(pe::ApplyModelEffects(text_, source_, model_effects), source_);
+          pe::ThermalModel::Parse(pe::ApplyModelEffects(text_, source_, model_effects), source_, files_);
       c.series = Simulate(m, g);
       c.key = key;
       c.valid = true;
@@ -189,6 +190,7 @@ class Evaluator {
     std::vector<std::vector<double>> series;
   };
   std::string text_, source_;
+  pe::ThermalModelFiles files_;
   std::vector<pe::Effect> effects_;
   std::vector<const pe::EffectSpec*> specs_;
   std::map<const Grid*, Cache> cache_;
@@ -368,12 +370,12 @@ std::string SeparatingExperiment(const std::vector<std::string>& effects) {
 }
 
 Result Run(const std::string& text, const std::string& source, const Data& train,
-           const Data& validate, const Options& o) {
+           const Data& validate, const Options& o, const pe::ThermalModelFiles& files) {
   const auto start = std::chrono::steady_clock::now();
   auto progress = [&](const std::string& s) {
     if (o.progress) o.progress(s);
   };
-  const pe::ThermalModel base = pe::ThermalModel::Parse(text, source);
+  const pe::ThermalModel base = pe::ThermalModel::Parse(text, source, files);
   for (const Data* d : {&train, &validate})
     for (const auto& m : d->measured)
       if (std::none_of(base.Nodes().begin(), base.Nodes().end(),
@@ -410,7 +412,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
 
   Result res;
   std::vector<pe::Effect> added;  // with their fitted values
-  Evaluator base_ev(text, source, {});
+  Evaluator base_ev(text, source, files, {});
   FitResult current = Fit(base_ev, {}, gt, o);
   const auto before_train = current.train_series;
   const auto before_val = base_ev.Series(nullptr, gv);
@@ -431,7 +433,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
         continue;
       std::vector<pe::Effect> effects = added;
       effects.push_back(cand);
-      Evaluator ev(text, source, effects);
+      Evaluator ev(text, source, files, effects);
       std::vector<double> p0;
       for (std::size_t e = 0; e < effects.size(); ++e) p0.push_back(ev.Internal(e, effects[e].values[0]));
       Candidate c;
@@ -505,7 +507,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
     current_val_rmse = rd.candidates[best].validate_rmse_K;
     // Every added effect's parameters, re-fitted jointly in this round.
     res.effects.clear();
-    Evaluator ev(text, source, added);
+    Evaluator ev(text, source, files, added);
     for (std::size_t e = 0; e < added.size(); ++e) {
       AddedEffect ae;
       ae.effect = added[e];
@@ -522,7 +524,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
   }
   res.verdict = res.rounds.empty() ? "none" : res.rounds.front().verdict;
 
-  Evaluator final_ev(text, source, added);
+  Evaluator final_ev(text, source, files, added);
   std::vector<double> pf;
   for (std::size_t e = 0; e < added.size(); ++e) pf.push_back(final_ev.Internal(e, added[e].values[0]));
   const auto after_train = final_ev.Series(pf.data(), gt);
@@ -531,7 +533,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
   res.train_after = Gaps(after_train, gt);
   res.validate_before = Gaps(before_val, gv);
   res.validate_after = Gaps(after_val, gv);
-  res.model_toml = pe::ApplyModelEffects(text, source, added);
+  res.model_toml = pe::ApplyModelEffects(text, source, added, files.directory);
   res.validate_plot = {gv.t_s, gv.nodes, gv.measured, before_val, after_val};
   res.train_plot = {gt.t_s, gt.nodes, gt.measured, before_train, after_train};
   res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -85,11 +85,14 @@ struct Result {
   double seconds = 0.0;
 };
 
-/// Runs the workflow. `model_text` is the model file, `source` its name. Throws
-/// estimators::ThermalModelError for a bad model, std::invalid_argument for an unknown effect
-/// name in options or data without a node of the model.
+/// Runs the workflow. `model_text` is the model file, `source` its name, `files` how the tables
+/// it names are read (estimators/thermal_model.hpp); the model.toml of the result names those
+/// tables by absolute path when `files.directory` is set. Throws estimators::ThermalModelError
+/// for a bad model, std::invalid_argument for an unknown effect name in options or data without
+/// a node of the model.
 Result Run(const std::string& model_text, const std::string& source, const Data& train,
-           const Data& validate, const Options& options);
+           const Data& validate, const Options& options,
+           const estimators::ThermalModelFiles& files = {});
 
 /// What experiment separates these effects (one sentence per effect).
 std::string SeparatingExperiment(const std::vector<std::string>& effects);

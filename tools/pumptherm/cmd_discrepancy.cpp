@@ -54,7 +54,8 @@ int RunDiscrepancy(const DiscrepancyOptions& o) {
     opt.progress = [](const std::string& line) { fmt::print(stderr, "\r\033[K{}\n", line); };
   discrepancy::Result r;
   try {
-    r = discrepancy::Run(text, path, train, validate, opt);
+    r = discrepancy::Run(text, path, train, validate, opt,
+                         estimators::ThermalModelFiles{daemon::DirectoryOf(path), &daemon::ReadTextFile});
   } catch (const estimators::ThermalModelError& e) {
     throw InputError(e.what());
   } catch (const std::invalid_argument& e) {
