@@ -294,7 +294,12 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
     LoadedText model_text;
     try {
       model_text = res.model(spec.model);
-      ps->models.push_back(std::make_unique<ThermalModel>(ThermalModel::Parse(model_text.text, model_text.source)));
+      // Tables the model names are read relative to the model file.
+      const std::size_t slash = model_text.source.rfind('/');
+      const estimators::ThermalModelFiles files{
+          slash == std::string::npos ? std::string(".") : model_text.source.substr(0, slash), res.read_file};
+      ps->models.push_back(
+          std::make_unique<ThermalModel>(ThermalModel::Parse(model_text.text, model_text.source, files)));
       for (const Fault& f : spec.faults) {
         if (f.kind != FaultKind::kCoolingFailure) {
           ps->model_of_fault.push_back(-1);
@@ -302,7 +307,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
         }
         const std::string scaled = ScaleEdgeResistance(model_text.text, model_text.source, f.edge, f.factor);
         ps->models.push_back(std::make_unique<ThermalModel>(ThermalModel::Parse(
-            scaled, fmt::format("{} (edge {} x {})", model_text.source, f.edge, f.factor))));
+            scaled, fmt::format("{} (edge {} x {})", model_text.source, f.edge, f.factor), files)));
         ps->model_of_fault.push_back(static_cast<int>(ps->models.size()) - 1);
       }
     } catch (const std::exception& e) {
@@ -624,7 +629,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
 
       // End of a thermal period: advance the truth with the latched inputs.
       if ((k + 1) % thermal_every == 0) {
-        m.Linearise(p.held, p.lin);
+        m.Linearise(p.held, p.x, p.lin);
         p.disc->Update(p.lin, thermal_dt_s);
         p.disc->Propagate(p.x, p.lin, p.next);
         const double sd = spec.process_noise_K * std::sqrt(thermal_dt_s);

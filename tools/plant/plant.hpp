@@ -35,6 +35,9 @@ struct PlantResources {
   std::function<LoadedText(const std::string& model_ref)> model;
   /// Motor file text for a path; preset names are resolved without calling it.
   std::function<LoadedText(const std::string& motor_ref)> motor_file;
+  /// Contents of a file a model names (loss maps, `[[table]]`), by path (relative paths are
+  /// already joined to the model file's directory). Unset: a model with tables is an error.
+  std::function<std::string(const std::string& path)> read_file;
   LoadedText dbc;      ///< the frame layout (protocol/pumptherm.dbc)
   LoadedText mapping;  ///< the signal mapping (protocol/mapping_pumptherm.toml)
 };

@@ -128,6 +128,7 @@ int RunPlantCommand(const PlantOptions& o) {
     const std::string path = ResolveModelPath(arg);
     return plant::LoadedText{ReadText(path), path};
   };
+  res.read_file = [](const std::string& path) { return ReadText(path); };
   res.motor_file = [&](const std::string& ref) {
     const fs::path p = fs::path(ref).is_relative() ? base / ref : fs::path(ref);
     if (!fs::exists(p)) {
