@@ -96,3 +96,63 @@ TEST(KalmanFilter, IndefiniteInnovationCovarianceIsReportedNotThrown) {
   EXPECT_FALSE(rep.ok);
   EXPECT_EQ(kf.State()(0), 0.0);
 }
+
+// The fixed-size paths (4 and 7 states, one measurement) against eqs. 30-34 with the Joseph form
+// written out here in dynamic-size Eigen (an oracle cross-check), and against a state count that
+// takes the dynamic path (5) for the same equations.
+TEST(KalmanFilter, FixedSizePathsMatchTheEquationsWrittenOut) {
+  for (const int n : {4, 5, 7}) {
+    std::mt19937_64 rng(11 + static_cast<unsigned>(n));
+    std::normal_distribution<double> nd;
+    Eigen::MatrixXd l(n, n), a(n, n), c(1, n);
+    for (int i = 0; i < n; ++i) {
+      c(0, i) = nd(rng);
+      for (int j = 0; j < n; ++j) {
+        l(i, j) = nd(rng);
+        a(i, j) = 0.1 * nd(rng) + (i == j ? 0.9 : 0.0);
+      }
+    }
+    Eigen::MatrixXd s = l * l.transpose() + Eigen::MatrixXd::Identity(n, n);
+    const Eigen::MatrixXd q = 0.02 * Eigen::MatrixXd::Identity(n, n);
+    const Eigen::MatrixXd r = Eigen::MatrixXd::Constant(1, 1, 0.4);
+    Eigen::VectorXd x = Eigen::VectorXd::Zero(n);
+    pe::KalmanFilter kf(n);
+    kf.Reset(x, s);
+    for (int k = 0; k < 20; ++k) {
+      Eigen::VectorXd u(n), y(1);
+      for (int i = 0; i < n; ++i) u(i) = nd(rng);
+      y(0) = nd(rng);
+      // Oracle.
+      x = a * x + u;
+      s = a * s * a.transpose() + q;
+      const Eigen::MatrixXd sy = c * s * c.transpose() + r;
+      const Eigen::MatrixXd gain = s * c.transpose() * sy.inverse();
+      const double nu = y(0) - (c * x)(0);
+      x += gain * nu;
+      const Eigen::MatrixXd ikc = Eigen::MatrixXd::Identity(n, n) - gain * c;
+      s = ikc * s * ikc.transpose() + gain * r * gain.transpose();
+      // Filter.
+      kf.Predict(a, u, q);
+      const pe::KalmanUpdateReport& rep = kf.Update(c, y, r);
+      ASSERT_TRUE(rep.ok);
+      EXPECT_NEAR(rep.innovation(0), nu, 1e-9 * (1 + std::abs(nu))) << "n=" << n;
+      EXPECT_NEAR(rep.innovation_var(0), sy(0, 0), 1e-9 * sy(0, 0)) << "n=" << n;
+      EXPECT_NEAR(rep.nis, nu * nu / sy(0, 0), 1e-9 * (1 + rep.nis)) << "n=" << n;
+      EXPECT_LT((kf.Gain() - gain).cwiseAbs().maxCoeff(), 1e-10) << "n=" << n;
+    }
+    EXPECT_LT((kf.State() - x).cwiseAbs().maxCoeff(), 1e-9) << "n=" << n;
+    EXPECT_LT((kf.Covariance() - s).cwiseAbs().maxCoeff(), 1e-9 * s.cwiseAbs().maxCoeff()) << "n=" << n;
+    EXPECT_EQ((kf.Covariance() - kf.Covariance().transpose()).cwiseAbs().maxCoeff(), 0.0) << "n=" << n;
+  }
+}
+
+// A non-positive scalar innovation covariance on the fixed-size path is reported, not used.
+TEST(KalmanFilter, FixedSizePathReportsANonPositiveInnovationCovariance) {
+  pe::KalmanFilter kf(7);
+  kf.Reset(Eigen::VectorXd::Ones(7), Eigen::MatrixXd::Zero(7, 7));
+  Eigen::MatrixXd c = Eigen::MatrixXd::Zero(1, 7);
+  c(0, 0) = 1.0;
+  const auto& rep = kf.Update(c, Eigen::VectorXd::Constant(1, 3.0), Eigen::MatrixXd::Constant(1, 1, -1.0));
+  EXPECT_FALSE(rep.ok);
+  EXPECT_EQ(kf.State(), Eigen::VectorXd::Ones(7));
+}
