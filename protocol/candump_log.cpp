@@ -169,7 +169,9 @@ std::string FormatCandumpLine(std::int64_t time_us, std::string_view interface,
     out += fmt::format("{:03X}#", frame.id);
   }
   if (frame.remote) {
+    // A remote frame's length is part of it: candump writes "R" and a length digit if not 0.
     out += 'R';
+    if (frame.len > 0 && frame.len <= 8) out += static_cast<char>('0' + frame.len);
     return out;
   }
   if (frame.fd) out += fmt::format("#{:X}", frame.fd_flags & 0xF);

@@ -77,6 +77,9 @@ TEST(CandumpLog, FormatRoundTrips) {
       "(0000000001.000000) can0 1F334455#R",
       "(0000000002.000000) can0 123##1AABBCCDDEEFF001122334455",
       "(0000000003.000000) can0 7FF#",
+      // Found by candump_log_fuzz: a remote frame's length digit was dropped by the formatter.
+      "(0000000004.000000) can0 7FF#R3",
+      "(0000000005.000000) can0 12345678#R8",
   };
   for (const char* line : lines) {
     const auto p = ParseCandumpLine(line);
@@ -93,6 +96,10 @@ TEST(CandumpLog, FormatRoundTrips) {
   }
   EXPECT_EQ(FormatCandumpLine(1436509052249713, "vcan0", ParseCandumpLine("(1.0) x 044#2A366C2BBA").record.frame),
             "(1436509052.249713) vcan0 044#2A366C2BBA");
+  EXPECT_EQ(FormatCandumpLine(4000000, "can0", ParseCandumpLine("(4.0) can0 7FF#R3").record.frame),
+            "(0000000004.000000) can0 7FF#R3");
+  EXPECT_EQ(FormatCandumpLine(4000000, "can0", ParseCandumpLine("(4.0) can0 7FF#R").record.frame),
+            "(0000000004.000000) can0 7FF#R");
 }
 
 }  // namespace
