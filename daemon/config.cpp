@@ -8,6 +8,7 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <sys/stat.h>
 #include <toml++/toml.h>
 
 #include "daemon/resources.hpp"
@@ -314,6 +315,17 @@ DaemonConfig LoadConfig(const std::string& path) {
   std::ostringstream ss;
   ss << in.rdbuf();
   return ParseConfig(ss.str(), path);
+}
+
+std::string ConfigPermissionWarning(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return "";
+  const bool group = (st.st_mode & S_IWGRP) != 0, others = (st.st_mode & S_IWOTH) != 0;
+  if (!group && !others) return "";
+  return fmt::format("{} is writable by {} (mode {:04o}): whoever can write it sets the alarm "
+                     "levels and who may clear trips; make it 0644 or tighter",
+                     path, group && others ? "group and others" : group ? "its group" : "others",
+                     st.st_mode & 07777);
 }
 
 }  // namespace pumptherm::daemon

@@ -102,4 +102,10 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source);
 /// Reads and parses a configuration file. Throws ConfigError (also when unreadable).
 DaemonConfig LoadConfig(const std::string& path);
 
+/// A warning when the file at `path` can be written by others than its owner (group- or
+/// world-writable: whoever can write it sets the alarm levels and who may clear trips), e.g.
+/// "/etc/pumptherm/pumpthermd.toml is writable by group and others (mode 0666): ...";
+/// empty when the mode is tight or the file cannot be stat()ed (LoadConfig reports that).
+std::string ConfigPermissionWarning(const std::string& path);
+
 }  // namespace pumptherm::daemon

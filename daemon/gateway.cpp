@@ -22,7 +22,6 @@ namespace {
 
 using protocol::MappingInput;
 using protocol::MappingOutput;
-constexpr double kInf = std::numeric_limits<double>::infinity();
 
 constexpr std::uint64_t RouteKey(std::size_t iface, bool extended, std::uint32_t id) {
   return (static_cast<std::uint64_t>(iface) << 33) | (static_cast<std::uint64_t>(extended) << 32) | id;

@@ -220,14 +220,26 @@ void Pump::ThermalStep(std::int64_t end_us) {
 
   const Eigen::VectorXd& x = sensor_.Estimate_degC();
   const Eigen::MatrixXd& s = sensor_.Covariance_K2();
-  double max_sd = 0.0;
+  // A filter driven outside any physical range is no estimate. The copper loss grows with the
+  // temperature (Saheba 2010 eqs. 12-16), so currents far above any rating, held while the
+  // frame sensor is silent, make the linearised network unstable and the estimate runs away
+  // to Inf within minutes (found by pipeline_step_fuzz). Then nothing is published as a
+  // temperature ("n/a", alarms see unknown nodes and an unconverged filter, a latched trip
+  // stays), the state is not saved, and the next step starts the filter again.
+  const bool diverged = !x.allFinite() || !s.diagonal().allFinite() ||
+                        (x.size() > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC));
+  if (diverged) {
+    ++counters_.filter_resets;
+    initialised_ = false;
+  }
+  double max_sd = diverged ? kInf : 0.0;
   for (int i = 0; i < x.size(); ++i) {
-    snapshot_.node_degC[static_cast<std::size_t>(i)] = x(i);
-    snapshot_.node_sd_K[static_cast<std::size_t>(i)] = std::sqrt(std::max(s(i, i), 0.0));
-    max_sd = std::max(max_sd, snapshot_.node_sd_K[static_cast<std::size_t>(i)]);
+    snapshot_.node_degC[static_cast<std::size_t>(i)] = diverged ? kNaN : x(i);
+    snapshot_.node_sd_K[static_cast<std::size_t>(i)] = diverged ? kNaN : std::sqrt(std::max(s(i, i), 0.0));
+    if (!diverged) max_sd = std::max(max_sd, snapshot_.node_sd_K[static_cast<std::size_t>(i)]);
   }
   snapshot_.time_us = end_us;
-  snapshot_.initialised = true;
+  snapshot_.initialised = !diverged;
   snapshot_.resistance = r;
   snapshot_.winding_resistance_degC = winding_res;
   snapshot_.frame_measured_degC = measured;
@@ -243,15 +255,15 @@ void Pump::ThermalStep(std::int64_t end_us) {
   snapshot_.nis = nis;
 
   int ttt_node = -1;
-  const double ttt = TimeToTrip_s(in, &ttt_node);
+  const double ttt = diverged ? kNaN : TimeToTrip_s(in, &ttt_node);
   snapshot_.time_to_trip_node = ttt_node;
 
-  for (int i = 0; i < x.size(); ++i) alarm_values_[static_cast<std::size_t>(i)] = x(i);
+  for (int i = 0; i < x.size(); ++i) alarm_values_[static_cast<std::size_t>(i)] = diverged ? kNaN : x(i);
   alarm_values_.back() = winding_res;
   estimators::AlarmInputs ai;
   ai.node_degC = alarm_values_.data();
   ai.sensor_degC = measured;
-  ai.sensor_model_degC = measured_state_ >= 0 ? x(measured_state_) : kNaN;
+  ai.sensor_model_degC = measured_state_ >= 0 && !diverged ? x(measured_state_) : kNaN;
   ai.sensor_nis = nis;
   ai.telemetry_age_s = static_cast<double>(end_us - last_frame_us_) * 1e-6;
   // The alarms rest on the virtual sensor: it must have converged. The identifier's health is
@@ -336,6 +348,15 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
       state.s_K2.cols() != n || !state.x_degC.allFinite() || !state.s_K2.allFinite()) {
     return false;
   }
+  // A damaged or forged file must not become a published estimate: temperatures in the
+  // believable range, variances not negative, inputs finite (they are held while down).
+  const auto& in = state.inputs;
+  if ((n > 0 && (state.x_degC.maxCoeff() > kMaxEstimate_degC || state.x_degC.minCoeff() < kMinEstimate_degC)) ||
+      (n > 0 && state.s_K2.diagonal().minCoeff() < 0.0) || !std::isfinite(in.speed_rpm) ||
+      !std::isfinite(in.id_A) || !std::isfinite(in.iq_A) || !std::isfinite(in.ambient_degC) ||
+      !std::isfinite(in.coolant_degC)) {
+    return false;
+  }
   Eigen::VectorXd x = state.x_degC;
   Eigen::MatrixXd s = state.s_K2;
   const double gap_s = static_cast<double>(now_us - state.time_us) * 1e-6;
@@ -354,7 +375,10 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
       return false;
     }
   }
-  if (!x.allFinite() || !s.allFinite()) return false;
+  if (!x.allFinite() || !s.allFinite() ||
+      (n > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC))) {
+    return false;
+  }
   if (!identifier_.Restore(state.resistance)) return false;
   sensor_.Restore(x, s);
   held_inputs_ = state.inputs;

@@ -23,6 +23,11 @@
 namespace pumptherm::daemon {
 
 inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+inline constexpr double kInf = std::numeric_limits<double>::infinity();
+/// Range of a believable node estimate: absolute zero to well above where copper melts
+/// (1085 degC). Outside it (or non-finite) the filter is reset, never published.
+inline constexpr double kMinEstimate_degC = -273.15;
+inline constexpr double kMaxEstimate_degC = 1000.0;
 
 /// Counters of one pump's inputs (what was dropped is counted, never silent).
 struct PumpCounters {
@@ -33,12 +38,14 @@ struct PumpCounters {
   std::uint64_t lost_frames = 0;         ///< gaps in the rolling counter
   std::uint64_t rejected_values = 0;     ///< NaN/Inf or out-of-range decoded values
   std::uint64_t thermal_steps = 0;
+  std::uint64_t filter_resets = 0;       ///< estimate left [kMinEstimate_degC, kMaxEstimate_degC]
 };
 
 /// Everything published about one pump at one moment.
 struct PumpSnapshot {
   std::int64_t time_us = 0;
-  bool initialised = false;               ///< false until the first thermal step: publish "n/a"
+  bool initialised = false;               ///< false until the first thermal step and after a
+                                          ///< filter reset: publish "n/a"
   std::vector<double> node_degC;          ///< per thermal state (model order); NaN before init
   std::vector<double> node_sd_K;
   estimators::ResistanceEstimate resistance;

@@ -63,6 +63,7 @@ int main(int argc, char** argv) {
   if (!check_path.empty()) {
     try {
       const DaemonConfig c = LoadConfig(check_path);
+      if (const std::string w = ConfigPermissionWarning(check_path); !w.empty()) Log(LogLevel::kWarning, "{}", w);
       const Gateway g(c);  // also checks the DBC, mapping, motors and models it names
       fmt::print("{}: OK ({} interface{}, {} pump{})\n", check_path, c.interfaces.size(),
                  c.interfaces.size() == 1 ? "" : "s", c.pumps.size(), c.pumps.size() == 1 ? "" : "s");
@@ -75,7 +76,10 @@ int main(int argc, char** argv) {
 
   DaemonConfig config;
   try {
-    if (!config_path.empty()) config = LoadConfig(config_path);
+    if (!config_path.empty()) {
+      config = LoadConfig(config_path);
+      if (const std::string w = ConfigPermissionWarning(config_path); !w.empty()) Log(LogLevel::kWarning, "{}", w);
+    }
   } catch (const ConfigError& e) {
     Log(LogLevel::kError, "{}", e.what());
     return kExitBadInput;
