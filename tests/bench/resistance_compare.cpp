@@ -78,8 +78,15 @@ double MagnetTrajectory_degC(double t_s) {
   return 27.2 + 30.0 * (1.0 - std::exp(-t_s / 14400.0));
 }
 
+// Measurement-chain overrides for the diagnosis of what limits the figures (0 = simulator default).
+struct Chain {
+  int adc_bits = 0;
+  double voltage_noise_V = -1.0;
+};
+
 std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
-                         const est::ResistanceIdentifierConfig& ours_config, std::FILE* trace) {
+                         const est::ResistanceIdentifierConfig& ours_config, const Chain& chain,
+                         std::FILE* trace) {
   const est::MotorDescription nameplate = est::MotorPreset("han2019-tmp");
   sim::TmpDriveConfig cfg;
   cfg.motor = nameplate;
@@ -96,6 +103,8 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
   cfg.winding_degC = WindingTrajectory_degC;
   cfg.magnet_degC = MagnetTrajectory_degC;
   cfg.seed = seed;
+  if (chain.adc_bits > 0) cfg.adc_bits = chain.adc_bits;
+  if (chain.voltage_noise_V >= 0.0) cfg.voltage_noise_V = chain.voltage_noise_V;
   sim::TmpDrive plant(cfg);
 
   const Eigen::Vector2d theta0(nameplate.copper.r0_ohm, nameplate.flux_Wb);
@@ -313,6 +322,9 @@ int main(int argc, char** argv) {
   app.add_option("--block", oc.block_samples, "ours: samples per block")->capture_default_str();
   app.add_option("--excitation-window", oc.excitation_window_s, "ours: s")->capture_default_str();
   app.add_option("--min-current", oc.min_current_A, "ours: A")->capture_default_str();
+  Chain chain;
+  app.add_option("--adc-bits", chain.adc_bits, "simulator: ADC bits (0 = default 12)");
+  app.add_option("--sim-voltage-noise", chain.voltage_noise_V, "simulator: rms uq/ud jitter, V (default 0.01)");
   CLI11_PARSE(app, argc, argv);
 
   const std::vector<Scenario> scenarios = {
@@ -341,7 +353,7 @@ int main(int argc, char** argv) {
       for (const char* name : kMethodNames) std::fprintf(trace, ",%s", name);
       std::fprintf(trace, ",ours_status\n");
     }
-    const auto figs = Run(sc, hours, seed, oc, trace);
+    const auto figs = Run(sc, hours, seed, oc, chain, trace);
     if (trace != nullptr) std::fclose(trace);
     fmt::print("\n== {}: {} ==\n", sc.name, sc.description);
     fmt::print("{:<16} {:>12} {:>9} {:>12} {:>9} {:>11} {:>11} {:>9}\n", "method", "psi_ramp_Wb",
