@@ -2,6 +2,7 @@
 // recorded inputs and measured node temperatures.
 #include <fmt/core.h>
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -23,6 +24,8 @@ struct EstimateOptions {
   double initial_degC = std::nan("");
   std::string initial = "measured";
   std::string columns;  ///< column preset ("" or "paderborn")
+  double max_step_s = 0.0;        ///< 0: one step per row
+  std::string interpolation = "hold";
   estimators::VirtualSensorConfig config;
 };
 
@@ -44,6 +47,12 @@ int RunEstimate(EstimateOptions& o) {
   std::vector<double> t, speed, id, iq, amb, cool, winding;
   std::vector<std::vector<double>> measured;
   Eigen::VectorXd x_first;
+  if (o.interpolation != "hold" && o.interpolation != "linear") {
+    throw InputError(fmt::format("--inputs: '{}' is neither 'hold' nor 'linear'", o.interpolation));
+  }
+  if (!(o.max_step_s >= 0.0) || !std::isfinite(o.max_step_s)) {
+    throw InputError("--max-step-s: must be a finite number >= 0");
+  }
   if (o.initial != "measured" && o.initial != "first-row") {
     throw InputError(fmt::format("--initial: '{}' is neither 'measured' nor 'first-row'", o.initial));
   }
@@ -76,6 +85,19 @@ int RunEstimate(EstimateOptions& o) {
     in.coolant_degC = cool[k];
     return in;
   };
+  // Inputs a fraction w of the way from row k-1 to row k (held at row k-1 unless linear).
+  auto between = [&](std::size_t k, double w) {
+    estimators::ThermalInputs a = inputs(k - 1);
+    if (o.interpolation == "hold") return a;
+    const estimators::ThermalInputs b = inputs(k);
+    auto mix = [w](double p, double q) { return p + w * (q - p); };
+    a.speed_rpm = mix(a.speed_rpm, b.speed_rpm);
+    a.id_A = mix(a.id_A, b.id_A);
+    a.iq_A = mix(a.iq_A, b.iq_A);
+    a.ambient_degC = mix(a.ambient_degC, b.ambient_degC);
+    a.coolant_degC = mix(a.coolant_degC, b.coolant_degC);
+    return a;
+  };
   estimators::VirtualThermalSensor vts(model, o.config);
   const int n = model.StateCount();
   const std::size_t m = measured.size();
@@ -104,11 +126,21 @@ int RunEstimate(EstimateOptions& o) {
   CsvWriter out(o.output, columns);
   std::vector<double> row(columns.size());
   Eigen::VectorXd y(static_cast<Eigen::Index>(m));
+  const Eigen::VectorXd no_measurement = Eigen::VectorXd::Constant(static_cast<Eigen::Index>(m), std::nan(""));
   for (std::size_t k = 0; k < t.size(); ++k) {
     for (std::size_t j = 0; j < m; ++j) y(static_cast<Eigen::Index>(j)) = measured[j][k];
     const double w = winding.empty() ? std::nan("") : winding[k];
     estimators::KalmanUpdateReport rep;
-    if (k > 0) rep = vts.Step(inputs(k - 1), t[k] - t[k - 1], y, w);
+    if (k > 0) {
+      // Rows further apart than --max-step-s are split; the measurements enter at the row.
+      const double dt_s = t[k] - t[k - 1];
+      const int steps =
+          o.max_step_s > 0.0 ? std::max(1, static_cast<int>(std::ceil(dt_s / o.max_step_s - 1e-9))) : 1;
+      for (int j = 0; j + 1 < steps; ++j) {
+        vts.Step(between(k, static_cast<double>(j) / steps), dt_s / steps, no_measurement, std::nan(""));
+      }
+      rep = vts.Step(between(k, static_cast<double>(steps - 1) / steps), dt_s / steps, y, w);
+    }
     const estimators::ThermalInputs in = inputs(k);
     const Eigen::VectorXd all = model.AllTemperatures_degC(in, vts.Estimate_degC());
     const Eigen::MatrixXd jac = model.AllTemperatureJacobian(in);
@@ -168,6 +200,14 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--columns", o->columns,
                      "Column names of a known data set: 'paderborn' (motor_speed, i_d, i_q, ambient, "
                      "coolant, <node>)");
+      app.add_option("--max-step-s", o->max_step_s,
+                     "Longest filter step, s; rows further apart are split and the measurements "
+                     "enter at the rows (0 = one step per row)")
+          ->capture_default_str();
+      app.add_option("--inputs", o->interpolation,
+                     "Inputs between rows: 'hold' (the earlier row's) or 'linear' (interpolated at "
+                     "the start of each step)")
+          ->capture_default_str();
       app.footer(
           "Example:\n  pumptherm estimate --model saheba2010-improved --input measured.csv "
           "--measure frame --output est.csv\n"
