@@ -130,14 +130,21 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
   m.copper.t0_degC = *Number(res, "t0_degC", "resistance.t0_degC", source, true);
   m.copper.alpha_per_K = *Number(res, "alpha_per_K", "resistance.alpha_per_K", source, true);
   RequirePositive(m.copper.alpha_per_K, res, "alpha_per_K", "resistance.alpha_per_K", source);
+  // Winding conductors have 3.8e-3..6e-3 per K (copper 3.93e-3); a coefficient near zero would
+  // turn eq. 3's division by alpha into a huge, noise-driven winding temperature.
+  if (m.copper.alpha_per_K < 1e-4 || m.copper.alpha_per_K > 2e-2) {
+    throw MotorDescriptionError(fmt::format(
+        "{}: key 'resistance.alpha_per_K' must be within [0.0001, 0.02] per K (copper 3.93e-3), got {}",
+        Where(source, res.get("alpha_per_K")->source()), m.copper.alpha_per_K));
+  }
   if (auto v = Number(res, "plausible_min_degC", "resistance.plausible_min_degC", source, false)) {
     m.plausible_min_degC = *v;
   }
   if (auto v = Number(res, "plausible_max_degC", "resistance.plausible_max_degC", source, false)) {
     m.plausible_max_degC = *v;
   }
-  if (!(m.plausible_min_degC < m.plausible_max_degC) ||
-      PlausibleMinResistance_ohm(m) <= 0.0) {
+  if (!(m.plausible_min_degC < m.plausible_max_degC) || PlausibleMinResistance_ohm(m) <= 0.0 ||
+      !(PlausibleMinResistance_ohm(m) < PlausibleMaxResistance_ohm(m))) {
     throw MotorDescriptionError(fmt::format(
         "{}:{}: keys 'resistance.plausible_min_degC' ({}) and 'resistance.plausible_max_degC' "
         "({}) must give a band of positive resistances",

@@ -106,6 +106,14 @@ TEST(MotorDescription, OutOfRangeValuesAreErrors) {
       << ErrorOf(neg);
   const std::string band = std::string(kValid) + "plausible_min_degC = 100.0\nplausible_max_degC = 50.0\n";
   EXPECT_NE(ErrorOf(band).find("plausible_min_degC"), std::string::npos) << ErrorOf(band);
+  // Found by motor_description_fuzz: alpha_per_K = 4.1e-31 was accepted, an empty resistance band.
+  std::string alpha = kValid;
+  alpha.replace(alpha.find("alpha_per_K = 3.93e-3"), 21, "alpha_per_K = 4.1e-31");
+  EXPECT_NE(ErrorOf(alpha).find("key 'resistance.alpha_per_K' must be within [0.0001, 0.02]"), std::string::npos)
+      << ErrorOf(alpha);
+  // A band too narrow to tell two resistances apart.
+  const std::string thin = std::string(kValid) + "plausible_min_degC = 1.0\nplausible_max_degC = 1.0000000000000002\n";
+  EXPECT_NE(ErrorOf(thin).find("plausible_min_degC"), std::string::npos) << ErrorOf(thin);
 }
 
 TEST(MotorDescription, SyntaxErrorNamesLine) {
