@@ -46,6 +46,13 @@ std::vector<std::uint8_t> Encode(const Message& m) {
   return bytes;
 }
 
+/// Encodes `m` into `bytes` (resized; no allocation once it has held a message this large).
+template <typename Message>
+void EncodeInto(const Message& m, std::vector<std::uint8_t>& bytes) {
+  bytes.resize(static_cast<std::size_t>(m.getEncodedSize()));
+  m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+}
+
 }  // namespace
 
 Gateway::Gateway(const DaemonConfig& config) : config_(config), counter_(config.gateway) {
@@ -206,8 +213,13 @@ Gateway::Gateway(const DaemonConfig& config) : config_(config), counter_(config.
       }
       routes_[route_key] = Route{static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(m)};
     }
+    const std::string& prefix = config_.lcm.channel_prefix;
+    io.channel_telemetry = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTelemetry);
+    io.channel_temperatures = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTemperatures);
+    io.channel_alarm = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kAlarm);
     io_.push_back(std::move(io));
   }
+  channel_health_ = lcm_channels::GatewayHealthChannelName(config_.lcm.channel_prefix);
 }
 
 std::size_t Gateway::Interface(std::string_view name) { return counter_.Interface(name); }
@@ -341,7 +353,6 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
   }
   last_now_us_ = now_us;
   const auto lcm_period_us = static_cast<std::int64_t>(std::llround(config_.lcm.period_s * 1e6));
-  const std::string& prefix = config_.lcm.channel_prefix;
   for (std::size_t p = 0; p < pumps_.size(); ++p) {
     Pump& pump = *pumps_[p];
     PumpIo& io = io_[p];
@@ -358,16 +369,21 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
     }
     if (io.next_lcm_us < 0) io.next_lcm_us = now_us;
     const std::string& name = pump.config().name;
-    auto publish = [&](lcm_channels::PumpChannel ch, const std::vector<std::uint8_t>& bytes) {
-      if (sink.PublishLcm(lcm_channels::PumpChannelName(prefix, name, ch), now_us, bytes)) {
+    auto publish = [&](const std::string& channel) {
+      if (sink.PublishLcm(channel, now_us, lcm_bytes_)) {
         ++counters_.lcm_published;
       } else {
         ++counters_.lcm_failed;
       }
     };
+    auto publish_alarm = [&] {
+      FillAlarm(pump, io.alarm_msg);
+      EncodeInto(io.alarm_msg, lcm_bytes_);
+      publish(io.channel_alarm);
+    };
     if (alarm_changed) {
       io.alarm_changes_sent = pump.snapshot().alarm_changes;
-      publish(lcm_channels::PumpChannel::kAlarm, EncodeAlarm(pump));
+      publish_alarm();
       const auto& a = pump.snapshot().alarm;
       Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning,
           "pump {}: alarm {} ({}){}", name, estimators::AlarmLevelName(a.level),
@@ -375,9 +391,15 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
           std::isfinite(a.value) ? fmt::format(", value {:.2f}", a.value) : std::string());
     }
     if (now_us >= io.next_lcm_us) {
-      publish(lcm_channels::PumpChannel::kTelemetry, EncodeTelemetry(p));
-      if (pump.snapshot().initialised) publish(lcm_channels::PumpChannel::kTemperatures, EncodeTemperatures(pump));
-      if (!alarm_changed) publish(lcm_channels::PumpChannel::kAlarm, EncodeAlarm(pump));
+      FillTelemetry(p, io.telemetry_msg);
+      EncodeInto(io.telemetry_msg, lcm_bytes_);
+      publish(io.channel_telemetry);
+      if (pump.snapshot().initialised) {
+        FillTemperatures(pump, io.temperatures_msg);
+        EncodeInto(io.temperatures_msg, lcm_bytes_);
+        publish(io.channel_temperatures);
+      }
+      if (!alarm_changed) publish_alarm();
       io.next_lcm_us += lcm_period_us;
       if (io.next_lcm_us <= now_us) io.next_lcm_us = now_us + lcm_period_us;
     }
@@ -394,7 +416,9 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
       io.frames_at_last_health = frames;
       io.last_health_us = now_us;
     }
-    if (sink.PublishLcm(lcm_channels::GatewayHealthChannelName(prefix), now_us, EncodeHealth(now_us))) {
+    FillHealth(now_us, health_msg_);
+    EncodeInto(health_msg_, lcm_bytes_);
+    if (sink.PublishLcm(channel_health_, now_us, lcm_bytes_)) {
       ++counters_.lcm_published;
     } else {
       ++counters_.lcm_failed;
@@ -404,8 +428,13 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
 }
 
 std::vector<std::uint8_t> Gateway::EncodeTemperatures(const Pump& pump) const {
-  const PumpSnapshot& s = pump.snapshot();
   pumptherm::temperatures_t m;
+  FillTemperatures(pump, m);
+  return Encode(m);
+}
+
+void Gateway::FillTemperatures(const Pump& pump, pumptherm::temperatures_t& m) const {
+  const PumpSnapshot& s = pump.snapshot();
   m.utime = s.time_us;
   m.pump = pump.config().name;
   const auto& r = s.resistance;
@@ -438,14 +467,18 @@ std::vector<std::uint8_t> Gateway::EncodeTemperatures(const Pump& pump) const {
   } else {
     m.filter_status = pumptherm::temperatures_t::FILTER_TRACKING;
   }
-  return Encode(m);
 }
 
 std::vector<std::uint8_t> Gateway::EncodeTelemetry(std::size_t p) const {
+  pumptherm::telemetry_t m;
+  FillTelemetry(p, m);
+  return Encode(m);
+}
+
+void Gateway::FillTelemetry(std::size_t p, pumptherm::telemetry_t& m) const {
   const PumpIo& io = io_[p];
   const Pump& pump = *pumps_[p];
   auto at = [&](MappingInput i) { return io.inputs[static_cast<std::size_t>(i)]; };
-  pumptherm::telemetry_t m;
   m.utime = io.inputs_us;
   m.pump = pump.config().name;
   m.node_id = static_cast<std::int32_t>(pump.config().node_id);
@@ -463,28 +496,52 @@ std::vector<std::uint8_t> Gateway::EncodeTelemetry(std::size_t p) const {
   m.coolant_degC = kNaN;
   m.dc_link_V = at(MappingInput::kDcLinkV);
   m.status_age_s = io.status_us >= 0 ? static_cast<double>(io.inputs_us - io.status_us) * 1e-6 : kNaN;
-  return Encode(m);
 }
 
 std::vector<std::uint8_t> Gateway::EncodeAlarm(const Pump& pump) const {
-  const PumpSnapshot& s = pump.snapshot();
   pumptherm::alarm_t m;
+  FillAlarm(pump, m);
+  return Encode(m);
+}
+
+void Gateway::FillAlarm(const Pump& pump, pumptherm::alarm_t& m) const {
+  const PumpSnapshot& s = pump.snapshot();
   m.utime = s.time_us;
   m.pump = pump.config().name;
   m.level = static_cast<std::int8_t>(s.alarm.level);
   m.time_to_trip_s = s.alarm.time_to_trip_s;
   const auto& names = pump.model().StateNames();
-  auto node_name = [&](int node) -> std::string {
-    if (node >= 0 && node < static_cast<int>(names.size())) return names[static_cast<std::size_t>(node)];
-    if (node == static_cast<int>(names.size())) return "winding_resistance";
-    return "";
+  // Assigned in place (no temporary strings): no allocation once the strings have held as much.
+  auto set_node_name = [&](std::string& out, int node) {
+    if (node >= 0 && node < static_cast<int>(names.size())) {
+      out = names[static_cast<std::size_t>(node)];
+    } else if (node == static_cast<int>(names.size())) {
+      out = "winding_resistance";
+    } else {
+      out.clear();
+    }
   };
-  m.forecast_node = std::isfinite(s.alarm.time_to_trip_s) ? node_name(s.time_to_trip_node) : "";
-  for (const auto& c : pump.ActiveConditions()) {
-    pumptherm::alarm_condition_t ac;
+  if (std::isfinite(s.alarm.time_to_trip_s)) {
+    set_node_name(m.forecast_node, s.time_to_trip_node);
+  } else {
+    m.forecast_node.clear();
+  }
+  pump.ActiveConditions(conditions_);
+  m.conditions.resize(conditions_.size());
+  for (std::size_t k = 0; k < conditions_.size(); ++k) {
+    const auto& c = conditions_[k];
+    pumptherm::alarm_condition_t& ac = m.conditions[k];
     ac.level = static_cast<std::int8_t>(c.level);
     ac.reason = static_cast<std::int8_t>(c.reason);
-    ac.node = c.node < 0 ? (c.reason == estimators::AlarmReason::kStaleTelemetry ? "telemetry" : "") : node_name(c.node);
+    if (c.node < 0) {
+      if (c.reason == estimators::AlarmReason::kStaleTelemetry) {
+        ac.node = "telemetry";
+      } else {
+        ac.node.clear();
+      }
+    } else {
+      set_node_name(ac.node, c.node);
+    }
     const bool temp = c.reason == estimators::AlarmReason::kEstimatedOverTemperature ||
                       c.reason == estimators::AlarmReason::kMeasuredOverTemperature;
     ac.value_degC = temp ? c.value : kNaN;
@@ -492,20 +549,26 @@ std::vector<std::uint8_t> Gateway::EncodeAlarm(const Pump& pump) const {
     ac.rate_K_per_s = c.reason == estimators::AlarmReason::kRateOfRise ? c.value / 60.0 : kNaN;
     ac.since_utime = static_cast<std::int64_t>(c.raised_at_s * 1e6);
     ac.latched = c.latched;
-    m.conditions.push_back(std::move(ac));
   }
   m.num_conditions = static_cast<std::int32_t>(m.conditions.size());
-  return Encode(m);
 }
 
 std::vector<std::uint8_t> Gateway::EncodeHealth(std::int64_t now_us) const {
   pumptherm::gateway_health_t m;
+  FillHealth(now_us, m);
+  return Encode(m);
+}
+
+void Gateway::FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) const {
   m.utime = now_us;
   m.uptime_s = static_cast<double>(now_us - start_us_) * 1e-6;
   m.num_pumps = static_cast<std::int32_t>(pumps_.size());
   m.lcm_publish_failures = static_cast<std::int64_t>(counters_.lcm_failed);
-  for (const auto& c : counter_.interfaces()) {
-    pumptherm::interface_health_t h;
+  const auto& interfaces = counter_.interfaces();
+  m.interfaces.resize(interfaces.size());
+  for (std::size_t k = 0; k < interfaces.size(); ++k) {
+    const auto& c = interfaces[k];
+    pumptherm::interface_health_t& h = m.interfaces[k];
     h.name = c.name;
     h.bus_state = c.up ? pumptherm::interface_health_t::BUS_STATE_ERROR_ACTIVE
                        : pumptherm::interface_health_t::BUS_STATE_DOWN;
@@ -518,10 +581,8 @@ std::vector<std::uint8_t> Gateway::EncodeHealth(std::int64_t now_us) const {
     h.rx_rejected = static_cast<std::int64_t>(counters_.rx_bad_length + counters_.rx_unknown_id);
     h.error_frames = static_cast<std::int64_t>(c.rx_error_frames);
     h.reopens = static_cast<std::int64_t>(c.reopens);
-    m.interfaces.push_back(std::move(h));
   }
   m.num_interfaces = static_cast<std::int32_t>(m.interfaces.size());
-  return Encode(m);
 }
 
 bool Gateway::Clear(const std::string& pump_name, const std::string& source, const std::string& comment) {
@@ -623,6 +684,14 @@ std::string Gateway::SaveState() const {
     t.insert("resistance_moments", rm);
     t.insert("resistance_blocks", static_cast<std::int64_t>(s.resistance.blocks));
     t.insert("resistance_rejections", s.resistance.consecutive_rejections);
+    // Two parallel arrays (toml++ 3.3 misprints an array of tables nested this deep).
+    toml::array trip_nodes, trip_values;
+    for (const auto& trip : s.latched_trips) {
+      trip_nodes.push_back(trip.node);
+      trip_values.push_back(trip.value_degC);
+    }
+    t.insert("latched_trip_nodes", std::move(trip_nodes));
+    t.insert("latched_trip_values_degC", std::move(trip_values));
     pumps.insert(p->config().name, std::move(t));
   }
   root.insert("pump", std::move(pumps));
@@ -684,7 +753,19 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
       for (int i = 0; i < 4; ++i) s.resistance.moments(i / 2, i % 2) = rm[static_cast<std::size_t>(i)];
       s.resistance.blocks = static_cast<std::uint64_t>((*t)["resistance_blocks"].value_or<std::int64_t>(0));
       s.resistance.consecutive_rejections = (*t)["resistance_rejections"].value_or(0);
-      ok = pump->Restore(s, std::max(now_us, s.time_us));
+      // Latched trips (absent in files written before they were saved: none latched).
+      const toml::array* trip_nodes = (*t)["latched_trip_nodes"].as_array();
+      const toml::array* trip_values = (*t)["latched_trip_values_degC"].as_array();
+      if (trip_nodes || trip_values) {
+        ok = trip_nodes && trip_values && trip_nodes->size() == trip_values->size();
+        for (std::size_t k = 0; ok && k < trip_nodes->size(); ++k) {
+          const auto node = (*trip_nodes)[k].value<std::string>();
+          const auto value = (*trip_values)[k].value<double>();
+          ok = node && value && std::isfinite(*value);
+          if (ok) s.latched_trips.push_back({*node, *value});
+        }
+      }
+      ok = ok && pump->Restore(s, std::max(now_us, s.time_us));
     }
     if (ok) {
       ++restored;

@@ -16,6 +16,10 @@
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
 #include "protocol/mapping.hpp"
+#include "pumptherm/alarm_t.hpp"
+#include "pumptherm/gateway_health_t.hpp"
+#include "pumptherm/telemetry_t.hpp"
+#include "pumptherm/temperatures_t.hpp"
 
 namespace pumptherm::daemon {
 
@@ -128,6 +132,12 @@ class Gateway {
     std::int64_t last_health_us = -1;
     double frame_rate_Hz = 0.0;
     std::int64_t last_clear_us = -1;  // last clear command frame acted on
+    // LCM publishing without allocation in steady state: channel names made once, messages
+    // filled in place (their strings and vectors keep their capacity).
+    std::string channel_telemetry, channel_temperatures, channel_alarm;
+    pumptherm::temperatures_t temperatures_msg;
+    pumptherm::telemetry_t telemetry_msg;
+    pumptherm::alarm_t alarm_msg;
   };
   struct Route {
     std::uint32_t pump;
@@ -135,6 +145,10 @@ class Gateway {
   };
 
   void Emit(std::size_t pump, OutputPlan& plan, std::int64_t time_us, OutputSink& sink);
+  void FillTemperatures(const Pump& p, pumptherm::temperatures_t& m) const;
+  void FillTelemetry(std::size_t pump_index, pumptherm::telemetry_t& m) const;
+  void FillAlarm(const Pump& p, pumptherm::alarm_t& m) const;
+  void FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) const;
   double OutputValue(std::size_t pump, protocol::MappingOutput output) const;
 
   DaemonConfig config_;
@@ -149,6 +163,10 @@ class Gateway {
   std::unordered_map<std::uint64_t, Route> routes_;
   std::vector<double> values_;   // decode/encode buffer (largest message)
   std::vector<std::string> alarm_node_order_;  // CAN AlarmNode index -> node name
+  std::string channel_health_;
+  pumptherm::gateway_health_t health_msg_;
+  std::vector<std::uint8_t> lcm_bytes_;        // LCM encoding buffer (largest message)
+  mutable std::vector<estimators::AlarmCondition> conditions_;  // FillAlarm's buffer
   std::int64_t start_us_ = -1;
   std::int64_t next_health_us_ = -1;
   std::int64_t last_now_us_ = -1;

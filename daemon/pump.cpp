@@ -339,6 +339,14 @@ PumpSavedState Pump::Save() const {
   s.inputs = held_inputs_;
   s.resistance = identifier_.Save();
   s.trip_latched = snapshot_.alarm.trip_latched;
+  const auto& names = model_->StateNames();
+  for (const auto& t : alarms_.LatchedTrips()) {
+    const std::string node = t.node == estimators::AlarmMonitor::kSensorTrip ? std::string("sensor")
+                             : t.node < static_cast<int>(names.size())
+                                 ? names[static_cast<std::size_t>(t.node)]
+                                 : std::string(kWindingResistanceNode);
+    s.latched_trips.push_back({node, t.value});
+  }
   return s;
 }
 
@@ -356,6 +364,19 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
       !std::isfinite(in.id_A) || !std::isfinite(in.iq_A) || !std::isfinite(in.ambient_degC) ||
       !std::isfinite(in.coolant_degC)) {
     return false;
+  }
+  // Alarm node names -> the monitor's indices (model nodes, then the winding resistance).
+  std::vector<estimators::AlarmMonitor::LatchedTrip> trips;
+  for (const auto& t : state.latched_trips) {
+    int node = estimators::AlarmMonitor::kSensorTrip;
+    if (t.node == kWindingResistanceNode) {
+      node = n;
+    } else if (t.node != "sensor") {
+      node = model_->StateIndex(t.node);
+      if (node < 0) return false;
+    }
+    if (!std::isfinite(t.value_degC)) return false;
+    trips.push_back({node, t.value_degC});
   }
   Eigen::VectorXd x = state.x_degC;
   Eigen::MatrixXd s = state.s_K2;
@@ -390,6 +411,11 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   }
   snapshot_.initialised = true;
   snapshot_.time_us = now_us;
+  for (const auto& t : trips) alarms_.RestoreLatchedTrip(t, static_cast<double>(now_us) * 1e-6);
+  if (!trips.empty()) {
+    snapshot_.alarm = alarms_.state();
+    ++snapshot_.alarm_changes;
+  }
   return true;
 }
 

@@ -69,6 +69,13 @@ struct PumpSavedState {
   estimators::ThermalInputs inputs;       ///< the last inputs (held while the daemon is down)
   estimators::ResistanceIdentifierState resistance;
   bool trip_latched = false;
+  /// Latched trips, restored latched: the alarm node's name (a model node,
+  /// "winding_resistance" or "sensor") and the value that raised it, degC.
+  struct LatchedTrip {
+    std::string node;
+    double value_degC = kNaN;
+  };
+  std::vector<LatchedTrip> latched_trips;
 };
 
 class Pump {
@@ -83,6 +90,8 @@ class Pump {
   const estimators::MotorDescription& motor() const { return motor_; }
   /// Every active alarm condition, most severe first.
   std::vector<estimators::AlarmCondition> ActiveConditions() const { return alarms_.ActiveConditions(); }
+  /// The same into `out`: no allocation once `out` has held as many (the gateway's LCM path).
+  void ActiveConditions(std::vector<estimators::AlarmCondition>& out) const { alarms_.ActiveConditions(out); }
 
   /// Fast telemetry halves (NaN for what the mapping does not carry), paired into one
   /// identifier sample when they arrive within 50 ms of each other with equal rolling counters
@@ -108,8 +117,9 @@ class Pump {
   PumpSavedState Save() const;
   /// Continues from `state` saved at state.time_us, aged to `now_us` by the thermal model with
   /// the last inputs held (a motor that kept running stays hot) and the covariance grown by the
-  /// process noise over the gap. Returns false (nothing changes) when the state does not fit
-  /// this pump's model.
+  /// process noise over the gap; latched trips latch again (until cleared). Returns false
+  /// (nothing changes) when the state does not fit this pump's model or names an alarm node it
+  /// lacks.
   bool Restore(const PumpSavedState& state, std::int64_t now_us);
 
  private:

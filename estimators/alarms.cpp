@@ -160,29 +160,60 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
     if (forecast_.level != AlarmLevel::kNone && in.time_to_trip_node >= 0) forecast_node_ = in.time_to_trip_node;
   }
 
-  // Publish the most severe alarm; among equals the one raised first.
-  AlarmState st;
-  st.time_to_trip_s = in.time_to_trip_s;
-  for (const AlarmCondition& c : ActiveConditions()) {
-    st.active_reasons |= static_cast<std::uint16_t>(1U << static_cast<unsigned>(c.reason));
-    if (c.level > st.level) {
-      st.level = c.level;
-      st.reason = c.reason;
-      st.node = c.node;
-      st.value = c.value;
-    }
-  }
-  st.trip_latched = sensor_over_.latched;
-  for (const auto& ch : over_) st.trip_latched = st.trip_latched || ch.latched;
-  state_ = st;
+  Compose(in.time_to_trip_s);
   return state_;
 }
 
-std::vector<AlarmCondition> AlarmMonitor::ActiveConditions() const {
-  std::vector<AlarmCondition> out;
+void AlarmMonitor::Compose(double time_to_trip_s) {
+  // Publish the most severe alarm; among equals the one raised first (and among those the first
+  // in ActiveConditions' order): the first of ActiveConditions(), found without allocating.
+  AlarmState st;
+  st.time_to_trip_s = time_to_trip_s;
+  double best_raised_s = 0.0;
+  ForEachActive([&](const Channel& ch, AlarmReason reason, const char*, int node, double) {
+    st.active_reasons |= static_cast<std::uint16_t>(1U << static_cast<unsigned>(reason));
+    if (ch.level > st.level || (ch.level == st.level && ch.raised_at_s < best_raised_s)) {
+      st.level = ch.level;
+      st.reason = reason;
+      st.node = node;
+      st.value = ch.value;
+      best_raised_s = ch.raised_at_s;
+    }
+  });
+  st.trip_latched = sensor_over_.latched;
+  for (const auto& ch : over_) st.trip_latched = st.trip_latched || ch.latched;
+  state_ = st;
+}
+
+std::vector<AlarmMonitor::LatchedTrip> AlarmMonitor::LatchedTrips() const {
+  std::vector<LatchedTrip> out;
+  for (std::size_t i = 0; i < over_.size(); ++i) {
+    if (over_[i].latched) out.push_back({static_cast<int>(i), over_[i].value});
+  }
+  if (sensor_over_.latched) out.push_back({kSensorTrip, sensor_over_.value});
+  return out;
+}
+
+bool AlarmMonitor::RestoreLatchedTrip(const LatchedTrip& trip, double now_s) {
+  if (!std::isfinite(trip.value) || trip.node < kSensorTrip ||
+      trip.node >= static_cast<int>(over_.size())) {
+    return false;
+  }
+  Channel& ch = trip.node == kSensorTrip ? sensor_over_ : over_[static_cast<std::size_t>(trip.node)];
+  ch.level = AlarmLevel::kTrip;
+  ch.pending = AlarmLevel::kTrip;
+  ch.pending_since_s = std::nan("");
+  ch.value = trip.value;
+  ch.raised_at_s = now_s;
+  ch.latched = true;
+  Compose(state_.time_to_trip_s);
+  return true;
+}
+
+template <typename F>
+void AlarmMonitor::ForEachActive(F&& f) const {
   auto add = [&](const Channel& ch, AlarmReason reason, const char* detail, int node, double threshold) {
-    if (ch.level == AlarmLevel::kNone) return;
-    out.push_back({ch.level, reason, detail, node, ch.value, threshold, ch.raised_at_s, ch.latched});
+    if (ch.level != AlarmLevel::kNone) f(ch, reason, detail, node, threshold);
   };
   for (std::size_t i = 0; i < over_.size(); ++i) {
     const auto& l = limits_[i];
@@ -200,12 +231,31 @@ std::vector<AlarmCondition> AlarmMonitor::ActiveConditions() const {
   add(disagree_, AlarmReason::kImplausibleSensor, "disagrees with the model", config_.sensor_node, std::nan(""));
   add(converged_, AlarmReason::kEstimatorNotConverged, "", -1, std::nan(""));
   add(forecast_, AlarmReason::kForecast, "", forecast_node_, std::nan(""));
-  // Most severe first; among equals the one raised first.
-  std::stable_sort(out.begin(), out.end(), [](const AlarmCondition& a, const AlarmCondition& b) {
+}
+
+std::vector<AlarmCondition> AlarmMonitor::ActiveConditions() const {
+  std::vector<AlarmCondition> out;
+  ActiveConditions(out);
+  return out;
+}
+
+void AlarmMonitor::ActiveConditions(std::vector<AlarmCondition>& out) const {
+  out.clear();
+  ForEachActive([&](const Channel& ch, AlarmReason reason, const char* detail, int node, double threshold) {
+    out.push_back({ch.level, reason, detail, node, ch.value, threshold, ch.raised_at_s, ch.latched});
+  });
+  // Most severe first; among equals the one raised first. Insertion sort: stable, and unlike
+  // std::stable_sort it needs no temporary buffer (a handful of conditions at most).
+  auto before = [](const AlarmCondition& a, const AlarmCondition& b) {
     if (a.level != b.level) return a.level > b.level;
     return a.raised_at_s < b.raised_at_s;
-  });
-  return out;
+  };
+  for (std::size_t i = 1; i < out.size(); ++i) {
+    const AlarmCondition c = out[i];
+    std::size_t j = i;
+    for (; j > 0 && before(c, out[j - 1]); --j) out[j] = out[j - 1];
+    out[j] = c;
+  }
 }
 
 bool AlarmMonitor::Clear() {

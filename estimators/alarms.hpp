@@ -124,8 +124,24 @@ class AlarmMonitor {
 
   const AlarmState& state() const { return state_; }
 
+  /// Latched trips, for saving across a restart: `node` is the node index (as in the
+  /// constructor's `limits`) or kSensorTrip for the measured sensor's own level.
+  static constexpr int kSensorTrip = -1;
+  struct LatchedTrip {
+    int node = kSensorTrip;
+    double value = std::numeric_limits<double>::quiet_NaN();  ///< degC that raised it
+  };
+  /// Every latched trip (allocates; for saving state, not per step).
+  std::vector<LatchedTrip> LatchedTrips() const;
+  /// Re-latches a trip saved by LatchedTrips() (after a restart), raised at `now_s`: it stays
+  /// latched until Clear(), as if it had never stopped. Returns false (nothing changes) for a
+  /// node index out of range or a non-finite value.
+  bool RestoreLatchedTrip(const LatchedTrip& trip, double now_s);
+
   /// Every active condition, most severe first (allocates; for publishing, not per frame).
   std::vector<AlarmCondition> ActiveConditions() const;
+  /// The same into `out` (cleared first): no allocation once `out` has held as many.
+  void ActiveConditions(std::vector<AlarmCondition>& out) const;
 
  private:
   /// One alarm condition with hold time and latch.
@@ -140,6 +156,11 @@ class AlarmMonitor {
   /// Moves `ch` toward `want` (with hold), `want` computed by the caller with hysteresis.
   void Update(Channel& ch, AlarmLevel want, double value, double now_s, double hold_s);
   AlarmLevel OverLevel(const Channel& ch, double t_degC, const TemperatureLimits& lim) const;
+  /// The published state from the channels (most severe first). Does not allocate.
+  void Compose(double time_to_trip_s);
+  /// Calls f(channel, reason, detail, node, threshold) for every active channel, in a fixed order.
+  template <typename F>
+  void ForEachActive(F&& f) const;
 
   AlarmConfig config_;
   std::vector<TemperatureLimits> limits_;

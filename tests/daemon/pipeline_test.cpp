@@ -200,7 +200,7 @@ TEST(Pipeline, NothingIsPublishedAsATemperatureBeforeTheFirstEstimate) {
   EXPECT_EQ(b.sink.lcm.count("PUMPTHERM/tmp1/TEMPS"), 0U);
 }
 
-TEST(Pipeline, OverheatingTripsLatchesAndClearsOnlyFromAConfiguredSource) {
+TEST(Pipeline, OverheatingTripsLatchesSurvivesARestartAndClearsOnlyFromAConfiguredSource) {
   Bench b(Config(R"(
 [pump.alarms.levels]
 slot_winding = { warning_degC = 50, trip_degC = 55 }
@@ -231,6 +231,63 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
   b.Run(3600.0, 0.0);
   ASSERT_LT(b.truth_(3), 45.0);
   EXPECT_EQ(b.gateway_.pumps()[0]->snapshot().alarm.level, estimators::AlarmLevel::kTrip);
+
+  // A restart now (state saved, a new gateway restores it): the trip is still latched although
+  // its condition is gone, with the node and the value that raised it, and goes out at once.
+  const std::string text = b.gateway_.SaveState();
+  EXPECT_NE(text.find("latched_trip_nodes = [ 'slot_winding' ]"), std::string::npos) << text;
+  Bench r(Config(R"(
+[pump.alarms.levels]
+slot_winding = { warning_degC = 50, trip_degC = 55 }
+)"));
+  r.t_us_ = b.t_us_ + 5'000'000;  // down for 5 s
+  std::string warning;
+  ASSERT_EQ(r.gateway_.RestoreState(text, r.t_us_, &warning), 1) << warning;
+  {
+    const auto& before = b.gateway_.pumps()[0]->snapshot().alarm;
+    const auto& after = r.gateway_.pumps()[0]->snapshot().alarm;
+    EXPECT_EQ(after.level, estimators::AlarmLevel::kTrip);
+    EXPECT_TRUE(after.trip_latched);
+    EXPECT_EQ(after.reason, estimators::AlarmReason::kEstimatedOverTemperature);
+    EXPECT_EQ(after.node, 3);
+    EXPECT_DOUBLE_EQ(after.value, before.value);
+  }
+  r.Run(10.0, 0.0);  // cool telemetry: still latched
+  EXPECT_EQ(r.gateway_.pumps()[0]->snapshot().alarm.level, estimators::AlarmLevel::kTrip);
+  ASSERT_FALSE(r.sink.frames.empty());
+  {
+    const protocol::CanFrame* first = nullptr;
+    for (const auto& [t, f] : r.sink.frames) {
+      if (f.id == alarm->id + 1) {
+        first = &f;
+        break;
+      }
+    }
+    ASSERT_NE(first, nullptr);
+    codec.Decode(std::span<const std::uint8_t>(first->data.data(), first->len), v);
+    EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0) << "first GW_ALARM after the restart";
+  }
+  EXPECT_TRUE(r.gateway_.Clear("tmp1", "panel", "after the restart"));
+  r.Run(10.0, 0.0);
+  EXPECT_EQ(r.gateway_.pumps()[0]->snapshot().alarm.level, estimators::AlarmLevel::kNone);
+  // A state without the key (written before trips were saved) restores with none latched; a
+  // latched trip on a node the model lacks makes the pump start cold, with a warning.
+  std::string old_text = text;
+  for (const char* key : {"latched_trip_nodes", "latched_trip_values_degC"}) {
+    const std::size_t at = old_text.find(key);
+    ASSERT_NE(at, std::string::npos) << key;
+    old_text.erase(at, old_text.find('\n', at) + 1 - at);
+  }
+  Bench o(Config());
+  ASSERT_EQ(o.gateway_.RestoreState(old_text, r.t_us_, &warning), 1) << warning << "\n" << old_text;
+  EXPECT_FALSE(o.gateway_.pumps()[0]->snapshot().alarm.trip_latched);
+  std::string foreign = text;
+  foreign.replace(foreign.find("'slot_winding'"), 14, "'no_such_node'");
+  Bench f(Config());
+  warning.clear();
+  EXPECT_EQ(f.gateway_.RestoreState(foreign, r.t_us_, &warning), 0);
+  EXPECT_NE(warning.find("tmp1"), std::string::npos) << warning;
+
   EXPECT_FALSE(b.gateway_.Clear("tmp1", "intruder", ""));
   EXPECT_TRUE(b.gateway_.Clear("tmp1", "panel", "checked the pump"));
   b.Run(10.0, 0.0);

@@ -95,6 +95,40 @@ TEST(Alarms, TripLatchesUntilClearedAndReassertsWhenStillHot) {
 
 }
 
+TEST(Alarms, LatchedTripsSaveAndRestoreAcrossARestart) {
+  Fixture f;
+  f.nodes[0] = 50.0;
+  f.nodes[1] = 150.0;  // node 1 over its trip level (140)
+  f.in.sensor_degC = 95.0;  // the sensor over its own trip level (90)
+  for (double t = 0; t <= 3; t += 1) f.At(t);
+  ASSERT_TRUE(f.m.state().trip_latched);
+  const auto trips = f.m.LatchedTrips();
+  ASSERT_EQ(trips.size(), 2U);
+  EXPECT_EQ(trips[0].node, 1);
+  EXPECT_DOUBLE_EQ(trips[0].value, 150.0);
+  EXPECT_EQ(trips[1].node, AlarmMonitor::kSensorTrip);
+  EXPECT_DOUBLE_EQ(trips[1].value, 95.0);
+
+  // A new monitor (the restarted daemon), the motor cool by now: still tripped until cleared.
+  Fixture g;
+  EXPECT_FALSE(g.m.RestoreLatchedTrip({2, 150.0}, 100.0)) << "node index out of range";
+  EXPECT_FALSE(g.m.RestoreLatchedTrip({1, kNaN}, 100.0));
+  EXPECT_FALSE(g.m.state().trip_latched);
+  for (const auto& t : trips) EXPECT_TRUE(g.m.RestoreLatchedTrip(t, 100.0));
+  EXPECT_EQ(g.m.state().level, AlarmLevel::kTrip);
+  EXPECT_TRUE(g.m.state().trip_latched);
+  EXPECT_EQ(g.m.state().node, 1);
+  g.nodes[0] = 30.0;
+  g.nodes[1] = 30.0;
+  g.in.sensor_degC = 30.0;
+  for (double t = 100; t <= 110; t += 1) EXPECT_EQ(g.At(t).level, AlarmLevel::kTrip) << t;
+  EXPECT_EQ(g.m.LatchedTrips().size(), 2U);
+  EXPECT_TRUE(g.m.Clear());
+  for (double t = 111; t <= 115; t += 1) g.At(t);
+  EXPECT_EQ(g.m.state().level, AlarmLevel::kNone);
+  EXPECT_TRUE(g.m.LatchedTrips().empty());
+}
+
 TEST(Alarms, MeasuredSensorHasItsOwnLevels) {
   Fixture f;
   f.nodes[0] = 60.0;

@@ -1,0 +1,164 @@
+// Issue 6 figure "heap allocations per frame in steady state: zero", as a test: this executable
+// replaces the global operator new/delete with counting ones, runs a multi-pump recording (the
+// plant simulator's demo: three pumps, 100 Hz fast telemetry and 10 Hz status, generated at
+// build time) through the offline pipeline's per-frame path (daemon/offline.cpp RunOffline:
+// parse the candump line, Gateway::OnFrame, Gateway::Advance into a sink that writes nothing),
+// and counts the allocations after a warm-up of 60 s of log time. The counted part holds
+// thermal steps, alarm evaluations, forecasts, CAN outputs, LCM encodings and health messages.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <new>
+#include <string>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "daemon/gateway.hpp"
+#include "daemon/resources.hpp"
+#include "protocol/candump_log.hpp"
+
+namespace {
+std::atomic<bool> g_counting{false};
+std::atomic<std::uint64_t> g_allocations{0};
+std::atomic<std::uint64_t> g_bytes{0};
+// PUMPTHERM_ABORT_ON_ALLOCATION=1 aborts at the first counted allocation (run under gdb to see
+// where it comes from).
+bool g_abort = std::getenv("PUMPTHERM_ABORT_ON_ALLOCATION") != nullptr;
+
+void* Allocate(std::size_t n, std::size_t align) {
+  if (g_counting.load(std::memory_order_relaxed)) {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+    g_bytes.fetch_add(n, std::memory_order_relaxed);
+    if (g_abort) std::abort();
+  }
+  void* p = nullptr;
+  if (align <= alignof(std::max_align_t)) {
+    p = std::malloc(n == 0 ? 1 : n);
+  } else if (posix_memalign(&p, align, n == 0 ? align : n) != 0) {
+    p = nullptr;
+  }
+  return p;
+}
+}  // namespace
+
+void* operator new(std::size_t n) {
+  if (void* p = Allocate(n, 0)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n) {
+  if (void* p = Allocate(n, 0)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t n, std::align_val_t a) {
+  if (void* p = Allocate(n, static_cast<std::size_t>(a))) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n, std::align_val_t a) {
+  if (void* p = Allocate(n, static_cast<std::size_t>(a))) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t n, const std::nothrow_t&) noexcept { return Allocate(n, 0); }
+void* operator new[](std::size_t n, const std::nothrow_t&) noexcept { return Allocate(n, 0); }
+// Our operator new allocates with malloc, so free is the matching release (GCC cannot see that
+// through the replaced operators).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+#pragma GCC diagnostic pop
+
+namespace pumptherm::daemon {
+namespace {
+
+/// The offline sink with no output files: counts, writes nothing (as RunOffline's LogSink
+/// without --output-log and --lcm-log).
+struct NullSink : OutputSink {
+  std::uint64_t frames = 0, lcm = 0;
+  void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override { ++frames; }
+  bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override {
+    ++lcm;
+    return true;
+  }
+};
+
+TEST(Allocation, NoHeapAllocationPerFrameInSteadyState) {
+  const std::string config_path = std::string(PUMPTHERM_SOURCE_DIR) + "/tools/demo/pumpthermd-demo.toml";
+  const DaemonConfig config = LoadConfig(config_path);
+  Gateway gateway(config);
+  std::ifstream in(PUMPTHERM_ALLOCATION_RECORDING);
+  ASSERT_TRUE(in) << PUMPTHERM_ALLOCATION_RECORDING << ": cannot open (built by vcan_pipeline_recording)";
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  ASSERT_GT(lines.size(), 50000U);
+
+  // The counting operator new is the one in use (else zero below would prove nothing).
+  static std::vector<int>* volatile probe = nullptr;
+  g_counting = true;
+  probe = new std::vector<int>(1000);
+  g_counting = false;
+  ASSERT_GE(g_allocations.load(), 2U) << "the counting operator new is not in use";
+  delete probe;
+  g_allocations = 0;
+  g_bytes = 0;
+
+  NullSink sink;
+  std::string last_interface;
+  std::size_t iface = 0;
+  std::int64_t start_us = -1, last_us = -1;
+  std::uint64_t counted_frames = 0, counted_outputs = 0, counted_lcm = 0;
+  std::uint64_t steps_before = 0;
+  constexpr std::int64_t kWarmUpUs = 60'000'000;
+  for (const std::string& line : lines) {
+    const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
+    ASSERT_TRUE(p.ok || p.skip) << line;
+    if (p.skip) continue;
+    if (p.record.interface != last_interface) {
+      last_interface = p.record.interface;
+      iface = gateway.Interface(last_interface);
+    }
+    const std::int64_t now = std::max(p.record.time_us, last_us);
+    if (start_us < 0) start_us = now;
+    if (!g_counting && now - start_us >= kWarmUpUs) {
+      for (const auto& pump : gateway.pumps()) steps_before += pump->counters().thermal_steps;
+      counted_outputs = sink.frames;
+      counted_lcm = sink.lcm;
+      g_counting = true;
+    }
+    gateway.OnFrame(iface, protocol::TimedFrame{now, p.record.frame});
+    gateway.Advance(now, sink);
+    last_us = now;
+    if (g_counting) ++counted_frames;
+  }
+  g_counting = false;
+  std::uint64_t steps = 0;
+  for (const auto& pump : gateway.pumps()) steps += pump->counters().thermal_steps;
+  steps -= steps_before;
+  counted_outputs = sink.frames - counted_outputs;
+  counted_lcm = sink.lcm - counted_lcm;
+  std::printf("counted %llu frames (%.1f s of log, %zu pumps): %llu thermal steps, %llu CAN outputs, "
+              "%llu LCM messages; %llu heap allocations (%llu bytes)\n",
+              static_cast<unsigned long long>(counted_frames), static_cast<double>(last_us - start_us - kWarmUpUs) * 1e-6,
+              gateway.pumps().size(), static_cast<unsigned long long>(steps),
+              static_cast<unsigned long long>(counted_outputs), static_cast<unsigned long long>(counted_lcm),
+              static_cast<unsigned long long>(g_allocations.load()), static_cast<unsigned long long>(g_bytes.load()));
+  // The counted window must hold everything the steady state does, or zero means nothing.
+  ASSERT_GT(counted_frames, 20000U);
+  ASSERT_GE(steps, 3U * 30U);
+  ASSERT_GT(counted_outputs, 1000U);
+  ASSERT_GT(counted_lcm, 3U * 3U * 30U);
+  EXPECT_EQ(g_allocations.load(), 0U) << "heap allocations in the per-frame path after warm-up ("
+                                      << static_cast<double>(g_allocations.load()) / static_cast<double>(counted_frames)
+                                      << " per frame); PUMPTHERM_ABORT_ON_ALLOCATION=1 under gdb shows where";
+}
+
+}  // namespace
+}  // namespace pumptherm::daemon
