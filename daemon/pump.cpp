@@ -207,11 +207,10 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const estimators::ResistanceEstimate& r = identifier_.estimate();
   const bool tracking = r.status == estimators::ResistanceStatus::kTracking;
   const double winding_res = tracking ? r.winding_degC : kNaN;
-  Eigen::Matrix<double, 1, 1> y;
-  y(0) = measured;
+  measurement_(0) = measured;  // a member: a temporary VectorXd would allocate every step
   const estimators::KalmanUpdateReport* report = nullptr;
   try {
-    report = &sensor_.Step(in, period_s_, y, config_.fuse_winding ? winding_res : kNaN);
+    report = &sensor_.Step(in, period_s_, measurement_, config_.fuse_winding ? winding_res : kNaN);
   } catch (const std::exception&) {
     ++counters_.rejected_values;
     return;
@@ -305,9 +304,15 @@ double Pump::TimeToTrip_s(const estimators::ThermalInputs& in, int* node) {
     }
   }
   try {
-    const Eigen::VectorXd ss = model_->SteadyState_degC(in);
+    // The steady state at these inputs, A x + f = 0 (ThermalModel::SteadyState_degC), into
+    // members: no allocation per step. A singular A gives non-finite values: no forecast.
+    model_->Linearise(in, forecast_lin_);
+    forecast_lu_.compute(forecast_lin_.a_per_s);
+    forecast_ss_.noalias() = forecast_lu_.solve(forecast_lin_.f_K_per_s);
+    forecast_ss_ = -forecast_ss_;
+    if (!forecast_ss_.allFinite()) return std::numeric_limits<double>::infinity();
     bool reaches = false;
-    for (std::size_t i = 0; i < names.size(); ++i) reaches = reaches || ss(static_cast<Eigen::Index>(i)) >= trip_of(i);
+    for (std::size_t i = 0; i < names.size(); ++i) reaches = reaches || forecast_ss_(static_cast<Eigen::Index>(i)) >= trip_of(i);
     if (!reaches) return std::numeric_limits<double>::infinity();
     model_->Linearise(in, forecast_x_, forecast_lin_);
     forecast_disc_.Update(forecast_lin_, kForecastStep_s);

@@ -166,10 +166,14 @@ class Pump {
   std::int64_t next_step_us_ = -1;
   bool initialised_ = false;
 
+  Eigen::VectorXd measurement_ = Eigen::VectorXd::Constant(1, kNaN);  // the frame sensor, per step
+
   // Forecast.
   estimators::ThermalLinearModel forecast_lin_;
   estimators::ThermalDiscretiser forecast_disc_{1e-3};
   Eigen::VectorXd forecast_x_, forecast_next_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> forecast_lu_;
+  Eigen::VectorXd forecast_ss_;
   std::vector<double> alarm_values_;
 };
 
