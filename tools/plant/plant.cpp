@@ -16,6 +16,7 @@
 #include <toml++/toml.h>
 
 #include "estimators/copper.hpp"
+#include "estimators/model_effects.hpp"
 #include "estimators/motor.hpp"
 #include "estimators/thermal_discretisation.hpp"
 #include "estimators/thermal_model.hpp"
@@ -298,6 +299,13 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       const std::size_t slash = model_text.source.rfind('/');
       const estimators::ThermalModelFiles files{
           slash == std::string::npos ? std::string(".") : model_text.source.substr(0, slash), res.read_file};
+      if (!spec.effects.empty()) {
+        // Hidden effects: the truth is the model with the workflow's effects added.
+        model_text.text = estimators::ApplyModelEffects(model_text.text, model_text.source, spec.effects);
+        for (const auto& e : spec.effects) {
+          model_text.source += fmt::format(" +{}", e.name);
+        }
+      }
       ps->models.push_back(
           std::make_unique<ThermalModel>(ThermalModel::Parse(model_text.text, model_text.source, files)));
       for (const Fault& f : spec.faults) {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <initializer_list>
+#include <optional>
 #include <set>
 #include <toml++/toml.h>
 
@@ -196,6 +197,56 @@ DriveSpec ParseDrive(const toml::table* pump, const toml::table* defaults, const
   return s;
 }
 
+// effects = [{ name = "frame_thermal_mass", values = [2700.0] }, ...]: the discrepancy
+// workflow's model effects, switched on in the truth (docs/plant-simulator.md).
+std::vector<estimators::Effect> ParseEffects(const toml::node& node, const std::string& source,
+                                             const std::string& where) {
+  const toml::array* arr = node.as_array();
+  if (arr == nullptr) Fail(source, LineOf(node), where, "expected an array of tables");
+  std::vector<estimators::Effect> out;
+  std::set<std::string> seen;
+  for (std::size_t i = 0; i < arr->size(); ++i) {
+    const toml::table* t = (*arr)[i].as_table();
+    const std::string at = fmt::format("{}[{}].", where, i);
+    if (t == nullptr) Fail(source, LineOf((*arr)[i]), at, "expected a table");
+    CheckKeys(*t, {"name", "values"}, source, at);
+    const auto name = t->get_as<std::string>("name");
+    if (name == nullptr) Fail(source, LineOf(*t), at + "name", "missing (an effect name)");
+    const estimators::EffectSpec* spec = estimators::FindEffect(name->get());
+    if (spec == nullptr) {
+      std::string list;
+      for (const auto& e : estimators::EffectVocabulary()) {
+        if (!e.sensor) list += (list.empty() ? "" : ", ") + e.name;
+      }
+      Fail(source, LineOf(*name), at + "name", fmt::format("unknown effect '{}' (known: {})", name->get(), list));
+    }
+    if (spec->sensor) {
+      Fail(source, LineOf(*name), at + "name",
+           fmt::format("'{}' is a sensor effect: set frame_sensor.lag_s or frame_sensor.offset_K instead",
+                       spec->name));
+    }
+    if (!seen.insert(spec->name).second) Fail(source, LineOf(*name), at + "name", "effect given twice");
+    const toml::array* values = t->get_as<toml::array>("values");
+    if (values == nullptr) Fail(source, LineOf(*t), at + "values", "missing (an array of numbers)");
+    if (values->size() != spec->parameters.size()) {
+      Fail(source, LineOf(*values), at + "values",
+           fmt::format("'{}' takes {} value(s)", spec->name, spec->parameters.size()));
+    }
+    estimators::Effect effect{spec->name, {}, {}};
+    for (std::size_t k = 0; k < values->size(); ++k) {
+      const std::optional<double> v = (*values)[k].value<double>();
+      const estimators::EffectParameterSpec& ps = spec->parameters[k];
+      if (!v || !std::isfinite(*v) || *v < ps.lower || *v > ps.upper) {
+        Fail(source, LineOf((*values)[k]), fmt::format("{}values[{}]", at, k),
+             fmt::format("{} must be a number in [{}, {}]", ps.name, ps.lower, ps.upper));
+      }
+      effect.values.push_back(*v);
+    }
+    out.push_back(std::move(effect));
+  }
+  return out;
+}
+
 std::vector<Fault> ParseFaults(const toml::node& node, const std::string& source,
                                const std::string& where) {
   const toml::array* arr = node.as_array();
@@ -305,7 +356,7 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
   const std::initializer_list<std::string_view> pump_keys = {
       "name", "node_id", "count", "stagger_s", "interface", "model", "motor", "ambient_C",
       "initial_C", "process_noise_K", "profile", "segments", "faults", "frame_sensor",
-      "ambient_sensor", "drive"};
+      "ambient_sensor", "drive", "effects"};
   if (defaults != nullptr) {
     CheckKeys(*defaults,
               {"interface", "model", "motor", "ambient_C", "initial_C", "process_noise_K",
@@ -371,6 +422,7 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
       base.segments = ParseSegments(*p->get("segments"), source, fmt::format("profile.{}.segments", profile));
     }
     if (const toml::node* f = pt.get("faults")) base.faults = ParseFaults(*f, source, at + "faults");
+    if (const toml::node* e = pt.get("effects")) base.effects = ParseEffects(*e, source, at + "effects");
 
     for (std::uint32_t k = 0; k < count; ++k) {
       PumpSpec p = base;

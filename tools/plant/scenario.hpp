@@ -13,6 +13,8 @@
 #include <string_view>
 #include <vector>
 
+#include "estimators/model_effects.hpp"
+
 namespace pumptherm::plant {
 
 /// A scenario that does not parse or is out of range; the message names the source, the line
@@ -104,6 +106,9 @@ struct PumpSpec {
   TemperatureSensorSpec ambient_sensor;
   DriveSpec drive;
   std::vector<Fault> faults;
+  /// Effects of the discrepancy workflow's vocabulary switched on in the truth model (model
+  /// effects only; estimators/model_effects.hpp, docs/discrepancy.md): hidden-effect data.
+  std::vector<estimators::Effect> effects;
   int line = 0;
 };
 
