@@ -4,12 +4,12 @@
 # where the kernel has vcan, otherwise in a QEMU guest). Ends with CTest's summary of the main
 # build (unit + vcan). Run tools/setup.sh first (the README's command does).
 #
-# Environment: PUMPTHERM_JOBS (default: number of cores), PUMPTHERM_FUZZ_SECONDS (default 30),
+# Environment: PUMPTHERM_JOBS (default: number of cores), PUMPTHERM_FUZZ_SECONDS (default 60),
 # CI=true makes a vcan test that can run neither natively nor in the guest fail, not skip.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=${PUMPTHERM_JOBS:-$(nproc)}
-fuzz_seconds=${PUMPTHERM_FUZZ_SECONDS:-30}
+fuzz_seconds=${PUMPTHERM_FUZZ_SECONDS:-60}
 start=$(date +%s)
 stage() { printf '\n=== %s (%ds)\n' "$*" $(( $(date +%s) - start )); }
 
@@ -39,12 +39,12 @@ if [[ -x tests/fuzz/run.sh ]]; then
   tests/fuzz/run.sh build-fuzz "$fuzz_seconds"
 fi
 
-stage "vcan tests (native vcan, or a QEMU guest) and system tests (Debian guest with systemd)"
+stage "vcan tests (native vcan, or a QEMU guest), package checks, slow tests, system tests (Debian guest with systemd)"
 # Verbose, so the log shows each test's mode line ("vcan: mode=guest kernel=...") and its
 # scenario's output: proof that they ran rather than skipped. Unit tests ran above. The log is
 # printed when CTest is done, so that CTest's summary line closes the output.
 set +e
-ctest --test-dir build -L 'vcan|system' -j "$jobs" -V >build/vcan-system-tests.log 2>&1
+ctest --test-dir build -L 'vcan|system|package|slow' -j "$jobs" -V >build/vcan-system-tests.log 2>&1
 rc=$?
 set -e
 grep -vE '^[0-9]+: (Test command|Working Directory|Environment variables|Test timeout|UpdateCTestConfiguration)|^UpdateCTestConfiguration|^Parse Config|^ Add coverage|^Constructing a list|^Updating test list|^Checking test dependency|^test [0-9]+$|^ +Start [0-9]+:' \
