@@ -1,11 +1,27 @@
 #include "daemon/frame_counter.hpp"
 
 #include <fmt/format.h>
+#include <linux/can/error.h>
 
 #include <cmath>
 #include <limits>
 
 namespace pumptherm::daemon {
+
+BusState NextBusState(BusState state, const protocol::CanFrame& frame) {
+  if (!frame.error) return state;
+  const std::uint32_t cls = frame.id;
+  if ((cls & CAN_ERR_BUSOFF) != 0U) return BusState::kBusOff;
+  if ((cls & CAN_ERR_RESTARTED) != 0U) state = BusState::kErrorActive;
+  if ((cls & CAN_ERR_CRTL) != 0U && frame.len >= 2) {
+    const std::uint8_t crtl = frame.data[1];
+    if ((crtl & (CAN_ERR_CRTL_RX_PASSIVE | CAN_ERR_CRTL_TX_PASSIVE)) != 0U) return BusState::kErrorPassive;
+    if ((crtl & (CAN_ERR_CRTL_RX_WARNING | CAN_ERR_CRTL_TX_WARNING)) != 0U) return BusState::kErrorWarning;
+    if ((crtl & CAN_ERR_CRTL_ACTIVE) != 0U) return BusState::kErrorActive;
+  }
+  if (state == BusState::kUnknown) return BusState::kErrorActive;  // it talks: not bus-off
+  return state;
+}
 
 std::size_t FrameCounter::Interface(std::string_view name) {
   for (std::size_t i = 0; i < interfaces_.size(); ++i) {
@@ -19,6 +35,7 @@ void FrameCounter::OnFrame(std::size_t iface, const protocol::TimedFrame& timed)
   InterfaceCounters& c = interfaces_[iface];
   if (timed.frame.error) {
     ++c.rx_error_frames;
+    c.bus_state = NextBusState(c.bus_state, timed.frame);
     return;
   }
   ++c.rx_frames;

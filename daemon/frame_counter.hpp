@@ -16,6 +16,17 @@
 
 namespace pumptherm::daemon {
 
+/// Controller state of a CAN interface as its error frames tell it (linux/can/error.h); only
+/// known when the interface's error frames are requested (config `error_frames = true`).
+enum class BusState : std::uint8_t { kUnknown, kErrorActive, kErrorWarning, kErrorPassive, kBusOff };
+
+/// The bus state after error frame `frame` (id: the error class bits, data: the details of
+/// linux/can/error.h), starting from `state`: bus-off (CAN_ERR_BUSOFF), passive or warning
+/// (CAN_ERR_CRTL with the RX/TX passive or warning bits in data[1]), back to active
+/// (CAN_ERR_CRTL_ACTIVE, or CAN_ERR_RESTARTED after a bus-off). Other error classes (protocol
+/// violations, lost arbitration, missing ACK) leave the state as it was.
+BusState NextBusState(BusState state, const protocol::CanFrame& frame);
+
 /// Counters of one interface.
 struct InterfaceCounters {
   std::string name;
@@ -25,6 +36,7 @@ struct InterfaceCounters {
   std::uint64_t tx_frames = 0;
   std::uint64_t tx_dropped = 0;       ///< ENOBUFS/EAGAIN/ENETDOWN on send: counted, not fatal
   std::uint64_t reopens = 0;          ///< times the socket was reopened after the interface vanished
+  BusState bus_state = BusState::kUnknown;  ///< from error frames; see NextBusState
   bool up = true;
 };
 

@@ -313,7 +313,13 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output) const {
       return last_now_us_ >= start_us_ ? static_cast<double>(last_now_us_ - start_us_) * 1e-6 : 0.0;
     case MappingOutput::kFrameRateHz: return io_[p].frame_rate_Hz;
     case MappingOutput::kDrops: return static_cast<double>(pump.counters().lost_frames);
-    case MappingOutput::kBusState: return counter_.interfaces()[io_[p].iface].up ? 0.0 : 3.0;
+    case MappingOutput::kBusState: {
+      // The DBC's VAL_ table: 0 error active (also warning and unknown), 1 passive, 2 bus off, 3 down.
+      const InterfaceCounters& c = counter_.interfaces()[io_[p].iface];
+      if (!c.up) return 3.0;
+      if (c.bus_state == BusState::kBusOff) return 2.0;
+      return c.bus_state == BusState::kErrorPassive ? 1.0 : 0.0;
+    }
   }
   return kNaN;
 }
@@ -559,6 +565,20 @@ std::vector<std::uint8_t> Gateway::EncodeHealth(std::int64_t now_us) const {
   return Encode(m);
 }
 
+namespace {
+std::int8_t LcmBusState(BusState state) {
+  using H = pumptherm::interface_health_t;
+  switch (state) {
+    case BusState::kErrorActive: return H::BUS_STATE_ERROR_ACTIVE;
+    case BusState::kErrorWarning: return H::BUS_STATE_ERROR_WARNING;
+    case BusState::kErrorPassive: return H::BUS_STATE_ERROR_PASSIVE;
+    case BusState::kBusOff: return H::BUS_STATE_BUS_OFF;
+    case BusState::kUnknown: break;
+  }
+  return H::BUS_STATE_UNKNOWN;
+}
+}  // namespace
+
 void Gateway::FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) const {
   m.utime = now_us;
   m.uptime_s = static_cast<double>(now_us - start_us_) * 1e-6;
@@ -570,8 +590,7 @@ void Gateway::FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) co
     const auto& c = interfaces[k];
     pumptherm::interface_health_t& h = m.interfaces[k];
     h.name = c.name;
-    h.bus_state = c.up ? pumptherm::interface_health_t::BUS_STATE_ERROR_ACTIVE
-                       : pumptherm::interface_health_t::BUS_STATE_DOWN;
+    h.bus_state = c.up ? LcmBusState(c.bus_state) : pumptherm::interface_health_t::BUS_STATE_DOWN;
     h.rx_frames_per_s = kNaN;
     h.tx_frames_per_s = kNaN;
     h.rx_frames = static_cast<std::int64_t>(c.rx_frames);

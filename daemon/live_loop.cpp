@@ -94,6 +94,7 @@ struct LiveLoop::Impl : OutputSink {
     InterfaceCounters& c = gateway->counter().counters(gateway_index[i]);
     if (c.up == up) return;
     c.up = up;
+    c.bus_state = BusState::kUnknown;  // a link that comes back starts over; its error frames tell
     if (up) {
       Log(LogLevel::kNotice, "{}: interface is up again; receiving", sockets[i].name());
     } else {

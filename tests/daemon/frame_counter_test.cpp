@@ -101,3 +101,52 @@ TEST(Offline, CountsFramesAndSkipsMalformedLines) {
 
 }  // namespace
 }  // namespace pumptherm::daemon
+
+namespace {
+pumptherm::protocol::CanFrame ErrorFrame(std::uint32_t cls, std::uint8_t crtl = 0) {
+  pumptherm::protocol::CanFrame f;
+  f.error = true;
+  f.id = cls;
+  f.len = 8;
+  f.data[1] = crtl;
+  return f;
+}
+}  // namespace
+
+// linux/can/error.h: CAN_ERR_CRTL 0x4 with data[1] RX/TX warning 0x04/0x08, passive 0x10/0x20,
+// active 0x40; CAN_ERR_BUSOFF 0x40; CAN_ERR_RESTARTED 0x100; CAN_ERR_PROT 0x8 (no state).
+TEST(BusState, FollowsTheControllerThroughWarningPassiveBusOffAndRestart) {
+  using pumptherm::daemon::BusState;
+  using pumptherm::daemon::NextBusState;
+  BusState s = BusState::kUnknown;
+  s = NextBusState(s, ErrorFrame(0x8));  // a protocol error: the controller talks, state unsaid
+  EXPECT_EQ(s, BusState::kErrorActive);
+  s = NextBusState(s, ErrorFrame(0x4, 0x08));
+  EXPECT_EQ(s, BusState::kErrorWarning);
+  s = NextBusState(s, ErrorFrame(0x4, 0x20));
+  EXPECT_EQ(s, BusState::kErrorPassive);
+  s = NextBusState(s, ErrorFrame(0x8));
+  EXPECT_EQ(s, BusState::kErrorPassive);  // protocol errors leave it
+  s = NextBusState(s, ErrorFrame(0x40));
+  EXPECT_EQ(s, BusState::kBusOff);
+  s = NextBusState(s, ErrorFrame(0x100));
+  EXPECT_EQ(s, BusState::kErrorActive);
+  s = NextBusState(s, ErrorFrame(0x4, 0x10));
+  s = NextBusState(s, ErrorFrame(0x4, 0x40));
+  EXPECT_EQ(s, BusState::kErrorActive);
+  pumptherm::protocol::CanFrame data;  // a data frame changes nothing
+  data.id = 0x40;
+  EXPECT_EQ(NextBusState(BusState::kBusOff, data), BusState::kBusOff);
+}
+
+TEST(BusState, CountedPerInterface) {
+  pumptherm::daemon::FrameCounter g(pumptherm::daemon::GatewayConfig{});
+  const std::size_t a = g.Interface("can0");
+  const std::size_t b = g.Interface("can1");
+  pumptherm::protocol::TimedFrame t;
+  t.frame = ErrorFrame(0x40);
+  g.OnFrame(a, t);
+  EXPECT_EQ(g.counters(a).bus_state, pumptherm::daemon::BusState::kBusOff);
+  EXPECT_EQ(g.counters(b).bus_state, pumptherm::daemon::BusState::kUnknown);
+  EXPECT_EQ(g.counters(a).rx_error_frames, 1U);
+}
