@@ -406,6 +406,9 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
     return false;
   }
   if (!identifier_.Restore(state.resistance)) return false;
+  // Published at once: the first GW_IDENT after a restart may go out before the first thermal
+  // step (seen in the system test: Rs "not available" right after kill -9).
+  snapshot_.resistance = identifier_.estimate();
   sensor_.Restore(x, s);
   held_inputs_ = state.inputs;
   have_inputs_ = true;

@@ -326,6 +326,11 @@ TEST(Pipeline, StateRoundTripsThroughText) {
   const auto& x = a.gateway_.pumps()[0]->snapshot().node_degC;
   const auto& y = b.gateway_.pumps()[0]->snapshot().node_degC;
   for (std::size_t i = 0; i < x.size(); ++i) EXPECT_NEAR(x[i], y[i], 1e-6);
+  // The resistance is published from the restored state before any telemetry or thermal step.
+  const auto& ra = a.gateway_.pumps()[0]->snapshot().resistance;
+  const auto& rb = b.gateway_.pumps()[0]->snapshot().resistance;
+  EXPECT_NE(rb.status, pumptherm::estimators::ResistanceStatus::kInitialising);
+  EXPECT_DOUBLE_EQ(rb.resistance_ohm, ra.resistance_ohm);
   // Aged by an hour with the motor at the same load: hotter, not reset to cold.
   Bench c(Config());
   EXPECT_EQ(c.gateway_.RestoreState(text, a.gateway_.pumps()[0]->snapshot().time_us + 3'600'000'000LL, &warning), 1);
