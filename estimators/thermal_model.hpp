@@ -46,6 +46,13 @@ struct ThermalInputs {
   double coolant_degC = 25.0;  ///< coolant temperature (used only by models with a coolant)
 };
 
+/// Inputs a fraction w (0..1) of the way from `a` to `b`, every field linearly.
+inline ThermalInputs InterpolateInputs(const ThermalInputs& a, const ThermalInputs& b, double w) {
+  auto mix = [w](double p, double q) { return p + w * (q - p); };
+  return ThermalInputs{mix(a.speed_rpm, b.speed_rpm), mix(a.id_A, b.id_A), mix(a.iq_A, b.iq_A),
+                       mix(a.ambient_degC, b.ambient_degC), mix(a.coolant_degC, b.coolant_degC)};
+}
+
 /// ia^2 + ib^2 + ic^2 for amplitude-invariant dq currents: 1.5 (id^2 + iq^2), A^2.
 inline double PhaseCurrentSquareSum_A2(double id_A, double iq_A) {
   return 1.5 * (id_A * id_A + iq_A * iq_A);

@@ -319,15 +319,7 @@ int main(int argc, char** argv) {
     };
     // Inputs a fraction w of the way from row k-1 to row k (the reference interpolates linearly).
     auto between = [&](std::size_t k, double w) {
-      pe::ThermalInputs a = inputs(k - 1);
-      const pe::ThermalInputs b = inputs(k);
-      auto mix = [w](double p, double q) { return p + w * (q - p); };
-      a.speed_rpm = mix(a.speed_rpm, b.speed_rpm);
-      a.id_A = mix(a.id_A, b.id_A);
-      a.iq_A = mix(a.iq_A, b.iq_A);
-      a.ambient_degC = mix(a.ambient_degC, b.ambient_degC);
-      a.coolant_degC = mix(a.coolant_degC, b.coolant_degC);
-      return a;
+      return pe::InterpolateInputs(inputs(k - 1), inputs(k), w);
     };
     constexpr int kSub = 10;  // 0.5 s steps between the 5 s rows, as the reference
     const Eigen::Vector4d measured0(pm[0], sy[0], st[0], sw[0]);

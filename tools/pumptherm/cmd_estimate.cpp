@@ -87,16 +87,9 @@ int RunEstimate(EstimateOptions& o) {
   };
   // Inputs a fraction w of the way from row k-1 to row k (held at row k-1 unless linear).
   auto between = [&](std::size_t k, double w) {
-    estimators::ThermalInputs a = inputs(k - 1);
+    const estimators::ThermalInputs a = inputs(k - 1);
     if (o.interpolation == "hold") return a;
-    const estimators::ThermalInputs b = inputs(k);
-    auto mix = [w](double p, double q) { return p + w * (q - p); };
-    a.speed_rpm = mix(a.speed_rpm, b.speed_rpm);
-    a.id_A = mix(a.id_A, b.id_A);
-    a.iq_A = mix(a.iq_A, b.iq_A);
-    a.ambient_degC = mix(a.ambient_degC, b.ambient_degC);
-    a.coolant_degC = mix(a.coolant_degC, b.coolant_degC);
-    return a;
+    return estimators::InterpolateInputs(a, inputs(k), w);
   };
   estimators::VirtualThermalSensor vts(model, o.config);
   const int n = model.StateCount();
