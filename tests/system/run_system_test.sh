@@ -681,6 +681,9 @@ run_guest() {
 
   local printed=0 console_printed=0 state=pre exit_code="" setup_failure="" timed_out=0
   local out_b64=$run_dir/out.b64 begin_s=""
+  # The scenario's own "NAME: FAIL: why" lines, repeated at the very end of a failed run so that
+  # a log cut to its tail (CI summaries) still says why.
+  local -a fail_lines=()
   local deadline
   deadline=$(awk -v s="$start" -v t="$timeout_s" 'BEGIN { printf "%d", s + t }')
   stream() {
@@ -704,7 +707,9 @@ run_guest() {
             exit_code=${line#*EXIT }
             exit_code=${exit_code%@@} ;;
           out:*) printf '%s\n' "$line" >>"$out_b64" ;;
-          run:*) printf '%s\n' "$line" ;;
+          run:*)
+            printf '%s\n' "$line"
+            [[ "$line" != *": FAIL: "* ]] || fail_lines+=("$line") ;;
           *) printf 'guest: %s\n' "$line" ;;
         esac
       done < <(sed -n "$((printed + 1)),${total}p" "$result")
@@ -769,6 +774,10 @@ run_guest() {
     say "run directory kept: $run_dir"
   else
     rm -rf "$run_dir"
+  fi
+  if ((rc != 0 && rc != 77)); then
+    local l
+    for l in "${fail_lines[@]}"; do say "${name} failed: ${l}"; done
   fi
   exit "$rc"
 }

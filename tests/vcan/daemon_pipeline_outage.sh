@@ -49,7 +49,12 @@ if head -n 1 "$WORK_DIR/lost.log" | canplayer -t 2>/dev/null; then fail "canplay
 sleep 3
 ip link set vcan0 up
 canplayer -I "$WORK_DIR/after.log" || fail "canplayer (after) failed"
-sleep 1.5
+# One marker frame after the replay (an ID no pump uses: counted as unknown). The kernel reports
+# a socket's receive-queue drops (SO_RXQ_OVFL) with the next frame it queues, so drops at the
+# very end of the replay would otherwise go unreported.
+sleep 0.5
+cansend vcan0 7FE#00 || fail "cansend (marker) failed"
+sleep 1.0
 kill -0 "$DAEMON_PID" 2>/dev/null || fail "the daemon died"
 pid_end=$DAEMON_PID
 stop_daemon
@@ -61,12 +66,12 @@ grep -q "vcan0: interface is up again" "$WORK_DIR/daemon.err" || fail "the daemo
 
 # canplayer exits non-zero at the first frame it cannot write: both parts went on the bus whole.
 cat "$WORK_DIR/before.log" "$WORK_DIR/after.log" >"$WORK_DIR/bus_in.log"
-n_bus=$(wc -l <"$WORK_DIR/bus_in.log")
+n_bus=$(($(wc -l <"$WORK_DIR/bus_in.log") + 1))  # + the marker frame
 status=$(head -n 1 "$WORK_DIR/daemon.out")
 rx=$(echo "$status" | sed -n 's/^.*rx \([0-9]*\) frames.*$/\1/p')
 rx_drops=$(echo "$status" | sed -n 's/^.*, \([0-9]*\) rx drops.*$/\1/p')
 tx_dropped=$(echo "$status" | sed -n 's/^.* \([0-9]*\) tx dropped.*$/\1/p')
-echo "$SCENARIO_NAME: canplayer sent $n_bus input frames (recording $n_whole - lost $n_lost = $((n_whole - n_lost))); daemon: rx $rx, rx drops $rx_drops, tx dropped $tx_dropped"
+echo "$SCENARIO_NAME: canplayer sent $((n_bus - 1)) input frames (recording $n_whole - lost $n_lost = $((n_whole - n_lost))) and 1 marker; daemon: rx $rx, rx drops $rx_drops, tx dropped $tx_dropped"
 echo "$SCENARIO_NAME: gateway: $status"
 # Every frame on the bus reached the daemon's socket: received, or counted as a receive-queue
 # drop (SO_RXQ_OVFL; an emulated CPU shared with canplayer and candump can fall behind: seen 0

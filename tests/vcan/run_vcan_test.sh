@@ -528,6 +528,9 @@ run_guest() {
 
   local printed=0 console_printed=0 state=pre exit_code="" setup_failure="" timed_out=0
   local guest_kernel="" out_b64=$run_dir/out.b64
+  # The scenario's own "NAME: FAIL: why" lines, repeated at the very end of a failed run so that
+  # a log cut to its tail (CI summaries) still says why.
+  local -a fail_lines=()
   local deadline
   deadline=$(awk -v s="$start" -v t="$timeout_s" 'BEGIN { printf "%d", s + t }')
   # Streams the complete lines the guest has written to the result port since the last call.
@@ -558,7 +561,9 @@ run_guest() {
             exit_code=${exit_code%@@}
             [[ "$exit_code" =~ ^[0-9]+$ ]] || { err "garbled exit marker: $line"; exit_code=1; } ;;
           out:*) printf '%s\n' "$line" >>"$out_b64" ;;
-          run:*) printf '%s\n' "$line" ;;
+          run:*)
+            printf '%s\n' "$line"
+            [[ "$line" != *": FAIL: "* ]] || fail_lines+=("$line") ;;
           *) printf 'guest: %s\n' "$line" ;;
         esac
       done < <(sed -n "$((printed + 1)),${total}p" "$result")
@@ -620,6 +625,10 @@ run_guest() {
     say "run directory kept: $run_dir"
   else
     rm -rf "$run_dir"
+  fi
+  if ((rc != 0 && rc != 77)); then
+    local l
+    for l in "${fail_lines[@]}"; do say "${name} failed: ${l}"; done
   fi
   exit "$rc"
 }
