@@ -1,5 +1,7 @@
 #include "daemon/live_loop.hpp"
 
+#include <fmt/format.h>
+
 #include <signal.h>
 #include <sys/epoll.h>
 #include <sys/signalfd.h>
@@ -9,6 +11,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -50,6 +53,7 @@ std::int64_t ClockUs(clockid_t clock) {
 struct LiveLoop::Impl : OutputSink {
   DaemonConfig config;
   std::string config_path;
+  LiveOptions options;
   std::unique_ptr<Gateway> gateway;
   std::unique_ptr<LcmBridge> lcm;
   UniqueFd epoll;
@@ -63,6 +67,7 @@ struct LiveLoop::Impl : OutputSink {
   std::int64_t next_status_us = 0;
   std::int64_t next_reopen_us = 0;
   std::int64_t next_save_us = 0;
+  std::int64_t next_table_us = std::numeric_limits<std::int64_t>::max();  // no table: never
   std::string state_path;
   bool stop = false;
   bool hang = false;
@@ -292,7 +297,7 @@ struct LiveLoop::Impl : OutputSink {
 
   void ArmTimer(std::int64_t mono_now) {
     std::int64_t next = std::min({gateway->counter().NextHeartbeatUs(), next_status_us, next_reopen_us,
-                                  next_save_us, mono_now + kMaxTickUs});
+                                  next_save_us, next_table_us, mono_now + kMaxTickUs});
     const std::int64_t wd = notifier.watchdog_half_period_us();
     if (wd > 0) next = std::min(next, mono_now + wd);
     next = std::max(next, mono_now + 1000);  // at least 1 ms ahead
@@ -322,8 +327,20 @@ struct LiveLoop::Impl : OutputSink {
       SaveState();
       next_save_us = mono + static_cast<std::int64_t>(config.gateway.state_save_period_s * 1e6);
     }
+    if (mono >= next_table_us) {
+      ShowTable();
+      next_table_us = mono + static_cast<std::int64_t>(options.table_period_s * 1e6);
+    }
     notifier.KickWatchdog(mono);
     ArmTimer(mono);
+  }
+
+  /// The pump table on stderr (--table), redrawn in place on a terminal, with the status line.
+  void ShowTable() {
+    std::string text = fmt::format("{}\n{}", gateway->StatusLine(), gateway->PumpTable());
+    if (::isatty(STDERR_FILENO) == 1) text = "\x1b[H\x1b[2J" + text;
+    std::fputs(text.c_str(), stderr);
+    std::fflush(stderr);
   }
 
   void OnSignal() {
@@ -352,10 +369,12 @@ struct LiveLoop::Impl : OutputSink {
   }
 };
 
-LiveLoop::LiveLoop(const DaemonConfig& config, std::string config_path) : impl_(std::make_unique<Impl>()) {
+LiveLoop::LiveLoop(const DaemonConfig& config, std::string config_path, LiveOptions options)
+    : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.config = config;
   m.config_path = std::move(config_path);
+  m.options = options;
   if (config.interfaces.empty()) {
     throw std::system_error(EINVAL, std::generic_category(),
                             config.source + ": no [[can]] interface configured (use -r LOG for a log)");
@@ -394,6 +413,7 @@ int LiveLoop::Run() {
   m.next_status_us = start;
   m.next_reopen_us = start + kReopenPeriodUs;
   m.next_save_us = start + static_cast<std::int64_t>(m.config.gateway.state_save_period_s * 1e6);
+  if (m.options.table) m.next_table_us = start + static_cast<std::int64_t>(m.options.table_period_s * 1e6);
   std::string names;
   for (const auto& s : m.sockets) names += (names.empty() ? "" : ", ") + s.name();
   Log(LogLevel::kNotice, "listening on {} for {} pump(s){}", names, m.gateway->pumps().size(),

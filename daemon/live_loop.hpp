@@ -11,6 +11,12 @@
 
 namespace pumptherm::daemon {
 
+/// Options of a live run that are not configuration (command line only).
+struct LiveOptions {
+  bool table = false;           ///< print the pump table on stderr while running
+  double table_period_s = 5.0;  ///< wall-clock seconds between tables
+};
+
 class LiveLoop {
  public:
   /// Builds the gateway from `config` (loaded from `config_path`, which SIGHUP re-reads), opens
@@ -18,7 +24,7 @@ class LiveLoop {
   /// saved state. Throws ConfigError for a configuration that does not fit its files, and
   /// std::system_error / std::runtime_error naming the interface or resource that failed.
   /// Blocks SIGTERM, SIGINT, SIGHUP (and SIGUSR1 with the test hang switch) for this thread.
-  LiveLoop(const DaemonConfig& config, std::string config_path);
+  LiveLoop(const DaemonConfig& config, std::string config_path, LiveOptions options = {});
   ~LiveLoop();
   LiveLoop(const LiveLoop&) = delete;
   LiveLoop& operator=(const LiveLoop&) = delete;

@@ -39,9 +39,11 @@ int main(int argc, char** argv) {
   app.add_option("--csv-dir", offline.csv_dir, "with -r: write <pump>.csv per pump, a row per thermal step");
   app.add_option("--csv-time-origin", offline.csv_time_origin_s,
                  "with --csv-dir: Unix time (s) that becomes time_s = 0 in the CSV files");
-  app.add_flag("--table", offline.table, "with -r: print a table of the pumps while running");
-  app.add_option("--table-period", offline.table_period_s, "with --table: log seconds between tables")
-      ->check(CLI::PositiveNumber);
+  app.add_flag("--table", offline.table, "print a table of the pumps on stderr while running (live or with -r)");
+  auto* table_period = app.add_option("--table-period", offline.table_period_s,
+                                      "with --table: seconds between tables (of log time with -r, wall-clock live; "
+                                      "default 60 with -r, 5 live)")
+                           ->check(CLI::PositiveNumber);
   app.add_option("--pace", offline.pace, "with -r: log seconds per wall-clock second (0 = as fast as possible)")
       ->check(CLI::NonNegativeNumber);
   app.set_version_flag("--version", "pumpthermd " PUMPTHERM_VERSION);
@@ -131,7 +133,10 @@ int main(int argc, char** argv) {
     return kExitBadInput;
   }
   try {
-    LiveLoop loop(config, config_path);
+    LiveOptions live;
+    live.table = offline.table;
+    if (table_period->count() > 0) live.table_period_s = offline.table_period_s;
+    LiveLoop loop(config, config_path, live);
     const int code = loop.Run();
     fmt::print("{}", loop.Summary());
     std::fflush(stdout);
