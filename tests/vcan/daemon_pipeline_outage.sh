@@ -7,9 +7,11 @@
 #     on the bus (it stops at the first failed write), and the daemon received every one of them
 #     or counted it as a receive-queue drop;
 #   - the daemon resumes by itself (logs down and up, receives after up, same process);
-#   - temperatures after resumption match expectations: the last estimates equal those of the
-#     offline run of the same frames (the recording without 15-18 s: 0.3 K) and differ from the
-#     offline run of the whole recording (no outage) by at most 0.5 K;
+#   - temperatures after resumption match expectations: the live estimates equal those of the
+#     offline run of the frames exactly as the daemon received them (captured by candump on vcan0,
+#     with the same kernel timestamps: 0.1 K), and losing the outage's frames costs little (the
+#     offline run of the recording without 15-18 s, original timing, against the offline run of
+#     the whole recording: at most 0.5 K);
 #   - nothing stale is transmitted after the outage: no gateway frame goes out while down (the
 #     sends fail and are counted as tx dropped; the output shows a pause of the outage's length),
 #     and right after up no burst: at most 4 frames per output ID in the first 0.25 s.
@@ -35,10 +37,12 @@ part 18 40 >"$WORK_DIR/after.log"
 n_whole=$(wc -l <"$WORK_DIR/whole.log"); n_lost=$(wc -l <"$WORK_DIR/lost.log")
 echo "$SCENARIO_NAME: recording 0-40 s: $n_whole frames; 15-18 s (sent while down): $n_lost frames"
 
-# The gateway's outputs (IDs 0x2xx, 0x4xx, 0x6xx), with a large receive buffer: under
-# emulation candump falls behind a replay of all the inputs; -D: it keeps running while vcan0
-# is down (it exits otherwise).
-candump -D -r 8388608 -L vcan0,200:700,400:700,600:700 >"$WORK_DIR/bus_out.log" &
+# Everything on vcan0 (the replayed inputs and the gateway's outputs), with a large receive
+# buffer: under emulation candump falls behind a replay of all the inputs; -D: it keeps running
+# while vcan0 is down (it exits otherwise). Every CAN_RAW socket gets the same kernel receive
+# timestamp for a frame (one skb, cloned per socket), so the inputs in this capture are exactly
+# what the daemon's socket saw, timing included.
+candump -D -r 8388608 -L vcan0 >"$WORK_DIR/bus_all.log" &
 CANDUMP_PID=$!
 sleep 0.5
 start_daemon "$WORK_DIR/pumpthermd.toml"
@@ -61,6 +65,10 @@ stop_daemon
 sleep 0.3
 kill "$CANDUMP_PID" 2>/dev/null || true
 wait "$CANDUMP_PID" 2>/dev/null || true
+# The gateway's outputs (IDs 0x2xx, 0x4xx, 0x6xx) and the inputs as received (without its
+# heartbeat, 0x7F0).
+awk '{ split($3, f, "#"); c = substr(f[1], 1, 1) } c == "2" || c == "4" || c == "6"' "$WORK_DIR/bus_all.log" >"$WORK_DIR/bus_out.log"
+awk '{ split($3, f, "#"); c = substr(f[1], 1, 1) } c != "2" && c != "4" && c != "6" && f[1] != "7F0"' "$WORK_DIR/bus_all.log" >"$WORK_DIR/live_in.log"
 grep -q "vcan0: interface is down" "$WORK_DIR/daemon.err" || fail "the daemon did not notice vcan0 going down"
 grep -q "vcan0: interface is up again" "$WORK_DIR/daemon.err" || fail "the daemon did not notice vcan0 coming up"
 
@@ -102,8 +110,23 @@ burst=$(awk -v u="$t_gap_end" '{ t = substr($1, 2, length($1) - 2) + 0; split($3
 echo "$SCENARIO_NAME: most frames of one ID in the first 0.25 s after up: $burst"
 [ "${burst%% *}" -le 4 ] || fail "a burst after up ($burst): stale frames queued during the outage?"
 
-# Temperatures after resumption: the offline runs over what the bus carried (original
-# timestamps: a 3 s gap where the live run had the outage) and over the whole recording.
+# Temperatures after resumption. (1) The live path computes what the offline path computes on the
+# same input: the offline run over the inputs as the daemon received them (candump's capture, the
+# daemon's own timestamps; under emulation canplayer stalls and catches up in bursts, which moves
+# the resistance identifier's estimate by up to 1 K against the recording's original timing:
+# seen in CI, 21.37 against 22.46 degC). (2) Losing the outage's frames costs little: the offline
+# runs over what the bus carried (original timestamps: a 3 s gap where the live run had the
+# outage) and over the whole recording (no outage).
+n_live_in=$(wc -l <"$WORK_DIR/live_in.log")
+# 0.1 K: the live gateway advances on its clock (Gateway::Advance from the timer) for about 1 s
+# after the marker, the offline run ends at the marker (seen: up to 0.04 K). Frames the daemon's
+# socket dropped (counted above) are in candump's capture but not in the daemon's estimate: then
+# only closeness can be asked for.
+same_tol=0.1; [ "$rx_drops" -eq 0 ] || same_tol=0.5
+[ "$n_live_in" -eq "$n_bus" ] ||
+  fail "candump captured $n_live_in of the $n_bus input frames on the bus (it fell behind): the comparison needs them all"
+"$BIN_DIR/pumpthermd" --config "$WORK_DIR/pumpthermd.toml" -r "$WORK_DIR/live_in.log" \
+  --output-log "$WORK_DIR/offline_live.log" >/dev/null 2>"$WORK_DIR/offline_live.err" || fail "offline run (live inputs) failed"
 "$BIN_DIR/pumpthermd" --config "$WORK_DIR/pumpthermd.toml" -r "$WORK_DIR/bus_in.log" \
   --output-log "$WORK_DIR/offline_bus.log" >/dev/null 2>"$WORK_DIR/offline_bus.err" || fail "offline run (bus) failed"
 "$BIN_DIR/pumpthermd" --config "$WORK_DIR/pumpthermd.toml" -r "$WORK_DIR/whole.log" \
@@ -120,12 +143,13 @@ near() { awk -v a="$1" -v b="$2" -v d="$3" 'BEGIN { x = a - b; if (x < 0) x = -x
 for node in 1 2 3; do
   for field in 0 1; do  # WindingRes_degC (resistance-based), Frame_degC (tmp-generic has no yoke)
     live=$(last_temp "$WORK_DIR/bus_out.log" "$node" "$field")
+    same=$(last_temp "$WORK_DIR/offline_live.log" "$node" "$field")
     off=$(last_temp "$WORK_DIR/offline_bus.log" "$node" "$field")
     whole=$(last_temp "$WORK_DIR/offline_whole.log" "$node" "$field")
-    echo "$SCENARIO_NAME: pump$node GW_TEMPS_A field $field: live $live, offline (same frames) $off, offline (no outage) $whole degC"
+    echo "$SCENARIO_NAME: pump$node GW_TEMPS_A field $field: live $live, offline on the received frames $same; offline on the recording without 15-18 s $off, with them (no outage) $whole degC"
     [ "$live" != 605.35 ] && [ "$whole" != 605.35 ] || fail "pump$node field $field: not available (raw 0xFFFF)"
-    near "$live" "$off" 0.3 || fail "pump$node: live $live degC and offline $off degC differ by more than 0.3 K"
-    near "$live" "$whole" 0.5 || fail "pump$node: after the outage $live degC, without it $whole degC (more than 0.5 K)"
+    near "$live" "$same" "$same_tol" || fail "pump$node: live $live degC, offline on the same received frames $same degC"
+    near "$off" "$whole" 0.5 || fail "pump$node: without the outage's frames $off degC, with them $whole degC (more than 0.5 K)"
   done
 done
 echo "$SCENARIO_NAME: PASS (pid $pid_end ran throughout)"
