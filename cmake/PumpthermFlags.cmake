@@ -13,4 +13,11 @@ if(PUMPTHERM_SANITIZE)
   add_compile_options(-fsanitize=address,undefined -fno-sanitize=vptr -fno-omit-frame-pointer
                       -fno-sanitize-recover=undefined)
   add_link_options(-fsanitize=address,undefined)
+  if(PUMPTHERM_FUZZ AND CMAKE_CXX_COMPILER_ID MATCHES "Clang")
+    # One build for the sanitized unit tests and the fuzz targets (tools/test-all.sh): every
+    # source also carries libFuzzer's coverage instrumentation, so the fuzz targets link the
+    # libraries as they are instead of instrumented copies (tests/fuzz/CMakeLists.txt). The unit
+    # tests do not link libFuzzer; the sanitizer runtime has no-op defaults for its callbacks.
+    add_compile_options(-fsanitize=fuzzer-no-link)
+  endif()
 endif()
