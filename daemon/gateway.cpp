@@ -676,7 +676,8 @@ std::string Gateway::PumpTable() const {
 
 std::string Gateway::SaveState() const {
   toml::table root;
-  root.insert("version", 1);
+  // Version 2: the resistance identifier's two magnet hypotheses (version 1: one filter).
+  root.insert("version", 2);
   toml::table pumps;
   for (const auto& p : pumps_) {
     if (!p->snapshot().initialised) continue;
@@ -694,15 +695,22 @@ std::string Gateway::SaveState() const {
     t.insert("inputs", toml::table{{"speed_rpm", s.inputs.speed_rpm}, {"id_A", s.inputs.id_A},
                                    {"iq_A", s.inputs.iq_A}, {"ambient_degC", s.inputs.ambient_degC},
                                    {"coolant_degC", s.inputs.coolant_degC}});
-    toml::array rx, rp, rm;
-    for (int i = 0; i < 4; ++i) rx.push_back(s.resistance.x(i));
-    for (int i = 0; i < 16; ++i) rp.push_back(s.resistance.p(i / 4, i % 4));
+    // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
+    // consecutive rejections.
+    toml::array rx, rp, rprob, rrej, rm;
+    for (const auto& h : s.resistance.hypotheses) {
+      for (int i = 0; i < 4; ++i) rx.push_back(h.x(i));
+      for (int i = 0; i < 16; ++i) rp.push_back(h.p(i / 4, i % 4));
+      rprob.push_back(h.probability);
+      rrej.push_back(h.consecutive_rejections);
+    }
     for (int i = 0; i < 4; ++i) rm.push_back(s.resistance.moments(i / 2, i % 2));
     t.insert("resistance_x", rx);
     t.insert("resistance_p", rp);
+    t.insert("resistance_probability", rprob);
+    t.insert("resistance_rejections", rrej);
     t.insert("resistance_moments", rm);
     t.insert("resistance_blocks", static_cast<std::int64_t>(s.resistance.blocks));
-    t.insert("resistance_rejections", s.resistance.consecutive_rejections);
     // Two parallel arrays (toml++ 3.3 misprints an array of tables nested this deep).
     toml::array trip_nodes, trip_values;
     for (const auto& trip : s.latched_trips) {
@@ -729,10 +737,14 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
                            e.source().begin.line, e.description());
     return 0;
   }
-  if (root["version"].value_or(0) != 1) {
+  // Version 1 (before the identifier's magnet hypotheses) is read too: its one filter
+  // becomes both hypotheses, with the prior probabilities.
+  const std::int64_t version = root["version"].value_or<std::int64_t>(0);
+  if (version != 1 && version != 2) {
     *warning = "saved state has an unknown version; starting cold";
     return 0;
   }
+  const std::size_t hypotheses = version == 1 ? 1 : estimators::kMagnetHypotheses;
   int restored = 0;
   std::string ignored;
   const toml::table* pumps = root["pump"].as_table();
@@ -754,11 +766,16 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
     PumpSavedState s;
     s.model_name = (*t)["model"].value_or(std::string());
     s.time_us = (*t)["time_us"].value_or<std::int64_t>(0);
-    std::vector<double> x, cov, rx, rp, rm;
+    std::vector<double> x, cov, rx, rp, rm, rprob, rrej;
     bool ok = numbers("x_degC", static_cast<std::size_t>(n), x) &&
-              numbers("s_K2", static_cast<std::size_t>(n * n), cov) && numbers("resistance_x", 4, rx) &&
-              numbers("resistance_p", 16, rp) && numbers("resistance_moments", 4, rm) && s.time_us > 0 &&
+              numbers("s_K2", static_cast<std::size_t>(n * n), cov) &&
+              numbers("resistance_x", 4 * hypotheses, rx) && numbers("resistance_p", 16 * hypotheses, rp) &&
+              numbers("resistance_moments", 4, rm) && s.time_us > 0 &&
               s.time_us <= now_us + 60'000'000;
+    if (ok && version == 2) {
+      ok = numbers("resistance_probability", hypotheses, rprob) &&
+           numbers("resistance_rejections", hypotheses, rrej);
+    }
     if (ok) {
       s.x_degC = Eigen::Map<const Eigen::VectorXd>(x.data(), n);
       s.s_K2 = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(cov.data(), n, n);
@@ -767,15 +784,41 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
       s.inputs.iq_A = (*t)["inputs"]["iq_A"].value_or(0.0);
       s.inputs.ambient_degC = (*t)["inputs"]["ambient_degC"].value_or(25.0);
       s.inputs.coolant_degC = (*t)["inputs"]["coolant_degC"].value_or(25.0);
-      for (int i = 0; i < 4; ++i) s.resistance.x(i) = rx[static_cast<std::size_t>(i)];
-      for (int i = 0; i < 16; ++i) s.resistance.p(i / 4, i % 4) = rp[static_cast<std::size_t>(i)];
-      for (int i = 0; i < 4; ++i) s.resistance.moments(i / 2, i % 2) = rm[static_cast<std::size_t>(i)];
-      s.resistance.blocks = static_cast<std::uint64_t>((*t)["resistance_blocks"].value_or<std::int64_t>(0));
-      s.resistance.consecutive_rejections = (*t)["resistance_rejections"].value_or(0);
+      Eigen::Matrix2d moments;
+      for (int i = 0; i < 4; ++i) moments(i / 2, i % 2) = rm[static_cast<std::size_t>(i)];
+      const auto blocks = static_cast<std::uint64_t>((*t)["resistance_blocks"].value_or<std::int64_t>(0));
+      const auto hx = [&](std::size_t j) {
+        Eigen::Vector4d v;
+        for (std::size_t i = 0; i < 4; ++i) v(static_cast<Eigen::Index>(i)) = rx[4 * j + i];
+        return v;
+      };
+      const auto hp = [&](std::size_t j) {
+        Eigen::Matrix4d m;
+        for (std::size_t i = 0; i < 16; ++i) m(static_cast<Eigen::Index>(i / 4), static_cast<Eigen::Index>(i % 4)) = rp[16 * j + i];
+        return m;
+      };
+      if (version == 1) {
+        s.resistance = estimators::StateFromSingleFilter(
+            hx(0), hp(0), moments, blocks, (*t)["resistance_rejections"].value_or(0),
+            pump->identifier().config());
+      } else {
+        for (std::size_t j = 0; j < hypotheses; ++j) {
+          auto& h = s.resistance.hypotheses[j];
+          h.x = hx(j);
+          h.p = hp(j);
+          h.probability = rprob[j];
+          // Rejection counts are small integers; anything else is damage.
+          const double rej = rrej[j];
+          ok = ok && rej >= 0.0 && rej <= 1e6 && rej == std::floor(rej);
+          h.consecutive_rejections = ok ? static_cast<int>(rej) : 0;
+        }
+        s.resistance.moments = moments;
+        s.resistance.blocks = blocks;
+      }
       // Latched trips (absent in files written before they were saved: none latched).
       const toml::array* trip_nodes = (*t)["latched_trip_nodes"].as_array();
       const toml::array* trip_values = (*t)["latched_trip_values_degC"].as_array();
-      if (trip_nodes || trip_values) {
+      if (ok && (trip_nodes || trip_values)) {
         ok = trip_nodes && trip_values && trip_nodes->size() == trip_values->size();
         for (std::size_t k = 0; ok && k < trip_nodes->size(); ++k) {
           const auto node = (*trip_nodes)[k].value<std::string>();

@@ -86,6 +86,7 @@ class Pump {
        std::shared_ptr<const estimators::ThermalModel> model, double thermal_period_s);
 
   const PumpConfig& config() const { return config_; }
+  const estimators::ResistanceIdentifier& identifier() const { return identifier_; }
   const estimators::ThermalModel& model() const { return *model_; }
   const estimators::MotorDescription& motor() const { return motor_; }
   /// Every active alarm condition, most severe first.

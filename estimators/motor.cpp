@@ -29,6 +29,12 @@ t0_degC = 27.2
 alpha_per_K = 4.1e-3
 plausible_min_degC = -20.0
 plausible_max_degC = 180.0
+# Optional [drive] table: the step of the uq the drive reports (its ADC or command resolution,
+# codes at integer multiples of it). With it the identifier removes the quantisation bias of its
+# block means (docs/resistance-identification.md); the paper does not give it. For example, 12
+# bits over a +/-48 V DC link:
+# [drive]
+# uq_resolution_V = 0.0234375
 )";
 
 std::string Where(std::string_view source, const toml::source_region& region) {
@@ -88,7 +94,7 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
   }
   RejectUnknownKeys(root,
                     {"name", "pole_pairs", "rated_speed_rpm", "flux_Wb", "inductance_H",
-                     "resistance"},
+                     "resistance", "drive"},
                     "", source);
   MotorDescription m;
   if (const toml::node* name = root.get("name")) {
@@ -149,6 +155,23 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
         "{}:{}: keys 'resistance.plausible_min_degC' ({}) and 'resistance.plausible_max_degC' "
         "({}) must give a band of positive resistances",
         source, res.source().begin.line, m.plausible_min_degC, m.plausible_max_degC));
+  }
+  if (const toml::node* drive_node = root.get("drive")) {
+    if (!drive_node->is_table()) {
+      throw MotorDescriptionError(
+          fmt::format("{}: key 'drive' must be a table", Where(source, drive_node->source())));
+    }
+    const toml::table& drive = *drive_node->as_table();
+    RejectUnknownKeys(drive, {"uq_resolution_V"}, "drive.", source);
+    if (auto v = Number(drive, "uq_resolution_V", "drive.uq_resolution_V", source, false)) {
+      // 12 bits over a 48 V link is 23 mV; a step of volts would be no voltage measurement.
+      if (!(*v > 0.0 && *v <= 10.0)) {
+        throw MotorDescriptionError(fmt::format(
+            "{}: key 'drive.uq_resolution_V' must be within (0, 10] V, got {}",
+            Where(source, drive.get("uq_resolution_V")->source()), *v));
+      }
+      m.uq_resolution_V = *v;
+    }
   }
   return m;
 }

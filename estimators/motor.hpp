@@ -14,9 +14,11 @@
 ///     alpha_per_K = 4.1e-3
 ///     plausible_min_degC = -20.0    # band outside which an identified Rs is "implausible"
 ///     plausible_max_degC = 180.0
+///     [drive]                       # optional: how the drive reports its signals
+///     uq_resolution_V = 0.0234375   # step of the reported uq (codes at multiples of it)
 ///
-/// Every key is required except `name` and the two plausibility keys; unknown keys are errors
-/// (a misspelt key must not silently fall back to a default).
+/// Every key is required except `name`, the two plausibility keys and the [drive] table;
+/// unknown keys are errors (a misspelt key must not silently fall back to a default).
 
 #include <stdexcept>
 #include <string>
@@ -44,12 +46,17 @@ struct MotorDescription {
   CopperLaw copper;                 ///< R0, T0, alpha of Han 2019 eq. 2
   double plausible_min_degC = -20.0;  ///< lower end of the plausible winding temperature
   double plausible_max_degC = 180.0;  ///< upper end of the plausible winding temperature
+  /// Step of the reported q-axis voltage, V: the drive's command or ADC resolution (codes at
+  /// integer multiples of it). The identifier removes the quantisation bias of its block means
+  /// with it (estimators/quantisation.hpp). 0 = not known: no correction.
+  double uq_resolution_V = 0.0;
 };
 
 /// Parses a motor description from TOML `text`; `source` names it in errors (a path or
 /// "preset han2019-tmp"). Throws MotorDescriptionError naming source, line and key for a
 /// syntax error, a missing, unknown or mistyped key, or a value out of range
-/// (pole_pairs < 1, non-positive speed, flux, inductance, r0 or alpha, empty band).
+/// (pole_pairs < 1, non-positive speed, flux, inductance, r0 or alpha, empty band, a
+/// uq_resolution_V outside (0, 10] V).
 MotorDescription ParseMotorDescription(std::string_view text, std::string_view source);
 
 /// The TOML text of a built-in preset, or an empty view when `name` is not a preset.

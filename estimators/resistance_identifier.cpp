@@ -3,7 +3,10 @@
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
+
+#include "estimators/quantisation.hpp"
 
 namespace pumptherm::estimators {
 namespace {
@@ -11,11 +14,13 @@ namespace {
 constexpr double kSecondsPerHour = 3600.0;
 // Share of the needed information one block must add to count as a fresh load change.
 constexpr double kFreshExcitationShare = 0.01;
+// Normalised innovation at which a block is rejected; also the cap of its evidence.
+constexpr double kMaxEvidenceZ = 6.0;
 
 // Four confidence levels in the spirit of Han 2019 eq. 23, on the normalised innovation
 // z = |eps| / sqrt(S) (S = phi^T P phi + r, the innovation variance) instead of |eps| / |y|.
 double NormalisedWeight(double z) noexcept {
-  if (!(z < 6.0)) return 0.0;  // untrusted (also NaN)
+  if (!(z < kMaxEvidenceZ)) return 0.0;  // untrusted (also NaN)
   if (z >= 4.0) return 0.1;    // low confidence
   if (z >= 3.0) return 0.5;    // high confidence
   return 1.0;                  // fully trusted
@@ -50,7 +55,12 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
       !(config.initial_flux_sigma_rel > 0.0) || !(config.winding_drift_K_per_sqrt_h >= 0.0) ||
       !(config.magnet_drift_K_per_sqrt_h >= 0.0) ||
       !(config.winding_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
-      !(config.magnet_rate_walk_K_per_h_per_sqrt_h >= 0.0) || !(config.rate_time_constant_s > 0.0) ||
+      !(config.magnet_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
+      !(config.steady_magnet_drift_K_per_sqrt_h >= 0.0) ||
+      !(config.steady_magnet_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
+      !(config.steady_magnet_prior >= 0.0 && config.steady_magnet_prior < 1.0) ||
+      !(config.hypothesis_probability_floor >= 0.0 && config.hypothesis_probability_floor < 0.5) ||
+      !(config.load_change_A > 0.0) || !(config.rate_time_constant_s > 0.0) ||
       !(config.min_current_A >= 0.0) || !(config.idle_current_A >= 0.0) ||
       config.reacquire_after_rejections < 1) {
     throw std::invalid_argument("ResistanceIdentifierConfig: a value is out of range");
@@ -62,60 +72,122 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
   q_resistance_ohm2_per_s_ = std::pow(dr_per_K * config.winding_drift_K_per_sqrt_h, 2) / h;
   q_resistance_rate_ohm2_per_s3_ =
       std::pow(dr_per_K * config.winding_rate_walk_K_per_h_per_sqrt_h / h, 2) / h;
-  q_flux_Wb2_per_s_ = std::pow(dpsi_per_K * config.magnet_drift_K_per_sqrt_h, 2) / h;
-  q_flux_rate_Wb2_per_s3_ = std::pow(dpsi_per_K * config.magnet_rate_walk_K_per_h_per_sqrt_h / h, 2) / h;
+  const double drift[kMagnetHypotheses] = {config.steady_magnet_drift_K_per_sqrt_h,
+                                           config.magnet_drift_K_per_sqrt_h};
+  const double rate_walk[kMagnetHypotheses] = {config.steady_magnet_rate_walk_K_per_h_per_sqrt_h,
+                                               config.magnet_rate_walk_K_per_h_per_sqrt_h};
   speed_noise_rad_per_s_ = ElectricalSpeed_rad_per_s(motor, config.speed_noise_rpm);
   r_min_ohm_ = PlausibleMinResistance_ohm(motor);
   r_max_ohm_ = PlausibleMaxResistance_ohm(motor);
-  // Initial covariance: nameplate uncertainty; rates start at zero with the stationary spread of
-  // their decaying random walk (q tau / 2).
-  p0_.setZero();
-  p0_(kStateResistance, kStateResistance) =
-      std::pow(config.initial_resistance_sigma_rel * motor.copper.r0_ohm, 2);
-  p0_(kStateFlux, kStateFlux) = std::pow(config.initial_flux_sigma_rel * motor.flux_Wb, 2);
-  p0_(kStateResistanceRate, kStateResistanceRate) =
-      q_resistance_rate_ohm2_per_s3_ * config.rate_time_constant_s / 2.0;
-  p0_(kStateFluxRate, kStateFluxRate) = q_flux_rate_Wb2_per_s3_ * config.rate_time_constant_s / 2.0;
+  for (int j = 0; j < kMagnetHypotheses; ++j) {
+    q_flux_Wb2_per_s_[j] = std::pow(dpsi_per_K * drift[j], 2) / h;
+    q_flux_rate_Wb2_per_s3_[j] = std::pow(dpsi_per_K * rate_walk[j] / h, 2) / h;
+    // Initial covariance: nameplate uncertainty; rates start at zero with the stationary
+    // spread of their decaying random walk (q tau / 2).
+    Eigen::Matrix4d& p0 = p0_[j];
+    p0.setZero();
+    p0(kStateResistance, kStateResistance) =
+        std::pow(config.initial_resistance_sigma_rel * motor.copper.r0_ohm, 2);
+    p0(kStateFlux, kStateFlux) = std::pow(config.initial_flux_sigma_rel * motor.flux_Wb, 2);
+    p0(kStateResistanceRate, kStateResistanceRate) =
+        q_resistance_rate_ohm2_per_s3_ * config.rate_time_constant_s / 2.0;
+    // A steady magnet's rate walk may be 0; keep P0 positive definite with a floor far below
+    // anything measurable (1e-9 of the drifting hypothesis' spread of 1 K/h).
+    p0(kStateFluxRate, kStateFluxRate) =
+        std::max(q_flux_rate_Wb2_per_s3_[j] * config.rate_time_constant_s / 2.0,
+                 std::pow(1e-9 * dpsi_per_K / h, 2));
+  }
   Reset();
+}
+
+ResistanceIdentifierState StateFromSingleFilter(const Eigen::Vector4d& x, const Eigen::Matrix4d& p,
+                                                const Eigen::Matrix2d& moments, std::uint64_t blocks,
+                                                int consecutive_rejections,
+                                                const ResistanceIdentifierConfig& config) {
+  ResistanceIdentifierState s;
+  for (auto& h : s.hypotheses) {
+    h.x = x;
+    h.p = p;
+    h.consecutive_rejections = consecutive_rejections;
+  }
+  s.hypotheses[kSteadyMagnet].probability = config.steady_magnet_prior;
+  s.hypotheses[kDriftingMagnet].probability = 1.0 - config.steady_magnet_prior;
+  s.moments = moments;
+  s.blocks = blocks;
+  return s;
+}
+
+void ResistanceIdentifier::ClearBlock() noexcept {
+  block_count_ = 0;
+  block_duration_s_ = 0.0;
+  sum_iq_A_ = sum_w_rad_per_s_ = sum_y_V_ = 0.0;
+  uq_first_V_ = sum_duq_V_ = sum_duq2_V2_ = 0.0;
 }
 
 void ResistanceIdentifier::Reset() noexcept {
   state_ = ResistanceIdentifierState{};
-  state_.x.setZero();
-  state_.x(kStateResistance) = motor_.copper.r0_ohm;
-  state_.x(kStateFlux) = motor_.flux_Wb;
-  state_.p = p0_;
-  block_count_ = 0;
-  block_duration_s_ = 0.0;
-  sum_iq_A_ = sum_w_rad_per_s_ = sum_y_V_ = 0.0;
+  for (int j = 0; j < kMagnetHypotheses; ++j) {
+    ResistanceHypothesisState& hyp = state_.hypotheses[j];
+    hyp.x.setZero();
+    hyp.x(kStateResistance) = motor_.copper.r0_ohm;
+    hyp.x(kStateFlux) = motor_.flux_Wb;
+    hyp.p = p0_[j];
+  }
+  state_.hypotheses[kSteadyMagnet].probability = config_.steady_magnet_prior;
+  state_.hypotheses[kDriftingMagnet].probability = 1.0 - config_.steady_magnet_prior;
+  ClearBlock();
+  last_block_iq_A_ = std::numeric_limits<double>::quiet_NaN();
   estimate_ = ResistanceEstimate{};
+  Mix();
   Publish(ResistanceStatus::kInitialising, 0.0, 0.0);
 }
 
 bool ResistanceIdentifier::Restore(const ResistanceIdentifierState& state) noexcept {
-  if (!state.x.allFinite() || !state.p.allFinite() || !state.moments.allFinite() ||
-      state.consecutive_rejections < 0) {
-    return false;
+  if (!state.moments.allFinite()) return false;
+  double total = 0.0;
+  for (const ResistanceHypothesisState& h : state.hypotheses) {
+    if (!h.x.allFinite() || !h.p.allFinite() || h.consecutive_rejections < 0 ||
+        !(h.probability >= 0.0 && h.probability <= 1.0)) {
+      return false;
+    }
+    const Eigen::LLT<Eigen::Matrix4d> llt(h.p);
+    if (llt.info() != Eigen::Success) return false;  // not positive definite
+    total += h.probability;
   }
-  const Eigen::LLT<Eigen::Matrix4d> llt(state.p);
-  if (llt.info() != Eigen::Success) return false;  // not positive definite
-  state_ = state;
-  block_count_ = 0;
-  block_duration_s_ = 0.0;
-  sum_iq_A_ = sum_w_rad_per_s_ = sum_y_V_ = 0.0;
+  ResistanceIdentifierState s = state;
+  if (!SteadyOn()) {
+    s.hypotheses[kSteadyMagnet].probability = 0.0;
+    total = s.hypotheses[kDriftingMagnet].probability;
+  }
+  if (!(total > 0.0)) return false;
+  for (ResistanceHypothesisState& h : s.hypotheses) h.probability /= total;
+  state_ = s;
+  ClearBlock();
+  last_block_iq_A_ = std::numeric_limits<double>::quiet_NaN();
+  Mix();
   Publish(state_.blocks == 0 ? ResistanceStatus::kInitialising : ResistanceStatus::kConverging,
           0.0, 0.0);
   return true;
 }
 
+void ResistanceIdentifier::Mix() noexcept {
+  x_.setZero();
+  for (const ResistanceHypothesisState& h : state_.hypotheses) x_ += h.probability * h.x;
+  p_.setZero();
+  for (const ResistanceHypothesisState& h : state_.hypotheses) {
+    const Eigen::Vector4d d = h.x - x_;
+    p_ += h.probability * (h.p + d * d.transpose());
+  }
+}
+
 void ResistanceIdentifier::Publish(ResistanceStatus status, double eps_V, double weight) noexcept {
-  estimate_.resistance_ohm = state_.x(kStateResistance);
-  estimate_.flux_Wb = state_.x(kStateFlux);
+  estimate_.resistance_ohm = x_(kStateResistance);
+  estimate_.flux_Wb = x_(kStateFlux);
   estimate_.winding_degC = TemperatureAt(motor_.copper, estimate_.resistance_ohm);
-  estimate_.resistance_sigma_ohm =
-      std::sqrt(std::max(state_.p(kStateResistance, kStateResistance), 0.0));
+  estimate_.resistance_sigma_ohm = std::sqrt(std::max(p_(kStateResistance, kStateResistance), 0.0));
   estimate_.innovation_V = eps_V;
   estimate_.weight = weight;
+  estimate_.steady_magnet_probability = state_.hypotheses[kSteadyMagnet].probability;
   estimate_.status = status;
 }
 
@@ -129,6 +201,10 @@ ResistanceEstimate ResistanceIdentifier::Update(const DqSample& s, double dt_s) 
   sum_y_V_ += s.uq_V - motor_.inductance_H * s.w_r_rad_per_s * s.id_A;
   sum_iq_A_ += s.iq_A;
   sum_w_rad_per_s_ += s.w_r_rad_per_s;
+  if (block_count_ == 0) uq_first_V_ = s.uq_V;
+  const double duq = s.uq_V - uq_first_V_;
+  sum_duq_V_ += duq;
+  sum_duq2_V2_ += duq * duq;
   block_duration_s_ += dt_s;
   if (++block_count_ >= config_.block_samples) ProcessBlock();
   return estimate_;
@@ -138,20 +214,27 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   const double n = block_count_;
   const double iq = sum_iq_A_ / n;
   const double w = sum_w_rad_per_s_ / n;
-  const double y = sum_y_V_ / n;
+  double y = sum_y_V_ / n;
   const double dt = block_duration_s_;
-  block_count_ = 0;
-  block_duration_s_ = 0.0;
-  sum_iq_A_ = sum_w_rad_per_s_ = sum_y_V_ = 0.0;
+  if (motor_.uq_resolution_V > 0.0 && block_count_ >= 2) {
+    // Quantisation bias of the mean of uq (estimators/quantisation.hpp): a known periodic
+    // function of the true mean, with the noise from this block's own variance (Sheppard).
+    const double uq_mean = uq_first_V_ + sum_duq_V_ / n;
+    const double uq_var = (sum_duq2_V2_ - sum_duq_V_ * sum_duq_V_ / n) / (n - 1.0);
+    y += CorrectQuantisedMean(uq_mean, uq_var, block_count_, motor_.uq_resolution_V) - uq_mean;
+  }
+  ClearBlock();
   ++state_.blocks;
+  const double previous_iq = last_block_iq_A_;
+  last_block_iq_A_ = iq;
+  // A load change: the blocks whose innovations tell the magnet hypotheses apart.
+  const bool load_change = std::abs(iq - previous_iq) > config_.load_change_A;  // false for NaN
 
-  Eigen::Vector4d& x = state_.x;
-  Eigen::Matrix4d& p = state_.p;
   // Variance of the block-mean output error: voltage noise plus the regressor noise carried
   // through the model (errors in variables), each divided by the samples averaged.
   const double r = (std::pow(config_.voltage_noise_V, 2) +
-                    std::pow(x(kStateResistance) * config_.current_noise_A, 2) +
-                    std::pow(x(kStateFlux) * speed_noise_rad_per_s_, 2)) /
+                    std::pow(x_(kStateResistance) * config_.current_noise_A, 2) +
+                    std::pow(x_(kStateFlux) * speed_noise_rad_per_s_, 2)) /
                    n;
 
   // Time update. Each parameter is an integrated, decaying random walk:
@@ -164,15 +247,6 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   f(kStateFlux, kStateFluxRate) = dt;
   f(kStateResistanceRate, kStateResistanceRate) = a;
   f(kStateFluxRate, kStateFluxRate) = a;
-  Eigen::Matrix4d q = Eigen::Matrix4d::Zero();
-  const auto add_pair = [&](int pos, int rate, double q_pos, double q_rate) {
-    q(pos, pos) = q_pos * dt + q_rate * dt * dt * dt / 3.0;
-    q(pos, rate) = q(rate, pos) = q_rate * dt * dt / 2.0;
-    q(rate, rate) = q_rate * dt;
-  };
-  add_pair(kStateResistance, kStateResistanceRate, q_resistance_ohm2_per_s_,
-           q_resistance_rate_ohm2_per_s3_);
-  add_pair(kStateFlux, kStateFluxRate, q_flux_Wb2_per_s_, q_flux_rate_Wb2_per_s3_);
   // Idle: with |iq| below idle_current_A there is no copper loss to drive the winding's
   // temperature and no resistive drop to see it by. The trend learnt under load no longer
   // applies (the winding cools), so Rs is held where it is, not extrapolated: its rate is
@@ -181,19 +255,6 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   if (idle) {
     f(kStateResistance, kStateResistanceRate) = 0.0;
     f(kStateResistanceRate, kStateResistanceRate) = 0.0;
-  }
-  x = f * x;
-  p = f * p * f.transpose() + q;
-  if (idle) p(kStateResistanceRate, kStateResistanceRate) = p0_(kStateResistanceRate, kStateResistanceRate);
-  // Bound the growth while nothing is learnt: scale row and column i together (a congruence
-  // with a diagonal matrix), which keeps P symmetric positive definite.
-  for (int i = 0; i < 4; ++i) {
-    const double cap = 4.0 * p0_(i, i);
-    if (p(i, i) > cap) {
-      const double k = std::sqrt(cap / p(i, i));
-      p.row(i) *= k;
-      p.col(i) *= k;
-    }
   }
 
   // Excitation monitor: exponentially weighted moments of [iq, w_r]; the information on Rs
@@ -214,48 +275,104 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   const double block_info = (iq - mean_iq) * (iq - mean_iq);
   const bool identifiable = !idle && info_r > 0.0 &&
                             (info_r >= info_needed || block_info >= kFreshExcitationShare * info_needed);
+  // Too little current for the voltage model (dead-time knee): no measurement update.
+  const bool measure = !(std::abs(iq) < config_.min_current_A);
 
   // Measurement row: y = iq Rs + w_r psi_f (Han 2019 eq. 6), h = [iq, 0, w_r, 0].
   const Eigen::Vector4d hrow(iq, 0.0, w, 0.0);
-  const double eps = y - hrow.dot(x);
-  if (std::abs(iq) < config_.min_current_A) {
-    // Too little current for the voltage model (dead-time knee): no measurement update.
-    Publish(Classify(false), eps, 0.0);
-    return;
-  }
-  const Eigen::Vector4d p_h = p * hrow;
-  const double s = hrow.dot(p_h) + r;
-  const double weight = NormalisedWeight(std::abs(eps) / std::sqrt(s));
-  if (weight > 0.0) {
-    const double r_eff = r / weight;  // Lambda divides the measurement variance (eq. 21)
-    Eigen::Vector4d gain = p_h / (hrow.dot(p_h) + r_eff);
-    if (!identifiable) {
-      // Rs and psi_f cannot be told apart: hold Rs and its rate (Schmidt "consider" update:
-      // their gain rows are zero, but their covariance and correlations are updated, so the
-      // next load change still corrects Rs through the correlation with psi_f).
-      gain(kStateResistance) = 0.0;
-      gain(kStateResistanceRate) = 0.0;
+  std::array<double, kMagnetHypotheses> log_likelihood{};
+  std::array<double, kMagnetHypotheses> eps_V{};
+  std::array<double, kMagnetHypotheses> weight_of{};
+  for (int j = 0; j < kMagnetHypotheses; ++j) {
+    if (j == kSteadyMagnet && !SteadyOn()) continue;
+    Eigen::Vector4d& x = state_.hypotheses[j].x;
+    Eigen::Matrix4d& p = state_.hypotheses[j].p;
+    Eigen::Matrix4d q = Eigen::Matrix4d::Zero();
+    const auto add_pair = [&](int pos, int rate, double q_pos, double q_rate) {
+      q(pos, pos) = q_pos * dt + q_rate * dt * dt * dt / 3.0;
+      q(pos, rate) = q(rate, pos) = q_rate * dt * dt / 2.0;
+      q(rate, rate) = q_rate * dt;
+    };
+    add_pair(kStateResistance, kStateResistanceRate, q_resistance_ohm2_per_s_,
+             q_resistance_rate_ohm2_per_s3_);
+    add_pair(kStateFlux, kStateFluxRate, q_flux_Wb2_per_s_[j], q_flux_rate_Wb2_per_s3_[j]);
+    x = f * x;
+    p = f * p * f.transpose() + q;
+    if (idle) p(kStateResistanceRate, kStateResistanceRate) = p0_[j](kStateResistanceRate, kStateResistanceRate);
+    // Bound the growth while nothing is learnt: scale row and column i together (a congruence
+    // with a diagonal matrix), which keeps P symmetric positive definite.
+    for (int i = 0; i < 4; ++i) {
+      const double cap = 4.0 * p0_[j](i, i);
+      if (p(i, i) > cap) {
+        const double k = std::sqrt(cap / p(i, i));
+        p.row(i) *= k;
+        p.col(i) *= k;
+      }
     }
-    x += gain * eps;
-    // Joseph form P = (I - K h^T) P (I - K h^T)^T + K r K^T, valid for any gain (Bucy & Joseph
-    // 1968; Simon, "Optimal State Estimation", 2006, eq. 5.19); keeps P symmetric PSD.
-    const Eigen::Matrix4d a_mat = Eigen::Matrix4d::Identity() - gain * hrow.transpose();
-    p = a_mat * p * a_mat.transpose() + r_eff * gain * gain.transpose();
-    p = 0.5 * (p + p.transpose()).eval();
-    state_.consecutive_rejections = 0;
-  } else if (++state_.consecutive_rejections >= config_.reacquire_after_rejections) {
-    // The model no longer fits (a stale restored state, a motor swap): re-open P.
-    p = p0_;
-    state_.consecutive_rejections = 0;
+    eps_V[j] = y - hrow.dot(x);
+    if (!measure) continue;
+    const Eigen::Vector4d p_h = p * hrow;
+    const double s = hrow.dot(p_h) + r;
+    const double z = std::abs(eps_V[j]) / std::sqrt(s);
+    // Gaussian likelihood of the innovation; z capped at the rejection level so that one
+    // outlying block cannot rule a hypothesis out.
+    const double z_capped = std::min(z, kMaxEvidenceZ);
+    log_likelihood[j] = -0.5 * z_capped * z_capped - 0.5 * std::log(s);
+    const double weight = NormalisedWeight(z);
+    weight_of[j] = weight;
+    if (weight > 0.0) {
+      const double r_eff = r / weight;  // Lambda divides the measurement variance (eq. 21)
+      Eigen::Vector4d gain = p_h / (hrow.dot(p_h) + r_eff);
+      if (!identifiable) {
+        // Rs and psi_f cannot be told apart: hold Rs and its rate (Schmidt "consider" update:
+        // their gain rows are zero, but their covariance and correlations are updated, so the
+        // next load change still corrects Rs through the correlation with psi_f).
+        gain(kStateResistance) = 0.0;
+        gain(kStateResistanceRate) = 0.0;
+      }
+      x += gain * eps_V[j];
+      // Joseph form P = (I - K h^T) P (I - K h^T)^T + K r K^T, valid for any gain (Bucy &
+      // Joseph 1968; Simon, "Optimal State Estimation", 2006, eq. 5.19); keeps P symmetric PSD.
+      const Eigen::Matrix4d a_mat = Eigen::Matrix4d::Identity() - gain * hrow.transpose();
+      p = a_mat * p * a_mat.transpose() + r_eff * gain * gain.transpose();
+      p = 0.5 * (p + p.transpose()).eval();
+      state_.hypotheses[j].consecutive_rejections = 0;
+    } else if (++state_.hypotheses[j].consecutive_rejections >= config_.reacquire_after_rejections) {
+      // The model no longer fits (a stale restored state, a motor swap): re-open P.
+      p = p0_[j];
+      state_.hypotheses[j].consecutive_rejections = 0;
+    }
   }
-  Publish(Classify(identifiable), eps, weight);
+  // Probabilities of the hypotheses (Bayes' rule on load-change blocks; between load changes
+  // both explain uq equally well, one with Rs and one with psi_f, and the tighter one would win
+  // for no physical reason). A floor keeps a hypothesis that was wrong revivable.
+  if (SteadyOn() && measure && load_change) {
+    const double top = std::max(log_likelihood[kSteadyMagnet], log_likelihood[kDriftingMagnet]);
+    double total = 0.0;
+    for (int j = 0; j < kMagnetHypotheses; ++j) {
+      state_.hypotheses[j].probability *= std::exp(log_likelihood[j] - top);
+      total += state_.hypotheses[j].probability;
+    }
+    for (int j = 0; j < kMagnetHypotheses; ++j) {
+      double& mu = state_.hypotheses[j].probability;
+      mu = total > 0.0 ? mu / total : (j == kSteadyMagnet ? config_.steady_magnet_prior : 1.0 - config_.steady_magnet_prior);
+      mu = std::max(mu, config_.hypothesis_probability_floor);
+    }
+    const double sum = state_.hypotheses[kSteadyMagnet].probability + state_.hypotheses[kDriftingMagnet].probability;
+    for (int j = 0; j < kMagnetHypotheses; ++j) state_.hypotheses[j].probability /= sum;
+  }
+  Mix();
+  const int best = state_.hypotheses[kSteadyMagnet].probability >= state_.hypotheses[kDriftingMagnet].probability
+                       ? kSteadyMagnet
+                       : kDriftingMagnet;
+  Publish(Classify(measure && identifiable), eps_V[best], weight_of[best]);
 }
 
 ResistanceStatus ResistanceIdentifier::Classify(bool identifiable) const noexcept {
-  const double rs = state_.x(kStateResistance);
+  const double rs = x_(kStateResistance);
   if (!(rs >= r_min_ohm_ && rs <= r_max_ohm_)) return ResistanceStatus::kImplausible;
   if (!identifiable) return ResistanceStatus::kNotIdentifiable;
-  if (std::sqrt(state_.p(kStateResistance, kStateResistance)) > config_.converged_sigma_rel * motor_.copper.r0_ohm) {
+  if (std::sqrt(p_(kStateResistance, kStateResistance)) > config_.converged_sigma_rel * motor_.copper.r0_ohm) {
     return ResistanceStatus::kConverging;
   }
   return ResistanceStatus::kTracking;

@@ -6,6 +6,8 @@
 /// Per raw sample (e.g. every 10 ms) Update() accumulates
 ///     y = uq - Ls w_r id   and   phi = [iq, w_r]
 /// (the q-axis equation of Han 2019 eq. 6 is linear, so block averages satisfy it exactly).
+/// When the motor description gives the uq resolution, the quantisation bias of the block mean
+/// of uq is removed (estimators/quantisation.hpp, noise from the block's own variance).
 /// Every `block_samples` samples the block means enter a Kalman-form discounted least-squares
 /// update of x = [Rs, dRs/dt, psi_f, dpsi_f/dt] (measurement row [iq, 0, w_r, 0]) in which
 ///   - forgetting is process noise added to P (each parameter drifts with a rate that itself
@@ -18,12 +20,19 @@
 ///   - an excitation monitor (exponentially weighted information on Rs with psi_f free, i.e.
 ///     the Schur complement of the regressor moments) decides whether Rs and psi_f can be told
 ///     apart; when they cannot, Rs is held and only psi_f is tracked;
+///   - two such filters run side by side, one per hypothesis about the magnet: steady (its flux
+///     barely drifts) and drifting (the rotor warming or cooling). Between load changes a drift
+///     of uq is resistance under the first and mostly flux under the second; each load change
+///     tells them apart, so their probabilities are updated with the innovations of load-change
+///     blocks only (multiple-model estimation, Magill 1965; Bar-Shalom, Li, Kirubarajan 2001,
+///     sec. 11.6), and the output is their probability-weighted mixture;
 ///   - the estimate is checked against a plausible band from the motor description.
 /// Every output carries one ResistanceStatus.
 ///
 /// Pure: no I/O, no clock (time enters as dt_s), no allocation after construction.
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <string_view>
 
@@ -36,6 +45,11 @@ inline constexpr int kStateResistance = 0;
 inline constexpr int kStateResistanceRate = 1;
 inline constexpr int kStateFlux = 2;
 inline constexpr int kStateFluxRate = 3;
+
+/// Indices of the magnet hypotheses (one filter each).
+inline constexpr int kSteadyMagnet = 0;    ///< the flux barely drifts
+inline constexpr int kDriftingMagnet = 1;  ///< the flux drifts with the magnet temperature
+inline constexpr int kMagnetHypotheses = 2;
 
 /// Health of a resistance estimate. Numeric values are stable (they appear in CSV output).
 enum class ResistanceStatus : std::uint8_t {
@@ -61,8 +75,20 @@ struct ResistanceIdentifierConfig {
   double speed_noise_rpm = 1.0;           ///< rms noise of one raw mechanical speed sample
   double winding_drift_K_per_sqrt_h = 1.0;   ///< random walk of the winding temperature
   double winding_rate_walk_K_per_h_per_sqrt_h = 10.0;  ///< random walk of its rate of change
-  double magnet_drift_K_per_sqrt_h = 0.1;    ///< random walk of the magnet temperature
-  double magnet_rate_walk_K_per_h_per_sqrt_h = 1.0;    ///< random walk of its rate of change
+  /// Drifting-magnet hypothesis: random walk of the magnet temperature, and of its rate.
+  double magnet_drift_K_per_sqrt_h = 0.1;
+  double magnet_rate_walk_K_per_h_per_sqrt_h = 3.0;
+  /// Steady-magnet hypothesis: the same two, small.
+  double steady_magnet_drift_K_per_sqrt_h = 0.01;
+  double steady_magnet_rate_walk_K_per_h_per_sqrt_h = 0.01;
+  /// Prior probability of the steady magnet (0 = that filter is off: one filter, drifting).
+  /// Favoured because a wrong "steady" is refuted by the first load change after a flux drift,
+  /// while a wrong "drifting" is only less precise and is refuted slowly.
+  double steady_magnet_prior = 0.9;
+  double hypothesis_probability_floor = 1e-6;  ///< no hypothesis is ever ruled out for good
+  /// A block whose mean iq differs from the previous block's by more than this is a load change:
+  /// its innovations update the hypotheses' probabilities (block noise of iq is ~1 mA).
+  double load_change_A = 0.02;
   double rate_time_constant_s = 3600.0;      ///< rates decay towards zero with this constant
   double flux_temperature_coefficient_per_K = -1e-3;  ///< NdFeB, d(psi_f)/psi_f per K
   double initial_resistance_sigma_rel = 0.1;  ///< nameplate Rs uncertainty (relative, 1 sigma)
@@ -98,18 +124,32 @@ struct ResistanceEstimate {
   double resistance_sigma_ohm = 0.0;  ///< sqrt(P_RR)
   double innovation_V = 0.0;          ///< eps of the last block update
   double weight = 0.0;                ///< Lambda of the last block update
+  double steady_magnet_probability = 0.0;  ///< probability of the steady-magnet hypothesis
   ResistanceStatus status = ResistanceStatus::kInitialising;
+};
+
+/// One magnet hypothesis' filter, as plain data.
+struct ResistanceHypothesisState {
+  /// [Rs ohm, dRs/dt ohm/s, psi_f Wb, dpsi_f/dt Wb/s], indexed by kState*.
+  Eigen::Vector4d x = Eigen::Vector4d::Zero();
+  Eigen::Matrix4d p = Eigen::Matrix4d::Zero();  ///< covariance of x, 4x4
+  double probability = 0.0;                     ///< of this hypothesis, 0..1
+  int consecutive_rejections = 0;
 };
 
 /// Everything needed to continue later, as plain data (the daemon's state store saves it).
 struct ResistanceIdentifierState {
-  /// [Rs ohm, dRs/dt ohm/s, psi_f Wb, dpsi_f/dt Wb/s], indexed by kState*.
-  Eigen::Vector4d x = Eigen::Vector4d::Zero();
-  Eigen::Matrix4d p = Eigen::Matrix4d::Zero();      ///< covariance of x, 4x4
+  std::array<ResistanceHypothesisState, kMagnetHypotheses> hypotheses;  ///< by kSteadyMagnet...
   Eigen::Matrix2d moments = Eigen::Matrix2d::Zero();  ///< EW moments of [iq, w_r] over blocks
   std::uint64_t blocks = 0;                         ///< block updates since start or reset
-  int consecutive_rejections = 0;
 };
+
+/// A state of the single-filter identifier (pumpthermd saved state version 1: one x, one P)
+/// carried over: both hypotheses continue from it, with the prior probabilities of `config`.
+ResistanceIdentifierState StateFromSingleFilter(const Eigen::Vector4d& x, const Eigen::Matrix4d& p,
+                                                const Eigen::Matrix2d& moments, std::uint64_t blocks,
+                                                int consecutive_rejections,
+                                                const ResistanceIdentifierConfig& config);
 
 class ResistanceIdentifier {
  public:
@@ -129,16 +169,26 @@ class ResistanceIdentifier {
 
   ResistanceIdentifierState Save() const { return state_; }
   /// Continues from a saved state. Returns false (and changes nothing) when the state has
-  /// non-finite values or a covariance that is not positive definite. A restored estimate that
-  /// no longer fits the motor is rejected block after block; after reacquire_after_rejections
-  /// blocks the covariance is re-opened and the estimate converges again.
+  /// non-finite values, a covariance that is not positive definite, probabilities outside
+  /// 0..1 or summing to zero, or negative counters. Probabilities are renormalised (and the
+  /// steady one set to 0 when steady_magnet_prior is 0). A restored estimate that no longer
+  /// fits the motor is rejected block after block; after reacquire_after_rejections blocks the
+  /// covariance is re-opened and the estimate converges again.
   bool Restore(const ResistanceIdentifierState& state) noexcept;
+
+  /// Probability-weighted mixture of the hypotheses' states, and its covariance
+  /// (sum_j mu_j (P_j + (x_j - x)(x_j - x)^T)); what the estimate reports.
+  const Eigen::Vector4d& x() const { return x_; }
+  const Eigen::Matrix4d& p() const { return p_; }
 
   const MotorDescription& motor() const { return motor_; }
   const ResistanceIdentifierConfig& config() const { return config_; }
 
  private:
   void ProcessBlock() noexcept;
+  void Mix() noexcept;
+  bool SteadyOn() const noexcept { return config_.steady_magnet_prior > 0.0; }
+  void ClearBlock() noexcept;
   ResistanceStatus Classify(bool identifiable) const noexcept;
   void Publish(ResistanceStatus status, double eps_V, double weight) noexcept;
 
@@ -152,12 +202,19 @@ class ResistanceIdentifier {
   double sum_iq_A_ = 0.0;
   double sum_w_rad_per_s_ = 0.0;
   double sum_y_V_ = 0.0;
+  double uq_first_V_ = 0.0;      // first uq of the block: the sums below are relative to it
+  double sum_duq_V_ = 0.0;       // (exact variance of 100 values near 40 V)
+  double sum_duq2_V2_ = 0.0;
+  double last_block_iq_A_ = 0.0;  // NaN after start, reset or restore: no load change seen
+  // Mixture of the hypotheses (what is published).
+  Eigen::Vector4d x_ = Eigen::Vector4d::Zero();
+  Eigen::Matrix4d p_ = Eigen::Matrix4d::Zero();
   // Derived constants.
   double q_resistance_ohm2_per_s_ = 0.0;    // random walk of Rs
   double q_resistance_rate_ohm2_per_s3_ = 0.0;  // random walk of dRs/dt
-  double q_flux_Wb2_per_s_ = 0.0;
-  double q_flux_rate_Wb2_per_s3_ = 0.0;
-  Eigen::Matrix4d p0_ = Eigen::Matrix4d::Zero();
+  std::array<double, kMagnetHypotheses> q_flux_Wb2_per_s_{};
+  std::array<double, kMagnetHypotheses> q_flux_rate_Wb2_per_s3_{};
+  std::array<Eigen::Matrix4d, kMagnetHypotheses> p0_{};
   double speed_noise_rad_per_s_ = 0.0;
   double r_min_ohm_ = 0.0;
   double r_max_ohm_ = 0.0;

@@ -294,7 +294,10 @@ std::vector<Row> Catalogue() {
       {"saved state", "huge", "first temperature `1e300`", [state, first_x] { return Restore(state.substr(0, first_x) + "1e300" + state.substr(state.find(',', first_x))); }, "restored 0; saved state of pump(s) tmp1 does not fit"},
       {"saved state", "NaN", "held input `speed_rpm = nan`", [state] { return Restore(Replace(state, "speed_rpm = ", "speed_rpm = nan\nold_speed_rpm = ")); }, "does not fit the configuration or is damaged"},
       {"saved state", "wrong length", "one temperature missing", [state, first_x] { return Restore(state.substr(0, first_x) + state.substr(state.find(',', first_x) + 2)); }, "restored 0"},
-      {"saved state", "unknown", "`version = 7`", [state] { return Restore(Replace(state, "version = 1", "version = 7")); }, "unknown version"},
+      {"saved state", "unknown", "`version = 7`", [state] { return Restore(Replace(state, "version = 2", "version = 7")); }, "unknown version"},
+      {"saved state", "wrong length", "`resistance_probability = [ 0.5 ]` (two hypotheses)", [state] { return Restore(Replace(state, "resistance_probability = [", "resistance_probability = [ 0.5 ]\nold_resistance_probability = [")); }, "does not fit the configuration or is damaged"},
+      {"saved state", "out of range", "`resistance_probability = [ 1.5, 0.1 ]`", [state] { return Restore(Replace(state, "resistance_probability = [", "resistance_probability = [ 1.5, 0.1 ]\nold_resistance_probability = [")); }, "does not fit the configuration or is damaged"},
+      {"saved state", "wrong type", "`resistance_rejections = [ 0.5, 0 ]`", [state] { return Restore(Replace(state, "resistance_rejections = [", "resistance_rejections = [ 0.5, 0 ]\nold_resistance_rejections = [")); }, "does not fit the configuration or is damaged"},
       {"saved state", "wrong type", "`model = \"other\"`", [state] { return Restore(Replace(state, "model = 'tmp-generic'", "model = 'other'")); }, "restored 0"},
       {"saved state", "non-UTF-8", "a byte `\\xff` in a key", [state] { return Restore(Replace(state, "version", "ver\xffsion")); }, "restored 0"},
   };

@@ -9,6 +9,7 @@
 #include <map>
 #include <numbers>
 #include <sstream>
+#include <toml++/toml.h>
 
 #include "daemon/gateway.hpp"
 #include "daemon/lcm_bridge.hpp"
@@ -335,6 +336,28 @@ TEST(Pipeline, StateRoundTripsThroughText) {
   Bench c(Config());
   EXPECT_EQ(c.gateway_.RestoreState(text, a.gateway_.pumps()[0]->snapshot().time_us + 3'600'000'000LL, &warning), 1);
   EXPECT_GT(c.gateway_.pumps()[0]->snapshot().node_degC[3], x[3] + 1.0);
+  // A state of version 1 (one resistance filter, before the magnet hypotheses): restored, the
+  // filter continuing as both hypotheses with the prior probabilities.
+  {
+    toml::table v1 = toml::parse(text);
+    v1.insert_or_assign("version", 1);
+    toml::table& p = *v1["pump"]["tmp1"].as_table();
+    toml::array x1, p1;
+    for (std::size_t i = 0; i < 4; ++i) x1.push_back(*(*p["resistance_x"].as_array())[i].value<double>());
+    for (std::size_t i = 0; i < 16; ++i) p1.push_back(*(*p["resistance_p"].as_array())[i].value<double>());
+    p.insert_or_assign("resistance_x", x1);
+    p.insert_or_assign("resistance_p", p1);
+    p.insert_or_assign("resistance_rejections", 0);
+    p.erase("resistance_probability");
+    std::ostringstream old;
+    old << v1;
+    Bench e(Config());
+    EXPECT_EQ(e.gateway_.RestoreState(old.str(), a.gateway_.pumps()[0]->snapshot().time_us, &warning), 1) << warning;
+    const auto& re = e.gateway_.pumps()[0]->snapshot().resistance;
+    EXPECT_EQ(re.resistance_ohm, x1[0].value<double>().value());
+    EXPECT_NEAR(re.steady_magnet_probability, pumptherm::estimators::ResistanceIdentifierConfig{}.steady_magnet_prior, 1e-12);
+    for (std::size_t i = 0; i < x.size(); ++i) EXPECT_NEAR(e.gateway_.pumps()[0]->snapshot().node_degC[i], x[i], 1e-6);
+  }
   // Damaged or foreign state: ignored with a warning, never a crash.
   Bench d(Config());
   EXPECT_EQ(d.gateway_.RestoreState("version = 1\n[pump.tmp1]\nmodel = \"other\"\n", 0, &warning), 0);

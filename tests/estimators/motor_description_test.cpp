@@ -116,6 +116,27 @@ TEST(MotorDescription, OutOfRangeValuesAreErrors) {
   EXPECT_NE(ErrorOf(thin).find("plausible_min_degC"), std::string::npos) << ErrorOf(thin);
 }
 
+// The optional [drive] table: the step of the reported uq (the identifier's quantisation-bias
+// correction); absent, no correction (0).
+TEST(MotorDescription, DriveTableGivesTheUqResolution) {
+  EXPECT_EQ(ParseMotorDescription(kValid, "m.toml").uq_resolution_V, 0.0);
+  EXPECT_EQ(MotorPreset("han2019-tmp").uq_resolution_V, 0.0);
+  const MotorDescription m =
+      ParseMotorDescription(std::string(kValid) + "[drive]\nuq_resolution_V = 0.0234375\n", "m.toml");
+  EXPECT_DOUBLE_EQ(m.uq_resolution_V, 96.0 / 4096.0);
+  EXPECT_EQ(ParseMotorDescription(std::string(kValid) + "[drive]\n", "m.toml").uq_resolution_V, 0.0);
+  const std::string zero = ErrorOf(std::string(kValid) + "[drive]\nuq_resolution_V = 0\n");
+  EXPECT_NE(zero.find("m.toml:11: key 'drive.uq_resolution_V' must be within (0, 10] V, got 0"), std::string::npos) << zero;
+  const std::string huge = ErrorOf(std::string(kValid) + "[drive]\nuq_resolution_V = 48\n");
+  EXPECT_NE(huge.find("'drive.uq_resolution_V' must be within (0, 10] V"), std::string::npos) << huge;
+  const std::string text = ErrorOf(std::string(kValid) + "[drive]\nuq_resolution_V = \"23 mV\"\n");
+  EXPECT_NE(text.find("m.toml:11: key 'drive.uq_resolution_V' must be a number"), std::string::npos) << text;
+  const std::string unknown = ErrorOf(std::string(kValid) + "[drive]\nud_resolution_V = 0.02\n");
+  EXPECT_NE(unknown.find("m.toml:11: unknown key 'drive.ud_resolution_V'"), std::string::npos) << unknown;
+  const std::string not_table = ErrorOf(std::string("drive = 1.0\n") + kValid);
+  EXPECT_NE(not_table.find("m.toml:1: key 'drive' must be a table"), std::string::npos) << not_table;
+}
+
 TEST(MotorDescription, SyntaxErrorNamesLine) {
   const std::string err = ErrorOf("pole_pairs = 1\nflux_Wb = = 3\n");
   EXPECT_NE(err.find("m.toml:2:"), std::string::npos) << err;

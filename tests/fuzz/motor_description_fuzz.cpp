@@ -1,7 +1,8 @@
 // libFuzzer target: the motor description reader (estimators/motor.hpp) on arbitrary text.
 // A MotorDescriptionError is the expected answer to bad input; an accepted description must
 // hold the documented ranges (pole_pairs >= 1; positive, finite speed, flux, inductance, R0 and
-// alpha; a non-empty plausibility band). Anything else is a finding.
+// alpha; a non-empty plausibility band; a uq resolution of 0 (absent) or within (0, 10] V).
+// Anything else is a finding.
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -28,6 +29,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       !(m.plausible_min_degC < m.plausible_max_degC)) {
     std::abort();
   }
+  if (!(m.uq_resolution_V == 0.0 || (m.uq_resolution_V > 0.0 && m.uq_resolution_V <= 10.0))) std::abort();
   const double lo = PlausibleMinResistance_ohm(m), hi = PlausibleMaxResistance_ohm(m);
   if (!std::isfinite(lo) || !std::isfinite(hi) || !(lo < hi)) std::abort();
   return 0;
