@@ -40,24 +40,30 @@ t0_in=$(head -n 1 "$WORK_DIR/input.log" | sed 's/^(\([0-9.]*\)).*/\1/')
 # first_level LOG T0 NODE LEVEL: seconds after T0 of the first GW_ALARM (0x200 + NODE) whose
 # AlarmLevel (bits 0-1 of byte 0) is LEVEL or more.
 first_level() {
-  id=$(printf '%03X' $((0x200 + $3)))
-  while read -r ts _ frame; do
-    case "$frame" in "$id#"*) ;; *) continue ;; esac
-    b0=$(printf '%d' "0x$(echo "${frame#*#}" | cut -c1-2)")
-    lvl=$((b0 & 3))
-    if [ "$lvl" -ge "$4" ] && [ "$lvl" -ne 3 ]; then
-      echo "$ts" | sed 's/[()]//g' | awk -v t0="$2" '{ printf "%.1f", $1 - t0 }'
-      return
-    fi
-  done <"$1"
-  echo none
+  # awk, not a shell loop: a few processes per frame cost minutes under emulation (TCG).
+  awk -v t0="$2" -v id="$(printf '%03X' $((0x200 + $3)))" -v want="$4" '
+    { split($3, f, "#") }
+    f[1] == id {
+      lvl = (index("0123456789ABCDEF", toupper(substr(f[2], 2, 1))) - 1) % 4
+      if (lvl >= want && lvl != 3) {
+        printf "%.1f", substr($1, 2, length($1) - 2) - t0
+        found = 1
+        exit
+      }
+    }
+    END { if (!found) printf "none" }' "$1"
 }
 # last_frame_temp LOG NODE: Frame_degC (bytes 2-3, 0.01 degC, offset -50) of the last GW_TEMPS_A.
 last_frame_temp() {
-  id=$(printf '%03X' $((0x400 + $2)))
-  p=$(grep " $id#" "$1" | tail -n 1 | sed 's/.*#//')
-  raw=$(printf '%d' "0x$(echo "$p" | cut -c7-8)$(echo "$p" | cut -c5-6)")
-  awk -v r="$raw" 'BEGIN { printf "%.2f", r * 0.01 - 50 }'
+  awk -v id="$(printf '%03X' $((0x400 + $2)))" '
+    function hex(s,  i, v) {
+      v = 0
+      for (i = 1; i <= length(s); i++) v = v * 16 + index("0123456789ABCDEF", toupper(substr(s, i, 1))) - 1
+      return v
+    }
+    { split($3, f, "#") }
+    f[1] == id { p = f[2] }
+    END { printf "%.2f", hex(substr(p, 7, 2) substr(p, 5, 2)) * 0.01 - 50 }' "$1"
 }
 t0_live=$(grep -m 1 '' "$WORK_DIR/live.log" | sed 's/^(\([0-9.]*\)).*/\1/')
 # The live capture starts with the daemon's first output; shift it to the replay's first frame:
