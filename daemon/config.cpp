@@ -181,6 +181,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     g.state_directory = r.String("state_directory", &empty);
     g.state_save_period_s = r.Number("state_save_period_s", g.state_save_period_s, 1.0, 86400.0);
     g.test_hang_switch = r.Bool("test_hang_switch", false);
+    g.test_state_write_pause_s = r.Number("test_state_write_pause_s", 0.0, 0.0, 5.0);
     r.RejectUnknown();
   }
 

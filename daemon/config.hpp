@@ -42,6 +42,7 @@ struct GatewayConfig {
   std::string state_directory;            ///< empty: $STATE_DIRECTORY, else no saved state
   double state_save_period_s = 60.0;      ///< how often estimator state is saved
   bool test_hang_switch = false;          ///< tests only: SIGUSR1 makes the loop hang
+  double test_state_write_pause_s = 0.0;  ///< tests only: pause in the middle of each state write
 };
 
 /// Where the frame layout comes from.

@@ -641,9 +641,15 @@ std::string Gateway::StatusLine() const {
     warnings += p->snapshot().alarm.level == estimators::AlarmLevel::kWarning;
     trips += p->snapshot().alarm.level == estimators::AlarmLevel::kTrip;
   }
-  return fmt::format("{} pumps, {} warning, {} trip; {}; {} unknown, {} bad length", pumps_.size(),
-                     warnings, trips, counter_.StatusLine(), counters_.rx_unknown_id,
-                     counters_.rx_bad_length);
+  std::uint64_t error_frames = 0;
+  for (const auto& c : counter_.interfaces()) error_frames += c.rx_error_frames;
+  std::string line = fmt::format("{} pumps, {} warning, {} trip; {}; {} unknown, {} bad length, {} error frames",
+                                 pumps_.size(), warnings, trips, counter_.StatusLine(), counters_.rx_unknown_id,
+                                 counters_.rx_bad_length, error_frames);
+  if (!config_.lcm.url.empty()) {
+    line += fmt::format("; lcm {} sent, {} failed", counters_.lcm_published, counters_.lcm_failed);
+  }
+  return line;
 }
 
 std::string Gateway::PumpTable() const {

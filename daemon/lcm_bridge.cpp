@@ -1,6 +1,8 @@
 #include "daemon/lcm_bridge.hpp"
 
 #include <lcm/lcm-cpp.hpp>
+
+#include <cerrno>
 #include <stdexcept>
 
 #include "protocol/lcm/channels.hpp"
@@ -36,7 +38,10 @@ void LcmBridge::Handle() {
 }
 
 bool LcmBridge::Publish(const std::string& channel, const std::vector<std::uint8_t>& bytes) {
-  return impl_->lcm.publish(channel, bytes.data(), static_cast<unsigned int>(bytes.size())) == 0;
+  errno = 0;
+  if (impl_->lcm.publish(channel, bytes.data(), static_cast<unsigned int>(bytes.size())) == 0) return true;
+  last_errno_ = errno;  // sendmsg's, when that is what failed
+  return false;
 }
 
 }  // namespace pumptherm::daemon

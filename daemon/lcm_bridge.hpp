@@ -34,12 +34,18 @@ class LcmBridge {
   int fd();
   /// Dispatches whatever is waiting, without blocking.
   void Handle();
-  /// Publishes raw encoded bytes; false when LCM refused (counted by the caller).
+  /// Publishes raw encoded bytes; false when LCM refused (counted by the caller), with the
+  /// reason in last_errno() (e.g. ENETUNREACH when the multicast route is gone). LCM 1.3 reports
+  /// a failure only for messages that fit one datagram (1400 bytes with the channel name): a
+  /// fragmented one counts as sent whatever happened; ours are far smaller.
   bool Publish(const std::string& channel, const std::vector<std::uint8_t>& bytes);
+  /// errno of the last failed Publish (0 when LCM gave none).
+  int last_errno() const { return last_errno_; }
 
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+  int last_errno_ = 0;
 };
 
 }  // namespace pumptherm::daemon

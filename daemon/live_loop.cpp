@@ -1,9 +1,10 @@
 #include "daemon/live_loop.hpp"
 
 #include <fmt/format.h>
-
+#include <linux/sock_diag.h>
 #include <signal.h>
 #include <sys/epoll.h>
+#include <sys/socket.h>
 #include <sys/signalfd.h>
 #include <sys/timerfd.h>
 #include <time.h>
@@ -15,10 +16,12 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <string_view>
 #include <system_error>
 #include <vector>
 
 #include "daemon/can_socket.hpp"
+#include "daemon/failure_report.hpp"
 #include "daemon/gateway.hpp"
 #include "daemon/lcm_bridge.hpp"
 #include "daemon/log.hpp"
@@ -37,6 +40,8 @@ constexpr std::uint64_t kFirstSocketTag = 3;
 constexpr std::int64_t kReopenPeriodUs = 1000000;   // check and reopen interfaces every second
 constexpr std::int64_t kMaxTickUs = 10000;          // outputs are due at 10 ms granularity
 constexpr int kRxBudget = 256;                      // frames per socket per wake-up (fairness)
+// A failure that repeats (LCM sends, state writes) is logged at once, then at most this often.
+constexpr std::int64_t kFailureReminderUs = 600'000'000;
 
 [[noreturn]] void ThrowErrno(const char* what) {
   throw std::system_error(errno, std::generic_category(), what);
@@ -69,6 +74,8 @@ struct LiveLoop::Impl : OutputSink {
   std::int64_t next_save_us = 0;
   std::int64_t next_table_us = std::numeric_limits<std::int64_t>::max();  // no table: never
   std::string state_path;
+  FailureReport lcm_report{kFailureReminderUs};
+  FailureReport save_report{kFailureReminderUs};
   bool stop = false;
   bool hang = false;
 
@@ -85,7 +92,33 @@ struct LiveLoop::Impl : OutputSink {
     }
   }
   bool PublishLcm(const std::string& channel, std::int64_t, const std::vector<std::uint8_t>& bytes) override {
-    return lcm ? lcm->Publish(channel, bytes) : true;
+    if (!lcm) return true;
+    const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
+    if (lcm->Publish(channel, bytes)) {
+      const FailureReport::Report r = lcm_report.Success(mono);
+      if (r.kind == FailureReport::Kind::kRecovered) {
+        Log(LogLevel::kNotice, "LCM: sending works again, after {} failed messages in {:.1f} s", r.run_failures, r.run_s);
+      }
+      return true;
+    }
+    // Counted by the gateway (status line 'lcm ... failed', gateway_health_t); logged sparingly.
+    const int err = lcm->last_errno();
+    const std::string_view what = err != 0 ? std::strerror(err) : "LCM refused the message";
+    const FailureReport::Report r = lcm_report.Failure(mono, what);
+    switch (r.kind) {
+      case FailureReport::Kind::kFirst:
+        Log(LogLevel::kWarning, "LCM: cannot send {}: {}; counting failed messages, next report in {} min or when sending works again",
+            channel, what, kFailureReminderUs / 60'000'000);
+        break;
+      case FailureReport::Kind::kChanged:
+      case FailureReport::Kind::kReminder:
+        Log(LogLevel::kWarning, "LCM: still cannot send: {} ({} failed messages since the last report, {} in {:.0f} s)",
+            what, r.failures_since_report, r.run_failures, r.run_s);
+        break;
+      default:
+        break;
+    }
+    return false;
   }
 
   void Watch(int fd, std::uint64_t tag) {
@@ -142,32 +175,70 @@ struct LiveLoop::Impl : OutputSink {
     Watch(lcm->fd(), kLcmTag);
   }
 
+  /// The kernel's drop counter of socket `i` (cumulative, 32 bits) is now `drops_total`.
+  void CountDrops(std::size_t i, std::uint32_t drops_total) {
+    // Wrap-safe; an older value (a frame queued before drops that SyncDrops already counted)
+    // changes nothing.
+    const auto delta = static_cast<std::int32_t>(drops_total - last_drop_total[i]);
+    if (delta <= 0) return;
+    gateway->counter().counters(gateway_index[i]).rx_queue_drops += static_cast<std::uint32_t>(delta);
+    last_drop_total[i] = drops_total;
+  }
+
+  /// Reads socket `i`'s drop counter directly (SO_MEMINFO). A frame carries the counter as it
+  /// was when the frame was queued (SO_RXQ_OVFL), so drops after the last queued frame show only
+  /// with the next one, and never when the socket is closed first (interface removed while the
+  /// queue was full): called before closing and every reopen tick.
+  void SyncDrops(std::size_t i) {
+    std::uint32_t meminfo[SK_MEMINFO_VARS] = {};
+    socklen_t len = sizeof meminfo;
+    if (::getsockopt(sockets[i].fd(), SOL_SOCKET, SO_MEMINFO, meminfo, &len) == 0 &&
+        len > SK_MEMINFO_DROPS * sizeof(std::uint32_t)) {
+      CountDrops(i, meminfo[SK_MEMINFO_DROPS]);
+    }
+  }
+
+  /// One frame received on socket `i`; `drops_total` is the kernel's drop counter with it.
+  void Take(std::size_t i, const protocol::TimedFrame& tf, std::uint32_t drops_total) {
+    InterfaceCounters& c = gateway->counter().counters(gateway_index[i]);
+    CountDrops(i, drops_total);
+    // The kernel reports a link going down before the frames still queued from before: those
+    // do not mean it is up again. Only while marked down does a frame cost the ioctl.
+    if (!c.up && sockets[i].InterfaceUp()) MarkUp(i, true);
+    gateway->OnFrame(gateway_index[i], tf);
+  }
+
   void Drain(std::size_t i) {
     CanSocket& s = sockets[i];
     protocol::TimedFrame tf;
     for (int k = 0; k < kRxBudget && s.is_open(); ++k) {
       std::uint32_t drops_total = last_drop_total[i];
       switch (s.Receive(&tf, &drops_total)) {
-        case RxStatus::kFrame: {
-          InterfaceCounters& c = gateway->counter().counters(gateway_index[i]);
-          if (drops_total != last_drop_total[i]) {
-            c.rx_queue_drops += drops_total - last_drop_total[i];  // unsigned wrap is right
-            last_drop_total[i] = drops_total;
-          }
-          MarkUp(i, true);
-          gateway->OnFrame(gateway_index[i], tf);
+        case RxStatus::kFrame:
+          Take(i, tf, drops_total);
           break;
-        }
         case RxStatus::kEmpty:
           return;
         case RxStatus::kDown:
           MarkUp(i, false);
           return;
-        case RxStatus::kGone:
-          Log(LogLevel::kWarning, "{}: interface was removed; will reopen it when it returns", s.name());
+        case RxStatus::kGone: {
+          // The removal is reported before the frames still queued on the socket, which were
+          // on the bus while the interface existed: take them before closing.
+          std::uint64_t late = 0;
+          for (;;) {
+            drops_total = last_drop_total[i];
+            if (s.Receive(&tf, &drops_total) != RxStatus::kFrame) break;
+            Take(i, tf, drops_total);
+            ++late;
+          }
+          SyncDrops(i);
+          Log(LogLevel::kWarning, "{}: interface was removed ({} frames still queued were taken); will reopen it when it returns",
+              s.name(), late);
           gateway->counter().counters(gateway_index[i]).up = false;
           s.Close();  // closing also removes it from the epoll set
           return;
+        }
         case RxStatus::kError:
           Log(LogLevel::kWarning, "{}: receive: {}", s.name(), std::strerror(s.last_errno()));
           return;
@@ -179,6 +250,7 @@ struct LiveLoop::Impl : OutputSink {
     for (std::size_t i = 0; i < sockets.size(); ++i) {
       if (sockets[i].is_open()) {
         MarkUp(i, sockets[i].InterfaceUp());
+        SyncDrops(i);
         continue;
       }
       try {
@@ -210,11 +282,38 @@ struct LiveLoop::Impl : OutputSink {
 
   void SaveState() {
     if (state_path.empty()) return;
+    const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
     try {
-      WriteFileAtomically(state_path, gateway->SaveState());
+      WriteFileAtomically(state_path, gateway->SaveState(), 0600, config.gateway.test_state_write_pause_s);
     } catch (const std::exception& e) {
-      Log(LogLevel::kWarning, "state not saved: {}", e.what());
+      // Counted (status line 'state ... failed'); the previous file stays as it was.
+      const FailureReport::Report r = save_report.Failure(mono, e.what());
+      switch (r.kind) {
+        case FailureReport::Kind::kFirst:
+          Log(LogLevel::kWarning, "state not saved: {}; {} keeps the previous state; retrying every {} s, next report in {} min or when it works again",
+              e.what(), state_path, config.gateway.state_save_period_s, kFailureReminderUs / 60'000'000);
+          break;
+        case FailureReport::Kind::kChanged:
+        case FailureReport::Kind::kReminder:
+          Log(LogLevel::kWarning, "state still not saved: {} ({} failed attempts since the last report, {} in {:.0f} s)",
+              e.what(), r.failures_since_report, r.run_failures, r.run_s);
+          break;
+        default:
+          break;
+      }
+      return;
     }
+    const FailureReport::Report r = save_report.Success(mono);
+    if (r.kind == FailureReport::Kind::kRecovered) {
+      Log(LogLevel::kNotice, "state saved again to {}, after {} failed attempts in {:.0f} s", state_path, r.run_failures, r.run_s);
+    }
+  }
+
+  /// systemd's STATUS=: the gateway's line and the state saving counts.
+  std::string Status() const {
+    std::string s = gateway->StatusLine();
+    if (!state_path.empty()) s += fmt::format("; state {} saved, {} failed", save_report.successes(), save_report.failures());
+    return s;
   }
 
   void RestoreState() {
@@ -230,6 +329,11 @@ struct LiveLoop::Impl : OutputSink {
       return;
     }
     state_path = dir + "/state.toml";
+    // A temporary left by a write that was cut short (kill -9, power loss): never read, removed.
+    const std::string tmp = TemporaryPathOf(state_path);
+    if (::unlink(tmp.c_str()) == 0) {
+      Log(LogLevel::kNotice, "removed {}, the unfinished state write of an earlier run (the saved state is {})", tmp, state_path);
+    }
     try {
       const auto text = ReadFileIfExists(state_path);
       if (!text) {
@@ -320,7 +424,7 @@ struct LiveLoop::Impl : OutputSink {
       next_reopen_us = mono + kReopenPeriodUs;
     }
     if (mono >= next_status_us) {
-      notifier.Status(gateway->StatusLine());
+      notifier.Status(Status());
       next_status_us = mono + static_cast<std::int64_t>(config.gateway.status_period_s * 1e6);
     }
     if (mono >= next_save_us) {
@@ -356,7 +460,7 @@ struct LiveLoop::Impl : OutputSink {
           notifier.Reloading();
           Log(LogLevel::kNotice, "SIGHUP received: reloading {}", config_path);
           Reload();
-          notifier.Ready(gateway->StatusLine());
+          notifier.Ready(Status());
           break;
         case SIGUSR1:
           Log(LogLevel::kWarning, "SIGUSR1 with test_hang_switch: the loop hangs now (tests only)");
@@ -404,7 +508,7 @@ LiveLoop::LiveLoop(const DaemonConfig& config, std::string config_path, LiveOpti
 LiveLoop::~LiveLoop() = default;
 
 std::string LiveLoop::Summary() const {
-  return impl_->gateway->StatusLine() + "\n" + impl_->gateway->counter().CountTable();
+  return impl_->Status() + "\n" + impl_->gateway->counter().CountTable();
 }
 
 int LiveLoop::Run() {

@@ -5,6 +5,8 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cmath>
+#include <ctime>
 #include <system_error>
 
 #include "daemon/unique_fd.hpp"
@@ -25,8 +27,10 @@ std::string DirectoryOf(const std::string& path) {
 
 }  // namespace
 
-void WriteFileAtomically(const std::string& path, const std::string& contents, int mode) {
-  const std::string tmp = path + ".tmp";
+std::string TemporaryPathOf(const std::string& path) { return path + ".tmp"; }
+
+void WriteFileAtomically(const std::string& path, const std::string& contents, int mode, double test_pause_s) {
+  const std::string tmp = TemporaryPathOf(path);
   UniqueFd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, mode));
   if (!fd.valid()) Throw(errno, "cannot create " + tmp);
   auto fail = [&](const char* step) {
@@ -36,15 +40,26 @@ void WriteFileAtomically(const std::string& path, const std::string& contents, i
     Throw(err, std::string(step) + " " + tmp);
   };
   if (::fchmod(fd.get(), static_cast<mode_t>(mode)) < 0) fail("cannot set the mode of");
-  std::size_t done = 0;
-  while (done < contents.size()) {
-    const ssize_t n = ::write(fd.get(), contents.data() + done, contents.size() - done);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      fail("cannot write");
+  auto write_up_to = [&](std::size_t& done, std::size_t end) {
+    while (done < end) {
+      const ssize_t n = ::write(fd.get(), contents.data() + done, end - done);
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        fail("cannot write");
+      }
+      done += static_cast<std::size_t>(n);
     }
-    done += static_cast<std::size_t>(n);
+  };
+  std::size_t done = 0;
+  if (test_pause_s > 0.0) {
+    write_up_to(done, contents.size() / 2);
+    timespec pause{};
+    pause.tv_sec = static_cast<time_t>(test_pause_s);
+    pause.tv_nsec = static_cast<long>(std::fmod(test_pause_s, 1.0) * 1e9);
+    while (::nanosleep(&pause, &pause) < 0 && errno == EINTR) {
+    }
   }
+  write_up_to(done, contents.size());
   if (::fsync(fd.get()) < 0) fail("cannot fsync");
   // close() reports delayed write errors (NFS, quotas); the descriptor is gone either way.
   if (::close(fd.Release()) < 0) {

@@ -82,6 +82,33 @@ TEST(FrameCounter, DisabledHeartbeatNeverComes) {
   EXPECT_FALSE(g.HeartbeatDue(100'000'000));
 }
 
+// The status line (systemd STATUS=) counts what issue 8's fault injection looks at: error
+// frames, and with LCM configured the messages sent and those that failed.
+TEST(Gateway, StatusLineCountsErrorFramesAndLcmFailures) {
+  struct FailingSink : OutputSink {
+    void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
+    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override { return false; }
+  };
+  DaemonConfig c;
+  c.gateway.heartbeat_period_s = 0.0;
+  Gateway quiet(c);
+  EXPECT_EQ(quiet.StatusLine().find("lcm"), std::string::npos) << quiet.StatusLine();
+  c.lcm.url = "memq://";
+  Gateway g(c);
+  const auto i = g.Interface("can0");
+  auto err = Frame(0x8);
+  err.frame.error = true;
+  g.OnFrame(i, err);
+  g.OnFrame(i, err);
+  g.OnFrame(i, Frame(0x123));
+  FailingSink sink;
+  g.Advance(1'000'000, sink);  // the gateway's health message is due: it fails
+  EXPECT_EQ(g.counters().lcm_failed, 1U);
+  EXPECT_EQ(g.StatusLine(),
+            "0 pumps, 0 warning, 0 trip; rx 1 frames, 1 IDs, 0 rx drops; tx 0 frames, 0 tx dropped; can0:up; "
+            "1 unknown, 0 bad length, 2 error frames; lcm 0 sent, 1 failed");
+}
+
 TEST(Offline, CountsFramesAndSkipsMalformedLines) {
   std::istringstream log(
       "(1.000000) can0 181#0102\n"
