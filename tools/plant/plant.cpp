@@ -417,17 +417,19 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   } closer{log};
   std::vector<PendingFrame> pending;
   std::string line;
+  // The lines of one flush are formatted into one buffer (its capacity kept) and written at once.
   auto write_until = [&](std::int64_t limit_us) {
     std::sort(pending.begin(), pending.end(), FrameBefore);
     std::size_t n = 0;
+    line.clear();
     while (n < pending.size() && pending[n].time_us < limit_us) {
       const PendingFrame& f = pending[n];
-      line = protocol::FormatCandumpLine(f.time_us, sc.pumps[f.pump].interface, f.frame);
+      protocol::AppendCandumpLine(line, f.time_us, sc.pumps[f.pump].interface, f.frame);
       line += '\n';
-      if (std::fwrite(line.data(), 1, line.size(), log) != line.size()) {
-        throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", result.log_path));
-      }
       ++n;
+    }
+    if (std::fwrite(line.data(), 1, line.size(), log) != line.size()) {
+      throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", result.log_path));
     }
     pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(n));
     result.frames_written += n;
