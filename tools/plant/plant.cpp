@@ -620,6 +620,10 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
           p.summary.max_level_time_s = t;
         }
         if (p.summary.warning_crossed_s < 0.0 && level > sc.levels.warning_degC) p.summary.warning_crossed_s = t;
+        auto& above = p.summary.above_warning_s;
+        const bool was_above = !above.empty() && above.back().second < 0.0;
+        if (!was_above && level > sc.levels.warning_degC) above.emplace_back(t, -1.0);
+        if (was_above && !(level > sc.levels.warning_degC)) above.back().second = t;
         if (p.summary.trip_crossed_s < 0.0 && level > sc.levels.trip_degC) p.summary.trip_crossed_s = t;
       }
       if (k % truth_every == 0) {
@@ -695,13 +699,18 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   for (std::size_t i = 0; i < result.pumps.size(); ++i) {
     const PumpSummary& s = result.pumps[i];
     auto opt = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{}", v); };
+    std::string above;
+    for (const auto& [a, b] : s.above_warning_s) {
+      auto at = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{:.2f}", v); };
+      above += fmt::format("{}[{}, {}]", above.empty() ? "" : ", ", at(a), at(b));
+    }
     json += fmt::format(
         "    {{\"name\": \"{}\", \"interface\": \"{}\", \"node_id\": {}, \"truth\": \"{}.truth.csv\", "
         "\"measured\": \"{}.measured.csv\", \"max_C\": {:.3f}, \"max_time_s\": {}, "
-        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"frames_written\": {}, "
+        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"above_warning_s\": [{}], \"frames_written\": {}, "
         "\"frames_suppressed\": {}}}{}\n",
         s.name, s.interface, s.node_id, s.name, s.name, s.max_level_node_degC, s.max_level_time_s,
-        opt(s.warning_crossed_s), opt(s.trip_crossed_s), s.frames_written, s.frames_suppressed,
+        opt(s.warning_crossed_s), opt(s.trip_crossed_s), above, s.frames_written, s.frames_suppressed,
         i + 1 < result.pumps.size() ? "," : "");
   }
   json += "  ]\n}\n";
