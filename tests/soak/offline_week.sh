@@ -19,8 +19,9 @@
 #   HOURS: simulated hours (default 168, the week; the CTest short form `soak.offline_short`
 #   uses 2). SCENARIO: a plant scenario with fleet32's pump names (default fleet32-week).
 #   SOAK_WORK_DIR=DIR keeps the run's files there (default: a temporary directory, removed).
-# Needs /usr/bin/time (package time) and awk. Cost: about 21 s of CPU per simulated hour on this
-# machine (plant 9, daemon 10, awk 2), on two processes in parallel: docs/robustness.md, "Soak".
+# Needs /usr/bin/time (package time) and awk. Cost: about 30 s of CPU per simulated hour on this
+# machine (plant 11, daemon 15, awk 4; measured over 24 h), plant and daemon in parallel, so the
+# week is about 84 min of CPU: docs/robustness.md, "Soak".
 set -eu
 build=${1:?usage: $0 BUILD_DIR [HOURS] [SCENARIO]}
 hours=${2:-168}
