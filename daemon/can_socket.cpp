@@ -8,8 +8,13 @@
 #include <sys/socket.h>
 #include <sys/time.h>
 
+#include <fmt/format.h>
+
+#include <algorithm>
 #include <cerrno>
+#include <cstdint>
 #include <cstring>
+#include <fstream>
 #include <system_error>
 
 namespace pumptherm::daemon {
@@ -21,7 +26,14 @@ namespace {
 
 }  // namespace
 
-CanSocket CanSocket::Open(const std::string& name, bool error_frames) {
+std::int64_t ReadRmemMax() {
+  std::ifstream f("/proc/sys/net/core/rmem_max");
+  std::int64_t v = -1;
+  if (!(f >> v)) return -1;
+  return v;
+}
+
+CanSocket CanSocket::Open(const std::string& name, bool error_frames, std::int64_t rx_buffer_bytes) {
   CanSocket s;
   s.name_ = name;
   s.fd_ = UniqueFd(::socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW));
@@ -52,6 +64,28 @@ CanSocket CanSocket::Open(const std::string& name, bool error_frames) {
   if (::setsockopt(s.fd_.get(), SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof on) < 0) {
     ThrowErrno("interface '" + name + "': CAN_RAW_FD_FRAMES");
   }
+  // The receive queue must hold the frames that arrive while the loop is busy elsewhere (a
+  // burst, a state save); the default (net.core.rmem_default, 208 KiB) holds about 200 frames.
+  // The kernel doubles the value for its bookkeeping and caps an unprivileged request at
+  // net.core.rmem_max; SO_RCVBUFFORCE passes the cap with CAP_NET_ADMIN (as candump -r does).
+  s.rx_buffer_asked_bytes_ = rx_buffer_bytes;
+  if (rx_buffer_bytes > 0) {
+    const int asked = static_cast<int>(std::min<std::int64_t>(rx_buffer_bytes, INT32_MAX / 2));
+    if (::setsockopt(s.fd_.get(), SOL_SOCKET, SO_RCVBUF, &asked, sizeof asked) < 0) {
+      ThrowErrno("interface '" + name + "': SO_RCVBUF");
+    }
+    int granted = 0;
+    socklen_t len = sizeof granted;
+    if (::getsockopt(s.fd_.get(), SOL_SOCKET, SO_RCVBUF, &granted, &len) == 0 && granted < 2 * asked) {
+      (void)::setsockopt(s.fd_.get(), SOL_SOCKET, SO_RCVBUFFORCE, &asked, sizeof asked);  // EPERM: capped
+    }
+  }
+  int granted = 0;
+  socklen_t len = sizeof granted;
+  if (::getsockopt(s.fd_.get(), SOL_SOCKET, SO_RCVBUF, &granted, &len) < 0) {
+    ThrowErrno("interface '" + name + "': getsockopt SO_RCVBUF");
+  }
+  s.rx_buffer_granted_bytes_ = granted;
   if (error_frames) {
     const can_err_mask_t mask = CAN_ERR_MASK;
     if (::setsockopt(s.fd_.get(), SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &mask, sizeof mask) < 0) {
@@ -137,6 +171,24 @@ TxStatus CanSocket::Send(const protocol::CanFrame& f) {
     case ENODEV: case ENXIO: return TxStatus::kGone;
     default: return TxStatus::kError;
   }
+}
+
+std::string CanSocket::RxBufferReport() const {
+  if (rx_buffer_asked_bytes_ <= 0) {
+    return fmt::format("{}: receive buffer {} bytes (the kernel's default; rx_buffer_bytes = 0)", name_,
+                       rx_buffer_granted_bytes_);
+  }
+  if (!rx_buffer_capped()) {
+    return fmt::format("{}: receive buffer {} bytes (rx_buffer_bytes = {}, doubled by the kernel)", name_,
+                       rx_buffer_granted_bytes_, rx_buffer_asked_bytes_);
+  }
+  const std::int64_t rmem_max = ReadRmemMax();
+  return fmt::format(
+      "{}: receive buffer capped at {} bytes (rx_buffer_bytes = {} asks for {}): an unprivileged socket "
+      "gets at most net.core.rmem_max ({}) x 2; raise the cap with a sysctl.d drop-in, e.g. "
+      "/etc/sysctl.d/60-pumptherm.conf: net.core.rmem_max = {} (docs/daemon.md, \"Receive buffer\")",
+      name_, rx_buffer_granted_bytes_, rx_buffer_asked_bytes_, 2 * rx_buffer_asked_bytes_,
+      rmem_max >= 0 ? fmt::format("{}", rmem_max) : std::string("unreadable"), rx_buffer_asked_bytes_);
 }
 
 bool CanSocket::InterfaceUp() const {

@@ -1,6 +1,7 @@
 #pragma once
 /// A SocketCAN CAN_RAW socket bound to one interface: non-blocking, kernel receive timestamps
-/// (SO_TIMESTAMP), receive-queue drop counting (SO_RXQ_OVFL), CAN FD frames accepted.
+/// (SO_TIMESTAMP), receive-queue drop counting (SO_RXQ_OVFL), CAN FD frames accepted, and a
+/// receive buffer of the configured size (SO_RCVBUF; what the kernel granted is kept).
 ///
 /// Open() throws std::system_error (with errno and what was being done). Receive() and Send()
 /// never throw and never block: expected events (no frame, interface down or gone, queue full)
@@ -33,9 +34,12 @@ enum class TxStatus {
 class CanSocket {
  public:
   /// Opens and binds a socket on interface `name`. With `error_frames` the socket also receives
-  /// error frames (all error classes). Throws std::system_error when the kernel has no SocketCAN,
-  /// the interface does not exist, or a socket option cannot be set.
-  static CanSocket Open(const std::string& name, bool error_frames);
+  /// error frames (all error classes). `rx_buffer_bytes` > 0 is asked for as SO_RCVBUF (the
+  /// kernel doubles it and caps an unprivileged request at net.core.rmem_max; when capped,
+  /// SO_RCVBUFFORCE is tried, which needs CAP_NET_ADMIN); 0 keeps the kernel's default. What was
+  /// granted is in rx_buffer_granted_bytes(). Throws std::system_error when the kernel has no
+  /// SocketCAN, the interface does not exist, or a socket option cannot be set.
+  static CanSocket Open(const std::string& name, bool error_frames, std::int64_t rx_buffer_bytes = 0);
 
   CanSocket() = default;
   CanSocket(CanSocket&&) noexcept = default;
@@ -59,10 +63,27 @@ class CanSocket {
 
   int last_errno() const { return last_errno_; }
 
+  /// The receive buffer asked for at Open (bytes; 0 = the kernel's default).
+  std::int64_t rx_buffer_asked_bytes() const { return rx_buffer_asked_bytes_; }
+  /// The receive buffer the kernel granted (getsockopt SO_RCVBUF, bytes: its doubled value).
+  std::int64_t rx_buffer_granted_bytes() const { return rx_buffer_granted_bytes_; }
+  /// Whether the kernel granted less than it grants an uncapped request (twice the asked size).
+  bool rx_buffer_capped() const {
+    return rx_buffer_asked_bytes_ > 0 && rx_buffer_granted_bytes_ < 2 * rx_buffer_asked_bytes_;
+  }
+  /// One line for the log about the receive buffer: asked, granted, and when the kernel capped
+  /// it (granted below twice the asked size) why and how to raise the cap.
+  std::string RxBufferReport() const;
+
  private:
   UniqueFd fd_;
   std::string name_;
   int last_errno_ = 0;
+  std::int64_t rx_buffer_asked_bytes_ = 0;
+  std::int64_t rx_buffer_granted_bytes_ = 0;
 };
+
+/// net.core.rmem_max (/proc/sys/net/core/rmem_max), bytes; -1 when it cannot be read.
+std::int64_t ReadRmemMax();
 
 }  // namespace pumptherm::daemon

@@ -262,6 +262,12 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
         }
       }
       iface.error_frames = r.Bool("error_frames", false);
+      iface.rx_buffer_bytes = r.Integer("rx_buffer_bytes", iface.rx_buffer_bytes, 0, kMaxRxBufferBytes);
+      if (iface.rx_buffer_bytes != 0 && iface.rx_buffer_bytes < kMinRxBufferBytes) {
+        r.Fail(t->get("rx_buffer_bytes"), "rx_buffer_bytes",
+               fmt::format("{} is below {} (0 keeps the kernel's default)", iface.rx_buffer_bytes,
+                           kMinRxBufferBytes));
+      }
       r.RejectUnknown();
       config.interfaces.push_back(std::move(iface));
     }

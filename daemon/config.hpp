@@ -27,10 +27,20 @@ class ConfigError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// Receive buffer asked for each CAN socket by default (SO_RCVBUF), bytes: the kernel doubles
+/// it for its bookkeeping and charges about 1 KiB per queued CAN frame, so 1 MiB holds about
+/// 2000 frames, a quarter of a second of a fully loaded 1 Mbit/s bus (docs/daemon.md, "Receive
+/// buffer"). Unprivileged sockets get at most net.core.rmem_max (x 2).
+inline constexpr std::int64_t kDefaultRxBufferBytes = 1 << 20;
+inline constexpr std::int64_t kMinRxBufferBytes = 4096;        ///< below it the kernel's own floor rules
+inline constexpr std::int64_t kMaxRxBufferBytes = 256LL << 20; ///< 256 MiB
+
 /// One SocketCAN interface the daemon listens and sends on.
 struct InterfaceConfig {
   std::string name;                 ///< e.g. "can0" or "vcan0"
   bool error_frames = false;        ///< subscribe to error frames (bus state)
+  /// SO_RCVBUF asked for the socket, bytes; 0 leaves the kernel's default (net.core.rmem_default).
+  std::int64_t rx_buffer_bytes = kDefaultRxBufferBytes;
 };
 
 struct GatewayConfig {

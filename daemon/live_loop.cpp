@@ -140,13 +140,21 @@ struct LiveLoop::Impl : OutputSink {
     }
   }
 
+  /// Opens the socket of one configured interface and logs the receive buffer it got (a warning
+  /// when the kernel capped it). Throws as CanSocket::Open.
+  static CanSocket OpenSocket(const InterfaceConfig& iface) {
+    CanSocket s = CanSocket::Open(iface.name, iface.error_frames, iface.rx_buffer_bytes);
+    Log(s.rx_buffer_capped() ? LogLevel::kWarning : LogLevel::kInfo, "{}", s.RxBufferReport());
+    return s;
+  }
+
   /// Opens the sockets of `config.interfaces` and maps them to the gateway's interfaces.
   void OpenSockets() {
     sockets.clear();
     gateway_index.clear();
     last_drop_total.clear();
     for (const InterfaceConfig& iface : config.interfaces) {
-      sockets.push_back(CanSocket::Open(iface.name, iface.error_frames));
+      sockets.push_back(OpenSocket(iface));
       last_drop_total.push_back(0);
     }
     MapSockets();
@@ -254,7 +262,7 @@ struct LiveLoop::Impl : OutputSink {
         continue;
       }
       try {
-        sockets[i] = CanSocket::Open(config.interfaces[i].name, config.interfaces[i].error_frames);
+        sockets[i] = OpenSocket(config.interfaces[i]);
         last_drop_total[i] = 0;
         Watch(sockets[i].fd(), kFirstSocketTag + i);
         ++gateway->counter().counters(gateway_index[i]).reopens;
@@ -363,14 +371,15 @@ struct LiveLoop::Impl : OutputSink {
       if (next.interfaces.size() != config.interfaces.size()) return false;
       for (std::size_t i = 0; i < next.interfaces.size(); ++i) {
         if (next.interfaces[i].name != config.interfaces[i].name ||
-            next.interfaces[i].error_frames != config.interfaces[i].error_frames) return false;
+            next.interfaces[i].error_frames != config.interfaces[i].error_frames ||
+            next.interfaces[i].rx_buffer_bytes != config.interfaces[i].rx_buffer_bytes) return false;
       }
       return true;
     }();
     std::vector<CanSocket> new_sockets;
     if (!same_interfaces) {
       try {
-        for (const InterfaceConfig& iface : next.interfaces) new_sockets.push_back(CanSocket::Open(iface.name, iface.error_frames));
+        for (const InterfaceConfig& iface : next.interfaces) new_sockets.push_back(OpenSocket(iface));
       } catch (const std::exception& e) {
         Log(LogLevel::kError, "reload refused, the running configuration stays: {}", e.what());
         return;

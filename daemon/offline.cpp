@@ -51,9 +51,10 @@ class LogSink : public OutputSink {
   void SendFrame(std::size_t iface, std::int64_t time_us, const protocol::CanFrame& frame) override {
     ++frames_out;
     if (!frames_.f) return;
-    const std::string line = protocol::FormatCandumpLine(time_us, gateway_.counter().interfaces()[iface].name, frame);
-    std::fputs(line.c_str(), frames_.f);
-    std::fputc('\n', frames_.f);
+    line_.clear();  // keeps its capacity: no allocation per frame
+    protocol::AppendCandumpLine(line_, time_us, gateway_.counter().interfaces()[iface].name, frame);
+    line_ += '\n';
+    std::fwrite(line_.data(), 1, line_.size(), frames_.f);  // errors show at Close (ferror)
   }
   bool PublishLcm(const std::string& channel, std::int64_t time_us, const std::vector<std::uint8_t>& bytes) override {
     ++lcm_out;
@@ -76,6 +77,7 @@ class LogSink : public OutputSink {
  private:
   File frames_;
   const Gateway& gateway_;
+  std::string line_;  ///< the line being written, its capacity kept
   std::unique_ptr<lcm::LogFile> lcm_;
 };
 

@@ -124,6 +124,15 @@ int main(int argc, char** argv) {
       fmt::print("sent {} frames and {} LCM messages; {} unknown-ID and {} short frames ignored\n",
                  r.frames_out, r.lcm_out, gateway->counters().rx_unknown_id, gateway->counters().rx_bad_length);
       fmt::print("{}", gateway->PumpTable());
+      // What each pump's pipeline did: the soak checks thermal_steps against elapsed / period.
+      fmt::print("{:<12} {:>12} {:>12} {:>12} {:>9} {:>9} {:>9} {:>13} {:>7}\n", "pump", "fast_frames",
+                 "status", "samples", "unpaired", "lost", "rejected", "thermal_steps", "resets");
+      for (const auto& p : gateway->pumps()) {
+        const PumpCounters& c = p->counters();
+        fmt::print("{:<12} {:>12} {:>12} {:>12} {:>9} {:>9} {:>9} {:>13} {:>7}\n", p->config().name,
+                   c.fast_frames, c.status_frames, c.samples, c.unpaired, c.lost_frames, c.rejected_values,
+                   c.thermal_steps, c.filter_resets);
+      }
     }
     return 0;
   }

@@ -2,6 +2,9 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <iterator>
+
 namespace pumptherm::protocol {
 namespace {
 
@@ -157,25 +160,77 @@ CandumpParse ParseCandumpLine(std::string_view line) noexcept {
   return p;
 }
 
-std::string FormatCandumpLine(std::int64_t time_us, std::string_view interface,
-                              const CanFrame& frame) {
-  std::string out = fmt::format("({:010d}.{:06d}) {} ", time_us / 1000000, time_us % 1000000,
-                                interface);
-  if (frame.error) {
-    out += fmt::format("{:08X}#", frame.id | kErrorFlag);
-  } else if (frame.extended) {
-    out += fmt::format("{:08X}#", frame.id);
-  } else {
-    out += fmt::format("{:03X}#", frame.id);
+namespace {
+
+/// Appends `v` in decimal, zero-padded to at least `width` digits.
+void AppendDecimal(std::string& out, std::uint64_t v, int width) {
+  char digits[24];
+  int n = 0;
+  do {
+    digits[n++] = static_cast<char>('0' + v % 10);
+    v /= 10;
+  } while (v != 0);
+  for (int k = n; k < width; ++k) out += '0';
+  while (n > 0) out += digits[--n];
+}
+
+/// Appends `v` in upper-case hexadecimal, zero-padded to at least `width` digits.
+void AppendHex(std::string& out, std::uint32_t v, int width) {
+  static constexpr char kHex[] = "0123456789ABCDEF";
+  char digits[8];
+  int n = 0;
+  do {
+    digits[n++] = kHex[v & 0xF];
+    v >>= 4;
+  } while (v != 0);
+  for (int k = n; k < width; ++k) out += '0';
+  while (n > 0) out += digits[--n];
+}
+
+}  // namespace
+
+void AppendCandumpLine(std::string& out, std::int64_t time_us, std::string_view interface,
+                       const CanFrame& frame) {
+  static constexpr char kHex[] = "0123456789ABCDEF";
+  if (time_us >= 0) {
+    out += '(';
+    AppendDecimal(out, static_cast<std::uint64_t>(time_us / 1000000), 10);
+    out += '.';
+    AppendDecimal(out, static_cast<std::uint64_t>(time_us % 1000000), 6);
+    out += ") ";
+  } else {  // not from a clock; formatted as before (C++ division: "-000000001.-00001")
+    fmt::format_to(std::back_inserter(out), "({:010d}.{:06d}) ", time_us / 1000000, time_us % 1000000);
   }
+  out.append(interface);
+  out += ' ';
+  if (frame.error) {
+    AppendHex(out, frame.id | kErrorFlag, 8);
+  } else {
+    AppendHex(out, frame.id, frame.extended ? 8 : 3);
+  }
+  out += '#';
   if (frame.remote) {
     // A remote frame's length is part of it: candump writes "R" and a length digit if not 0.
     out += 'R';
     if (frame.len > 0 && frame.len <= 8) out += static_cast<char>('0' + frame.len);
-    return out;
+    return;
   }
-  if (frame.fd) out += fmt::format("#{:X}", frame.fd_flags & 0xF);
-  for (std::size_t k = 0; k < frame.len; ++k) out += fmt::format("{:02X}", frame.data[k]);
+  if (frame.fd) {
+    out += '#';
+    out += kHex[frame.fd_flags & 0xF];
+  }
+  const std::size_t len = std::min<std::size_t>(frame.len, frame.data.size());
+  for (std::size_t k = 0; k < len; ++k) {
+    out += kHex[frame.data[k] >> 4];
+    out += kHex[frame.data[k] & 0xF];
+  }
+}
+
+std::string FormatCandumpLine(std::int64_t time_us, std::string_view interface,
+                              const CanFrame& frame) {
+  std::string out;
+  out.reserve(48 + interface.size() + 2 * static_cast<std::size_t>(frame.len));
+  AppendCandumpLine(out, time_us, interface, frame);
   return out;
 }
 

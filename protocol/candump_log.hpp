@@ -39,4 +39,9 @@ CandumpParse ParseCandumpLine(std::string_view line) noexcept;
 std::string FormatCandumpLine(std::int64_t time_us, std::string_view interface,
                               const CanFrame& frame);
 
+/// The same line appended to `out` (no trailing newline), formatted by hand: no allocation once
+/// `out` has the capacity (the plant and `pumpthermd -r --output-log` write millions of lines).
+void AppendCandumpLine(std::string& out, std::int64_t time_us, std::string_view interface,
+                       const CanFrame& frame);
+
 }  // namespace pumptherm::protocol

@@ -28,6 +28,7 @@ interface = "vcan0"
 [[can]]
 interface = "can1"
 error_frames = true
+rx_buffer_bytes = 4194304
 )",
                              "p.toml");
   EXPECT_EQ(c.gateway.name, "bench");
@@ -38,6 +39,24 @@ error_frames = true
   EXPECT_EQ(c.interfaces[0].name, "vcan0");
   EXPECT_FALSE(c.interfaces[0].error_frames);
   EXPECT_TRUE(c.interfaces[1].error_frames);
+  EXPECT_EQ(c.interfaces[0].rx_buffer_bytes, kDefaultRxBufferBytes);
+  EXPECT_EQ(c.interfaces[1].rx_buffer_bytes, 4194304);
+}
+
+TEST(Config, ReceiveBufferRange) {
+  EXPECT_EQ(kDefaultRxBufferBytes, 1048576);  // docs/daemon.md and pumpthermd.toml(5) say so
+  EXPECT_EQ(ParseConfig("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 0\n", "p.toml").interfaces[0].rx_buffer_bytes, 0);
+  EXPECT_EQ(ParseConfig("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 4096\n", "p.toml").interfaces[0].rx_buffer_bytes, 4096);
+  EXPECT_EQ(ParseConfig("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 268435456\n", "p.toml").interfaces[0].rx_buffer_bytes,
+            268435456);
+  EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 4095\n"),
+            "p.toml:3: key 'can[0].rx_buffer_bytes': 4095 is below 4096 (0 keeps the kernel's default)");
+  EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 268435457\n"),
+            "p.toml:3: key 'can[0].rx_buffer_bytes': 268435457 is outside [0, 268435456]");
+  EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = -1\n"),
+            "p.toml:3: key 'can[0].rx_buffer_bytes': -1 is outside [0, 268435456]");
+  EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 1.5e6\n"),
+            "p.toml:3: key 'can[0].rx_buffer_bytes': expected an integer");
 }
 
 TEST(Config, EmptyFileGivesDefaults) {

@@ -2,7 +2,7 @@
 // A ConfigError is the expected answer to bad input, and its message must name the file
 // ("fuzz.toml:"). Any other exception, a crash or a sanitizer report is a finding, and so is an
 // accepted configuration that breaks the documented ranges (a pump without a name, a
-// non-positive period).
+// non-positive period, a receive buffer outside 0 or 4096..256 MiB).
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -22,6 +22,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   if (!(config.gateway.thermal_period_s > 0.0) || !std::isfinite(config.gateway.thermal_period_s)) std::abort();
   if (!(config.lcm.period_s > 0.0) || !(config.lcm.health_period_s > 0.0)) std::abort();
+  for (const auto& i : config.interfaces) {
+    if (i.rx_buffer_bytes != 0 && (i.rx_buffer_bytes < kMinRxBufferBytes || i.rx_buffer_bytes > kMaxRxBufferBytes)) std::abort();
+  }
   for (const auto& p : config.pumps) {
     if (p.name.empty()) std::abort();
     if (!std::isfinite(p.winding_sd_K) || !(p.winding_sd_K > 0.0)) std::abort();

@@ -71,6 +71,17 @@ TEST(PlantDemo, Pump3WarnsThenTripsPumps1And2StayBelowWarning) {
     }
   }
   EXPECT_NEAR(first_warning, p3.warning_crossed_s, 1.0);
+  // Above-warning intervals (the soak's alarm check reads them): none on pumps 1-2; pump 3's
+  // first starts at its warning crossing, and the last is still open at the end (it trips).
+  EXPECT_TRUE(r.pumps[0].above_warning_s.empty());
+  EXPECT_TRUE(r.pumps[1].above_warning_s.empty());
+  ASSERT_FALSE(p3.above_warning_s.empty());
+  EXPECT_DOUBLE_EQ(p3.above_warning_s.front().first, p3.warning_crossed_s);
+  EXPECT_LT(p3.above_warning_s.back().second, 0.0) << "still above warning at the end";
+  for (std::size_t k = 0; k + 1 < p3.above_warning_s.size(); ++k) {
+    EXPECT_LT(p3.above_warning_s[k].first, p3.above_warning_s[k].second);
+    EXPECT_LE(p3.above_warning_s[k].second, p3.above_warning_s[k + 1].first);
+  }
   std::printf("demo: pump1 max %.1f degC, pump2 max %.1f degC, pump3 warning at %.0f s, trip at %.0f s\n",
               r.pumps[0].max_level_node_degC, r.pumps[1].max_level_node_degC, p3.warning_crossed_s,
               p3.trip_crossed_s);

@@ -104,6 +104,21 @@ end_s = 8
   EXPECT_DOUBLE_EQ(sc.bus_offs[0].end_s, 8.0);
 }
 
+TEST(PlantScenario, ProfileRepeatRunsTheSegmentsAgain) {
+  std::string text = kMinimal;
+  text.replace(text.find("[profile.p]\n"), 12, "[profile.p]\nrepeat = 3\n");
+  const Scenario sc = ParseScenario(text, "s.toml");
+  const auto& seg = sc.pumps.at(0).segments;
+  ASSERT_EQ(seg.size(), 6u);
+  for (std::size_t k = 0; k < 6; k += 2) {
+    EXPECT_DOUBLE_EQ(seg[k].speed_rpm, 1000.0) << k;
+    EXPECT_DOUBLE_EQ(seg[k + 1].ambient_degC, 30.0) << k;
+  }
+  text = kMinimal;
+  text.replace(text.find("[profile.p]\n"), 12, "[profile.p]\nrepeat = 0\n");
+  EXPECT_NE(ErrorOf(text).find("profile.p.repeat"), std::string::npos) << ErrorOf(text);
+}
+
 TEST(PlantScenario, ErrorsNameLineAndKey) {
   std::string text = kMinimal;
   text.replace(text.find("node_id = 3"), 11, "node_ib = 3");
@@ -149,6 +164,18 @@ TEST(PlantScenario, BundledScenariosParse) {
   const Scenario fleet = ParseScenario(ss.str(), "fleet32");
   EXPECT_EQ(fleet.pumps.size(), 32u);
   EXPECT_DOUBLE_EQ(fleet.duration_s, 3600.0);
+  std::ifstream fw(std::string(dir) + "/tools/plant/scenarios/fleet32-week.toml");
+  std::stringstream sw;
+  sw << fw.rdbuf();
+  const Scenario week = ParseScenario(sw.str(), "fleet32-week");
+  ASSERT_EQ(week.pumps.size(), 32u);
+  EXPECT_DOUBLE_EQ(week.duration_s, 7 * 86400.0);
+  for (const PumpSpec& p : week.pumps) {  // the daily cycle, seven times, after the group's stagger
+    double total_s = 0.0;
+    for (const auto& s : p.segments) total_s += s.duration_s;
+    EXPECT_GE(total_s, 7 * 86400.0) << p.name;
+    EXPECT_LE(total_s, 7 * 86400.0 + 6 * 20.0) << p.name;  // at most 6 x stagger_s (groups of 7)
+  }
 }
 
 }  // namespace

@@ -1,6 +1,9 @@
 #include "protocol/candump_log.hpp"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
+
+#include <random>
 
 namespace pumptherm::protocol {
 namespace {
@@ -100,6 +103,54 @@ TEST(CandumpLog, FormatRoundTrips) {
             "(0000000004.000000) can0 7FF#R3");
   EXPECT_EQ(FormatCandumpLine(4000000, "can0", ParseCandumpLine("(4.0) can0 7FF#R").record.frame),
             "(0000000004.000000) can0 7FF#R");
+}
+
+// The formatter before it was made allocation-free (one fmt::format per field), kept as the
+// oracle: the plant's "same seed, same bytes" and every golden log depend on identical output.
+std::string ReferenceFormat(std::int64_t time_us, std::string_view interface, const CanFrame& frame) {
+  std::string out = fmt::format("({:010d}.{:06d}) {} ", time_us / 1000000, time_us % 1000000, interface);
+  if (frame.error) {
+    out += fmt::format("{:08X}#", frame.id | 0x20000000U);
+  } else if (frame.extended) {
+    out += fmt::format("{:08X}#", frame.id);
+  } else {
+    out += fmt::format("{:03X}#", frame.id);
+  }
+  if (frame.remote) {
+    out += 'R';
+    if (frame.len > 0 && frame.len <= 8) out += static_cast<char>('0' + frame.len);
+    return out;
+  }
+  if (frame.fd) out += fmt::format("#{:X}", frame.fd_flags & 0xF);
+  for (std::size_t k = 0; k < frame.len; ++k) out += fmt::format("{:02X}", frame.data[k]);
+  return out;
+}
+
+TEST(CandumpLog, FormatEqualsTheReferenceFormatter) {
+  std::mt19937_64 rng(7);
+  std::string appended = "prefix ";
+  std::string expected = "prefix ";
+  for (int i = 0; i < 20000; ++i) {
+    CanFrame f;
+    const std::uint64_t r = rng();
+    f.extended = (r & 1) != 0;
+    f.error = (r & 2) != 0 && (r & 4) != 0;
+    f.remote = (r & 8) != 0 && (r & 16) != 0;
+    f.fd = !f.remote && (r & 32) != 0;
+    f.fd_flags = static_cast<std::uint8_t>((r >> 8) & 0xFF);
+    f.id = static_cast<std::uint32_t>(rng()) & (f.extended || f.error ? 0x1FFFFFFFU : 0x7FFU);
+    f.len = static_cast<std::uint8_t>((r >> 16) % (f.fd ? 65 : 9));
+    for (auto& b : f.data) b = static_cast<std::uint8_t>(rng());
+    std::int64_t t = static_cast<std::int64_t>(rng() >> 12);  // up to 4.4e15 us
+    if (i % 97 == 0) t = -t / 1000;
+    if (i % 89 == 0) t = 0;
+    const std::string iface = i % 3 == 0 ? "vcan0" : (i % 3 == 1 ? "can1" : "a-very-long-if");
+    ASSERT_EQ(FormatCandumpLine(t, iface, f), ReferenceFormat(t, iface, f)) << "frame " << i;
+    AppendCandumpLine(appended, t, iface, f);
+    appended += '\n';
+    expected += ReferenceFormat(t, iface, f) + '\n';
+  }
+  EXPECT_EQ(appended, expected);
 }
 
 }  // namespace

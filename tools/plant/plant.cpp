@@ -417,17 +417,19 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   } closer{log};
   std::vector<PendingFrame> pending;
   std::string line;
+  // The lines of one flush are formatted into one buffer (its capacity kept) and written at once.
   auto write_until = [&](std::int64_t limit_us) {
     std::sort(pending.begin(), pending.end(), FrameBefore);
     std::size_t n = 0;
+    line.clear();
     while (n < pending.size() && pending[n].time_us < limit_us) {
       const PendingFrame& f = pending[n];
-      line = protocol::FormatCandumpLine(f.time_us, sc.pumps[f.pump].interface, f.frame);
+      protocol::AppendCandumpLine(line, f.time_us, sc.pumps[f.pump].interface, f.frame);
       line += '\n';
-      if (std::fwrite(line.data(), 1, line.size(), log) != line.size()) {
-        throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", result.log_path));
-      }
       ++n;
+    }
+    if (std::fwrite(line.data(), 1, line.size(), log) != line.size()) {
+      throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", result.log_path));
     }
     pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(n));
     result.frames_written += n;
@@ -618,6 +620,10 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
           p.summary.max_level_time_s = t;
         }
         if (p.summary.warning_crossed_s < 0.0 && level > sc.levels.warning_degC) p.summary.warning_crossed_s = t;
+        auto& above = p.summary.above_warning_s;
+        const bool was_above = !above.empty() && above.back().second < 0.0;
+        if (!was_above && level > sc.levels.warning_degC) above.emplace_back(t, -1.0);
+        if (was_above && !(level > sc.levels.warning_degC)) above.back().second = t;
         if (p.summary.trip_crossed_s < 0.0 && level > sc.levels.trip_degC) p.summary.trip_crossed_s = t;
       }
       if (k % truth_every == 0) {
@@ -693,13 +699,18 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   for (std::size_t i = 0; i < result.pumps.size(); ++i) {
     const PumpSummary& s = result.pumps[i];
     auto opt = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{}", v); };
+    std::string above;
+    for (const auto& [a, b] : s.above_warning_s) {
+      auto at = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{:.2f}", v); };
+      above += fmt::format("{}[{}, {}]", above.empty() ? "" : ", ", at(a), at(b));
+    }
     json += fmt::format(
         "    {{\"name\": \"{}\", \"interface\": \"{}\", \"node_id\": {}, \"truth\": \"{}.truth.csv\", "
         "\"measured\": \"{}.measured.csv\", \"max_C\": {:.3f}, \"max_time_s\": {}, "
-        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"frames_written\": {}, "
+        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"above_warning_s\": [{}], \"frames_written\": {}, "
         "\"frames_suppressed\": {}}}{}\n",
         s.name, s.interface, s.node_id, s.name, s.name, s.max_level_node_degC, s.max_level_time_s,
-        opt(s.warning_crossed_s), opt(s.trip_crossed_s), s.frames_written, s.frames_suppressed,
+        opt(s.warning_crossed_s), opt(s.trip_crossed_s), above, s.frames_written, s.frames_suppressed,
         i + 1 < result.pumps.size() ? "," : "");
   }
   json += "  ]\n}\n";

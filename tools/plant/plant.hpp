@@ -17,6 +17,7 @@
 #include <functional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "tools/plant/scenario.hpp"
@@ -51,6 +52,9 @@ struct PumpSummary {
   double max_level_time_s = 0.0;
   double warning_crossed_s = -1.0;   ///< first time the truth exceeds warning_C (-1 = never)
   double trip_crossed_s = -1.0;      ///< first time the truth exceeds trip_C (-1 = never)
+  /// Every interval in which the truth was above warning_C: [start, end) at thermal-step
+  /// resolution; end -1 = still above at the end of the run.
+  std::vector<std::pair<double, double>> above_warning_s;
   std::uint64_t frames_written = 0;
   std::uint64_t frames_suppressed = 0;  ///< by faults (dropped, stale, bus-off)
 };

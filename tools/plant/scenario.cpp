@@ -368,7 +368,7 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
       const toml::table* p = value.as_table();
       const std::string at = fmt::format("profile.{}.", key.str());
       if (p == nullptr) Fail(source, LineOf(value), at, "expected a table");
-      CheckKeys(*p, {"segments", "description"}, source, at);
+      CheckKeys(*p, {"segments", "description", "repeat"}, source, at);
       if (p->get("segments") == nullptr) Fail(source, LineOf(*p), at + "segments", "missing");
     }
   }
@@ -420,6 +420,14 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
              fmt::format("no [profile.{}] in the file", profile));
       }
       base.segments = ParseSegments(*p->get("segments"), source, fmt::format("profile.{}.segments", profile));
+      // repeat = N: the segments N times in a row (a daily cycle over a week).
+      Reader pr(p, nullptr, source, fmt::format("profile.{}.", profile), LineOf(*p));
+      const auto repeat = static_cast<std::size_t>(pr.Integer("repeat", 1, 1, 100000));
+      const std::size_t one = base.segments.size();
+      for (std::size_t k = 1; k < repeat; ++k) {
+        base.segments.insert(base.segments.end(), base.segments.begin(),
+                             base.segments.begin() + static_cast<std::ptrdiff_t>(one));
+      }
     }
     if (const toml::node* f = pt.get("faults")) base.faults = ParseFaults(*f, source, at + "faults");
     if (const toml::node* e = pt.get("effects")) base.effects = ParseEffects(*e, source, at + "effects");
