@@ -362,11 +362,14 @@ TEST(ResistanceIdentifier, SingleFilterStateCarriesOver) {
   config.steady_magnet_prior = 0.0;  // one filter, as before the hypotheses
   ResistanceIdentifier single(motor, config);
   for (long k = 0; k < 600L * 100; ++k) single.Update(Exact(0.30, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
-  const ResistanceHypothesisState& only = single.Save().hypotheses[kDriftingMagnet];
+  // A copy: Save() returns by value, so a reference into its result would dangle (ASan:
+  // stack-use-after-scope).
+  const ResistanceIdentifierState saved = single.Save();
+  const ResistanceHypothesisState only = saved.hypotheses[kDriftingMagnet];
   EXPECT_EQ(single.estimate().steady_magnet_probability, 0.0);
   const ResistanceIdentifierConfig defaults;
-  const ResistanceIdentifierState carried = StateFromSingleFilter(
-      only.x, only.p, single.Save().moments, single.Save().blocks, 3, defaults);
+  const ResistanceIdentifierState carried =
+      StateFromSingleFilter(only.x, only.p, saved.moments, saved.blocks, 3, defaults);
   ResistanceIdentifier both(motor, defaults);
   ASSERT_TRUE(both.Restore(carried));
   EXPECT_EQ(both.estimate().status, ResistanceStatus::kConverging);
