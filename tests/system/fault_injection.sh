@@ -101,9 +101,9 @@ st_gt() { [ "$(st "$1")" -gt "$2" ]; }
 check_state() {
   [ -s "$1" ] || fail "$2: $1 is missing or empty"
   head -n 1 "$1" | grep -q '^# pumpthermd saved state' || fail "$2: $1 lacks its header line"
-  grep -q '^version = 1$' "$1" || fail "$2: $1 lacks 'version = 1'"
+  grep -q '^version = 2$' "$1" || fail "$2: $1 lacks 'version = 2'"
   for key in model time_us x_degC s_K2 resistance_x resistance_p resistance_moments resistance_blocks \
-             resistance_rejections latched_trip_nodes latched_trip_values_degC; do
+             resistance_rejections resistance_probability latched_trip_nodes latched_trip_values_degC; do
     [ "$(grep -c "^ *$key = " "$1")" = 3 ] || fail "$2: $1 does not have '$key' for 3 pumps"
   done
   for p in pump1 pump2 pump3; do grep -q "^\[pump\.$p\]" "$1" || fail "$2: $1 lacks [pump.$p]"; done
