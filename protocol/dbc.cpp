@@ -517,6 +517,11 @@ class Parser {
       if (!sv.empty() && sv[0] == '+') sv.remove_prefix(1);
       auto [p, ec] = std::from_chars(sv.data(), sv.data() + sv.size(), v);
       if (ec != std::errc() || p != sv.data() + sv.size()) Fail(num, "a raw value");
+      // A raw value is a 64-bit integer at most; converting a double outside that range to one
+      // is undefined behaviour (found by dbc_reader_fuzz: 4.4e101).
+      if (!(v >= -9223372036854775808.0 && v < 9223372036854775808.0)) {
+        Fail(num, "a raw value within the 64-bit integer range");
+      }
       const std::string label = Unescape(Expect(TokenKind::kString, "a value description string").text);
       out[static_cast<std::int64_t>(v)] = label;
     }
@@ -821,8 +826,8 @@ class Parser {
         s->attributes[a.name] = a.value;
         if (a.name == "GenSigSNA") {
           const double* v = std::get_if<double>(&a.value);
-          if (v == nullptr || *v != std::floor(*v)) {
-            FailAt(a.line, a.column, "GenSigSNA must be an integer raw value");
+          if (v == nullptr || *v != std::floor(*v) || !(*v >= -9223372036854775808.0 && *v < 9223372036854775808.0)) {
+            FailAt(a.line, a.column, "GenSigSNA must be an integer raw value within the 64-bit range");
           }
           s->not_available_raw = static_cast<std::int64_t>(*v);
         }

@@ -171,6 +171,19 @@ TEST(DbcTest, ErrorsNameLineColumnAndWhatWasExpected) {
   ExpectError("12 BO_\n", 1, 1, "a DBC keyword");
 }
 
+// Raw values beyond the 64-bit range are an error, not undefined behaviour in the conversion
+// (dbc_reader_fuzz found a value description 4.44444e+101 under UBSan).
+TEST(DbcTest, RawValuesOutsideThe64BitRangeAreErrors) {
+  const std::string message = "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n";
+  ExpectError(message + "VAL_ 1 S 4.44444e+101 \"huge\" ;\n", 3, 10, "64-bit integer range");
+  ExpectError(message + "VAL_ 1 S -1e19 \"huge\" ;\n", 3, 10, "64-bit integer range");
+  ExpectError(message + "BA_DEF_ SG_ \"GenSigSNA\" FLOAT 0 1e300;\nBA_ \"GenSigSNA\" SG_ 1 S 1e30;\n", 4, 1,
+              "within the 64-bit range");
+  // The largest values that fit are fine.
+  const Dbc dbc = ParseDbc(message + "VAL_ 1 S 4294967295 \"u32\" -9223372036854775808 \"min\" ;\n", "ok.dbc");
+  ASSERT_EQ(dbc.messages.size(), 1u);
+}
+
 TEST(DbcTest, SkipsUnusedSectionsAndReportsDanglingReferences) {
   const Dbc dbc = ParseDbc(
       "BO_ 1 M: 1 X\n SG_ S : 0|12@1+ (1,0) [0|0] \"\" X\n"
