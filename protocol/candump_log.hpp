@@ -41,6 +41,9 @@ std::string FormatCandumpLine(std::int64_t time_us, std::string_view interface,
 
 /// The same line appended to `out` (no trailing newline), formatted by hand: no allocation once
 /// `out` has the capacity (the plant and `pumpthermd -r --output-log` write millions of lines).
+/// Measured against fmt::format_to into the same string (byte-identical output): `pumptherm
+/// plant fleet32 --duration-s 120` (806,400 lines) takes 0.31-0.34 s user by hand, 0.65-0.68 s
+/// with fmt.
 void AppendCandumpLine(std::string& out, std::int64_t time_us, std::string_view interface,
                        const CanFrame& frame);
 
