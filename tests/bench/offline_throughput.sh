@@ -18,6 +18,7 @@ build=${1:?usage: $0 BUILD_DIR [LOG]}
 log=${2:-/tmp/pumptherm-fleet32/fleet32.log}
 daemon="$build/daemon/pumpthermd"
 tool="$build/tools/pumptherm"
+here=$(cd "$(dirname "$0")" && pwd)
 [ -x "$daemon" ] || { echo "$0: $daemon is not built" >&2; exit 2; }
 command -v log2asc >/dev/null || { echo "$0: log2asc (can-utils) is not installed" >&2; exit 2; }
 [ -x /usr/bin/time ] || { echo "$0: /usr/bin/time (package time) is not installed" >&2; exit 2; }
@@ -35,14 +36,7 @@ trap 'rm -rf "$work"' EXIT
 {
   printf '[gateway]\nname = "fleet32"\nheartbeat_period_s = 0\n\n[alarms.levels]\n'
   printf 'winding = { warning_degC = 100.0, trip_degC = 120.0 }\n\n'
-  printf '[[can]]\ninterface = "can0"\n\n[[can]]\ninterface = "can1"\n'
-  for line in a b; do
-    iface=can0; [ "$line" = b ] && iface=can1
-    for n in 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15; do
-      printf '\n[[pump]]\nname = "%s%02d"\nnode_id = %d\ninterface = "%s"\nmotor = "han2019-tmp"\nthermal_model = "tmp-generic"\n' \
-        "$line" "$n" "$n" "$iface"
-    done
-  done
+  sh "$here/../data/fleet32_pumps.sh"
 } >"$work/fleet32.toml"
 "$daemon" --check-config "$work/fleet32.toml" >/dev/null
 

@@ -50,14 +50,7 @@ cfg=$work/pumpthermd-soak.toml
   printf '[gateway]\nname = "soak"\nheartbeat_period_s = 0\nthermal_period_s = 1.0\n\n'
   printf '[alarms]\nhysteresis_K = 2.0\nhold_s = 2.0\nstale_after_s = 2.0\nforecast_horizon_s = 300.0\n'
   printf '[alarms.levels]\nwinding = { warning_degC = 100.0, trip_degC = 120.0 }\n\n'
-  printf '[[can]]\ninterface = "can0"\n\n[[can]]\ninterface = "can1"\n'
-  for line in a b; do
-    iface=can0; [ "$line" = b ] && iface=can1
-    for n in 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15; do
-      printf '\n[[pump]]\nname = "%s%02d"\nnode_id = %d\ninterface = "%s"\nmotor = "han2019-tmp"\nthermal_model = "tmp-generic"\n' \
-        "$line" "$n" "$n" "$iface"
-    done
-  done
+  sh "$here/../data/fleet32_pumps.sh"
 } >"$cfg"
 "$daemon" --check-config "$cfg" >/dev/null
 
