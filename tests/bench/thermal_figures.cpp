@@ -3,6 +3,8 @@
 //    truth = the improved model with the paper's process noise, frame sensor with the paper's
 //    noise, filter started 10 degC off; filter model improved (model right) or baseline (model
 //    wrong), with and without the resistance-based winding temperature fused.
+//  - Noise sweeps over ten runs (Figs. 7 and 8, five seeds each): the filter's Q scaled against
+//    the truth with eq. 39's noise, and the truth's noise scaled with a matched filter.
 //  - Model alone as in Figs. 4-6: baseline against improved truth.
 //  - Real data: Paderborn profile 46 (Wallscheid, Kirchgaessner, Boecker; LEA, Paderborn
 //    University) with the 4-node model, the stator yoke as the only measured node.
@@ -73,6 +75,7 @@ struct StateFigures {
   std::string node;
   double t_within_3K_s = 0.0;  ///< time after which |error| stays <= 3 K
   double max_after_60s_K = 0.0;
+  double max_at_s = 0.0;  ///< when the maximum after 60 s occurred
   double rms_after_60s_K = 0.0;
 };
 
@@ -97,7 +100,10 @@ std::vector<StateFigures> Score(const std::vector<std::string>& names,
       const double e = std::abs(est[k](static_cast<Eigen::Index>(i)) - truth[k](static_cast<Eigen::Index>(i)));
       if (e > 3.0) f.t_within_3K_s = t + dt_s;
       if (t > 60.0) {
-        f.max_after_60s_K = std::max(f.max_after_60s_K, e);
+        if (e > f.max_after_60s_K) {
+          f.max_after_60s_K = e;
+          f.max_at_s = t;
+        }
         ss += e * e;
         ++count;
       }
@@ -110,13 +116,26 @@ std::vector<StateFigures> Score(const std::vector<std::string>& names,
 
 enum class Sensor { kPaper, kRtd };
 
+/// Process noise of the truth and of the filter, K per square-root second and state (eq. 39's
+/// 0.0894 K per 1 s step by default in both), and the filter's initial spread: S(0) =
+/// 20^2 (1 1^T) + spread^2 I. The experiments start the truth at one temperature everywhere (a
+/// machine at rest) and the filter 10 K above it, so the prior says "one unknown temperature,
+/// the parts within 1 K of each other"; the daemon's default spread (5 K) is for a start on a
+/// machine that may be running, and its start-up is shown separately.
+struct NoiseLevels {
+  double truth_sd_K = pumptherm::sim::ThermalPlantConfig{}.process_sd_K;
+  double filter_sd_K = pe::VirtualSensorConfig{}.process_sd_K;
+  double initial_spread_sd_K = 1.0;
+};
+
 Run Kalman(const std::string& label, const pe::ThermalModel& truth_model,
            const pe::ThermalModel& filter_model, const std::vector<pe::ThermalInputs>& profile,
-           bool fuse_winding, Sensor sensor, std::uint64_t seed, bool truth_noise = true) {
+           bool fuse_winding, Sensor sensor, std::uint64_t seed, bool truth_noise = true,
+           NoiseLevels noise = {}) {
   const int n = truth_model.StateCount();
   const Eigen::VectorXd x0 = Eigen::VectorXd::Constant(n, 22.0);
   pumptherm::sim::ThermalPlantConfig plant_cfg;
-  if (!truth_noise) plant_cfg.process_sd_K = 0.0;
+  plant_cfg.process_sd_K = truth_noise ? noise.truth_sd_K : 0.0;
   pumptherm::sim::ThermalPlant plant(truth_model, x0, plant_cfg, seed);
   pumptherm::sim::SensorConfig frame_cfg;
   frame_cfg.noise_sd = 0.0557;  // eq. 38
@@ -131,6 +150,8 @@ Run Kalman(const std::string& label, const pe::ThermalModel& truth_model,
   pumptherm::sim::Sensor winding(winding_cfg, seed + 2);
   pe::VirtualSensorConfig cfg;
   cfg.winding_measurement_sd_K = 1.0;
+  cfg.process_sd_K = noise.filter_sd_K;
+  cfg.initial_spread_sd_K = noise.initial_spread_sd_K;
   pe::VirtualThermalSensor vts(filter_model, cfg);
   vts.Initialise(x0 + Eigen::VectorXd::Constant(n, 10.0));  // started 10 degC off
   Run r;
@@ -184,8 +205,8 @@ std::string StatesJson(const Run& r) {
   std::string s = "{";
   for (std::size_t i = 0; i < r.states.size(); ++i) {
     const auto& f = r.states[i];
-    s += fmt::format("{}\"{}\": {{\"t_within_3K_s\": {}, \"max_after_60s_K\": {:.4f}, \"rms_after_60s_K\": {:.4f}}}",
-                     i ? ", " : "", f.node, f.t_within_3K_s, f.max_after_60s_K, f.rms_after_60s_K);
+    s += fmt::format("{}\"{}\": {{\"t_within_3K_s\": {}, \"max_after_60s_K\": {:.4f}, \"max_at_s\": {}, \"rms_after_60s_K\": {:.4f}}}",
+                     i ? ", " : "", f.node, f.t_within_3K_s, f.max_after_60s_K, f.max_at_s, f.rms_after_60s_K);
   }
   return s + "}";
 }
@@ -281,10 +302,105 @@ int main(int argc, char** argv) {
     const Run exact = Kalman(fmt::format("Fig. {}: truth = improved model without process noise (the model exactly right), filter improved, frame sensor", fig),
                              improved, improved, profile, false, Sensor::kPaper, 100 + static_cast<std::uint64_t>(fig), false);
     PrintRun(exact);
+    NoiseLevels daemon_prior;
+    daemon_prior.initial_spread_sd_K = pe::VirtualSensorConfig{}.initial_spread_sd_K;
+    const Run wide = Kalman(fmt::format("Fig. {}: as the first, filter improved, frame sensor, the daemon's default initial spread ({} K)", fig,
+                                        daemon_prior.initial_spread_sd_K),
+                            improved, improved, profile, false, Sensor::kPaper, 100 + static_cast<std::uint64_t>(fig), true,
+                            daemon_prior);
+    PrintRun(wide);
+    json += fmt::format("  \"fig{}_filter_improved_default_spread\": {{\"initial_spread_sd_K\": {}, \"mean_nis\": {:.4f}, \"states\": {}}},\n",
+                        fig, daemon_prior.initial_spread_sd_K, wide.mean_nis, StatesJson(wide));
     json += fmt::format("  \"fig{}_filter_improved_noiseless_truth\": {{\"mean_nis\": {:.4f}, \"states\": {}}},\n", fig,
                         exact.mean_nis, StatesJson(exact));
     json += fmt::format("  \"fig{}_filter_improved_rtd_sensor\": {{\"mean_nis\": {:.4f}, \"states\": {}}},\n", fig,
                         rtd.mean_nis, StatesJson(rtd));
+  }
+
+  // Noise sweeps (right model, frame sensor only), five seeds per setting, worst seed reported:
+  //  A. truth with eq. 39's noise, the filter's process sd scaled 1/4 .. 4: whether any other Q
+  //     beats the matched one (the Kalman filter is the MMSE estimator when Q is the truth's);
+  //  B. truth noise from 0 to eq. 39's, the filter matched to it: up to which noise the 1.0 K
+  //     goal holds. The equivalent random heat flow on a node is C_i x sd / 1 s.
+  {
+    const double paper_sd_K = NoiseLevels{}.truth_sd_K;
+    const int kSeeds = 5;
+    const auto& C = improved.Capacities_J_per_K();
+    fmt::print("\nEquivalent random heat flow of eq. 39's noise (C_i x {} K / 1 s), W:", paper_sd_K);
+    for (Eigen::Index i = 0; i < C.size(); ++i) fmt::print(" {} {:.0f}", names[static_cast<std::size_t>(i)], C(i) * paper_sd_K);
+    fmt::print("\n");
+    struct Worst {
+      double winding_max_K = 0, winding_rms_K = 0, rotor_max_K = 0, all_max_K = 0, all_t3_s = 0;
+    };
+    auto run_seeds = [&](NoiseLevels noise) {
+      Worst w;
+      for (const auto& [fig, segs] : figs) {
+        const auto profile = Profile(segs);
+        for (int s = 0; s < kSeeds; ++s) {
+          const Run r = Kalman("", improved, improved, profile, false, Sensor::kPaper,
+                               1000 + 10 * static_cast<std::uint64_t>(fig) + static_cast<std::uint64_t>(s),
+                               noise.truth_sd_K > 0.0, noise);
+          for (const auto& f : r.states) {
+            const bool winding = f.node == "slot_winding" || f.node == "end_winding";
+            if (winding) {
+              w.winding_max_K = std::max(w.winding_max_K, f.max_after_60s_K);
+              w.winding_rms_K = std::max(w.winding_rms_K, f.rms_after_60s_K);
+            }
+            if (f.node == "rotor") w.rotor_max_K = std::max(w.rotor_max_K, f.max_after_60s_K);
+            w.all_max_K = std::max(w.all_max_K, f.max_after_60s_K);
+            w.all_t3_s = std::max(w.all_t3_s, f.t_within_3K_s);
+          }
+        }
+      }
+      return w;
+    };
+    auto worst_json = [](const Worst& w) {
+      return fmt::format("\"winding_max_K\": {:.4f}, \"winding_rms_K\": {:.4f}, \"rotor_max_K\": {:.4f}, "
+                         "\"all_max_K\": {:.4f}, \"all_within_3K_at_s\": {}",
+                         w.winding_max_K, w.winding_rms_K, w.rotor_max_K, w.all_max_K, w.all_t3_s);
+    };
+    static constexpr char head[] = "  {:>10} {:>10} {:>13} {:>13} {:>11} {:>11} {:>12}\n";
+    static constexpr char row[] = "  {:>10.4f} {:>10.4f} {:>11.2f} K {:>11.2f} K {:>9.2f} K {:>9.2f} K {:>10.0f} s\n";
+    fmt::print("\nSweep A (Figs. 7 and 8, {} seeds each, worst seed): truth with eq. 39's noise, filter Q scaled\n", kSeeds);
+    fmt::print(head, "truth sd", "filter sd", "winding max", "winding rms", "rotor max", "all max", "3 K at");
+    json += "  \"sweep_filter_q\": [";
+    bool first = true;
+    for (double scale : {0.25, 0.5, 1.0, 2.0, 4.0}) {
+      const NoiseLevels noise{paper_sd_K, paper_sd_K * scale};
+      const Worst w = run_seeds(noise);
+      fmt::print(row, noise.truth_sd_K, noise.filter_sd_K, w.winding_max_K, w.winding_rms_K, w.rotor_max_K, w.all_max_K, w.all_t3_s);
+      json += fmt::format("{}{{\"truth_sd_K\": {}, \"filter_sd_K\": {:.5f}, {}}}", first ? "" : ", ",
+                          noise.truth_sd_K, noise.filter_sd_K, worst_json(w));
+      first = false;
+    }
+    json += "],\n";
+    fmt::print("\nSweep B (Figs. 7 and 8, {} seeds each, worst seed): truth noise scaled, filter matched (eq. 39's when the truth has none)\n", kSeeds);
+    fmt::print(head, "truth sd", "filter sd", "winding max", "winding rms", "rotor max", "all max", "3 K at");
+    json += "  \"sweep_truth_noise\": [";
+    first = true;
+    const std::string sweep_csv = (work / "sweep_truth_noise.csv").string();
+    auto sweep_out = fmt::output_file(sweep_csv);
+    sweep_out.print("truth_sd_K,winding_max_K,rotor_max_K,all_max_K\n");
+    for (double scale : {0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0}) {
+      const NoiseLevels noise{paper_sd_K * scale, scale > 0.0 ? paper_sd_K * scale : paper_sd_K};
+      const Worst w = run_seeds(noise);
+      fmt::print(row, noise.truth_sd_K, noise.filter_sd_K, w.winding_max_K, w.winding_rms_K, w.rotor_max_K, w.all_max_K, w.all_t3_s);
+      json += fmt::format("{}{{\"truth_sd_K\": {:.5f}, \"filter_sd_K\": {:.5f}, {}}}", first ? "" : ", ",
+                          noise.truth_sd_K, noise.filter_sd_K, worst_json(w));
+      sweep_out.print("{:.5f},{:.4f},{:.4f},{:.4f}\n", noise.truth_sd_K, w.winding_max_K, w.rotor_max_K, w.all_max_K);
+      first = false;
+    }
+    sweep_out.close();
+    json += "],\n";
+    Plot(fmt::format(
+        "set terminal pngcairo size 900,550\nset output '{}/thermal_noise_sweep.png'\nset datafile separator ','\n"
+        "set key top left noenhanced\nset grid\nset xlabel 'process noise of the truth, K per sqrt(s) and state (eq. 39: {})'\n"
+        "set ylabel 'max |error| after 60 s, worst of 10 runs (K)'\n"
+        "set title 'Virtual sensor, right model, frame sensor only, filter Q matched (Figs. 7 and 8 set-ups)' noenhanced\n"
+        "plot '{}' using 1:2 with linespoints lw 2 pt 7 title 'windings', '' using 1:3 with linespoints lw 2 pt 5 title 'rotor', "
+        "'' using 1:4 with lines lw 1 dt 4 lc rgb 'black' title 'worst state', 1.0 with lines dt 2 lc rgb 'black' title 'goal 1.0 K', "
+        "3.0 with lines dt 3 lc rgb 'gray40' title '3 K'\n",
+        out_dir, paper_sd_K, sweep_csv));
   }
 
   // Model alone (Figs. 4-6): baseline against the improved truth, both from 22 degC.
