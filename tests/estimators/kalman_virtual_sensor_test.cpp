@@ -74,6 +74,40 @@ TEST(VirtualThermalSensor, ConvergesOnSimulatedDataWithTheFrameSensor) {
   EXPECT_LT(r.mean_nis, 2.0);
 }
 
+// Issue 5's goal on the Fig. 7 set-up (800 r/min, 40-60-40 A, shortened to 600 + 600 + 600 s):
+// with the model right (truth = the same model, no process noise), the frame sensor alone and the
+// filter started 10 K above a machine at rest, every state is within 3 K by 60 s and within 1.0 K
+// after. The prior says what a machine at rest is: one unknown temperature, parts within 1 K.
+// The same run with the baseline model in the filter misses (max 3.4 K after 60 s).
+// docs/virtual-sensor.md, "How much process noise the 1.0 K goal allows".
+TEST(VirtualThermalSensor, MeetsTheOneKelvinGoalWhenTheModelIsRight) {
+  const auto improved = Load("saheba2010-improved");
+  pumptherm::sim::ThermalPlantConfig noiseless;
+  noiseless.process_sd_K = 0.0;
+  const Eigen::VectorXd x0 = Eigen::VectorXd::Constant(7, 22.0);
+  pumptherm::sim::ThermalPlant plant(improved, x0, noiseless, 7);
+  pe::VirtualSensorConfig cfg;
+  cfg.initial_spread_sd_K = 1.0;
+  pe::VirtualThermalSensor vts(improved, cfg);
+  vts.Initialise(x0 + Eigen::VectorXd::Constant(7, 10.0));
+  std::mt19937_64 rng(8);
+  std::normal_distribution<double> noise(0.0, 0.0557);  // eq. 38
+  double err_at_60s_K = 0.0, max_after_60s_K = 0.0;
+  for (int k = 1; k <= 1800; ++k) {
+    pe::ThermalInputs in;
+    in.speed_rpm = 800.0;
+    in.iq_A = (k > 600 && k <= 1200) ? 60.0 : 40.0;
+    in.ambient_degC = 22.0;
+    const Eigen::VectorXd& x = plant.Step(in, 1.0);
+    vts.Step(in, 1.0, Eigen::VectorXd::Constant(1, x(0) + noise(rng)), std::nan(""));
+    const double err = (vts.Estimate_degC() - x).cwiseAbs().maxCoeff();
+    if (k == 60) err_at_60s_K = err;
+    if (k > 60) max_after_60s_K = std::max(max_after_60s_K, err);
+  }
+  EXPECT_LT(err_at_60s_K, 3.0) << "max |error| over the states at 60 s";
+  EXPECT_LT(max_after_60s_K, 1.0) << "max |error| over the states after 60 s";
+}
+
 TEST(VirtualThermalSensor, FusingTheWindingTemperatureUsesBothMeasurements) {
   const auto improved = Load("saheba2010-improved");
   pe::VirtualThermalSensor vts(improved, {});
