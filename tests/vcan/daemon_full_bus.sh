@@ -10,9 +10,11 @@
 # guest the daemon spends about 24 s of CPU on these frames (offline on the host: 0.14 s),
 # canplayer only just reaches the full rate (7038 and 7442 frames/s in two runs) and the daemon
 # needs a deep queue: rx_buffer_bytes = 8 MiB here (with the default 1 MiB: 752 drops of
-# 359,986). The issue asks for 15 minutes; this is 40 s of traffic.
+# 359,986). This is 40 s of traffic; the issue's 15 minutes are daemon_full_bus_15min.sh, which
+# sets FULL_BUS_LOOPS and sources this file (canplayer -l: the recording played that many times).
 set -eu
-SCENARIO_NAME=daemon_full_bus
+SCENARIO_NAME=${SCENARIO_NAME:-daemon_full_bus}
+loops=${FULL_BUS_LOOPS:-1}
 . "$DATA_DIR/daemon_lib.sh"
 
 {
@@ -28,9 +30,10 @@ SCENARIO_NAME=daemon_full_bus
 "$BIN_DIR/pumpthermd" --check-config "$WORK_DIR/pumpthermd.toml" >/dev/null || fail "the test configuration is invalid"
 
 log=$DATA_DIR/full_bus.log
-n_bus=$(wc -l <"$log")
+n_log=$(wc -l <"$log")
+n_bus=$((n_log * loops))
 span_s=$(tail -n 1 "$log" | awk '{ print substr($1, 2, length($1) - 2) + 0 }')
-echo "$SCENARIO_NAME: $n_bus frames over $span_s s ($(awk -v n="$n_bus" -v s="$span_s" 'BEGIN { printf "%.0f", n / s }') frames/s in the log)"
+echo "$SCENARIO_NAME: $n_log frames over $span_s s ($(awk -v n="$n_log" -v s="$span_s" 'BEGIN { printf "%.0f", n / s }') frames/s in the log), played $loops time(s): $n_bus frames"
 
 start_daemon "$WORK_DIR/pumpthermd.toml"
 buffer=$(grep -o 'vcan0: receive buffer.*' "$WORK_DIR/daemon.err" | head -n 1)
@@ -38,7 +41,7 @@ echo "$SCENARIO_NAME: $buffer"
 [ -n "$buffer" ] || fail "the daemon did not log its receive buffer"
 # /proc/uptime: 10 ms resolution (busybox date has no sub-second clock).
 up0=$(cut -d' ' -f1 /proc/uptime)
-canplayer -I "$log" || fail "canplayer failed"
+canplayer -I "$log" -l "$loops" || fail "canplayer failed"
 up1=$(cut -d' ' -f1 /proc/uptime)
 sleep 1
 kill -0 "$DAEMON_PID" 2>/dev/null || fail "the daemon died"
