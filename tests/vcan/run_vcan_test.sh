@@ -58,6 +58,8 @@ environment:
   PUMPTHERM_CACHE   where tools/setup.sh unpacked the guest kernel (default /var/cache/pumptherm)
   PUMPTHERM_VCAN_VERBOSE=1, PUMPTHERM_VCAN_KEEP=1   as --verbose and --keep (e.g. under ctest)
   PUMPTHERM_VCAN_PVH=0   boot the compressed vmlinuz, not the cached uncompressed vmlinux
+  PUMPTHERM_VCAN_SMP=N   give the guest N emulated CPUs (default 1; QEMU runs each on its own
+                         host thread, so N > 1 only helps with idle host cores)
   CI=true           a run that is possible neither way fails instead of skipping (exit 77)
 
 example:
@@ -501,7 +503,11 @@ run_guest() {
   cat "$base_cpio" "$run_cpio" >"$initrd"
   rm -f "$run_cpio"
 
-  local qemu=(qemu-system-x86_64 -m 512 -no-reboot -nodefaults -no-user-config -display none
+  local smp=${PUMPTHERM_VCAN_SMP:-1}
+  if [[ ! "$smp" =~ ^[1-8]$ ]]; then
+    err "PUMPTHERM_VCAN_SMP: '$smp' is not a CPU count from 1 to 8"; exit 2
+  fi
+  local qemu=(qemu-system-x86_64 -m 512 -smp "$smp" -no-reboot -nodefaults -no-user-config -display none
     -kernel "$guest_kernel_image" -initrd "$initrd"
     -append "console=ttyS0 quiet panic=-1")
   if ((shell)); then
@@ -544,7 +550,7 @@ run_guest() {
           *"$kMarker-BEGIN kernel="*)
             guest_kernel=${line#*kernel=}
             guest_kernel=${guest_kernel%@@}
-            say "mode=guest kernel=${guest_kernel} test=${name} (QEMU TCG)"
+            say "mode=guest kernel=${guest_kernel} test=${name} (QEMU TCG, ${smp} CPU)"
             state=run ;;
           *"$kMarker-SETUP-FAILED "*)
             setup_failure=${line#*FAILED }
