@@ -130,12 +130,11 @@ struct NoiseLevels {
 
 Run Kalman(const std::string& label, const pe::ThermalModel& truth_model,
            const pe::ThermalModel& filter_model, const std::vector<pe::ThermalInputs>& profile,
-           bool fuse_winding, Sensor sensor, std::uint64_t seed, bool truth_noise = true,
-           NoiseLevels noise = {}) {
+           bool fuse_winding, Sensor sensor, std::uint64_t seed, NoiseLevels noise = {}) {
   const int n = truth_model.StateCount();
   const Eigen::VectorXd x0 = Eigen::VectorXd::Constant(n, 22.0);
   pumptherm::sim::ThermalPlantConfig plant_cfg;
-  plant_cfg.process_sd_K = truth_noise ? noise.truth_sd_K : 0.0;
+  plant_cfg.process_sd_K = noise.truth_sd_K;
   pumptherm::sim::ThermalPlant plant(truth_model, x0, plant_cfg, seed);
   pumptherm::sim::SensorConfig frame_cfg;
   frame_cfg.noise_sd = 0.0557;  // eq. 38
@@ -299,14 +298,17 @@ int main(int argc, char** argv) {
     const Run rtd = Kalman(fmt::format("Fig. {}: as above, filter improved, RTD-like frame sensor (0.1 K steps, 20 s lag)", fig),
                            improved, improved, profile, false, Sensor::kRtd, 100 + static_cast<std::uint64_t>(fig));
     PrintRun(rtd);
+    NoiseLevels noiseless_truth;
+    noiseless_truth.truth_sd_K = 0.0;
     const Run exact = Kalman(fmt::format("Fig. {}: truth = improved model without process noise (the model exactly right), filter improved, frame sensor", fig),
-                             improved, improved, profile, false, Sensor::kPaper, 100 + static_cast<std::uint64_t>(fig), false);
+                             improved, improved, profile, false, Sensor::kPaper, 100 + static_cast<std::uint64_t>(fig),
+                             noiseless_truth);
     PrintRun(exact);
     NoiseLevels daemon_prior;
     daemon_prior.initial_spread_sd_K = pe::VirtualSensorConfig{}.initial_spread_sd_K;
     const Run wide = Kalman(fmt::format("Fig. {}: as the first, filter improved, frame sensor, the daemon's default initial spread ({} K)", fig,
                                         daemon_prior.initial_spread_sd_K),
-                            improved, improved, profile, false, Sensor::kPaper, 100 + static_cast<std::uint64_t>(fig), true,
+                            improved, improved, profile, false, Sensor::kPaper, 100 + static_cast<std::uint64_t>(fig),
                             daemon_prior);
     PrintRun(wide);
     json += fmt::format("  \"fig{}_filter_improved_default_spread\": {{\"initial_spread_sd_K\": {}, \"mean_nis\": {:.4f}, \"states\": {}}},\n",
@@ -338,8 +340,7 @@ int main(int argc, char** argv) {
         const auto profile = Profile(segs);
         for (int s = 0; s < kSeeds; ++s) {
           const Run r = Kalman("", improved, improved, profile, false, Sensor::kPaper,
-                               1000 + 10 * static_cast<std::uint64_t>(fig) + static_cast<std::uint64_t>(s),
-                               noise.truth_sd_K > 0.0, noise);
+                               1000 + 10 * static_cast<std::uint64_t>(fig) + static_cast<std::uint64_t>(s), noise);
           for (const auto& f : r.states) {
             const bool winding = f.node == "slot_winding" || f.node == "end_winding";
             if (winding) {
