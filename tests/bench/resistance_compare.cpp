@@ -362,6 +362,7 @@ int main(int argc, char** argv) {
       {"speed_ripple", "base + 3 r/min mechanical ripple", false, false, true, true, false},
       {"nameplate", "base + plant R0 +4 %, psi_f -3 % vs nameplate", false, false, false, true, true},
       {"no_load_steps", "base without gas-load steps (constant 2 A)", false, false, false, false, false},
+      {"no_load_steps_flux_drift", "no gas-load steps, magnet flux -0.1 %/K", true, false, false, false, false},
       {"frequent_steps", "base with gas-load changes every 3 min on average", false, false, false, true, false, 180.0},
       {"everything", "every disturbance above, with load steps", true, true, true, true, true},
   };
