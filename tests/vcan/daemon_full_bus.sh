@@ -11,8 +11,9 @@
 # needs a deep queue: rx_buffer_bytes = 8 MiB here (with the default 1 MiB: 752 drops of
 # 359,986). CTest gives the guest two CPUs (PUMPTHERM_VCAN_SMP=2): sharing one with the daemon,
 # canplayer only just reached the full rate in 40 s (7038 and 7442 frames/s) and fell below it
-# over 15 min (6716 and 6793); with two it keeps the recording's 9000. This is 40 s of traffic; the 15 minutes are daemon_full_bus_15min.sh, which
-# sets FULL_BUS_LOOPS and sources this file (canplayer -l: the recording played that many times).
+# over 15 min (6716 and 6793); with two it keeps the recording's 9000. This is 40 s of traffic;
+# the 15 minutes are daemon_full_bus_15min.sh, which sets FULL_BUS_LOOPS and sources this
+# file (canplayer -l: the recording played that many times).
 set -eu
 SCENARIO_NAME=${SCENARIO_NAME:-daemon_full_bus}
 loops=${FULL_BUS_LOOPS:-1}
