@@ -6,6 +6,8 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
+#include <system_error>
 #include <cstring>
 #include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
@@ -86,6 +88,9 @@ class CsvSink {
  public:
   CsvSink(const std::string& dir, double origin_s, const Gateway& g) : origin_s_(origin_s) {
     if (dir.empty()) return;
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);  // like the tools' --out
+    if (ec) throw std::system_error(ec, "--csv-dir: cannot create '" + dir + "'");
     for (const auto& p : g.pumps()) {
       files_.push_back(std::make_unique<File>(fmt::format("{}/{}.csv", dir, p->config().name), "w"));
       std::string header = "time_s";

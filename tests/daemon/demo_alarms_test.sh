@@ -12,7 +12,7 @@ tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 "$pumptherm" plant demo --out "$tmp" --quiet
 origin=$(head -n 1 "$tmp/demo.log" | sed 's/^(\([0-9]*\)\..*/\1/')
-mkdir -p "$tmp/est"
+# --csv-dir is created by the daemon, as the tools create --out.
 "$pumpthermd" --config "$src/tools/demo/pumpthermd-demo.toml" -r "$tmp/demo.log" \
   --csv-dir "$tmp/est" --csv-time-origin "$origin" >"$tmp/out.txt" 2>"$tmp/err.txt"
 
