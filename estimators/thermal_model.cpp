@@ -235,6 +235,7 @@ struct ThermalModel::Impl {
   std::string name;
   std::unique_ptr<ExpressionVariables> vars = std::make_unique<ExpressionVariables>();
   std::map<std::string, double> parameters;
+  std::optional<ThermalOperatingRange> operating_range;
   std::vector<ThermalNodeInfo> nodes;
   std::vector<int> state_of_node;  ///< -1 for massless
   std::vector<int> massless_of_node;
@@ -494,6 +495,36 @@ void CheckKeys(const toml::table& t, std::initializer_list<const char*> allowed,
   }
 }
 
+/// `[operating_range]`: speed_rpm > 0, iq_A = 1 to 8 finite currents, scale_current_A > 0
+/// (default: the largest |iq_A|).
+ThermalOperatingRange ParseOperatingRange(const toml::node& n, const std::string& source) {
+  const toml::table* t = n.as_table();
+  auto fail = [&](const toml::node& at, const std::string& what) {
+    throw ThermalModelError(fmt::format("{}: [operating_range]: {}", Where(source, LineOf(at)), what));
+  };
+  if (!t) fail(n, "must be a table");
+  CheckKeys(*t, {"speed_rpm", "iq_A", "scale_current_A"}, "[operating_range]", source);
+  ThermalOperatingRange r;
+  const auto speed = (*t)["speed_rpm"].value<double>();
+  if (!speed || !(*speed > 0.0) || !std::isfinite(*speed)) fail(n, "speed_rpm must be a positive number");
+  r.speed_rpm = *speed;
+  const toml::array* iq = (*t)["iq_A"].as_array();
+  if (!iq || iq->empty() || iq->size() > 8) fail(n, "iq_A must be an array of 1 to 8 currents");
+  for (const auto& v : *iq) {
+    const auto a = v.value<double>();
+    if (!a || !std::isfinite(*a)) fail(v, "iq_A must hold finite numbers");
+    r.iq_A.push_back(*a);
+    r.scale_current_A = std::max(r.scale_current_A, std::abs(*a));
+  }
+  if (const toml::node* sc = t->get("scale_current_A")) {
+    const auto a = sc->value<double>();
+    if (!a || !(*a > 0.0) || !std::isfinite(*a)) fail(*sc, "scale_current_A must be a positive number");
+    r.scale_current_A = *a;
+  }
+  if (!(r.scale_current_A > 0.0)) fail(n, "iq_A must hold a non-zero current (or give scale_current_A)");
+  return r;
+}
+
 }  // namespace
 
 ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& source,
@@ -508,8 +539,8 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
     throw ThermalModelError(fmt::format("{}: {}", Where(source, static_cast<int>(e.source().begin.line)),
                                         e.description()));
   }
-  CheckKeys(root, {"model", "parameters", "table", "quantity", "node", "edge", "loss"}, "top level",
-            source);
+  CheckKeys(root, {"model", "parameters", "operating_range", "table", "quantity", "node", "edge", "loss"},
+            "top level", source);
 
   if (const toml::table* model = root["model"].as_table()) {
     CheckKeys(*model, {"name", "description", "source"}, "[model]", source);
@@ -527,6 +558,10 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
       }
       m.parameters[std::string(k.str())] = *val;
     }
+  }
+
+  if (const toml::node* range = root.get("operating_range")) {
+    m.operating_range = ParseOperatingRange(*range, source);
   }
 
   // Nodes.
@@ -896,6 +931,9 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
 }
 
 const std::string& ThermalModel::Name() const { return impl_->name; }
+const ThermalOperatingRange* ThermalModel::OperatingRange() const {
+  return impl_->operating_range ? &*impl_->operating_range : nullptr;
+}
 const std::vector<ThermalNodeInfo>& ThermalModel::Nodes() const { return impl_->nodes; }
 int ThermalModel::StateCount() const { return impl_->n(); }
 const std::vector<std::string>& ThermalModel::StateNames() const { return impl_->state_names; }

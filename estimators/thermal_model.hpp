@@ -80,6 +80,14 @@ struct ThermalLinearModel {
   Eigen::VectorXd f_K_per_s;
 };
 
+/// The model's typical operation, from its optional `[operating_range]` table: the defaults of
+/// tools that need operating points (sensor placement).
+struct ThermalOperatingRange {
+  double speed_rpm = 0.0;                ///< typical mechanical speed
+  std::vector<double> iq_A;              ///< q-axis currents spanning the typical load (1 to 8)
+  double scale_current_A = 0.0;          ///< a sustained high load (the scaling run's current)
+};
+
 /// How one node was declared.
 struct ThermalNodeInfo {
   std::string name;
@@ -108,6 +116,8 @@ class ThermalModel {
   ~ThermalModel();
 
   const std::string& Name() const;
+  /// The `[operating_range]` table, or nullptr when the file has none.
+  const ThermalOperatingRange* OperatingRange() const;
   /// All nodes in file order.
   const std::vector<ThermalNodeInfo>& Nodes() const;
   /// Number of states n (nodes with heat capacity).

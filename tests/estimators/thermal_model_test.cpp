@@ -10,6 +10,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace pe = pumptherm::estimators;
 
@@ -257,4 +258,43 @@ TEST(ThermalModel, NonFiniteInputsAreRejected) {
   in.iq_A = std::nan("");
   pe::ThermalLinearModel lin;
   EXPECT_THROW(m.Linearise(in, lin), std::domain_error);
+}
+
+TEST(ThermalModelOperatingRange, ShippedModelsStateTheirTypicalOperation) {
+  const auto tmp = pe::ThermalModel::Parse(ReadModel("tmp-generic"), "tmp-generic");
+  ASSERT_NE(tmp.OperatingRange(), nullptr);
+  EXPECT_EQ(tmp.OperatingRange()->speed_rpm, 21000.0);
+  EXPECT_EQ(tmp.OperatingRange()->iq_A, (std::vector<double>{1.0, 2.5, 4.5}));
+  EXPECT_EQ(tmp.OperatingRange()->scale_current_A, 3.0);
+  const auto saheba = pe::ThermalModel::Parse(ReadModel("saheba2010-improved"), "saheba");
+  ASSERT_NE(saheba.OperatingRange(), nullptr);
+  EXPECT_EQ(saheba.OperatingRange()->iq_A, (std::vector<double>{40.0, 52.5, 65.0}));
+  const auto star = pe::ThermalModel::Parse(kStar, "star");
+  EXPECT_EQ(star.OperatingRange(), nullptr);
+}
+
+TEST(ThermalModelOperatingRange, ScaleCurrentDefaultsToTheLargestCurrent) {
+  const auto m = pe::ThermalModel::Parse(
+      std::string("[operating_range]\nspeed_rpm = 100\niq_A = [1.0, -7.5, 2.0]\n") + kStar, "s");
+  ASSERT_NE(m.OperatingRange(), nullptr);
+  EXPECT_EQ(m.OperatingRange()->scale_current_A, 7.5);
+}
+
+TEST(ThermalModelOperatingRange, BadValuesNameTheTableAndLine) {
+  auto error = [](const std::string& table) {
+    try {
+      pe::ThermalModel::Parse(table + kStar, "m.toml");
+    } catch (const pe::ThermalModelError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error("[operating_range]\nspeed_rpm = -1\niq_A = [1.0]\n").find("m.toml:1: [operating_range]: speed_rpm"),
+            std::string::npos)
+      << error("[operating_range]\nspeed_rpm = -1\niq_A = [1.0]\n");
+  EXPECT_NE(error("[operating_range]\nspeed_rpm = 5\niq_A = []\n").find("iq_A must be an array"), std::string::npos);
+  EXPECT_NE(error("[operating_range]\nspeed_rpm = 5\niq_A = [0.0]\n").find("non-zero current"), std::string::npos);
+  EXPECT_NE(error("[operating_range]\nspeed_rpm = 5\niq_A = [1.0]\nrpm = 3\n").find("unknown key 'rpm'"),
+            std::string::npos)
+      << error("[operating_range]\nspeed_rpm = 5\niq_A = [1.0]\nrpm = 3\n");
 }

@@ -23,10 +23,24 @@ struct PlacementOptions {
   double scale_current_A = 50.0;
   double scale_duration_s = 2700.0;
   estimators::PlacementConfig config;
+  // Whether the command line gave these; if not, the model's [operating_range] does.
+  bool speed_given = false;
+  bool currents_given = false;
+  bool scale_given = false;
 };
+
+/// The model's typical operation replaces the defaults the command line did not override.
+void ApplyOperatingRange(const estimators::ThermalModel& model, PlacementOptions& o) {
+  const estimators::ThermalOperatingRange* r = model.OperatingRange();
+  if (!r) return;
+  if (!o.speed_given) o.speed_rpm = r->speed_rpm;
+  if (!o.currents_given) o.currents_A = r->iq_A;
+  if (!o.scale_given) o.scale_current_A = r->scale_current_A;
+}
 
 int RunPlacement(PlacementOptions& o) {
   const estimators::ThermalModel model = LoadThermalModel(o.model);
+  ApplyOperatingRange(model, o);
   if (o.currents_A.empty()) throw InputError("--currents-A: give at least one current");
   for (double i : o.currents_A) {
     estimators::ThermalInputs in;
@@ -64,6 +78,8 @@ int RunPlacement(PlacementOptions& o) {
   };
   const auto rank_all = rank([](const auto& r) { return r.mse_all; });
   const auto rank_w = rank([](const auto& r) { return r.mse_windings; });
+  fmt::print("# operating points {}\n", model.OperatingRange() ? "from the model's [operating_range] where not given"
+                                                                 : "from the command line's defaults (the model has no [operating_range])");
   fmt::print("# model {}; {} r/min; A_D at {} A, each over 1/3 of N = {} steps of {} s\n",
              model.Name(), o.speed_rpm, fmt::join(o.currents_A, ", "), o.config.steps, o.config.dt_s);
   fmt::print("# nondimensional by the rises after {} s at {} A; Sm^1/2 {} K, Sp^1/2 {} K, S0^1/2 {} K\n",
@@ -82,11 +98,16 @@ const SubcommandRegistrar kRegistrar{
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<PlacementOptions>();
       app.add_option("--model,-m", o->model, "Shipped model name or path to a model .toml")->required();
-      app.add_option("--speed-rpm", o->speed_rpm, "Speed of the operating points")->capture_default_str();
+      app.add_option("--speed-rpm", o->speed_rpm,
+                     "Speed of the operating points (default: the model's [operating_range], else this)")
+          ->capture_default_str()
+          ->each([o](const std::string&) { o->speed_given = true; });
       app.add_option("--currents-A", o->currents_A,
-                     "q-axis currents whose A_D each hold for a third of the window (min mid max)")
+                     "q-axis currents whose A_D each hold for a third of the window (min mid max; "
+                     "default: the model's [operating_range], else these)")
           ->delimiter(',')
-          ->capture_default_str();
+          ->capture_default_str()
+          ->each([o](const std::string&) { o->currents_given = true; });
       app.add_option("--ambient-C", o->ambient_degC, "Ambient temperature")->capture_default_str();
       app.add_option("--coolant-C", o->coolant_degC, "Coolant temperature")->capture_default_str();
       app.add_option("--dt-s", o->config.dt_s, "Sampling time tau")->capture_default_str();
@@ -94,7 +115,10 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--measurement-sd-K", o->config.measurement_sd_K, "eq. 38")->capture_default_str();
       app.add_option("--process-sd-K", o->config.process_sd_K, "eq. 39, per step")->capture_default_str();
       app.add_option("--initial-sd-K", o->config.initial_sd_K, "S(0)^1/2 per state")->capture_default_str();
-      app.add_option("--scale-current-A", o->scale_current_A, "Current of the scaling run")->capture_default_str();
+      app.add_option("--scale-current-A", o->scale_current_A,
+                     "Current of the scaling run (default: the model's [operating_range], else this)")
+          ->capture_default_str()
+          ->each([o](const std::string&) { o->scale_given = true; });
       app.add_option("--scale-duration-s", o->scale_duration_s, "Length of the scaling run")->capture_default_str();
       app.footer("Example:\n  pumptherm placement --model saheba2010-improved");
       return [o] { return RunPlacement(*o); };
