@@ -25,12 +25,13 @@ help_subcommands() {
   awk '/^$/ { in_subs = 0 } /^[A-Za-z].*:$/ { in_subs = ($0 == "Subcommands:"); next }
        in_subs && /^  [a-z]/ { print $1 }' | sort -u
 }
-# Options in a man page fragment: the words starting with '-' on the line after each .TP.
+# Options in a man page fragment: the words starting with '-' on the line after each .TP. Not
+# made unique: an option described twice shows as a difference from --help.
 man_options() {
   sed -e 's/\\-/-/g' -e 's/\\f[BIRP]//g' -e 's/"/ /g' -e 's/,/ /g' |
     awk 'prev_tp { for (i = 1; i <= NF; i++) if ($i ~ /^--?[A-Za-z0-9][-A-Za-z0-9]*$/) print $i }
          { prev_tp = ($1 == ".TP") }' |
-    grep -vxE -- '-h|--help' | sort -u
+    grep -vxE -- '-h|--help' | sort
 }
 # Lines of man page $1 in section .SH $2 (up to the next .SH).
 man_section() {
