@@ -31,6 +31,7 @@ add_custom_command(OUTPUT "${pumptherm_changelog_gz}"
   DEPENDS "${PUMPTHERM_DEBIAN_DIR}/changelog"
   COMMENT "gzip packaging/debian/changelog")
 install(FILES "${PUMPTHERM_DEBIAN_DIR}/copyright" "${pumptherm_changelog_gz}"
+  "${PROJECT_SOURCE_DIR}/docs/operator-guide.md"
   DESTINATION ${CMAKE_INSTALL_DATADIR}/doc/pumptherm COMPONENT deb EXCLUDE_FROM_ALL)
 
 # The demo configuration (tools/demo.sh's), for the operator's guide.

@@ -23,7 +23,8 @@ for f in /usr/sbin/pumpthermd /usr/bin/pumptherm /usr/bin/pumptherm-spy /usr/bin
          /usr/share/pumptherm/motors/han2019-tmp.toml /usr/share/pumptherm/scenarios/demo.toml \
          /usr/share/man/man8/pumpthermd.8.gz /usr/share/man/man5/pumpthermd.toml.5.gz \
          /usr/share/man/man1/pumptherm.1.gz /usr/share/man/man1/pumptherm-spy.1.gz \
-         /usr/share/doc/pumptherm/copyright /usr/share/doc/pumptherm/changelog.gz; do
+         /usr/share/doc/pumptherm/copyright /usr/share/doc/pumptherm/changelog.gz \
+         /usr/share/doc/pumptherm/operator-guide.md; do
   grep -qxF "$f" "$tmp/files" && echo "ok: holds $f" || { echo "FAIL: $f is not in the package"; fail=1; }
 done
 # Every shipped model and motor of the source tree is in the package.
