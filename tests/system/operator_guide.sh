@@ -17,7 +17,7 @@ fail() {
 uptime_s() { cut -d' ' -f1 /proc/uptime; }
 
 ip link add dev can0 type vcan && ip link set up can0 || fail "cannot create the vcan interface can0"
-cp "$DATA_DIR"/pumptherm_*.deb "$WORK_DIR/"
+cp "$DATA_DIR"/pumptherm_*.deb "$DATA_DIR"/pumptherm-tools_*.deb "$WORK_DIR/"
 guide=$DATA_DIR/operator-guide.md
 [ -f "$guide" ] || fail "no operator-guide.md in $DATA_DIR"
 

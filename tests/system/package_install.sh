@@ -33,11 +33,15 @@ wait_for() {  # wait_for SECONDS COMMAND...
 uptime_s() { cut -d' ' -f1 /proc/uptime; }
 since() { awk -v a="$1" -v b="$(uptime_s)" 'BEGIN { printf "%.1f", b - a }'; }
 
-# 1. apt install ./pumptherm_*.deb, offline.
+# 1. apt install ./pumptherm_*.deb (the daemon) alone, offline: a gateway host needs no tools;
+#    then ./pumptherm-tools_*.deb, which this test uses to make its recording.
 deb=$(ls "$DATA_DIR"/pumptherm_*.deb | head -n 1)
+tools_deb=$(ls "$DATA_DIR"/pumptherm-tools_*.deb | head -n 1)
 [ -n "$deb" ] || fail "no pumptherm_*.deb in $DATA_DIR"
-cp "$deb" "$WORK_DIR/"
+[ -n "$tools_deb" ] || fail "no pumptherm-tools_*.deb in $DATA_DIR"
+cp "$deb" "$tools_deb" "$WORK_DIR/"
 deb=$WORK_DIR/$(basename "$deb")
+tools_deb=$WORK_DIR/$(basename "$tools_deb")
 t0=$(uptime_s)
 timeout 300 apt-get install -y --no-install-recommends "$deb" >"$WORK_DIR/apt.log" 2>&1 ||
   { sed 's/^/  /' "$WORK_DIR/apt.log"; fail "apt-get install $deb"; }
@@ -45,9 +49,16 @@ sed 's/^/  /' "$WORK_DIR/apt.log" | tail -n 6
 echo "$T: apt-get install $(basename "$deb") took $(since "$t0") s (guest time, TCG)"
 dpkg-query -W -f='${Status} ${Version}\n' pumptherm | grep -q '^install ok installed ' ||
   fail "dpkg says: $(dpkg-query -W -f='${Status}' pumptherm)"
-for f in /usr/sbin/pumpthermd /usr/bin/pumptherm /usr/bin/pumptherm-spy /lib/systemd/system/$unit \
-         /etc/pumptherm/pumpthermd.toml.example /usr/share/man/man8/pumpthermd.8.gz; do
+for f in /usr/sbin/pumpthermd /lib/systemd/system/$unit /etc/pumptherm/pumpthermd.toml.example \
+         /usr/share/man/man8/pumpthermd.8.gz /usr/share/doc/pumptherm/operator-guide.md; do
   [ -e "$f" ] || fail "$f is not installed"
+done
+[ ! -e /usr/bin/pumptherm ] || fail "the daemon's package installed /usr/bin/pumptherm (a tool)"
+echo "$T: the daemon's package alone: pumpthermd and its unit, no tools"
+timeout 300 apt-get install -y --no-install-recommends "$tools_deb" >"$WORK_DIR/apt-tools.log" 2>&1 ||
+  { sed 's/^/  /' "$WORK_DIR/apt-tools.log"; fail "apt-get install $tools_deb"; }
+for f in /usr/bin/pumptherm /usr/bin/pumptherm-spy /usr/share/man/man1/pumptherm.1.gz; do
+  [ -e "$f" ] || fail "$f is not installed by pumptherm-tools"
 done
 pumpthermd --version | sed "s/^/$T: /"
 
