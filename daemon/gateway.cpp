@@ -230,6 +230,7 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
   const auto it = routes_.find(RouteKey(iface, tf.frame.extended, tf.frame.id));
   if (it == routes_.end()) {
     ++counters_.rx_unknown_id;
+    WarnUnconfiguredNode(iface, tf);
     return;
   }
   const Route r = it->second;
@@ -272,6 +273,35 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
     io.status_us = tf.time_us;
     pump.OnStatus(tf.time_us, at(MappingInput::kSpeedMechRpm), at(MappingInput::kDriveState),
                   at(MappingInput::kFrameTempDegC), at(MappingInput::kAmbientTempDegC));
+  }
+}
+
+void Gateway::WarnUnconfiguredNode(std::size_t iface, const protocol::TimedFrame& tf) {
+  constexpr std::int64_t kWarnEvery_us = 60'000'000;
+  for (const InputMessage& im : inputs_) {
+    const auto& msg = dbc_.messages[static_cast<std::size_t>(im.message_index)];
+    if (msg.extended != tf.frame.extended || tf.frame.id < msg.id ||
+        tf.frame.id - msg.id >= mapping_.node_id_limit) {
+      continue;
+    }
+    ++counters_.rx_unconfigured_node;
+    const std::uint32_t node = tf.frame.id - msg.id;
+    const std::uint64_t key = (static_cast<std::uint64_t>(iface) << 32) | node;
+    auto [it, first] = unconfigured_warned_us_.try_emplace(key, tf.time_us);
+    if (!first && tf.time_us - it->second < kWarnEvery_us && tf.time_us >= it->second) return;
+    it->second = tf.time_us;
+    std::string silent;
+    for (std::size_t p = 0; p < pumps_.size(); ++p) {
+      if (io_[p].iface != iface || io_[p].inputs_us >= 0 || io_[p].status_us >= 0) continue;
+      silent += fmt::format("{}{} (node_id {})", silent.empty() ? "" : ", ", pumps_[p]->config().name,
+                            pumps_[p]->config().node_id);
+    }
+    const std::string& name = counter_.interfaces()[iface].name;
+    Log(LogLevel::kWarning, "{}: {} frames (ID {:X}) from node ID {}, which no pump on {} has; {}", name,
+        msg.name, tf.frame.id, node, name,
+        silent.empty() ? "every pump configured there is heard from"
+                       : "not heard from yet there: " + silent + " - is its node_id wrong?");
+    return;
   }
 }
 

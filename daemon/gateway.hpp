@@ -5,6 +5,7 @@
 /// recording equal a live run of it (docs/architecture.md, "Data flow of the daemon").
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <string>
 #include <unordered_map>
@@ -37,6 +38,9 @@ class OutputSink {
 /// Gateway-wide counters beyond the per-interface ones.
 struct GatewayCounters {
   std::uint64_t rx_unknown_id = 0;     ///< frames whose ID no configured pump uses
+  /// Of those, frames of a mapped input message for a node ID no pump on that interface has
+  /// (a pump configured with the wrong node_id, or an unconfigured pump); warned about.
+  std::uint64_t rx_unconfigured_node = 0;
   std::uint64_t rx_bad_length = 0;     ///< frames shorter than their message: rejected
   std::uint64_t tx_saturated = 0;      ///< output values clamped to a signal's range
   std::uint64_t lcm_published = 0;
@@ -93,6 +97,10 @@ class Gateway {
   std::vector<std::uint8_t> EncodeHealth(std::int64_t now_us) const;
 
  private:
+  /// Warns (at most once a minute per interface and node ID) about a frame of a mapped input
+  /// message from a node ID that no pump on its interface has, naming the pumps of that
+  /// interface not yet heard from: the likely ones with a wrong node_id.
+  void WarnUnconfiguredNode(std::size_t iface, const protocol::TimedFrame& tf);
   struct InputSignal {
     protocol::MappingInput input;
     int signal_index;
@@ -119,6 +127,7 @@ class Gateway {
     std::vector<OutputSignal> signals;
     bool alarm = false;              // sent at once when the alarm changes
   };
+  std::map<std::uint64_t, std::int64_t> unconfigured_warned_us_;  ///< (iface, node) -> last warning
   struct PumpIo {
     std::size_t iface = 0;           // FrameCounter index
     std::vector<OutputPlan> outputs;

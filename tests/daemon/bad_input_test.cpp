@@ -161,6 +161,7 @@ std::string Frame(std::uint32_t id, const std::string& hex, bool fd = false, boo
     if (v > 0) out += (out.empty() ? "" : ", ") + std::string(name) + " " + std::to_string(v);
   };
   add("rx_unknown_id", gc.rx_unknown_id);
+  add("rx_unconfigured_node", gc.rx_unconfigured_node);
   add("rx_bad_length", gc.rx_bad_length);
   add("rejected_values", pc.rejected_values);
   add("fast_frames", pc.fast_frames);
@@ -275,7 +276,7 @@ std::vector<Row> Catalogue() {
       // --- CAN frames (PUMP_FAST_I of node 1 is 0x101, PUMP_STATUS 0x181, PUMP_CLEAR 0x701) ---
       {"CAN frame", "wrong length", "PUMP_FAST_I with 4 bytes", [] { return Frame(0x101, "00000000"); }, "rx_bad_length 1"},
       {"CAN frame", "unknown", "ID 0x123", [] { return Frame(0x123, "0000000000000000"); }, "rx_unknown_id 1"},
-      {"CAN frame", "unknown", "PUMP_FAST_I of node 2 (not configured)", [] { return Frame(0x102, "0000000000000000"); }, "rx_unknown_id 1"},
+      {"CAN frame", "unknown", "PUMP_FAST_I of node 2 (not configured)", [] { return Frame(0x102, "0000000000000000"); }, "rx_unknown_id 1, rx_unconfigured_node 1"},
       {"CAN frame", "NaN", "PUMP_FAST_I, Id_A not-available (0x8000)", [] { return Frame(0x101, "0080000000000000"); }, "rejected_values 1"},
       {"CAN frame", "huge", "PUMP_FAST_I as a 64-byte CAN FD frame", [] { return Frame(0x101, std::string(128, '0'), true); }, "fast_frames 1"},
       {"CAN frame", "wrong type", "remote frame on 0x101", [] { return Frame(0x101, "", false, true); }, "ignored"},
@@ -321,6 +322,29 @@ TEST(BadInput, EveryRowOfTheCatalogueGivesItsAnswer) {
       std::printf("| %s | %s | %s | %s |\n", r.surface, r.kind, r.input.c_str(), a.c_str());
     }
   }
+}
+
+// A frame of a mapped message from a node ID no pump has: a warning naming the node ID and the
+// pump of that interface not heard from (a wrong node_id), at most once a minute per node.
+TEST(UnconfiguredNode, WarnsOnceAMinuteNamingTheSilentPump) {
+  Gateway g(ParseConfig(kGatewayConfig, std::string(PUMPTHERM_SOURCE_DIR) + "/p.toml"));
+  protocol::TimedFrame tf;
+  tf.frame.id = 0x102;  // PUMP_FAST_I of node 2; tmp1 is node 1 and silent
+  tf.frame.len = 8;
+  testing::internal::CaptureStderr();
+  for (int k = 0; k < 100; ++k) {
+    tf.time_us = 1'700'000'000'000'000 + k * 1'000'000;  // 100 s at 1 Hz
+    g.OnFrame(g.Interface("can0"), tf);
+  }
+  const std::string err = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(g.counters().rx_unconfigured_node, 100u);
+  EXPECT_NE(err.find("can0: PUMP_FAST_I frames (ID 102) from node ID 2, which no pump on can0 has; not "
+                     "heard from yet there: tmp1 (node_id 1) - is its node_id wrong?"),
+            std::string::npos)
+      << err;
+  std::size_t lines = 0;
+  for (std::size_t at = err.find("node ID 2"); at != std::string::npos; at = err.find("node ID 2", at + 1)) ++lines;
+  EXPECT_EQ(lines, 2u) << "one warning at 0 s and one at 60 s:\n" << err;
 }
 
 }  // namespace
