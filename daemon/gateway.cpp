@@ -20,6 +20,39 @@
 namespace pumptherm::daemon {
 namespace {
 
+/// The journal's line for an alarm change: the worst level with its reason, node and value, every
+/// active reason, and which reasons were raised and cleared since `logged_reasons` (the set the
+/// previous line showed), e.g. "alarm trip (estimated_over_temperature, winding, value 121.30);
+/// active: estimated_over_temperature, forecast; raised: estimated_over_temperature".
+std::string AlarmChangeText(const estimators::AlarmState& a, std::uint16_t logged_reasons,
+                            const std::vector<std::string>& node_names) {
+  std::string out = fmt::format("alarm {} ({}", estimators::AlarmLevelName(a.level),
+                                estimators::AlarmReasonName(a.reason));
+  if (a.node >= 0 && static_cast<std::size_t>(a.node) < node_names.size()) {
+    out += ", " + node_names[static_cast<std::size_t>(a.node)];
+  } else if (a.node >= 0 && static_cast<std::size_t>(a.node) == node_names.size()) {
+    out += ", winding_resistance";  // the alarm inputs' last entry: the winding from resistance
+  }
+  if (std::isfinite(a.value)) out += fmt::format(", value {:.2f}", a.value);
+  out += ")";
+  auto list = [](std::uint16_t bits) {
+    std::string s;
+    for (std::size_t r = 1; r < estimators::kAlarmReasonCount; ++r) {
+      if (bits & (1u << r)) {
+        s += (s.empty() ? "" : ", ") + std::string(estimators::AlarmReasonName(static_cast<estimators::AlarmReason>(r)));
+      }
+    }
+    return s;
+  };
+  const std::uint16_t raised = a.active_reasons & static_cast<std::uint16_t>(~logged_reasons);
+  const std::uint16_t cleared = logged_reasons & static_cast<std::uint16_t>(~a.active_reasons);
+  if (a.active_reasons) out += "; active: " + list(a.active_reasons);
+  if (raised) out += "; raised: " + list(raised);
+  if (cleared) out += "; cleared: " + list(cleared);
+  if (a.trip_latched) out += "; trip latched";
+  return out;
+}
+
 using protocol::MappingInput;
 using protocol::MappingOutput;
 
@@ -421,10 +454,9 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
       io.alarm_changes_sent = pump.snapshot().alarm_changes;
       publish_alarm();
       const auto& a = pump.snapshot().alarm;
-      Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning,
-          "pump {}: alarm {} ({}){}", name, estimators::AlarmLevelName(a.level),
-          estimators::AlarmReasonName(a.reason),
-          std::isfinite(a.value) ? fmt::format(", value {:.2f}", a.value) : std::string());
+      Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning, "pump {}: {}",
+          name, AlarmChangeText(a, io.logged_active_reasons, pump.model().StateNames()));
+      io.logged_active_reasons = a.active_reasons;
     }
     if (now_us >= io.next_lcm_us) {
       FillTelemetry(p, io.telemetry_msg);

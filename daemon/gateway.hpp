@@ -141,6 +141,7 @@ class Gateway {
     std::int64_t last_health_us = -1;
     double frame_rate_Hz = 0.0;
     std::int64_t last_clear_us = -1;  // last clear command frame acted on
+    std::uint16_t logged_active_reasons = 0;  // the active reasons the last alarm line showed
     // LCM publishing without allocation in steady state: channel names made once, messages
     // filled in place (their strings and vectors keep their capacity).
     std::string channel_telemetry, channel_temperatures, channel_alarm;

@@ -40,5 +40,11 @@ check() {  # check LEVEL_NAME ALARM_LEVEL DEGC
 }
 check warning 1 100
 check trip 2 120
-grep -q "trip (estimated_over_temperature)" "$tmp/err.txt" || { echo "FAIL: no trip logged"; fail=1; }
+grep -q "alarm trip (estimated_over_temperature" "$tmp/err.txt" || { echo "FAIL: no trip logged"; fail=1; }
+# Every alarm line says what changed: no line repeats the one before it, and each names the
+# reasons raised or cleared (or the latch) besides the active set.
+grep "pump pump3: alarm" "$tmp/err.txt" | sed 's/^/  journal: /'
+dups=$(grep "pump pump3: alarm" "$tmp/err.txt" | uniq -d)
+[[ -z $dups ]] || { echo "FAIL: alarm lines repeated: $dups"; fail=1; }
+grep -q "pump pump3: alarm .*raised: " "$tmp/err.txt" || { echo "FAIL: no alarm line names a raised reason"; fail=1; }
 exit $fail
