@@ -2,7 +2,8 @@
 # Hidden-effect data from `pumptherm plant` (issue 9 item 2): the bundled scenario
 # hidden-frame-mass hides 3 kJ/K on the frame of saheba2010-baseline; the discrepancy workflow,
 # not told about it, must name frame_thermal_mass with an interval holding 3000 J/K and shrink the
-# validation gap. Bad `effects` entries: exit 2 naming line and key.
+# validation gap. The same for guide-pump3 (the operator's guide: a cooling path 1.8 times the
+# model's, named frame_ambient_resistance). Bad `effects` entries: exit 2 naming line and key.
 # Usage: hidden_effect_test.sh <pumptherm>
 set -u
 exe=$1
@@ -25,6 +26,23 @@ g = r["gap"]["validate"]
 before, after = g["before"]["overall"]["rmse_K"], g["after"]["overall"]["rmse_K"]
 assert after < 0.5 * before, (before, after)
 print(f"named frame_thermal_mass: {p['value']:.0f} J/K ({lo:.0f}..{hi:.0f}), validation RMSE {before:.2f} -> {after:.2f} K")
+PY
+
+# The operator's guide's scenario: tmp-generic whose cooling path is 1.8 times its model's.
+"$exe" plant guide-pump3 --out "$tmp/g" -q || fail "plant guide-pump3"
+"$exe" discrepancy --model tmp-generic --train "$tmp/g/train.measured.csv" \
+  --validate "$tmp/g/validate.measured.csv" --out "$tmp/gr" > "$tmp/gout.txt" 2>&1 || { cat "$tmp/gout.txt"; fail "discrepancy (guide)"; }
+cat "$tmp/gout.txt"
+python3 - "$tmp/gr/report.json" <<'PY' || fail "the guide's report does not name the hidden cooling effect"
+import json, sys
+r = json.load(open(sys.argv[1]))
+assert r["verdict"] == "named" and r["effect"] == "frame_ambient_resistance", (r["verdict"], r["effect"])
+p = r["effects"][0]["parameters"][0]
+assert abs(p["value"] - 1.8) < 0.1, p["value"]
+g = r["gap"]["validate"]
+before, after = g["before"]["overall"]["rmse_K"], g["after"]["overall"]["rmse_K"]
+assert after < 0.2 * before, (before, after)
+print(f"guide-pump3: named frame_ambient_resistance x{p['value']:.2f}, validation RMSE {before:.2f} -> {after:.2f} K")
 PY
 
 # Bad effects: unknown name, a sensor effect, a wrong number of values.
