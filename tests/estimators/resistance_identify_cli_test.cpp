@@ -1,6 +1,8 @@
 // `pumptherm identify` run as a process: bad input gives exit code 2 and a message naming the
 // row and column (or line and key); good input gives the documented output columns.
 #include <gtest/gtest.h>
+
+#include <algorithm>
 #include <sys/wait.h>
 
 #include <cmath>
@@ -128,4 +130,17 @@ TEST(IdentifyCli, IdentifiesSimulatedTelemetry) {
 }
 
 }  // namespace
+TEST(IdentifyCli, ShortOptionsAndStandardOutputByDefault) {
+  WriteText(TempPath("short.csv"), std::string(kHeader) + kRow1 + kRow2);
+  const std::string out = TempPath("short.stdout");
+  const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' identify -i '" + TempPath("short.csv") +
+                          "' > '" + out + "' 2>/dev/null";
+  const int status = std::system(cmd.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  const std::string csv = ReadText(out);
+  EXPECT_EQ(csv.rfind("time_s,resistance_ohm", 0), 0u) << csv;
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3) << csv;
+}
+
 }  // namespace pumptherm

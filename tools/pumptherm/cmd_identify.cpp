@@ -82,19 +82,19 @@ const SubcommandRegistrar kRegistrar{
     "identify", "stator resistance, flux and winding temperature from dq telemetry",
     [](CLI::App& app) {
       struct Options {
-        std::string input, output, motor = "han2019-tmp";
+        std::string input, output = "-", motor = "han2019-tmp";
         int block_samples = 100;
         double min_current_A = 0.0;
       };
       auto opt = std::make_shared<Options>();
-      app.add_option("--input", opt->input,
+      app.add_option("--input,-i", opt->input,
                      "CSV with columns time_s, id_A, iq_A, ud_V, uq_V, speed_rpm (mechanical "
                      "r/min), any order; '-' reads standard input")
           ->required();
-      app.add_option("--output", opt->output,
+      app.add_option("--output,-o", opt->output,
                      "CSV written with time_s, resistance_ohm, flux_Wb, winding_degC, status; "
-                     "'-' is standard output")
-          ->required();
+                     "'-' is standard output (the default)")
+          ->capture_default_str();
       app.add_option("--motor", opt->motor,
                      "motor description: a preset (han2019-tmp) or a TOML file")
           ->capture_default_str();
