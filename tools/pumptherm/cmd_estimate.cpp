@@ -9,6 +9,7 @@
 #include "estimators/kalman_virtual_sensor.hpp"
 #include "tools/common/csv.hpp"
 #include "tools/pumptherm/model_files.hpp"
+#include "tools/pumptherm/recording.hpp"
 #include "tools/pumptherm/thermal_columns.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
@@ -26,6 +27,7 @@ struct EstimateOptions {
   std::string columns;  ///< column preset ("" or "paderborn")
   double max_step_s = 0.0;        ///< 0: one step per row
   std::string interpolation = "hold";
+  RecordingSource recording;  ///< --log: the inputs from a candump recording instead of --input
   estimators::VirtualSensorConfig config;
 };
 
@@ -57,7 +59,9 @@ int RunEstimate(EstimateOptions& o) {
     throw InputError(fmt::format("--initial: '{}' is neither 'measured' nor 'first-row'", o.initial));
   }
   try {
-    const CsvTable csv = CsvTable::Read(o.input);
+    if (o.input.empty() == o.recording.log.empty()) throw InputError("give --input CSV or --log RECORDING");
+    const CsvTable csv = o.input.empty() ? CsvTable::Parse(RecordingToCsv(o.recording, nullptr), o.recording.log)
+                                         : CsvTable::Read(o.input);
     auto col = [&](const std::string& standard) { return csv.Column(InputColumn(o.columns, standard)); };
     t = csv.Time();
     speed = col("speed_rpm");
@@ -75,7 +79,7 @@ int RunEstimate(EstimateOptions& o) {
   } catch (const CsvError& e) {
     throw InputError(e.what());
   }
-  if (t.empty()) throw InputError(fmt::format("{}: no data rows", o.input));
+  if (t.empty()) throw InputError(fmt::format("{}: no data rows", o.input.empty() ? o.recording.log : o.input));
   auto inputs = [&](std::size_t k) {
     estimators::ThermalInputs in;
     in.speed_rpm = speed[k];
@@ -166,8 +170,10 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--model,-m", o->model, "Shipped model name or path to a model .toml")->required();
       app.add_option("--input,-i", o->input,
                      "CSV with time_s, speed_rpm, id_A, iq_A, ambient_C (coolant_C if the model has "
-                     "a coolant) and <node>_C for every measured node (empty or nan = not measured)")
-          ->required();
+                     "a coolant) and <node>_C for every measured node (empty or nan = not measured); or --log");
+      AddRecordingOptions(app, o->recording);
+      app.add_option("--motor", o->recording.motor, "with --log: motor preset or file (pole pairs for the speed)")
+          ->capture_default_str();
       app.add_option("--output,-o", o->output,
                      "CSV to write: <node>_C and <node>_sd_K per node, innovations, nis");
       app.add_option("--measure", o->measure, "Measured nodes, comma-separated")->capture_default_str();

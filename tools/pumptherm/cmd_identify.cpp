@@ -14,6 +14,7 @@
 #include "estimators/motor.hpp"
 #include "estimators/resistance_identifier.hpp"
 #include "tools/common/csv.hpp"
+#include "tools/pumptherm/recording.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
 namespace pumptherm::tools {
@@ -39,12 +40,16 @@ est::MotorDescription LoadMotor(const std::string& file_or_preset) {
   }
 }
 
-int Run(const std::string& input, const std::string& output, const std::string& motor_arg,
-        int block_samples, double min_current_A) {
+int Run(const std::string& input, const RecordingSource& recording, const std::string& output,
+        const std::string& motor_arg, int block_samples, double min_current_A) {
   const est::MotorDescription motor = LoadMotor(motor_arg);
   std::vector<double> t, id, iq, ud, uq, rpm;
   try {
-    const CsvTable table = CsvTable::Read(input);
+    if (input.empty() == recording.log.empty()) throw InputError("give --input CSV or --log RECORDING");
+    RecordingSource source = recording;
+    source.motor = motor_arg;
+    const CsvTable table = input.empty() ? CsvTable::Parse(RecordingToCsv(source, nullptr), recording.log)
+                                         : CsvTable::Read(input);
     t = table.Time("time_s");
     id = table.Column("id_A");
     iq = table.Column("iq_A");
@@ -83,14 +88,15 @@ const SubcommandRegistrar kRegistrar{
     [](CLI::App& app) {
       struct Options {
         std::string input, output = "-", motor = "han2019-tmp";
+        RecordingSource recording;
         int block_samples = 100;
         double min_current_A = 0.0;
       };
       auto opt = std::make_shared<Options>();
       app.add_option("--input,-i", opt->input,
                      "CSV with columns time_s, id_A, iq_A, ud_V, uq_V, speed_rpm (mechanical "
-                     "r/min), any order; '-' reads standard input")
-          ->required();
+                     "r/min), any order; '-' reads standard input (or --log)");
+      AddRecordingOptions(app, opt->recording);
       app.add_option("--output,-o", opt->output,
                      "CSV written with time_s, resistance_ohm, flux_Wb, winding_degC, status; "
                      "'-' is standard output (the default)")
@@ -114,7 +120,7 @@ const SubcommandRegistrar kRegistrar{
           "Example:\n"
           "  pumptherm identify --input telemetry.csv --motor han2019-tmp --output rs.csv");
       return [opt]() {
-        return Run(opt->input, opt->output, opt->motor, opt->block_samples, opt->min_current_A);
+        return Run(opt->input, opt->recording, opt->output, opt->motor, opt->block_samples, opt->min_current_A);
       };
     }};
 

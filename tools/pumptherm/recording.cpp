@@ -1,0 +1,216 @@
+#include "tools/pumptherm/recording.hpp"
+
+#include <fmt/core.h>
+
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <sstream>
+#include <vector>
+
+#include "daemon/resources.hpp"
+#include "estimators/motor.hpp"
+#include "protocol/candump_log.hpp"
+#include "protocol/codec.hpp"
+#include "protocol/dbc.hpp"
+#include "protocol/mapping.hpp"
+#include "tools/pumptherm/subcommand.hpp"
+
+namespace pumptherm::tools {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr std::int64_t kPairWindow_us = 50'000;
+constexpr double kRadPerSPerRpm = 2.0 * 3.14159265358979323846 / 60.0;
+constexpr std::uint64_t kWarnedLines = 5;
+
+using protocol::MappingInput;
+
+/// One half of a dq sample: a current frame (a = id, b = iq) or a voltage frame (a = ud, b = uq).
+struct Half {
+  std::int64_t t_us = -1;
+  double a = kNaN, b = kNaN, counter = kNaN;
+};
+
+std::string Load(daemon::ResourceKind kind, const std::string& reference, const char* what) {
+  try {
+    return daemon::ReadTextFile(daemon::ResolveResource(kind, reference));
+  } catch (const std::exception& e) {
+    throw InputError(fmt::format("--{}: {}", what, e.what()));
+  }
+}
+
+estimators::MotorDescription LoadMotor(const std::string& reference) {
+  try {
+    if (!estimators::MotorPresetText(reference).empty()) return estimators::MotorPreset(reference);
+    return estimators::ParseMotorDescription(Load(daemon::ResourceKind::kMotor, reference, "motor"), reference);
+  } catch (const estimators::MotorDescriptionError& e) {
+    throw InputError(e.what());
+  }
+}
+
+/// Decoding state of one pump's telemetry: the latest halves, speed and status values.
+class Assembler {
+ public:
+  /// `status_mapped`: the mapping has the status message's temperatures (rows wait for them).
+  Assembler(int pole_pairs, bool status_mapped, std::ostringstream& csv, RecordingCounts& counts)
+      : pole_pairs_(pole_pairs), status_mapped_(status_mapped), csv_(csv), counts_(counts) {}
+
+  /// `v` holds this frame's mapped inputs (NaN where the frame has none).
+  void OnFrame(std::int64_t t_us, const double* v, bool currents, bool voltages, bool status) {
+    auto at = [&](MappingInput i) { return v[static_cast<std::size_t>(i)]; };
+    if (status) {
+      if (std::isfinite(at(MappingInput::kSpeedMechRpm))) speed_rpm_ = at(MappingInput::kSpeedMechRpm);
+      if (std::isfinite(at(MappingInput::kFrameTempDegC))) frame_C_ = at(MappingInput::kFrameTempDegC);
+      if (std::isfinite(at(MappingInput::kAmbientTempDegC))) ambient_C_ = at(MappingInput::kAmbientTempDegC);
+    }
+    const double counter = at(MappingInput::kRollingCounter);
+    if (currents) {
+      if (std::isfinite(at(MappingInput::kSpeedElecRadPerS))) {
+        speed_rpm_ = at(MappingInput::kSpeedElecRadPerS) / (pole_pairs_ * kRadPerSPerRpm);
+      }
+      if (currents_.t_us >= 0) ++counts_.unpaired;
+      currents_ = Half{t_us, at(MappingInput::kIdA), at(MappingInput::kIqA), counter};
+    }
+    if (voltages) {
+      if (voltages_.t_us >= 0) ++counts_.unpaired;
+      voltages_ = Half{t_us, at(MappingInput::kUdV), at(MappingInput::kUqV), counter};
+    }
+    TryPair();
+  }
+
+ private:
+  void TryPair() {
+    if (currents_.t_us < 0 || voltages_.t_us < 0) return;
+    const bool near = std::abs(currents_.t_us - voltages_.t_us) <= kPairWindow_us;
+    const bool same = currents_.counter == voltages_.counter || std::isnan(currents_.counter) ||
+                      std::isnan(voltages_.counter);
+    if (!near || !same) return;  // the older half waits to be replaced (and counted unpaired)
+    const std::int64_t t = std::max(currents_.t_us, voltages_.t_us);
+    const bool finite = std::isfinite(currents_.a) && std::isfinite(currents_.b) &&
+                        std::isfinite(voltages_.a) && std::isfinite(voltages_.b) && std::isfinite(speed_rpm_);
+    // Rows start once the status frame has given the temperatures, so that every cell is a number.
+    const bool temperatures = !status_mapped_ || (std::isfinite(frame_C_) && std::isfinite(ambient_C_));
+    if (finite && temperatures) {
+      if (counts_.first_us < 0) counts_.first_us = t;
+      // Ten significant digits: a decoded value is raw * factor + offset, whose last binary
+      // digits (21.700000000000003 for 217 * 0.1) are not information; time to the microsecond.
+      csv_ << fmt::format("{:.12g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g}\n",
+                          static_cast<double>(t - counts_.first_us) * 1e-6, currents_.a, currents_.b,
+                          voltages_.a, voltages_.b, speed_rpm_, frame_C_, ambient_C_);
+      ++counts_.rows;
+    }
+    currents_ = Half{};
+    voltages_ = Half{};
+  }
+
+  int pole_pairs_;
+  bool status_mapped_;
+  std::ostringstream& csv_;
+  RecordingCounts& counts_;
+  Half currents_, voltages_;
+  double speed_rpm_ = kNaN, frame_C_ = kNaN, ambient_C_ = kNaN;
+};
+
+}  // namespace
+
+void AddRecordingOptions(CLI::App& app, RecordingSource& s) {
+  app.add_option("--log", s.log, "candump log (-l/-L format) to read the pump's telemetry from ('-' = stdin)");
+  app.add_option("--node-id", s.node_id, "with --log: the pump's node ID (CAN ID = DBC ID + node ID)")
+      ->capture_default_str();
+  app.add_option("--interface", s.interface, "with --log: only frames of this interface (default: any)");
+  app.add_option("--dbc", s.dbc, "with --log: DBC file or shipped name")->capture_default_str();
+  app.add_option("--mapping", s.mapping, "with --log: signal mapping file or shipped name")->capture_default_str();
+}
+
+std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts) {
+  RecordingCounts local;
+  RecordingCounts& counts = out_counts ? *out_counts : local;
+  protocol::Dbc dbc;
+  protocol::SignalMapping mapping;
+  try {
+    dbc = protocol::ParseDbc(Load(daemon::ResourceKind::kDbc, s.dbc, "dbc"), s.dbc);
+    mapping = protocol::ParseMapping(Load(daemon::ResourceKind::kDbc, s.mapping, "mapping"), s.mapping, dbc);
+  } catch (const std::exception& e) {
+    throw InputError(e.what());
+  }
+  if (s.node_id >= mapping.node_id_limit) {
+    throw InputError(fmt::format("--node-id {} is not below the mapping's node_id_limit {}", s.node_id,
+                                 mapping.node_id_limit));
+  }
+  const estimators::MotorDescription motor = LoadMotor(s.motor);
+  const protocol::DbcCodec codec(dbc);
+  // Per DBC message: which inputs it carries (signal index, scale, offset).
+  struct Bound {
+    MappingInput input;
+    int signal;
+    double scale, offset;
+  };
+  std::vector<std::vector<Bound>> bound(dbc.messages.size());
+  for (std::size_t i = 0; i < protocol::kMappingInputCount; ++i) {
+    const auto& ref = mapping.inputs[i];
+    if (ref) {
+      bound[static_cast<std::size_t>(ref->message_index)].push_back(
+          {static_cast<MappingInput>(i), ref->signal_index, ref->scale, ref->offset});
+    }
+  }
+  std::ifstream file;
+  if (s.log != "-") {
+    file.open(s.log);
+    if (!file) throw InputError(fmt::format("--log {}: cannot open", s.log));
+  }
+  std::istream& in = s.log == "-" ? std::cin : file;
+  const std::string where = s.log == "-" ? "<stdin>" : s.log;
+  std::ostringstream csv;
+  csv << "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm,frame_C,ambient_C\n";
+  const bool status_mapped = mapping.input(MappingInput::kFrameTempDegC).has_value() &&
+                             mapping.input(MappingInput::kAmbientTempDegC).has_value();
+  Assembler assembler(motor.pole_pairs, status_mapped, csv, counts);
+  std::vector<double> values(64);
+  std::string line;
+  while (std::getline(in, line)) {
+    ++counts.lines;
+    const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
+    if (p.skip) continue;
+    if (!p.ok) {
+      if (++counts.bad_lines <= kWarnedLines) {
+        fmt::print(stderr, "{}:{}:{}: skipped: {}\n", where, counts.lines, p.column, p.error);
+      }
+      continue;
+    }
+    const protocol::CanFrame& f = p.record.frame;
+    if (f.error || f.remote || f.id < s.node_id) continue;
+    if (!s.interface.empty() && p.record.interface != s.interface) continue;
+    const int m = codec.Find(f.id - s.node_id, f.extended);
+    if (m < 0 || bound[static_cast<std::size_t>(m)].empty()) continue;
+    ++counts.frames;
+    const auto& mc = codec.message(static_cast<std::size_t>(m));
+    if (values.size() < mc.signal_count()) values.resize(mc.signal_count());
+    if (mc.Decode(std::span<const std::uint8_t>(f.data.data(), f.len), values) != protocol::CodecStatus::kOk) {
+      ++counts.undecodable;
+      continue;
+    }
+    double v[protocol::kMappingInputCount];
+    for (double& x : v) x = kNaN;
+    bool currents = false, voltages = false, status = false;
+    for (const Bound& b : bound[static_cast<std::size_t>(m)]) {
+      v[static_cast<std::size_t>(b.input)] = b.scale * values[static_cast<std::size_t>(b.signal)] + b.offset;
+      currents = currents || b.input == MappingInput::kIqA;
+      voltages = voltages || b.input == MappingInput::kUqV;
+      status = status || b.input == MappingInput::kFrameTempDegC || b.input == MappingInput::kSpeedMechRpm;
+    }
+    assembler.OnFrame(p.record.time_us, v, currents, voltages, status);
+  }
+  if (counts.bad_lines > kWarnedLines) {
+    fmt::print(stderr, "{}: {} bad lines skipped in all (the first {} shown)\n", where, counts.bad_lines, kWarnedLines);
+  }
+  if (counts.rows == 0) {
+    throw InputError(fmt::format("{}: no paired current and voltage frames of node ID {}{} ({} lines, {} of its frames)",
+                                 where, s.node_id, s.interface.empty() ? "" : " on " + s.interface,
+                                 counts.lines, counts.frames));
+  }
+  return csv.str();
+}
+
+}  // namespace pumptherm::tools
