@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include "estimators/magnet.hpp"
+
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -20,6 +22,27 @@ constexpr double kForecastLimit_s = 6.0 * 3600.0;
 /// Largest node standard deviation of a converged virtual sensor.
 constexpr double kConvergedSd_K = 5.0;
 
+/// The identifier's settings for this motor: its magnet's coefficient, when the motor file
+/// states one, scales the flux's drift (the identifier's magnet hypotheses).
+estimators::ResistanceIdentifierConfig IdentifierConfig(const estimators::MotorDescription& motor) {
+  estimators::ResistanceIdentifierConfig c;
+  if (motor.magnet.Given()) c.flux_temperature_coefficient_per_K = motor.magnet.flux_temperature_coefficient_per_K;
+  return c;
+}
+
+/// Standard deviation of the identified flux: the mixture covariance of the identifier's
+/// magnet hypotheses (ResistanceIdentifier::p()), Wb.
+double FluxSd_Wb(const estimators::ResistanceIdentifier& identifier) {
+  return std::sqrt(std::max(identifier.p()(estimators::kStateFlux, estimators::kStateFlux), 0.0));
+}
+
+/// Whether the identifier's flux is an estimate: not the nameplate (initialising), not from
+/// an implausible fit or invalid input. While Rs cannot be told apart the flux is tracked.
+bool FluxUsable(estimators::ResistanceStatus s) {
+  return s == estimators::ResistanceStatus::kTracking || s == estimators::ResistanceStatus::kConverging ||
+         s == estimators::ResistanceStatus::kNotIdentifiable;
+}
+
 estimators::VirtualSensorConfig SensorConfig(const PumpConfig& c) {
   estimators::VirtualSensorConfig v;
   v.measured_nodes = {c.measured_node};
@@ -36,7 +59,7 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
       motor_(motor),
       period_s_(thermal_period_s),
       period_us_(static_cast<std::int64_t>(std::llround(thermal_period_s * 1e6))),
-      identifier_(motor, estimators::ResistanceIdentifierConfig{}),
+      identifier_(motor, IdentifierConfig(motor)),
       sensor_(*model_, SensorConfig(config)),
       alarms_([&] {
         // Validate levels against the model before the monitor is built.
@@ -68,6 +91,20 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
             ac, limits, s == config.alarms.levels.end() ? estimators::TemperatureLimits{} : s->second.limits);
       }()) {
   measured_state_ = model_->StateIndex(config_.measured_node);
+  if (!config_.magnet_node.empty()) {
+    magnet_state_ = model_->StateIndex(config_.magnet_node);
+    if (magnet_state_ < 0) {
+      throw std::invalid_argument(fmt::format(
+          "pump '{}' (line {}): magnet_node '{}' is not a node with heat capacity of model '{}'",
+          config_.name, config_.line, config_.magnet_node, model_->Name()));
+    }
+    if (!motor_.magnet.Given()) {
+      throw std::invalid_argument(fmt::format(
+          "pump '{}' (line {}): magnet_node '{}' is set but motor '{}' states no [magnet] table "
+          "(t0_degC, flux_temperature_coefficient_per_K) to turn the flux into a temperature",
+          config_.name, config_.line, config_.magnet_node, motor_.name));
+    }
+  }
   const int n = model_->StateCount();
   snapshot_.node_degC.assign(static_cast<std::size_t>(n), kNaN);
   snapshot_.node_sd_K.assign(static_cast<std::size_t>(n), kNaN);
@@ -145,6 +182,10 @@ void Pump::Identify(std::int64_t t_us) {
   last_sample_us_ = t_us;
   identifier_.Update(s, dt_s);
   ++counters_.samples;
+  if (identifier_.blocks() != identifier_blocks_) {
+    identifier_blocks_ = identifier_.blocks();
+    flux_block_us_ = t_us;
+  }
 }
 
 void Pump::OnStatus(std::int64_t t_us, double speed_rpm, double /*drive_state*/,
@@ -208,9 +249,10 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const bool tracking = r.status == estimators::ResistanceStatus::kTracking;
   const double winding_res = tracking ? r.winding_degC : kNaN;
   measurement_(0) = measured;  // a member: a temporary VectorXd would allocate every step
+  UpdateMagnetTemperature(end_us);
   const estimators::KalmanUpdateReport* report = nullptr;
   try {
-    report = &sensor_.Step(in, period_s_, measurement_, config_.fuse_winding ? winding_res : kNaN);
+    report = &sensor_.Step(in, period_s_, measurement_, ExtraMeasurements(winding_res));
   } catch (const std::exception&) {
     ++counters_.rejected_values;
     return;
@@ -280,6 +322,28 @@ void Pump::ThermalStep(std::int64_t end_us) {
       now.active_reasons != before.active_reasons || now.trip_latched != before.trip_latched) {
     ++snapshot_.alarm_changes;
   }
+}
+
+void Pump::UpdateMagnetTemperature(std::int64_t end_us) {
+  const estimators::ResistanceEstimate& r = identifier_.estimate();
+  const double age_s = static_cast<double>(end_us - flux_block_us_) * 1e-6;
+  const bool fresh = flux_block_us_ >= 0 && age_s <= config_.alarms.monitor.stale_after_s + period_s_;
+  snapshot_.flux_sd_Wb = FluxSd_Wb(identifier_);
+  const estimators::MagnetTemperature m =
+      fresh && FluxUsable(r.status) ? estimators::MagnetTemperatureFromFlux(motor_, r.flux_Wb, snapshot_.flux_sd_Wb)
+                                    : estimators::MagnetTemperature{kNaN, kNaN};
+  snapshot_.magnet_flux_degC = m.degC;
+  snapshot_.magnet_flux_sd_K = m.sd_K;
+}
+
+const estimators::NodeMeasurements& Pump::ExtraMeasurements(double winding_res_degC) {
+  extra_.Clear();
+  if (config_.fuse_winding) extra_.Add(estimators::kWindingWeightsRow, winding_res_degC, config_.winding_sd_K);
+  if (magnet_state_ >= 0) {
+    extra_.Add(magnet_state_, snapshot_.magnet_flux_degC,
+               std::max(snapshot_.magnet_flux_sd_K, config_.magnet_min_sd_K));
+  }
+  return extra_;
 }
 
 double Pump::TimeToTrip_s(const estimators::ThermalInputs& in, int* node) {

@@ -50,6 +50,11 @@ struct PumpSnapshot {
   std::vector<double> node_sd_K;
   estimators::ResistanceEstimate resistance;
   double winding_resistance_degC = kNaN;  ///< NaN unless the identifier is tracking
+  /// Magnet temperature from the identified flux (estimators/magnet.hpp) and its sd: NaN
+  /// unless the motor states a magnet law and the flux is fresh and usable (FluxUsable()).
+  double magnet_flux_degC = kNaN;
+  double magnet_flux_sd_K = kNaN;
+  double flux_sd_Wb = kNaN;               ///< sd of the identified flux (mixture covariance)
   double frame_measured_degC = kNaN;
   double ambient_degC = kNaN;
   double speed_rpm = kNaN;
@@ -125,6 +130,10 @@ class Pump {
 
  private:
   void ThermalStep(std::int64_t step_end_us);
+  /// The magnet temperature from the identifier's flux into the snapshot (NaN when unusable).
+  void UpdateMagnetTemperature(std::int64_t step_end_us);
+  /// This step's extra filter measurements: the winding from resistance, the magnet from flux.
+  const estimators::NodeMeasurements& ExtraMeasurements(double winding_res_degC);
   double TimeToTrip_s(const estimators::ThermalInputs& in, int* node);
   void Identify(std::int64_t t_us);
 
@@ -137,6 +146,10 @@ class Pump {
   estimators::VirtualThermalSensor sensor_;
   estimators::AlarmMonitor alarms_;
   int measured_state_ = -1;
+  int magnet_state_ = -1;                // state the magnet temperature is fused into (-1: none)
+  std::uint64_t identifier_blocks_ = 0;  // block updates seen, to time the flux's freshness
+  std::int64_t flux_block_us_ = -1;      // time of the identifier's last block update
+  estimators::NodeMeasurements extra_;
   std::vector<int> level_states_;        // state index of each alarm node (n states + winding)
   PumpCounters counters_;
   PumpSnapshot snapshot_;
