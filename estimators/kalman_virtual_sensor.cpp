@@ -55,11 +55,13 @@ bool VirtualThermalSensor::Uses(const NodeMeasurement& e) const {
         "virtual sensor: extra measurement of state {}, which model '{}' (with {} states) lacks",
         e.state, model_.Name(), model_.StateCount()));
   }
-  if (!(e.sd_K > 0.0) || !std::isfinite(e.sd_K)) {
+  if (!(e.sd_K > 0.0) || !std::isfinite(e.sd_K) || !std::isfinite(e.winding_gain)) {
     throw std::invalid_argument(fmt::format(
-        "virtual sensor: extra measurement of state {} with sd {} K (must be positive)", e.state, e.sd_K));
+        "virtual sensor: extra measurement of state {} with sd {} K (must be positive) and winding "
+        "gain {} (must be finite)", e.state, e.sd_K, e.winding_gain));
   }
-  return e.state != kWindingWeightsRow || model_.WindingWeights().sum() > 0.0;
+  const bool reads_winding = e.state == kWindingWeightsRow || e.winding_gain != 0.0;
+  return !reads_winding || model_.WindingWeights().sum() > 0.0;
 }
 
 const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs, double dt_s,
@@ -112,7 +114,8 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
     if (e.state == kWindingWeightsRow) {
       c_.row(row) = model_.WindingWeights().transpose();
     } else {
-      c_(row, e.state) = 1.0;
+      if (e.winding_gain != 0.0) c_.row(row) = e.winding_gain * model_.WindingWeights().transpose();
+      c_(row, e.state) += 1.0;
     }
     y_(row) = e.value_degC;
     sm_(row, row) = e.sd_K * e.sd_K;

@@ -27,11 +27,14 @@ namespace pumptherm::estimators {
 inline constexpr int kWindingWeightsRow = -1;
 
 /// One extra measurement of one step: a temperature of one node (or of the winding weights)
-/// with its own standard deviation.
+/// with its own standard deviation. With a winding_gain g the row reads the node plus g times
+/// the winding temperature (ThermalModel::WindingWeights): the back-EMF seen through an
+/// identified line uq = Rs iq + w psi_f depends on the magnet and, through Rs, on the winding.
 struct NodeMeasurement {
   int state = kWindingWeightsRow;  ///< state index, or kWindingWeightsRow
   double value_degC = std::numeric_limits<double>::quiet_NaN();  ///< NaN = not measured
   double sd_K = std::numeric_limits<double>::quiet_NaN();        ///< > 0 when value is finite
+  double winding_gain = 0.0;       ///< g above (a node row only), dimensionless
 };
 
 /// A small fixed-capacity list of extra measurements: no allocation when filled every step.
@@ -39,9 +42,9 @@ class NodeMeasurements {
  public:
   static constexpr int kCapacity = 4;
   /// Appends one measurement. Returns false (and drops it) when the list is full.
-  bool Add(int state, double value_degC, double sd_K) noexcept {
+  bool Add(int state, double value_degC, double sd_K, double winding_gain = 0.0) noexcept {
     if (size_ >= kCapacity) return false;
-    items_[static_cast<std::size_t>(size_++)] = NodeMeasurement{state, value_degC, sd_K};
+    items_[static_cast<std::size_t>(size_++)] = NodeMeasurement{state, value_degC, sd_K, winding_gain};
     return true;
   }
   void Clear() noexcept { size_ = 0; }
@@ -95,8 +98,9 @@ class VirtualThermalSensor {
   /// Returns the update's report. No allocation once the operating point and the count of
   /// valid measurements are steady. Throws std::domain_error for non-finite inputs (from the
   /// model) or dt_s <= 0; std::invalid_argument for an extra measurement of a state that does
-  /// not exist or with a finite value and an sd that is not positive and finite. An extra
-  /// measurement of the winding weights is skipped when the model has no winding.
+  /// not exist or with a finite value and an sd that is not positive and finite or a
+  /// non-finite winding gain. An extra measurement that reads the winding weights (its row, or
+  /// a non-zero winding gain) is skipped when the model has no winding.
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s,
                                  const Eigen::VectorXd& measured_degC,
                                  const NodeMeasurements& extra);

@@ -162,6 +162,21 @@ TEST(VirtualThermalSensor, ExtraNodeMeasurementsEnterWithTheirOwnVariance) {
   bad_sd.Add(rotor, 40.0, 0.0);
   EXPECT_THROW(precise.Step(in, 1.0, frame, bad_state), std::invalid_argument);
   EXPECT_THROW(precise.Step(in, 1.0, frame, bad_sd), std::invalid_argument);
+  // A row with a winding gain g reads rotor + g winding: its innovation is
+  // y - (x_rotor + g W.x) of the prediction, which a filter without measurements shows.
+  pe::VirtualThermalSensor coupled_vts(improved, {}), predicted(improved, {});
+  coupled_vts.Initialise(Eigen::VectorXd::Constant(7, 30.0));
+  predicted.Initialise(Eigen::VectorXd::Constant(7, 30.0));
+  const Eigen::VectorXd nothing = Eigen::VectorXd::Constant(1, std::nan(""));
+  pe::NodeMeasurements coupled;
+  coupled.Add(rotor, 50.0, 1.0, 0.5);
+  const double nu = coupled_vts.Step(in, 1.0, nothing, coupled).innovation(0);
+  EXPECT_EQ(predicted.Step(in, 1.0, nothing, pe::NodeMeasurements{}).measurements, 0);
+  const Eigen::VectorXd& xp = predicted.Estimate_degC();
+  EXPECT_NEAR(nu, 50.0 - (xp(rotor) + 0.5 * improved.WindingWeights().dot(xp)), 1e-9);
+  pe::NodeMeasurements bad_gain;
+  bad_gain.Add(rotor, 40.0, 1.0, std::nan(""));
+  EXPECT_THROW(precise.Step(in, 1.0, frame, bad_gain), std::invalid_argument);
   // The list holds kCapacity entries and refuses more.
   pe::NodeMeasurements full;
   for (int i = 0; i < pe::NodeMeasurements::kCapacity; ++i) EXPECT_TRUE(full.Add(rotor, 40.0, 1.0));

@@ -32,7 +32,7 @@ struct PlotOptions {
   std::vector<std::string> labels;
   std::vector<std::string> nodes;
   std::vector<std::string> extras;  ///< estimate columns drawn as points: COLUMN or COLUMN=NODE
-  bool bands = true;                ///< +-2 sd bands from the estimate's <node>_sd_K
+  bool no_bands = false;            ///< no +-2 sd bands from the estimate's <node>_sd_K
   std::string out;
   std::string title;
   std::string gnuplot = "gnuplot";
@@ -272,7 +272,7 @@ int RunPlot(const PlotOptions& o) {
       }
     }
     if (s.estimate) {
-      if (o.bands) AddBands(*s.estimate, nodes, dir / fmt::format("p{}_band.dat", i), lines);
+      if (!o.no_bands) AddBands(*s.estimate, nodes, dir / fmt::format("p{}_band.dat", i), lines);
       add_table(*s.estimate, o.estimate_name, "2");
       AddExtras(*s.estimate, extras, dir / fmt::format("p{}_extra.dat", i), lines);
     }
@@ -394,7 +394,7 @@ const SubcommandRegistrar kRegistrar{
                      "Estimate columns drawn as points, COLUMN or COLUMN=NODE (in that node's colour), "
                      "e.g. winding_resistance_C=winding,magnet_flux_C=rotor")
           ->delimiter(',');
-      app.add_flag("!--no-bands", o->bands, "Do not draw the +-2 sd bands of the estimate's <node>_sd_K");
+      app.add_flag("--no-bands", o->no_bands, "Do not draw the +-2 sd bands of the estimate's <node>_sd_K");
       app.add_option("--warning-C", o->warning_degC, "Warning level, degC: drawn, and its true crossing marked");
       app.add_option("--trip-C", o->trip_degC, "Trip level, degC: drawn, and its true crossing marked");
       app.add_option("--level-node", o->level_node, "Node whose truth is checked against the levels (default: the first of --nodes)");
