@@ -295,6 +295,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.measured_node = r.String("measured_node", &pc.measured_node);
       pc.fuse_winding = r.Bool("fuse_winding", pc.fuse_winding);
       pc.winding_sd_K = r.Number("winding_sd_K", pc.winding_sd_K, 0.01, 100.0);
+      pc.magnet_node = r.String("magnet_node", &pc.magnet_node);
+      pc.magnet_min_sd_K = r.Number("magnet_min_sd_K", pc.magnet_min_sd_K, 0.01, 100.0);
       pc.alarms = config.alarms;
       if (const toml::table* at = r.Table("alarms")) {
         TableReader ar(*at, r.Join("alarms"), source);

@@ -91,6 +91,12 @@ struct PumpConfig {
   std::string measured_node = "frame";    ///< the node the frame sensor measures
   bool fuse_winding = true;               ///< feed the resistance-based winding temperature
   double winding_sd_K = 3.0;              ///< its standard deviation in the filter
+  /// Node the magnet temperature from the flux is fused into (empty: published, not fused).
+  std::string magnet_node;
+  /// Least standard deviation of the magnet temperature from the flux, K, in the filter and as
+  /// published: the identifier's covariance sees its noise, not the nameplate flux's error or
+  /// the inverter's voltage error.
+  double magnet_min_sd_K = 3.0;
   AlarmsConfig alarms;                    ///< the gateway's [alarms] with this pump's overrides
   int line = 0;                           ///< line of the [[pump]] table
 };

@@ -345,6 +345,7 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output) const {
                      s.resistance.status != estimators::ResistanceStatus::kInvalidInput;
   switch (output) {
     case MappingOutput::kWindingResTempDegC: return s.winding_resistance_degC;
+    case MappingOutput::kMagnetFluxTempDegC: return s.magnet_flux_degC;
     case MappingOutput::kRsOhm: return ident ? s.resistance.resistance_ohm : kNaN;
     case MappingOutput::kFluxWb: return ident ? s.resistance.flux_Wb : kNaN;
     case MappingOutput::kRsStatus: return static_cast<double>(s.resistance.status);
@@ -510,7 +511,9 @@ void Gateway::FillTemperatures(const Pump& pump, pumptherm::temperatures_t& m) c
   m.resistance_ohm = ident ? r.resistance_ohm : kNaN;
   m.resistance_sd_ohm = ident ? r.resistance_sigma_ohm : kNaN;
   m.flux_Wb = ident ? r.flux_Wb : kNaN;
-  m.flux_sd_Wb = kNaN;
+  m.flux_sd_Wb = ident ? s.flux_sd_Wb : kNaN;
+  m.magnet_flux_degC = s.magnet_flux_degC;
+  m.magnet_flux_sd_K = s.magnet_flux_sd_K;
   m.resistance_winding_degC = s.winding_resistance_degC;
   // Standard deviation of eq. 3 applied to the resistance: sd_R / (R0 alpha).
   const auto& law = pump.motor().copper;

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include "estimators/magnet.hpp"
+
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -20,6 +22,27 @@ constexpr double kForecastLimit_s = 6.0 * 3600.0;
 /// Largest node standard deviation of a converged virtual sensor.
 constexpr double kConvergedSd_K = 5.0;
 
+/// The identifier's settings for this motor: its magnet's coefficient, when the motor file
+/// states one, scales the flux's drift (the identifier's magnet hypotheses).
+estimators::ResistanceIdentifierConfig IdentifierConfig(const estimators::MotorDescription& motor) {
+  estimators::ResistanceIdentifierConfig c;
+  if (motor.magnet.Given()) c.flux_temperature_coefficient_per_K = motor.magnet.flux_temperature_coefficient_per_K;
+  return c;
+}
+
+/// Standard deviation of the identified flux: the mixture covariance of the identifier's
+/// magnet hypotheses (ResistanceIdentifier::p()), Wb.
+double FluxSd_Wb(const estimators::ResistanceIdentifier& identifier) {
+  return std::sqrt(std::max(identifier.p()(estimators::kStateFlux, estimators::kStateFlux), 0.0));
+}
+
+/// Whether the identifier's flux is an estimate: not the nameplate (initialising), not from
+/// an implausible fit or invalid input. While Rs cannot be told apart the flux is tracked.
+bool FluxUsable(estimators::ResistanceStatus s) {
+  return s == estimators::ResistanceStatus::kTracking || s == estimators::ResistanceStatus::kConverging ||
+         s == estimators::ResistanceStatus::kNotIdentifiable;
+}
+
 estimators::VirtualSensorConfig SensorConfig(const PumpConfig& c) {
   estimators::VirtualSensorConfig v;
   v.measured_nodes = {c.measured_node};
@@ -36,7 +59,7 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
       motor_(motor),
       period_s_(thermal_period_s),
       period_us_(static_cast<std::int64_t>(std::llround(thermal_period_s * 1e6))),
-      identifier_(motor, estimators::ResistanceIdentifierConfig{}),
+      identifier_(motor, IdentifierConfig(motor)),
       sensor_(*model_, SensorConfig(config)),
       alarms_([&] {
         // Validate levels against the model before the monitor is built.
@@ -68,6 +91,20 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
             ac, limits, s == config.alarms.levels.end() ? estimators::TemperatureLimits{} : s->second.limits);
       }()) {
   measured_state_ = model_->StateIndex(config_.measured_node);
+  if (!config_.magnet_node.empty()) {
+    magnet_state_ = model_->StateIndex(config_.magnet_node);
+    if (magnet_state_ < 0) {
+      throw std::invalid_argument(fmt::format(
+          "pump '{}' (line {}): magnet_node '{}' is not a node with heat capacity of model '{}'",
+          config_.name, config_.line, config_.magnet_node, model_->Name()));
+    }
+    if (!motor_.magnet.Given()) {
+      throw std::invalid_argument(fmt::format(
+          "pump '{}' (line {}): magnet_node '{}' is set but motor '{}' states no [magnet] table "
+          "(t0_degC, flux_temperature_coefficient_per_K) to turn the flux into a temperature",
+          config_.name, config_.line, config_.magnet_node, motor_.name));
+    }
+  }
   const int n = model_->StateCount();
   snapshot_.node_degC.assign(static_cast<std::size_t>(n), kNaN);
   snapshot_.node_sd_K.assign(static_cast<std::size_t>(n), kNaN);
@@ -100,6 +137,7 @@ void Pump::OnCurrents(std::int64_t t_us, double id_A, double iq_A, double w_e, d
   if (std::isfinite(speed)) {
     sum_id2_ += id_A * id_A;
     sum_iq2_ += iq_A * iq_A;
+    sum_iq_ += iq_A;
     sum_speed_ += speed;
     ++n_inputs_;
   }
@@ -145,6 +183,10 @@ void Pump::Identify(std::int64_t t_us) {
   last_sample_us_ = t_us;
   identifier_.Update(s, dt_s);
   ++counters_.samples;
+  if (identifier_.blocks() != identifier_blocks_) {
+    identifier_blocks_ = identifier_.blocks();
+    flux_block_us_ = t_us;
+  }
 }
 
 void Pump::OnStatus(std::int64_t t_us, double speed_rpm, double /*drive_state*/,
@@ -179,12 +221,14 @@ bool Pump::Advance(std::int64_t t_us) {
 
 void Pump::ThermalStep(std::int64_t end_us) {
   estimators::ThermalInputs in = held_inputs_;
+  double mean_iq_A = kNaN;
   if (n_inputs_ > 0) {
     in.id_A = std::sqrt(sum_id2_ / n_inputs_);
     in.iq_A = std::sqrt(sum_iq2_ / n_inputs_);
     in.speed_rpm = sum_speed_ / n_inputs_;
+    mean_iq_A = sum_iq_ / n_inputs_;
     have_inputs_ = true;
-    sum_id2_ = sum_iq2_ = sum_speed_ = 0.0;
+    sum_id2_ = sum_iq2_ = sum_speed_ = sum_iq_ = 0.0;
     n_inputs_ = 0;
   } else if (!have_inputs_ && std::isfinite(speed_rpm_)) {
     // Status frames but no fast telemetry: the speed is known, the currents are not (taken 0).
@@ -208,9 +252,10 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const bool tracking = r.status == estimators::ResistanceStatus::kTracking;
   const double winding_res = tracking ? r.winding_degC : kNaN;
   measurement_(0) = measured;  // a member: a temporary VectorXd would allocate every step
+  BackEmfMeasurement(end_us, mean_iq_A, in.speed_rpm * motor_.pole_pairs * kRadPerSPerRpm);
   const estimators::KalmanUpdateReport* report = nullptr;
   try {
-    report = &sensor_.Step(in, period_s_, measurement_, config_.fuse_winding ? winding_res : kNaN);
+    report = &sensor_.Step(in, period_s_, measurement_, ExtraMeasurements(winding_res));
   } catch (const std::exception&) {
     ++counters_.rejected_values;
     return;
@@ -241,6 +286,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
   snapshot_.initialised = !diverged;
   snapshot_.resistance = r;
   snapshot_.winding_resistance_degC = winding_res;
+  PublishMagnetTemperature();
   snapshot_.frame_measured_degC = measured;
   snapshot_.ambient_degC = in.ambient_degC;
   snapshot_.speed_rpm = in.speed_rpm;
@@ -280,6 +326,67 @@ void Pump::ThermalStep(std::int64_t end_us) {
       now.active_reasons != before.active_reasons || now.trip_latched != before.trip_latched) {
     ++snapshot_.alarm_changes;
   }
+}
+
+// The identifier fits the line uq/w = psi_f + Rs iq/w (Han 2019 eq. 6 with id = 0). Between
+// load changes it cannot split the two terms (docs/resistance-identification.md): while it holds
+// Rs and the winding heats, psi_f absorbs the resistive drop (measured on the demo: up to 15 K of
+// magnet temperature). Their sum at the present iq, E = psi_f + Rs iq/w, is what it sees well.
+// With the copper law R = R0 (1 + alpha (Tw - T0)) (Han 2019 eq. 2) and the magnet law
+// psi = psi0 (1 + beta (Tm - T0m)) (estimators/magnet.hpp), E is linear in both temperatures:
+//   z = T0m + (E - psi0 - R0 iq/w) / (psi0 beta) + g T0 = Tm + g Tw,  g = R0 alpha iq / (w psi0 beta),
+// a measurement of the magnet node plus g times the winding that the filter takes as one row.
+// Its sd is E's (from the identifier's covariance of [Rs, psi_f]) over psi0 |beta|.
+void Pump::BackEmfMeasurement(std::int64_t end_us, double iq_A, double w) {
+  magnet_z_degC_ = kNaN;
+  const estimators::ResistanceEstimate& r = identifier_.estimate();
+  const double age_s = static_cast<double>(end_us - flux_block_us_) * 1e-6;
+  const bool fresh = flux_block_us_ >= 0 && age_s <= config_.alarms.monitor.stale_after_s + period_s_;
+  // Below a tenth of rated speed the back-EMF is too small to tell the magnet's 0.1 %/K.
+  const double w_min = 0.1 * estimators::ElectricalSpeed_rad_per_s(motor_, motor_.rated_speed_rpm);
+  if (!motor_.magnet.Given() || !fresh || !FluxUsable(r.status) || !std::isfinite(iq_A) ||
+      !(std::abs(w) >= w_min)) {
+    return;
+  }
+  const Eigen::Matrix4d& p = identifier_.p();
+  const double u = iq_A / w;  // s A / rad: the resistance's weight in E
+  const double var_e = p(estimators::kStateFlux, estimators::kStateFlux) +
+                       u * u * p(estimators::kStateResistance, estimators::kStateResistance) +
+                       2.0 * u * p(estimators::kStateResistance, estimators::kStateFlux);
+  const double e = r.flux_Wb + r.resistance_ohm * u;
+  const double psi0_beta = motor_.flux_Wb * motor_.magnet.flux_temperature_coefficient_per_K;
+  const auto& cu = motor_.copper;
+  // A model without a winding cannot take the Rs term: then the flux alone (g = 0).
+  const bool winding = model_->WindingWeights().sum() > 0.0;
+  magnet_gain_ = winding ? cu.r0_ohm * cu.alpha_per_K * u / psi0_beta : 0.0;
+  const double drop = winding ? cu.r0_ohm * u : r.resistance_ohm * u;
+  magnet_z_degC_ = motor_.magnet.t0_degC + (e - drop - motor_.flux_Wb) / psi0_beta + magnet_gain_ * cu.t0_degC;
+  magnet_z_sd_K_ = std::sqrt(std::max(var_e, 0.0)) / std::abs(psi0_beta);
+}
+
+void Pump::PublishMagnetTemperature() {
+  snapshot_.flux_sd_Wb = FluxSd_Wb(identifier_);
+  snapshot_.magnet_flux_degC = snapshot_.magnet_flux_sd_K = kNaN;
+  if (!std::isfinite(magnet_z_degC_) || !snapshot_.initialised) return;
+  // T_magnet = z - g T_winding at the filter's winding estimate, var = var_z + g^2 w^T S w,
+  // with z's sd at least magnet_min_sd_K as in the filter (the identifier's covariance sees
+  // its noise, not the nameplate's or the inverter's errors).
+  const Eigen::VectorXd& w = model_->WindingWeights();
+  winding_cov_.noalias() = sensor_.Covariance_K2() * w;
+  const double winding_degC = w.dot(sensor_.Estimate_degC());
+  const double z_sd_K = std::max(magnet_z_sd_K_, config_.magnet_min_sd_K);
+  snapshot_.magnet_flux_degC = magnet_z_degC_ - magnet_gain_ * winding_degC;
+  snapshot_.magnet_flux_sd_K =
+      std::sqrt(z_sd_K * z_sd_K + magnet_gain_ * magnet_gain_ * std::max(w.dot(winding_cov_), 0.0));
+}
+
+const estimators::NodeMeasurements& Pump::ExtraMeasurements(double winding_res_degC) {
+  extra_.Clear();
+  if (config_.fuse_winding) extra_.Add(estimators::kWindingWeightsRow, winding_res_degC, config_.winding_sd_K);
+  if (magnet_state_ >= 0 && std::isfinite(magnet_z_degC_)) {
+    extra_.Add(magnet_state_, magnet_z_degC_, std::max(magnet_z_sd_K_, config_.magnet_min_sd_K), magnet_gain_);
+  }
+  return extra_;
 }
 
 double Pump::TimeToTrip_s(const estimators::ThermalInputs& in, int* node) {

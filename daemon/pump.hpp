@@ -50,6 +50,12 @@ struct PumpSnapshot {
   std::vector<double> node_sd_K;
   estimators::ResistanceEstimate resistance;
   double winding_resistance_degC = kNaN;  ///< NaN unless the identifier is tracking
+  /// Magnet temperature from the identified back-EMF (Pump::BackEmfMeasurement) at the
+  /// filter's winding temperature, and its sd: NaN unless the motor states a magnet law and
+  /// the identification is fresh, usable and at speed.
+  double magnet_flux_degC = kNaN;
+  double magnet_flux_sd_K = kNaN;
+  double flux_sd_Wb = kNaN;               ///< sd of the identified flux (mixture covariance)
   double frame_measured_degC = kNaN;
   double ambient_degC = kNaN;
   double speed_rpm = kNaN;
@@ -125,6 +131,13 @@ class Pump {
 
  private:
   void ThermalStep(std::int64_t step_end_us);
+  /// This step's magnet measurement from the identifier's line at the period's mean iq and
+  /// electrical speed `w_rad_per_s` (NaN value when unusable); see pump.cpp.
+  void BackEmfMeasurement(std::int64_t step_end_us, double iq_A, double w_rad_per_s);
+  /// The magnet temperature at the filter's (updated) winding estimate into the snapshot.
+  void PublishMagnetTemperature();
+  /// This step's extra filter measurements: the winding from resistance, the magnet from flux.
+  const estimators::NodeMeasurements& ExtraMeasurements(double winding_res_degC);
   double TimeToTrip_s(const estimators::ThermalInputs& in, int* node);
   void Identify(std::int64_t t_us);
 
@@ -137,6 +150,13 @@ class Pump {
   estimators::VirtualThermalSensor sensor_;
   estimators::AlarmMonitor alarms_;
   int measured_state_ = -1;
+  int magnet_state_ = -1;                // state the magnet temperature is fused into (-1: none)
+  std::uint64_t identifier_blocks_ = 0;  // block updates seen, to time the flux's freshness
+  std::int64_t flux_block_us_ = -1;      // time of the identifier's last block update
+  estimators::NodeMeasurements extra_;
+  // This step's back-EMF measurement: z = T_magnet + gain T_winding, sd_K (NaN z: none).
+  double magnet_z_degC_ = kNaN, magnet_gain_ = 0.0, magnet_z_sd_K_ = kNaN;
+  Eigen::VectorXd winding_cov_;          // S w, for the winding estimate's variance
   std::vector<int> level_states_;        // state index of each alarm node (n states + winding)
   PumpCounters counters_;
   PumpSnapshot snapshot_;
@@ -160,7 +180,7 @@ class Pump {
   std::int64_t last_frame_us_ = -1;
 
   // Inputs averaged over the current thermal period.
-  double sum_id2_ = 0.0, sum_iq2_ = 0.0, sum_speed_ = 0.0;
+  double sum_id2_ = 0.0, sum_iq2_ = 0.0, sum_speed_ = 0.0, sum_iq_ = 0.0;
   int n_inputs_ = 0;
   estimators::ThermalInputs held_inputs_;
   bool have_inputs_ = false;

@@ -2,6 +2,7 @@
 
 #include <fmt/core.h>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -42,8 +43,43 @@ void VirtualThermalSensor::Initialise(const Eigen::VectorXd& x0_degC) {
 const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs, double dt_s,
                                                      const Eigen::VectorXd& measured_degC,
                                                      double winding_degC) {
+  winding_only_.Clear();
+  winding_only_.Add(kWindingWeightsRow, winding_degC, config_.winding_measurement_sd_K);
+  return Step(inputs, dt_s, measured_degC, winding_only_);
+}
+
+bool VirtualThermalSensor::Uses(const NodeMeasurement& e) const {
+  if (!std::isfinite(e.value_degC)) return false;
+  if (e.state != kWindingWeightsRow && (e.state < 0 || e.state >= model_.StateCount())) {
+    throw std::invalid_argument(fmt::format(
+        "virtual sensor: extra measurement of state {}, which model '{}' (with {} states) lacks",
+        e.state, model_.Name(), model_.StateCount()));
+  }
+  if (!(e.sd_K > 0.0) || !std::isfinite(e.sd_K) || !std::isfinite(e.winding_gain)) {
+    throw std::invalid_argument(fmt::format(
+        "virtual sensor: extra measurement of state {} with sd {} K (must be positive) and winding "
+        "gain {} (must be finite)", e.state, e.sd_K, e.winding_gain));
+  }
+  const bool reads_winding = e.state == kWindingWeightsRow || e.winding_gain != 0.0;
+  return !reads_winding || model_.WindingWeights().sum() > 0.0;
+}
+
+const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs, double dt_s,
+                                                     const Eigen::VectorXd& measured_degC,
+                                                     const NodeMeasurements& extra) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
     throw std::domain_error("virtual sensor: the period must be positive and finite");
+  }
+  // Counted (and checked) before the time update: a refused step changes nothing.
+  const int n = model_.StateCount();
+  const Eigen::Index sensors =
+      std::min(measured_degC.size(), static_cast<Eigen::Index>(measured_states_.size()));
+  int m = 0;
+  for (Eigen::Index i = 0; i < sensors; ++i) {
+    if (std::isfinite(measured_degC(i))) ++m;
+  }
+  for (int j = 0; j < extra.size(); ++j) {
+    if (Uses(extra[j])) ++m;
   }
   // Terms that read node temperatures are evaluated at the current estimate.
   model_.Linearise(inputs, filter_.State(), lin_);
@@ -58,13 +94,6 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
   }
   filter_.Predict(d.ad, bu_, sp_);
 
-  const int n = model_.StateCount();
-  int m = 0;
-  for (Eigen::Index i = 0; i < measured_degC.size() && i < static_cast<Eigen::Index>(measured_states_.size()); ++i) {
-    if (std::isfinite(measured_degC(i))) ++m;
-  }
-  const bool winding = std::isfinite(winding_degC) && model_.WindingWeights().sum() > 0.0;
-  if (winding) ++m;
   c_.resize(m, n);
   y_.resize(m);
   sm_.resize(m, m);
@@ -72,17 +101,25 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
   sm_.setZero();
   int row = 0;
   const double var_m = config_.measurement_sd_K * config_.measurement_sd_K;
-  for (Eigen::Index i = 0; i < measured_degC.size() && i < static_cast<Eigen::Index>(measured_states_.size()); ++i) {
+  for (Eigen::Index i = 0; i < sensors; ++i) {
     if (!std::isfinite(measured_degC(i))) continue;
     c_(row, measured_states_[static_cast<std::size_t>(i)]) = 1.0;
     y_(row) = measured_degC(i);
     sm_(row, row) = var_m;
     ++row;
   }
-  if (winding) {
-    c_.row(row) = model_.WindingWeights().transpose();
-    y_(row) = winding_degC;
-    sm_(row, row) = config_.winding_measurement_sd_K * config_.winding_measurement_sd_K;
+  for (int j = 0; j < extra.size(); ++j) {
+    const NodeMeasurement& e = extra[j];
+    if (!Uses(e)) continue;
+    if (e.state == kWindingWeightsRow) {
+      c_.row(row) = model_.WindingWeights().transpose();
+    } else {
+      if (e.winding_gain != 0.0) c_.row(row) = e.winding_gain * model_.WindingWeights().transpose();
+      c_(row, e.state) += 1.0;
+    }
+    y_(row) = e.value_degC;
+    sm_(row, row) = e.sd_K * e.sd_K;
+    ++row;
   }
   return filter_.Update(c_, y_, sm_, config_.covariance_update);
 }

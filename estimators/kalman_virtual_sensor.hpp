@@ -1,14 +1,18 @@
 #pragma once
 /// The virtual thermal sensor: the thermal network (ThermalModel) run as a Kalman filter
 /// (Saheba et al. 2010, IEEE CSM 30(1), section "Virtual thermal sensor", eqs. 18-34), measuring
-/// any subset of the nodes with capacity and, optionally, the winding temperature from resistance
-/// identification (Han et al. 2019 eq. 3) as a second measurement with its own variance.
+/// any subset of the nodes with capacity and, optionally, a few extra measurements with their own
+/// variances: the winding temperature from resistance identification (Han et al. 2019 eq. 3, a
+/// row of the model's winding weights) or a node's temperature from another estimator (the
+/// magnet's from its flux linkage).
 ///
 /// One Step() per period: the time update with the inputs held over the period (exact ZOH,
 /// eqs. 20-21, re-discretised only when the operating point moves), then the measurement update
 /// with whatever was measured at the end of the period (NaN = not measured this time).
 
 #include <Eigen/Dense>
+#include <array>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -17,6 +21,40 @@
 #include "estimators/thermal_model.hpp"
 
 namespace pumptherm::estimators {
+
+/// Row of an extra measurement that reads the model's winding weights (the mean temperature of
+/// the copper, ThermalModel::WindingWeights) instead of one node.
+inline constexpr int kWindingWeightsRow = -1;
+
+/// One extra measurement of one step: a temperature of one node (or of the winding weights)
+/// with its own standard deviation. With a winding_gain g the row reads the node plus g times
+/// the winding temperature (ThermalModel::WindingWeights): the back-EMF seen through an
+/// identified line uq = Rs iq + w psi_f depends on the magnet and, through Rs, on the winding.
+struct NodeMeasurement {
+  int state = kWindingWeightsRow;  ///< state index, or kWindingWeightsRow
+  double value_degC = std::numeric_limits<double>::quiet_NaN();  ///< NaN = not measured
+  double sd_K = std::numeric_limits<double>::quiet_NaN();        ///< > 0 when value is finite
+  double winding_gain = 0.0;       ///< g above (a node row only), dimensionless
+};
+
+/// A small fixed-capacity list of extra measurements: no allocation when filled every step.
+class NodeMeasurements {
+ public:
+  static constexpr int kCapacity = 4;
+  /// Appends one measurement. Returns false (and drops it) when the list is full.
+  bool Add(int state, double value_degC, double sd_K, double winding_gain = 0.0) noexcept {
+    if (size_ >= kCapacity) return false;
+    items_[static_cast<std::size_t>(size_++)] = NodeMeasurement{state, value_degC, sd_K, winding_gain};
+    return true;
+  }
+  void Clear() noexcept { size_ = 0; }
+  int size() const noexcept { return size_; }
+  const NodeMeasurement& operator[](int i) const { return items_[static_cast<std::size_t>(i)]; }
+
+ private:
+  std::array<NodeMeasurement, kCapacity> items_{};
+  int size_ = 0;
+};
 
 /// Covariances and options. Defaults are the paper's (eqs. 38-39).
 struct VirtualSensorConfig {
@@ -55,10 +93,19 @@ class VirtualThermalSensor {
   void Restore(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) { filter_.Reset(x_degC, s_K2); }
 
   /// Advances one period of `dt_s` with `inputs` held over it, then corrects with
-  /// `measured_degC` (one per configured measured node, NaN = not measured) and, if finite,
-  /// `winding_degC` (the resistance-based winding temperature). Returns the update's report.
-  /// No allocation once the operating point and the count of valid measurements are steady.
-  /// Throws std::domain_error for non-finite inputs (from the model) or dt_s <= 0.
+  /// `measured_degC` (one per configured measured node, NaN = not measured; these rows come
+  /// first in the report) and every entry of `extra` whose value is finite (in list order).
+  /// Returns the update's report. No allocation once the operating point and the count of
+  /// valid measurements are steady. Throws std::domain_error for non-finite inputs (from the
+  /// model) or dt_s <= 0; std::invalid_argument for an extra measurement of a state that does
+  /// not exist or with a finite value and an sd that is not positive and finite or a
+  /// non-finite winding gain. An extra measurement that reads the winding weights (its row, or
+  /// a non-zero winding gain) is skipped when the model has no winding.
+  const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s,
+                                 const Eigen::VectorXd& measured_degC,
+                                 const NodeMeasurements& extra);
+  /// The same with one extra measurement: `winding_degC` (the resistance-based winding
+  /// temperature, NaN = none) with the configured winding_measurement_sd_K.
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s,
                                  const Eigen::VectorXd& measured_degC, double winding_degC);
 
@@ -70,6 +117,10 @@ class VirtualThermalSensor {
   const std::vector<int>& MeasuredStates() const { return measured_states_; }
 
  private:
+  /// Whether `e` enters this step's update (finite value, a winding row only when the model has
+  /// a winding); throws std::invalid_argument for a state out of range or a bad sd.
+  bool Uses(const NodeMeasurement& e) const;
+
   const ThermalModel& model_;
   VirtualSensorConfig config_;
   std::vector<int> measured_states_;
@@ -81,6 +132,7 @@ class VirtualThermalSensor {
   Eigen::MatrixXd c_;
   Eigen::VectorXd y_;
   Eigen::MatrixXd sm_;
+  NodeMeasurements winding_only_;
   double sp_dt_s_ = -1.0;
 };
 

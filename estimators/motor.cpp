@@ -35,6 +35,14 @@ plausible_max_degC = 180.0
 # bits over a +/-48 V DC link:
 # [drive]
 # uq_resolution_V = 0.0234375
+
+[magnet]
+# The paper gives psi_f (Table 1) but neither the magnet grade nor the temperature of the
+# measurement: assumed sintered NdFeB (reversible temperature coefficient of the remanence
+# -0.09 to -0.13 %/K in the makers' sheets, docs/virtual-sensor.md) with psi_f at the same room
+# temperature as R0.
+t0_degC = 27.2
+flux_temperature_coefficient_per_K = -1.0e-3
 )";
 
 std::string Where(std::string_view source, const toml::source_region& region) {
@@ -82,6 +90,27 @@ void RequirePositive(double value, const toml::table& table, std::string_view ke
                                           Where(source, node->source()), path, value));
 }
 
+void ParseMagnetLaw(const toml::node& node, std::string_view source, MotorDescription& m) {
+  if (!node.is_table()) {
+    throw MotorDescriptionError(
+        fmt::format("{}: key 'magnet' must be a table", Where(source, node.source())));
+  }
+  const toml::table& magnet = *node.as_table();
+  RejectUnknownKeys(magnet, {"t0_degC", "flux_temperature_coefficient_per_K"}, "magnet.", source);
+  m.magnet.t0_degC = *Number(magnet, "t0_degC", "magnet.t0_degC", source, true);
+  const double beta = *Number(magnet, "flux_temperature_coefficient_per_K",
+                              "magnet.flux_temperature_coefficient_per_K", source, true);
+  // Ferrite about -0.2 %/K, NdFeB about -0.1, SmCo about -0.03: a flux that rises with
+  // temperature or barely moves is no magnet law (the temperature would be noise / beta).
+  if (!(beta >= -5e-3 && beta <= -1e-5)) {
+    throw MotorDescriptionError(fmt::format(
+        "{}: key 'magnet.flux_temperature_coefficient_per_K' must be within [-0.005, -0.00001] per K "
+        "(NdFeB about -1e-3, SmCo about -3e-4), got {}",
+        Where(source, magnet.get("flux_temperature_coefficient_per_K")->source()), beta));
+  }
+  m.magnet.flux_temperature_coefficient_per_K = beta;
+}
+
 }  // namespace
 
 MotorDescription ParseMotorDescription(std::string_view text, std::string_view source) {
@@ -94,7 +123,7 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
   }
   RejectUnknownKeys(root,
                     {"name", "pole_pairs", "rated_speed_rpm", "flux_Wb", "inductance_H",
-                     "resistance", "drive"},
+                     "resistance", "drive", "magnet"},
                     "", source);
   MotorDescription m;
   if (const toml::node* name = root.get("name")) {
@@ -173,6 +202,7 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
       m.uq_resolution_V = *v;
     }
   }
+  if (const toml::node* magnet_node = root.get("magnet")) ParseMagnetLaw(*magnet_node, source, m);
   return m;
 }
 

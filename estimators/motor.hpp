@@ -16,8 +16,12 @@
 ///     plausible_max_degC = 180.0
 ///     [drive]                       # optional: how the drive reports its signals
 ///     uq_resolution_V = 0.0234375   # step of the reported uq (codes at multiples of it)
+///     [magnet]                      # optional: how the flux falls with magnet temperature
+///     t0_degC = 27.2                # temperature at which flux_Wb holds
+///     flux_temperature_coefficient_per_K = -1.0e-3  # reversible coefficient of the remanence
 ///
-/// Every key is required except `name`, the two plausibility keys and the [drive] table;
+/// Every key is required except `name`, the two plausibility keys and the [drive] and
+/// [magnet] tables (both keys of [magnet] are required when it is given);
 /// unknown keys are errors (a misspelt key must not silently fall back to a default).
 
 #include <stdexcept>
@@ -36,6 +40,14 @@ class MotorDescriptionError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// How the magnet flux linkage depends on the magnet temperature (estimators/magnet.hpp):
+/// psi_f(T) = flux_Wb (1 + flux_temperature_coefficient_per_K (T - t0_degC)).
+struct MagnetLaw {
+  double t0_degC = 0.0;                            ///< where the motor's flux_Wb holds
+  double flux_temperature_coefficient_per_K = 0.0; ///< < 0; 0 = no law given
+  bool Given() const noexcept { return flux_temperature_coefficient_per_K != 0.0; }
+};
+
 /// Electrical description of a surface permanent-magnet synchronous motor.
 struct MotorDescription {
   std::string name;                 ///< free text, e.g. "han2019-tmp"
@@ -50,13 +62,16 @@ struct MotorDescription {
   /// integer multiples of it). The identifier removes the quantisation bias of its block means
   /// with it (estimators/quantisation.hpp). 0 = not known: no correction.
   double uq_resolution_V = 0.0;
+  /// The magnet's temperature law; not Given() when the file has no [magnet] table (then no
+  /// magnet temperature is derived from the flux).
+  MagnetLaw magnet;
 };
 
 /// Parses a motor description from TOML `text`; `source` names it in errors (a path or
 /// "preset han2019-tmp"). Throws MotorDescriptionError naming source, line and key for a
 /// syntax error, a missing, unknown or mistyped key, or a value out of range
 /// (pole_pairs < 1, non-positive speed, flux, inductance, r0 or alpha, empty band, a
-/// uq_resolution_V outside (0, 10] V).
+/// uq_resolution_V outside (0, 10] V, a magnet coefficient outside [-5e-3, -1e-5] per K).
 MotorDescription ParseMotorDescription(std::string_view text, std::string_view source);
 
 /// The TOML text of a built-in preset, or an empty view when `name` is not a preset.

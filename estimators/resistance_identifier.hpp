@@ -183,6 +183,8 @@ class ResistanceIdentifier {
 
   const MotorDescription& motor() const { return motor_; }
   const ResistanceIdentifierConfig& config() const { return config_; }
+  /// Block updates since start, reset or restore (a new one means a fresh estimate).
+  std::uint64_t blocks() const noexcept { return state_.blocks; }
 
  private:
   void ProcessBlock() noexcept;

@@ -70,8 +70,9 @@ enum class MappingOutput {
   kFrameRateHz,         ///< frame_rate_Hz
   kDrops,               ///< drops
   kBusState,            ///< bus_state
+  kMagnetFluxTempDegC,  ///< magnet_flux_temp_degC: magnet temperature from the identified flux
 };
-inline constexpr std::size_t kMappingOutputCount = 14;
+inline constexpr std::size_t kMappingOutputCount = 15;
 
 /// The TOML key of an input or output.
 std::string_view MappingInputName(MappingInput input) noexcept;

@@ -5,7 +5,8 @@
 #      truth, sensors) and writes their CAN traffic as a candump log; pump 3's cooling fails.
 #   2. `pumpthermd -r` runs the gateway offline on that recording, showing a live-style table
 #      (20 minutes in about 20 seconds), and writes its estimates, output frames and LCM log.
-#   3. `pumptherm plot` draws estimated against true temperatures with the alarm moments.
+#   3. `pumptherm plot` draws every estimated node with its +-2 sd band against the truth, the
+#      winding temperature from resistance and the magnet temperature from flux, and the alarms.
 # Options: --fast (no pacing), --live (the same on vcan0 with canplayer; needs kernel vcan).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,7 +16,7 @@ for arg in "$@"; do
   case "$arg" in
     --fast) pace=0 ;;
     --live) live=1 ;;
-    -h|--help) sed -n '2,10p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,11p' "$0"; exit 0 ;;
     *) echo "demo.sh: unknown option '$arg' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -46,8 +47,10 @@ echo "== 3/3 plotting: $out/demo.png"
   --truth "$out/pump1.truth.csv" --estimate "$out/estimates/pump1.csv" --label "pump1" \
   --truth "$out/pump2.truth.csv" --estimate "$out/estimates/pump2.csv" --label "pump2" \
   --truth "$out/pump3.truth.csv" --estimate "$out/estimates/pump3.csv" --label "pump3 (cooling fails)" \
-  --nodes winding,frame --warning-C 100 --trip-C 120 \
-  --title "pumptherm demo: estimated (dashed) against true (solid) temperatures" --out "$out/demo.png"
+  --nodes winding,rotor,stator,frame --extra winding_resistance_C=winding,magnet_flux_C=rotor \
+  --warning-C 100 --trip-C 120 --row-height 380 \
+  --title "pumptherm demo: estimated (dashed, +-2 sd shaded) against true (solid) temperatures; points: winding from resistance, magnet from flux" \
+  --out "$out/demo.png"
 echo
 echo "Done. The plot is $out/demo.png; estimates per pump in $out/estimates/, the gateway's"
 echo "CAN output in $out/gateway.log (candump format), its LCM messages in $out/gateway.lcm."

@@ -150,6 +150,8 @@ int Run(const Options& options) {
       temps.flux_sd_Wb = 5e-5;
       temps.resistance_winding_degC = winding_degC + 0.5 * unit_noise(rng);
       temps.resistance_winding_sd_K = 1.5;
+      temps.magnet_flux_degC = ambient_degC + 0.6 * rise_K + 2.0 * unit_noise(rng);
+      temps.magnet_flux_sd_K = 3.0;
       temps.ident_status = ramping ? pumptherm::temperatures_t::IDENT_CONVERGING
                                    : pumptherm::temperatures_t::IDENT_CONVERGED;
       temps.num_nodes = static_cast<std::int32_t>(options.nodes.size());

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <lcm/lcm-cpp.hpp>
 #include <map>
@@ -424,6 +425,27 @@ thermal_model = "no-such-model"
     return std::string();
   }();
   EXPECT_NE(bad_model.find("p.toml:4: key 'pump[0].thermal_model': 'no-such-model': no such models file"), std::string::npos) << bad_model;
+  // The magnet temperature: a node with capacity, and a motor that states its magnet law.
+  const std::string massless = error_of("magnet_node = \"7\"\n");
+  EXPECT_NE(massless.find("magnet_node '7' is not a node with heat capacity of model 'saheba2010-improved'"),
+            std::string::npos) << massless;
+  const std::string motor_path = (std::filesystem::temp_directory_path() / "pipeline_test_no_magnet.toml").string();
+  {
+    std::ofstream f(motor_path);
+    f << "pole_pairs = 1\nrated_speed_rpm = 21000\nflux_Wb = 0.0182\ninductance_H = 0.24e-3\n"
+         "[resistance]\nr0_ohm = 0.28\nt0_degC = 27.2\nalpha_per_K = 4.1e-3\n";
+  }
+  std::string no_law = Config("magnet_node = \"rotor\"\n");
+  no_law.replace(no_law.find("motor = \"han2019-tmp\""), 21, "motor = \"" + motor_path + "\"");
+  std::string no_law_error;
+  try {
+    Gateway g(ParseConfig(no_law, "p.toml"));
+  } catch (const ConfigError& e) {
+    no_law_error = e.what();
+  }
+  std::filesystem::remove(motor_path);
+  EXPECT_NE(no_law_error.find("magnet_node 'rotor' is set but motor"), std::string::npos) << no_law_error;
+  EXPECT_NE(no_law_error.find("states no [magnet] table"), std::string::npos) << no_law_error;
 }
 
 }  // namespace

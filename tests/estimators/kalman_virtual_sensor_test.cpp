@@ -124,6 +124,65 @@ TEST(VirtualThermalSensor, FusingTheWindingTemperatureUsesBothMeasurements) {
   EXPECT_EQ(vts.Step(in, 1.0, Eigen::VectorXd::Constant(1, std::nan("")), 45.0).measurements, 1);
 }
 
+TEST(VirtualThermalSensor, ExtraNodeMeasurementsEnterWithTheirOwnVariance) {
+  const auto improved = Load("saheba2010-improved");
+  pe::ThermalInputs in;
+  in.speed_rpm = 800.0;
+  in.iq_A = 50.0;
+  in.ambient_degC = 22.0;
+  const Eigen::VectorXd frame = Eigen::VectorXd::Constant(1, 31.0);
+  const int rotor = improved.StateIndex("rotor");
+  ASSERT_GE(rotor, 0);
+  // The same step with the list form and the winding-only form gives the same update.
+  pe::VirtualThermalSensor a(improved, {}), b(improved, {});
+  a.Initialise(Eigen::VectorXd::Constant(7, 30.0));
+  b.Initialise(Eigen::VectorXd::Constant(7, 30.0));
+  pe::NodeMeasurements w;
+  w.Add(pe::kWindingWeightsRow, 45.0, pe::VirtualSensorConfig{}.winding_measurement_sd_K);
+  a.Step(in, 1.0, frame, w);
+  b.Step(in, 1.0, frame, 45.0);
+  EXPECT_LT((a.Estimate_degC() - b.Estimate_degC()).cwiseAbs().maxCoeff(), 1e-12);
+  // A rotor reading: a third row; a precise one pulls the rotor further than a vague one.
+  pe::VirtualThermalSensor precise(improved, {}), vague(improved, {});
+  precise.Initialise(Eigen::VectorXd::Constant(7, 30.0));
+  vague.Initialise(Eigen::VectorXd::Constant(7, 30.0));
+  pe::NodeMeasurements p = w, v = w;
+  p.Add(rotor, 60.0, 1.0);
+  v.Add(rotor, 60.0, 10.0);
+  EXPECT_EQ(precise.Step(in, 1.0, frame, p).measurements, 3);
+  EXPECT_EQ(vague.Step(in, 1.0, frame, v).measurements, 3);
+  EXPECT_GT(precise.Estimate_degC()(rotor), vague.Estimate_degC()(rotor) + 1.0);
+  EXPECT_GT(vague.Estimate_degC()(rotor), 30.0);
+  // NaN = not measured; a state out of range or a zero sd is refused.
+  pe::NodeMeasurements nan_rotor;
+  nan_rotor.Add(rotor, std::nan(""), 1.0);
+  EXPECT_EQ(precise.Step(in, 1.0, frame, nan_rotor).measurements, 1);
+  pe::NodeMeasurements bad_state, bad_sd;
+  bad_state.Add(7, 40.0, 1.0);
+  bad_sd.Add(rotor, 40.0, 0.0);
+  EXPECT_THROW(precise.Step(in, 1.0, frame, bad_state), std::invalid_argument);
+  EXPECT_THROW(precise.Step(in, 1.0, frame, bad_sd), std::invalid_argument);
+  // A row with a winding gain g reads rotor + g winding: its innovation is
+  // y - (x_rotor + g W.x) of the prediction, which a filter without measurements shows.
+  pe::VirtualThermalSensor coupled_vts(improved, {}), predicted(improved, {});
+  coupled_vts.Initialise(Eigen::VectorXd::Constant(7, 30.0));
+  predicted.Initialise(Eigen::VectorXd::Constant(7, 30.0));
+  const Eigen::VectorXd nothing = Eigen::VectorXd::Constant(1, std::nan(""));
+  pe::NodeMeasurements coupled;
+  coupled.Add(rotor, 50.0, 1.0, 0.5);
+  const double nu = coupled_vts.Step(in, 1.0, nothing, coupled).innovation(0);
+  EXPECT_EQ(predicted.Step(in, 1.0, nothing, pe::NodeMeasurements{}).measurements, 0);
+  const Eigen::VectorXd& xp = predicted.Estimate_degC();
+  EXPECT_NEAR(nu, 50.0 - (xp(rotor) + 0.5 * improved.WindingWeights().dot(xp)), 1e-9);
+  pe::NodeMeasurements bad_gain;
+  bad_gain.Add(rotor, 40.0, 1.0, std::nan(""));
+  EXPECT_THROW(precise.Step(in, 1.0, frame, bad_gain), std::invalid_argument);
+  // The list holds kCapacity entries and refuses more.
+  pe::NodeMeasurements full;
+  for (int i = 0; i < pe::NodeMeasurements::kCapacity; ++i) EXPECT_TRUE(full.Add(rotor, 40.0, 1.0));
+  EXPECT_FALSE(full.Add(rotor, 40.0, 1.0));
+}
+
 TEST(VirtualThermalSensor, RejectsUnknownMeasuredNode) {
   const auto improved = Load("saheba2010-improved");
   pe::VirtualSensorConfig cfg;

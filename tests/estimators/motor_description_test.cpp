@@ -7,6 +7,7 @@
 #include <sstream>
 #include <string>
 
+#include "estimators/magnet.hpp"
 #include "estimators/motor.hpp"
 
 namespace pumptherm::estimators {
@@ -135,6 +136,35 @@ TEST(MotorDescription, DriveTableGivesTheUqResolution) {
   EXPECT_NE(unknown.find("m.toml:11: unknown key 'drive.ud_resolution_V'"), std::string::npos) << unknown;
   const std::string not_table = ErrorOf(std::string("drive = 1.0\n") + kValid);
   EXPECT_NE(not_table.find("m.toml:1: key 'drive' must be a table"), std::string::npos) << not_table;
+}
+
+// The optional [magnet] table and the temperature it gives from a flux (estimators/magnet.hpp):
+// T = T0 + (psi/psi0 - 1)/beta, sd = sd_psi/(psi0 |beta|), worked by hand below.
+TEST(MotorDescription, MagnetTableGivesTheFluxTemperatureLaw) {
+  const MotorDescription none = ParseMotorDescription(kValid, "m.toml");
+  EXPECT_FALSE(none.magnet.Given());
+  EXPECT_TRUE(std::isnan(MagnetTemperatureFromFlux(none, 0.1, 1e-4).degC));
+  const MotorDescription m = ParseMotorDescription(
+      std::string(kValid) + "[magnet]\nt0_degC = 20.0\nflux_temperature_coefficient_per_K = -1.0e-3\n", "m.toml");
+  ASSERT_TRUE(m.magnet.Given());
+  // 0.1 Wb at 20 degC; 0.0995 Wb is 0.5 % less: 5 K hotter. sd 1e-5 Wb is 0.01 %: 0.1 K.
+  const MagnetTemperature t = MagnetTemperatureFromFlux(m, 0.0995, 1e-5);
+  EXPECT_NEAR(t.degC, 25.0, 1e-9);
+  EXPECT_NEAR(t.sd_K, 0.1, 1e-12);
+  EXPECT_NEAR(FluxAt_Wb(m, 25.0), 0.0995, 1e-15);
+  EXPECT_TRUE(std::isnan(MagnetTemperatureFromFlux(m, std::nan(""), 1e-5).degC));
+  // The preset: NdFeB assumed, psi_f at R0's temperature.
+  const MotorDescription han = MotorPreset("han2019-tmp");
+  EXPECT_DOUBLE_EQ(han.magnet.t0_degC, 27.2);
+  EXPECT_DOUBLE_EQ(han.magnet.flux_temperature_coefficient_per_K, -1e-3);
+  const std::string rising =
+      ErrorOf(std::string(kValid) + "[magnet]\nt0_degC = 20.0\nflux_temperature_coefficient_per_K = 1e-3\n");
+  EXPECT_NE(rising.find("m.toml:12: key 'magnet.flux_temperature_coefficient_per_K' must be within"),
+            std::string::npos) << rising;
+  const std::string missing = ErrorOf(std::string(kValid) + "[magnet]\nflux_temperature_coefficient_per_K = -1e-3\n");
+  EXPECT_NE(missing.find("missing key 'magnet.t0_degC'"), std::string::npos) << missing;
+  const std::string unknown = ErrorOf(std::string(kValid) + "[magnet]\ngrade = 1\n");
+  EXPECT_NE(unknown.find("m.toml:11: unknown key 'magnet.grade'"), std::string::npos) << unknown;
 }
 
 TEST(MotorDescription, SyntaxErrorNamesLine) {

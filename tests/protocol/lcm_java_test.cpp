@@ -83,6 +83,8 @@ void FlattenInto(Flat& f, const std::string& p, const temperatures_t& m) {
   f.Number(p + ".flux_sd_Wb", m.flux_sd_Wb);
   f.Number(p + ".resistance_winding_degC", m.resistance_winding_degC);
   f.Number(p + ".resistance_winding_sd_K", m.resistance_winding_sd_K);
+  f.Number(p + ".magnet_flux_degC", m.magnet_flux_degC);
+  f.Number(p + ".magnet_flux_sd_K", m.magnet_flux_sd_K);
   f.Integer(p + ".ident_status", m.ident_status);
   f.Integer(p + ".num_nodes", m.num_nodes);
   for (std::size_t i = 0; i < m.node_names.size(); ++i) {

@@ -86,6 +86,8 @@ inline temperatures_t SampleTemperatures(std::vector<std::string> nodes = {
   m.flux_sd_Wb = 4.0e-5;
   m.resistance_winding_degC = 61.25;
   m.resistance_winding_sd_K = 1.4;
+  m.magnet_flux_degC = 48.5;
+  m.magnet_flux_sd_K = 2.2;
   m.ident_status = temperatures_t::IDENT_NOT_IDENTIFIABLE;
   m.num_nodes = static_cast<std::int32_t>(nodes.size());
   for (std::size_t i = 0; i < nodes.size(); ++i) {
@@ -107,6 +109,8 @@ inline void ExpectSame(const temperatures_t& e, const temperatures_t& a) {
   EXPECT_TRUE(SameBits(e.flux_sd_Wb, a.flux_sd_Wb));
   EXPECT_TRUE(SameBits(e.resistance_winding_degC, a.resistance_winding_degC));
   EXPECT_TRUE(SameBits(e.resistance_winding_sd_K, a.resistance_winding_sd_K));
+  EXPECT_TRUE(SameBits(e.magnet_flux_degC, a.magnet_flux_degC));
+  EXPECT_TRUE(SameBits(e.magnet_flux_sd_K, a.magnet_flux_sd_K));
   EXPECT_EQ(e.ident_status, a.ident_status);
   ASSERT_EQ(e.num_nodes, a.num_nodes);
   ASSERT_EQ(e.node_names, a.node_names);

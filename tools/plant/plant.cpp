@@ -503,8 +503,10 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       const double rs_ohm = estimators::ResistanceAt(p.motor.copper, winding_degC);
       double flux_Wb = p.motor.flux_Wb;
       if (p.magnet_state >= 0) {
-        flux_Wb *= 1.0 + spec.drive.flux_temperature_coefficient_per_K *
-                             (p.x(p.magnet_state) - p.motor.copper.t0_degC);
+        // Relative to the flux at the motor's magnet reference (its copper T0 when the motor
+        // file states no magnet law); the coefficient is the scenario's: the truth's magnet.
+        const double t0_degC = p.motor.magnet.Given() ? p.motor.magnet.t0_degC : p.motor.copper.t0_degC;
+        flux_Wb *= 1.0 + spec.drive.flux_temperature_coefficient_per_K * (p.x(p.magnet_state) - t0_degC);
       }
 
       // Sensors, sampled at the status rate (every thermal step in a thermal-only run).

@@ -22,6 +22,9 @@ struct EstimateOptions {
   std::string output = "-";
   std::string measure = "frame";
   std::string winding_column;
+  std::string magnet_column;
+  std::string magnet_node = "rotor";
+  double magnet_sd_K = 3.0;
   double initial_degC = std::nan("");
   std::string initial = "measured";
   std::string columns;  ///< column preset ("" or "paderborn")
@@ -46,7 +49,7 @@ int RunEstimate(EstimateOptions& o) {
       o.config.measured_nodes.push_back(node);
     }
   }
-  std::vector<double> t, speed, id, iq, amb, cool, winding;
+  std::vector<double> t, speed, id, iq, amb, cool, winding, magnet;
   std::vector<std::vector<double>> measured;
   Eigen::VectorXd x_first;
   if (o.interpolation != "hold" && o.interpolation != "linear") {
@@ -76,10 +79,19 @@ int RunEstimate(EstimateOptions& o) {
       x_first = InitialTemperatures_degC(model, csv, o.columns, o.initial, o.initial_degC, amb[0]);
     }
     if (!o.winding_column.empty()) winding = csv.ColumnAllowingNaN(o.winding_column);
+    if (!o.magnet_column.empty()) magnet = csv.ColumnAllowingNaN(o.magnet_column);
   } catch (const CsvError& e) {
     throw InputError(e.what());
   }
   if (t.empty()) throw InputError(fmt::format("{}: no data rows", o.input.empty() ? o.recording.log : o.input));
+  const int magnet_state = magnet.empty() ? -1 : model.StateIndex(o.magnet_node);
+  if (!magnet.empty() && magnet_state < 0) {
+    throw InputError(fmt::format("--magnet-node: '{}' is not a node with heat capacity of model '{}'",
+                                 o.magnet_node, model.Name()));
+  }
+  if (!(o.magnet_sd_K > 0.0) || !std::isfinite(o.magnet_sd_K)) {
+    throw InputError("--magnet-sd-K: must be a positive finite number");
+  }
   auto inputs = [&](std::size_t k) {
     estimators::ThermalInputs in;
     in.speed_rpm = speed[k];
@@ -119,14 +131,21 @@ int RunEstimate(EstimateOptions& o) {
   for (const auto& node : model.Nodes()) columns.push_back(node.name + "_sd_K");
   for (const auto& node : o.config.measured_nodes) columns.push_back(node + "_innovation_K");
   if (!winding.empty()) columns.push_back("winding_innovation_K");
+  if (!magnet.empty()) columns.push_back("magnet_innovation_K");
   columns.push_back("nis");
   CsvWriter out(o.output, columns);
   std::vector<double> row(columns.size());
   Eigen::VectorXd y(static_cast<Eigen::Index>(m));
   const Eigen::VectorXd no_measurement = Eigen::VectorXd::Constant(static_cast<Eigen::Index>(m), std::nan(""));
+  const estimators::NodeMeasurements none;
+  estimators::NodeMeasurements extra;
   for (std::size_t k = 0; k < t.size(); ++k) {
     for (std::size_t j = 0; j < m; ++j) y(static_cast<Eigen::Index>(j)) = measured[j][k];
     const double w = winding.empty() ? std::nan("") : winding[k];
+    const double mag = magnet.empty() ? std::nan("") : magnet[k];
+    extra.Clear();
+    extra.Add(estimators::kWindingWeightsRow, w, o.config.winding_measurement_sd_K);
+    if (!magnet.empty()) extra.Add(magnet_state, mag, o.magnet_sd_K);
     estimators::KalmanUpdateReport rep;
     if (k > 0) {
       // Rows further apart than --max-step-s are split; the measurements enter at the row.
@@ -134,9 +153,9 @@ int RunEstimate(EstimateOptions& o) {
       const int steps =
           o.max_step_s > 0.0 ? std::max(1, static_cast<int>(std::ceil(dt_s / o.max_step_s - 1e-9))) : 1;
       for (int j = 0; j + 1 < steps; ++j) {
-        vts.Step(between(k, static_cast<double>(j) / steps), dt_s / steps, no_measurement, std::nan(""));
+        vts.Step(between(k, static_cast<double>(j) / steps), dt_s / steps, no_measurement, none);
       }
-      rep = vts.Step(between(k, static_cast<double>(steps - 1) / steps), dt_s / steps, y, w);
+      rep = vts.Step(between(k, static_cast<double>(steps - 1) / steps), dt_s / steps, y, extra);
     }
     const estimators::ThermalInputs in = inputs(k);
     const Eigen::VectorXd all = model.AllTemperatures_degC(in, vts.Estimate_degC());
@@ -152,9 +171,14 @@ int RunEstimate(EstimateOptions& o) {
       const bool valid = k > 0 && std::isfinite(measured[j][k]);
       row[c++] = valid ? rep.innovation(r++) : std::nan("");
     }
+    // The winding row is stacked only when the model has a winding (WindingWeights).
     if (!winding.empty()) {
-      const bool valid = k > 0 && std::isfinite(w) && r < rep.innovation.size();
-      row[c++] = valid ? rep.innovation(r) : std::nan("");
+      const bool valid = k > 0 && std::isfinite(w) && model.WindingWeights().sum() > 0.0 && r < rep.innovation.size();
+      row[c++] = valid ? rep.innovation(r++) : std::nan("");
+    }
+    if (!magnet.empty()) {
+      const bool valid = k > 0 && std::isfinite(mag) && r < rep.innovation.size();
+      row[c++] = valid ? rep.innovation(r++) : std::nan("");
     }
     row[c++] = k > 0 && rep.measurements > 0 ? rep.nis : std::nan("");
     out.Row(row);
@@ -179,6 +203,13 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--measure", o->measure, "Measured nodes, comma-separated")->capture_default_str();
       app.add_option("--winding-column", o->winding_column,
                      "Column with the winding temperature from resistance identification, degC");
+      app.add_option("--magnet-column", o->magnet_column,
+                     "Column with the magnet temperature from the identified flux, degC (the daemon's "
+                     "magnet_flux_C), fused as a measurement of --magnet-node");
+      app.add_option("--magnet-node", o->magnet_node, "Node the magnet temperature measures")
+          ->capture_default_str();
+      app.add_option("--magnet-sd-K", o->magnet_sd_K, "Noise of the flux-based magnet temperature")
+          ->capture_default_str();
       app.add_option("--measurement-sd-K", o->config.measurement_sd_K,
                      "Node sensor noise (Saheba 2010 eq. 38)")->capture_default_str();
       app.add_option("--process-sd-K", o->config.process_sd_K,

@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -30,6 +31,8 @@ struct PlotOptions {
   std::vector<std::string> events;
   std::vector<std::string> labels;
   std::vector<std::string> nodes;
+  std::vector<std::string> extras;  ///< estimate columns drawn as points: COLUMN or COLUMN=NODE
+  bool no_bands = false;            ///< no +-2 sd bands from the estimate's <node>_sd_K
   std::string out;
   std::string title;
   std::string gnuplot = "gnuplot";
@@ -107,6 +110,51 @@ double FirstAtOrAbove(const std::vector<double>& t, const std::vector<double>& v
   return std::nan("");
 }
 
+/// Appends to `lines` a translucent band estimate +- 2 sd (from `<node>_sd_K`) per node that
+/// has one, in the node's colour, written to `file`.
+void AddBands(const CsvTable& t, const std::vector<std::string>& nodes, const fs::path& file, std::string& lines) {
+  const std::vector<double> time = Times(t);
+  std::vector<std::vector<double>> cols{std::vector<double>(time.size())};
+  for (std::size_t r = 0; r < time.size(); ++r) cols[0][r] = time[r] / 60.0;
+  std::vector<std::size_t> colours;
+  for (std::size_t k = 0; k < nodes.size(); ++k) {
+    if (!t.Has(nodes[k] + "_C") || !t.Has(nodes[k] + "_sd_K")) continue;
+    const auto v = Col(t, nodes[k] + "_C");
+    const auto sd = Col(t, nodes[k] + "_sd_K");
+    std::vector<double> lo(v.size()), hi(v.size());
+    for (std::size_t r = 0; r < v.size(); ++r) {
+      lo[r] = v[r] - 2.0 * sd[r];
+      hi[r] = v[r] + 2.0 * sd[r];
+    }
+    cols.push_back(std::move(lo));
+    cols.push_back(std::move(hi));
+    colours.push_back(k + 1);
+  }
+  if (colours.empty()) return;
+  WriteData(file, cols);
+  for (std::size_t c = 0; c < colours.size(); ++c) {
+    lines += fmt::format("{}{} using 1:{}:{} with filledcurves lc {} fs transparent solid 0.18 noborder {}",
+                         lines.empty() ? "" : ", ", Quote(file.string()), 2 + 2 * c, 3 + 2 * c, colours[c],
+                         c == 0 ? "title '+-2 sd'" : "notitle");
+  }
+}
+
+/// Appends to `lines` the extra estimate columns as small points (colour 0: black).
+void AddExtras(const CsvTable& t, const std::vector<std::pair<std::string, std::size_t>>& extras,
+               const fs::path& file, std::string& lines) {
+  if (extras.empty()) return;
+  const std::vector<double> time = Times(t);
+  std::vector<std::vector<double>> cols{std::vector<double>(time.size())};
+  for (std::size_t r = 0; r < time.size(); ++r) cols[0][r] = time[r] / 60.0;
+  for (const auto& e : extras) cols.push_back(Col(t, e.first));
+  WriteData(file, cols);
+  for (std::size_t c = 0; c < extras.size(); ++c) {
+    const std::string colour = extras[c].second == 0 ? "rgb 'black'" : fmt::format("{}", extras[c].second);
+    lines += fmt::format("{}{} using 1:{} with points pt {} ps 0.35 lc {} title {}", lines.empty() ? "" : ", ",
+                         Quote(file.string()), c + 2, c % 2 == 0 ? 7 : 5, colour, Quote(extras[c].first));
+  }
+}
+
 int RunPlot(const PlotOptions& o) {
   if (o.truth.empty() && o.estimate.empty()) throw InputError("give --truth and/or --estimate CSV files");
   const std::size_t n = std::max(o.truth.size(), o.estimate.size());
@@ -173,6 +221,21 @@ int RunPlot(const PlotOptions& o) {
     }
   } cleanup{dir, o.keep_script};
 
+  // Extra estimate columns: (column, colour index: 1 + the node's position, else 0 = black).
+  std::vector<std::pair<std::string, std::size_t>> extras;
+  for (const std::string& e : o.extras) {
+    const std::size_t eq = e.find('=');
+    const std::string column = e.substr(0, eq);
+    const std::string node = eq == std::string::npos ? "" : e.substr(eq + 1);
+    const auto it = std::find(nodes.begin(), nodes.end(), node);
+    extras.emplace_back(column, it == nodes.end() ? 0 : 1 + static_cast<std::size_t>(it - nodes.begin()));
+    for (const Series& s : series) {
+      if (s.estimate && !s.estimate->Has(column)) {
+        throw InputError(fmt::format("--extra: column '{}' is not in {}", column, s.estimate->source()));
+      }
+    }
+  }
+
   const std::string level_node = !o.level_node.empty() ? o.level_node : nodes[0];
   std::string plots;
   bool any_events = false;
@@ -208,7 +271,11 @@ int RunPlot(const PlotOptions& o) {
         if (std::isfinite(o.trip_degC)) s.truth_trip_s = FirstAtOrAbove(t, v, o.trip_degC);
       }
     }
-    if (s.estimate) add_table(*s.estimate, o.estimate_name, "2");
+    if (s.estimate) {
+      if (!o.no_bands) AddBands(*s.estimate, nodes, dir / fmt::format("p{}_band.dat", i), lines);
+      add_table(*s.estimate, o.estimate_name, "2");
+      AddExtras(*s.estimate, extras, dir / fmt::format("p{}_extra.dat", i), lines);
+    }
     std::string marks;
     if (s.events) {
       any_events = true;
@@ -323,6 +390,11 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--label", o->labels, "Panel title per pump (default: the file name)");
       app.add_option("--nodes,-n", o->nodes, "Nodes to plot (default: every <node>_C column both files have)")
           ->delimiter(',');
+      app.add_option("--extra", o->extras,
+                     "Estimate columns drawn as points, COLUMN or COLUMN=NODE (in that node's colour), "
+                     "e.g. winding_resistance_C=winding,magnet_flux_C=rotor")
+          ->delimiter(',');
+      app.add_flag("--no-bands", o->no_bands, "Do not draw the +-2 sd bands of the estimate's <node>_sd_K");
       app.add_option("--warning-C", o->warning_degC, "Warning level, degC: drawn, and its true crossing marked");
       app.add_option("--trip-C", o->trip_degC, "Trip level, degC: drawn, and its true crossing marked");
       app.add_option("--level-node", o->level_node, "Node whose truth is checked against the levels (default: the first of --nodes)");
@@ -341,7 +413,8 @@ const SubcommandRegistrar kRegistrar{
           "      --warning-C 100 --trip-C 120 --out pump3.png\n"
           "One panel per pump (repeat --truth/--estimate/--label in the same order), then the alarm\n"
           "timeline when alarm levels are given. Solid: truth; dashed: estimate; vertical lines: alarm\n"
-          "moments (solid) and true level crossings (dotted).");
+          "moments (solid) and true level crossings (dotted); shaded: estimate +-2 sd where the\n"
+          "estimate has <node>_sd_K; points: --extra columns.");
       return [o] { return RunPlot(*o); };
     }};
 

@@ -1,0 +1,145 @@
+#!/usr/bin/env python3
+"""Judges the demo, node by node, against the plant simulator's truth.
+
+Runs `pumptherm plant demo` (unless --reuse), the gateway offline on its recording
+(`pumpthermd -r`, no pacing) with tools/demo/pumpthermd-demo.toml, and reports per pump:
+  - per estimated node, after --skip-s (300 s): max |estimate - truth| and the share of steps in
+    which the truth lies within estimate +- 2 sd (coverage);
+  - the same for the winding temperature from resistance (against the truth's winding_res_C)
+    and, when the CSV has it, the magnet temperature from the flux (against the truth of the
+    magnet node, by its sd);
+  - the first warning and trip against the truth's first crossings (summary.json).
+Prints a table and writes judge.json into the output directory. Standard library only.
+
+Example:
+  tests/bench/demo_judge.py --build build --out /tmp/demo-judge
+"""
+import argparse
+import bisect
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+
+
+def read_csv(path):
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    header, body = rows[0], rows[1:]
+    cols = {name: [] for name in header}
+    for r in body:
+        for name, v in zip(header, r):
+            try:
+                cols[name].append(float(v))
+            except ValueError:
+                cols[name].append(math.nan)
+    return cols
+
+
+def interp(ts, vs, t):
+    """Linear interpolation of the series (ts ascending) at t; NaN outside."""
+    i = bisect.bisect_left(ts, t)
+    if i < len(ts) and ts[i] == t:
+        return vs[i]
+    if i == 0 or i >= len(ts):
+        return math.nan
+    a = (t - ts[i - 1]) / (ts[i] - ts[i - 1])
+    return vs[i - 1] + a * (vs[i] - vs[i - 1])
+
+
+def judge_series(est_t, est_v, est_sd, truth_t, truth_v, skip_s):
+    """Max |error|, coverage (truth within +-2 sd) and the sample count after skip_s."""
+    max_err, inside, n = 0.0, 0, 0
+    for t, v, sd in zip(est_t, est_v, est_sd):
+        if t < skip_s or not math.isfinite(v):
+            continue
+        truth = interp(truth_t, truth_v, t)
+        if not math.isfinite(truth):
+            continue
+        err = abs(v - truth)
+        max_err = max(max_err, err)
+        n += 1
+        if math.isfinite(sd) and err <= 2.0 * sd:
+            inside += 1
+    return {"max_abs_error_K": round(max_err, 2) if n else None,
+            "coverage_2sd": round(inside / n, 3) if n else None, "samples": n}
+
+
+def first_at_or_above(ts, vs, level):
+    for t, v in zip(ts, vs):
+        if math.isfinite(v) and v >= level:
+            return t
+    return None
+
+
+def run(cmd, **kw):
+    print("+ " + " ".join(cmd), file=sys.stderr)
+    subprocess.run(cmd, check=True, **kw)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--build", default="build", help="build directory with pumpthermd, pumptherm")
+    ap.add_argument("--out", default="demo-judge", help="output directory")
+    ap.add_argument("--scenario", default="demo", help="plant scenario (shipped name or path)")
+    ap.add_argument("--config", default="tools/demo/pumpthermd-demo.toml", help="daemon configuration")
+    ap.add_argument("--skip-s", type=float, default=300.0, help="judge from this time on, s")
+    ap.add_argument("--magnet-node", default="rotor", help="truth node the magnet temperature is judged against")
+    ap.add_argument("--reuse", action="store_true", help="reuse the recording and estimates in --out")
+    a = ap.parse_args()
+
+    est_dir = os.path.join(a.out, "estimates")
+    if not a.reuse:
+        os.makedirs(est_dir, exist_ok=True)
+        run([os.path.join(a.build, "tools/pumptherm"), "plant", a.scenario, "--out", a.out],
+            stdout=subprocess.DEVNULL)
+        log = [f for f in os.listdir(a.out) if f.endswith(".log")][0]
+        with open(os.path.join(a.out, log)) as f:
+            origin = f.readline().split(")")[0].lstrip("(").split(".")[0]
+        with open(os.path.join(a.out, "pumpthermd.txt"), "w") as o:
+            run([os.path.join(a.build, "daemon/pumpthermd"), "--config", a.config, "-r",
+                 os.path.join(a.out, log), "--pace", "0", "--csv-dir", est_dir,
+                 "--csv-time-origin", origin], stdout=o, stderr=subprocess.STDOUT)
+
+    with open(os.path.join(a.out, "summary.json")) as f:
+        summary = json.load(f)
+    report = {"skip_s": a.skip_s, "pumps": []}
+    for p in summary["pumps"]:
+        name = p["name"]
+        truth = read_csv(os.path.join(a.out, name + ".truth.csv"))
+        est = read_csv(os.path.join(est_dir, name + ".csv"))
+        tt, et = truth["time_s"], est["time_s"]
+        nodes = {}
+        for col in est:
+            if col.endswith("_sd_K") and col[:-5] + "_C" in est and col[:-5] + "_C" in truth:
+                node = col[:-5]
+                nodes[node] = judge_series(et, est[node + "_C"], est[col], tt, truth[node + "_C"], a.skip_s)
+        extra = {}
+        if "winding_resistance_C" in est and "winding_res_C" in truth:
+            sd = est.get("winding_resistance_sd_K", [math.nan] * len(et))
+            extra["winding_from_resistance"] = judge_series(et, est["winding_resistance_C"], sd, tt,
+                                                            truth["winding_res_C"], a.skip_s)
+        if "magnet_flux_C" in est and a.magnet_node + "_C" in truth:
+            extra["magnet_from_flux"] = judge_series(et, est["magnet_flux_C"], est["magnet_flux_sd_K"], tt,
+                                                     truth[a.magnet_node + "_C"], a.skip_s)
+        level = est.get("alarm_level", [])
+        alarms = {"warning_s": first_at_or_above(et, level, 1.0), "trip_s": first_at_or_above(et, level, 2.0),
+                  "true_warning_s": p.get("warning_crossed_s"), "true_trip_s": p.get("trip_crossed_s")}
+        report["pumps"].append({"name": name, "nodes": nodes, "extra": extra, "alarms": alarms})
+
+    print(f"after {a.skip_s:.0f} s: max |error| K / coverage of +-2 sd")
+    for p in report["pumps"]:
+        cells = [f"{k} {v['max_abs_error_K']} / {v['coverage_2sd']}" for k, v in {**p["nodes"], **p["extra"]}.items()]
+        print(f"  {p['name']}: " + "; ".join(cells))
+        al = p["alarms"]
+        print(f"    warning {al['warning_s']} s (truth {al['true_warning_s']}), trip {al['trip_s']} s "
+              f"(truth {al['true_trip_s']})")
+    with open(os.path.join(a.out, "judge.json"), "w") as f:
+        json.dump(report, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
