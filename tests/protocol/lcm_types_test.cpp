@@ -82,6 +82,7 @@ TEST(LcmTypes, AlarmRoundTrip) {
 }
 
 TEST(LcmTypes, AlarmClearRoundTrip) { ExpectRoundTrip(SampleAlarmClear()); }
+TEST(LcmTypes, AlarmClearReplyRoundTrip) { ExpectRoundTrip(SampleAlarmClearReply()); }
 
 TEST(LcmTypes, GatewayHealthRoundTrip) {
   ExpectRoundTrip(SampleGatewayHealth(0));

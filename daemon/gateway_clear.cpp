@@ -1,0 +1,60 @@
+// The gateway's authenticated LCM clears (docs/threat-model.md): Gateway::ClearFromLcm and
+// Gateway::LoadClearKey, kept apart from the frame and estimation paths of gateway.cpp.
+#include <algorithm>
+
+#include "daemon/gateway.hpp"
+#include "daemon/log.hpp"
+#include "protocol/lcm/channels.hpp"
+
+namespace pumptherm::daemon {
+
+void Gateway::LoadClearKey(const std::string& credentials_dir) {
+  if (const auto key = LoadConfiguredClearKey(config_, credentials_dir)) clear_auth_.SetKey(*key);
+}
+
+bool Gateway::ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_us, OutputSink& sink) {
+  using R = pumptherm::alarm_clear_reply_t;
+  ++counters_.clears_refused;  // taken back below when accepted
+  if (!m) {
+    ++counters_.clears_unauthenticated;
+    Log(LogLevel::kWarning, "alarm clear refused: the message does not decode as alarm_clear_t (an old sender?)");
+    return false;
+  }
+  const auto pump = std::find_if(pumps_.begin(), pumps_.end(), [&](const auto& p) { return p->config().name == m->pump; });
+  if (pump == pumps_.end()) {
+    Log(LogLevel::kWarning, "alarm clear for unknown pump '{}' from '{}' ignored", m->pump, m->source);
+    return false;
+  }
+  const auto& sources = (*pump)->config().alarms.clear_lcm_sources;
+  const bool source_allowed = std::find(sources.begin(), sources.end(), m->source) != sources.end();
+  std::string reason;
+  const std::int8_t result = clear_auth_.Check(*m, source_allowed, now_us, &reason);
+  const std::string comment = m->comment.empty() ? "" : ": " + m->comment;
+  bool latched = (*pump)->snapshot().alarm.trip_latched;
+  if (result == R::RESULT_ACCEPTED) {
+    --counters_.clears_refused;
+    ++counters_.clears_accepted;
+    const bool was = (*pump)->ClearTrips();
+    latched = false;
+    reason = was ? "latched trip cleared" : "nothing was latched";
+    Log(LogLevel::kNotice, "pump {}: alarm clear from '{}' (counter {}) accepted ({}){}", m->pump, m->source,
+        m->counter, reason, comment);
+  } else {
+    if (result == R::RESULT_BAD_MAC || result == R::RESULT_NO_KEY) ++counters_.clears_unauthenticated;
+    Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' (counter {}) refused: {}{}", m->pump, m->source,
+        m->counter, reason, comment);
+  }
+  const pumptherm::alarm_clear_reply_t reply = clear_auth_.Reply(*m, result, reason, latched, now_us);
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(reply.getEncodedSize()));
+  reply.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  const std::string channel = lcm_channels::PumpChannelName(config_.lcm.channel_prefix, m->pump,
+                                                            lcm_channels::PumpChannel::kAlarmClearReply);
+  if (sink.PublishLcm(channel, now_us, bytes)) {
+    ++counters_.lcm_published;
+  } else {
+    ++counters_.lcm_failed;
+  }
+  return result == R::RESULT_ACCEPTED;
+}
+
+}  // namespace pumptherm::daemon
