@@ -82,6 +82,8 @@ class Gateway {
   /// Loads the clear key named by the configuration (LoadConfiguredClearKey); without one,
   /// every LCM clear is refused. Throws ConfigError.
   void LoadClearKey(const std::string& credentials_dir);
+  /// Sets the clear key directly (tests; LoadClearKey reads it from the configured file).
+  void SetClearKey(const ClearKey& key) { clear_auth_.SetKey(key); }
   const ClearAuthenticator& clear_auth() const { return clear_auth_; }
 
   FrameCounter& counter() { return counter_; }

@@ -30,7 +30,7 @@ bool Gateway::ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_u
   std::string reason;
   const std::int8_t result = clear_auth_.Check(*m, source_allowed, now_us, &reason);
   const std::string comment = m->comment.empty() ? "" : ": " + m->comment;
-  bool latched = (*pump)->snapshot().alarm.trip_latched;
+  bool latched = !(*pump)->Save().latched_trips.empty();  // the snapshot lags a clear until the next step
   if (result == R::RESULT_ACCEPTED) {
     --counters_.clears_refused;
     ++counters_.clears_accepted;
