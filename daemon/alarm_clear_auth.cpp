@@ -12,6 +12,7 @@
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
+#include <system_error>
 #include <toml++/toml.h>
 #include <vector>
 
@@ -157,12 +158,18 @@ std::optional<ClearKey> LoadConfiguredClearKey(const DaemonConfig& config, const
   };
   if (const std::string problem = ClearKeyFileProblem(c.key_file, c.key_group); !problem.empty()) fail(problem);
   // Under the shipped unit, systemd (as root) hands the file over as a credential: the
-  // service's dynamic user is not in the operators' group. An empty one means "not loaded".
+  // service's dynamic user is not in the operators' group. kNoClearKeyCredential means systemd
+  // found no file when the service started; the file itself is read then.
   std::string path = c.key_file;
   if (!credentials_dir.empty()) {
     const std::string copy = credentials_dir + "/" + kClearKeyCredential;
-    struct stat st {};
-    if (::stat(copy.c_str(), &st) == 0 && st.st_size > 0) path = copy;
+    std::optional<std::string> text;
+    try {
+      text = ReadFileIfExists(copy);
+    } catch (const std::system_error& e) {
+      fail(e.what());
+    }
+    if (text && *text != kNoClearKeyCredential) path = copy;
   }
   try {
     return ReadClearKeyFile(path);

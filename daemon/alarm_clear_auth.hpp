@@ -13,6 +13,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include "pumptherm/alarm_clear_reply_t.hpp"
 #include "pumptherm/alarm_clear_t.hpp"
@@ -31,8 +32,10 @@ struct DaemonConfig;
 inline constexpr std::size_t kClearKeyBytes = 32;
 using ClearKey = std::array<std::uint8_t, kClearKeyBytes>;
 
-/// Name of the systemd credential that carries the key (LoadCredential= in the unit).
+/// Name of the systemd credential that carries the key (LoadCredential= in the unit), and
+/// what it holds when there was no key file (the unit's SetCredential= fallback).
 inline constexpr const char* kClearKeyCredential = "pumptherm-clear-key";
+inline constexpr std::string_view kNoClearKeyCredential = "none";
 
 /// What is wrong with the permissions of key file `path`, or "" when nothing is: it must be a
 /// regular file that others can neither read nor write and its group cannot write, and it must
@@ -47,7 +50,8 @@ ClearKey ReadClearKeyFile(const std::string& path);
 
 /// The key of `config` (alarms.clear_key_file), or nullopt when none is configured. Checks the
 /// file's permissions (ClearKeyFileProblem) and reads it, or, when systemd handed it over as
-/// credential kClearKeyCredential in `credentials_dir` (non-empty), reads that copy. Throws
+/// credential kClearKeyCredential in `credentials_dir` (non-empty, and the credential not
+/// kNoClearKeyCredential), reads that copy. Throws
 /// ConfigError "FILE:LINE: key 'alarms.clear_key_file': PROBLEM" for any problem.
 std::optional<ClearKey> LoadConfiguredClearKey(const DaemonConfig& config, const std::string& credentials_dir);
 

@@ -307,8 +307,12 @@ TEST_F(KeyFile, WrongSizeIsAnErrorAndASystemdCredentialIsPreferred) {
   const ClearKey k = Key(40);
   WriteFileAtomically(dir_ + "/" + kClearKeyCredential, std::string(k.begin(), k.end()), 0400);
   EXPECT_EQ(LoadConfiguredClearKey(Config(group_), dir_), Key(40));
-  WriteFileAtomically(dir_ + "/" + kClearKeyCredential, "", 0400);  // SetCredential= fallback: empty
+  // The unit's SetCredential= fallback: the file itself is read (here: the short one).
+  WriteFileAtomically(dir_ + "/" + kClearKeyCredential, std::string(kNoClearKeyCredential), 0400);
   EXPECT_THROW(LoadConfiguredClearKey(Config(group_), dir_), ConfigError);
+  const ClearKey f = Key(60);
+  WriteFileAtomically(path_, std::string(f.begin(), f.end()), 0640);
+  EXPECT_EQ(LoadConfiguredClearKey(Config(group_), dir_), Key(60));
 }
 
 TEST(ClearAuth, LcmSourcesWithoutAKeyAreAConfigurationError) {
