@@ -2,11 +2,13 @@
 
 #include <fmt/format.h>
 #include <grp.h>
+#include <lcm/lcm-cpp.hpp>
 #include <sodium.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -18,6 +20,7 @@
 
 #include "daemon/config.hpp"
 #include "daemon/state_store.hpp"
+#include "protocol/lcm/channels.hpp"
 
 namespace pumptherm::daemon {
 namespace {
@@ -200,6 +203,44 @@ void Sign(const ClearKey& key, pumptherm::alarm_clear_reply_t& m) {
 bool Verify(const ClearKey& key, const pumptherm::alarm_clear_t& m) { return RequestInput(m).Verify(key, m.mac); }
 
 bool Verify(const ClearKey& key, const pumptherm::alarm_clear_reply_t& m) { return ReplyInput(m).Verify(key, m.mac); }
+
+ClearExchange SendClear(lcm::LCM& lcm, const std::string& prefix, const ClearKey& key,
+                        pumptherm::alarm_clear_t m, double timeout_s) {
+  using lcm_channels::PumpChannel;
+  using lcm_channels::PumpChannelName;
+  Sign(key, m);
+  struct Listener {
+    const ClearKey& key;
+    std::int64_t counter;
+    ClearExchange out;
+    void On(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+      pumptherm::alarm_clear_reply_t r{};
+      const int size = static_cast<int>(rbuf->data_size);
+      if (r.decode(rbuf->data, 0, size) != size) return;
+      if (r.counter != counter) return;
+      if (Verify(key, r)) {
+        out.reply = r;
+      } else {
+        ++out.untrusted_replies;
+        out.untrusted_reason = r.reason;
+      }
+    }
+  } listener{key, m.counter, {}};
+  lcm::Subscription* sub =
+      lcm.subscribe(PumpChannelName(prefix, m.pump, PumpChannel::kAlarmClearReply), &Listener::On, &listener);
+  if (lcm.publish(PumpChannelName(prefix, m.pump, PumpChannel::kAlarmClear), &m) != 0) {
+    lcm.unsubscribe(sub);
+    throw std::runtime_error(fmt::format("LCM: cannot publish the clear command: {}", std::strerror(errno)));
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (!listener.out.reply) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) break;
+    lcm.handleTimeout(static_cast<int>(std::min<std::int64_t>(left.count(), 100)));
+  }
+  lcm.unsubscribe(sub);
+  return listener.out;
+}
 
 std::int8_t ClearAuthenticator::Check(const pumptherm::alarm_clear_t& m, bool source_allowed, std::int64_t now_us,
                                       std::string* reason) {

@@ -18,6 +18,10 @@
 #include "pumptherm/alarm_clear_reply_t.hpp"
 #include "pumptherm/alarm_clear_t.hpp"
 
+namespace lcm {
+class LCM;
+}
+
 namespace toml {
 inline namespace v3 {
 class table;
@@ -67,6 +71,20 @@ void Sign(const ClearKey& key, pumptherm::alarm_clear_reply_t& m);
 /// True when `m.mac` is right for `key` (compared in constant time).
 bool Verify(const ClearKey& key, const pumptherm::alarm_clear_t& m);
 bool Verify(const ClearKey& key, const pumptherm::alarm_clear_reply_t& m);
+
+/// What came back for one clear command (SendClear).
+struct ClearExchange {
+  std::optional<pumptherm::alarm_clear_reply_t> reply;  ///< the answer, signed with the key
+  int untrusted_replies = 0;     ///< answers to this counter not signed with the key
+  std::string untrusted_reason;  ///< the reason the last of those gave
+};
+
+/// The client's side (`pumptherm clear-trip`): signs `m` with `key`, publishes it on
+/// <prefix>/<m.pump>/ALARM_CLEAR over `lcm`, and waits up to `timeout_s` (wall clock) for the
+/// answer to its counter on <prefix>/<m.pump>/ALARM_CLEAR_REPLY, handling `lcm` meanwhile.
+/// Throws std::runtime_error when LCM refuses to publish.
+ClearExchange SendClear(lcm::LCM& lcm, const std::string& prefix, const ClearKey& key,
+                        pumptherm::alarm_clear_t m, double timeout_s);
 
 /// The gateway's side: the key, the time window and the last accepted counter of each pump.
 class ClearAuthenticator {

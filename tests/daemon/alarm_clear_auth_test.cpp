@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <cstdio>
+#include <lcm/lcm-cpp.hpp>
 #include <string>
 #include <toml++/toml.h>
 
@@ -15,6 +16,7 @@
 #include "daemon/config.hpp"
 #include "daemon/gateway.hpp"
 #include "daemon/state_store.hpp"
+#include "protocol/lcm/channels.hpp"
 #include "pumptherm/alarm_clear_reply_t.hpp"
 
 namespace pumptherm::daemon {
@@ -213,6 +215,47 @@ TEST_F(ClearGateway, ValidCodeOutsideTheWindowOrFromAnotherSourceIsRefused) {
   EXPECT_EQ(replies_[1].result, Reply::RESULT_OUTSIDE_WINDOW);
   EXPECT_EQ(replies_[2].result, Reply::RESULT_SOURCE_REFUSED);
   EXPECT_EQ(gateway_.counters().clears_unauthenticated, 0U);
+}
+
+// The client's exchange (pumptherm clear-trip) against a gateway over one memq:// LCM: the
+// command goes out on ALARM_CLEAR, the gateway answers on ALARM_CLEAR_REPLY, the client trusts
+// only answers signed with its key.
+TEST_F(ClearGateway, ClientSeesTheGatewaysSignedAnswer) {
+  lcm::LCM lcm("memq://");
+  ASSERT_TRUE(lcm.good());
+  struct Responder : OutputSink {
+    lcm::LCM& lcm;
+    Gateway& gateway;
+    Responder(lcm::LCM& l, Gateway& g) : lcm(l), gateway(g) {}
+    void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
+    bool PublishLcm(const std::string& channel, std::int64_t, const std::vector<std::uint8_t>& b) override {
+      return lcm.publish(channel, b.data(), static_cast<unsigned>(b.size())) == 0;
+    }
+    void On(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+      pumptherm::alarm_clear_t m;
+      const int size = static_cast<int>(rbuf->data_size);
+      const bool ok = m.decode(rbuf->data, 0, size) == size;
+      gateway.ClearFromLcm(ok ? &m : nullptr, kNowUs, *this);
+    }
+  } responder(lcm, gateway_);
+  lcm.subscribe(lcm_channels::AllPumpsPattern("PUMPTHERM", lcm_channels::PumpChannel::kAlarmClear), &Responder::On,
+                &responder);
+  Latch(gateway_);
+  const ClearExchange ok = SendClear(lcm, "PUMPTHERM", Key(1), Command(kNowUs, 7), 2.0);
+  ASSERT_TRUE(ok.reply.has_value());
+  EXPECT_EQ(ok.reply->result, Reply::RESULT_ACCEPTED);
+  EXPECT_FALSE(Latched());
+  const ClearExchange again = SendClear(lcm, "PUMPTHERM", Key(1), Command(kNowUs, 7), 2.0);
+  ASSERT_TRUE(again.reply.has_value());
+  EXPECT_EQ(again.reply->result, Reply::RESULT_REPLAYED);
+  EXPECT_EQ(again.reply->last_counter, 7);
+  // Signed with another key: the gateway refuses, and its answer is not trusted by the client.
+  Latch(gateway_);
+  const ClearExchange other = SendClear(lcm, "PUMPTHERM", Key(2), Command(kNowUs, 8), 0.5);
+  EXPECT_FALSE(other.reply.has_value());
+  EXPECT_EQ(other.untrusted_replies, 1);
+  EXPECT_EQ(other.untrusted_reason, "no or a wrong authentication code");
+  EXPECT_TRUE(Latched());
 }
 
 TEST(ClearAuth, GatewayWithoutAKeyRefusesEveryLcmClear) {
