@@ -179,7 +179,8 @@ std::string Clear(const std::string& pump, const std::string& source) {
   const bool ok = g.Clear(pump, source, "");
   return std::string(ok ? "accepted" : "refused") + ", logged; clears_accepted " +
          std::to_string(g.counters().clears_accepted) + ", clears_refused " +
-         std::to_string(g.counters().clears_refused);
+         std::to_string(g.counters().clears_refused) + ", clears_unauthenticated " +
+         std::to_string(g.counters().clears_unauthenticated);
 }
 
 constexpr std::int64_t kNowUs = 1'700'000'000'000'000;
@@ -334,7 +335,7 @@ std::vector<Row> Catalogue() {
       // --- clear commands (LCM alarm_clear_t and PUMP_CLEAR frames) ---
       {"LCM clear", "spoofed", "source `panel` (configured), no code", [] { return LcmClear(ClearCommand("tmp1", "panel", 0)); }, "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1; reply PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: no or a wrong authentication code"},
       {"LCM clear", "spoofed", "source `panel`, code made with another key", [] { return LcmClear(ClearCommand("tmp1", "panel", 2)); }, "wrong authentication code"},
-      {"LCM clear", "spoofed", "source `panel`, no code, through the unauthenticated path", [] { return Clear("tmp1", "panel"); }, "refused"},
+      {"LCM clear", "spoofed", "source `panel`, no code, through the unauthenticated path", [] { return Clear("tmp1", "panel"); }, "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1"},
       {"LCM clear", "replayed", "a valid command received twice", [] { const auto m = ClearCommand("tmp1", "panel", 1); return LcmClear({&m, &m}); }, "refused, logged; clears_accepted 1, clears_refused 1, clears_unauthenticated 0; reply PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: counter 5 is not above the last accepted 5"},
       {"LCM clear", "old", "a valid command issued 31 s ago", [] { return LcmClear(ClearCommand("tmp1", "panel", 1, kNowUs - 31'000'000)); }, "window 30 s"},
       {"LCM clear", "huge", "a valid command with `utime` INT64_MIN", [] { return LcmClear(ClearCommand("tmp1", "panel", 1, std::numeric_limits<std::int64_t>::min())); }, "refused"},
