@@ -162,6 +162,7 @@ class Gateway {
   };
 
   void Emit(std::size_t pump, OutputPlan& plan, std::int64_t time_us, OutputSink& sink);
+  void PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us, OutputSink& sink);
   void FillTemperatures(const Pump& p, pumptherm::temperatures_t& m) const;
   void FillTelemetry(std::size_t pump_index, pumptherm::telemetry_t& m) const;
   void FillAlarm(const Pump& p, pumptherm::alarm_t& m) const;
