@@ -44,6 +44,8 @@ TOML
 # memq:// is this process alone: nobody answers.
 expect 1 "tmp1: no answer from the gateway within 0.2 s on memq://" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml" --timeout-s 0.2
 expect 2 "pump 'tmp9' is not configured in $tmp/d.toml" -- "$tool" clear-trip tmp9 -c "$tmp/d.toml"
+# Another host: no configuration, the URL and the key on the command line.
+expect 1 "tmp1: no answer from the gateway within 0.2 s on memq://" -- "$tool" clear-trip tmp1 -c "$tmp/none.toml" --url memq:// --key "$tmp/clear.key" --timeout-s 0.2
 expect 2 "nonexistent.toml: cannot open" -- "$tool" clear-trip tmp1 -c "$tmp/nonexistent.toml"
 chmod 0644 "$tmp/clear.key"
 expect 2 "clear.key is open to others \(mode 0644\)" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml"

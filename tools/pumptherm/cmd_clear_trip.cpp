@@ -3,6 +3,7 @@
 // (docs/threat-model.md; docs/lcm.md, "Clearing a trip").
 #include <fmt/core.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <lcm/lcm-cpp.hpp>
@@ -22,6 +23,7 @@ struct ClearTripOptions {
   std::string config = "/etc/pumptherm/pumpthermd.toml";
   std::string key_file;
   std::string url;
+  std::string prefix;
   std::string source;
   std::string node;
   std::string comment;
@@ -33,18 +35,29 @@ struct Settings {
   std::string url, prefix = "PUMPTHERM", key_file, key_group, source = "operator";
 };
 
+/// Settings from the options alone, for a host without the daemon's configuration.
+Settings FromOptions(const ClearTripOptions& o) {
+  Settings s;
+  s.url = o.url;
+  s.key_file = o.key_file;
+  if (!o.prefix.empty()) s.prefix = o.prefix;
+  if (!o.source.empty()) s.source = o.source;
+  return s;
+}
+
 Settings Resolve(const ClearTripOptions& o) {
+  if (!o.url.empty() && !o.key_file.empty() && ::access(o.config.c_str(), F_OK) != 0) return FromOptions(o);
   Settings s;
   daemon::DaemonConfig c;
   try {
     c = daemon::LoadConfig(o.config);
   } catch (const daemon::ConfigError& e) {
-    throw InputError(e.what());
+    throw InputError(fmt::format("{} (without the configuration, give --url and --key)", e.what()));
   }
   const bool known = std::any_of(c.pumps.begin(), c.pumps.end(), [&](const auto& p) { return p.name == o.pump; });
   if (!known) throw InputError(fmt::format("pump '{}' is not configured in {}", o.pump, o.config));
   s.url = o.url.empty() ? c.lcm.url : o.url;
-  s.prefix = c.lcm.channel_prefix;
+  s.prefix = o.prefix.empty() ? c.lcm.channel_prefix : o.prefix;
   s.key_file = o.key_file.empty() ? c.clear_auth.key_file : o.key_file;
   s.key_group = c.clear_auth.key_group;
   const auto& sources = c.alarms.clear_lcm_sources;
@@ -122,6 +135,7 @@ const SubcommandRegistrar kRegistrar{
           ->capture_default_str();
       app.add_option("--key", o->key_file, "Key file (default: alarms.clear_key_file of the configuration)");
       app.add_option("--url", o->url, "LCM URL (default: lcm.url of the configuration)");
+      app.add_option("--prefix", o->prefix, "LCM channel prefix (default: lcm.channel_prefix, or PUMPTHERM)");
       app.add_option("--source", o->source, "Who clears (default: the first of alarms.clear_lcm_sources)");
       app.add_option("--node", o->node, "Node whose trip to clear (default: every latched trip)");
       app.add_option("--comment", o->comment, "Why; the gateway logs it");
@@ -130,6 +144,7 @@ const SubcommandRegistrar kRegistrar{
           ->capture_default_str();
       app.footer(
           "Exit codes: 0 the gateway accepted the clear, 1 it refused or did not answer, 2 bad input.\n"
+          "Without the configuration file, --url and --key are needed.\n"
           "Example (as a member of the group that owns the key file):\n"
           "  pumptherm clear-trip tmp1 --comment 'bearing replaced'");
       return [o] { return RunClearTrip(*o); };
