@@ -251,11 +251,6 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     a.clear_can_interfaces = r.Strings("clear_can_interfaces");
     a.clear_lcm_sources = r.Strings("clear_lcm_sources");
     ReadClearAuth(r, config.dbc.base_dir, config.clear_auth);
-    if (!a.clear_lcm_sources.empty() && config.clear_auth.key_file.empty()) {
-      r.Fail(t->get("clear_lcm_sources"), "clear_lcm_sources",
-             "LCM clears need a key: set alarms.clear_key_file and alarms.clear_key_group "
-             "(docs/threat-model.md)");
-    }
     read_levels(r, a);
     r.RejectUnknown();
     config.alarms = a;

@@ -80,7 +80,7 @@ class Gateway {
   bool ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_us, OutputSink& sink);
 
   /// Loads the clear key named by the configuration (LoadConfiguredClearKey); without one,
-  /// every LCM clear is refused. Throws ConfigError.
+  /// every LCM clear is refused (a warning when LCM sources are configured). Throws ConfigError.
   void LoadClearKey(const std::string& credentials_dir);
   /// Sets the clear key directly (tests; LoadClearKey reads it from the configured file).
   void SetClearKey(const ClearKey& key) { clear_auth_.SetKey(key); }

@@ -9,7 +9,16 @@
 namespace pumptherm::daemon {
 
 void Gateway::LoadClearKey(const std::string& credentials_dir) {
-  if (const auto key = LoadConfiguredClearKey(config_, credentials_dir)) clear_auth_.SetKey(*key);
+  if (const auto key = LoadConfiguredClearKey(config_, credentials_dir)) {
+    clear_auth_.SetKey(*key);
+    return;
+  }
+  // Not an error: a configuration from before the key keeps its gateway running (a gateway
+  // that does not start raises no alarm at all); its LCM clears are refused and counted.
+  if (!config_.alarms.clear_lcm_sources.empty()) {
+    Log(LogLevel::kWarning, "{}: alarms.clear_lcm_sources is set but alarms.clear_key_file is not: every LCM "
+        "clear will be refused (docs/threat-model.md)", config_.source);
+  }
 }
 
 bool Gateway::ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_us, OutputSink& sink) {

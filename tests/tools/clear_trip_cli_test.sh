@@ -55,5 +55,7 @@ expect 0 "d.toml: OK" -- "$daemon" --check-config "$tmp/d.toml"
 head -c 16 /dev/urandom > "$tmp/clear.key"
 expect 2 "clear.key holds 16 bytes; a clear key is 32 random bytes" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml"
 sed -i '/clear_key/d' "$tmp/d.toml"
-expect 2 "d.toml:4: key 'alarms.clear_lcm_sources': LCM clears need a key" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml"
+expect 2 "d.toml: no alarms.clear_key_file: LCM clears are off in this configuration" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml"
+expect 0 "d.toml: OK" -- "$daemon" --check-config "$tmp/d.toml"
+expect 0 "clear_lcm_sources is set but alarms.clear_key_file is not: every LCM clear will be refused" -- "$daemon" --check-config "$tmp/d.toml"
 exit $fail
