@@ -125,6 +125,20 @@ class TableReader {
   std::vector<std::string> used_;
 };
 
+/// alarms.clear_key_file (relative to `base_dir`), clear_key_group and clear_window_s.
+void ReadClearAuth(TableReader& r, const std::string& base_dir, ClearAuthConfig& c) {
+  const std::string empty;
+  c.key_file = r.String("clear_key_file", &empty);
+  c.key_group = r.String("clear_key_group", &empty);
+  c.window_s = r.Number("clear_window_s", c.window_s, 1.0, 3600.0);
+  if (const toml::node* n = r.table().get("clear_key_file")) c.line = static_cast<int>(n->source().begin.line);
+  if (!c.key_file.empty() && c.key_file[0] != '/') c.key_file = base_dir + "/" + c.key_file;
+  if (!c.key_file.empty() && c.key_group.empty()) {
+    r.Fail(r.table().get("clear_key_file"), "clear_key_group",
+           "missing: name the group of operators that owns the clear key file");
+  }
+}
+
 }  // namespace
 
 DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
@@ -236,6 +250,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     m.forecast_horizon_s = r.Number("forecast_horizon_s", m.forecast_horizon_s, 0.0, 86400.0);
     a.clear_can_interfaces = r.Strings("clear_can_interfaces");
     a.clear_lcm_sources = r.Strings("clear_lcm_sources");
+    ReadClearAuth(r, config.dbc.base_dir, config.clear_auth);
     read_levels(r, a);
     r.RejectUnknown();
     config.alarms = a;

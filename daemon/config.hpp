@@ -82,6 +82,14 @@ struct AlarmsConfig {
   std::vector<std::string> clear_lcm_sources;     ///< alarm_clear_t.source values accepted
 };
 
+/// Authenticated LCM clears (docs/threat-model.md): the key file and the replay window.
+struct ClearAuthConfig {
+  std::string key_file;             ///< empty: no key, every LCM clear is refused
+  std::string key_group;            ///< group that owns the key file (the operators)
+  double window_s = 30.0;           ///< a command's time may be this far from the gateway's clock
+  int line = 0;                     ///< line of alarms.clear_key_file, for messages
+};
+
 struct PumpConfig {
   std::string name;
   std::uint32_t node_id = 0;
@@ -107,6 +115,7 @@ struct DaemonConfig {
   DbcConfig dbc;
   LcmConfig lcm;
   AlarmsConfig alarms;              ///< defaults for every pump
+  ClearAuthConfig clear_auth;       ///< from [alarms]: clear_key_file, clear_key_group, clear_window_s
   std::map<std::string, double> output_periods_s;  ///< DBC message name -> period override
   std::vector<InterfaceConfig> interfaces;
   std::vector<PumpConfig> pumps;

@@ -88,7 +88,8 @@ void EncodeInto(const Message& m, std::vector<std::uint8_t>& bytes) {
 
 }  // namespace
 
-Gateway::Gateway(const DaemonConfig& config) : config_(config), counter_(config.gateway) {
+Gateway::Gateway(const DaemonConfig& config)
+    : config_(config), counter_(config.gateway), clear_auth_(config.clear_auth.window_s) {
   auto fail = [&](int line, const std::string& key, const std::string& what) -> ConfigError {
     return ConfigError(fmt::format("{}:{}: key '{}': {}", config_.source, line, key, what));
   };
@@ -679,8 +680,12 @@ bool Gateway::Clear(const std::string& pump_name, const std::string& source, con
       allowed = std::find(a.clear_can_interfaces.begin(), a.clear_can_interfaces.end(), iface) !=
                 a.clear_can_interfaces.end();
     } else {
-      allowed = std::find(a.clear_lcm_sources.begin(), a.clear_lcm_sources.end(), source) !=
-                a.clear_lcm_sources.end();
+      // A source name alone proves nothing: LCM clears go through ClearFromLcm.
+      ++counters_.clears_refused;
+      ++counters_.clears_unauthenticated;
+      Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' refused (no authentication code){}",
+          pump_name, source, comment.empty() ? "" : ": " + comment);
+      return false;
     }
     if (!allowed) {
       ++counters_.clears_refused;
@@ -793,6 +798,7 @@ std::string Gateway::SaveState() const {
     pumps.insert(p->config().name, std::move(t));
   }
   root.insert("pump", std::move(pumps));
+  clear_auth_.Save(root);
   std::ostringstream ss;
   ss << "# pumpthermd saved state: written atomically; safe to delete (the daemon starts cold).\n"
      << root << "\n";
@@ -808,6 +814,8 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
                            e.source().begin.line, e.description());
     return 0;
   }
+  // The clear counters have their own version: taken whatever the pumps' state holds.
+  std::string clear_warning = clear_auth_.Restore(root);
   // Version 1 (before the identifier's magnet hypotheses) is read too: its one filter
   // becomes both hypotheses, with the prior probabilities.
   const std::int64_t version = root["version"].value_or<std::int64_t>(0);
@@ -910,6 +918,7 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
     *warning = fmt::format("saved state of pump(s) {} does not fit the configuration or is damaged; "
                            "they start cold", ignored);
   }
+  if (!clear_warning.empty()) *warning += (warning->empty() ? "" : "; ") + clear_warning;
   return restored;
 }
 

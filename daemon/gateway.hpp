@@ -11,6 +11,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "daemon/alarm_clear_auth.hpp"
 #include "daemon/config.hpp"
 #include "daemon/frame_counter.hpp"
 #include "daemon/pump.hpp"
@@ -46,7 +47,8 @@ struct GatewayCounters {
   std::uint64_t lcm_published = 0;
   std::uint64_t lcm_failed = 0;
   std::uint64_t clears_accepted = 0;
-  std::uint64_t clears_refused = 0;
+  std::uint64_t clears_refused = 0;        ///< every refused clear, whatever the reason
+  std::uint64_t clears_unauthenticated = 0;  ///< of those: LCM clears without a valid code (or undecodable)
 };
 
 class Gateway {
@@ -72,6 +74,21 @@ class Gateway {
   /// "can:<interface>"). Accepted only from configured sources; every attempt is logged.
   /// Returns true when accepted.
   bool Clear(const std::string& pump, const std::string& source, const std::string& comment);
+
+  /// An LCM alarm_clear_t received at gateway time `now_us` (us since the Unix epoch); nullptr
+  /// when the bytes did not decode as one. Accepted only with a valid authentication code,
+  /// inside the time window, with a new counter and from a configured source
+  /// (ClearAuthenticator::Check); every attempt is logged and counted, and a command for a
+  /// configured pump is answered on <prefix>/<pump>/ALARM_CLEAR_REPLY through `sink`.
+  /// Returns true when accepted (the caller saves the state: the counter must survive a crash).
+  bool ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_us, OutputSink& sink);
+
+  /// Loads the clear key named by the configuration (LoadConfiguredClearKey); without one,
+  /// every LCM clear is refused (a warning when LCM sources are configured). Throws ConfigError.
+  void LoadClearKey(const std::string& credentials_dir);
+  /// Sets the clear key directly (tests; LoadClearKey reads it from the configured file).
+  void SetClearKey(const ClearKey& key) { clear_auth_.SetKey(key); }
+  const ClearAuthenticator& clear_auth() const { return clear_auth_; }
 
   FrameCounter& counter() { return counter_; }
   const FrameCounter& counter() const { return counter_; }
@@ -155,6 +172,7 @@ class Gateway {
   };
 
   void Emit(std::size_t pump, OutputPlan& plan, std::int64_t time_us, OutputSink& sink);
+  void PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us, OutputSink& sink);
   void FillTemperatures(const Pump& p, pumptherm::temperatures_t& m) const;
   void FillTelemetry(std::size_t pump_index, pumptherm::telemetry_t& m) const;
   void FillAlarm(const Pump& p, pumptherm::alarm_t& m) const;
@@ -177,6 +195,7 @@ class Gateway {
   pumptherm::gateway_health_t health_msg_;
   std::vector<std::uint8_t> lcm_bytes_;        // LCM encoding buffer (largest message)
   mutable std::vector<estimators::AlarmCondition> conditions_;  // FillAlarm's buffer
+  ClearAuthenticator clear_auth_;
   std::int64_t start_us_ = -1;
   std::int64_t next_health_us_ = -1;
   std::int64_t last_now_us_ = -1;

@@ -14,8 +14,14 @@ struct LcmBridge::Impl {
   lcm::LCM lcm;
   ClearHandler on_clear;
   explicit Impl(const std::string& url) : lcm(url) {}
-  void OnClear(const lcm::ReceiveBuffer*, const std::string& channel, const pumptherm::alarm_clear_t* msg) {
-    if (on_clear) on_clear(channel, *msg);
+  pumptherm::alarm_clear_t message;  // decoded in place
+  // Raw bytes, decoded here: LCM's typed handler drops a message that does not decode
+  // without telling anyone, and a refused clear must be counted.
+  void OnClear(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+    if (!on_clear) return;
+    const int size = static_cast<int>(rbuf->data_size);
+    const bool ok = message.decode(rbuf->data, 0, size) == size;
+    on_clear(channel, ok ? &message : nullptr);
   }
 };
 

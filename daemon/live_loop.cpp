@@ -176,9 +176,10 @@ struct LiveLoop::Impl : OutputSink {
     lcm.reset();
     if (config.lcm.url.empty()) return;
     lcm = std::make_unique<LcmBridge>(config.lcm.url, config.lcm.channel_prefix,
-                                      [this](const std::string& channel, const pumptherm::alarm_clear_t& m) {
-                                        (void)channel;
-                                        gateway->Clear(m.pump, m.source, m.comment);
+                                      [this](const std::string&, const pumptherm::alarm_clear_t* m) {
+                                        // An accepted counter is saved at once: after a crash,
+                                        // the same command must not clear again.
+                                        if (gateway->ClearFromLcm(m, ClockUs(CLOCK_REALTIME), *this)) SaveState();
                                       });
     Watch(lcm->fd(), kLcmTag);
   }
@@ -363,6 +364,7 @@ struct LiveLoop::Impl : OutputSink {
     try {
       next = LoadConfig(config_path);
       next_gateway = std::make_unique<Gateway>(next);
+      next_gateway->LoadClearKey(CredentialsDirectory());
     } catch (const std::exception& e) {
       Log(LogLevel::kError, "reload refused, the running configuration stays: {}", e.what());
       return;
@@ -493,6 +495,7 @@ LiveLoop::LiveLoop(const DaemonConfig& config, std::string config_path, LiveOpti
                             config.source + ": no [[can]] interface configured (use -r LOG for a log)");
   }
   m.gateway = std::make_unique<Gateway>(m.config);
+  m.gateway->LoadClearKey(CredentialsDirectory());
   m.epoll = UniqueFd(epoll_create1(EPOLL_CLOEXEC));
   if (!m.epoll.valid()) ThrowErrno("epoll_create1");
 

@@ -66,7 +66,8 @@ int main(int argc, char** argv) {
     try {
       const DaemonConfig c = LoadConfig(check_path);
       if (const std::string w = ConfigPermissionWarning(check_path); !w.empty()) Log(LogLevel::kWarning, "{}", w);
-      const Gateway g(c);  // also checks the DBC, mapping, motors and models it names
+      Gateway g(c);  // also checks the DBC, mapping, motors and models it names
+      g.LoadClearKey(CredentialsDirectory());  // and the clear key file's permissions
       fmt::print("{}: OK ({} interface{}, {} pump{})\n", check_path, c.interfaces.size(),
                  c.interfaces.size() == 1 ? "" : "s", c.pumps.size(), c.pumps.size() == 1 ? "" : "s");
       return 0;

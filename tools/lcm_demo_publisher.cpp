@@ -202,6 +202,9 @@ int Run(const Options& options) {
         clear.node = "";
         clear.source = "pumptherm-lcm-demo";
         clear.comment = "demo clear command";
+        // Not signed (the demo holds no key): a gateway refuses it and counts it.
+        clear.counter = tick;
+        std::fill(std::begin(clear.mac), std::end(clear.mac), std::uint8_t{0});
         Publish(lcm, PumpChannelName(options.prefix, pump, PumpChannel::kAlarmClear), clear, sent,
                 failures);
       }

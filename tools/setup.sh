@@ -10,7 +10,7 @@ packages=(
   build-essential cmake ninja-build pkg-config git ca-certificates
   libeigen3-dev libceres-dev libmuparser-dev
   liblcm-dev liblcm-bin liblcm-java libglib2.0-dev
-  libsystemd-dev libtomlplusplus-dev libcli11-dev libfmt-dev
+  libsystemd-dev libsodium-dev libtomlplusplus-dev libcli11-dev libfmt-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   clang libclang-rt-14-dev
   can-utils iproute2 kmod cpio gzip busybox-static qemu-system-x86 debootstrap e2fsprogs

@@ -6,6 +6,7 @@
 ///   <prefix>/<pump>/TEMPS         pumptherm::temperatures_t
 ///   <prefix>/<pump>/ALARM         pumptherm::alarm_t
 ///   <prefix>/<pump>/ALARM_CLEAR   pumptherm::alarm_clear_t (command to the gateway)
+///   <prefix>/<pump>/ALARM_CLEAR_REPLY   pumptherm::alarm_clear_reply_t (the gateway's answer)
 ///   <prefix>/GATEWAY/HEALTH       pumptherm::gateway_health_t
 ///
 /// Pure string handling: no I/O. Names are restricted to ASCII letters, digits, '_', '-' and
@@ -23,9 +24,10 @@ namespace pumptherm::lcm_channels {
 inline constexpr std::string_view kDefaultPrefix = "PUMPTHERM";
 
 /// The per-pump channels.
-enum class PumpChannel { kTelemetry, kTemperatures, kAlarm, kAlarmClear };
+enum class PumpChannel { kTelemetry, kTemperatures, kAlarm, kAlarmClear, kAlarmClearReply };
 
-/// Last path element of a per-pump channel: "TELEMETRY", "TEMPS", "ALARM", "ALARM_CLEAR".
+/// Last path element of a per-pump channel: "TELEMETRY", "TEMPS", "ALARM", "ALARM_CLEAR",
+/// "ALARM_CLEAR_REPLY".
 constexpr std::string_view Suffix(PumpChannel channel) {
   switch (channel) {
     case PumpChannel::kTelemetry:
@@ -36,6 +38,8 @@ constexpr std::string_view Suffix(PumpChannel channel) {
       return "ALARM";
     case PumpChannel::kAlarmClear:
       return "ALARM_CLEAR";
+    case PumpChannel::kAlarmClearReply:
+      return "ALARM_CLEAR_REPLY";
   }
   return "";
 }
@@ -146,7 +150,8 @@ inline std::optional<ParsedChannel> ParsePumpChannel(std::string_view prefix,
     return std::nullopt;
   }
   for (const PumpChannel c : {PumpChannel::kTelemetry, PumpChannel::kTemperatures,
-                              PumpChannel::kAlarm, PumpChannel::kAlarmClear}) {
+                              PumpChannel::kAlarm, PumpChannel::kAlarmClear,
+                              PumpChannel::kAlarmClearReply}) {
     if (suffix == Suffix(c)) {
       return ParsedChannel{std::string(pump), c};
     }

@@ -7,11 +7,13 @@
 
 #include <cstdlib>
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
 #include "daemon/config.hpp"
 #include "daemon/gateway.hpp"
+#include "pumptherm/alarm_clear_reply_t.hpp"
 #include "estimators/motor.hpp"
 #include "estimators/thermal_model.hpp"
 #include "protocol/candump_log.hpp"
@@ -125,6 +127,8 @@ interface = "can0"
 [alarms]
 clear_can_interfaces = ["can0"]
 clear_lcm_sources = ["panel"]
+clear_key_file = "clear.key"
+clear_key_group = "root"
 [[pump]]
 name = "tmp1"
 node_id = 1
@@ -176,8 +180,55 @@ std::string Clear(const std::string& pump, const std::string& source) {
   const bool ok = g.Clear(pump, source, "");
   return std::string(ok ? "accepted" : "refused") + ", logged; clears_accepted " +
          std::to_string(g.counters().clears_accepted) + ", clears_refused " +
-         std::to_string(g.counters().clears_refused);
+         std::to_string(g.counters().clears_refused) + ", clears_unauthenticated " +
+         std::to_string(g.counters().clears_unauthenticated);
 }
+
+constexpr std::int64_t kNowUs = 1'700'000'000'000'000;
+
+ClearKey TestKey(std::uint8_t seed) {
+  ClearKey k{};
+  for (std::size_t i = 0; i < k.size(); ++i) k[i] = static_cast<std::uint8_t>(seed + i);
+  return k;
+}
+
+/// Counts what a gateway keyed with TestKey(1) made of LCM clear commands `messages` (nullptr:
+/// bytes that did not decode), and the verdict of the last reply it published.
+std::string LcmClear(const std::vector<const pumptherm::alarm_clear_t*>& messages) {
+  Gateway g(ParseConfig(kGatewayConfig, std::string(PUMPTHERM_SOURCE_DIR) + "/p.toml"));
+  g.SetClearKey(TestKey(1));
+  struct ReplySink : NullSink {
+    std::string last;
+    bool PublishLcm(const std::string& channel, std::int64_t, const std::vector<std::uint8_t>& b) override {
+      pumptherm::alarm_clear_reply_t r;
+      if (r.decode(b.data(), 0, static_cast<int>(b.size())) > 0) last = channel + ": " + r.reason;
+      return true;
+    }
+  } sink;
+  bool ok = false;
+  for (const auto* m : messages) ok = g.ClearFromLcm(m, kNowUs, sink);
+  return std::string(ok ? "accepted" : "refused") + ", logged; clears_accepted " +
+         std::to_string(g.counters().clears_accepted) + ", clears_refused " +
+         std::to_string(g.counters().clears_refused) + ", clears_unauthenticated " +
+         std::to_string(g.counters().clears_unauthenticated) + (sink.last.empty() ? "; no reply" : "; reply " + sink.last);
+}
+
+/// A clear command for `pump` from `source`, signed with TestKey(key_seed) (0: no code).
+pumptherm::alarm_clear_t ClearCommand(const std::string& pump, const std::string& source, std::uint8_t key_seed,
+                                      std::int64_t utime = kNowUs, std::int64_t counter = 5) {
+  pumptherm::alarm_clear_t m;
+  m.utime = utime;
+  m.pump = pump;
+  m.node = "";
+  m.source = source;
+  m.comment = "";
+  m.counter = counter;
+  std::fill(std::begin(m.mac), std::end(m.mac), std::uint8_t{0});
+  if (key_seed != 0) Sign(TestKey(key_seed), m);
+  return m;
+}
+
+std::string LcmClear(const pumptherm::alarm_clear_t& m) { return LcmClear({&m}); }
 
 /// A valid saved state of the test gateway's pump, from a short run.
 std::string SavedState() {
@@ -283,9 +334,16 @@ std::vector<Row> Catalogue() {
       {"CAN frame", "wrong type", "error frame", [] { return Frame(0x004, "0000000000000000", false, false, true); }, "ignored"},
       {"CAN frame", "empty", "PUMP_STATUS with 0 bytes", [] { return Frame(0x181, ""); }, "rx_bad_length 1"},
       // --- clear commands (LCM alarm_clear_t and PUMP_CLEAR frames) ---
-      {"LCM clear", "unknown", "source `intruder`", [] { return Clear("tmp1", "intruder"); }, "refused"},
-      {"LCM clear", "unknown", "pump `nope`", [] { return Clear("nope", "panel"); }, "refused"},
-      {"LCM clear", "valid", "source `panel` (configured)", [] { return Clear("tmp1", "panel"); }, "accepted"},
+      {"LCM clear", "spoofed", "source `panel` (configured), no code", [] { return LcmClear(ClearCommand("tmp1", "panel", 0)); }, "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1; reply PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: no or a wrong authentication code"},
+      {"LCM clear", "spoofed", "source `panel`, code made with another key", [] { return LcmClear(ClearCommand("tmp1", "panel", 2)); }, "wrong authentication code"},
+      {"LCM clear", "spoofed", "source `panel`, no code, through the unauthenticated path", [] { return Clear("tmp1", "panel"); }, "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1"},
+      {"LCM clear", "replayed", "a valid command received twice", [] { const auto m = ClearCommand("tmp1", "panel", 1); return LcmClear({&m, &m}); }, "refused, logged; clears_accepted 1, clears_refused 1, clears_unauthenticated 0; reply PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: counter 5 is not above the last accepted 5"},
+      {"LCM clear", "old", "a valid command issued 31 s ago", [] { return LcmClear(ClearCommand("tmp1", "panel", 1, kNowUs - 31'000'000)); }, "window 30 s"},
+      {"LCM clear", "huge", "a valid command with `utime` INT64_MIN", [] { return LcmClear(ClearCommand("tmp1", "panel", 1, std::numeric_limits<std::int64_t>::min())); }, "refused"},
+      {"LCM clear", "unknown", "source `intruder` with a valid code", [] { return LcmClear(ClearCommand("tmp1", "intruder", 1)); }, "not in alarms.clear_lcm_sources"},
+      {"LCM clear", "unknown", "pump `nope`", [] { return LcmClear(ClearCommand("nope", "panel", 1)); }, "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 0; no reply"},
+      {"LCM clear", "wrong type", "bytes that do not decode as alarm_clear_t", [] { return LcmClear({nullptr}); }, "clears_unauthenticated 1; no reply"},
+      {"LCM clear", "valid", "source `panel`, signed with the key, new counter", [] { return LcmClear(ClearCommand("tmp1", "panel", 1)); }, "accepted, logged; clears_accepted 1, clears_refused 0"},
       {"CAN clear", "unknown", "PUMP_CLEAR on `can:can1`", [] { return Clear("tmp1", "can:can1"); }, "refused"},
       // --- saved state ---
       {"saved state", "valid", "a state saved by the same gateway", [state] { return Restore(state); }, "restored 1"},

@@ -71,7 +71,7 @@ dpkg-deb --field "$deb" Depends > "$tmp/depends"
 echo "Depends: $(cat "$tmp/depends")"
 # Every library package our binaries link, and versions where the library's symbols file gives
 # one (libsystemd0's minimum is older than any release; liblcm1 has no symbols file).
-for lib in libc6 libstdc++6 libgcc-s1 libsystemd0 libfmt9 libtomlplusplus3 libmuparser2v5 liblcm1; do
+for lib in libc6 libstdc++6 libgcc-s1 libsystemd0 libfmt9 libtomlplusplus3 libmuparser2v5 liblcm1 libsodium23; do
   tr ',' '\n' < "$tmp/depends" | sed 's/^ *//; s/ .*//' | grep -qxF "$lib" ||
     { echo "FAIL: Depends lacks $lib"; fail=1; }
 done

@@ -122,6 +122,20 @@ void FlattenInto(Flat& f, const std::string& p, const alarm_clear_t& m) {
   f.Text(p + ".node", m.node);
   f.Text(p + ".source", m.source);
   f.Text(p + ".comment", m.comment);
+  f.Integer(p + ".counter", m.counter);
+  // Java's byte is signed.
+  for (std::size_t i = 0; i < 32; ++i) f.Integer(Index(p + ".mac", i), static_cast<std::int8_t>(m.mac[i]));
+}
+
+void FlattenInto(Flat& f, const std::string& p, const alarm_clear_reply_t& m) {
+  f.Integer(p + ".utime", m.utime);
+  f.Text(p + ".pump", m.pump);
+  f.Integer(p + ".counter", m.counter);
+  f.Integer(p + ".result", m.result);
+  f.Text(p + ".reason", m.reason);
+  f.Integer(p + ".last_counter", m.last_counter);
+  f.Bool(p + ".trip_latched", m.trip_latched);
+  for (std::size_t i = 0; i < 32; ++i) f.Integer(Index(p + ".mac", i), static_cast<std::int8_t>(m.mac[i]));
 }
 
 void FlattenInto(Flat& f, const std::string& p, const gateway_health_t& m) {
@@ -233,6 +247,7 @@ TEST_F(LcmJava, JavaDecodesWhatCppEncodesAndEncodesItBack) {
   Add(SampleAlarm(2));
   Add(SampleAlarm(0));
   Add(SampleAlarmClear());
+  Add(SampleAlarmClearReply());
   Add(SampleGatewayHealth(2));
   ASSERT_FALSE(HasFailure());
 

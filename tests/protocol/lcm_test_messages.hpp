@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <pumptherm/alarm_clear_reply_t.hpp>
 #include <pumptherm/alarm_clear_t.hpp>
 #include <pumptherm/alarm_t.hpp>
 #include <pumptherm/gateway_health_t.hpp>
@@ -179,6 +180,9 @@ inline alarm_clear_t SampleAlarmClear() {
   m.node = "";
   m.source = "operator@console-2";
   m.comment = "Wicklung geprüft, Störung behoben";  // non-ASCII UTF-8 on purpose
+  m.counter = 1'763'776'803'000'017;
+  // Bytes above 127 on purpose (Java's byte is signed).
+  for (int i = 0; i < 32; ++i) m.mac[i] = static_cast<std::uint8_t>(i * 8 + 3);
   return m;
 }
 
@@ -188,6 +192,32 @@ inline void ExpectSame(const alarm_clear_t& e, const alarm_clear_t& a) {
   EXPECT_EQ(e.node, a.node);
   EXPECT_EQ(e.source, a.source);
   EXPECT_EQ(e.comment, a.comment);
+  EXPECT_EQ(e.counter, a.counter);
+  for (int i = 0; i < 32; ++i) EXPECT_EQ(e.mac[i], a.mac[i]) << "mac[" << i << "]";
+}
+
+inline alarm_clear_reply_t SampleAlarmClearReply() {
+  alarm_clear_reply_t m;
+  m.utime = 1'763'776'803'250'000;
+  m.pump = "tmp-07";
+  m.counter = 1'763'776'803'000'017;
+  m.result = alarm_clear_reply_t::RESULT_REPLAYED;
+  m.reason = "counter 1763776803000017 is not above the last accepted 1763776803000018";
+  m.last_counter = 1'763'776'803'000'018;
+  m.trip_latched = true;
+  for (int i = 0; i < 32; ++i) m.mac[i] = static_cast<std::uint8_t>(255 - i * 7);
+  return m;
+}
+
+inline void ExpectSame(const alarm_clear_reply_t& e, const alarm_clear_reply_t& a) {
+  EXPECT_EQ(e.utime, a.utime);
+  EXPECT_EQ(e.pump, a.pump);
+  EXPECT_EQ(e.counter, a.counter);
+  EXPECT_EQ(e.result, a.result);
+  EXPECT_EQ(e.reason, a.reason);
+  EXPECT_EQ(e.last_counter, a.last_counter);
+  EXPECT_EQ(e.trip_latched, a.trip_latched);
+  for (int i = 0; i < 32; ++i) EXPECT_EQ(e.mac[i], a.mac[i]) << "mac[" << i << "]";
 }
 
 /// `interfaces`: how many CAN interfaces the sample reports.

@@ -82,6 +82,7 @@ TEST(LcmTypes, AlarmRoundTrip) {
 }
 
 TEST(LcmTypes, AlarmClearRoundTrip) { ExpectRoundTrip(SampleAlarmClear()); }
+TEST(LcmTypes, AlarmClearReplyRoundTrip) { ExpectRoundTrip(SampleAlarmClearReply()); }
 
 TEST(LcmTypes, GatewayHealthRoundTrip) {
   ExpectRoundTrip(SampleGatewayHealth(0));
@@ -93,6 +94,7 @@ TEST(LcmTypes, TruncatedBuffersAreRefused) {
   ExpectTruncationRefused(SampleTemperatures());
   ExpectTruncationRefused(SampleAlarm(2));
   ExpectTruncationRefused(SampleAlarmClear());
+  ExpectTruncationRefused(SampleAlarmClearReply());
   ExpectTruncationRefused(SampleGatewayHealth(2));
 }
 
@@ -134,8 +136,8 @@ TEST(LcmTypes, FingerprintsAndNamesAreDistinct) {
   const std::set<std::int64_t> hashes{telemetry_t::getHash(),       temperatures_t::getHash(),
                                       alarm_t::getHash(),           alarm_condition_t::getHash(),
                                       alarm_clear_t::getHash(),     gateway_health_t::getHash(),
-                                      interface_health_t::getHash()};
-  EXPECT_EQ(hashes.size(), 7U);
+                                      interface_health_t::getHash(), alarm_clear_reply_t::getHash()};
+  EXPECT_EQ(hashes.size(), 8U);
   EXPECT_STREQ(telemetry_t::getTypeName(), "telemetry_t");
   EXPECT_STREQ(temperatures_t::getTypeName(), "temperatures_t");
   EXPECT_STREQ(alarm_t::getTypeName(), "alarm_t");
@@ -153,12 +155,16 @@ TEST(LcmTypes, AlarmClearWireLayoutFollowsTheSpecification) {
   m.node = "";
   m.source = "s";
   m.comment = "";
+  m.counter = 0x1112131415161718;
+  for (int i = 0; i < 32; ++i) m.mac[i] = static_cast<std::uint8_t>(0xA0 + i);
   const std::vector<std::uint8_t> bytes = Encode(m);
-  const std::vector<std::uint8_t> body{0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08,  // utime
-                                       0,    0,    0,    2,    'p',  0,                 // pump
-                                       0,    0,    0,    1,    0,                       // node ""
-                                       0,    0,    0,    2,    's',  0,                 // source
-                                       0,    0,    0,    1,    0};  // comment ""
+  std::vector<std::uint8_t> body{0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08,  // utime
+                                 0,    0,    0,    2,    'p',  0,                 // pump
+                                 0,    0,    0,    1,    0,                       // node ""
+                                 0,    0,    0,    2,    's',  0,                 // source
+                                 0,    0,    0,    1,    0,                       // comment ""
+                                 0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18};  // counter
+  for (int i = 0; i < 32; ++i) body.push_back(static_cast<std::uint8_t>(0xA0 + i));  // mac: 32 bytes, no length
   ASSERT_EQ(bytes.size(), 8 + body.size());
   EXPECT_EQ(std::vector<std::uint8_t>(bytes.begin() + 8, bytes.end()), body);
   std::uint64_t hash = 0;

@@ -32,7 +32,7 @@ CONTROL
 }
 
 # The libraries pumpthermd, pumptherm and the LCM tools link against (ldd + dpkg -S on the host).
-make_deb pumptherm-probe "libc6, libstdc++6, libgcc-s1, libsystemd0, libfmt9, libtomlplusplus3, libmuparser2v5, libgomp1, liblcm1, libglib2.0-0"
+make_deb pumptherm-probe "libc6, libstdc++6, libgcc-s1, libsystemd0, libfmt9, libtomlplusplus3, libmuparser2v5, libgomp1, liblcm1, libglib2.0-0, libsodium23"
 cd "$WORK_DIR"
 timeout 120 apt-get install -y --no-install-recommends ./pumptherm-probe_1.0_amd64.deb \
   >"$WORK_DIR/apt.log" 2>&1 || { sed 's/^/  /' "$WORK_DIR/apt.log"; fail "apt-get install ./pumptherm-probe_1.0_amd64.deb"; }

@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
   using namespace pumptherm::tools;
   CLI::App app{"pumptherm: tools for the pump thermal gateway (DBC, identification, thermal models)"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", "pumptherm " PUMPTHERM_VERSION);
   app.footer("Run `pumptherm <subcommand> --help` for the options and an example of each.");
   auto& entries = Subcommands();
   std::sort(entries.begin(), entries.end(),

@@ -1,0 +1,72 @@
+// The gateway's authenticated LCM clears (docs/threat-model.md): Gateway::ClearFromLcm and
+// Gateway::LoadClearKey, kept apart from the frame and estimation paths of gateway.cpp.
+#include <algorithm>
+
+#include "daemon/gateway.hpp"
+#include "daemon/log.hpp"
+#include "protocol/lcm/channels.hpp"
+
+namespace pumptherm::daemon {
+
+void Gateway::LoadClearKey(const std::string& credentials_dir) {
+  if (const auto key = LoadConfiguredClearKey(config_, credentials_dir)) {
+    clear_auth_.SetKey(*key);
+    return;
+  }
+  // Not an error: a configuration from before the key keeps its gateway running (a gateway
+  // that does not start raises no alarm at all); its LCM clears are refused and counted.
+  if (!config_.alarms.clear_lcm_sources.empty()) {
+    Log(LogLevel::kWarning, "{}: alarms.clear_lcm_sources is set but alarms.clear_key_file is not: every LCM "
+        "clear will be refused (docs/threat-model.md)", config_.source);
+  }
+}
+
+bool Gateway::ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_us, OutputSink& sink) {
+  using R = pumptherm::alarm_clear_reply_t;
+  if (!m) {
+    ++counters_.clears_refused;
+    ++counters_.clears_unauthenticated;
+    Log(LogLevel::kWarning, "alarm clear refused: the message does not decode as alarm_clear_t (an old sender?)");
+    return false;
+  }
+  const auto pump = std::find_if(pumps_.begin(), pumps_.end(), [&](const auto& p) { return p->config().name == m->pump; });
+  if (pump == pumps_.end()) {
+    ++counters_.clears_refused;
+    Log(LogLevel::kWarning, "alarm clear for unknown pump '{}' from '{}' ignored", m->pump, m->source);
+    return false;
+  }
+  const auto& sources = (*pump)->config().alarms.clear_lcm_sources;
+  const bool source_allowed = std::find(sources.begin(), sources.end(), m->source) != sources.end();
+  std::string reason;
+  const std::int8_t result = clear_auth_.Check(*m, source_allowed, now_us, &reason);
+  const std::string comment = m->comment.empty() ? "" : ": " + m->comment;
+  if (result == R::RESULT_ACCEPTED) {
+    ++counters_.clears_accepted;
+    reason = (*pump)->ClearTrips() ? "latched trip cleared" : "nothing was latched";
+    Log(LogLevel::kNotice, "pump {}: alarm clear from '{}' (counter {}) accepted ({}){}", m->pump, m->source,
+        m->counter, reason, comment);
+  } else {
+    ++counters_.clears_refused;
+    if (result == R::RESULT_BAD_MAC || result == R::RESULT_NO_KEY) ++counters_.clears_unauthenticated;
+    Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' (counter {}) refused: {}{}", m->pump, m->source,
+        m->counter, reason, comment);
+  }
+  // The snapshot lags a clear until the next thermal step; the saved latch does not.
+  const bool latched = !(*pump)->Save().latched_trips.empty();
+  PublishClearReply(clear_auth_.Reply(*m, result, reason, latched, now_us), now_us, sink);
+  return result == R::RESULT_ACCEPTED;
+}
+
+void Gateway::PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us, OutputSink& sink) {
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(reply.getEncodedSize()));
+  reply.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  const std::string channel = lcm_channels::PumpChannelName(config_.lcm.channel_prefix, reply.pump,
+                                                            lcm_channels::PumpChannel::kAlarmClearReply);
+  if (sink.PublishLcm(channel, now_us, bytes)) {
+    ++counters_.lcm_published;
+  } else {
+    ++counters_.lcm_failed;
+  }
+}
+
+}  // namespace pumptherm::daemon
