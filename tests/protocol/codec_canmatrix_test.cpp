@@ -86,13 +86,14 @@ double ParsePyNumber(const std::string& s) {
   return std::strtod(s.c_str(), nullptr);
 }
 
-Theirs RunCanmatrix(const fs::path& dbc, const fs::path& frames) {
+/// Runs decode.py once on every (DBC, frames) pair; canmatrix's answer for each pair.
+std::vector<Theirs> RunCanmatrix(const std::vector<std::pair<fs::path, fs::path>>& pairs) {
+  std::string command = std::string(kPython) + " '" + Script().string() + "'";
+  for (const auto& [dbc, frames] : pairs) command += " '" + dbc.string() + "' '" + frames.string() + "'";
   int status = 0;
-  const std::string out = Run(std::string(kPython) + " '" + Script().string() + "' '" + dbc.string() +
-                                  "' '" + frames.string() + "' 2>/dev/null",
-                              status);
-  EXPECT_EQ(status, 0) << "decode.py failed on " << dbc;
-  Theirs t;
+  const std::string out = Run(command + " 2>/dev/null", status);
+  EXPECT_EQ(status, 0) << "decode.py failed: " << command;
+  std::vector<Theirs> all;
   std::istringstream in(out);
   std::string line;
   while (std::getline(in, line)) {
@@ -100,16 +101,22 @@ Theirs RunCanmatrix(const fs::path& dbc, const fs::path& frames) {
     std::string kind, name, raw, phys;
     int index = 0;
     ls >> kind >> index;
-    if (kind == "nomsg") {
-      ++t.missing;
+    if (kind == "file") {
+      all.emplace_back();
+    } else if (all.empty()) {
+      ADD_FAILURE() << "decode.py: output before the first file: " << line;
+    } else if (kind == "nomsg") {
+      ++all.back().missing;
     } else if (kind == "padded") {
-      ++t.padded;
+      ++all.back().padded;
     } else if (kind == "sig") {
       ls >> name >> raw >> phys;
-      t.values[{index, name}] = {ParsePyNumber(raw), ParsePyNumber(phys)};
+      all.back().values[{index, name}] = {ParsePyNumber(raw), ParsePyNumber(phys)};
     }
   }
-  return t;
+  EXPECT_EQ(all.size(), pairs.size());
+  all.resize(pairs.size());
+  return all;
 }
 
 bool Near(double a, double b) {
@@ -138,37 +145,45 @@ std::int64_t SignedRaw(std::uint64_t bits, std::uint32_t length) {
   return static_cast<std::int64_t>((bits ^ sign_bit) - sign_bit);
 }
 
-void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_message, Tally& tally) {
-  SCOPED_TRACE(path.string());
-  const Dbc dbc = ParseDbc(test::ReadFile(path), path.string());
-  const DbcCodec codec(dbc);
-  std::mt19937_64 rng(seed);
+/// One DBC and the random frames written for it, exactly as long as each message is declared.
+struct Case {
+  fs::path path;
+  Dbc dbc;
   std::vector<std::pair<std::size_t, std::vector<std::uint8_t>>> frames;
-  const fs::path frames_path =
-      fs::temp_directory_path() / ("pumptherm_canmatrix_" + std::to_string(getpid()) + ".txt");
-  {
-    std::ofstream f(frames_path);
-    for (std::size_t mi = 0; mi < dbc.messages.size(); ++mi) {
-      for (int k = 0; k < frames_per_message; ++k) {
-        std::vector<std::uint8_t> data(codec.message(mi).min_bytes());
-        for (auto& b : data) b = static_cast<std::uint8_t>(rng());
-        f << std::hex << dbc.messages[mi].id << std::dec << ' ' << (dbc.messages[mi].extended ? 1 : 0) << ' ';
-        for (auto b : data) f << "0123456789ABCDEF"[b >> 4] << "0123456789ABCDEF"[b & 15];
-        f << '\n';
-        frames.emplace_back(mi, std::move(data));
-      }
+  fs::path frames_path;
+};
+
+Case MakeCase(const fs::path& path, std::uint64_t seed, int frames_per_message, int n) {
+  Case c{path, ParseDbc(test::ReadFile(path), path.string()), {}, {}};
+  const DbcCodec codec(c.dbc);
+  std::mt19937_64 rng(seed);
+  c.frames_path = fs::temp_directory_path() /
+                  ("pumptherm_canmatrix_" + std::to_string(getpid()) + "_" + std::to_string(n) + ".txt");
+  std::ofstream f(c.frames_path);
+  for (std::size_t mi = 0; mi < c.dbc.messages.size(); ++mi) {
+    for (int k = 0; k < frames_per_message; ++k) {
+      std::vector<std::uint8_t> data(codec.message(mi).min_bytes());
+      for (auto& b : data) b = static_cast<std::uint8_t>(rng());
+      f << std::hex << c.dbc.messages[mi].id << std::dec << ' ' << (c.dbc.messages[mi].extended ? 1 : 0) << ' ';
+      for (auto b : data) f << "0123456789ABCDEF"[b >> 4] << "0123456789ABCDEF"[b & 15];
+      f << '\n';
+      c.frames.emplace_back(mi, std::move(data));
     }
   }
-  const Theirs theirs = RunCanmatrix(path, frames_path);
-  fs::remove(frames_path);
+  return c;
+}
+
+void Compare(const Case& test_case, const Theirs& theirs, Tally& tally) {
+  SCOPED_TRACE(test_case.path.string());
+  const Dbc& dbc = test_case.dbc;
+  const DbcCodec codec(dbc);
   ++tally.files;
   tally.messages += dbc.messages.size();
-  tally.frames += frames.size();
+  tally.frames += test_case.frames.size();
   tally.canmatrix_lacks_message += theirs.missing;
   tally.canmatrix_padded += theirs.padded;
-
-  for (std::size_t fi = 0; fi < frames.size(); ++fi) {
-    const auto& [mi, data] = frames[fi];
+  for (std::size_t fi = 0; fi < test_case.frames.size(); ++fi) {
+    const auto& [mi, data] = test_case.frames[fi];
     const DbcMessage& m = dbc.messages[mi];
     const MessageCodec& mc = codec.message(mi);
     std::vector<double> ours(mc.signal_count());
@@ -228,9 +243,18 @@ TEST(CodecCanmatrixTest, DecodesLikeCanmatrixOnEveryDbc) {
   }
   files.push_back(test::PumpthermDbc());
   files.push_back(test::SourceDir() / "tests" / "protocol" / "candied" / "features.dbc");
+  std::vector<Case> cases;
+  std::vector<std::pair<fs::path, fs::path>> pairs;
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    cases.push_back(MakeCase(files[i], 200 + i, 4, static_cast<int>(i)));
+    pairs.emplace_back(cases.back().path, cases.back().frames_path);
+  }
+  const std::vector<Theirs> theirs = RunCanmatrix(pairs);
   Tally tally;
-  std::uint64_t seed = 200;
-  for (const auto& path : files) CrossCheckFile(path, seed++, 4, tally);
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    fs::remove(cases[i].frames_path);
+    Compare(cases[i], theirs[i], tally);
+  }
   std::cout << "files " << tally.files << " (" << real << " shared), messages " << tally.messages
             << ", frames " << tally.frames << ": " << tally.agreed << " of " << tally.compared
             << " values agree with canmatrix; ours null where canmatrix has a number: "
