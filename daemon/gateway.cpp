@@ -191,6 +191,10 @@ Gateway::Gateway(const DaemonConfig& config) : config_(config), counter_(config.
                               model->StateIndex(node), ref.scale, ref.offset});
     }
     for (auto& plan : io.outputs) {
+      // A node-indexed message sends its nodes one after another, spread over the period: each
+      // node once per period, and no burst of frames on one ID.
+      const auto nodes = static_cast<std::int64_t>(model->StateNames().size());
+      if (plan.node_table && nodes > 0) plan.period_us = std::max<std::int64_t>(1000, plan.period_us / nodes);
       const auto& msg = dbc_.messages[static_cast<std::size_t>(plan.message_index)];
       const int rc = msg.FindSignal("RollingCounter");
       const bool mapped = std::any_of(plan.signals.begin(), plan.signals.end(),
@@ -352,9 +356,10 @@ void Gateway::Emit(std::size_t p, OutputPlan& plan, std::int64_t time_us, Output
     EmitFrame(p, plan, -1, time_us, sink);
     return;
   }
-  // A node-indexed message: one frame per node of this pump's model.
+  // A node-indexed message: the next node of this pump's model, round robin.
   const auto count = static_cast<int>(pumps_[p]->model().StateNames().size());
-  for (int node = 0; node < count; ++node) EmitFrame(p, plan, node, time_us, sink);
+  if (plan.next_node >= count) plan.next_node = 0;
+  EmitFrame(p, plan, plan.next_node++, time_us, sink);
 }
 
 void Gateway::EmitFrame(std::size_t p, OutputPlan& plan, int node, std::int64_t time_us, OutputSink& sink) {

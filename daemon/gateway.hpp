@@ -118,7 +118,8 @@ class Gateway {
     std::uint8_t counter = 0;
     std::vector<OutputSignal> signals;
     bool alarm = false;              // sent at once when the alarm changes
-    bool node_table = false;         // node-indexed: one frame per model node each period
+    bool node_table = false;         // node-indexed: each model node once per period, in turn
+    int next_node = 0;               // node_table: the node the next frame carries
   };
   struct PumpIo {
     std::size_t iface = 0;           // FrameCounter index

@@ -74,7 +74,7 @@ enum class MappingOutput {
   kBusState,            ///< bus_state
   /// node_index: the multiplexer of a node-indexed message; the frame carries the thermal
   /// model's node with this index (model order), so any model's nodes reach the bus. The
-  /// gateway sends one frame per node each period.
+  /// gateway sends the nodes in turn, each once per period.
   kNodeIndex,
   kNodeCount,           ///< node_count: how many nodes the pump's model has
   kNodeTempDegC,        ///< node_temp_degC: that node's estimated temperature

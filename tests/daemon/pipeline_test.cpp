@@ -185,19 +185,26 @@ TEST(Pipeline, EstimatesFollowTheTruthAndGoOutOnCanAndLcm) {
   EXPECT_NEAR(v[static_cast<std::size_t>(temps->FindSignal("Frame_degC"))], s.node_degC[0], 0.02);
   EXPECT_NEAR(v[static_cast<std::size_t>(temps->FindSignal("Teeth_degC"))], s.node_degC[2], 0.02);
 
-  // GW_NODE_TEMP: the last second's frames carry every node of the model with its sd.
+  // GW_NODE_TEMP: the last second's frames carry every node of the model, in turn, with its
+  // sd; seven a second, as GW_TEMPS_A's one.
   const auto node_frames = b.NodeFrames();
+  EXPECT_NEAR(static_cast<double>(node_frames.size()), 7.0 * count, 7.0 * 2);
   ASSERT_GE(node_frames.size(), 7u);
+  std::set<std::size_t> seen;
   for (std::size_t i = node_frames.size() - 7; i < node_frames.size(); ++i) {
     const auto& f = node_frames[i];
     const auto node = static_cast<std::size_t>(f.at("NodeIndex"));
     ASSERT_LT(node, 7u);
-    EXPECT_EQ(node, i - (node_frames.size() - 7));
+    seen.insert(node);
+    if (i > node_frames.size() - 7) {
+      EXPECT_EQ(node, (static_cast<std::size_t>(node_frames[i - 1].at("NodeIndex")) + 1) % 7);
+    }
     EXPECT_EQ(f.at("NodeCount"), 7.0);
     EXPECT_NEAR(f.at("NodeTemp_degC"), s.node_degC[node], 0.02);
     EXPECT_NEAR(f.at("NodeSd_K"), s.node_sd_K[node], 0.002);
     EXPECT_GT(f.at("NodeSd_K"), 0.0);
   }
+  EXPECT_EQ(seen.size(), 7u);
 
   // Every LCM type, decodable, with the node names of the model.
   ASSERT_TRUE(b.sink.lcm.count("PUMPTHERM/tmp1/TEMPS"));
