@@ -86,6 +86,9 @@ void EncodeInto(const Message& m, std::vector<std::uint8_t>& bytes) {
   m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
 }
 
+/// DBC warnings logged one by one at start; the rest are counted.
+constexpr std::size_t kMaxReportedDbcProblems = 20;
+
 }  // namespace
 
 Gateway::Gateway(const DaemonConfig& config)
@@ -102,6 +105,15 @@ Gateway::Gateway(const DaemonConfig& config)
     dbc_ = protocol::ParseDbc(ReadTextFile(dbc_path), dbc_path);
   } catch (const std::exception& e) {
     throw fail(0, "dbc.file", e.what());
+  }
+  // Statements the reader skipped and other oddities: the rest of the DBC is in use.
+  for (std::size_t i = 0; i < dbc_.problems.size() && i < kMaxReportedDbcProblems; ++i) {
+    const auto& p = dbc_.problems[i];
+    Log(LogLevel::kWarning, "{}:{}:{}: {}", dbc_path, p.line, p.column, p.message);
+  }
+  if (dbc_.problems.size() > kMaxReportedDbcProblems) {
+    Log(LogLevel::kWarning, "{}: {} more DBC warnings (pumptherm dbc check lists them)", dbc_path,
+        dbc_.problems.size() - kMaxReportedDbcProblems);
   }
   try {
     const std::string path = ResolveResource(ResourceKind::kDbc, config_.dbc.mapping, config_.dbc.base_dir);
@@ -131,26 +143,6 @@ Gateway::Gateway(const DaemonConfig& config)
     it->status = it->status || IsStatusInput(input);
     it->clear = it->clear || input == MappingInput::kAlarmClear;
   }
-
-  // Temperatures in the order the CAN alarm node index counts them: by message ID, then start bit.
-  struct TempOut {
-    std::uint32_t id;
-    std::uint32_t bit;
-    std::string node;
-  };
-  std::vector<TempOut> temp_order;
-  if (const auto& w = mapping_.output(MappingOutput::kWindingResTempDegC)) {
-    temp_order.push_back({dbc_.messages[static_cast<std::size_t>(w->message_index)].id,
-                          dbc_.messages[static_cast<std::size_t>(w->message_index)].signals[static_cast<std::size_t>(w->signal_index)].start_bit,
-                          "winding_resistance"});
-  }
-  for (const auto& [node, ref] : mapping_.node_temperatures) {
-    const auto& msg = dbc_.messages[static_cast<std::size_t>(ref.message_index)];
-    temp_order.push_back({msg.id, msg.signals[static_cast<std::size_t>(ref.signal_index)].start_bit, node});
-  }
-  std::sort(temp_order.begin(), temp_order.end(),
-            [](const TempOut& a, const TempOut& b) { return std::tie(a.id, a.bit) < std::tie(b.id, b.bit); });
-  for (const auto& t : temp_order) alarm_node_order_.push_back(t.node);
 
   // Pumps.
   std::map<std::string, std::shared_ptr<const estimators::ThermalModel>> models;
@@ -197,6 +189,7 @@ Gateway::Gateway(const DaemonConfig& config)
     } catch (const std::exception& e) {
       throw fail(pc.line, key, e.what());
     }
+    CheckNodeOutputs(pc, key, *model);
     PumpIo io;
     io.iface = counter_.Interface(pc.interface);
     for (double& v : io.inputs) v = kNaN;
@@ -223,6 +216,7 @@ Gateway::Gateway(const DaemonConfig& config)
       plan.signals.push_back({ref->signal_index, OutputSource::kMapped, static_cast<MappingOutput>(o), -1,
                               ref->scale, ref->offset});
       plan.alarm = plan.alarm || static_cast<MappingOutput>(o) == MappingOutput::kAlarmLevel;
+      plan.node_table = plan.node_table || static_cast<MappingOutput>(o) == MappingOutput::kNodeIndex;
     }
     for (const auto& [node, ref] : mapping_.node_temperatures) {
       OutputPlan& plan = plan_for(ref.message_index);
@@ -231,6 +225,10 @@ Gateway::Gateway(const DaemonConfig& config)
                               model->StateIndex(node), ref.scale, ref.offset});
     }
     for (auto& plan : io.outputs) {
+      // A node-indexed message sends its nodes one after another, spread over the period: each
+      // node once per period, and no burst of frames on one ID.
+      const auto nodes = static_cast<std::int64_t>(model->StateNames().size());
+      if (plan.node_table && nodes > 0) plan.period_us = std::max<std::int64_t>(1000, plan.period_us / nodes);
       const auto& msg = dbc_.messages[static_cast<std::size_t>(plan.message_index)];
       const int rc = msg.FindSignal("RollingCounter");
       const bool mapped = std::any_of(plan.signals.begin(), plan.signals.end(),
@@ -339,7 +337,28 @@ void Gateway::WarnUnconfiguredNode(std::size_t iface, const protocol::TimedFrame
   }
 }
 
-double Gateway::OutputValue(std::size_t p, MappingOutput output) const {
+void Gateway::CheckNodeOutputs(const PumpConfig& pc, const std::string& key,
+                               const estimators::ThermalModel& model) const {
+  const auto& names = model.StateNames();
+  const bool node_table = mapping_.output(MappingOutput::kNodeIndex).has_value();
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    if (!node_table && !mapping_.node_temperatures.contains(names[i])) {
+      throw ConfigError(fmt::format(
+          "{}:{}: key '{}.thermal_model': node '{}' of {} has no CAN output: map outputs.node_index "
+          "and node_temp_degC (a node-indexed message such as GW_NODE_TEMP) or outputs.nodes.{}",
+          config_.source, pc.line, key, names[i], pc.thermal_model, names[i]));
+    }
+    if (mapping_.output(MappingOutput::kAlarmNode) && i >= kAlarmNodeWindingRes) {
+      throw ConfigError(fmt::format(
+          "{}:{}: key '{}.thermal_model': node '{}' of {} cannot be named by alarm_node: indices "
+          "0 to {} name model nodes ({} the winding from resistance, {} none)",
+          config_.source, pc.line, key, names[i], pc.thermal_model, kAlarmNodeWindingRes - 1,
+          kAlarmNodeWindingRes, kAlarmNodeWindingRes + 1));
+    }
+  }
+}
+
+double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const {
   const Pump& pump = *pumps_[p];
   const PumpSnapshot& s = pump.snapshot();
   const bool ident = s.resistance.status != estimators::ResistanceStatus::kInitialising &&
@@ -358,13 +377,11 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output) const {
     case MappingOutput::kAlarmLevel: return s.initialised ? static_cast<double>(s.alarm.level) : kNaN;
     case MappingOutput::kAlarmReason: return s.initialised ? static_cast<double>(s.alarm.reason) : kNaN;
     case MappingOutput::kAlarmNode: {
+      // The model's node index (as node_index), or the winding temperature from resistance.
       if (!s.initialised || (s.alarm.node < 0 && s.alarm.reason != estimators::AlarmReason::kEstimatedOverTemperature)) return kNaN;
-      const auto& names = pump.model().StateNames();
-      const std::string name = s.alarm.node >= 0 && s.alarm.node < static_cast<int>(names.size())
-                                   ? names[static_cast<std::size_t>(s.alarm.node)]
-                                   : "winding_resistance";
-      const auto it = std::find(alarm_node_order_.begin(), alarm_node_order_.end(), name);
-      return it == alarm_node_order_.end() ? kNaN : static_cast<double>(it - alarm_node_order_.begin());
+      const auto count = static_cast<int>(pump.model().StateNames().size());
+      return s.alarm.node >= 0 && s.alarm.node < count ? static_cast<double>(s.alarm.node)
+                                                       : static_cast<double>(kAlarmNodeWindingRes);
     }
     case MappingOutput::kAlarmValueDegC: {
       const auto r = s.alarm.reason;
@@ -378,6 +395,16 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output) const {
       return last_now_us_ >= start_us_ ? static_cast<double>(last_now_us_ - start_us_) * 1e-6 : 0.0;
     case MappingOutput::kFrameRateHz: return io_[p].frame_rate_Hz;
     case MappingOutput::kDrops: return static_cast<double>(pump.counters().lost_frames);
+    case MappingOutput::kNodeIndex: return node >= 0 ? static_cast<double>(node) : kNaN;
+    case MappingOutput::kNodeCount: return static_cast<double>(s.node_degC.size());
+    case MappingOutput::kNodeTempDegC:
+      return s.initialised && node >= 0 && static_cast<std::size_t>(node) < s.node_degC.size()
+                 ? s.node_degC[static_cast<std::size_t>(node)]
+                 : kNaN;
+    case MappingOutput::kNodeSdK:
+      return s.initialised && node >= 0 && static_cast<std::size_t>(node) < s.node_sd_K.size()
+                 ? s.node_sd_K[static_cast<std::size_t>(node)]
+                 : kNaN;
     case MappingOutput::kBusState: {
       // The DBC's VAL_ table: 0 error active (also warning and unknown), 1 passive, 2 bus off, 3 down.
       const InterfaceCounters& c = counter_.interfaces()[io_[p].iface];
@@ -390,6 +417,17 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output) const {
 }
 
 void Gateway::Emit(std::size_t p, OutputPlan& plan, std::int64_t time_us, OutputSink& sink) {
+  if (!plan.node_table) {
+    EmitFrame(p, plan, -1, time_us, sink);
+    return;
+  }
+  // A node-indexed message: the next node of this pump's model, round robin.
+  const auto count = static_cast<int>(pumps_[p]->model().StateNames().size());
+  if (plan.next_node >= count) plan.next_node = 0;
+  EmitFrame(p, plan, plan.next_node++, time_us, sink);
+}
+
+void Gateway::EmitFrame(std::size_t p, OutputPlan& plan, int node, std::int64_t time_us, OutputSink& sink) {
   const auto& msg = dbc_.messages[static_cast<std::size_t>(plan.message_index)];
   const auto& codec = codec_->message(static_cast<std::size_t>(plan.message_index));
   std::fill(values_.begin(), values_.begin() + static_cast<std::ptrdiff_t>(codec.signal_count()), kNaN);
@@ -397,7 +435,7 @@ void Gateway::Emit(std::size_t p, OutputPlan& plan, std::int64_t time_us, Output
   for (const OutputSignal& o : plan.signals) {
     double v = kNaN;
     switch (o.source) {
-      case OutputSource::kMapped: v = OutputValue(p, o.output); break;
+      case OutputSource::kMapped: v = OutputValue(p, o.output, node); break;
       case OutputSource::kNode:
         v = s.initialised && o.state >= 0 ? s.node_degC[static_cast<std::size_t>(o.state)] : kNaN;
         break;

@@ -143,6 +143,8 @@ class Gateway {
     std::uint8_t counter = 0;
     std::vector<OutputSignal> signals;
     bool alarm = false;              // sent at once when the alarm changes
+    bool node_table = false;         // node-indexed: each model node once per period, in turn
+    int next_node = 0;               // node_table: the node the next frame carries
   };
   std::map<std::uint64_t, std::int64_t> unconfigured_warned_us_;  ///< (iface, node) -> last warning
   struct PumpIo {
@@ -171,13 +173,23 @@ class Gateway {
     std::uint32_t message;  // into inputs_
   };
 
+  /// alarm_node's value for the winding temperature from resistance; the next value is "none".
+  static constexpr std::size_t kAlarmNodeWindingRes = 14;
+
   void Emit(std::size_t pump, OutputPlan& plan, std::int64_t time_us, OutputSink& sink);
   void PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us, OutputSink& sink);
+  /// One frame of `plan`; `node` is the model node of a node-indexed message, else -1.
+  void EmitFrame(std::size_t pump, OutputPlan& plan, int node, std::int64_t time_us, OutputSink& sink);
+  /// Throws ConfigError naming the pump and node if a node of `model` has no CAN output, or
+  /// cannot be named by alarm_node.
+  void CheckNodeOutputs(const PumpConfig& pc, const std::string& key,
+                        const estimators::ThermalModel& model) const;
   void FillTemperatures(const Pump& p, pumptherm::temperatures_t& m) const;
   void FillTelemetry(std::size_t pump_index, pumptherm::telemetry_t& m) const;
   void FillAlarm(const Pump& p, pumptherm::alarm_t& m) const;
   void FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) const;
-  double OutputValue(std::size_t pump, protocol::MappingOutput output) const;
+  /// `node`: the model node of a node-indexed frame, else -1.
+  double OutputValue(std::size_t pump, protocol::MappingOutput output, int node) const;
 
   DaemonConfig config_;
   protocol::Dbc dbc_;
@@ -190,7 +202,6 @@ class Gateway {
   std::vector<PumpIo> io_;
   std::unordered_map<std::uint64_t, Route> routes_;
   std::vector<double> values_;   // decode/encode buffer (largest message)
-  std::vector<std::string> alarm_node_order_;  // CAN AlarmNode index -> node name
   std::string channel_health_;
   pumptherm::gateway_health_t health_msg_;
   std::vector<std::uint8_t> lcm_bytes_;        // LCM encoding buffer (largest message)

@@ -90,6 +90,10 @@ CandumpParse ParseCandumpLine(std::string_view line) noexcept {
     if (id > 0x7FF) return Fail(id_begin + 1, "11-bit CAN ID above 7FF");
     f.id = id;
   } else if (id_len == 8) {
+    if (id > (0x1FFFFFFFU | kErrorFlag)) {
+      // Bits 30 and 31 are the RTR and EFF flags of struct can_frame; candump writes neither.
+      return Fail(id_begin + 1, "CAN ID above 29 bits");
+    }
     if (id & kErrorFlag) {
       f.error = true;
       f.id = id & 0x1FFFFFFFU;

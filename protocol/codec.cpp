@@ -88,7 +88,8 @@ MessageCodec::MessageCodec(const DbcMessage& message)
       ranges_.insert(ranges_.end(), s.multiplexer_ranges.begin(), s.multiplexer_ranges.end());
       any_multiplexed_ = true;
     }
-    min_bytes_ = std::max<std::size_t>(min_bytes_, SignalEndByte(s));
+    // A signal whose bits run past the declared length is never in a frame of that length.
+    p.overhangs = SignalEndByte(s) > message.size_bytes;
     signals_.push_back(p);
   }
   if (min_bytes_ > 64) throw std::invalid_argument("message " + message.name + " beyond 64 bytes");
@@ -200,6 +201,7 @@ bool MessageCodec::InRanges(const SignalPlan& p, std::uint64_t switch_bits) cons
 
 bool MessageCodec::Selected(const std::uint8_t* buf, std::size_t index) const noexcept {
   const SignalPlan& p = signals_[index];
+  if (p.overhangs) return false;
   if (p.switch_index < 0) return true;
   const auto sw = static_cast<std::size_t>(p.switch_index);
   return Selected(buf, sw) && InRanges(p, Extract(signals_[sw], buf));
@@ -207,6 +209,7 @@ bool MessageCodec::Selected(const std::uint8_t* buf, std::size_t index) const no
 
 bool MessageCodec::SelectedByValues(std::span<const double> values, std::size_t index) const noexcept {
   const SignalPlan& p = signals_[index];
+  if (p.overhangs) return false;
   if (p.switch_index < 0) return true;
   const auto sw = static_cast<std::size_t>(p.switch_index);
   EncodeResult ignored;
@@ -223,14 +226,17 @@ CodecStatus MessageCodec::Decode(std::span<const std::uint8_t> payload,
   std::memset(buf + min_bytes_, 0, 9);
   for (std::size_t i = 0; i < signals_.size(); ++i) {
     const SignalPlan& p = signals_[i];
-    double v = ToPhysical(p, Extract(p, buf));
-    if (p.switch_index >= 0 && !Selected(buf, i)) v = kNaN;
-    values[i] = v;
+    if (p.overhangs || (p.switch_index >= 0 && !Selected(buf, i))) {
+      values[i] = kNaN;
+      continue;
+    }
+    values[i] = ToPhysical(p, Extract(p, buf));
   }
   return CodecStatus::kOk;
 }
 
 std::uint64_t MessageCodec::RawBits(std::span<const std::uint8_t> payload, std::size_t index) const noexcept {
+  if (signals_[index].overhangs) return 0;
   alignas(8) std::uint8_t buf[kBufferBytes_];
   std::memcpy(buf, payload.data(), min_bytes_);
   std::memset(buf + min_bytes_, 0, 9);
@@ -258,7 +264,7 @@ EncodeResult MessageCodec::Encode(std::span<const double> values,
   alignas(8) std::uint8_t buf[kBufferBytes_] = {};
   for (std::size_t i = 0; i < signals_.size(); ++i) {
     const SignalPlan& p = signals_[i];
-    if (p.switch_index >= 0 && !SelectedByValues(values, i)) continue;
+    if (p.overhangs || (p.switch_index >= 0 && !SelectedByValues(values, i))) continue;
     Insert(p, ToRaw(p, values[i], result), buf);
   }
   std::memcpy(payload.data(), buf, min_bytes_);

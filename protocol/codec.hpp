@@ -15,8 +15,10 @@
 ///   saturation stops one short of it, so a real value never reads back as "not available".
 ///   NaN encodes to the "not available" raw value (or, for a signal without one, to raw 0, and
 ///   is counted). Bits not covered by a present signal are zero.
-/// - A payload shorter than the message (its declared length, or further if a signal reaches
-///   further) is rejected: nothing is read past its end.
+/// - A payload shorter than the message's declared length is rejected: nothing is read past its
+///   end. A signal whose bits run past the declared length (a defect of the DBC, reported as a
+///   problem by ParseDbc) decodes to NaN in every frame and is never encoded; the message's other
+///   signals decode and encode as usual.
 
 #include <cstdint>
 #include <span>
@@ -49,7 +51,7 @@ class MessageCodec {
   explicit MessageCodec(const DbcMessage& message);
 
   std::size_t signal_count() const noexcept { return signals_.size(); }
-  /// Shortest payload accepted, bytes: the declared length or the furthest signal byte.
+  /// Shortest payload accepted, bytes: the message's declared length.
   std::size_t min_bytes() const noexcept { return min_bytes_; }
   std::uint32_t id() const noexcept { return id_; }
   bool extended() const noexcept { return extended_; }
@@ -60,9 +62,9 @@ class MessageCodec {
   /// if `values` has fewer than signal_count() elements.
   CodecStatus Decode(std::span<const std::uint8_t> payload, std::span<double> values) const noexcept;
 
-  /// Raw bits of signal `index` (unsigned, masked to its length), and whether the frame's
-  /// multiplexer values select it. Precondition: payload.size() >= min_bytes(),
-  /// index < signal_count().
+  /// Raw bits of signal `index` (unsigned, masked to its length; 0 for a signal that overhangs
+  /// the declared length), and whether the frame's multiplexer values select it (never for a
+  /// signal that overhangs). Precondition: payload.size() >= min_bytes(), index < signal_count().
   std::uint64_t RawBits(std::span<const std::uint8_t> payload, std::size_t index) const noexcept;
   bool IsPresent(std::span<const std::uint8_t> payload, std::size_t index) const noexcept;
 
@@ -91,6 +93,7 @@ class MessageCodec {
     std::uint8_t length = 0;
     bool big_endian = false;
     bool has_sna = false;
+    bool overhangs = false;      ///< reaches past the declared length: always NaN
     SignalValueType value_type = SignalValueType::kInteger;
   };
 

@@ -14,6 +14,7 @@ namespace pumptherm::protocol {
 DbcError::DbcError(std::string file, int line, int column, const std::string& what)
     : std::runtime_error(fmt::format("{}:{}:{}: {}", file, line, column, what)),
       file_(std::move(file)),
+      detail_(what),
       line_(line),
       column_(column) {}
 
@@ -107,8 +108,21 @@ class Lexer {
   Token Next() {
     Peek();
     has_peek_ = false;
+    last_ = peek_;
     return peek_;
   }
+  /// The token Next() returned last.
+  const Token& last() const { return last_; }
+  /// Puts the token Next() returned last back, so the next statement starts with it. Only
+  /// right after Next() (nothing peeked since).
+  bool Unget() {
+    if (has_peek_) return false;
+    peek_ = last_;
+    has_peek_ = true;
+    return true;
+  }
+  /// Whether the lexer itself failed (an unterminated string): nothing after it can be read.
+  bool failed() const { return failed_; }
  private:
   char At(std::size_t i) const { return i < text_.size() ? text_[i] : '\0'; }
   void Advance() {
@@ -149,6 +163,7 @@ class Lexer {
         Advance();
       }
       if (pos_ >= text_.size()) {
+        failed_ = true;
         throw DbcError(std::string(file_name_), t.line, t.column, "unterminated string");
       }
       t.kind = TokenKind::kString;
@@ -201,7 +216,9 @@ class Lexer {
   int line_ = 1;
   int column_ = 1;
   Token peek_;
+  Token last_;
   bool has_peek_ = false;
+  bool failed_ = false;
 };
 
 /// Undoes the DBC string escapes (\" and \\).
@@ -242,7 +259,19 @@ class Parser {
   }
 
   Dbc Parse() {
-    while (lex_.Peek().kind != TokenKind::kEnd) Statement();
+    std::optional<DbcError> first_error;
+    while (lex_.Peek().kind != TokenKind::kEnd) {
+      const Token kw = lex_.Peek();
+      try {
+        Statement();
+      } catch (const DbcError& e) {
+        if (lex_.failed()) throw;
+        if (!first_error) first_error = e;
+        Recover(kw, e);
+      }
+    }
+    // A file of which nothing loads is not a DBC with warnings: report its first error.
+    if (first_error && dbc_.messages.empty()) throw *first_error;
     Resolve();
     return std::move(dbc_);
   }
@@ -255,8 +284,49 @@ class Parser {
   [[noreturn]] void FailAt(int line, int column, const std::string& what) {
     throw DbcError(dbc_.file_name, line, column, what);
   }
-  void Problem(int line, std::string message) {
-    dbc_.problems.push_back({line, std::move(message)});
+  void Problem(int line, int column, std::string message) {
+    dbc_.problems.push_back({line, column, std::move(message)});
+  }
+
+  /// A reference to the pseudo-message of independent signals or to a message skipped as
+  /// malformed: nothing to attach it to, and nothing new to report.
+  bool Ignored(std::uint32_t raw_id) const {
+    return raw_id == kIndependentSignalsId || skipped_ids_.contains(raw_id);
+  }
+
+  /// Warn-and-skip, as canmatrix and opendbc's parser do with real files: the malformed
+  /// statement (a BO_ with its SG_ lines, or one SG_) becomes a problem at the place it broke,
+  /// and reading goes on at the next statement: after a ';', or at the next keyword on a later
+  /// line (a statement missing its ';', like "CM_ ... \"text\"" then the next CM_).
+  void Recover(const Token& kw, const DbcError& e) {
+    const char* skipped = "statement skipped";
+    if (kw.kind == TokenKind::kIdentifier && kw.text == "BO_") {
+      skipped = "message and its signals skipped";
+      current_message_ = -1;
+      skipping_signals_ = true;
+      if (message_raw_id_) skipped_ids_.insert(*message_raw_id_);
+    } else if (kw.kind == TokenKind::kIdentifier && kw.text == "SG_") {
+      skipped = "signal skipped";
+    }
+    if (e.line() != kw.line && kw.kind == TokenKind::kIdentifier) {
+      Problem(e.line(), e.column(), fmt::format("{}; the {} of line {} skipped", e.detail(), kw.text, kw.line));
+    } else {
+      Problem(e.line(), e.column(), fmt::format("{}; {}", e.detail(), skipped));
+    }
+    const Token last = lex_.last();
+    const bool consumed_more = last.line != kw.line || last.column != kw.column;
+    if (last.kind == TokenKind::kPunct && last.text[0] == ';') return;
+    if (consumed_more && last.kind == TokenKind::kIdentifier && IsKeyword(last.text) &&
+        last.line > kw.line && lex_.Unget()) {
+      return;  // the failing token starts the next statement
+    }
+    for (;;) {
+      const Token t = lex_.Peek();
+      if (t.kind == TokenKind::kEnd) return;
+      if (t.kind == TokenKind::kIdentifier && IsKeyword(t.text) && t.line > last.line) return;
+      lex_.Next();
+      if (t.kind == TokenKind::kPunct && t.text[0] == ';') return;
+    }
   }
 
   Token Expect(TokenKind kind, const char* what) {
@@ -377,7 +447,9 @@ class Parser {
   }
 
   void Message(const Token& kw) {
+    message_raw_id_.reset();
     const std::uint32_t raw_id = MessageId();
+    message_raw_id_ = raw_id;
     const Token name = Expect(TokenKind::kIdentifier, "a message name");
     ExpectPunct(':');
     const Token size_tok = lex_.Peek();
@@ -394,14 +466,16 @@ class Parser {
     m.extended = (raw_id & kExtendedFlag) != 0;
     m.id = raw_id & ~kExtendedFlag;
     if (m.extended && m.id > 0x1FFFFFFFu) {
-      FailAt(kw.line, kw.column, fmt::format("extended message ID {:#x} above 29 bits", m.id));
+      // Only bit 31 is a flag; a raw ID with bit 30 (or 29) set as well names no CAN frame.
+      FailAt(kw.line, kw.column,
+             fmt::format("extended message ID {:#x} above 29 bits (raw {})", m.id, raw_id));
     }
     if (!m.extended && m.id > 0x7FFu) {
       if (m.id > 0x1FFFFFFFu) {
         FailAt(kw.line, kw.column, fmt::format("message ID {:#x} above 29 bits", m.id));
       }
       // Some writers omit bit 31; such an ID can only be a 29-bit one.
-      Problem(kw.line, fmt::format("message ID {:#x} above 11 bits without bit 31 set: read as "
+      Problem(kw.line, kw.column, fmt::format("message ID {:#x} above 11 bits without bit 31 set: read as "
                                    "a 29-bit ID",
                                    m.id));
       m.extended = true;
@@ -421,6 +495,7 @@ class Parser {
     if (current_message_ < 0 && !skipping_signals_) Fail(kw, "BO_ before SG_");
     DbcSignal s;
     s.line = kw.line;
+    s.column = kw.column;
     const Token name = Expect(TokenKind::kIdentifier, "a signal name");
     s.name = std::string(name.text);
     std::optional<std::uint64_t> mux_value;
@@ -433,7 +508,7 @@ class Parser {
       } else if (v == "m") {
         // vw_pq.dbc (opendbc) writes a lone lower-case "m" for the multiplexer.
         s.is_multiplexer = true;
-        Problem(ind.line, fmt::format("multiplexer indicator 'm' of {} read as 'M'", s.name));
+        Problem(ind.line, ind.column, fmt::format("multiplexer indicator 'm' of {} read as 'M'", s.name));
       } else if (v.size() >= 2 && v[0] == 'm' && IsDigit(v[1])) {
         v.remove_prefix(1);
         if (v.back() == 'M') {
@@ -505,7 +580,7 @@ class Parser {
     while (!AcceptPunct(';')) {
       const Token& t = lex_.Peek();
       if ((t.kind == TokenKind::kIdentifier && IsKeyword(t.text)) || t.kind == TokenKind::kEnd) {
-        Problem(t.line, t.kind == TokenKind::kEnd ? "missing ';' at the end of the file"
+        Problem(t.line, t.column, t.kind == TokenKind::kEnd ? "missing ';' at the end of the file"
                                                   : "missing ';' before this line");
         break;
       }
@@ -533,17 +608,18 @@ class Parser {
     return const_cast<DbcMessage*>(dbc_.FindMessage(raw_id & ~kExtendedFlag, ext));
   }
 
-  DbcSignal* SignalByRawId(std::uint32_t raw_id, std::string_view name, int line, const char* where) {
+  DbcSignal* SignalByRawId(std::uint32_t raw_id, std::string_view name, int line, int column,
+                           const char* where) {
     DbcMessage* m = MessageByRawId(raw_id);
     if (m == nullptr) {
-      if (raw_id != kIndependentSignalsId) {
-        Problem(line, fmt::format("{} refers to unknown message ID {}", where, raw_id));
+      if (!Ignored(raw_id)) {
+        Problem(line, column, fmt::format("{} refers to unknown message ID {}", where, raw_id));
       }
       return nullptr;
     }
     const int i = m->FindSignal(name);
     if (i < 0) {
-      Problem(line, fmt::format("{} refers to unknown signal {} in message {}", where, name, m->name));
+      Problem(line, column, fmt::format("{} refers to unknown signal {} in message {}", where, name, m->name));
       return nullptr;
     }
     return &m->signals[static_cast<std::size_t>(i)];
@@ -557,26 +633,29 @@ class Parser {
       return;
     }
     const Token obj = Expect(TokenKind::kIdentifier, "BU_, BO_, SG_, EV_ or a comment string");
+    // The comment is applied once its ';' is read: a statement skipped as malformed leaves nothing.
     if (obj.text == "BO_") {
       const std::uint32_t id = MessageId();
       const std::string text = Unescape(Expect(TokenKind::kString, "a comment string").text);
+      ExpectPunct(';');
       if (DbcMessage* m = MessageByRawId(id)) {
         m->comment = text;
-      } else if (id != kIndependentSignalsId) {
-        Problem(obj.line, fmt::format("CM_ refers to unknown message ID {}", id));
+      } else if (!Ignored(id)) {
+        Problem(obj.line, obj.column, fmt::format("CM_ refers to unknown message ID {}", id));
       }
     } else if (obj.text == "SG_") {
       const std::uint32_t id = MessageId();
       const std::string sig(Expect(TokenKind::kIdentifier, "a signal name").text);
       const std::string text = Unescape(Expect(TokenKind::kString, "a comment string").text);
-      if (DbcSignal* s = SignalByRawId(id, sig, obj.line, "CM_")) s->comment = text;
+      ExpectPunct(';');
+      if (DbcSignal* s = SignalByRawId(id, sig, obj.line, obj.column, "CM_")) s->comment = text;
     } else if (obj.text == "BU_" || obj.text == "EV_") {
       Expect(TokenKind::kIdentifier, "a name");
       Expect(TokenKind::kString, "a comment string");
+      ExpectPunct(';');
     } else {
       Fail(obj, "BU_, BO_, SG_, EV_ or a comment string");
     }
-    ExpectPunct(';');
   }
 
   DbcAttributeValue AttributeValueToken(const char* what) {
@@ -633,7 +712,7 @@ class Parser {
     if (DbcAttributeDefinition* d = Definition(Unescape(name.text))) {
       d->default_value = std::move(v);
     } else {
-      Problem(kw.line, fmt::format("BA_DEF_DEF_ for undeclared attribute {}", name.text));
+      Problem(kw.line, kw.column, fmt::format("BA_DEF_DEF_ for undeclared attribute {}", name.text));
     }
   }
 
@@ -675,7 +754,7 @@ class Parser {
     const std::uint32_t id = MessageId();
     const std::string sig(Expect(TokenKind::kIdentifier, "a signal name").text);
     auto values = ValueDescriptions();
-    if (DbcSignal* s = SignalByRawId(id, sig, kw.line, "VAL_")) s->value_descriptions = std::move(values);
+    if (DbcSignal* s = SignalByRawId(id, sig, kw.line, kw.column, "VAL_")) s->value_descriptions = std::move(values);
   }
 
   void SignalValueType_(const Token& kw) {
@@ -686,17 +765,17 @@ class Parser {
     const std::uint64_t type = Unsigned("0 (integer), 1 (float) or 2 (double)");
     ExpectPunct(';');
     if (type > 2) Fail(t, "0 (integer), 1 (float) or 2 (double)");
-    DbcSignal* s = SignalByRawId(id, sig, kw.line, "SIG_VALTYPE_");
+    DbcSignal* s = SignalByRawId(id, sig, kw.line, kw.column, "SIG_VALTYPE_");
     if (s == nullptr) return;
-    s->value_type = type == 0 ? SignalValueType::kInteger
-                    : type == 1 ? SignalValueType::kFloat32
-                                : SignalValueType::kFloat64;
     const std::uint32_t need = type == 1 ? 32 : type == 2 ? 64 : s->length_bits;
     if (s->length_bits != need) {
       FailAt(t.line, t.column,
              fmt::format("signal {} is {} bits long; an IEEE {} needs {}", sig, s->length_bits,
                          type == 1 ? "float" : "double", need));
     }
+    s->value_type = type == 0 ? SignalValueType::kInteger
+                    : type == 1 ? SignalValueType::kFloat32
+                                : SignalValueType::kFloat64;
   }
 
   void MultiplexValues(const Token& kw) {
@@ -741,7 +820,10 @@ class Parser {
     for (auto& p : mux_values_) {
       DbcMessage* m = MessageByRawId(p.message_id_raw);
       if (m == nullptr) {
-        Problem(p.line, fmt::format("SG_MUL_VAL_ refers to unknown message ID {}", p.message_id_raw));
+        if (!Ignored(p.message_id_raw)) {
+          Problem(p.line, p.column,
+                  fmt::format("SG_MUL_VAL_ refers to unknown message ID {}", p.message_id_raw));
+        }
         continue;
       }
       const int i = m->FindSignal(p.signal);
@@ -793,7 +875,7 @@ class Parser {
   void ApplyAttribute(PendingAttribute& a) {
     const DbcAttributeDefinition* d = Definition(a.name);
     if (d == nullptr) {
-      Problem(a.line, fmt::format("BA_ for undeclared attribute {}", a.name));
+      Problem(a.line, a.column, fmt::format("BA_ for undeclared attribute {}", a.name));
     } else if (d->type == DbcAttributeDefinition::Type::kEnum) {
       // BA_ writes an enum attribute as its index; keep the label.
       if (const double* idx = std::get_if<double>(&a.value)) {
@@ -809,8 +891,8 @@ class Parser {
       case DbcAttributeDefinition::Object::kMessage: {
         DbcMessage* m = MessageByRawId(a.message_id_raw);
         if (m == nullptr) {
-          if (a.message_id_raw != kIndependentSignalsId) {
-            Problem(a.line, fmt::format("BA_ refers to unknown message ID {}", a.message_id_raw));
+          if (!Ignored(a.message_id_raw)) {
+            Problem(a.line, a.column, fmt::format("BA_ refers to unknown message ID {}", a.message_id_raw));
           }
           break;
         }
@@ -821,13 +903,18 @@ class Parser {
         break;
       }
       case DbcAttributeDefinition::Object::kSignal: {
-        DbcSignal* s = SignalByRawId(a.message_id_raw, a.signal, a.line, "BA_");
+        DbcSignal* s = SignalByRawId(a.message_id_raw, a.signal, a.line, a.column, "BA_");
         if (s == nullptr) break;
         s->attributes[a.name] = a.value;
         if (a.name == "GenSigSNA") {
+          // Real files declare it as a STRING ("FFFh"); only an integer raw value is usable.
           const double* v = std::get_if<double>(&a.value);
           if (v == nullptr || *v != std::floor(*v) || !(*v >= -9223372036854775808.0 && *v < 9223372036854775808.0)) {
-            FailAt(a.line, a.column, "GenSigSNA must be an integer raw value within the 64-bit range");
+            Problem(a.line, a.column,
+                    fmt::format("GenSigSNA of signal {} is not an integer raw value within the "
+                                "64-bit range; ignored",
+                                a.signal));
+            break;
           }
           s->not_available_raw = static_cast<std::int64_t>(*v);
         }
@@ -839,15 +926,17 @@ class Parser {
   }
 
   void CheckMessage(DbcMessage& m) {
-    for (const auto& s : m.signals) {
+    for (auto& s : m.signals) {
       const std::uint32_t need = SignalEndByte(s);
       if (need > 64) {
         FailAt(s.line, 1, fmt::format("signal {} of {} reaches byte {}, beyond 64 bytes", s.name,
                                       m.name, need - 1));
       }
       if (need > m.size_bytes) {
-        Problem(s.line, fmt::format("signal {} of {} reaches byte {} but the message is {} bytes",
-                                    s.name, m.name, need - 1, m.size_bytes));
+        Problem(s.line, s.column,
+                fmt::format("signal {} of {} reaches byte {} but the message is {} bytes: it "
+                            "decodes as not available",
+                            s.name, m.name, need - 1, m.size_bytes));
       }
       if (s.not_available_raw) {
         const std::int64_t v = *s.not_available_raw;
@@ -857,8 +946,10 @@ class Parser {
                             v < (std::int64_t{1} << (s.length_bits - 1)))
                          : (v >= 0 && v < (std::int64_t{1} << s.length_bits)));
         if (!fits) {
-          FailAt(s.line, 1, fmt::format("GenSigSNA {} of signal {} does not fit in {} bits", v,
-                                        s.name, s.length_bits));
+          Problem(s.line, s.column,
+                  fmt::format("GenSigSNA {} of signal {} does not fit in {} bits; ignored", v,
+                              s.name, s.length_bits));
+          s.not_available_raw.reset();
         }
       }
     }
@@ -882,6 +973,9 @@ class Parser {
   std::vector<std::vector<bool>> simple_mux_;
   std::vector<PendingMuxValues> mux_values_;
   std::vector<PendingAttribute> attributes_;
+  /// Raw ID of the BO_ being read (set before it is checked), and those of skipped messages.
+  std::optional<std::uint32_t> message_raw_id_;
+  std::set<std::uint32_t> skipped_ids_;
 };
 
 }  // namespace

@@ -8,10 +8,11 @@
 /// signals), 29-bit IDs (bit 31 of the DBC ID) and CAN FD lengths up to 64 bytes. Other sections
 /// (`NS_`, `BS_`, `EV_`, `SIG_GROUP_`, `BO_TX_BU_`, ...) are skipped.
 ///
-/// Pure parsing: the caller hands in the text and a name for messages. Errors throw `DbcError`
-/// naming file, line and column and what was expected; oddities that do not stop decoding (a
-/// signal reaching past the declared length, a reference to an unknown signal in `VAL_`) are
-/// collected in `Dbc::problems`.
+/// Pure parsing: the caller hands in the text and a name for messages. A locally malformed
+/// statement is skipped and collected in `Dbc::problems` with its line and column, as are
+/// oddities that do not stop decoding (a signal reaching past the declared length, which then
+/// decodes as not available; a reference to an unknown signal in `VAL_`). Errors that leave
+/// nothing to load throw `DbcError` naming file, line and column and what was expected.
 ///
 /// Project convention (docs/protocol.md): a signal attribute `GenSigSNA` holds the raw value
 /// that means "not available"; the codec decodes it to NaN and encodes NaN to it.
@@ -75,7 +76,8 @@ struct DbcSignal {
   /// Raw value meaning "not available" (attribute `GenSigSNA`), if declared.
   std::optional<std::int64_t> not_available_raw;
 
-  int line = 0;  ///< line of the `SG_` in the file, for messages
+  int line = 0;    ///< line of the `SG_` in the file, for messages
+  int column = 0;  ///< column of the `SG_`
 };
 
 /// One message (`BO_`).
@@ -112,6 +114,7 @@ struct DbcAttributeDefinition {
 /// Something in the file that does not stop loading but a person should look at.
 struct DbcProblem {
   int line = 0;
+  int column = 0;  ///< 1-based; 0 if the problem concerns a whole line
   std::string message;
 };
 
@@ -144,15 +147,26 @@ class DbcError : public std::runtime_error {
   const std::string& file() const noexcept { return file_; }
   int line() const noexcept { return line_; }     ///< 1-based
   int column() const noexcept { return column_; } ///< 1-based
+  /// What went wrong, without the file:line:column prefix.
+  const std::string& detail() const noexcept { return detail_; }
  private:
   std::string file_;
+  std::string detail_;
   int line_;
   int column_;
 };
 
 /// Parses DBC text. `file_name` only labels errors and problems.
-/// Throws DbcError (file, line, column, what was expected) on a syntax error, a signal outside
-/// 64 bytes, a duplicate message ID or signal name, or a multiplexer cycle.
+///
+/// A locally malformed statement (a syntax error, a message ID above 29 bits, a duplicate
+/// message ID or signal name, a signal outside 64 bytes, a `CM_` missing its ';') is a problem
+/// naming its line and column; that statement is skipped (a `BO_` with its signals, or one
+/// `SG_`) and the rest of the file loads. A `GenSigSNA` that is not an integer raw value
+/// fitting the signal is a problem and is ignored.
+/// Throws DbcError (file, line, column, what was expected) on an unterminated string, on a
+/// file where statements were skipped and no message loads, and on whole-file inconsistencies:
+/// a multiplexed signal without a unique multiplexer, an `SG_MUL_VAL_` naming an unknown
+/// signal, a multiplexer cycle.
 Dbc ParseDbc(std::string_view text, std::string_view file_name);
 
 }  // namespace pumptherm::protocol

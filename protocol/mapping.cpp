@@ -19,7 +19,8 @@ constexpr std::array<std::string_view, kMappingOutputCount> kOutputNames = {
     "winding_res_temp_degC", "rs_ohm",         "flux_Wb",       "rs_status",
     "flux_status",           "alarm_level",    "alarm_reason",  "alarm_node",
     "alarm_value_degC",      "time_to_trip_s", "uptime_s",      "frame_rate_Hz",
-    "drops",                 "bus_state",      "magnet_flux_temp_degC"};
+    "drops",                 "bus_state",      "magnet_flux_temp_degC", "node_index",
+    "node_count",            "node_temp_degC", "node_sd_K"};
 
 std::string Where(const toml::source_region& r) {
   const std::string file = r.path ? *r.path : std::string("<mapping>");
@@ -96,6 +97,25 @@ void ResolveSection(const toml::table& root, std::string_view section,
   }
 }
 
+/// The node-indexed message: node_index with node_temp_degC, node_sd_K and node_count in the
+/// same message, so one frame says which node its temperature belongs to.
+void CheckNodeTable(const toml::table& table, const SignalMapping& mapping) {
+  const auto& index = mapping.output(MappingOutput::kNodeIndex);
+  const auto& temp = mapping.output(MappingOutput::kNodeTempDegC);
+  const toml::node* outputs = table.get("outputs");
+  const toml::node& where = outputs != nullptr ? *outputs : static_cast<const toml::node&>(table);
+  if (index.has_value() != temp.has_value()) {
+    Fail(where, "outputs", "node_index and node_temp_degC go together (a node-indexed message)");
+  }
+  for (MappingOutput o : {MappingOutput::kNodeTempDegC, MappingOutput::kNodeSdK, MappingOutput::kNodeCount}) {
+    const auto& r = mapping.output(o);
+    if (r && (!index || r->message_index != index->message_index)) {
+      Fail(where, fmt::format("outputs.{}", MappingOutputName(o)),
+           "must be in the message of outputs.node_index");
+    }
+  }
+}
+
 }  // namespace
 
 std::string_view MappingInputName(MappingInput input) noexcept {
@@ -134,6 +154,8 @@ SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
                                         Resolve(v, fmt::format("outputs.nodes.{}", k.str()), dbc));
     }
   }
+
+  CheckNodeTable(table, mapping);
 
   // The estimators cannot run without the dq quantities and a speed.
   std::vector<std::string> missing;

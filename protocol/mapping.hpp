@@ -11,6 +11,8 @@
 ///     frame_temp_degC = { message = "PUMP_STATUS", signal = "FrameTemp_degC", scale = 1.0, offset = 0.0 }
 ///     [outputs]
 ///     winding_res_temp_degC = { message = "GW_TEMPS_A", signal = "WindingRes_degC" }
+///     node_index = { message = "GW_NODE_TEMP", signal = "NodeIndex" }    # node-indexed message:
+///     node_temp_degC = { message = "GW_NODE_TEMP", signal = "NodeTemp_degC" }  # any model's nodes
 ///     [outputs.nodes]                     # thermal-model node name -> signal, degC
 ///     frame = { message = "GW_TEMPS_A", signal = "Frame_degC" }
 ///
@@ -71,8 +73,15 @@ enum class MappingOutput {
   kDrops,               ///< drops
   kBusState,            ///< bus_state
   kMagnetFluxTempDegC,  ///< magnet_flux_temp_degC: magnet temperature from the identified flux
+  /// node_index: the multiplexer of a node-indexed message; the frame carries the thermal
+  /// model's node with this index (model order), so any model's nodes reach the bus. The
+  /// gateway sends the nodes in turn, each once per period.
+  kNodeIndex,
+  kNodeCount,           ///< node_count: how many nodes the pump's model has
+  kNodeTempDegC,        ///< node_temp_degC: that node's estimated temperature
+  kNodeSdK,             ///< node_sd_K: its standard deviation (Kalman covariance), K
 };
-inline constexpr std::size_t kMappingOutputCount = 15;
+inline constexpr std::size_t kMappingOutputCount = 19;
 
 /// The TOML key of an input or output.
 std::string_view MappingInputName(MappingInput input) noexcept;
@@ -115,7 +124,8 @@ class MappingError : public std::runtime_error {
 /// Parses and validates a mapping from TOML text. `source_name` labels errors.
 /// Throws MappingError for a TOML syntax error, an unknown key, a missing message/signal key,
 /// a message or signal the DBC does not have, a missing required input (id_A, iq_A, ud_V, uq_V
-/// and one speed), a node_id_limit outside 1..65536, or ID blocks that overflow or overlap.
+/// and one speed), node_index without node_temp_degC (or the reverse) or node outputs outside
+/// node_index's message, a node_id_limit outside 1..65536, or ID blocks that overflow or overlap.
 SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name, const Dbc& dbc);
 
 /// The same, from a table already parsed (e.g. the `[mapping]` table of the daemon config);

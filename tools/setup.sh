@@ -16,6 +16,7 @@ packages=(
   can-utils iproute2 kmod cpio gzip busybox-static qemu-system-x86 debootstrap e2fsprogs
   gnuplot-nox default-jdk-headless libjchart2d-java xvfb xauth xdotool x11-apps imagemagick
   lintian dpkg-dev groff-base time
+  python3-canmatrix   # the independent DBC decoder of tests/protocol/codec_canmatrix_test.cpp
 )
 
 want_guest=1

@@ -112,7 +112,11 @@ const std::string kDbc = "VERSION \"\"\n\nBU_: N\n\nBO_ 256 M: 8 N\n SG_ S : 0|1
 std::string Dbc(const std::string& text) {
   try {
     const auto d = protocol::ParseDbc(text, "x.dbc");
-    return "accepted (" + std::to_string(d.messages.size()) + " messages)";
+    std::string answer = "accepted (" + std::to_string(d.messages.size()) + " messages)";
+    for (const auto& p : d.problems) {
+      answer += "; warning x.dbc:" + std::to_string(p.line) + ":" + std::to_string(p.column) + ": " + p.message;
+    }
+    return answer;
   } catch (const protocol::DbcError& e) {
     return e.what();
   }
@@ -311,6 +315,7 @@ std::vector<Row> Catalogue() {
       {"candump log", "wrong length", "`123#1` (odd hex digits)", [] { return Candump("(1.0) can0 123#1"); }, "column"},
       {"candump log", "wrong length", "9 data bytes, classic", [] { return Candump("(1.0) can0 123#001122334455667788"); }, "column"},
       {"candump log", "out of range", "`800#00` (11-bit ID above 7FF)", [] { return Candump("(1.0) can0 800#00"); }, "column"},
+      {"candump log", "out of range", "`40000123#00` (CAN ID above 29 bits)", [] { return Candump("(1.0) can0 40000123#00"); }, "column 12: CAN ID above 29 bits"},
       {"candump log", "out of range", "remote length 9 `123#R9`", [] { return Candump("(1.0) can0 123#R9"); }, "column"},
       {"candump log", "wrong type", "time `(abc)`", [] { return Candump("(abc) can0 123#00"); }, "column 2"},
       {"candump log", "huge", "time of 30 digits", [] { return Candump("(999999999999999999999999999999.0) can0 123#00"); }, "column"},
@@ -318,7 +323,7 @@ std::vector<Row> Catalogue() {
       {"candump log", "non-UTF-8", "data `\\xff\\xff`", [] { return Candump("(1.0) can0 123#\xff\xff"); }, "column"},
       // --- DBC ---
       {"DBC", "truncated", "`SG_` line cut after the start bit", [] { return Dbc(kDbc.substr(0, kDbc.find("@"))); }, "x.dbc:6:"},
-      // Accepted: the codec then needs 10 bytes, so 8-byte frames of it count as rx_bad_length.
+      // Accepted with a warning: the signal decodes as not available, the frames decode.
       {"DBC", "wrong length", "signal past the 8 bytes of its message", [] { return Dbc(Replace(kDbc, "0|16@", "60|16@")); }, "accepted"},
       {"DBC", "huge", "signal past 64 bytes", [] { return Dbc(Replace(kDbc, "0|16@", "510|16@")); }, "beyond 64 bytes"},
       {"DBC", "duplicate", "message 256 twice", [] { return Dbc(kDbc + "BO_ 256 M2: 8 N\n"); }, "x.dbc:"},

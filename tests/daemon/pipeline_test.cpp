@@ -9,6 +9,7 @@
 #include <lcm/lcm-cpp.hpp>
 #include <map>
 #include <numbers>
+#include <set>
 #include <sstream>
 #include <toml++/toml.h>
 
@@ -115,6 +116,22 @@ class Bench {
     gateway_.Advance(t_us, sink);
   }
 
+  /// The GW_NODE_TEMP frames sent for node 1, decoded: signal name -> value, in send order.
+  std::vector<std::map<std::string, double>> NodeFrames() const {
+    std::vector<std::map<std::string, double>> out;
+    const protocol::DbcMessage* m = dbc_.FindMessage("GW_NODE_TEMP");
+    const auto& codec = codec_.message(static_cast<std::size_t>(m - dbc_.messages.data()));
+    for (const auto& [t, f] : sink.frames) {
+      if (f.id != m->id + 1) continue;
+      std::vector<double> v(codec.signal_count());
+      if (codec.Decode(std::span<const std::uint8_t>(f.data.data(), f.len), v) != protocol::CodecStatus::kOk) continue;
+      std::map<std::string, double> named;
+      for (std::size_t i = 0; i < v.size(); ++i) named[m->signals[i].name] = v[i];
+      out.push_back(std::move(named));
+    }
+    return out;
+  }
+
   /// Runs `seconds` at `iq_A`.
   void Run(double seconds, double iq_A) {
     const double w = 800.0 / 60.0 * 2.0 * std::numbers::pi;  // one pole pair
@@ -190,6 +207,27 @@ TEST(Pipeline, EstimatesFollowTheTruthAndGoOutOnCanAndLcm) {
   EXPECT_NEAR(v[static_cast<std::size_t>(temps->FindSignal("Frame_degC"))], s.node_degC[0], 0.02);
   EXPECT_NEAR(v[static_cast<std::size_t>(temps->FindSignal("Teeth_degC"))], s.node_degC[2], 0.02);
 
+  // GW_NODE_TEMP: the last second's frames carry every node of the model, in turn, with its
+  // sd; seven a second, as GW_TEMPS_A's one.
+  const auto node_frames = b.NodeFrames();
+  EXPECT_NEAR(static_cast<double>(node_frames.size()), 7.0 * count, 7.0 * 2);
+  ASSERT_GE(node_frames.size(), 7u);
+  std::set<std::size_t> seen;
+  for (std::size_t i = node_frames.size() - 7; i < node_frames.size(); ++i) {
+    const auto& f = node_frames[i];
+    const auto node = static_cast<std::size_t>(f.at("NodeIndex"));
+    ASSERT_LT(node, 7u);
+    seen.insert(node);
+    if (i > node_frames.size() - 7) {
+      EXPECT_EQ(node, (static_cast<std::size_t>(node_frames[i - 1].at("NodeIndex")) + 1) % 7);
+    }
+    EXPECT_EQ(f.at("NodeCount"), 7.0);
+    EXPECT_NEAR(f.at("NodeTemp_degC"), s.node_degC[node], 0.02);
+    EXPECT_NEAR(f.at("NodeSd_K"), s.node_sd_K[node], 0.002);
+    EXPECT_GT(f.at("NodeSd_K"), 0.0);
+  }
+  EXPECT_EQ(seen.size(), 7u);
+
   // Every LCM type, decodable, with the node names of the model.
   ASSERT_TRUE(b.sink.lcm.count("PUMPTHERM/tmp1/TEMPS"));
   ASSERT_TRUE(b.sink.lcm.count("PUMPTHERM/tmp1/TELEMETRY"));
@@ -203,6 +241,53 @@ TEST(Pipeline, EstimatesFollowTheTruthAndGoOutOnCanAndLcm) {
   EXPECT_EQ(m.node_names[3], "slot_winding");
   EXPECT_NEAR(m.node_degC[3], s.node_degC[3], 1e-9);
   EXPECT_EQ(m.filter_status, pumptherm::temperatures_t::FILTER_TRACKING);
+}
+
+std::string GenericConfig(const std::string& dbc_section = "") {
+  std::string c = Config();
+  c.replace(c.find("saheba2010-improved"), std::string("saheba2010-improved").size(), "tmp-generic");
+  return dbc_section + c;
+}
+
+TEST(Pipeline, EveryNodeOfTheDefaultModelReachesCanWithItsSd) {
+  Bench b(GenericConfig());
+  b.Run(30.0, 5.0);  // tmp-generic is not the plant's model: a light load keeps it in range
+  const auto& s = b.gateway_.pumps()[0]->snapshot();
+  ASSERT_TRUE(s.initialised);
+  ASSERT_EQ(s.node_degC.size(), 4u);  // frame, stator, winding, rotor
+  const auto frames = b.NodeFrames();
+  ASSERT_GE(frames.size(), 4u);
+  std::set<double> seen;
+  for (std::size_t i = frames.size() - 4; i < frames.size(); ++i) {
+    const auto node = static_cast<std::size_t>(frames[i].at("NodeIndex"));
+    ASSERT_LT(node, 4u);
+    seen.insert(static_cast<double>(node));
+    EXPECT_EQ(frames[i].at("NodeCount"), 4.0);
+    EXPECT_NEAR(frames[i].at("NodeTemp_degC"), s.node_degC[node], 0.02) << node;
+    EXPECT_NEAR(frames[i].at("NodeSd_K"), s.node_sd_K[node], 0.002) << node;
+  }
+  EXPECT_EQ(seen.size(), 4u);
+}
+
+TEST(Pipeline, ANodeWithoutCanOutputIsAConfigurationErrorNamingIt) {
+  // The shipped mapping without the node-indexed message: tmp-generic's stator has no signal.
+  std::string mapping = ReadTextFile(std::string(PUMPTHERM_SOURCE_DIR) + "/protocol/mapping_pumptherm.toml");
+  std::istringstream in(mapping);
+  std::string line, kept;
+  while (std::getline(in, line)) {
+    if (line.rfind("node_", 0) != 0) kept += line + "\n";
+  }
+  const std::string path = ::testing::TempDir() + "pumptherm_mapping_no_node_table.toml";
+  std::ofstream(path) << kept;
+  const std::string config = GenericConfig("[dbc]\nfile = \"pumptherm.dbc\"\nmapping = \"" + path + "\"\n");
+  try {
+    const Gateway g(ParseConfig(config, std::string(PUMPTHERM_SOURCE_DIR) + "/tests/daemon/pipeline.toml"));
+    ADD_FAILURE() << "accepted a model node without CAN output";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("pump[0].thermal_model': node 'stator' of tmp-generic has no CAN output"),
+              std::string::npos) << e.what();
+  }
+  std::remove(path.c_str());
 }
 
 TEST(Pipeline, NothingIsPublishedAsATemperatureBeforeTheFirstEstimate) {
@@ -237,7 +322,7 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
   EXPECT_EQ(s.alarm.reason, estimators::AlarmReason::kEstimatedOverTemperature);
   EXPECT_EQ(s.alarm.node, 3);
   EXPECT_TRUE(s.alarm.trip_latched);
-  // The alarm frame says so, with the node index of the CAN layout (slot_winding = 4).
+  // The alarm frame says so, with the model's node index (slot_winding = 3, as GW_NODE_TEMP).
   const protocol::DbcMessage* alarm = b.dbc_.FindMessage("GW_ALARM");
   const auto& codec = b.codec_.message(static_cast<std::size_t>(alarm - b.dbc_.messages.data()));
   protocol::CanFrame last{};
@@ -248,7 +333,7 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
   codec.Decode(std::span<const std::uint8_t>(last.data.data(), last.len), v);
   EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0);
   EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmReason"))], 1.0);
-  EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmNode"))], 4.0);
+  EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmNode"))], 3.0);
 
   // Cool down: still latched. A clear from an unknown source is refused, from "panel" accepted.
   b.Run(3600.0, 0.0);

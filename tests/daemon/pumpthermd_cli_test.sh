@@ -45,6 +45,14 @@ expect 0 "bad.log:6:13: expected a hexadecimal CAN ID; line skipped" -- "$bin" -
 "$bin" -r "$tmp/bad.log" 2>/dev/null | grep -q "10 frames, .* 1 malformed lines skipped" || { echo "FAIL: bad line not counted"; fail=1; }
 # From stdin, as in `candump -L can0 | pumpthermd -r -`.
 "$bin" -r - < "$data/skeleton.log" | grep -q "<stdin>: 2210 frames" || { echo "FAIL: stdin"; fail=1; }
+# A DBC with a malformed statement: --check-config reports the warning (file:line:column) and
+# accepts the configuration, since the rest of the DBC loads.
+cp "$data/../../protocol/pumptherm.dbc" "$tmp/w.dbc"
+printf 'BO_ 3221225763 BIT30: 8 Gateway\n SG_ X : 0|8@1+ (1,0) [0|0] "" Monitor\n' >> "$tmp/w.dbc"
+bad_line=$(($(wc -l < "$data/../../protocol/pumptherm.dbc") + 1))
+printf '[[can]]\ninterface = "can0"\n[dbc]\nfile = "w.dbc"\nmapping = "mapping_pumptherm.toml"\n[[pump]]\nname = "p"\nnode_id = 0\ninterface = "can0"\nmotor = "han2019-tmp"\nthermal_model = "tmp-generic"\nmeasured_node = "frame"\n' > "$tmp/w.toml"
+expect 0 "warning: .*w.dbc:$bad_line:1: extended message ID 0x40000123 above 29 bits" -- "$bin" --check-config "$tmp/w.toml"
+expect 0 "w.toml: OK \(1 interface, 1 pump\)" -- "$bin" --check-config "$tmp/w.toml"
 # The example configuration shipped in systemd/ is valid.
 expect 0 "pumpthermd.toml: OK \(1 interface, 1 pump\)" -- "$bin" --check-config "$data/../../systemd/pumpthermd.toml"
 exit $fail

@@ -60,6 +60,8 @@ TEST(CandumpLog, ErrorsNameTheColumn) {
       {"(1.0) vcan0 044#0", 18},                   // half a byte
       {"(1.0) vcan0 044#000102030405060708", 33},  // 9 bytes classic
       {"(1.0) vcan0 044", 16},                     // no '#'
+      {"(1.0) vcan0 40000123#00", 13},             // bit 30 (the RTR flag) set: above 29 bits
+      {"(1.0) vcan0 FFFFFFFF#00", 13},             // above 29 bits, not an error frame
       {"(1.0) vcan0 123##1001122", 25},            // FD length 3 ok, 3 bytes + flags
   };
   for (const auto& c : cases) {

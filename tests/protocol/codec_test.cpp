@@ -224,9 +224,35 @@ TEST(CodecTest, ShortFramesAreRejectedAndNeverReadPastTheirEnd) {
   EXPECT_EQ(values[0], 0x77);
   std::vector<double> too_few;
   EXPECT_EQ(codec.Decode(exact, too_few), CodecStatus::kWrongCount);
-  // A signal past the declared length raises the minimum to its last byte.
-  const MessageCodec longer(Message("BO_ 1 M: 2 X\n SG_ S : 24|8@1+ (1,0) [0|0] \"\" X\n"));
-  EXPECT_EQ(longer.min_bytes(), 4u);
+}
+
+TEST(CodecTest, SignalsOverhangingTheDeclaredLengthAreNullAndTheOthersDecode) {
+  // As in a real file: "55|30@0+" in an 8-byte message runs from byte 6 to byte 9.
+  const MessageCodec codec(Message(
+      "BO_ 1 M: 8 X\n SG_ Over : 55|30@0+ (1,0) [0|0] \"\" X\n SG_ A : 0|8@1+ (1,0) [0|0] \"\" X\n"
+      " SG_ B : 15|16@0- (0.5,1) [0|0] \"\" X\n SG_ Tail : 48|8@1+ (1,0) [0|0] \"\" X\n"));
+  EXPECT_EQ(codec.min_bytes(), 8u);
+  const Bytes frame = {0x2A, 0xFF, 0xFE, 0, 0, 0, 0x99, 0x55};  // exactly 8 bytes: ASan checks reads
+  std::vector<double> values(4, 42.0);
+  ASSERT_EQ(codec.Decode(frame, values), CodecStatus::kOk);
+  EXPECT_TRUE(std::isnan(values[0]));
+  EXPECT_EQ(values[1], 0x2A);
+  EXPECT_EQ(values[2], -2 * 0.5 + 1);  // raw 0xFFFE = -2
+  EXPECT_EQ(values[3], 0x99);
+  EXPECT_FALSE(codec.IsPresent(frame, 0));
+  EXPECT_EQ(codec.RawBits(frame, 0), 0u);
+  // Encoding leaves its bits zero and writes the others.
+  Bytes out(8, 0xEE);
+  const std::vector<double> in = {12345, 7, 0.5, 1};
+  ASSERT_EQ(codec.Encode(in, out).status, CodecStatus::kOk);
+  EXPECT_EQ(out, (Bytes{7, 0xFF, 0xFF, 0, 0, 0, 1, 0}));
+  // A multiplexer that overhangs selects nothing.
+  const MessageCodec muxed(Message("BO_ 1 M: 1 X\n SG_ Mux M : 8|8@1+ (1,0) [0|0] \"\" X\n"
+                                   " SG_ A m0 : 0|8@1+ (1,0) [0|0] \"\" X\n"));
+  std::vector<double> two(2);
+  ASSERT_EQ(muxed.Decode(Bytes{5}, two), CodecStatus::kOk);
+  EXPECT_TRUE(std::isnan(two[0]));
+  EXPECT_TRUE(std::isnan(two[1]));
 }
 
 TEST(CodecTest, MultiplexedSignalsAreNanUnlessSelected) {

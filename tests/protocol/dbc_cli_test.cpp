@@ -47,18 +47,43 @@ fs::path TempFile(const std::string& name) {
 TEST(DbcCliTest, CheckListsThePumpthermFrameSet) {
   const RunResult r = RunPumptherm("dbc check '" + test::PumpthermDbc().string() + "'");
   EXPECT_EQ(r.exit_code, 0) << r.out;
-  EXPECT_NE(r.out.find("9 messages, 39 signals, 3 nodes"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("10 messages, 44 signals, 3 nodes"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("0x100 PUMP_FAST_I 8 bytes, 10 ms, from PumpDrive"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("n/a raw -32768"), std::string::npos) << r.out;
 }
 
 TEST(DbcCliTest, CheckNamesWhereAFileIsBroken) {
   const fs::path bad = TempFile("bad.dbc");
-  std::ofstream(bad) << "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0 [0|0] \"\" X\n";
-  const RunResult r = RunPumptherm("dbc check '" + bad.string() + "'");
+  std::ofstream(bad) << "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0 [0|0] \"\" X\n SG_ T : 8|8@1+ (1,0) [0|0] \"\" X\n";
+  // The broken signal is a warning; the rest loads.
+  RunResult r = RunPumptherm("dbc check '" + bad.string() + "'");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find(bad.string() + ":2:22: warning: expected ')'"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("signal skipped"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("1 messages, 1 signals"), std::string::npos) << r.out;
+  // --strict: warnings fail.
+  r = RunPumptherm("dbc check --strict '" + bad.string() + "'");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  // Nothing loads: an error.
+  std::ofstream(bad) << "BO_ 1 M: 65 X\n";
+  r = RunPumptherm("dbc check '" + bad.string() + "'");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find(bad.string() + ":1:10: message length above 64 bytes"), std::string::npos) << r.out;
+  // An empty DBC is no frame set: --strict fails it.
+  std::ofstream(bad) << "VERSION \"\"\nBU_: X\n";
+  r = RunPumptherm("dbc check '" + bad.string() + "'");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("no messages"), std::string::npos) << r.out;
+  r = RunPumptherm("dbc check --strict '" + bad.string() + "'");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
   fs::remove(bad);
-  EXPECT_EQ(r.exit_code, 2);
-  EXPECT_NE(r.out.find(bad.string() + ":2:22: expected ')'"), std::string::npos) << r.out;
+}
+
+TEST(DbcCliTest, ShippedDbcByItsBareName) {
+  // As the config names it: a bare file name not in the working directory is the shipped file.
+  const RunResult r = RunPumptherm("dbc check pumptherm.dbc");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("0x100 PUMP_FAST_I 8 bytes"), std::string::npos) << r.out;
 }
 
 TEST(DbcCliTest, DecodeGivesBackWhatTheEncoderWrote) {
@@ -108,13 +133,20 @@ TEST(DbcCliTest, DecodeGivesBackWhatTheEncoderWrote) {
   fs::remove(log);
 }
 
-TEST(DbcCliTest, DecodeNamesABadLogLine) {
+TEST(DbcCliTest, DecodeSkipsAndCountsBadLogLines) {
   const fs::path log = TempFile("bad.log");
-  std::ofstream(log) << "(1.000000) vcan0 100#0011223344556677\n(2.0) vcan0 10Z#00\n";
-  const RunResult r = RunPumptherm("dbc decode --dbc '" + test::PumpthermDbc().string() + "' '" + log.string() + "'");
+  std::ofstream(log) << "(1.000000) vcan0 100#0011223344556677\n(2.0) vcan0 10Z#00\n"
+                     << "(3.0) vcan0 40000100#0011223344556677\n(4.000000) vcan0 100#0011223344556677\n";
+  const RunResult r = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + log.string() + "'");
   fs::remove(log);
-  EXPECT_EQ(r.exit_code, 2);
-  EXPECT_NE(r.out.find(log.string() + ":2:"), std::string::npos) << r.out;
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find(log.string() + ":2:15: warning: expected a hexadecimal CAN ID; line skipped"),
+            std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(log.string() + ":3:13: warning: CAN ID above 29 bits; line skipped"),
+            std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"time_s\":4.000000"), std::string::npos) << r.out;  // reading went on
+  EXPECT_NE(r.out.find("2 frames decoded, 0 with IDs not in pumptherm.dbc, 0 shorter than their message, 2 bad lines skipped"),
+            std::string::npos) << r.out;
 }
 
 }  // namespace

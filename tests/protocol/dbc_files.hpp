@@ -17,8 +17,13 @@ inline std::filesystem::path SourceDir() {
   return dir != nullptr ? std::filesystem::path(dir) : std::filesystem::current_path();
 }
 
-/// ../shared/data/dbc next to the repository (absent on checkouts outside the team's machines).
-inline std::filesystem::path SharedDbcDir() { return SourceDir() / ".." / "shared" / "data" / "dbc"; }
+/// ../shared/data/dbc next to the repository (absent on checkouts outside the team's machines);
+/// PUMPTHERM_SHARED_DIR names another copy of shared/ (a git worktree sits elsewhere).
+inline std::filesystem::path SharedDbcDir() {
+  const char* shared = std::getenv("PUMPTHERM_SHARED_DIR");
+  const std::filesystem::path root = shared != nullptr ? std::filesystem::path(shared) : SourceDir() / ".." / "shared";
+  return root / "data" / "dbc";
+}
 
 /// Every *.dbc under SharedDbcDir(), sorted; empty if the folder is absent.
 inline std::vector<std::filesystem::path> RealDbcFiles() {

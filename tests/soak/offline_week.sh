@@ -10,7 +10,8 @@
 #   3. resident memory flat: the daemon's VmRSS sampled every 10 min of log time; its highest
 #      value in the last day (the last seventh of a shorter run, at least an hour) exceeds the
 #      highest of the first day by at most 512 KB;
-#   4. no drift in timing: every periodic output (GW_TEMPS_A/B, GW_HEALTH 1 s, GW_IDENT 0.1 s,
+#   4. no drift in timing: every periodic output (GW_TEMPS_A/B, GW_HEALTH 1 s, GW_NODE_TEMP 1 s per
+#      node, GW_IDENT 0.1 s,
 #      GW_ALARM 0.1 s plus one frame per alarm change) has its period's count in every hour
 #      (+-1; hours counted from the ID's first frame), its frames lag their schedule (first frame + k periods) by less than 1 ms on the
 #      last day as on the first; each pump's thermal step count equals elapsed / period (+-1).
@@ -41,6 +42,9 @@ else
   trap 'rm -rf "$work"' EXIT
 fi
 duration_s=$((hours * 3600))
+# GW_NODE_TEMP (0x48x) carries each node of the model once a second, one frame per 1 s / nodes:
+# tmp-generic (tests/data/fleet32_pumps.sh) has 4.
+node_count=4
 
 # The daemon's configuration: a00..a15 on can0, b00..b15 on can1 (node IDs 0..15), the plant's
 # motor and model, levels and alarm timing as in the demo (tools/demo/pumpthermd-demo.toml), no
@@ -90,7 +94,7 @@ done
 [ -n "$daemon_pid" ] || { echo "$0: cannot find the daemon's process" >&2; exit 2; }
 
 # The statistics, and a memory sample each time the output's log time passes 10 more minutes.
-/usr/bin/time -f '%e %U %S %M' -o "$work/awk.time" awk -v every=600 -f "$here/output_stats.awk" "$work/out.fifo" |
+/usr/bin/time -f '%e %U %S %M' -o "$work/awk.time" awk -v every=600 -v nodes="$node_count" -f "$here/output_stats.awk" "$work/out.fifo" |
   while read -r tag value rest; do
     if [ "$tag" = T ]; then
       rss=$(awk '$1 == "VmRSS:" { print $2 }' "/proc/$daemon_pid/status" 2>/dev/null) || rss=""
@@ -141,11 +145,11 @@ awk -v w="$window_s" -v d="$duration_s" '
 
 # --- 4. timing ---
 expected_steps=$((duration_s - 1))
-awk -v hours="$hours" '
+awk -v hours="$hours" -v nodes="$node_count" '
   $1 == "H" { key = $2 " " $3; id = $3; h = $4; n = $5
               if (h > hours - 2) next              # the last hour of each ID is partial
               if (substr(id, 1, 1) == "2") { alarm_n[key, h] = n; alarm_keys[key] = 1; next }
-              exp_n = (substr(id, 1, 2) == "42") ? 36000 : 3600
+              exp_n = (substr(id, 1, 2) == "42") ? 36000 : (substr(id, 1, 2) == "48") ? 3600 * nodes : 3600
               checked++
               if (n < exp_n - 1 || n > exp_n + 1) { bad++; if (bad <= 5) printf "  %s hour %d: %d frames, expected %d\n", key, h, n, exp_n } }
   $1 == "A" { changes[$3 " " $4, int($2 / 3600)]++ }

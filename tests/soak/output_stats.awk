@@ -3,7 +3,7 @@
 #   - every change of a pump's GW_ALARM level or reason (0x200 + node; AlarmLevel = bits 0-1 of
 #     byte 0, AlarmReason = bits 2-7): lines "A <log time s> <iface> <id> <level> <reason>";
 #   - frames per CAN ID per hour of log time, and for the periodic messages (GW_TEMPS_A/B, 1 s;
-#     GW_IDENT, 0.1 s; GW_HEALTH, 1 s) the lag of each frame behind its schedule (first frame +
+#     GW_IDENT, 0.1 s; GW_HEALTH, 1 s; GW_NODE_TEMP, 1 s / nodes) the lag of each frame behind its schedule (first frame +
 #     k periods), per day: drift would show as growing lags or missing frames;
 #   - a line "T <seconds of log time>" every `every` seconds of log time, flushed at once, so that
 #     the caller can sample the daemon's memory as the log time passes.
@@ -11,13 +11,14 @@
 # frame; the last one is partial), "L <iface> <id> <day> <min lag
 # us> <max lag us> <frames>" per periodic ID and day, "N <frames> <first time> <last time>".
 #
-# Usage: awk -v every=600 -f output_stats.awk OUTPUT_LOG
+# Usage: awk -v every=600 -v nodes=4 -f output_stats.awk OUTPUT_LOG   (nodes: of the model)
 function hexbyte(s,    h) {
   h = "0123456789ABCDEF"
   return (index(h, substr(s, 1, 1)) - 1) * 16 + index(h, substr(s, 2, 1)) - 1
 }
 BEGIN {
   if (every == "") every = 600
+  if (nodes == "") nodes = 1
   n = 0
 }
 {
@@ -46,6 +47,7 @@ BEGIN {
     }
   } else {
     period = (c == "4" && substr(id, 2, 1) == "2") ? 0.1 : 1.0   # GW_IDENT 0x42n at 10 Hz
+    if (c == "4" && substr(id, 2, 1) == "8") period = 1.0 / nodes  # GW_NODE_TEMP: one node per 1 s / nodes
     if (!(key in first)) { first[key] = rel; per[key] = period }
     k = int((rel - first[key]) / period + 0.5)
     lag = (rel - first[key] - k * period) * 1e6

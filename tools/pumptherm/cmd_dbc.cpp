@@ -14,6 +14,7 @@
 
 #include "protocol/candump_log.hpp"
 #include "protocol/codec.hpp"
+#include "daemon/resources.hpp"
 #include "protocol/dbc.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
@@ -33,7 +34,14 @@ std::string ReadWholeFile(const std::string& path) {
   return ss.str();
 }
 
-Dbc LoadDbc(const std::string& path) {
+/// A DBC named by path, or a shipped one by its bare name ("pumptherm"), as the config names it.
+Dbc LoadDbc(const std::string& reference) {
+  std::string path;
+  try {
+    path = daemon::ResolveResource(daemon::ResourceKind::kDbc, reference);
+  } catch (const std::runtime_error& e) {
+    throw InputError(e.what());
+  }
   try {
     return protocol::ParseDbc(ReadWholeFile(path), path);
   } catch (const protocol::DbcError& e) {
@@ -76,9 +84,15 @@ int Check(const std::string& path, bool strict) {
                  mux);
     }
   }
-  for (const auto& p : dbc.problems) fmt::print(stderr, "{}:{}: warning: {}\n", path, p.line, p.message);
+  for (const auto& p : dbc.problems) {
+    fmt::print(stderr, "{}:{}:{}: warning: {}\n", dbc.file_name, p.line, p.column, p.message);
+  }
   if (!dbc.problems.empty()) {
-    fmt::print(stderr, "{}: {} problem(s)\n", path, dbc.problems.size());
+    fmt::print(stderr, "{}: {} problem(s)\n", dbc.file_name, dbc.problems.size());
+    if (strict) return 2;
+  }
+  if (dbc.messages.empty()) {
+    fmt::print(stderr, "{}: warning: no messages\n", dbc.file_name);
     if (strict) return 2;
   }
   return 0;
@@ -100,6 +114,9 @@ std::string JsonEscape(std::string_view s) {
 
 /// 15 significant digits: raw * factor + offset without binary noise (308.4, not 308.40000000000003).
 std::string Number(double v) { return std::isfinite(v) ? fmt::format("{:.15g}", v) : std::string(); }
+
+/// Bad log lines warned about one by one; the rest are only counted.
+constexpr std::size_t kMaxReportedBadLines = 10;
 
 struct DecodeOptions {
   std::string dbc_path;
@@ -147,13 +164,18 @@ int Decode(const DecodeOptions& o) {
   std::vector<double> values;
   std::vector<std::string> row(columns);
   std::string line;
-  std::size_t line_no = 0, decoded = 0, unknown = 0, too_short = 0;
+  std::size_t line_no = 0, decoded = 0, unknown = 0, too_short = 0, bad_lines = 0;
   while (std::getline(*in, line)) {
     ++line_no;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
     if (p.skip) continue;
-    if (!p.ok) throw InputError(fmt::format("{}:{}:{}: {}", log_name, line_no, p.column, p.error));
+    if (!p.ok) {
+      if (++bad_lines <= kMaxReportedBadLines) {
+        fmt::print(stderr, "{}:{}:{}: warning: {}; line skipped\n", log_name, line_no, p.column, p.error);
+      }
+      continue;
+    }
     const protocol::CanFrame& f = p.record.frame;
     if (f.error || f.remote) continue;
     int index = -1;
@@ -198,8 +220,10 @@ int Decode(const DecodeOptions& o) {
     }
   }
   std::fflush(stdout);
-  fmt::print(stderr, "{}: {} frames decoded, {} with IDs not in {}, {} shorter than their message\n",
-             log_name, decoded, unknown, o.dbc_path, too_short);
+  fmt::print(stderr,
+             "{}: {} frames decoded, {} with IDs not in {}, {} shorter than their message, {} bad "
+             "lines skipped\n",
+             log_name, decoded, unknown, o.dbc_path, too_short, bad_lines);
   return 0;
 }
 
@@ -216,15 +240,16 @@ const SubcommandRegistrar kRegistrar{
       auto check_path = std::make_shared<std::string>();
       auto strict = std::make_shared<bool>(false);
       CLI::App* check = app.add_subcommand("check", "Load a DBC file, list messages and signals, report problems");
-      check->add_option("FILE", *check_path, "DBC file")->required();
-      check->add_flag("--strict", *strict, "exit 2 if the file has problems (warnings)");
+      check->add_option("FILE", *check_path, "DBC file, or a shipped one by name (pumptherm.dbc)")->required();
+      check->add_flag("--strict", *strict, "exit 2 if the file has problems (warnings) or no messages");
       check->footer("Example: pumptherm dbc check protocol/pumptherm.dbc\n"
-                    "Errors name file:line:column; problems that do not stop decoding are warnings.");
+                    "Warnings and errors name file:line:column. A malformed statement is a warning and\n"
+                    "is skipped (a BO_ with its signals, or one SG_); the rest of the file loads.");
 
       auto opts = std::make_shared<DecodeOptions>();
       CLI::App* decode = app.add_subcommand(
           "decode", "Decode a candump log (file or stdin) to JSON lines or CSV, one row per decoded frame");
-      decode->add_option("--dbc", opts->dbc_path, "DBC file")->required();
+      decode->add_option("--dbc", opts->dbc_path, "DBC file, or a shipped one by name (pumptherm.dbc)")->required();
       decode->add_option("LOG", opts->log_path, "candump -l/-L log; stdin if absent or '-'");
       decode->add_option("--format", opts->format, "json (JSON lines, NaN as null) or csv")
           ->check(CLI::IsMember({"json", "csv"}));
@@ -235,7 +260,8 @@ const SubcommandRegistrar kRegistrar{
       decode->footer(
           "Example: pumptherm dbc decode --dbc protocol/pumptherm.dbc --node-id-limit 16 run.log\n"
           "Signals a frame's multiplexer does not select, and 'not available' raw values, are empty\n"
-          "(CSV) or null (JSON). Frames shorter than their message are counted and skipped.");
+          "(CSV) or null (JSON). Frames shorter than their message are counted and skipped; so are\n"
+          "malformed log lines, with a file:line:column warning for each of the first 10.");
 
       return [check, decode, check_path, strict, opts]() -> int {
         if (check->parsed()) return Check(*check_path, *strict);
