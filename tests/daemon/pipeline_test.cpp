@@ -51,6 +51,9 @@ interface = "can0"
 [alarms]
 hold_s = 2
 clear_lcm_sources = ["panel"]
+# The bench's frame sensor is the noiseless truth: steady, it repeats its value to the bit, so
+# the flat-noise test for a stuck sensor does not apply to it.
+flat_after_s = 0
 
 [[pump]]
 name = "tmp1"
@@ -271,6 +274,32 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
   EXPECT_TRUE(r.gateway_.Clear("tmp1", "panel", "after the restart"));
   r.Run(10.0, 0.0);
   EXPECT_EQ(r.gateway_.pumps()[0]->snapshot().alarm.level, estimators::AlarmLevel::kNone);
+  // A restart whose clock is an hour behind the saved time: the filter starts cold (its age is
+  // unknown), the trip latches again all the same and goes out as a trip before any estimate.
+  {
+    Bench c(Config(R"(
+[pump.alarms.levels]
+slot_winding = { warning_degC = 50, trip_degC = 55 }
+)"));
+    c.t_us_ = b.t_us_ - 3'600'000'000LL;
+    warning.clear();
+    EXPECT_EQ(c.gateway_.RestoreState(text, c.t_us_, &warning), 0);
+    EXPECT_NE(warning.find("latched again: tmp1"), std::string::npos) << warning;
+    EXPECT_TRUE(c.gateway_.pumps()[0]->snapshot().alarm.trip_latched);
+    EXPECT_FALSE(c.gateway_.pumps()[0]->snapshot().initialised);
+    c.Run(10.0, 0.0);
+    const protocol::CanFrame* first = nullptr;
+    for (const auto& [t, f] : c.sink.frames) {
+      if (f.id == alarm->id + 1) {
+        first = &f;
+        break;
+      }
+    }
+    ASSERT_NE(first, nullptr);
+    codec.Decode(std::span<const std::uint8_t>(first->data.data(), first->len), v);
+    EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0) << "first GW_ALARM";
+    EXPECT_TRUE(c.gateway_.pumps()[0]->snapshot().alarm.trip_latched);
+  }
   // A state without the key (written before trips were saved) restores with none latched; a
   // latched trip on a node the model lacks makes the pump start cold, with a warning.
   std::string old_text = text;
@@ -405,7 +434,7 @@ TEST(Pipeline, ConfigurationErrorsNameTheKey) {
     return std::string();
   };
   EXPECT_NE(error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n")
-                .find("p.toml:12: key 'pump[0]': pump 'tmp1': alarm levels (line 20) for node 'winding', which model 'saheba2010-improved' does not have"),
+                .find("p.toml:15: key 'pump[0]': pump 'tmp1': alarm levels (line 23) for node 'winding', which model 'saheba2010-improved' does not have"),
             std::string::npos)
       << error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n");
   const std::string bad_model = [] {
@@ -424,6 +453,25 @@ thermal_model = "no-such-model"
     return std::string();
   }();
   EXPECT_NE(bad_model.find("p.toml:4: key 'pump[0].thermal_model': 'no-such-model': no such models file"), std::string::npos) << bad_model;
+}
+
+// The CAN alarm frame's reason codes are the daemon's: the DBC's value table names every code
+// of estimators::AlarmReason with its log name, and nothing else.
+TEST(Pipeline, DbcAlarmReasonTableIsTheDaemonsCodes) {
+  const protocol::Dbc dbc = protocol::ParseDbc(
+      ReadTextFile(ResolveResource(ResourceKind::kDbc, "pumptherm.dbc")), "pumptherm.dbc");
+  const protocol::DbcMessage* alarm = dbc.FindMessage("GW_ALARM");
+  ASSERT_NE(alarm, nullptr);
+  const int k = alarm->FindSignal("AlarmReason");
+  ASSERT_GE(k, 0);
+  const auto& table = alarm->signals[static_cast<std::size_t>(k)].value_descriptions;
+  EXPECT_EQ(table.size(), estimators::kAlarmReasonCount);
+  for (std::size_t code = 0; code < estimators::kAlarmReasonCount; ++code) {
+    const auto it = table.find(static_cast<std::int64_t>(code));
+    ASSERT_NE(it, table.end()) << "code " << code << " missing from the DBC";
+    EXPECT_EQ(it->second, estimators::AlarmReasonName(static_cast<estimators::AlarmReason>(code)))
+        << "code " << code;
+  }
 }
 
 }  // namespace
