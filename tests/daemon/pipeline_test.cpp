@@ -218,6 +218,7 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
   EXPECT_EQ(s.alarm.reason, estimators::AlarmReason::kEstimatedOverTemperature);
   EXPECT_EQ(s.alarm.node, 3);
   EXPECT_TRUE(s.alarm.trip_latched);
+  EXPECT_EQ(b.gateway_.counters().trip_latches, 1U);  // the live loop writes the state at once
   // The alarm frame says so, with the node index of the CAN layout (slot_winding = 4).
   const protocol::DbcMessage* alarm = b.dbc_.FindMessage("GW_ALARM");
   const auto& codec = b.codec_.message(static_cast<std::size_t>(alarm - b.dbc_.messages.data()));
@@ -453,6 +454,19 @@ thermal_model = "no-such-model"
     return std::string();
   }();
   EXPECT_NE(bad_model.find("p.toml:4: key 'pump[0].thermal_model': 'no-such-model': no such models file"), std::string::npos) << bad_model;
+}
+
+// PUMP_CLEAR repeats within 2 s (a held button) are not acted on but counted; the next one
+// after 2 s is (here refused: can0 is no configured clear source).
+TEST(Pipeline, ClearFrameRepeatsAreCountedNotDropped) {
+  Bench b(Config());
+  const std::int64_t t0 = 1'767'225'600'000'000;
+  b.Frame("PUMP_CLEAR", t0, {{"ClearTrips", 1.0}});
+  b.Frame("PUMP_CLEAR", t0 + 100'000, {{"ClearTrips", 1.0}});
+  b.Frame("PUMP_CLEAR", t0 + 200'000, {{"ClearTrips", 1.0}});
+  b.Frame("PUMP_CLEAR", t0 + 2'100'000, {{"ClearTrips", 1.0}});
+  EXPECT_EQ(b.gateway_.counters().clears_refused, 2U);
+  EXPECT_EQ(b.gateway_.counters().clears_rate_limited, 2U);
 }
 
 // The CAN alarm frame's reason codes are the daemon's: the DBC's value table names every code
