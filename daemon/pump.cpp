@@ -280,7 +280,13 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const double ttt = diverged ? kNaN : TimeToTrip_s(in, &ttt_node);
   snapshot_.time_to_trip_node = ttt_node;
 
-  const bool blind = !diverged && fault != estimators::SensorFault::kNone && std::isnan(winding_res);
+  // Blind: the sensor itself failed and no fresh resistance temperature stands in. A silent link
+  // alone is stale telemetry (the estimate runs on with the last inputs), but it does not end a
+  // blind stretch that began before it.
+  const estimators::SensorFault fault_alarm = SensorFaultAlarm(fault, end_us);
+  const bool measured_again = fault == estimators::SensorFault::kNone || !std::isnan(winding_res);
+  const bool blind = !diverged && !measured_again &&
+                     (fault_alarm != estimators::SensorFault::kNone || blind_x_.size() > 0);
   StepBlindBound(blind, in);
   for (int i = 0; i < x.size(); ++i) {
     const double bound = blind_x_.size() == x.size() ? blind_x_(i) : kNaN;
@@ -291,7 +297,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
   ai.node_degC = alarm_values_.data();
   ai.sensor_degC = measured;
   ai.sensor_raw_degC = raw;
-  ai.sensor_fault = SensorFaultAlarm(fault, end_us);
+  ai.sensor_fault = fault_alarm;
   ai.sensor_model_degC = measured_state_ >= 0 && !diverged ? x(measured_state_) : kNaN;
   ai.sensor_nis = nis;
   ai.telemetry_age_s = TelemetryAge_s(end_us);
