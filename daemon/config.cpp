@@ -244,6 +244,9 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     }
     m.stuck_after_s = r.Number("stuck_after_s", m.stuck_after_s, 1.0, 86400.0);
     m.stuck_model_move_K = r.Number("stuck_model_move_K", m.stuck_model_move_K, 0.0, 100.0);
+    m.flat_after_s = r.Number("flat_after_s", m.flat_after_s, 0.0, 86400.0);
+    m.max_step_K = r.Number("max_step_K", m.max_step_K, 0.1, 1000.0);
+    m.jump_recover_s = r.Number("jump_recover_s", m.jump_recover_s, 0.0, 86400.0);
     m.nis_limit = r.Number("nis_limit", m.nis_limit, 0.0, kInf);
     m.disagree_hold_s = r.Number("disagree_hold_s", m.disagree_hold_s, 0.0, 86400.0);
     m.not_converged_grace_s = r.Number("not_converged_grace_s", m.not_converged_grace_s, 0.0, 86400.0);

@@ -297,7 +297,10 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
     const double c = at(MappingInput::kAlarmClear);
     if (c >= 0.5 && (io.last_clear_us < 0 || tf.time_us - io.last_clear_us >= 2'000'000)) {
       io.last_clear_us = tf.time_us;
+      io.clear_repeat_logged = false;
       Clear(pump.config().name, "can:" + counter_.interfaces()[iface].name, "PUMP_CLEAR frame");
+    } else if (c >= 0.5) {
+      RateLimitedClear(io, pump.config().name, counter_.interfaces()[iface].name);
     }
     return;
   }
@@ -358,6 +361,15 @@ void Gateway::CheckNodeOutputs(const PumpConfig& pc, const std::string& key,
   }
 }
 
+void Gateway::RateLimitedClear(PumpIo& io, const std::string& pump, const std::string& iface) {
+  ++counters_.clears_rate_limited;
+  if (io.clear_repeat_logged) return;  // a held button: one line per burst, every repeat counted
+  io.clear_repeat_logged = true;
+  Log(LogLevel::kNotice,
+      "pump {}: PUMP_CLEAR from can:{} within 2 s of the last one ignored (rate limit; further "
+      "repeats are counted, not logged)", pump, iface);
+}
+
 double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const {
   const Pump& pump = *pumps_[p];
   const PumpSnapshot& s = pump.snapshot();
@@ -374,8 +386,12 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const
       return static_cast<double>(s.resistance.status == estimators::ResistanceStatus::kNotIdentifiable
                                      ? estimators::ResistanceStatus::kTracking
                                      : s.resistance.status);
-    case MappingOutput::kAlarmLevel: return s.initialised ? static_cast<double>(s.alarm.level) : kNaN;
-    case MappingOutput::kAlarmReason: return s.initialised ? static_cast<double>(s.alarm.reason) : kNaN;
+    // A latched trip goes out as a trip even while the filter has no estimate (just reset, or
+    // restarted with only its trips restored).
+    case MappingOutput::kAlarmLevel:
+      return s.initialised || s.alarm.trip_latched ? static_cast<double>(s.alarm.level) : kNaN;
+    case MappingOutput::kAlarmReason:
+      return s.initialised || s.alarm.trip_latched ? static_cast<double>(s.alarm.reason) : kNaN;
     case MappingOutput::kAlarmNode: {
       // The model's node index (as node_index), or the winding temperature from resistance.
       if (!s.initialised || (s.alarm.node < 0 && s.alarm.reason != estimators::AlarmReason::kEstimatedOverTemperature)) return kNaN;
@@ -466,6 +482,9 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
     Pump& pump = *pumps_[p];
     PumpIo& io = io_[p];
     pump.Advance(now_us);
+    const bool latched = pump.snapshot().alarm.trip_latched;
+    if (latched && !io.trip_latched) ++counters_.trip_latches;
+    io.trip_latched = latched;
     if (pump.last_frame_us() < 0) continue;  // nothing heard from this pump yet: nothing to say
     const bool alarm_changed = pump.snapshot().alarm_changes != io.alarm_changes_sent;
     for (OutputPlan& plan : io.outputs) {
@@ -543,7 +562,7 @@ std::vector<std::uint8_t> Gateway::EncodeTemperatures(const Pump& pump) const {
 
 void Gateway::FillTemperatures(const Pump& pump, pumptherm::temperatures_t& m) const {
   const PumpSnapshot& s = pump.snapshot();
-  m.utime = s.time_us;
+  m.utime = s.time_us + wall_offset_us_;
   m.pump = pump.config().name;
   const auto& r = s.resistance;
   const bool ident = r.status != estimators::ResistanceStatus::kInitialising;
@@ -589,7 +608,7 @@ void Gateway::FillTelemetry(std::size_t p, pumptherm::telemetry_t& m) const {
   const PumpIo& io = io_[p];
   const Pump& pump = *pumps_[p];
   auto at = [&](MappingInput i) { return io.inputs[static_cast<std::size_t>(i)]; };
-  m.utime = io.inputs_us;
+  m.utime = io.inputs_us + wall_offset_us_;
   m.pump = pump.config().name;
   m.node_id = static_cast<std::int32_t>(pump.config().node_id);
   m.id_A = at(MappingInput::kIdA);
@@ -616,7 +635,7 @@ std::vector<std::uint8_t> Gateway::EncodeAlarm(const Pump& pump) const {
 
 void Gateway::FillAlarm(const Pump& pump, pumptherm::alarm_t& m) const {
   const PumpSnapshot& s = pump.snapshot();
-  m.utime = s.time_us;
+  m.utime = s.time_us + wall_offset_us_;
   m.pump = pump.config().name;
   m.level = static_cast<std::int8_t>(s.alarm.level);
   m.time_to_trip_s = s.alarm.time_to_trip_s;
@@ -657,7 +676,7 @@ void Gateway::FillAlarm(const Pump& pump, pumptherm::alarm_t& m) const {
     ac.value_degC = temp ? c.value : kNaN;
     ac.threshold_degC = c.threshold;
     ac.rate_K_per_s = c.reason == estimators::AlarmReason::kRateOfRise ? c.value / 60.0 : kNaN;
-    ac.since_utime = static_cast<std::int64_t>(c.raised_at_s * 1e6);
+    ac.since_utime = static_cast<std::int64_t>(c.raised_at_s * 1e6) + wall_offset_us_;
     ac.latched = c.latched;
   }
   m.num_conditions = static_cast<std::int32_t>(m.conditions.size());
@@ -684,7 +703,7 @@ std::int8_t LcmBusState(BusState state) {
 }  // namespace
 
 void Gateway::FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) const {
-  m.utime = now_us;
+  m.utime = now_us + wall_offset_us_;
   m.uptime_s = static_cast<double>(now_us - start_us_) * 1e-6;
   m.num_pumps = static_cast<std::int32_t>(pumps_.size());
   m.lcm_publish_failures = static_cast<std::int64_t>(counters_.lcm_failed);
@@ -788,43 +807,71 @@ std::string Gateway::PumpTable() const {
   return out;
 }
 
+namespace {
+
+/// The filter's and the identifier's state of one pump into its saved table.
+void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::table& t) {
+  t.insert("time_us", s.time_us + wall_offset_us);
+  toml::array x, cov;
+  for (int i = 0; i < s.x_degC.size(); ++i) x.push_back(s.x_degC(i));
+  for (int i = 0; i < s.s_K2.rows(); ++i) {
+    for (int j = 0; j < s.s_K2.cols(); ++j) cov.push_back(s.s_K2(i, j));
+  }
+  t.insert("x_degC", x);
+  t.insert("s_K2", cov);
+  t.insert("inputs", toml::table{{"speed_rpm", s.inputs.speed_rpm}, {"id_A", s.inputs.id_A},
+                                 {"iq_A", s.inputs.iq_A}, {"ambient_degC", s.inputs.ambient_degC},
+                                 {"coolant_degC", s.inputs.coolant_degC}});
+  // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
+  // consecutive rejections.
+  toml::array rx, rp, rprob, rrej, rm;
+  for (const auto& h : s.resistance.hypotheses) {
+    for (int i = 0; i < 4; ++i) rx.push_back(h.x(i));
+    for (int i = 0; i < 16; ++i) rp.push_back(h.p(i / 4, i % 4));
+    rprob.push_back(h.probability);
+    rrej.push_back(h.consecutive_rejections);
+  }
+  for (int i = 0; i < 4; ++i) rm.push_back(s.resistance.moments(i / 2, i % 2));
+  t.insert("resistance_x", rx);
+  t.insert("resistance_p", rp);
+  t.insert("resistance_probability", rprob);
+  t.insert("resistance_rejections", rrej);
+  t.insert("resistance_moments", rm);
+  t.insert("resistance_blocks", static_cast<std::int64_t>(s.resistance.blocks));
+}
+
+/// The latched trips of one saved pump (two parallel arrays; both absent: none). False for a
+/// damaged pair.
+bool ReadLatchedTrips(const toml::table& t, std::vector<PumpSavedState::LatchedTrip>& out) {
+  out.clear();
+  const toml::array* nodes = t["latched_trip_nodes"].as_array();
+  const toml::array* values = t["latched_trip_values_degC"].as_array();
+  if (!nodes && !values) return true;
+  if (!nodes || !values || nodes->size() != values->size()) return false;
+  for (std::size_t k = 0; k < nodes->size(); ++k) {
+    const auto node = (*nodes)[k].value<std::string>();
+    const auto value = (*values)[k].value<double>();
+    if (!node || !value || !std::isfinite(*value)) return false;
+    out.push_back({*node, *value});
+  }
+  return true;
+}
+
+}  // namespace
+
 std::string Gateway::SaveState() const {
   toml::table root;
   // Version 2: the resistance identifier's two magnet hypotheses (version 1: one filter).
   root.insert("version", 2);
   toml::table pumps;
   for (const auto& p : pumps_) {
-    if (!p->snapshot().initialised) continue;
     const PumpSavedState s = p->Save();
+    // A pump whose filter was just reset has no estimate to save, but its latched trips are.
+    const bool estimate = p->snapshot().initialised;
+    if (!estimate && s.latched_trips.empty()) continue;
     toml::table t;
     t.insert("model", s.model_name);
-    t.insert("time_us", s.time_us);
-    toml::array x, cov;
-    for (int i = 0; i < s.x_degC.size(); ++i) x.push_back(s.x_degC(i));
-    for (int i = 0; i < s.s_K2.rows(); ++i) {
-      for (int j = 0; j < s.s_K2.cols(); ++j) cov.push_back(s.s_K2(i, j));
-    }
-    t.insert("x_degC", x);
-    t.insert("s_K2", cov);
-    t.insert("inputs", toml::table{{"speed_rpm", s.inputs.speed_rpm}, {"id_A", s.inputs.id_A},
-                                   {"iq_A", s.inputs.iq_A}, {"ambient_degC", s.inputs.ambient_degC},
-                                   {"coolant_degC", s.inputs.coolant_degC}});
-    // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
-    // consecutive rejections.
-    toml::array rx, rp, rprob, rrej, rm;
-    for (const auto& h : s.resistance.hypotheses) {
-      for (int i = 0; i < 4; ++i) rx.push_back(h.x(i));
-      for (int i = 0; i < 16; ++i) rp.push_back(h.p(i / 4, i % 4));
-      rprob.push_back(h.probability);
-      rrej.push_back(h.consecutive_rejections);
-    }
-    for (int i = 0; i < 4; ++i) rm.push_back(s.resistance.moments(i / 2, i % 2));
-    t.insert("resistance_x", rx);
-    t.insert("resistance_p", rp);
-    t.insert("resistance_probability", rprob);
-    t.insert("resistance_rejections", rrej);
-    t.insert("resistance_moments", rm);
-    t.insert("resistance_blocks", static_cast<std::int64_t>(s.resistance.blocks));
+    if (estimate) InsertEstimate(s, wall_offset_us_, t);
     // Two parallel arrays (toml++ 3.3 misprints an array of tables nested this deep).
     toml::array trip_nodes, trip_values;
     for (const auto& trip : s.latched_trips) {
@@ -864,6 +911,7 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
   const std::size_t hypotheses = version == 1 ? 1 : estimators::kMagnetHypotheses;
   int restored = 0;
   std::string ignored;
+  std::string relatched;
   const toml::table* pumps = root["pump"].as_table();
   for (auto& pump : pumps_) {
     const toml::table* t = pumps ? (*pumps)[pump->config().name].as_table() : nullptr;
@@ -882,12 +930,19 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
     const int n = pump->model().StateCount();
     PumpSavedState s;
     s.model_name = (*t)["model"].value_or(std::string());
-    s.time_us = (*t)["time_us"].value_or<std::int64_t>(0);
+    // Saved in wall time (it outlives this boot); the pipeline runs on its own clock.
+    const std::int64_t saved_wall_us = (*t)["time_us"].value_or<std::int64_t>(0);
+    s.time_us = saved_wall_us - wall_offset_us_;
+    // Latched trips (absent in files written before they were saved: none latched).
+    if (!ReadLatchedTrips(*t, s.latched_trips)) {
+      ignored += (ignored.empty() ? "" : ", ") + pump->config().name;
+      continue;
+    }
     std::vector<double> x, cov, rx, rp, rm, rprob, rrej;
     bool ok = numbers("x_degC", static_cast<std::size_t>(n), x) &&
               numbers("s_K2", static_cast<std::size_t>(n * n), cov) &&
               numbers("resistance_x", 4 * hypotheses, rx) && numbers("resistance_p", 16 * hypotheses, rp) &&
-              numbers("resistance_moments", 4, rm) && s.time_us > 0 &&
+              numbers("resistance_moments", 4, rm) && saved_wall_us > 0 &&
               s.time_us <= now_us + 60'000'000;
     if (ok && version == 2) {
       ok = numbers("resistance_probability", hypotheses, rprob) &&
@@ -932,29 +987,24 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
         s.resistance.moments = moments;
         s.resistance.blocks = blocks;
       }
-      // Latched trips (absent in files written before they were saved: none latched).
-      const toml::array* trip_nodes = (*t)["latched_trip_nodes"].as_array();
-      const toml::array* trip_values = (*t)["latched_trip_values_degC"].as_array();
-      if (ok && (trip_nodes || trip_values)) {
-        ok = trip_nodes && trip_values && trip_nodes->size() == trip_values->size();
-        for (std::size_t k = 0; ok && k < trip_nodes->size(); ++k) {
-          const auto node = (*trip_nodes)[k].value<std::string>();
-          const auto value = (*trip_values)[k].value<double>();
-          ok = node && value && std::isfinite(*value);
-          if (ok) s.latched_trips.push_back({*node, *value});
-        }
-      }
       ok = ok && pump->Restore(s, std::max(now_us, s.time_us));
     }
     if (ok) {
       ++restored;
-    } else {
-      ignored += (ignored.empty() ? "" : ", ") + pump->config().name;
+      continue;
+    }
+    ignored += (ignored.empty() ? "" : ", ") + pump->config().name;
+    // The filter starts cold, but a latched trip must survive every restart path (a clock far
+    // behind the saved time, a damaged filter state, a pump saved while its filter was reset).
+    if (!s.latched_trips.empty() && pump->RestoreLatchedTrips(s, now_us)) {
+      relatched += fmt::format("{}{} ({} trip(s))", relatched.empty() ? "" : ", ", pump->config().name,
+                               s.latched_trips.size());
     }
   }
   if (!ignored.empty()) {
     *warning = fmt::format("saved state of pump(s) {} does not fit the configuration or is damaged; "
                            "they start cold", ignored);
+    if (!relatched.empty()) *warning += fmt::format("; latched again: {}", relatched);
   }
   if (!clear_warning.empty()) *warning += (warning->empty() ? "" : "; ") + clear_warning;
   return restored;

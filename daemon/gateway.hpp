@@ -49,6 +49,8 @@ struct GatewayCounters {
   std::uint64_t clears_accepted = 0;
   std::uint64_t clears_refused = 0;        ///< every refused clear, whatever the reason
   std::uint64_t clears_unauthenticated = 0;  ///< of those: LCM clears without a valid code (or undecodable)
+  std::uint64_t clears_rate_limited = 0;  ///< PUMP_CLEAR repeats within 2 s: ignored
+  std::uint64_t trip_latches = 0;         ///< trips latched (the live loop saves the state at once)
 };
 
 class Gateway {
@@ -96,9 +98,16 @@ class Gateway {
   const std::vector<std::unique_ptr<Pump>>& pumps() const { return pumps_; }
   const DaemonConfig& config() const { return config_; }
 
+  /// Wall clock minus the pipeline's clock (us). The pipeline's time (frame stamps, Advance)
+  /// measures elapsed time: the log's stamps offline (offset 0), CLOCK_MONOTONIC live, where the
+  /// loop sets this before each Advance. Wall time only labels: LCM utime fields and the saved
+  /// state's times, which outlive a boot.
+  void SetWallClockOffset(std::int64_t wall_minus_pipeline_us) { wall_offset_us_ = wall_minus_pipeline_us; }
+
   /// Saved state of every pump as text (TOML; docs/daemon.md "State").
   std::string SaveState() const;
-  /// Restores the pumps found in `text` (saved by SaveState), aged to `now_us`. Returns the
+  /// Restores the pumps found in `text` (saved by SaveState), aged to `now_us` (pipeline time;
+  /// the saved wall times are mapped with SetWallClockOffset's offset). Returns the
   /// number of pumps restored; `warning` says what was ignored and why. Never throws.
   int RestoreState(const std::string& text, std::int64_t now_us, std::string* warning);
 
@@ -161,6 +170,8 @@ class Gateway {
     double frame_rate_Hz = 0.0;
     std::int64_t last_clear_us = -1;  // last clear command frame acted on
     std::uint16_t logged_active_reasons = 0;  // the active reasons the last alarm line showed
+    bool clear_repeat_logged = false;  // a rate-limited repeat of it was logged
+    bool trip_latched = false;         // the pump's trip latch at the last Advance
     // LCM publishing without allocation in steady state: channel names made once, messages
     // filled in place (their strings and vectors keep their capacity).
     std::string channel_telemetry, channel_temperatures, channel_alarm;
@@ -176,6 +187,7 @@ class Gateway {
   /// alarm_node's value for the winding temperature from resistance; the next value is "none".
   static constexpr std::size_t kAlarmNodeWindingRes = 14;
 
+  void RateLimitedClear(PumpIo& io, const std::string& pump, const std::string& iface);
   void Emit(std::size_t pump, OutputPlan& plan, std::int64_t time_us, OutputSink& sink);
   void PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us, OutputSink& sink);
   /// One frame of `plan`; `node` is the model node of a node-indexed message, else -1.
@@ -197,6 +209,7 @@ class Gateway {
   protocol::SignalMapping mapping_;
   FrameCounter counter_;
   GatewayCounters counters_;
+  std::int64_t wall_offset_us_ = 0;
   std::vector<InputMessage> inputs_;
   std::vector<std::unique_ptr<Pump>> pumps_;
   std::vector<PumpIo> io_;

@@ -53,7 +53,18 @@ std::int64_t ClockUs(clockid_t clock) {
   return static_cast<std::int64_t>(ts.tv_sec) * 1000000 + ts.tv_nsec / 1000;
 }
 
+std::int64_t WallMinusMonotonicUs() { return ClockUs(CLOCK_REALTIME) - ClockUs(CLOCK_MONOTONIC); }
+
 }  // namespace
+
+std::int64_t MonotonicStampUs(std::int64_t stamp_wall_us, std::int64_t wall_now_us, std::int64_t mono_now_us,
+                              std::int64_t last_mono_us) {
+  if (stamp_wall_us <= 0) return std::max(mono_now_us, last_mono_us);  // no kernel stamp
+  const std::int64_t mono = stamp_wall_us - (wall_now_us - mono_now_us);
+  // A wall clock stepped between the frame's arrival and now moves `mono` by the step: the
+  // frame cannot have arrived after now, nor before the frame taken before it.
+  return std::max(std::min(mono, mono_now_us), last_mono_us);
+}
 
 struct LiveLoop::Impl : OutputSink {
   DaemonConfig config;
@@ -78,6 +89,8 @@ struct LiveLoop::Impl : OutputSink {
   FailureReport save_report{kFailureReminderUs};
   bool stop = false;
   bool hang = false;
+  std::uint64_t saved_trip_latches = 0;  // gateway trip_latches at the last state write
+  std::int64_t last_frame_mono_us = -1;  // the last frame's stamp on the monotonic clock
 
   // OutputSink: frames to the pump's socket, LCM to the bridge.
   void SendFrame(std::size_t iface, std::int64_t, const protocol::CanFrame& frame) override {
@@ -220,10 +233,13 @@ struct LiveLoop::Impl : OutputSink {
   void Drain(std::size_t i) {
     CanSocket& s = sockets[i];
     protocol::TimedFrame tf;
+    const std::int64_t mono_now = ClockUs(CLOCK_MONOTONIC);
+    const std::int64_t wall_now = ClockUs(CLOCK_REALTIME);
     for (int k = 0; k < kRxBudget && s.is_open(); ++k) {
       std::uint32_t drops_total = last_drop_total[i];
       switch (s.Receive(&tf, &drops_total)) {
         case RxStatus::kFrame:
+          tf.time_us = last_frame_mono_us = MonotonicStampUs(tf.time_us, wall_now, mono_now, last_frame_mono_us);
           Take(i, tf, drops_total);
           break;
         case RxStatus::kEmpty:
@@ -238,6 +254,7 @@ struct LiveLoop::Impl : OutputSink {
           for (;;) {
             drops_total = last_drop_total[i];
             if (s.Receive(&tf, &drops_total) != RxStatus::kFrame) break;
+            tf.time_us = last_frame_mono_us = MonotonicStampUs(tf.time_us, wall_now, mono_now, last_frame_mono_us);
             Take(i, tf, drops_total);
             ++late;
           }
@@ -287,6 +304,23 @@ struct LiveLoop::Impl : OutputSink {
         }
       }
     }
+  }
+
+  /// Brings the pipeline to now on the monotonic clock (elapsed time: a wall clock set back or
+  /// forward neither stops nor skips thermal steps and holds); the wall clock only labels.
+  void AdvanceGateway() {
+    gateway->SetWallClockOffset(WallMinusMonotonicUs());
+    gateway->Advance(ClockUs(CLOCK_MONOTONIC), *this);
+    SaveIfTripLatched();
+  }
+
+  /// A trip that latched is written to the state at once, not at the next period: a restart
+  /// (kill -9, watchdog, power loss) right after it must find it latched.
+  void SaveIfTripLatched() {
+    const std::uint64_t latches = gateway->counters().trip_latches;
+    if (latches == saved_trip_latches) return;
+    saved_trip_latches = latches;
+    SaveState();
   }
 
   void SaveState() {
@@ -350,7 +384,8 @@ struct LiveLoop::Impl : OutputSink {
         return;
       }
       std::string warning;
-      const int n = gateway->RestoreState(*text, ClockUs(CLOCK_REALTIME), &warning);
+      gateway->SetWallClockOffset(WallMinusMonotonicUs());
+      const int n = gateway->RestoreState(*text, ClockUs(CLOCK_MONOTONIC), &warning);
       if (!warning.empty()) Log(LogLevel::kWarning, "{}: {}", state_path, warning);
       Log(LogLevel::kNotice, "restored the state of {} pump(s) from {}", n, state_path);
     } catch (const std::exception& e) {
@@ -389,10 +424,12 @@ struct LiveLoop::Impl : OutputSink {
     }
     // Carry every pump's estimate over (pumps of the same name and model).
     std::string warning;
-    const int carried = next_gateway->RestoreState(gateway->SaveState(), ClockUs(CLOCK_REALTIME), &warning);
+    next_gateway->SetWallClockOffset(WallMinusMonotonicUs());
+    const int carried = next_gateway->RestoreState(gateway->SaveState(), ClockUs(CLOCK_MONOTONIC), &warning);
     const bool lcm_changed = next.lcm.url != config.lcm.url || next.lcm.channel_prefix != config.lcm.channel_prefix;
     config = std::move(next);
     gateway = std::move(next_gateway);
+    saved_trip_latches = 0;  // the new gateway counts from zero
     if (!same_interfaces) {
       sockets = std::move(new_sockets);
       last_drop_total.assign(sockets.size(), 0);
@@ -428,7 +465,7 @@ struct LiveLoop::Impl : OutputSink {
       Log(LogLevel::kWarning, "timerfd read: {}", std::strerror(errno));
     }
     const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
-    gateway->Advance(ClockUs(CLOCK_REALTIME), *this);
+    AdvanceGateway();
     SendHeartbeat(mono);
     if (mono >= next_reopen_us) {
       Reopen();
@@ -566,7 +603,7 @@ int LiveLoop::Run() {
         }
       }
     }
-    if (frames) m.gateway->Advance(ClockUs(CLOCK_REALTIME), m);
+    if (frames) m.AdvanceGateway();
   }
   m.notifier.Stopping();
   m.SaveState();

@@ -4,6 +4,7 @@
 /// interfaces), a signalfd (SIGTERM/SIGINT stop, SIGHUP reload) and LCM's descriptor.
 /// Expected events in the loop are counted, never thrown.
 
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -16,6 +17,13 @@ struct LiveOptions {
   bool table = false;           ///< print the pump table on stderr while running
   double table_period_s = 5.0;  ///< wall-clock seconds between tables
 };
+
+/// A kernel receive stamp (SO_TIMESTAMP: CLOCK_REALTIME, us) on CLOCK_MONOTONIC, given both
+/// clocks read at about the same moment (`wall_now_us`, `mono_now_us`) and the previous frame's
+/// result `last_mono_us` (-1: none). The result lies in [last_mono_us, mono_now_us]: elapsed
+/// time never runs backward when the wall clock is set. A stamp of 0 (none) is `mono_now_us`.
+std::int64_t MonotonicStampUs(std::int64_t stamp_wall_us, std::int64_t wall_now_us, std::int64_t mono_now_us,
+                              std::int64_t last_mono_us);
 
 class LiveLoop {
  public:

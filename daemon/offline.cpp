@@ -97,7 +97,8 @@ class CsvSink {
       for (const auto& n : p->model().StateNames()) header += fmt::format(",{}_C,{}_sd_K", n, n);
       header += ",winding_resistance_C,magnet_flux_C,magnet_flux_sd_K,resistance_ohm,flux_Wb,ident_status,"
                 "frame_measured_C,ambient_C,"
-                "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s\n";
+                "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s,alarm_active_reasons,"
+                "sensor_fault\n";
       std::fputs(header.c_str(), files_.back()->f);
       last_.push_back(-1);
     }
@@ -110,11 +111,12 @@ class CsvSink {
       std::string row = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6 - origin_s_);
       for (std::size_t k = 0; k < s.node_degC.size(); ++k) row += fmt::format(",{:.4f},{:.4f}", s.node_degC[k], s.node_sd_K[k]);
       const auto& r = s.resistance;
-      row += fmt::format(",{:.4f},{:.4f},{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f}\n",
+      row += fmt::format(",{:.4f},{:.4f},{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f},{},{}\n",
                          s.winding_resistance_degC, s.magnet_flux_degC, s.magnet_flux_sd_K, r.resistance_ohm, r.flux_Wb, static_cast<int>(r.status),
                          s.frame_measured_degC, s.ambient_degC, s.speed_rpm, s.nis,
                          static_cast<int>(s.alarm.level), static_cast<int>(s.alarm.reason), s.alarm.node,
-                         std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : -1.0);
+                         std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : -1.0,
+                         s.alarm.active_reasons, static_cast<int>(s.sensor_fault));
       std::fputs(row.c_str(), files_[i]->f);
     }
   }
@@ -130,6 +132,17 @@ class CsvSink {
 
 }  // namespace
 
+std::int64_t OfflineClock::Now(std::int64_t stamp_us) {
+  if (last_stamp_us_ >= 0 && stamp_us < last_stamp_us_ - kClockStepUs) {
+    // The recording's clock was stepped back: time holds here and runs on from the new stamps.
+    offset_us_ = last_now_us_ - stamp_us;
+  }
+  last_stamp_us_ = stamp_us;
+  // Frames a little out of order (another interface, jitter) are taken at the later time.
+  last_now_us_ = std::max(stamp_us + offset_us_, last_now_us_);
+  return last_now_us_;
+}
+
 OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& gateway,
                          const OfflineOptions& options) {
   OfflineResult r;
@@ -140,6 +153,7 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
   std::size_t last_index = 0;
   std::int64_t last_time_us = -1;
   std::int64_t next_table_us = -1;
+  OfflineClock clock;
   const bool tty = ::isatty(STDERR_FILENO) == 1;
   const auto wall_start = std::chrono::steady_clock::now();
   std::int64_t log_start_us = -1;
@@ -164,10 +178,8 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       last_interface = p.record.interface;
       last_index = gateway.Interface(last_interface);
     }
-    const std::int64_t t = p.record.time_us;
-    if (log_start_us < 0) log_start_us = t;
-    // Time runs forward: a frame stamped before its predecessor is processed at the later time.
-    const std::int64_t now = std::max(t, last_time_us);
+    const std::int64_t now = clock.Now(p.record.time_us);
+    if (log_start_us < 0) log_start_us = now;
     gateway.OnFrame(last_index, protocol::TimedFrame{now, p.record.frame});
     gateway.Advance(now, sink);
     csv.Write(gateway);

@@ -4,6 +4,7 @@
 /// log, the LCM messages to an LCM log file (lcm-logplayer plays it), and per-pump estimates to
 /// CSV files, as asked.
 
+#include <cstdint>
 #include <cstdio>
 #include <istream>
 #include <memory>
@@ -30,6 +31,25 @@ struct OfflineResult {
   std::uint64_t bad_lines = 0;   ///< malformed lines: reported (first few) and counted, skipped
   std::uint64_t frames_out = 0;
   std::uint64_t lcm_out = 0;
+};
+
+/// The pipeline's clock in offline mode, from the log's stamps (kernel receive times, the wall
+/// clock of the recording host). Elapsed time never runs backward: a stamp up to
+/// kClockStepUs before the previous one (frames of two interfaces slightly out of order) is
+/// taken at the later time; a larger backward step is the recording host's clock being set
+/// back, so time holds there and runs on at the pace of the new stamps. A forward step cannot be
+/// told from a silence in the recording and is elapsed time (the model ages the estimate over
+/// it; stale telemetry is raised).
+class OfflineClock {
+ public:
+  static constexpr std::int64_t kClockStepUs = 1'000'000;
+  /// The pipeline time (us) for a frame stamped `stamp_us`.
+  std::int64_t Now(std::int64_t stamp_us);
+
+ private:
+  std::int64_t last_stamp_us_ = -1;
+  std::int64_t last_now_us_ = -1;
+  std::int64_t offset_us_ = 0;
 };
 
 /// Feeds every frame of the candump log in `in` to `gateway`. `source` names the log in error

@@ -50,6 +50,18 @@ estimators::VirtualSensorConfig SensorConfig(const PumpConfig& c) {
   return v;
 }
 
+/// The network of `lin` with its heat paths to the boundary (ambient or coolant at
+/// `boundary_degC`) removed: a row of A summing to less than zero leaks heat out of the network
+/// (interior conduction sums to zero in each row; a copper temperature coefficient adds to it),
+/// so that leak leaves the diagonal and its boundary term leaves f.
+void WithoutBoundaryPaths(estimators::ThermalLinearModel& lin, double boundary_degC) {
+  for (Eigen::Index i = 0; i < lin.a_per_s.rows(); ++i) {
+    const double leak_per_s = std::min(lin.a_per_s.row(i).sum(), 0.0);
+    lin.a_per_s(i, i) -= leak_per_s;
+    lin.f_K_per_s(i) += leak_per_s * boundary_degC;
+  }
+}
+
 }  // namespace
 
 Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
@@ -89,7 +101,8 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
         auto s = config.alarms.levels.find("sensor");
         return estimators::AlarmMonitor(
             ac, limits, s == config.alarms.levels.end() ? estimators::TemperatureLimits{} : s->second.limits);
-      }()) {
+      }()),
+      sensor_health_(config.alarms.monitor) {
   measured_state_ = model_->StateIndex(config_.measured_node);
   if (!config_.magnet_node.empty()) {
     magnet_state_ = model_->StateIndex(config_.magnet_node);
@@ -116,7 +129,7 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
 
 void Pump::OnCurrents(std::int64_t t_us, double id_A, double iq_A, double w_e, double counter) {
   ++counters_.fast_frames;
-  last_frame_us_ = t_us;
+  NoteFastFrame(t_us);
   if (!std::isfinite(id_A) || !std::isfinite(iq_A)) {
     ++counters_.rejected_values;
     return;
@@ -151,7 +164,7 @@ void Pump::OnCurrents(std::int64_t t_us, double id_A, double iq_A, double w_e, d
 
 void Pump::OnVoltages(std::int64_t t_us, double ud_V, double uq_V, double counter) {
   ++counters_.fast_frames;
-  last_frame_us_ = t_us;
+  NoteFastFrame(t_us);
   if (!std::isfinite(ud_V) || !std::isfinite(uq_V)) {
     ++counters_.rejected_values;
     return;
@@ -162,6 +175,17 @@ void Pump::OnVoltages(std::int64_t t_us, double ud_V, double uq_V, double counte
       (currents_.counter == counter || std::isnan(counter) || std::isnan(currents_.counter))) {
     Identify(std::max(t_us, currents_.t_us));
   }
+}
+
+void Pump::NoteFastFrame(std::int64_t t_us) {
+  if (t_us != last_fast_us_) previous_fast_us_ = last_fast_us_;
+  last_frame_us_ = last_fast_us_ = t_us;
+}
+
+std::int64_t Pump::LastAtOrBefore(std::int64_t last_us, std::int64_t previous_us, std::int64_t t_us) {
+  // A step that runs after a later frame came in (offline, the first frame after a silence
+  // brings the steps of the silence) must see the frame before it.
+  return last_us <= t_us ? last_us : previous_us;
 }
 
 void Pump::Identify(std::int64_t t_us) {
@@ -192,12 +216,10 @@ void Pump::Identify(std::int64_t t_us) {
 void Pump::OnStatus(std::int64_t t_us, double speed_rpm, double /*drive_state*/,
                     double frame_degC, double ambient_degC) {
   ++counters_.status_frames;
-  last_frame_us_ = t_us;
+  if (t_us != last_status_us_) previous_status_us_ = last_status_us_;
+  last_frame_us_ = last_status_us_ = t_us;
   if (std::isfinite(speed_rpm)) speed_rpm_ = speed_rpm;
-  if (std::isfinite(frame_degC)) {
-    frame_degC_ = frame_degC;
-    frame_us_ = t_us;
-  }
+  sensor_health_.OnReading(static_cast<double>(t_us) * 1e-6, frame_degC);
   if (std::isfinite(ambient_degC)) ambient_degC_ = ambient_degC;
 }
 
@@ -237,10 +259,11 @@ void Pump::ThermalStep(std::int64_t end_us) {
   }
   if (std::isfinite(ambient_degC_)) in.ambient_degC = in.coolant_degC = ambient_degC_;
   if (!have_inputs_) return;
-  const double stale_s = config_.alarms.monitor.stale_after_s;
-  const bool frame_fresh =
-      frame_us_ >= 0 && static_cast<double>(end_us - frame_us_) * 1e-6 <= stale_s + period_s_;
-  const double measured = frame_fresh ? frame_degC_ : kNaN;
+  // The frame sensor is fused only while SensorHealth finds no fault: a failed sensor is left
+  // out and the filter runs on the model (and the winding resistance), its sd growing.
+  const estimators::SensorFault fault = sensor_health_.Fault(static_cast<double>(end_us) * 1e-6);
+  const double raw = fault == estimators::SensorFault::kMissing ? kNaN : sensor_health_.last_degC();
+  const double measured = fault == estimators::SensorFault::kNone ? raw : kNaN;
   if (!initialised_) {
     const double x0 = std::isfinite(measured) ? measured : ambient_degC_;
     if (!std::isfinite(x0)) return;  // no temperature at all yet: wait
@@ -249,8 +272,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
   }
   held_inputs_ = in;
   const estimators::ResistanceEstimate& r = identifier_.estimate();
-  const bool tracking = r.status == estimators::ResistanceStatus::kTracking;
-  const double winding_res = tracking ? r.winding_degC : kNaN;
+  const double winding_res = FreshWindingResistance_degC(end_us);
   measurement_(0) = measured;  // a member: a temporary VectorXd would allocate every step
   BackEmfMeasurement(end_us, mean_iq_A, in.speed_rpm * motor_.pole_pairs * kRadPerSPerRpm);
   const estimators::KalmanUpdateReport* report = nullptr;
@@ -288,6 +310,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
   snapshot_.winding_resistance_degC = winding_res;
   PublishMagnetTemperature();
   snapshot_.frame_measured_degC = measured;
+  snapshot_.sensor_fault = fault;
   snapshot_.ambient_degC = in.ambient_degC;
   snapshot_.speed_rpm = in.speed_rpm;
   // The frame sensor's own innovation test (its row comes first when it was measured).
@@ -303,14 +326,27 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const double ttt = diverged ? kNaN : TimeToTrip_s(in, &ttt_node);
   snapshot_.time_to_trip_node = ttt_node;
 
-  for (int i = 0; i < x.size(); ++i) alarm_values_[static_cast<std::size_t>(i)] = diverged ? kNaN : x(i);
+  // Blind: the sensor itself failed and no fresh resistance temperature stands in. A silent link
+  // alone is stale telemetry (the estimate runs on with the last inputs), but it does not end a
+  // blind stretch that began before it.
+  const estimators::SensorFault fault_alarm = SensorFaultAlarm(fault, end_us);
+  const bool measured_again = fault == estimators::SensorFault::kNone || !std::isnan(winding_res);
+  const bool blind = !diverged && !measured_again &&
+                     (fault_alarm != estimators::SensorFault::kNone || blind_x_.size() > 0);
+  StepBlindBound(blind, in);
+  for (int i = 0; i < x.size(); ++i) {
+    const double bound = blind_x_.size() == x.size() ? blind_x_(i) : kNaN;
+    alarm_values_[static_cast<std::size_t>(i)] = diverged ? kNaN : std::isnan(bound) ? x(i) : std::max(x(i), bound);
+  }
   alarm_values_.back() = winding_res;
   estimators::AlarmInputs ai;
   ai.node_degC = alarm_values_.data();
   ai.sensor_degC = measured;
+  ai.sensor_raw_degC = raw;
+  ai.sensor_fault = fault_alarm;
   ai.sensor_model_degC = measured_state_ >= 0 && !diverged ? x(measured_state_) : kNaN;
   ai.sensor_nis = nis;
-  ai.telemetry_age_s = static_cast<double>(end_us - last_frame_us_) * 1e-6;
+  ai.telemetry_age_s = TelemetryAge_s(end_us);
   // The alarms rest on the virtual sensor: it must have converged. The identifier's health is
   // published with its estimate (status) but is no alarm: the filter uses its winding
   // temperature only while it is tracking, so an identifier still converging (a pump whose load
@@ -387,6 +423,50 @@ const estimators::NodeMeasurements& Pump::ExtraMeasurements(double winding_res_d
     extra_.Add(magnet_state_, magnet_z_degC_, std::max(magnet_z_sd_K_, config_.magnet_min_sd_K), magnet_gain_);
   }
   return extra_;
+void Pump::StepBlindBound(bool blind, const estimators::ThermalInputs& in) {
+  if (!blind) {
+    blind_x_.resize(0);
+    return;
+  }
+  // No temperature is measured (the frame sensor failed, no fresh resistance temperature): the
+  // levels are checked against the worst case, the model with every heat path to the boundary
+  // lost (a cooling failure nothing could see), from the estimate when the measurements stopped.
+  if (blind_x_.size() != model_->StateCount()) blind_x_ = sensor_.Estimate_degC();
+  try {
+    estimators::ThermalLinearModel lin;
+    model_->Linearise(in, blind_x_, lin);
+    WithoutBoundaryPaths(lin, in.ambient_degC);
+    estimators::ThermalDiscreteModel d;
+    estimators::DiscretiseZoh(lin.a_per_s, period_s_, d);
+    blind_x_ = d.ad * blind_x_ + d.phi_s * lin.f_K_per_s;
+  } catch (const std::exception&) {
+    blind_x_.setConstant(kNaN);  // no bound at these inputs: the levels see the estimate alone
+  }
+}
+
+double Pump::FreshWindingResistance_degC(std::int64_t t_us) const {
+  const estimators::ResistanceEstimate& r = identifier_.estimate();
+  if (r.status != estimators::ResistanceStatus::kTracking || last_sample_us_ < 0) return kNaN;
+  const double age_s = static_cast<double>(t_us - last_sample_us_) * 1e-6;
+  return age_s <= config_.alarms.monitor.stale_after_s ? r.winding_degC : kNaN;
+}
+
+estimators::SensorFault Pump::SensorFaultAlarm(estimators::SensorFault fault, std::int64_t t_us) const {
+  // A sensor missing because every frame of the pump stopped is a link outage (stale
+  // telemetry), not a failed sensor.
+  const std::int64_t fast_us = LastAtOrBefore(last_fast_us_, previous_fast_us_, t_us);
+  const bool link_silent =
+      fast_us < 0 || static_cast<double>(t_us - fast_us) * 1e-6 > config_.alarms.monitor.stale_after_s;
+  return fault == estimators::SensorFault::kMissing && link_silent ? estimators::SensorFault::kNone : fault;
+}
+
+double Pump::TelemetryAge_s(std::int64_t t_us) const {
+  double age_s = 0.0;
+  for (const std::int64_t last_us : {LastAtOrBefore(last_fast_us_, previous_fast_us_, t_us),
+                                    LastAtOrBefore(last_status_us_, previous_status_us_, t_us)}) {
+    if (last_us >= 0) age_s = std::max(age_s, static_cast<double>(t_us - last_us) * 1e-6);
+  }
+  return age_s;
 }
 
 double Pump::TimeToTrip_s(const estimators::ThermalInputs& in, int* node) {
@@ -477,19 +557,8 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
       !std::isfinite(in.coolant_degC)) {
     return false;
   }
-  // Alarm node names -> the monitor's indices (model nodes, then the winding resistance).
   std::vector<estimators::AlarmMonitor::LatchedTrip> trips;
-  for (const auto& t : state.latched_trips) {
-    int node = estimators::AlarmMonitor::kSensorTrip;
-    if (t.node == kWindingResistanceNode) {
-      node = n;
-    } else if (t.node != "sensor") {
-      node = model_->StateIndex(t.node);
-      if (node < 0) return false;
-    }
-    if (!std::isfinite(t.value_degC)) return false;
-    trips.push_back({node, t.value_degC});
-  }
+  if (!TripIndices(state, trips)) return false;
   Eigen::VectorXd x = state.x_degC;
   Eigen::MatrixXd s = state.s_K2;
   const double gap_s = static_cast<double>(now_us - state.time_us) * 1e-6;
@@ -526,11 +595,40 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   }
   snapshot_.initialised = true;
   snapshot_.time_us = now_us;
+  Relatch(trips, now_us);
+  return true;
+}
+
+bool Pump::TripIndices(const PumpSavedState& state,
+                       std::vector<estimators::AlarmMonitor::LatchedTrip>& out) const {
+  // Alarm node names -> the monitor's indices (model nodes, then the winding resistance).
+  out.clear();
+  for (const auto& t : state.latched_trips) {
+    int node = estimators::AlarmMonitor::kSensorTrip;
+    if (t.node == kWindingResistanceNode) {
+      node = model_->StateCount();
+    } else if (t.node != "sensor") {
+      node = model_->StateIndex(t.node);
+      if (node < 0) return false;
+    }
+    if (!std::isfinite(t.value_degC)) return false;
+    out.push_back({node, t.value_degC});
+  }
+  return true;
+}
+
+void Pump::Relatch(const std::vector<estimators::AlarmMonitor::LatchedTrip>& trips, std::int64_t now_us) {
   for (const auto& t : trips) alarms_.RestoreLatchedTrip(t, static_cast<double>(now_us) * 1e-6);
   if (!trips.empty()) {
     snapshot_.alarm = alarms_.state();
     ++snapshot_.alarm_changes;
   }
+}
+
+bool Pump::RestoreLatchedTrips(const PumpSavedState& state, std::int64_t now_us) {
+  std::vector<estimators::AlarmMonitor::LatchedTrip> trips;
+  if (!TripIndices(state, trips)) return false;
+  Relatch(trips, now_us);
   return true;
 }
 

@@ -57,6 +57,8 @@ struct PumpSnapshot {
   double magnet_flux_sd_K = kNaN;
   double flux_sd_Wb = kNaN;               ///< sd of the identified flux (mixture covariance)
   double frame_measured_degC = kNaN;
+  double frame_measured_degC = kNaN;      ///< the frame sensor as fused (NaN: not fused)
+  estimators::SensorFault sensor_fault = estimators::SensorFault::kNone;
   double ambient_degC = kNaN;
   double speed_rpm = kNaN;
   double innovation_K = kNaN;
@@ -128,6 +130,10 @@ class Pump {
   /// (nothing changes) when the state does not fit this pump's model or names an alarm node it
   /// lacks.
   bool Restore(const PumpSavedState& state, std::int64_t now_us);
+  /// Latches again only the trips of `state` (when its filter state cannot be used: the filter
+  /// starts cold, the trips stay latched until cleared). Returns false (nothing changes) when a
+  /// trip names an alarm node this pump lacks or has a non-finite value.
+  bool RestoreLatchedTrips(const PumpSavedState& state, std::int64_t now_us);
 
  private:
   void ThermalStep(std::int64_t step_end_us);
@@ -140,6 +146,23 @@ class Pump {
   const estimators::NodeMeasurements& ExtraMeasurements(double winding_res_degC);
   double TimeToTrip_s(const estimators::ThermalInputs& in, int* node);
   void Identify(std::int64_t t_us);
+  void NoteFastFrame(std::int64_t t_us);
+  /// The latest of two frame times (`last_us`, the one before it `previous_us`) not after `t_us`.
+  static std::int64_t LastAtOrBefore(std::int64_t last_us, std::int64_t previous_us, std::int64_t t_us);
+  bool TripIndices(const PumpSavedState& state,
+                   std::vector<estimators::AlarmMonitor::LatchedTrip>& out) const;
+  void Relatch(const std::vector<estimators::AlarmMonitor::LatchedTrip>& trips, std::int64_t now_us);
+  /// The resistance-based winding temperature if the identifier tracks and its last sample is
+  /// at most `stale_after_s` old at `t_us`, else NaN.
+  double FreshWindingResistance_degC(std::int64_t t_us) const;
+  /// Advances (or, when not `blind`, drops) the worst-case bound used for the levels while no
+  /// temperature is measured.
+  void StepBlindBound(bool blind, const estimators::ThermalInputs& in);
+  /// The sensor fault to alarm on: `fault`, except a missing sensor while the fast frames are
+  /// silent too (the link, not the sensor).
+  estimators::SensorFault SensorFaultAlarm(estimators::SensorFault fault, std::int64_t t_us) const;
+  /// Age of the oldest input kind that has arrived at least once (fast frames, status), s.
+  double TelemetryAge_s(std::int64_t t_us) const;
 
   PumpConfig config_;
   std::shared_ptr<const estimators::ThermalModel> model_;
@@ -149,6 +172,7 @@ class Pump {
   estimators::ResistanceIdentifier identifier_;
   estimators::VirtualThermalSensor sensor_;
   estimators::AlarmMonitor alarms_;
+  estimators::SensorHealth sensor_health_;
   int measured_state_ = -1;
   int magnet_state_ = -1;                // state the magnet temperature is fused into (-1: none)
   std::uint64_t identifier_blocks_ = 0;  // block updates seen, to time the flux's freshness
@@ -173,11 +197,13 @@ class Pump {
   double w_e_rad_per_s_ = kNaN;          // latest electrical speed (fast frame or status)
 
   // Status values.
-  double frame_degC_ = kNaN;
-  std::int64_t frame_us_ = -1;
   double ambient_degC_ = kNaN;
   double speed_rpm_ = kNaN;
   std::int64_t last_frame_us_ = -1;
+  std::int64_t last_fast_us_ = -1;
+  std::int64_t previous_fast_us_ = -1;   // the fast frame time before last_fast_us_
+  std::int64_t last_status_us_ = -1;
+  std::int64_t previous_status_us_ = -1;
 
   // Inputs averaged over the current thermal period.
   double sum_id2_ = 0.0, sum_iq2_ = 0.0, sum_speed_ = 0.0, sum_iq_ = 0.0;
@@ -196,6 +222,7 @@ class Pump {
   Eigen::PartialPivLU<Eigen::MatrixXd> forecast_lu_;
   Eigen::VectorXd forecast_ss_;
   std::vector<double> alarm_values_;
+  Eigen::VectorXd blind_x_;  // worst-case bound while blind (size 0: not blind), degC
 };
 
 }  // namespace pumptherm::daemon

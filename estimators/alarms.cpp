@@ -21,6 +21,18 @@ const char* AlarmReasonName(AlarmReason reason) {
     case AlarmReason::kImplausibleSensor: return "implausible_sensor";
     case AlarmReason::kEstimatorNotConverged: return "estimator_not_converged";
     case AlarmReason::kForecast: return "forecast";
+    case AlarmReason::kSensorFault: return "sensor_fault";
+  }
+  return "unknown";
+}
+
+const char* SensorFaultName(SensorFault fault) {
+  switch (fault) {
+    case SensorFault::kNone: return "none";
+    case SensorFault::kMissing: return "missing";
+    case SensorFault::kStuck: return "stuck";
+    case SensorFault::kOutOfRange: return "out of range";
+    case SensorFault::kJumping: return "jumping";
   }
   return "unknown";
 }
@@ -60,23 +72,37 @@ void AlarmMonitor::Update(Channel& ch, AlarmLevel want, double value, double now
   if (ch.latched && want < AlarmLevel::kTrip) want = AlarmLevel::kTrip;
   // A trip cleared while its condition is still there latches again at once.
   if (want == AlarmLevel::kTrip && ch.level == AlarmLevel::kTrip) ch.latched = true;
-  if (want == ch.level) {
-    ch.pending = want;
-    ch.pending_since_s = std::nan("");
-    return;
+  // Each level's hold counts the time spent in its band or above, so a value moving between
+  // the warning and the trip band keeps the warning's hold running.
+  for (const AlarmLevel band : {AlarmLevel::kWarning, AlarmLevel::kTrip}) {
+    double& since = ch.band_since_s[static_cast<std::size_t>(band)];
+    if (want < band) {
+      since = std::nan("");
+    } else if (std::isnan(since)) {
+      since = now_s;
+    }
   }
-  if (ch.pending != want || std::isnan(ch.pending_since_s)) {
-    ch.pending = want;
-    ch.pending_since_s = now_s;
+  AlarmLevel reached = ch.level;
+  for (const AlarmLevel band : {AlarmLevel::kWarning, AlarmLevel::kTrip}) {
+    const double since = ch.band_since_s[static_cast<std::size_t>(band)];
+    if (band > reached && !std::isnan(since) && now_s - since >= hold_s) reached = band;
   }
-  if (now_s - ch.pending_since_s < hold_s) return;
-  const bool raising = want > ch.level;
-  ch.level = want;
-  ch.pending_since_s = std::nan("");
-  if (raising) {
+  if (reached > ch.level) {
+    ch.level = reached;
+    ch.below_since_s = std::nan("");
     ch.value = value;
     ch.raised_at_s = now_s;
-    if (want == AlarmLevel::kTrip) ch.latched = true;
+    if (reached == AlarmLevel::kTrip) ch.latched = true;
+    return;
+  }
+  if (want >= ch.level) {
+    ch.below_since_s = std::nan("");
+    return;
+  }
+  if (std::isnan(ch.below_since_s)) ch.below_since_s = now_s;
+  if (now_s - ch.below_since_s >= hold_s) {
+    ch.level = want;
+    ch.below_since_s = std::nan("");
   }
 }
 
@@ -96,7 +122,8 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
 
   for (std::size_t i = 0; i < limits_.size(); ++i) {
     const double t = in.node_degC ? in.node_degC[i] : std::nan("");
-    Update(over_[i], OverLevel(over_[i], t, limits_[i]), t, now_s, hold);
+    // NaN: not known now; the channel and its pending holds stay as they are.
+    if (Known(t)) Update(over_[i], OverLevel(over_[i], t, limits_[i]), t, now_s, hold);
     // Rate of rise over consecutive windows of rate_window_s.
     if (Known(t)) {
       if (std::isnan(window_start_degC_[i])) {
@@ -109,41 +136,20 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
       }
     }
     const double r = rise_K_per_min_[i];
-    AlarmLevel want = rise_[i].level;
     if (Known(r)) {
       const bool over = r > config_.max_rise_K_per_min;
       const bool still = rise_[i].level != AlarmLevel::kNone && r > 0.8 * config_.max_rise_K_per_min;
-      want = (over || still) ? AlarmLevel::kWarning : AlarmLevel::kNone;
+      Update(rise_[i], (over || still) ? AlarmLevel::kWarning : AlarmLevel::kNone, r, now_s, 0.0);
     }
-    Update(rise_[i], want, r, now_s, 0.0);
   }
-
-  Update(sensor_over_, OverLevel(sensor_over_, in.sensor_degC, sensor_limits_), in.sensor_degC,
-         now_s, hold);
-  Update(stale_, in.telemetry_age_s > config_.stale_after_s ? AlarmLevel::kWarning : AlarmLevel::kNone,
-         in.telemetry_age_s, now_s, 0.0);
 
   if (Known(in.sensor_degC)) {
-    const bool out = in.sensor_degC < config_.sensor_min_degC || in.sensor_degC > config_.sensor_max_degC;
-    Update(range_, out ? AlarmLevel::kWarning : AlarmLevel::kNone, in.sensor_degC, now_s, hold);
-    // Stuck: the same reading while the model's estimate of that node moves.
-    if (in.sensor_degC != stuck_value_) {
-      stuck_value_ = in.sensor_degC;
-      stuck_since_s_ = now_s;
-      stuck_model_min_ = stuck_model_max_ = in.sensor_model_degC;
-    } else if (Known(in.sensor_model_degC)) {
-      if (std::isnan(stuck_model_min_)) stuck_model_min_ = stuck_model_max_ = in.sensor_model_degC;
-      stuck_model_min_ = std::min(stuck_model_min_, in.sensor_model_degC);
-      stuck_model_max_ = std::max(stuck_model_max_, in.sensor_model_degC);
-    }
-    const bool stuck = now_s - stuck_since_s_ >= config_.stuck_after_s &&
-                       stuck_model_max_ - stuck_model_min_ > config_.stuck_model_move_K;
-    Update(stuck_, stuck ? AlarmLevel::kWarning : AlarmLevel::kNone, in.sensor_degC, now_s, 0.0);
+    Update(sensor_over_, OverLevel(sensor_over_, in.sensor_degC, sensor_limits_), in.sensor_degC,
+           now_s, hold);
   }
-  if (Known(in.sensor_nis)) {
-    Update(disagree_, in.sensor_nis > config_.nis_limit ? AlarmLevel::kWarning : AlarmLevel::kNone,
-           in.sensor_nis, now_s, config_.disagree_hold_s);
-  }
+  Update(stale_, in.telemetry_age_s > config_.stale_after_s ? AlarmLevel::kWarning : AlarmLevel::kNone,
+         in.telemetry_age_s, now_s, hold);
+  StepSensor(now_s, in);
   const bool not_converged =
       !in.estimators_converged && now_s - start_s_ >= config_.not_converged_grace_s;
   Update(converged_, not_converged ? AlarmLevel::kWarning : AlarmLevel::kNone, 0.0, now_s, hold);
@@ -155,13 +161,42 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
     if (forecast_.level != AlarmLevel::kNone && ttt < 1.1 * config_.forecast_horizon_s) {
       want = AlarmLevel::kWarning;
     }
-    if (std::isnan(ttt)) want = forecast_.level;
-    Update(forecast_, want, ttt, now_s, hold);
+    if (Known(ttt)) Update(forecast_, want, ttt, now_s, hold);
     if (forecast_.level != AlarmLevel::kNone && in.time_to_trip_node >= 0) forecast_node_ = in.time_to_trip_node;
   }
 
   Compose(in.time_to_trip_s);
   return state_;
+}
+
+void AlarmMonitor::StepSensor(double now_s, const AlarmInputs& in) {
+  // A failed sensor, found by SensorHealth without trusting its readings.
+  if (in.sensor_fault != SensorFault::kNone && sensor_fault_.level == AlarmLevel::kNone) {
+    sensor_fault_kind_ = in.sensor_fault;
+  }
+  Update(sensor_fault_, in.sensor_fault != SensorFault::kNone ? AlarmLevel::kWarning : AlarmLevel::kNone,
+         in.sensor_raw_degC, now_s, config_.hold_s);
+  // Stuck while the model moves: the same raw reading while the estimate of that node (free of
+  // the sensor once SensorHealth has left it out) moves.
+  const double raw = in.sensor_raw_degC;
+  if (Known(raw)) {
+    if (raw != stuck_value_) {
+      stuck_value_ = raw;
+      stuck_since_s_ = now_s;
+      stuck_model_min_ = stuck_model_max_ = in.sensor_model_degC;
+    } else if (Known(in.sensor_model_degC)) {
+      if (std::isnan(stuck_model_min_)) stuck_model_min_ = stuck_model_max_ = in.sensor_model_degC;
+      stuck_model_min_ = std::min(stuck_model_min_, in.sensor_model_degC);
+      stuck_model_max_ = std::max(stuck_model_max_, in.sensor_model_degC);
+    }
+    const bool stuck = now_s - stuck_since_s_ >= config_.stuck_after_s &&
+                       stuck_model_max_ - stuck_model_min_ > config_.stuck_model_move_K;
+    Update(stuck_, stuck ? AlarmLevel::kWarning : AlarmLevel::kNone, raw, now_s, config_.hold_s);
+  }
+  if (Known(in.sensor_nis)) {
+    Update(disagree_, in.sensor_nis > config_.nis_limit ? AlarmLevel::kWarning : AlarmLevel::kNone,
+           in.sensor_nis, now_s, config_.disagree_hold_s);
+  }
 }
 
 void AlarmMonitor::Compose(double time_to_trip_s) {
@@ -201,8 +236,8 @@ bool AlarmMonitor::RestoreLatchedTrip(const LatchedTrip& trip, double now_s) {
   }
   Channel& ch = trip.node == kSensorTrip ? sensor_over_ : over_[static_cast<std::size_t>(trip.node)];
   ch.level = AlarmLevel::kTrip;
-  ch.pending = AlarmLevel::kTrip;
-  ch.pending_since_s = std::nan("");
+  ch.band_since_s.fill(std::nan(""));
+  ch.below_since_s = std::nan("");
   ch.value = trip.value;
   ch.raised_at_s = now_s;
   ch.latched = true;
@@ -226,7 +261,8 @@ void AlarmMonitor::ForEachActive(F&& f) const {
     add(rise_[i], AlarmReason::kRateOfRise, "", static_cast<int>(i), std::nan(""));
   }
   add(stale_, AlarmReason::kStaleTelemetry, "", -1, std::nan(""));
-  add(range_, AlarmReason::kImplausibleSensor, "out of range", config_.sensor_node, std::nan(""));
+  add(sensor_fault_, AlarmReason::kSensorFault, SensorFaultName(sensor_fault_kind_), config_.sensor_node,
+      std::nan(""));
   add(stuck_, AlarmReason::kImplausibleSensor, "stuck", config_.sensor_node, std::nan(""));
   add(disagree_, AlarmReason::kImplausibleSensor, "disagrees with the model", config_.sensor_node, std::nan(""));
   add(converged_, AlarmReason::kEstimatorNotConverged, "", -1, std::nan(""));
@@ -268,6 +304,30 @@ bool AlarmMonitor::Clear() {
   clear(sensor_over_);
   state_.trip_latched = false;
   return any;
+}
+
+SensorHealth::SensorHealth(const AlarmConfig& config) : config_(config) {}
+
+void SensorHealth::OnReading(double t_s, double value_degC) {
+  if (std::isnan(value_degC)) return;
+  // A step between consecutive readings (not across a silence, in which it may have warmed).
+  const bool consecutive = Known(last_s_) && t_s - last_s_ <= config_.stale_after_s;
+  if (consecutive && std::abs(value_degC - last_degC_) > config_.max_step_K) {
+    jump_until_s_ = t_s + config_.jump_recover_s;
+  }
+  if (value_degC != last_degC_) changed_s_ = t_s;
+  last_degC_ = value_degC;
+  last_s_ = t_s;
+}
+
+SensorFault SensorHealth::Fault(double now_s) const {
+  if (std::isnan(last_s_) || now_s - last_s_ > config_.stale_after_s) return SensorFault::kMissing;
+  if (last_degC_ < config_.sensor_min_degC || last_degC_ > config_.sensor_max_degC) {
+    return SensorFault::kOutOfRange;
+  }
+  if (now_s < jump_until_s_) return SensorFault::kJumping;
+  if (config_.flat_after_s > 0.0 && now_s - changed_s_ >= config_.flat_after_s) return SensorFault::kStuck;
+  return SensorFault::kNone;
 }
 
 }  // namespace pumptherm::estimators

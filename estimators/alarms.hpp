@@ -6,10 +6,13 @@
 ///
 /// Semantics (docs/alarms.md):
 /// - A condition must hold continuously for `hold_s` before its alarm asserts (a single noisy
-///   sample never trips). A warning clears when the value falls below its level minus
-///   `hysteresis_K` (after the same hold); a trip latches until Clear() is called and its
-///   condition is gone.
-/// - NaN inputs mean "not measured yet": they neither assert nor clear anything.
+///   sample never trips). The hold counts the time spent in a level's band or above: a value
+///   moving between the warning and the trip band keeps the warning's hold running. A warning
+///   clears when the value falls below its level minus `hysteresis_K` (after the same hold); a
+///   trip latches until Clear() is called and its condition is gone.
+/// - NaN inputs mean "not measured yet": they neither assert nor clear anything, and a pending
+///   hold keeps its start (a lost sample never restarts a pending trip).
+/// - Stale telemetry and sensor faults follow `hold_s` like every other condition.
 /// - The published state is the most severe active alarm (trip over warning; among equals the
 ///   one raised first), plus a bit set of every active reason.
 
@@ -34,8 +37,22 @@ enum class AlarmReason : std::uint8_t {
   kImplausibleSensor = 5,         ///< sensor out of range, stuck, or disagreeing with the model
   kEstimatorNotConverged = 6,     ///< an estimator has not converged (or lost convergence)
   kForecast = 7,                  ///< time to trip at the present load below the horizon
+  kSensorFault = 8,               ///< the measured sensor failed (missing, stuck, out of range,
+                                  ///< jumping), found without trusting its readings; it is
+                                  ///< left out of the filter meanwhile
 };
-inline constexpr std::size_t kAlarmReasonCount = 8;
+inline constexpr std::size_t kAlarmReasonCount = 9;
+
+/// What is wrong with the measured sensor, judged from evidence that does not rest on its
+/// reading being right (its frame's age, its noise, physics' bounds on its value and steps).
+enum class SensorFault : std::uint8_t {
+  kNone = 0,
+  kMissing = 1,     ///< no reading for longer than `stale_after_s` (its frame stopped)
+  kStuck = 2,       ///< the reading has not moved by one bit for `flat_after_s` (no noise left)
+  kOutOfRange = 3,  ///< outside [sensor_min_degC, sensor_max_degC]
+  kJumping = 4,     ///< a step between readings larger than `max_step_K` (faster than physics)
+};
+const char* SensorFaultName(SensorFault fault);
 
 /// Name of a reason code ("estimated_over_temperature", ...), for logs.
 const char* AlarmReasonName(AlarmReason reason);
@@ -60,6 +77,15 @@ struct AlarmConfig {
   /// node moved by more than `stuck_model_move_K`.
   double stuck_after_s = 120.0;
   double stuck_model_move_K = 2.0;
+  /// Sensor fault "stuck": the raw reading bit-for-bit unchanged this long (a live RTD's noise
+  /// moves its last digit; 0 = off). Valid for a sensor whose noise is not far below its
+  /// resolution.
+  double flat_after_s = 30.0;
+  /// Sensor fault "jumping": one reading differing from the previous one (at most
+  /// `stale_after_s` before it) by more than this (K); the sensor stays out for
+  /// `jump_recover_s` after the last such step.
+  double max_step_K = 5.0;
+  double jump_recover_s = 30.0;
   /// Disagreement: normalised innovation squared above this (chi-square, 1 dof: 10.83 is the
   /// 0.1 % tail) for `disagree_hold_s`.
   double nis_limit = 10.83;
@@ -78,6 +104,8 @@ struct AlarmInputs {
   double sensor_model_degC = std::numeric_limits<double>::quiet_NaN();  ///< model estimate there
   double sensor_nis = std::numeric_limits<double>::quiet_NaN();    ///< last innovation test
   double telemetry_age_s = 0.0;          ///< time since the last telemetry frame
+  SensorFault sensor_fault = SensorFault::kNone;  ///< from SensorHealth
+  double sensor_raw_degC = std::numeric_limits<double>::quiet_NaN();  ///< last reading, even if faulty
   bool estimators_converged = true;
   double time_to_trip_s = std::numeric_limits<double>::infinity();  ///< from the forecast
   int time_to_trip_node = -1;
@@ -147,14 +175,20 @@ class AlarmMonitor {
   /// One alarm condition with hold time and latch.
   struct Channel {
     AlarmLevel level = AlarmLevel::kNone;  ///< asserted level
-    double pending_since_s = std::numeric_limits<double>::quiet_NaN();
-    AlarmLevel pending = AlarmLevel::kNone;
+    /// Start of the present run at or above warning ([1]) and at or above trip ([2]); NaN: not
+    /// in that band now. [0] is unused.
+    std::array<double, 3> band_since_s{std::numeric_limits<double>::quiet_NaN(),
+                                       std::numeric_limits<double>::quiet_NaN(),
+                                       std::numeric_limits<double>::quiet_NaN()};
+    /// Start of the present run below the asserted level (NaN: not below it).
+    double below_since_s = std::numeric_limits<double>::quiet_NaN();
     double value = std::numeric_limits<double>::quiet_NaN();
     double raised_at_s = 0.0;
     bool latched = false;
   };
   /// Moves `ch` toward `want` (with hold), `want` computed by the caller with hysteresis.
   void Update(Channel& ch, AlarmLevel want, double value, double now_s, double hold_s);
+  void StepSensor(double now_s, const AlarmInputs& in);
   AlarmLevel OverLevel(const Channel& ch, double t_degC, const TemperatureLimits& lim) const;
   /// The published state from the channels (most severe first). Does not allocate.
   void Compose(double time_to_trip_s);
@@ -169,7 +203,8 @@ class AlarmMonitor {
   std::vector<Channel> rise_;        // per node
   Channel sensor_over_;
   Channel stale_;
-  Channel range_;
+  Channel sensor_fault_;
+  SensorFault sensor_fault_kind_ = SensorFault::kNone;  // the fault that raised sensor_fault_
   Channel stuck_;
   Channel disagree_;
   Channel converged_;
@@ -186,6 +221,34 @@ class AlarmMonitor {
   double start_s_ = std::numeric_limits<double>::quiet_NaN();
   int forecast_node_ = -1;
   AlarmState state_;
+};
+
+/// Health of the measured sensor from evidence that does not rest on its readings being right:
+/// the age of its last reading, whether its noise still moves the last digit, physical bounds
+/// on its value and on a step between two readings. A sensor with a fault must not be fused.
+/// Pure logic: times are arguments (s, monotonic).
+class SensorHealth {
+ public:
+  /// Uses `stale_after_s`, `sensor_min_degC`, `sensor_max_degC`, `flat_after_s`, `max_step_K`,
+  /// `jump_recover_s`.
+  explicit SensorHealth(const AlarmConfig& config);
+  /// One reading (degC) received at `t_s`; NaN (the sensor's "not available") is ignored, so
+  /// its age grows.
+  void OnReading(double t_s, double value_degC);
+  /// The fault at `now_s` (kNone: usable), most fundamental first: missing, out of range,
+  /// jumping, stuck.
+  SensorFault Fault(double now_s) const;
+  /// Last reading (NaN before any), whatever its health.
+  double last_degC() const { return last_degC_; }
+  /// Time of the last reading (NaN before any).
+  double last_s() const { return last_s_; }
+
+ private:
+  AlarmConfig config_;
+  double last_degC_ = std::numeric_limits<double>::quiet_NaN();
+  double last_s_ = std::numeric_limits<double>::quiet_NaN();
+  double changed_s_ = std::numeric_limits<double>::quiet_NaN();
+  double jump_until_s_ = -std::numeric_limits<double>::infinity();
 };
 
 }  // namespace pumptherm::estimators

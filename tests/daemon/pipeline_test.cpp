@@ -55,6 +55,9 @@ hold_s = 2
 clear_lcm_sources = ["panel"]
 clear_key_file = "clear.key"
 clear_key_group = "root"
+# The bench's frame sensor is the noiseless truth: steady, it repeats its value to the bit, so
+# the flat-noise test for a stuck sensor does not apply to it.
+flat_after_s = 0
 
 [[pump]]
 name = "tmp1"
@@ -322,6 +325,7 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
   EXPECT_EQ(s.alarm.reason, estimators::AlarmReason::kEstimatedOverTemperature);
   EXPECT_EQ(s.alarm.node, 3);
   EXPECT_TRUE(s.alarm.trip_latched);
+  EXPECT_EQ(b.gateway_.counters().trip_latches, 1U);  // the live loop writes the state at once
   // The alarm frame says so, with the model's node index (slot_winding = 3, as GW_NODE_TEMP).
   const protocol::DbcMessage* alarm = b.dbc_.FindMessage("GW_ALARM");
   const auto& codec = b.codec_.message(static_cast<std::size_t>(alarm - b.dbc_.messages.data()));
@@ -380,6 +384,32 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
   EXPECT_TRUE(r.gateway_.ClearFromLcm(&after_restart, r.t_us_, r.sink));
   r.Run(10.0, 0.0);
   EXPECT_EQ(r.gateway_.pumps()[0]->snapshot().alarm.level, estimators::AlarmLevel::kNone);
+  // A restart whose clock is an hour behind the saved time: the filter starts cold (its age is
+  // unknown), the trip latches again all the same and goes out as a trip before any estimate.
+  {
+    Bench c(Config(R"(
+[pump.alarms.levels]
+slot_winding = { warning_degC = 50, trip_degC = 55 }
+)"));
+    c.t_us_ = b.t_us_ - 3'600'000'000LL;
+    warning.clear();
+    EXPECT_EQ(c.gateway_.RestoreState(text, c.t_us_, &warning), 0);
+    EXPECT_NE(warning.find("latched again: tmp1"), std::string::npos) << warning;
+    EXPECT_TRUE(c.gateway_.pumps()[0]->snapshot().alarm.trip_latched);
+    EXPECT_FALSE(c.gateway_.pumps()[0]->snapshot().initialised);
+    c.Run(10.0, 0.0);
+    const protocol::CanFrame* first = nullptr;
+    for (const auto& [t, f] : c.sink.frames) {
+      if (f.id == alarm->id + 1) {
+        first = &f;
+        break;
+      }
+    }
+    ASSERT_NE(first, nullptr);
+    codec.Decode(std::span<const std::uint8_t>(first->data.data(), first->len), v);
+    EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0) << "first GW_ALARM";
+    EXPECT_TRUE(c.gateway_.pumps()[0]->snapshot().alarm.trip_latched);
+  }
   // A state without the key (written before trips were saved) restores with none latched; a
   // latched trip on a node the model lacks makes the pump start cold, with a warning.
   std::string old_text = text;
@@ -520,7 +550,7 @@ TEST(Pipeline, ConfigurationErrorsNameTheKey) {
     return std::string();
   };
   EXPECT_NE(error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n")
-                .find("p.toml:14: key 'pump[0]': pump 'tmp1': alarm levels (line 22) for node 'winding', which model 'saheba2010-improved' does not have"),
+                .find("p.toml:17: key 'pump[0]': pump 'tmp1': alarm levels (line 25) for node 'winding', which model 'saheba2010-improved' does not have"),
             std::string::npos)
       << error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n");
   const std::string bad_model = [] {
@@ -560,6 +590,38 @@ thermal_model = "no-such-model"
   std::filesystem::remove(motor_path);
   EXPECT_NE(no_law_error.find("magnet_node 'rotor' is set but motor"), std::string::npos) << no_law_error;
   EXPECT_NE(no_law_error.find("states no [magnet] table"), std::string::npos) << no_law_error;
+}
+
+// PUMP_CLEAR repeats within 2 s (a held button) are not acted on but counted; the next one
+// after 2 s is (here refused: can0 is no configured clear source).
+TEST(Pipeline, ClearFrameRepeatsAreCountedNotDropped) {
+  Bench b(Config());
+  const std::int64_t t0 = 1'767'225'600'000'000;
+  b.Frame("PUMP_CLEAR", t0, {{"ClearTrips", 1.0}});
+  b.Frame("PUMP_CLEAR", t0 + 100'000, {{"ClearTrips", 1.0}});
+  b.Frame("PUMP_CLEAR", t0 + 200'000, {{"ClearTrips", 1.0}});
+  b.Frame("PUMP_CLEAR", t0 + 2'100'000, {{"ClearTrips", 1.0}});
+  EXPECT_EQ(b.gateway_.counters().clears_refused, 2U);
+  EXPECT_EQ(b.gateway_.counters().clears_rate_limited, 2U);
+}
+
+// The CAN alarm frame's reason codes are the daemon's: the DBC's value table names every code
+// of estimators::AlarmReason with its log name, and nothing else.
+TEST(Pipeline, DbcAlarmReasonTableIsTheDaemonsCodes) {
+  const protocol::Dbc dbc = protocol::ParseDbc(
+      ReadTextFile(ResolveResource(ResourceKind::kDbc, "pumptherm.dbc")), "pumptherm.dbc");
+  const protocol::DbcMessage* alarm = dbc.FindMessage("GW_ALARM");
+  ASSERT_NE(alarm, nullptr);
+  const int k = alarm->FindSignal("AlarmReason");
+  ASSERT_GE(k, 0);
+  const auto& table = alarm->signals[static_cast<std::size_t>(k)].value_descriptions;
+  EXPECT_EQ(table.size(), estimators::kAlarmReasonCount);
+  for (std::size_t code = 0; code < estimators::kAlarmReasonCount; ++code) {
+    const auto it = table.find(static_cast<std::int64_t>(code));
+    ASSERT_NE(it, table.end()) << "code " << code << " missing from the DBC";
+    EXPECT_EQ(it->second, estimators::AlarmReasonName(static_cast<estimators::AlarmReason>(code)))
+        << "code " << code;
+  }
 }
 
 }  // namespace

@@ -8,6 +8,8 @@
 #include <unistd.h>
 
 #include "daemon/config.hpp"
+#include "daemon/live_loop.hpp"
+#include "daemon/offline.hpp"
 #include "daemon/pump.hpp"
 #include "daemon/state_store.hpp"
 #include "daemon/resources.hpp"
@@ -53,6 +55,58 @@ TEST(PumpRobustness, RunawayEstimateIsResetNeverPublished) {
   EXPECT_GT(pump->counters().filter_resets, 0U) << "the runaway was expected to happen here";
   EXPECT_GT(hottest_published, 200.0);  // it did run hot before the reset
   EXPECT_TRUE(pump->snapshot().alarm.trip_latched || pump->snapshot().alarm.level != estimators::AlarmLevel::kNone);
+}
+
+// Offline, the log's stamps are the clock: a stamp a little behind (another interface) is taken
+// at the later time; the recording host's clock set back 200 s holds time and then runs on at the
+// pace of the new stamps; a forward step is elapsed time.
+TEST(PipelineClock, OfflineBackwardStepHoldsThenRunsOn) {
+  OfflineClock c;
+  const std::int64_t t0 = 1'767'225'600'000'000;
+  EXPECT_EQ(c.Now(t0), t0);
+  EXPECT_EQ(c.Now(t0 + 1'000'000), t0 + 1'000'000);
+  EXPECT_EQ(c.Now(t0 + 999'000), t0 + 1'000'000);            // 1 ms out of order
+  EXPECT_EQ(c.Now(t0 - 199'000'000), t0 + 1'000'000);        // set back 200 s
+  EXPECT_EQ(c.Now(t0 - 198'000'000), t0 + 2'000'000);        // runs on, 1 s later
+  EXPECT_EQ(c.Now(t0 + 100'000'000), t0 + 300'000'000);      // forward: elapsed
+}
+
+// Live, the kernel's receive stamps are wall time: mapped to the monotonic clock, they stay in
+// [previous frame, now] whatever the wall clock did between a frame's arrival and its reading.
+TEST(PipelineClock, KernelStampsMapToTheMonotonicClock) {
+  const std::int64_t wall = 1'767'225'600'000'000;
+  const std::int64_t mono = 5'000'000'000;
+  EXPECT_EQ(MonotonicStampUs(wall - 3'000, wall, mono, -1), mono - 3'000);
+  // The wall clock was set back 200 s after the frame arrived: it looks 200 s in the future.
+  EXPECT_EQ(MonotonicStampUs(wall - 3'000, wall - 200'000'000, mono, mono - 10'000), mono);
+  // Set forward 200 s: it looks 200 s old, but not older than the frame before it.
+  EXPECT_EQ(MonotonicStampUs(wall - 3'000, wall + 200'000'000, mono, mono - 10'000), mono - 10'000);
+  EXPECT_EQ(MonotonicStampUs(0, wall, mono, mono - 10'000), mono);  // no stamp
+}
+
+// A frozen frame sensor is found by its flat noise, dropped from the filter (the sd grows) and
+// raised as a sensor fault; a silent one is found by its age, the fast frames going on.
+TEST(PumpRobustness, FrozenAndSilentSensorsAreFaultsAndLeftOut) {
+  for (const bool frozen : {true, false}) {
+    auto pump = MakePump();
+    const std::int64_t t0 = 1'700'000'000'000'000;
+    double sd_when_failed = kNaN;
+    for (int k = 0; k < 1200; ++k) {  // 120 s at 10 Hz: the sensor fails at 30 s
+      const std::int64_t t = t0 + std::int64_t{k} * 100'000;
+      pump->OnCurrents(t, 0.0, 3.0, 2513.0, kNaN);
+      const bool failed = k >= 300;
+      if (failed && std::isnan(sd_when_failed)) sd_when_failed = pump->snapshot().node_sd_K[0];
+      const double live = 40.0 + 0.1 * (k % 3);
+      if (!failed || frozen) pump->OnStatus(t, 24000.0, 2.0, failed ? 40.0 : live, 25.0);
+      pump->Advance(t);
+    }
+    const PumpSnapshot& s = pump->snapshot();
+    const char* what = frozen ? "frozen" : "silent";
+    EXPECT_EQ(s.sensor_fault, frozen ? estimators::SensorFault::kStuck : estimators::SensorFault::kMissing) << what;
+    EXPECT_TRUE(std::isnan(s.frame_measured_degC)) << what << ": a failed sensor must not be fused";
+    EXPECT_TRUE(s.alarm.active_reasons & (1U << static_cast<unsigned>(estimators::AlarmReason::kSensorFault))) << what;
+    EXPECT_GT(s.node_sd_K[0], sd_when_failed) << what << ": the frame's sd must grow without its sensor";
+  }
 }
 
 // Security (issue 8): a configuration anyone may write decides the alarm levels and who may

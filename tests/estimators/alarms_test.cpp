@@ -207,37 +207,59 @@ TEST(Alarms, RateOfRise) {
   EXPECT_LE(t, 421);  // within one window (+1 s) of the change
 }
 
-TEST(Alarms, StaleTelemetryIsImmediateAndClearsWhenFramesReturn) {
+TEST(Alarms, StaleTelemetryFollowsTheHoldBothWays) {
   Fixture f;
   f.in.telemetry_age_s = 1.0;
   EXPECT_EQ(f.At(0).level, AlarmLevel::kNone);
   f.in.telemetry_age_s = 2.5;
-  const auto s = f.At(1);
+  EXPECT_EQ(f.At(1).level, AlarmLevel::kNone);  // 0 s of the 2 s hold
+  f.in.telemetry_age_s = 0.01;                   // one frame got through: the hold restarts
+  EXPECT_EQ(f.At(2).level, AlarmLevel::kNone);
+  f.in.telemetry_age_s = 2.5;
+  f.At(3);
+  EXPECT_EQ(f.At(4).level, AlarmLevel::kNone);
+  const auto s = f.At(5);
   EXPECT_EQ(s.level, AlarmLevel::kWarning);
   EXPECT_EQ(s.reason, AlarmReason::kStaleTelemetry);
   f.in.telemetry_age_s = 0.01;
-  EXPECT_EQ(f.At(2).level, AlarmLevel::kNone);
+  EXPECT_EQ(f.At(6).level, AlarmLevel::kWarning);  // clearing holds too
+  EXPECT_EQ(f.At(7).level, AlarmLevel::kWarning);
+  EXPECT_EQ(f.At(8).level, AlarmLevel::kNone);
 }
 
-TEST(Alarms, SensorOutOfRangeStuckAndDisagreeing) {
+TEST(Alarms, SensorFaultIsItsOwnAlarmWithTheHold) {
   Fixture f;
-  f.in.sensor_degC = -60.0;
-  f.At(0);
-  EXPECT_EQ(f.At(2).reason, AlarmReason::kImplausibleSensor);
-  f.in.sensor_degC = 40.0;
+  f.in.sensor_raw_degC = 40.0;
+  f.in.sensor_fault = SensorFault::kMissing;
+  EXPECT_EQ(f.At(0).level, AlarmLevel::kNone);
+  const auto s = f.At(2);
+  EXPECT_EQ(s.level, AlarmLevel::kWarning);
+  EXPECT_EQ(s.reason, AlarmReason::kSensorFault);
+  EXPECT_TRUE(s.active_reasons & (1U << static_cast<unsigned>(AlarmReason::kSensorFault)));
+  const auto c = f.m.ActiveConditions();
+  ASSERT_EQ(c.size(), 1U);
+  EXPECT_STREQ(c[0].detail, "missing");
+  f.in.sensor_fault = SensorFault::kNone;
   f.At(3);
   EXPECT_EQ(f.At(5).level, AlarmLevel::kNone);
+}
 
+TEST(Alarms, SensorStuckAndDisagreeing) {
+  Fixture f;
+  f.in.sensor_degC = f.in.sensor_raw_degC = 40.0;
+  f.At(3);
   // Stuck: the reading frozen at 40.0 since t = 3 while the model moves 5 K in 120 s: the
-  // alarm comes once the reading has been frozen for 120 s (t = 123) and the model moved > 2 K.
-  for (double t = 6; t < 123; t += 1) {
+  // alarm comes once the reading has been frozen for 120 s (t = 123) and the model moved > 2 K,
+  // after the hold (t = 125).
+  for (double t = 6; t < 125; t += 1) {
     f.in.sensor_model_degC = 40.0 + 5.0 * (t - 6) / 120.0;
     EXPECT_EQ(f.At(t).level, AlarmLevel::kNone) << t;
   }
   f.in.sensor_model_degC = 44.9;
-  EXPECT_EQ(f.At(123).reason, AlarmReason::kImplausibleSensor);
-  f.in.sensor_degC = 40.1;
-  EXPECT_EQ(f.At(124).level, AlarmLevel::kNone);
+  EXPECT_EQ(f.At(125).reason, AlarmReason::kImplausibleSensor);
+  f.in.sensor_degC = f.in.sensor_raw_degC = 40.1;
+  f.At(126);
+  EXPECT_EQ(f.At(128).level, AlarmLevel::kNone);
 
   // Disagreement: NIS above 10.83 for 30 s.
   f.in.sensor_nis = 25.0;
@@ -246,10 +268,90 @@ TEST(Alarms, SensorOutOfRangeStuckAndDisagreeing) {
   EXPECT_EQ(f.At(160).reason, AlarmReason::kImplausibleSensor);
 }
 
+// The hold counts time in a band or above: 110/125 alternating against 100/120 is a warning.
+TEST(Alarms, ValueMovingBetweenBandsKeepsTheWarningHold) {
+  AlarmMonitor m(Config(), {{100.0, 120.0}}, {});
+  double node = 0.0;
+  AlarmInputs in;
+  in.node_degC = &node;
+  AlarmLevel level = AlarmLevel::kNone;
+  for (int t = 0; t <= 3; ++t) {
+    node = t % 2 == 0 ? 110.0 : 125.0;
+    level = m.Step(t, in).level;
+  }
+  EXPECT_EQ(level, AlarmLevel::kWarning);
+  // Then above trip for the hold: trip (the trip band's own hold started at its first sample).
+  node = 125.0;
+  m.Step(4, in);
+  m.Step(5, in);
+  EXPECT_EQ(m.Step(6, in).level, AlarmLevel::kTrip);
+}
+
+// NaN (a lost sample) never restarts a pending trip: 125/NaN alternating trips after the hold.
+TEST(Alarms, NaNNeverRestartsAPendingTrip) {
+  AlarmMonitor m(Config(), {{100.0, 120.0}}, {});
+  double node = 0.0;
+  AlarmInputs in;
+  in.node_degC = &node;
+  node = 125.0;
+  EXPECT_EQ(m.Step(0, in).level, AlarmLevel::kNone);
+  node = kNaN;
+  EXPECT_EQ(m.Step(1, in).level, AlarmLevel::kNone);
+  node = 125.0;
+  EXPECT_EQ(m.Step(2, in).level, AlarmLevel::kTrip);
+}
+
+TEST(SensorHealth, MissingStuckOutOfRangeAndJumping) {
+  AlarmConfig c = Config();
+  c.stale_after_s = 2.0;
+  c.flat_after_s = 30.0;
+  c.max_step_K = 5.0;
+  c.jump_recover_s = 30.0;
+  SensorHealth h(c);
+  EXPECT_EQ(h.Fault(0.0), SensorFault::kMissing);  // never read
+  // A live sensor at 10 Hz: the last digit moves.
+  double t = 0.0;
+  for (; t < 60.0; t += 0.1) {
+    h.OnReading(t, 40.0 + 0.1 * (static_cast<int>(t * 10) % 2));
+    ASSERT_EQ(h.Fault(t), SensorFault::kNone) << t;
+  }
+  // Frozen: stuck once 30 s without a change.
+  const double frozen_at = t;
+  for (; t < frozen_at + 29.9; t += 0.1) {
+    h.OnReading(t, 40.0);
+    ASSERT_EQ(h.Fault(t), SensorFault::kNone) << t;
+  }
+  h.OnReading(frozen_at + 30.05, 40.0);
+  EXPECT_EQ(h.Fault(frozen_at + 30.05), SensorFault::kStuck);
+  // Silent: missing after 2 s; NaN readings (not available) do not count as readings.
+  h.OnReading(100.0, 40.1);
+  h.OnReading(101.0, kNaN);
+  EXPECT_EQ(h.Fault(102.0), SensorFault::kNone);
+  EXPECT_EQ(h.Fault(102.1), SensorFault::kMissing);
+  // Out of range.
+  h.OnReading(103.0, 300.0);
+  EXPECT_EQ(h.Fault(103.0), SensorFault::kOutOfRange);
+  // A jump of more than 5 K between consecutive readings: out for 30 s after the last jump.
+  // Across a silence (7 s here) a step is no jump: the node may have warmed meanwhile.
+  h.OnReading(110.0, 40.0);
+  h.OnReading(110.1, 40.1);
+  EXPECT_EQ(h.Fault(110.1), SensorFault::kNone);
+  h.OnReading(110.2, 30.0);
+  EXPECT_EQ(h.Fault(110.2), SensorFault::kJumping);
+  h.OnReading(140.0, 40.2);
+  EXPECT_EQ(h.Fault(140.0), SensorFault::kJumping);  // 30 s after 110.2, not yet over
+  h.OnReading(140.3, 40.3);
+  EXPECT_EQ(h.Fault(140.3), SensorFault::kNone);
+  h.OnReading(140.4, 47.0);
+  EXPECT_EQ(h.Fault(140.4), SensorFault::kJumping);
+  h.OnReading(170.5, 47.1);
+  EXPECT_EQ(h.Fault(170.5), SensorFault::kNone);
+}
+
 // A steady motor gives a steady reading: frozen while the model is flat too is not "stuck".
 TEST(Alarms, FrozenSensorWithAFlatModelIsNotStuck) {
   Fixture f;
-  f.in.sensor_degC = 40.0;
+  f.in.sensor_degC = f.in.sensor_raw_degC = 40.0;
   f.in.sensor_model_degC = 40.0;
   for (double t = 0; t < 1000; t += 1) {
     f.in.sensor_model_degC = 40.0 + 0.5 * std::sin(t / 50.0);
