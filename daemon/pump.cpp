@@ -423,6 +423,8 @@ const estimators::NodeMeasurements& Pump::ExtraMeasurements(double winding_res_d
     extra_.Add(magnet_state_, magnet_z_degC_, std::max(magnet_z_sd_K_, config_.magnet_min_sd_K), magnet_gain_);
   }
   return extra_;
+}
+
 void Pump::StepBlindBound(bool blind, const estimators::ThermalInputs& in) {
   if (!blind) {
     blind_x_.resize(0);
