@@ -210,7 +210,9 @@ void Pump::ThermalStep(std::int64_t end_us) {
   measurement_(0) = measured;  // a member: a temporary VectorXd would allocate every step
   const estimators::KalmanUpdateReport* report = nullptr;
   try {
-    report = &sensor_.Step(in, period_s_, measurement_, config_.fuse_winding ? winding_res : kNaN);
+    // The identifier's 1-sigma and the model's own (config) add in quadrature: independent.
+    const double winding_sd = std::hypot(r.winding_sd_K, config_.winding_sd_K);
+    report = &sensor_.Step(in, period_s_, measurement_, config_.fuse_winding ? winding_res : kNaN, winding_sd);
   } catch (const std::exception&) {
     ++counters_.rejected_values;
     return;

@@ -41,7 +41,7 @@ void VirtualThermalSensor::Initialise(const Eigen::VectorXd& x0_degC) {
 
 const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs, double dt_s,
                                                      const Eigen::VectorXd& measured_degC,
-                                                     double winding_degC) {
+                                                     double winding_degC, double winding_sd_K) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
     throw std::domain_error("virtual sensor: the period must be positive and finite");
   }
@@ -82,7 +82,8 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
   if (winding) {
     c_.row(row) = model_.WindingWeights().transpose();
     y_(row) = winding_degC;
-    sm_(row, row) = config_.winding_measurement_sd_K * config_.winding_measurement_sd_K;
+    const double sd = winding_sd_K > 0.0 ? winding_sd_K : config_.winding_measurement_sd_K;  // false for NaN
+    sm_(row, row) = sd * sd;
   }
   return filter_.Update(c_, y_, sm_, config_.covariance_update);
 }

@@ -9,6 +9,7 @@
 /// with whatever was measured at the end of the period (NaN = not measured this time).
 
 #include <Eigen/Dense>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -56,11 +57,13 @@ class VirtualThermalSensor {
 
   /// Advances one period of `dt_s` with `inputs` held over it, then corrects with
   /// `measured_degC` (one per configured measured node, NaN = not measured) and, if finite,
-  /// `winding_degC` (the resistance-based winding temperature). Returns the update's report.
+  /// `winding_degC` (the resistance-based winding temperature) with standard deviation
+  /// `winding_sd_K` (NaN or not positive: winding_measurement_sd_K). Returns the update's report.
   /// No allocation once the operating point and the count of valid measurements are steady.
   /// Throws std::domain_error for non-finite inputs (from the model) or dt_s <= 0.
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s,
-                                 const Eigen::VectorXd& measured_degC, double winding_degC);
+                                 const Eigen::VectorXd& measured_degC, double winding_degC,
+                                 double winding_sd_K = std::numeric_limits<double>::quiet_NaN());
 
   const Eigen::VectorXd& Estimate_degC() const { return filter_.State(); }
   const Eigen::MatrixXd& Covariance_K2() const { return filter_.Covariance(); }

@@ -70,8 +70,9 @@ enum class MappingOutput {
   kFrameRateHz,         ///< frame_rate_Hz
   kDrops,               ///< drops
   kBusState,            ///< bus_state
+  kWindingResSdK,       ///< winding_res_sd_K: 1-sigma of the resistance-based temperature, K
 };
-inline constexpr std::size_t kMappingOutputCount = 14;
+inline constexpr std::size_t kMappingOutputCount = 15;
 
 /// The TOML key of an input or output.
 std::string_view MappingInputName(MappingInput input) noexcept;
