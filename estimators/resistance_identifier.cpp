@@ -185,7 +185,7 @@ bool ResistanceIdentifier::Restore(const ResistanceIdentifierState& state) noexc
   ClearBlock();
   last_block_iq_A_ = std::numeric_limits<double>::quiet_NaN();
   mean_nis_ = 1.0;
-  // The allowance at the restored excitation (no block yet: this one's distance is 0).
+  // The allowance at the restored excitation (only the window's spread of iq is used here).
   allowance_ohm_ = 0.0;
   const Excitation ex = AssessExcitation(0.0, 0.0);
   if (ex.spread_A > 0.0) allowance_ohm_ = config_.voltage_error_allowance_V / ex.spread_A;
@@ -410,7 +410,6 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     const double z_capped = std::min(z_of[best], kMaxEvidenceZ);
     const double keep = std::exp(-dt / config_.consistency_window_s);
     mean_nis_ = keep * mean_nis_ + (1.0 - keep) * z_capped * z_capped;
-
   }
   Publish(Classify(measure && separable, measure && identifiable), eps_V[best], weight_of[best]);
 }

@@ -119,7 +119,8 @@ struct ResistanceIdentifierConfig {
   /// and the level above which the model is taken not to explain the data (expected 1).
   double consistency_window_s = 60.0;
   double max_consistency_nis = 4.0;
-  int reacquire_after_rejections = 30;    ///< consecutive rejected blocks before P is re-opened
+  /// Consecutive rejected or down-weighted blocks (z >= 3) before P is re-opened.
+  int reacquire_after_rejections = 30;
   /// Blocks whose mean |iq| is below this are not used at all (0 = use all). The inverter's
   /// dead-time voltage error is nearly constant (absorbed into psi_f) only well above its
   /// knee; below it, its slope against iq looks like resistance. About 3x the drive's knee.
