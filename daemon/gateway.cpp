@@ -380,6 +380,8 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const
     case MappingOutput::kMagnetFluxTempDegC: return s.magnet_flux_degC;
     case MappingOutput::kRsOhm: return ident ? s.resistance.resistance_ohm : kNaN;
     case MappingOutput::kFluxWb: return ident ? s.resistance.flux_Wb : kNaN;
+    case MappingOutput::kWindingResSdK: return ident ? s.resistance.winding_sd_K : kNaN;
+    case MappingOutput::kMagnetFluxSdK: return s.magnet_flux_sd_K;
     case MappingOutput::kRsStatus: return static_cast<double>(s.resistance.status);
     case MappingOutput::kFluxStatus:
       // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
@@ -569,15 +571,12 @@ void Gateway::FillTemperatures(const Pump& pump, pumptherm::temperatures_t& m) c
   m.resistance_ohm = ident ? r.resistance_ohm : kNaN;
   m.resistance_sd_ohm = ident ? r.resistance_sigma_ohm : kNaN;
   m.flux_Wb = ident ? r.flux_Wb : kNaN;
-  m.flux_sd_Wb = ident ? s.flux_sd_Wb : kNaN;
+  m.flux_sd_Wb = ident ? r.flux_sd_Wb : kNaN;
   m.magnet_flux_degC = s.magnet_flux_degC;
   m.magnet_flux_sd_K = s.magnet_flux_sd_K;
   m.resistance_winding_degC = s.winding_resistance_degC;
-  // Standard deviation of eq. 3 applied to the resistance: sd_R / (R0 alpha).
-  const auto& law = pump.motor().copper;
-  m.resistance_winding_sd_K = std::isfinite(s.winding_resistance_degC)
-                                  ? r.resistance_sigma_ohm / (law.r0_ohm * law.alpha_per_K)
-                                  : kNaN;
+  // The identifier's 1-sigma of eq. 3's temperature (covariance and voltage-error allowance).
+  m.resistance_winding_sd_K = std::isfinite(s.winding_resistance_degC) ? r.winding_sd_K : kNaN;
   m.ident_status = static_cast<std::int8_t>(r.status);
   const auto& names = pump.model().StateNames();
   m.num_nodes = static_cast<std::int32_t>(names.size());
@@ -831,7 +830,8 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
     rprob.push_back(h.probability);
     rrej.push_back(h.consecutive_rejections);
   }
-  for (int i = 0; i < 4; ++i) rm.push_back(s.resistance.moments(i / 2, i % 2));
+  // Excitation moments of [iq, w_r, 1] (9, row-major); files with 4 ([iq, w_r]) still load.
+  for (int i = 0; i < 9; ++i) rm.push_back(s.resistance.moments(i / 3, i % 3));
   t.insert("resistance_x", rx);
   t.insert("resistance_p", rp);
   t.insert("resistance_probability", rprob);
@@ -942,7 +942,7 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
     bool ok = numbers("x_degC", static_cast<std::size_t>(n), x) &&
               numbers("s_K2", static_cast<std::size_t>(n * n), cov) &&
               numbers("resistance_x", 4 * hypotheses, rx) && numbers("resistance_p", 16 * hypotheses, rp) &&
-              numbers("resistance_moments", 4, rm) && saved_wall_us > 0 &&
+              (numbers("resistance_moments", 9, rm) || numbers("resistance_moments", 4, rm)) && saved_wall_us > 0 &&
               s.time_us <= now_us + 60'000'000;
     if (ok && version == 2) {
       ok = numbers("resistance_probability", hypotheses, rprob) &&
@@ -956,8 +956,14 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
       s.inputs.iq_A = (*t)["inputs"]["iq_A"].value_or(0.0);
       s.inputs.ambient_degC = (*t)["inputs"]["ambient_degC"].value_or(25.0);
       s.inputs.coolant_degC = (*t)["inputs"]["coolant_degC"].value_or(25.0);
-      Eigen::Matrix2d moments;
-      for (int i = 0; i < 4; ++i) moments(i / 2, i % 2) = rm[static_cast<std::size_t>(i)];
+      Eigen::Matrix3d moments;
+      if (rm.size() == 9) {
+        for (int i = 0; i < 9; ++i) moments(i / 3, i % 3) = rm[static_cast<std::size_t>(i)];
+      } else {
+        Eigen::Matrix2d two;
+        for (int i = 0; i < 4; ++i) two(i / 2, i % 2) = rm[static_cast<std::size_t>(i)];
+        moments = estimators::MomentsFromTwoRegressors(two);
+      }
       const auto blocks = static_cast<std::uint64_t>((*t)["resistance_blocks"].value_or<std::int64_t>(0));
       const auto hx = [&](std::size_t j) {
         Eigen::Vector4d v;

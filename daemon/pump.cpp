@@ -418,7 +418,9 @@ void Pump::PublishMagnetTemperature() {
 
 const estimators::NodeMeasurements& Pump::ExtraMeasurements(double winding_res_degC) {
   extra_.Clear();
-  if (config_.fuse_winding) extra_.Add(estimators::kWindingWeightsRow, winding_res_degC, config_.winding_sd_K);
+  // The identifier's 1-sigma and the model's own (config) add in quadrature: independent.
+  const double winding_sd_K = std::hypot(identifier_.estimate().winding_sd_K, config_.winding_sd_K);
+  if (config_.fuse_winding) extra_.Add(estimators::kWindingWeightsRow, winding_res_degC, winding_sd_K);
   if (magnet_state_ >= 0 && std::isfinite(magnet_z_degC_)) {
     extra_.Add(magnet_state_, magnet_z_degC_, std::max(magnet_z_sd_K_, config_.magnet_min_sd_K), magnet_gain_);
   }

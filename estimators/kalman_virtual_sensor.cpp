@@ -42,9 +42,11 @@ void VirtualThermalSensor::Initialise(const Eigen::VectorXd& x0_degC) {
 
 const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs, double dt_s,
                                                      const Eigen::VectorXd& measured_degC,
-                                                     double winding_degC) {
+                                                     double winding_degC, double winding_sd_K) {
   winding_only_.Clear();
-  winding_only_.Add(kWindingWeightsRow, winding_degC, config_.winding_measurement_sd_K);
+  // NaN or not positive: the configured winding_measurement_sd_K.
+  const double sd = winding_sd_K > 0.0 ? winding_sd_K : config_.winding_measurement_sd_K;
+  winding_only_.Add(kWindingWeightsRow, winding_degC, sd);
   return Step(inputs, dt_s, measured_degC, winding_only_);
 }
 

@@ -105,9 +105,11 @@ class VirtualThermalSensor {
                                  const Eigen::VectorXd& measured_degC,
                                  const NodeMeasurements& extra);
   /// The same with one extra measurement: `winding_degC` (the resistance-based winding
-  /// temperature, NaN = none) with the configured winding_measurement_sd_K.
+  /// temperature, NaN = none) with standard deviation `winding_sd_K` (NaN or not positive: the
+  /// configured winding_measurement_sd_K).
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s,
-                                 const Eigen::VectorXd& measured_degC, double winding_degC);
+                                 const Eigen::VectorXd& measured_degC, double winding_degC,
+                                 double winding_sd_K = std::numeric_limits<double>::quiet_NaN());
 
   const Eigen::VectorXd& Estimate_degC() const { return filter_.State(); }
   const Eigen::MatrixXd& Covariance_K2() const { return filter_.Covariance(); }

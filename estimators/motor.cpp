@@ -35,6 +35,10 @@ plausible_max_degC = 180.0
 # bits over a +/-48 V DC link:
 # [drive]
 # uq_resolution_V = 0.0234375
+# The drive's voltage error from dead time, if known (compensated before identification):
+# u_err tanh(|i| / knee) along the current vector; knee 0 gives u_err sign(i).
+# voltage_error_V = 0.15
+# voltage_error_knee_A = 0.5
 
 [magnet]
 # The paper gives psi_f (Table 1) but neither the magnet grade nor the temperature of the
@@ -109,6 +113,38 @@ void ParseMagnetLaw(const toml::node& node, std::string_view source, MotorDescri
         Where(source, magnet.get("flux_temperature_coefficient_per_K")->source()), beta));
   }
   m.magnet.flux_temperature_coefficient_per_K = beta;
+}
+
+}  // namespace
+
+namespace {
+
+// The inverter's voltage error along the current vector (dead time, switch drops):
+// u_err tanh(|i| / knee) i / |i|, the sign(i) term when the knee is 0. Both keys or neither.
+void ParseVoltageError(const toml::table& drive, std::string_view source, MotorDescription& m) {
+  const auto u = Number(drive, "voltage_error_V", "drive.voltage_error_V", source, false);
+  const auto knee = Number(drive, "voltage_error_knee_A", "drive.voltage_error_knee_A", source, false);
+  if (knee && !u) {
+    throw MotorDescriptionError(fmt::format(
+        "{}: key 'drive.voltage_error_knee_A' needs 'drive.voltage_error_V'",
+        Where(source, drive.get("voltage_error_knee_A")->source())));
+  }
+  if (!u) return;
+  // A few volts is a broken drive, not a dead-time error; the sign is fixed by the model.
+  if (!(*u >= 0.0 && *u <= 5.0)) {
+    throw MotorDescriptionError(fmt::format(
+        "{}: key 'drive.voltage_error_V' must be within [0, 5] V, got {}",
+        Where(source, drive.get("voltage_error_V")->source()), *u));
+  }
+  m.voltage_error_V = *u;
+  if (knee) {
+    if (!(*knee >= 0.0 && *knee <= 100.0)) {
+      throw MotorDescriptionError(fmt::format(
+          "{}: key 'drive.voltage_error_knee_A' must be within [0, 100] A, got {}",
+          Where(source, drive.get("voltage_error_knee_A")->source()), *knee));
+    }
+    m.voltage_error_knee_A = *knee;
+  }
 }
 
 }  // namespace
@@ -191,7 +227,8 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
           fmt::format("{}: key 'drive' must be a table", Where(source, drive_node->source())));
     }
     const toml::table& drive = *drive_node->as_table();
-    RejectUnknownKeys(drive, {"uq_resolution_V"}, "drive.", source);
+    RejectUnknownKeys(drive, {"uq_resolution_V", "voltage_error_V", "voltage_error_knee_A"},
+                      "drive.", source);
     if (auto v = Number(drive, "uq_resolution_V", "drive.uq_resolution_V", source, false)) {
       // 12 bits over a 48 V link is 23 mV; a step of volts would be no voltage measurement.
       if (!(*v > 0.0 && *v <= 10.0)) {
@@ -201,6 +238,7 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
       }
       m.uq_resolution_V = *v;
     }
+    ParseVoltageError(drive, source, m);
   }
   if (const toml::node* magnet_node = root.get("magnet")) ParseMagnetLaw(*magnet_node, source, m);
   return m;
@@ -223,6 +261,13 @@ MotorDescription MotorPreset(std::string_view name) {
 
 double ElectricalSpeed_rad_per_s(const MotorDescription& motor, double speed_rpm) noexcept {
   return speed_rpm * (2.0 * std::numbers::pi / 60.0) * motor.pole_pairs;
+}
+
+double VoltageErrorQ_V(const MotorDescription& motor, double id_A, double iq_A) noexcept {
+  const double mag = std::hypot(id_A, iq_A);
+  if (!(motor.voltage_error_V > 0.0) || !(mag > 0.0)) return 0.0;
+  const double shape = motor.voltage_error_knee_A > 0.0 ? std::tanh(mag / motor.voltage_error_knee_A) : 1.0;
+  return motor.voltage_error_V * shape * iq_A / mag;
 }
 
 double PlausibleMinResistance_ohm(const MotorDescription& motor) noexcept {

@@ -16,6 +16,8 @@
 ///     plausible_max_degC = 180.0
 ///     [drive]                       # optional: how the drive reports its signals
 ///     uq_resolution_V = 0.0234375   # step of the reported uq (codes at multiples of it)
+///     voltage_error_V = 0.15        # inverter dead-time voltage error (optional)
+///     voltage_error_knee_A = 0.5    # its tanh knee (optional; 0 = sign(i))
 ///     [magnet]                      # optional: how the flux falls with magnet temperature
 ///     t0_degC = 27.2                # temperature at which flux_Wb holds
 ///     flux_temperature_coefficient_per_K = -1.0e-3  # reversible coefficient of the remanence
@@ -65,13 +67,24 @@ struct MotorDescription {
   /// The magnet's temperature law; not Given() when the file has no [magnet] table (then no
   /// magnet temperature is derived from the flux).
   MagnetLaw magnet;
+  /// Inverter voltage error (dead time, switch drops) along the current vector, V: the drive
+  /// applies u - u_err tanh(|i| / knee) i / |i| when asked for u. The identifier adds it back
+  /// to the reported uq before identification. 0 = not known: nothing compensated.
+  double voltage_error_V = 0.0;
+  /// Current magnitude at which that error reaches 76 % (tanh), A; 0 = the plain sign(i) term.
+  double voltage_error_knee_A = 0.0;
 };
+
+/// The q-axis share of the inverter voltage error at currents (id, iq), V:
+/// voltage_error_V tanh(|i| / knee) iq / |i| (iq / |i| alone for knee 0); 0 at zero current.
+double VoltageErrorQ_V(const MotorDescription& motor, double id_A, double iq_A) noexcept;
 
 /// Parses a motor description from TOML `text`; `source` names it in errors (a path or
 /// "preset han2019-tmp"). Throws MotorDescriptionError naming source, line and key for a
 /// syntax error, a missing, unknown or mistyped key, or a value out of range
 /// (pole_pairs < 1, non-positive speed, flux, inductance, r0 or alpha, empty band, a
-/// uq_resolution_V outside (0, 10] V, a magnet coefficient outside [-5e-3, -1e-5] per K).
+/// uq_resolution_V outside (0, 10] V, a voltage_error_V outside [0, 5] V, a knee outside
+/// [0, 100] A or without voltage_error_V, a magnet coefficient outside [-5e-3, -1e-5] per K).
 MotorDescription ParseMotorDescription(std::string_view text, std::string_view source);
 
 /// The TOML text of a built-in preset, or an empty view when `name` is not a preset.

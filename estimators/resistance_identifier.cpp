@@ -41,6 +41,7 @@ std::string_view ToString(ResistanceStatus status) noexcept {
     case ResistanceStatus::kNotIdentifiable: return "not_identifiable";
     case ResistanceStatus::kImplausible: return "implausible";
     case ResistanceStatus::kInvalidInput: return "invalid_input";
+    case ResistanceStatus::kHeld: return "held";
   }
   return "unknown";
 }
@@ -51,10 +52,14 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
   if (config.block_samples < 1 || !(config.current_noise_A > 0.0) ||
       !(config.voltage_noise_V > 0.0) || !(config.speed_noise_rpm >= 0.0) ||
       !(config.excitation_window_s > 0.0) || !(config.identifiable_sigma_rel > 0.0) ||
-      !(config.converged_sigma_rel > 0.0) || !(config.initial_resistance_sigma_rel > 0.0) ||
+      !(config.tracking_bound_K > 0.0) || !(config.voltage_error_allowance_V >= 0.0) ||
+      !(config.consistency_window_s > 0.0) || !(config.max_consistency_nis > 0.0) ||
+      !(config.initial_resistance_sigma_rel > 0.0) ||
       !(config.initial_flux_sigma_rel > 0.0) || !(config.winding_drift_K_per_sqrt_h >= 0.0) ||
       !(config.magnet_drift_K_per_sqrt_h >= 0.0) ||
       !(config.winding_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
+      !(config.steady_winding_drift_K_per_sqrt_h >= 0.0) ||
+      !(config.steady_winding_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
       !(config.magnet_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
       !(config.steady_magnet_drift_K_per_sqrt_h >= 0.0) ||
       !(config.steady_magnet_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
@@ -69,17 +74,24 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
   const double dpsi_per_K = motor.flux_Wb * config.flux_temperature_coefficient_per_K;
   const double h = kSecondsPerHour;
   // Intensities: variance growth per second of each random walk (ohm^2/s, ohm^2/s^3, ...).
-  q_resistance_ohm2_per_s_ = std::pow(dr_per_K * config.winding_drift_K_per_sqrt_h, 2) / h;
-  q_resistance_rate_ohm2_per_s3_ =
-      std::pow(dr_per_K * config.winding_rate_walk_K_per_h_per_sqrt_h / h, 2) / h;
+  // The winding's walk per hypothesis: under a steady magnet every uq drift at constant current
+  // is resistance, so the winding may move fast (a cooling failure); under a drifting magnet
+  // a fast winding would take the magnet's drift, so it stays slow.
+  const double w_drift[kMagnetHypotheses] = {config.steady_winding_drift_K_per_sqrt_h,
+                                             config.winding_drift_K_per_sqrt_h};
+  const double w_rate_walk[kMagnetHypotheses] = {config.steady_winding_rate_walk_K_per_h_per_sqrt_h,
+                                                 config.winding_rate_walk_K_per_h_per_sqrt_h};
   const double drift[kMagnetHypotheses] = {config.steady_magnet_drift_K_per_sqrt_h,
                                            config.magnet_drift_K_per_sqrt_h};
   const double rate_walk[kMagnetHypotheses] = {config.steady_magnet_rate_walk_K_per_h_per_sqrt_h,
                                                config.magnet_rate_walk_K_per_h_per_sqrt_h};
   speed_noise_rad_per_s_ = ElectricalSpeed_rad_per_s(motor, config.speed_noise_rpm);
+  w_scale_rad_per_s_ = ElectricalSpeed_rad_per_s(motor, motor.rated_speed_rpm);
   r_min_ohm_ = PlausibleMinResistance_ohm(motor);
   r_max_ohm_ = PlausibleMaxResistance_ohm(motor);
   for (int j = 0; j < kMagnetHypotheses; ++j) {
+    q_resistance_ohm2_per_s_[j] = std::pow(dr_per_K * w_drift[j], 2) / h;
+    q_resistance_rate_ohm2_per_s3_[j] = std::pow(dr_per_K * w_rate_walk[j] / h, 2) / h;
     q_flux_Wb2_per_s_[j] = std::pow(dpsi_per_K * drift[j], 2) / h;
     q_flux_rate_Wb2_per_s3_[j] = std::pow(dpsi_per_K * rate_walk[j] / h, 2) / h;
     // Initial covariance: nameplate uncertainty; rates start at zero with the stationary
@@ -90,7 +102,7 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
         std::pow(config.initial_resistance_sigma_rel * motor.copper.r0_ohm, 2);
     p0(kStateFlux, kStateFlux) = std::pow(config.initial_flux_sigma_rel * motor.flux_Wb, 2);
     p0(kStateResistanceRate, kStateResistanceRate) =
-        q_resistance_rate_ohm2_per_s3_ * config.rate_time_constant_s / 2.0;
+        q_resistance_rate_ohm2_per_s3_[j] * config.rate_time_constant_s / 2.0;
     // A steady magnet's rate walk may be 0; keep P0 positive definite with a floor far below
     // anything measurable (1e-9 of the drifting hypothesis' spread of 1 K/h).
     p0(kStateFluxRate, kStateFluxRate) =
@@ -100,8 +112,14 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
   Reset();
 }
 
+Eigen::Matrix3d MomentsFromTwoRegressors(const Eigen::Matrix2d& moments) {
+  Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
+  m.topLeftCorner<2, 2>() = moments;
+  return m;
+}
+
 ResistanceIdentifierState StateFromSingleFilter(const Eigen::Vector4d& x, const Eigen::Matrix4d& p,
-                                                const Eigen::Matrix2d& moments, std::uint64_t blocks,
+                                                const Eigen::Matrix3d& moments, std::uint64_t blocks,
                                                 int consecutive_rejections,
                                                 const ResistanceIdentifierConfig& config) {
   ResistanceIdentifierState s;
@@ -120,7 +138,7 @@ ResistanceIdentifierState StateFromSingleFilter(const Eigen::Vector4d& x, const 
 void ResistanceIdentifier::ClearBlock() noexcept {
   block_count_ = 0;
   block_duration_s_ = 0.0;
-  sum_iq_A_ = sum_w_rad_per_s_ = sum_y_V_ = 0.0;
+  sum_iq_A_ = sum_id_A_ = sum_w_rad_per_s_ = sum_y_V_ = 0.0;
   uq_first_V_ = sum_duq_V_ = sum_duq2_V2_ = 0.0;
 }
 
@@ -137,6 +155,8 @@ void ResistanceIdentifier::Reset() noexcept {
   state_.hypotheses[kDriftingMagnet].probability = 1.0 - config_.steady_magnet_prior;
   ClearBlock();
   last_block_iq_A_ = std::numeric_limits<double>::quiet_NaN();
+  mean_nis_ = 1.0;
+  allowance_ohm_ = 0.0;
   estimate_ = ResistanceEstimate{};
   Mix();
   Publish(ResistanceStatus::kInitialising, 0.0, 0.0);
@@ -164,6 +184,11 @@ bool ResistanceIdentifier::Restore(const ResistanceIdentifierState& state) noexc
   state_ = s;
   ClearBlock();
   last_block_iq_A_ = std::numeric_limits<double>::quiet_NaN();
+  mean_nis_ = 1.0;
+  // The allowance at the restored excitation (only the window's spread of iq is used here).
+  allowance_ohm_ = 0.0;
+  const Excitation ex = AssessExcitation(0.0, 0.0);
+  if (ex.spread_A > 0.0) allowance_ohm_ = config_.voltage_error_allowance_V / ex.spread_A;
   Mix();
   Publish(state_.blocks == 0 ? ResistanceStatus::kInitialising : ResistanceStatus::kConverging,
           0.0, 0.0);
@@ -185,8 +210,11 @@ void ResistanceIdentifier::Publish(ResistanceStatus status, double eps_V, double
   estimate_.flux_Wb = x_(kStateFlux);
   estimate_.winding_degC = TemperatureAt(motor_.copper, estimate_.resistance_ohm);
   estimate_.resistance_sigma_ohm = std::sqrt(std::max(p_(kStateResistance, kStateResistance), 0.0));
+  estimate_.winding_sd_K = WindingSd_K();
+  estimate_.flux_sd_Wb = std::sqrt(std::max(p_(kStateFlux, kStateFlux), 0.0));
   estimate_.innovation_V = eps_V;
   estimate_.weight = weight;
+  estimate_.mean_nis = mean_nis_;
   estimate_.steady_magnet_probability = state_.hypotheses[kSteadyMagnet].probability;
   estimate_.status = status;
 }
@@ -200,6 +228,7 @@ ResistanceEstimate ResistanceIdentifier::Update(const DqSample& s, double dt_s) 
   // q-axis equation (Han 2019 eq. 6) with the Ls w_r id term moved to the output.
   sum_y_V_ += s.uq_V - motor_.inductance_H * s.w_r_rad_per_s * s.id_A;
   sum_iq_A_ += s.iq_A;
+  sum_id_A_ += s.id_A;
   sum_w_rad_per_s_ += s.w_r_rad_per_s;
   if (block_count_ == 0) uq_first_V_ = s.uq_V;
   const double duq = s.uq_V - uq_first_V_;
@@ -223,6 +252,9 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     const double uq_var = (sum_duq2_V2_ - sum_duq_V_ * sum_duq_V_ / n) / (n - 1.0);
     y += CorrectQuantisedMean(uq_mean, uq_var, block_count_, motor_.uq_resolution_V) - uq_mean;
   }
+  // The inverter's voltage error (motor description), on the block means: within a block the
+  // current barely moves, and one evaluation a block keeps the per-sample cost unchanged.
+  y -= VoltageErrorQ_V(motor_, sum_id_A_ / n, iq);
   ClearBlock();
   ++state_.blocks;
   const double previous_iq = last_block_iq_A_;
@@ -257,24 +289,23 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     f(kStateResistanceRate, kStateResistanceRate) = 0.0;
   }
 
-  // Excitation monitor: exponentially weighted moments of [iq, w_r]; the information on Rs
-  // with psi_f free is the Schur complement S_ii - S_iw^2 / S_ww of the regressor moments.
-  const Eigen::Vector2d v(iq, w);
+  // Excitation monitor: exponentially weighted moments of [iq, w_r, 1] over blocks.
+  const Eigen::Vector3d v(iq, w, 1.0);
   const double decay = std::exp(-dt / config_.excitation_window_s);
   state_.moments = decay * state_.moments + v * v.transpose();
-  const double s_ii = state_.moments(0, 0);
-  const double s_iw = state_.moments(0, 1);
-  const double s_ww = state_.moments(1, 1);
-  const double info_r = s_ww > 0.0 ? s_ii - s_iw * s_iw / s_ww : s_ii;  // A^2 (block units)
+  const Excitation ex = AssessExcitation(iq, w);
   const double sigma_target = config_.identifiable_sigma_rel * motor_.copper.r0_ohm;
   const double info_needed = r / (sigma_target * sigma_target);
-  // Information this block alone adds: its iq's distance from the window's iq at this speed
-  // (Schur complement of the previous moments updated by one block). A load change makes the
-  // block count at once, so its information is not spent on psi_f while the window catches up.
-  const double mean_iq = s_ww > 0.0 ? s_iw / s_ww * w : 0.0;
-  const double block_info = (iq - mean_iq) * (iq - mean_iq);
-  const bool identifiable = !idle && info_r > 0.0 &&
-                            (info_r >= info_needed || block_info >= kFreshExcitationShare * info_needed);
+  // A load change makes the block count at once (its information is not spent on psi_f while
+  // the window catches up): its iq's distance from the window's iq at this speed.
+  const auto enough = [&](double info) {
+    return info > 0.0 && (info >= info_needed || ex.block_info >= kFreshExcitationShare * info_needed);
+  };
+  // separable: Rs apart from psi_f (Han 2019 eq. 6 as it stands); identifiable: also apart from
+  // a constant voltage offset (the inverter's error at one sign of iq). Only the second moves Rs.
+  const bool separable = !idle && enough(ex.info_two);
+  const bool identifiable = separable && enough(ex.info_three);
+  if (identifiable && ex.spread_A > 0.0) allowance_ohm_ = config_.voltage_error_allowance_V / ex.spread_A;
   // Too little current for the voltage model (dead-time knee): no measurement update.
   const bool measure = !(std::abs(iq) < config_.min_current_A);
 
@@ -283,6 +314,7 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   std::array<double, kMagnetHypotheses> log_likelihood{};
   std::array<double, kMagnetHypotheses> eps_V{};
   std::array<double, kMagnetHypotheses> weight_of{};
+  std::array<double, kMagnetHypotheses> z_of{};
   for (int j = 0; j < kMagnetHypotheses; ++j) {
     if (j == kSteadyMagnet && !SteadyOn()) continue;
     Eigen::Vector4d& x = state_.hypotheses[j].x;
@@ -293,8 +325,8 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
       q(pos, rate) = q(rate, pos) = q_rate * dt * dt / 2.0;
       q(rate, rate) = q_rate * dt;
     };
-    add_pair(kStateResistance, kStateResistanceRate, q_resistance_ohm2_per_s_,
-             q_resistance_rate_ohm2_per_s3_);
+    add_pair(kStateResistance, kStateResistanceRate, q_resistance_ohm2_per_s_[j],
+             q_resistance_rate_ohm2_per_s3_[j]);
     add_pair(kStateFlux, kStateFluxRate, q_flux_Wb2_per_s_[j], q_flux_rate_Wb2_per_s3_[j]);
     x = f * x;
     p = f * p * f.transpose() + q;
@@ -314,6 +346,7 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     const Eigen::Vector4d p_h = p * hrow;
     const double s = hrow.dot(p_h) + r;
     const double z = std::abs(eps_V[j]) / std::sqrt(s);
+    z_of[j] = z;
     // Gaussian likelihood of the innovation; z capped at the rejection level so that one
     // outlying block cannot rule a hypothesis out.
     const double z_capped = std::min(z, kMaxEvidenceZ);
@@ -336,9 +369,13 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
       const Eigen::Matrix4d a_mat = Eigen::Matrix4d::Identity() - gain * hrow.transpose();
       p = a_mat * p * a_mat.transpose() + r_eff * gain * gain.transpose();
       p = 0.5 * (p + p.transpose()).eval();
+    }
+    // A run of rejected or down-weighted blocks (z >= 3; 0.3 % of blocks by chance) says the
+    // model no longer fits (a stale restored state, a motor swap, a held Rs that the data
+    // contradict while this hypothesis' flux is stiff): re-open P.
+    if (weight >= 1.0) {
       state_.hypotheses[j].consecutive_rejections = 0;
     } else if (++state_.hypotheses[j].consecutive_rejections >= config_.reacquire_after_rejections) {
-      // The model no longer fits (a stale restored state, a motor swap): re-open P.
       p = p0_[j];
       state_.hypotheses[j].consecutive_rejections = 0;
     }
@@ -346,7 +383,9 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   // Probabilities of the hypotheses (Bayes' rule on load-change blocks; between load changes
   // both explain uq equally well, one with Rs and one with psi_f, and the tighter one would win
   // for no physical reason). A floor keeps a hypothesis that was wrong revivable.
-  if (SteadyOn() && measure && load_change) {
+  // Only where Rs is identifiable: while it is held, the stiffer filter mispredicts the held
+  // part, which is no evidence about the magnet.
+  if (SteadyOn() && measure && identifiable && load_change) {
     const double top = std::max(log_likelihood[kSteadyMagnet], log_likelihood[kDriftingMagnet]);
     double total = 0.0;
     for (int j = 0; j < kMagnetHypotheses; ++j) {
@@ -365,14 +404,59 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   const int best = state_.hypotheses[kSteadyMagnet].probability >= state_.hypotheses[kDriftingMagnet].probability
                        ? kSteadyMagnet
                        : kDriftingMagnet;
-  Publish(Classify(measure && identifiable), eps_V[best], weight_of[best]);
+  if (measure) {
+    // Residual consistency of the hypothesis reported: the EW mean of z^2 (1 when the model and
+    // its variances explain the data; capped so that one outlier is not a minute of doubt).
+    const double z_capped = std::min(z_of[best], kMaxEvidenceZ);
+    const double keep = std::exp(-dt / config_.consistency_window_s);
+    mean_nis_ = keep * mean_nis_ + (1.0 - keep) * z_capped * z_capped;
+  }
+  Publish(Classify(measure && separable, measure && identifiable), eps_V[best], weight_of[best]);
 }
 
-ResistanceStatus ResistanceIdentifier::Classify(bool identifiable) const noexcept {
+ResistanceIdentifier::Excitation ResistanceIdentifier::AssessExcitation(double iq, double w) const noexcept {
+  // Information on Rs with the other regressors free: the Schur complement of the moments
+  // (the residual sum of squares of iq regressed on them). w_r is scaled to the rated speed so
+  // that [w_r, 1], collinear at constant speed, stay well conditioned; a ridge of 1e-9 of the
+  // trace keeps that block invertible (it counts slightly less of iq as explained).
+  const Eigen::Matrix3d& m = state_.moments;
+  Excitation ex;
+  const double s_ii = m(0, 0);
+  const double s_iw = m(0, 1);
+  const double s_ww = m(1, 1);
+  ex.info_two = s_ww > 0.0 ? s_ii - s_iw * s_iw / s_ww : s_ii;
+  const double ws = w_scale_rad_per_s_;
+  const double a = s_ww / (ws * ws), b = m(1, 2) / ws, c = m(2, 2);
+  const double ridge = 1e-9 * (a + c) + 1e-300;
+  const double det = (a + ridge) * (c + ridge) - b * b;
+  const double g0 = s_iw / ws, g1 = m(0, 2);
+  if (!(det > 0.0)) {
+    ex.info_three = 0.0;
+    return ex;
+  }
+  // coefficients of iq on [w_r / ws, 1]
+  const double k0 = ((c + ridge) * g0 - b * g1) / det;
+  const double k1 = ((a + ridge) * g1 - b * g0) / det;
+  ex.info_three = std::max(s_ii - (k0 * g0 + k1 * g1), 0.0);
+  const double predicted = k0 * w / ws + k1;
+  ex.block_info = (iq - predicted) * (iq - predicted);
+  ex.spread_A = c > 0.0 ? std::sqrt(ex.info_three / c) : 0.0;
+  return ex;
+}
+
+double ResistanceIdentifier::WindingSd_K() const noexcept {
+  const double var = std::max(p_(kStateResistance, kStateResistance), 0.0) + allowance_ohm_ * allowance_ohm_;
+  return std::sqrt(var) / (motor_.copper.r0_ohm * motor_.copper.alpha_per_K);
+}
+
+ResistanceStatus ResistanceIdentifier::Classify(bool separable, bool identifiable) const noexcept {
   const double rs = x_(kStateResistance);
   if (!(rs >= r_min_ohm_ && rs <= r_max_ohm_)) return ResistanceStatus::kImplausible;
-  if (!identifiable) return ResistanceStatus::kNotIdentifiable;
-  if (std::sqrt(p_(kStateResistance, kStateResistance)) > config_.converged_sigma_rel * motor_.copper.r0_ohm) {
+  if (!separable) return ResistanceStatus::kNotIdentifiable;
+  if (!identifiable) return ResistanceStatus::kHeld;
+  // Evidence, not a small covariance alone: the 2-sigma of the winding temperature within the
+  // bound, and residuals consistent with the variances that gave it.
+  if (2.0 * WindingSd_K() > config_.tracking_bound_K || mean_nis_ > config_.max_consistency_nis) {
     return ResistanceStatus::kConverging;
   }
   return ResistanceStatus::kTracking;

@@ -17,17 +17,23 @@
 ///   - the weight Lambda is the paper's four levels but on the normalised innovation
 ///     |eps| / sqrt(phi^T P phi + r) instead of |eps| / |y| (eq. 23 rejects nearly every sample
 ///     under realistic noise); Lambda = 0 leaves theta unchanged;
-///   - an excitation monitor (exponentially weighted information on Rs with psi_f free, i.e.
-///     the Schur complement of the regressor moments) decides whether Rs and psi_f can be told
-///     apart; when they cannot, Rs is held and only psi_f is tracked;
+///   - an excitation monitor (exponentially weighted information on Rs with psi_f and a
+///     constant voltage offset free, i.e. the Schur complement of the moments of [iq, w_r, 1])
+///     decides whether Rs can be told apart from psi_f and from an inverter voltage offset;
+///     when it cannot, Rs is held and only psi_f is tracked;
+///   - when the motor description gives the inverter's voltage error, it is subtracted from
+///     each block mean of uq before identification;
 ///   - two such filters run side by side, one per hypothesis about the magnet: steady (its flux
 ///     barely drifts) and drifting (the rotor warming or cooling). Between load changes a drift
 ///     of uq is resistance under the first and mostly flux under the second; each load change
 ///     tells them apart, so their probabilities are updated with the innovations of load-change
 ///     blocks only (multiple-model estimation, Magill 1965; Bar-Shalom, Li, Kirubarajan 2001,
 ///     sec. 11.6), and the output is their probability-weighted mixture;
-///   - the estimate is checked against a plausible band from the motor description.
-/// Every output carries one ResistanceStatus.
+///   - the estimate is checked against a plausible band from the motor description;
+///   - `tracking` needs evidence: identifiable now, a 1-sigma of the winding temperature
+///     (covariance plus an allowance for unmodelled voltage error over the current excitation)
+///     within half of tracking_bound_K, and innovations consistent with their variance.
+/// Every output carries one ResistanceStatus and the winding temperature's 1-sigma.
 ///
 /// Pure: no I/O, no clock (time enters as dt_s), no allocation after construction.
 
@@ -61,6 +67,9 @@ enum class ResistanceStatus : std::uint8_t {
                          ///< below min_current_A)
   kImplausible = 4,      ///< the Rs estimate is outside the plausible band of the motor
   kInvalidInput = 5,     ///< this sample had a NaN or infinite value and was ignored
+  kHeld = 6,             ///< the regressors vary, but iq does not vary independently of a
+                         ///< constant (constant current during a run-up): Rs cannot be told
+                         ///< from an inverter voltage offset, so Rs is held (psi_f tracked)
 };
 
 /// Lower-case name of a status ("tracking", "not_identifiable", ...).
@@ -73,8 +82,13 @@ struct ResistanceIdentifierConfig {
   double current_noise_A = 0.01;          ///< rms noise of one raw iq sample
   double voltage_noise_V = 0.02;          ///< rms noise of one raw uq sample
   double speed_noise_rpm = 1.0;           ///< rms noise of one raw mechanical speed sample
-  double winding_drift_K_per_sqrt_h = 1.0;   ///< random walk of the winding temperature
-  double winding_rate_walk_K_per_h_per_sqrt_h = 10.0;  ///< random walk of its rate of change
+  /// Drifting-magnet hypothesis: random walk of the winding temperature, and of its rate.
+  double winding_drift_K_per_sqrt_h = 1.0;
+  double winding_rate_walk_K_per_h_per_sqrt_h = 10.0;
+  /// Steady-magnet hypothesis: the same two, loose enough for a winding heating several K/min
+  /// (with the flux steady, a uq drift at constant current can only be resistance).
+  double steady_winding_drift_K_per_sqrt_h = 3.0;
+  double steady_winding_rate_walk_K_per_h_per_sqrt_h = 100.0;
   /// Drifting-magnet hypothesis: random walk of the magnet temperature, and of its rate.
   double magnet_drift_K_per_sqrt_h = 0.1;
   double magnet_rate_walk_K_per_h_per_sqrt_h = 3.0;
@@ -95,8 +109,18 @@ struct ResistanceIdentifierConfig {
   double initial_flux_sigma_rel = 0.05;       ///< nameplate psi_f uncertainty (relative)
   double excitation_window_s = 600.0;     ///< time constant of the excitation monitor
   double identifiable_sigma_rel = 0.005;  ///< Rs std (relative) the window must support
-  double converged_sigma_rel = 0.003;     ///< Rs std (relative) for "tracking"
-  int reacquire_after_rejections = 30;    ///< consecutive rejected blocks before P is re-opened
+  /// "tracking" only while twice the winding temperature's 1-sigma is within this bound, K.
+  double tracking_bound_K = 2.0;
+  /// Voltage error left after compensation that may vary with the current (the dead-time
+  /// shape near its knee, converter non-linearity), V. Over the window's spread of iq it is a
+  /// resistance error that no covariance shows; it enters winding_sd_K.
+  double voltage_error_allowance_V = 2e-4;
+  /// Residual consistency: time constant of the mean of the squared normalised innovation,
+  /// and the level above which the model is taken not to explain the data (expected 1).
+  double consistency_window_s = 60.0;
+  double max_consistency_nis = 4.0;
+  /// Consecutive rejected or down-weighted blocks (z >= 3) before P is re-opened.
+  int reacquire_after_rejections = 30;
   /// Blocks whose mean |iq| is below this are not used at all (0 = use all). The inverter's
   /// dead-time voltage error is nearly constant (absorbed into psi_f) only well above its
   /// knee; below it, its slope against iq looks like resistance. About 3x the drive's knee.
@@ -122,8 +146,15 @@ struct ResistanceEstimate {
   double flux_Wb = 0.0;               ///< psi_f estimate
   double winding_degC = 0.0;          ///< Han 2019 eq. 3 applied to resistance_ohm
   double resistance_sigma_ohm = 0.0;  ///< sqrt(P_RR)
+  /// 1-sigma of winding_degC, K: sqrt(P_RR + allowance^2) / (R0 alpha) (Han 2019 eq. 3),
+  /// the allowance being voltage_error_allowance_V over the window's spread of iq.
+  double winding_sd_K = 0.0;
+  double flux_sd_Wb = 0.0;            ///< sqrt(P_psi psi)
   double innovation_V = 0.0;          ///< eps of the last block update
   double weight = 0.0;                ///< Lambda of the last block update
+  /// EW mean of the squared normalised innovation over consistency_window_s (1 when the
+  /// residuals match their variance; above max_consistency_nis: no "tracking").
+  double mean_nis = 1.0;
   double steady_magnet_probability = 0.0;  ///< probability of the steady-magnet hypothesis
   ResistanceStatus status = ResistanceStatus::kInitialising;
 };
@@ -140,14 +171,20 @@ struct ResistanceHypothesisState {
 /// Everything needed to continue later, as plain data (the daemon's state store saves it).
 struct ResistanceIdentifierState {
   std::array<ResistanceHypothesisState, kMagnetHypotheses> hypotheses;  ///< by kSteadyMagnet...
-  Eigen::Matrix2d moments = Eigen::Matrix2d::Zero();  ///< EW moments of [iq, w_r] over blocks
+  /// EW moments of the block means [iq A, w_r rad/s, 1], 3x3 (the (2,2) element is the EW
+  /// block count).
+  Eigen::Matrix3d moments = Eigen::Matrix3d::Zero();
   std::uint64_t blocks = 0;                         ///< block updates since start or reset
 };
+
+/// Moments saved by an identifier without the constant regressor ([iq, w_r] only, 2x2) as
+/// the 3x3 moments: the constant's row and column are zero (no evidence on an offset yet).
+Eigen::Matrix3d MomentsFromTwoRegressors(const Eigen::Matrix2d& moments);
 
 /// A state of the single-filter identifier (pumpthermd saved state version 1: one x, one P)
 /// carried over: both hypotheses continue from it, with the prior probabilities of `config`.
 ResistanceIdentifierState StateFromSingleFilter(const Eigen::Vector4d& x, const Eigen::Matrix4d& p,
-                                                const Eigen::Matrix2d& moments, std::uint64_t blocks,
+                                                const Eigen::Matrix3d& moments, std::uint64_t blocks,
                                                 int consecutive_rejections,
                                                 const ResistanceIdentifierConfig& config);
 
@@ -191,7 +228,15 @@ class ResistanceIdentifier {
   void Mix() noexcept;
   bool SteadyOn() const noexcept { return config_.steady_magnet_prior > 0.0; }
   void ClearBlock() noexcept;
-  ResistanceStatus Classify(bool identifiable) const noexcept;
+  struct Excitation {
+    double info_two = 0.0;    // information on Rs with psi_f free, A^2 (block units)
+    double info_three = 0.0;  // the same with a constant offset free as well
+    double block_info = 0.0;  // this block's squared distance from the window's prediction
+    double spread_A = 0.0;    // rms of iq about that prediction over the window
+  };
+  Excitation AssessExcitation(double iq, double w) const noexcept;
+  ResistanceStatus Classify(bool separable, bool identifiable) const noexcept;
+  double WindingSd_K() const noexcept;
   void Publish(ResistanceStatus status, double eps_V, double weight) noexcept;
 
   MotorDescription motor_;
@@ -202,22 +247,27 @@ class ResistanceIdentifier {
   int block_count_ = 0;
   double block_duration_s_ = 0.0;
   double sum_iq_A_ = 0.0;
+  double sum_id_A_ = 0.0;
   double sum_w_rad_per_s_ = 0.0;
   double sum_y_V_ = 0.0;
   double uq_first_V_ = 0.0;      // first uq of the block: the sums below are relative to it
   double sum_duq_V_ = 0.0;       // (exact variance of 100 values near 40 V)
   double sum_duq2_V2_ = 0.0;
   double last_block_iq_A_ = 0.0;  // NaN after start, reset or restore: no load change seen
+  double mean_nis_ = 1.0;         // EW mean of the squared normalised innovation (expected 1)
+  double allowance_ohm_ = 0.0;    // voltage_error_allowance_V over the iq spread when last
+                                  // identified (held with Rs)
   // Mixture of the hypotheses (what is published).
   Eigen::Vector4d x_ = Eigen::Vector4d::Zero();
   Eigen::Matrix4d p_ = Eigen::Matrix4d::Zero();
   // Derived constants.
-  double q_resistance_ohm2_per_s_ = 0.0;    // random walk of Rs
-  double q_resistance_rate_ohm2_per_s3_ = 0.0;  // random walk of dRs/dt
+  std::array<double, kMagnetHypotheses> q_resistance_ohm2_per_s_{};        // random walk of Rs
+  std::array<double, kMagnetHypotheses> q_resistance_rate_ohm2_per_s3_{};  // of dRs/dt
   std::array<double, kMagnetHypotheses> q_flux_Wb2_per_s_{};
   std::array<double, kMagnetHypotheses> q_flux_rate_Wb2_per_s3_{};
   std::array<Eigen::Matrix4d, kMagnetHypotheses> p0_{};
   double speed_noise_rad_per_s_ = 0.0;
+  double w_scale_rad_per_s_ = 1.0;  // rated electrical speed: scale of w_r in the monitor
   double r_min_ohm_ = 0.0;
   double r_max_ohm_ = 0.0;
 };

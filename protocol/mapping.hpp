@@ -80,8 +80,10 @@ enum class MappingOutput {
   kNodeCount,           ///< node_count: how many nodes the pump's model has
   kNodeTempDegC,        ///< node_temp_degC: that node's estimated temperature
   kNodeSdK,             ///< node_sd_K: its standard deviation (Kalman covariance), K
+  kWindingResSdK,       ///< winding_res_sd_K: 1-sigma of the resistance-based temperature, K
+  kMagnetFluxSdK,       ///< magnet_flux_sd_K: 1-sigma of the magnet temperature from the flux, K
 };
-inline constexpr std::size_t kMappingOutputCount = 19;
+inline constexpr std::size_t kMappingOutputCount = 21;
 
 /// The TOML key of an input or output.
 std::string_view MappingInputName(MappingInput input) noexcept;

@@ -5,7 +5,7 @@
 // 10 ms, for the base case and each disturbance. Prints a terminal table and writes JSON.
 //
 //   resistance_compare [--hours 24] [--scenario all|base|flux_drift|...] [--seed 1] [--seeds 1]
-//                      [--json out.json]
+//                      [--json out.json] [--voltage-error-model]
 //
 // Ours is given the drive's uq resolution (the simulator's 12-bit step over the DC link) in its
 // motor description, as a user would write it in the motor file; --no-quantisation-correction
@@ -49,6 +49,14 @@ struct Scenario {
   bool load_steps = true;
   bool nameplate_error = false;
   double load_step_mean_interval_s = 600.0;
+  // Added for the status figures (0 or false: as before).
+  double hours = 0.0;              // run length after the ramp (0: --hours)
+  double ramp_s = 0.0;             // run-up time (0: the simulator's 480 s)
+  double ramp_current_A = 0.0;     // accelerating current (0: the simulator's 6 A)
+  double warm_start_K = 0.0;       // winding this much above T0 at start (decays in 2 h)
+  double plant_flux_scale = 1.0;   // the plant's psi_f against the nameplate
+  double dead_time_V = 0.0;        // inverter voltage error (0: the `dead_time` switch's 0.2 V)
+  bool fast_heating = false;       // the demo's pump 3: the heavy profile, winding ~6 K/min
 };
 
 // Figures of one method on one run (definitions in docs/resistance-identification.md).
@@ -60,6 +68,9 @@ struct Figures {
   double d_t_every_s_percent = kNan;  // eq. 25 with the max over every 1 s after the first 30 min
   double r_error_percent = kNan;      // max |Rs - true Rs| / true Rs over every 1 s, same span
   double tracking_fraction = kNan;    // ours only: share of 1 s outputs with status "tracking"
+  double tracking_max_error_K = kNan; // ours only: max |T - T_true| over 1 s outputs "tracking"
+  double held_fraction = kNan;        // ours only: share of 1 s outputs with status "held"
+  double max_sd_ratio = kNan;         // ours only: max |T - T_true| / winding_sd_K while tracking
 };
 
 struct MethodTrace {
@@ -84,11 +95,32 @@ double MagnetTrajectory_degC(double t_s) {
   return 27.2 + 30.0 * (1.0 - std::exp(-t_s / 14400.0));
 }
 
+// The demo's pump 3 (tools/plant/scenarios/demo.toml, profile "heavy", cooling failed at 240 s):
+// run-up 120 s at 3 A, then 2.5 A, 3.5 A and 4.5 A; the winding follows the demo's truth
+// (pump3.truth.csv, winding_res_C): 4-5 K/min at first, about 6 K/min from 9 min on; its
+// magnet flux does not drift there (the model has no magnet node).
+double FastHeatingLoad_A(double t_s) {
+  if (t_s < 240.0) return 2.5;
+  if (t_s < 480.0) return 3.5;
+  return 4.5;
+}
+double FastHeatingWinding_degC(double t_s) {
+  // The demo's truth once a minute, 0 to 20 min (`pumptherm plant demo`, pump3.truth.csv,
+  // column winding_res_C), linear in between.
+  static constexpr double kDegC[] = {22.00, 26.89, 31.01, 34.67, 37.86, 44.52, 50.06,
+                                     55.52, 60.82, 70.44, 76.94, 83.11, 89.17, 95.21,
+                                     101.15, 107.06, 112.95, 118.79, 124.59, 130.30, 135.99};
+  const double t_min = std::clamp(t_s / 60.0, 0.0, 20.0);
+  const int i = std::min(static_cast<int>(t_min), 19);
+  return kDegC[i] + (t_min - i) * (kDegC[i + 1] - kDegC[i]);
+}
+
 // Measurement-chain overrides for the diagnosis of what limits the figures (0 = simulator default).
 struct Chain {
   int adc_bits = 0;
   double voltage_noise_V = -1.0;
   bool quantisation_correction = true;  // ours knows the drive's uq step
+  bool voltage_error_model = false;     // ours knows the drive's voltage error ([drive] table)
 };
 
 std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
@@ -101,13 +133,27 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
     cfg.motor.copper.r0_ohm *= 1.04;
     cfg.motor.flux_Wb *= 0.97;
   }
+  if (sc.ramp_s > 0.0) cfg.ramp_s = sc.ramp_s;
+  if (sc.ramp_current_A > 0.0) cfg.ramp_current_A = sc.ramp_current_A;
+  if (sc.hours > 0.0) hours = sc.hours;
+  cfg.motor.flux_Wb *= sc.plant_flux_scale;
   cfg.duration_s = cfg.ramp_s + hours * 3600.0;
   cfg.flux_drift = sc.flux_drift;
   cfg.dead_time = sc.dead_time;
   cfg.speed_ripple = sc.speed_ripple;
   cfg.load_steps = sc.load_steps;
   cfg.load_step_mean_interval_s = sc.load_step_mean_interval_s;
+  if (sc.dead_time_V > 0.0) cfg.dead_time_V = sc.dead_time_V;
   cfg.winding_degC = WindingTrajectory_degC;
+  if (sc.warm_start_K != 0.0) {
+    const double warm = sc.warm_start_K;
+    cfg.winding_degC = [warm](double t) { return WindingTrajectory_degC(t) + warm * std::exp(-t / 7200.0); };
+  }
+  if (sc.fast_heating) {
+    cfg.winding_degC = FastHeatingWinding_degC;
+    const double ramp = cfg.ramp_s;
+    cfg.load_profile_A = [ramp](double t) { return FastHeatingLoad_A(t - ramp + 120.0); };
+  }
   cfg.magnet_degC = MagnetTrajectory_degC;
   cfg.seed = seed;
   if (chain.adc_bits > 0) cfg.adc_bits = chain.adc_bits;
@@ -123,6 +169,10 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
   est::MotorDescription ours_motor = nameplate;
   if (chain.quantisation_correction) {
     ours_motor.uq_resolution_V = 2.0 * cfg.dc_link_V / std::ldexp(1.0, cfg.adc_bits);
+  }
+  if (chain.voltage_error_model && cfg.dead_time) {
+    ours_motor.voltage_error_V = cfg.dead_time_V;
+    ours_motor.voltage_error_knee_A = cfg.dead_time_knee_A;
   }
   est::ResistanceIdentifier ours(ours_motor, ours_config);
   // Convergence (the paper's 0.16 s / 0.27 s): fresh instances started at the 11 h mark with Rs
@@ -159,7 +209,8 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
   double log_next = ramp_end + 1800.0;  // the paper's 30-min log: 48 points after the ramp
   double true_sum_log = 0;
   int true_n_log = 0;
-  long tracking = 0, outputs = 0;
+  long tracking = 0, outputs = 0, held = 0;
+  double tracking_max_err_K = 0.0, max_sd_ratio = 0.0;
   const double dt = cfg.sample_period_s;
   std::uint64_t k = 0;
 
@@ -256,17 +307,25 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
     if (t >= ramp_end && std::abs(t - ramp_end) < 0.5 * dt) {
       for (auto& mt : m) mt.fig.flux_after_ramp_Wb = mt.last_psi;
     }
-    if (trace != nullptr && k % 6000 == 0) {  // one line per simulated minute
+    // One line per simulated minute; per second on runs under an hour.
+    if (trace != nullptr && k % (hours < 1.0 ? 100 : 6000) == 0) {
       std::fprintf(trace, "%.6f,%.4f", t / 3600.0, s.true_winding_degC);
       for (const auto& mt : m) {
         std::fprintf(trace, ",%.4f", est::TemperatureAt(nameplate.copper, mt.last_r));
       }
-      std::fprintf(trace, ",%d,%.6f\n", static_cast<int>(e.status), e.steady_magnet_probability);
+      std::fprintf(trace, ",%d,%.6f,%.4f,%.4f,%.3f\n", static_cast<int>(e.status),
+                   e.steady_magnet_probability, e.winding_sd_K, s.true_iq_A, e.mean_nis);
     }
     if (t < ramp_end) continue;
     if (at_second) {
       ++outputs;
-      if (e.status == est::ResistanceStatus::kTracking) ++tracking;
+      if (e.status == est::ResistanceStatus::kHeld) ++held;
+      if (e.status == est::ResistanceStatus::kTracking) {
+        ++tracking;
+        const double err = std::abs(e.winding_degC - s.true_winding_degC);
+        tracking_max_err_K = std::max(tracking_max_err_K, err);
+        max_sd_ratio = std::max(max_sd_ratio, err / e.winding_sd_K);
+      }
     }
     const bool log_point = t >= log_next;
     if (log_point) {
@@ -305,6 +364,9 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
     out.push_back(mt.fig);
   }
   out[4].tracking_fraction = outputs > 0 ? static_cast<double>(tracking) / outputs : kNan;
+  out[4].held_fraction = outputs > 0 ? static_cast<double>(held) / outputs : kNan;
+  out[4].tracking_max_error_K = tracking > 0 ? tracking_max_err_K : kNan;
+  out[4].max_sd_ratio = tracking > 0 ? max_sd_ratio : kNan;
   return out;
 }
 
@@ -334,6 +396,8 @@ int main(int argc, char** argv) {
   est::ResistanceIdentifierConfig oc;
   app.add_option("--winding-drift", oc.winding_drift_K_per_sqrt_h, "ours: K/sqrt(h)")->capture_default_str();
   app.add_option("--winding-rate-walk", oc.winding_rate_walk_K_per_h_per_sqrt_h, "ours: K/h/sqrt(h)")->capture_default_str();
+  app.add_option("--steady-winding-drift", oc.steady_winding_drift_K_per_sqrt_h, "ours: K/sqrt(h)")->capture_default_str();
+  app.add_option("--steady-winding-rate-walk", oc.steady_winding_rate_walk_K_per_h_per_sqrt_h, "ours: K/h/sqrt(h)")->capture_default_str();
   app.add_option("--magnet-drift", oc.magnet_drift_K_per_sqrt_h, "ours: K/sqrt(h)")->capture_default_str();
   app.add_option("--magnet-rate-walk", oc.magnet_rate_walk_K_per_h_per_sqrt_h, "ours: K/h/sqrt(h)")->capture_default_str();
   app.add_option("--rate-tau", oc.rate_time_constant_s, "ours: s")->capture_default_str();
@@ -352,6 +416,12 @@ int main(int argc, char** argv) {
   bool no_correction = false;
   app.add_flag("--no-quantisation-correction", no_correction,
                "ours: no uq resolution in its motor description (no quantisation-bias correction)");
+  app.add_flag("--voltage-error-model", chain.voltage_error_model,
+               "ours: the simulator's inverter voltage error (size and knee) in its motor "
+               "description, compensated before identification");
+  app.add_option("--voltage-error-allowance", oc.voltage_error_allowance_V, "ours: V")->capture_default_str();
+  app.add_option("--tracking-bound", oc.tracking_bound_K, "ours: K (2-sigma)")->capture_default_str();
+  app.add_option("--consistency-window", oc.consistency_window_s, "ours: s")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   chain.quantisation_correction = !no_correction;
 
@@ -365,6 +435,17 @@ int main(int argc, char** argv) {
       {"no_load_steps_flux_drift", "no gas-load steps, magnet flux -0.1 %/K", true, false, false, false, false},
       {"frequent_steps", "base with gas-load changes every 3 min on average", false, false, false, true, false, 180.0},
       {"everything", "every disturbance above, with load steps", true, true, true, true, true},
+      // Start-up: a warm winding, the plant's flux off the nameplate, a 9 A run-up.
+      {"warm_start", "winding 35 degC at start, plant psi_f +1.6 %, 9 A run-up", false, false, false, true,
+       false, 600.0, 0.0, 0.0, 9.0, 7.8, 1.016},
+      {"voltage_error_0.10", "warm_start + inverter voltage error 0.10 V", false, true, false, true, false,
+       600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.10},
+      {"voltage_error_0.15", "warm_start + inverter voltage error 0.15 V", false, true, false, true, false,
+       600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.15},
+      {"voltage_error_0.20", "warm_start + inverter voltage error 0.20 V", false, true, false, true, false,
+       600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.20},
+      {"pump3_heating", "the demo's pump 3: 2 min run-up at 3 A, 2.5/3.5/4.5 A, winding up to 6 K/min",
+       false, false, false, false, false, 600.0, 0.3, 120.0, 3.0, 0.0, 1.0, 0.0, true},
   };
   std::string json = "{\n  \"hours\": " + fmt::format("{}", hours) + ",\n  \"seed\": " +
                      fmt::format("{}", seed) + ",\n  \"seeds\": " + fmt::format("{}", seeds) +
@@ -381,13 +462,14 @@ int main(int argc, char** argv) {
       }
       std::fprintf(trace, "time_h,true_degC");
       for (const char* name : kMethodNames) std::fprintf(trace, ",%s", name);
-      std::fprintf(trace, ",ours_status,ours_steady_magnet_probability\n");
+      std::fprintf(trace, ",ours_status,ours_steady_magnet_probability,ours_winding_sd_K,true_iq_A,ours_mean_nis\n");
     }
     const auto figs = Run(sc, hours, seed, oc, chain, trace);
     if (trace != nullptr) std::fclose(trace);
     fmt::print("\n== {}: {} ==\n", sc.name, sc.description);
-    fmt::print("{:<16} {:>12} {:>9} {:>12} {:>9} {:>11} {:>11} {:>9}\n", "method", "psi_ramp_Wb",
-               "dR_%", "converge_s", "dT_%", "dT_1s_%", "Rs_err_%", "tracking");
+    fmt::print("{:<16} {:>12} {:>9} {:>12} {:>9} {:>11} {:>11} {:>9} {:>11} {:>7} {:>9}\n", "method",
+               "psi_ramp_Wb", "dR_%", "converge_s", "dT_%", "dT_1s_%", "Rs_err_%", "tracking",
+               "trk_err_K", "held", "err/sd");
     if (!first) json += ",\n";
     first = false;
     json += fmt::format("    {{\"name\": \"{}\", \"description\": \"{}\", \"methods\": [\n", sc.name,
@@ -395,23 +477,26 @@ int main(int argc, char** argv) {
     auto num = [](double v) { return std::isfinite(v) ? fmt::format("{:.6g}", v) : std::string("null"); };
     for (std::size_t i = 0; i < figs.size(); ++i) {
       const auto& f = figs[i];
-      fmt::print("{:<16} {:>12.6f} {:>9.3f} {:>12.2f} {:>9.2f} {:>11.2f} {:>11.2f} {:>9.3f}\n",
+      fmt::print("{:<16} {:>12.6f} {:>9.3f} {:>12.2f} {:>9.2f} {:>11.2f} {:>11.2f} {:>9.3f} {:>11.2f} {:>7.3f} {:>9.2f}\n",
                  kMethodNames[i], f.flux_after_ramp_Wb, f.d_r_percent, f.convergence_s,
-                 f.d_t_percent, f.d_t_every_s_percent, f.r_error_percent, f.tracking_fraction);
+                 f.d_t_percent, f.d_t_every_s_percent, f.r_error_percent, f.tracking_fraction,
+                 f.tracking_max_error_K, f.held_fraction, f.max_sd_ratio);
       json += fmt::format(
           "      {{\"method\": \"{}\", \"flux_after_ramp_Wb\": {}, \"dR_percent\": {}, "
           "\"convergence_s\": {}, \"dT_percent\": {}, \"dT_every_1s_percent\": {}, "
-          "\"Rs_error_percent\": {}, \"tracking_fraction\": {}}}{}\n",
+          "\"Rs_error_percent\": {}, \"tracking_fraction\": {}, \"tracking_max_error_K\": {}, "
+          "\"held_fraction\": {}, \"max_error_over_sd\": {}}}{}\n",
           kMethodNames[i], num(f.flux_after_ramp_Wb), num(f.d_r_percent), num(f.convergence_s),
           num(f.d_t_percent), num(f.d_t_every_s_percent), num(f.r_error_percent),
-          num(f.tracking_fraction),
+          num(f.tracking_fraction), num(f.tracking_max_error_K), num(f.held_fraction),
+          num(f.max_sd_ratio),
           i + 1 < figs.size() ? "," : "");
     }
     json += "    ]";
     if (seeds > 1) {
       // Ours on further seeds: the figures per seed, then the worst and the mean of dT.
-      fmt::print("ours by seed:\n{:>6} {:>9} {:>9} {:>11} {:>11} {:>12} {:>9}\n", "seed", "dR_%",
-                 "dT_%", "dT_1s_%", "Rs_err_%", "converge_s", "tracking");
+      fmt::print("ours by seed:\n{:>6} {:>9} {:>9} {:>11} {:>11} {:>12} {:>9} {:>11}\n", "seed", "dR_%",
+                 "dT_%", "dT_1s_%", "Rs_err_%", "converge_s", "tracking", "trk_err_K");
       json += ",\n     \"ours_by_seed\": [\n";
       double worst = 0.0, sum = 0.0;
       for (int k = 0; k < seeds; ++k) {
@@ -419,15 +504,16 @@ int main(int argc, char** argv) {
         const Figures f = k == 0 ? figs[4] : Run(sc, hours, sd, oc, chain, nullptr)[4];
         worst = std::max(worst, f.d_t_percent);
         sum += f.d_t_percent;
-        fmt::print("{:>6} {:>9.3f} {:>9.2f} {:>11.2f} {:>11.2f} {:>12.2f} {:>9.3f}\n", sd,
+        fmt::print("{:>6} {:>9.3f} {:>9.2f} {:>11.2f} {:>11.2f} {:>12.2f} {:>9.3f} {:>11.2f}\n", sd,
                    f.d_r_percent, f.d_t_percent, f.d_t_every_s_percent, f.r_error_percent,
-                   f.convergence_s, f.tracking_fraction);
+                   f.convergence_s, f.tracking_fraction, f.tracking_max_error_K);
         json += fmt::format(
             "       {{\"seed\": {}, \"dR_percent\": {}, \"dT_percent\": {}, "
             "\"dT_every_1s_percent\": {}, \"Rs_error_percent\": {}, \"convergence_s\": {}, "
-            "\"tracking_fraction\": {}}}{}\n",
+            "\"tracking_fraction\": {}, \"tracking_max_error_K\": {}}}{}\n",
             sd, num(f.d_r_percent), num(f.d_t_percent), num(f.d_t_every_s_percent),
             num(f.r_error_percent), num(f.convergence_s), num(f.tracking_fraction),
+            num(f.tracking_max_error_K),
             k + 1 < seeds ? "," : "");
         std::fflush(stdout);
       }

@@ -500,6 +500,25 @@ TEST(Pipeline, StateRoundTripsThroughText) {
     EXPECT_NEAR(re.steady_magnet_probability, pumptherm::estimators::ResistanceIdentifierConfig{}.steady_magnet_prior, 1e-12);
     for (std::size_t i = 0; i < x.size(); ++i) EXPECT_NEAR(e.gateway_.pumps()[0]->snapshot().node_degC[i], x[i], 1e-6);
   }
+  // A version-2 state written before the excitation moments gained the constant regressor
+  // (4 numbers, [iq, w_r]): restored, the constant's row starting empty.
+  {
+    toml::table v2 = toml::parse(text);
+    toml::table& p = *v2["pump"]["tmp1"].as_table();
+    const toml::array& m9 = *p["resistance_moments"].as_array();
+    ASSERT_EQ(m9.size(), 9U);
+    toml::array m4;
+    for (const std::size_t i : {0U, 1U, 3U, 4U}) m4.push_back(*m9[i].value<double>());
+    p.insert_or_assign("resistance_moments", m4);
+    std::ostringstream old;
+    old << v2;
+    Bench f(Config());
+    EXPECT_EQ(f.gateway_.RestoreState(old.str(), a.gateway_.pumps()[0]->snapshot().time_us, &warning), 1) << warning;
+    const auto saved = f.gateway_.pumps()[0]->Save().resistance;
+    EXPECT_EQ(saved.moments(0, 1), m4[1].value<double>().value());
+    EXPECT_EQ(saved.moments(2, 2), 0.0);
+    EXPECT_DOUBLE_EQ(f.gateway_.pumps()[0]->snapshot().resistance.resistance_ohm, ra.resistance_ohm);
+  }
   // Damaged or foreign state: ignored with a warning, never a crash.
   Bench d(Config());
   EXPECT_EQ(d.gateway_.RestoreState("version = 1\n[pump.tmp1]\nmodel = \"other\"\n", 0, &warning), 0);

@@ -167,6 +167,31 @@ TEST(MotorDescription, MagnetTableGivesTheFluxTemperatureLaw) {
   EXPECT_NE(unknown.find("m.toml:11: unknown key 'magnet.grade'"), std::string::npos) << unknown;
 }
 
+// The optional inverter voltage error in [drive]: u_err and its knee; the q-axis share is
+// u_err tanh(|i| / knee) iq / |i| (iq / |i| alone with knee 0).
+TEST(MotorDescription, DriveTableGivesTheVoltageError) {
+  EXPECT_EQ(ParseMotorDescription(kValid, "m.toml").voltage_error_V, 0.0);
+  const MotorDescription m = ParseMotorDescription(
+      std::string(kValid) + "[drive]\nvoltage_error_V = 0.15\nvoltage_error_knee_A = 0.5\n", "m.toml");
+  EXPECT_DOUBLE_EQ(m.voltage_error_V, 0.15);
+  EXPECT_DOUBLE_EQ(m.voltage_error_knee_A, 0.5);
+  EXPECT_NEAR(VoltageErrorQ_V(m, 0.0, 2.0), 0.15 * std::tanh(4.0), 1e-15);
+  EXPECT_NEAR(VoltageErrorQ_V(m, 0.0, -2.0), -0.15 * std::tanh(4.0), 1e-15);
+  EXPECT_NEAR(VoltageErrorQ_V(m, 3.0, 4.0), 0.15 * std::tanh(10.0) * 0.8, 1e-15);
+  EXPECT_EQ(VoltageErrorQ_V(m, 0.0, 0.0), 0.0);
+  const MotorDescription sign = ParseMotorDescription(std::string(kValid) + "[drive]\nvoltage_error_V = 0.1\n", "m.toml");
+  EXPECT_EQ(sign.voltage_error_knee_A, 0.0);
+  EXPECT_DOUBLE_EQ(VoltageErrorQ_V(sign, 0.0, 0.01), 0.1);
+  const std::string neg = ErrorOf(std::string(kValid) + "[drive]\nvoltage_error_V = -0.1\n");
+  EXPECT_NE(neg.find("m.toml:11: key 'drive.voltage_error_V' must be within [0, 5] V, got -0.1"), std::string::npos) << neg;
+  const std::string knee_alone = ErrorOf(std::string(kValid) + "[drive]\nvoltage_error_knee_A = 0.5\n");
+  EXPECT_NE(knee_alone.find("m.toml:11: key 'drive.voltage_error_knee_A' needs 'drive.voltage_error_V'"), std::string::npos)
+      << knee_alone;
+  const std::string bad_knee = ErrorOf(std::string(kValid) + "[drive]\nvoltage_error_V = 0.1\nvoltage_error_knee_A = -1\n");
+  EXPECT_NE(bad_knee.find("m.toml:12: key 'drive.voltage_error_knee_A' must be within [0, 100] A"), std::string::npos)
+      << bad_knee;
+}
+
 TEST(MotorDescription, SyntaxErrorNamesLine) {
   const std::string err = ErrorOf("pole_pairs = 1\nflux_Wb = = 3\n");
   EXPECT_NE(err.find("m.toml:2:"), std::string::npos) << err;

@@ -65,7 +65,8 @@ int Run(const std::string& input, const RecordingSource& recording, const std::s
   config.block_samples = block_samples;
   config.min_current_A = min_current_A;
   est::ResistanceIdentifier identifier(motor, config);
-  CsvWriter out(output, {"time_s", "resistance_ohm", "flux_Wb", "winding_degC", "status"});
+  CsvWriter out(output, {"time_s", "resistance_ohm", "flux_Wb", "winding_degC", "status",
+                         "winding_sd_K", "flux_sd_Wb"});
   // The first sample's period is taken from the second (the data give no earlier time).
   const double first_dt = t.size() > 1 ? t[1] - t[0] : 0.0;
   for (std::size_t k = 0; k < t.size(); ++k) {
@@ -73,12 +74,14 @@ int Run(const std::string& input, const RecordingSource& recording, const std::s
     const est::ResistanceEstimate e = identifier.Update(
         {id[k], iq[k], ud[k], uq[k], est::ElectricalSpeed_rad_per_s(motor, rpm[k])}, dt);
     out.Row({t[k], e.resistance_ohm, e.flux_Wb, e.winding_degC,
-             static_cast<double>(static_cast<int>(e.status))});
+             static_cast<double>(static_cast<int>(e.status)), e.winding_sd_K, e.flux_sd_Wb});
   }
   out.Close();
   const est::ResistanceEstimate& last = identifier.estimate();
-  fmt::print(stderr, "identify: {} rows; last: Rs {:.6f} ohm, psi_f {:.7f} Wb, winding {:.2f} degC, {}\n",
-             t.size(), last.resistance_ohm, last.flux_Wb, last.winding_degC,
+  fmt::print(stderr,
+             "identify: {} rows; last: Rs {:.6f} ohm, psi_f {:.7f} Wb, winding {:.2f} degC "
+             "(1-sigma {:.2f} K), {}\n",
+             t.size(), last.resistance_ohm, last.flux_Wb, last.winding_degC, last.winding_sd_K,
              est::ToString(last.status));
   return 0;
 }
@@ -98,7 +101,8 @@ const SubcommandRegistrar kRegistrar{
                      "r/min), any order; '-' reads standard input (or --log)");
       AddRecordingOptions(app, opt->recording);
       app.add_option("--output,-o", opt->output,
-                     "CSV written with time_s, resistance_ohm, flux_Wb, winding_degC, status; "
+                     "CSV written with time_s, resistance_ohm, flux_Wb, winding_degC, status, "
+                     "winding_sd_K, flux_sd_Wb; "
                      "'-' is standard output (the default)")
           ->capture_default_str();
       app.add_option("--motor", opt->motor,

@@ -43,6 +43,7 @@ TmpDriveSample TmpDrive::Step() {
     }
   }
   const double speed_fraction = set_rpm / rated_rpm;
+  if (config_.load_profile_A && !ramping) load_target_A_ = config_.load_profile_A(t);
   const double target_A = ramping ? config_.ramp_current_A +
                                         config_.load_current_A * speed_fraction * speed_fraction
                                   : load_target_A_;

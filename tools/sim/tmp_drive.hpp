@@ -59,6 +59,9 @@ struct TmpDriveConfig {
   /// Winding and magnet temperature trajectories (degC) against time (s); the test sets them.
   std::function<double(double)> winding_degC = [](double) { return 27.2; };
   std::function<double(double)> magnet_degC = [](double) { return 27.2; };
+  /// Scripted gas-load current (A) against time (s) after the ramp; when set it replaces the
+  /// random load steps and the constant load current.
+  std::function<double(double)> load_profile_A;
   std::uint64_t seed = 1;
 };
 
