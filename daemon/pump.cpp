@@ -36,11 +36,12 @@ double FluxSd_Wb(const estimators::ResistanceIdentifier& identifier) {
   return std::sqrt(std::max(identifier.p()(estimators::kStateFlux, estimators::kStateFlux), 0.0));
 }
 
-/// Whether the identifier's flux is an estimate: not the nameplate (initialising), not from
-/// an implausible fit or invalid input. While Rs cannot be told apart the flux is tracked.
+/// Whether the identifier's back-EMF line E = psi_f + Rs iq/w is fitted to data: not the
+/// nameplate (initialising) and not from invalid input. It is usable whatever the split between
+/// its two terms: at constant current a falling flux (a heating magnet) can move Rs out of its
+/// plausible band (implausible) or be held (held, not identifiable) while E still follows uq/w.
 bool FluxUsable(estimators::ResistanceStatus s) {
-  return s == estimators::ResistanceStatus::kTracking || s == estimators::ResistanceStatus::kConverging ||
-         s == estimators::ResistanceStatus::kNotIdentifiable;
+  return s != estimators::ResistanceStatus::kInitialising && s != estimators::ResistanceStatus::kInvalidInput;
 }
 
 estimators::VirtualSensorConfig SensorConfig(const PumpConfig& c) {

@@ -324,7 +324,7 @@ TEST(DbcTest, EveryRealDbcLoads) {
 TEST(DbcTest, PumpthermFrameSetIsCompleteAndConsistent) {
   const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "protocol/pumptherm.dbc");
   EXPECT_TRUE(dbc.problems.empty()) << dbc.problems.front().line << ": " << dbc.problems.front().message;
-  EXPECT_EQ(dbc.messages.size(), 10u);
+  EXPECT_EQ(dbc.messages.size(), 11u);
   for (const auto& m : dbc.messages) {
     SCOPED_TRACE(m.name);
     ASSERT_TRUE(m.cycle_time_ms.has_value());

@@ -67,15 +67,8 @@ std::string Alarm(const pumptherm::alarm_t& a, bool heard) {
 
 std::string IdentStatusName(int status) {
   using S = estimators::ResistanceStatus;
-  switch (static_cast<S>(status)) {
-    case S::kInitialising: return "initialising";
-    case S::kConverging: return "converging";
-    case S::kTracking: return "tracking";
-    case S::kNotIdentifiable: return "not_identifiable";
-    case S::kImplausible: return "implausible";
-    case S::kInvalidInput: return "invalid_input";
-  }
-  return fmt::format("code{}", status);
+  if (status < 0 || status > static_cast<int>(S::kHeld)) return fmt::format("code{}", status);
+  return std::string(estimators::ToString(static_cast<S>(status)));
 }
 
 std::string AlarmReasonLabel(int reason) {
