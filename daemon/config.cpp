@@ -234,6 +234,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     m.disagree_hold_s = r.Number("disagree_hold_s", m.disagree_hold_s, 0.0, 86400.0);
     m.not_converged_grace_s = r.Number("not_converged_grace_s", m.not_converged_grace_s, 0.0, 86400.0);
     m.forecast_horizon_s = r.Number("forecast_horizon_s", m.forecast_horizon_s, 0.0, 86400.0);
+    m.trip_sd_factor = r.Number("trip_sd_factor", m.trip_sd_factor, 0.0, 10.0);
+    m.warning_sd_factor = r.Number("warning_sd_factor", m.warning_sd_factor, 0.0, 10.0);
     a.clear_can_interfaces = r.Strings("clear_can_interfaces");
     a.clear_lcm_sources = r.Strings("clear_lcm_sources");
     read_levels(r, a);
@@ -295,6 +297,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.measured_node = r.String("measured_node", &pc.measured_node);
       pc.fuse_winding = r.Bool("fuse_winding", pc.fuse_winding);
       pc.winding_sd_K = r.Number("winding_sd_K", pc.winding_sd_K, 0.01, 100.0);
+      pc.frame_sensor_lag_s = r.Number("frame_sensor_lag_s", pc.frame_sensor_lag_s, 0.0, 3600.0);
       pc.alarms = config.alarms;
       if (const toml::table* at = r.Table("alarms")) {
         TableReader ar(*at, r.Join("alarms"), source);

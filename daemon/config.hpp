@@ -91,6 +91,7 @@ struct PumpConfig {
   std::string measured_node = "frame";    ///< the node the frame sensor measures
   bool fuse_winding = true;               ///< feed the resistance-based winding temperature
   double winding_sd_K = 3.0;              ///< its standard deviation in the filter
+  double frame_sensor_lag_s = 0.0;        ///< first-order lag of the frame sensor (mismatch test)
   AlarmsConfig alarms;                    ///< the gateway's [alarms] with this pump's overrides
   int line = 0;                           ///< line of the [[pump]] table
 };

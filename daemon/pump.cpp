@@ -27,6 +27,19 @@ estimators::VirtualSensorConfig SensorConfig(const PumpConfig& c) {
   return v;
 }
 
+estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c) {
+  estimators::MismatchDetectorConfig m;
+  m.measured_node = c.measured_node;
+  m.sensor_lag_s = c.frame_sensor_lag_s;
+  return m;
+}
+
+/// Whether a finding changed enough to be announced (state, effect or onset).
+bool NewVerdict(const estimators::MismatchFinding& a, const estimators::MismatchFinding& b) {
+  const bool same_onset = a.onset_s == b.onset_s || (std::isnan(a.onset_s) && std::isnan(b.onset_s));
+  return a.state != b.state || a.effect != b.effect || !same_onset;
+}
+
 }  // namespace
 
 Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
@@ -66,12 +79,14 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
         auto s = config.alarms.levels.find("sensor");
         return estimators::AlarmMonitor(
             ac, limits, s == config.alarms.levels.end() ? estimators::TemperatureLimits{} : s->second.limits);
-      }()) {
+      }()),
+      mismatch_(*model_, MismatchConfig(config)) {
   measured_state_ = model_->StateIndex(config_.measured_node);
   const int n = model_->StateCount();
   snapshot_.node_degC.assign(static_cast<std::size_t>(n), kNaN);
   snapshot_.node_sd_K.assign(static_cast<std::size_t>(n), kNaN);
   alarm_values_.assign(static_cast<std::size_t>(n) + 1, kNaN);
+  alarm_sd_.assign(static_cast<std::size_t>(n) + 1, kNaN);
   forecast_x_.resize(n);
   forecast_next_.resize(n);
   if (period_us_ <= 0) throw std::invalid_argument("thermal period must be positive");
@@ -201,6 +216,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
     const double x0 = std::isfinite(measured) ? measured : ambient_degC_;
     if (!std::isfinite(x0)) return;  // no temperature at all yet: wait
     sensor_.Initialise(Eigen::VectorXd::Constant(model_->StateCount(), x0));
+    mismatch_.Initialise(x0, static_cast<double>(end_us) * 1e-6);
     initialised_ = true;
   }
   held_inputs_ = in;
@@ -216,6 +232,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
     return;
   }
   ++counters_.thermal_steps;
+  CheckModel(in, measured, end_us);
 
   const Eigen::VectorXd& x = sensor_.Estimate_degC();
   const Eigen::MatrixXd& s = sensor_.Covariance_K2();
@@ -257,13 +274,23 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const double ttt = diverged ? kNaN : TimeToTrip_s(in, &ttt_node);
   snapshot_.time_to_trip_node = ttt_node;
 
-  for (int i = 0; i < x.size(); ++i) alarm_values_[static_cast<std::size_t>(i)] = diverged ? kNaN : x(i);
+  for (int i = 0; i < x.size(); ++i) {
+    alarm_values_[static_cast<std::size_t>(i)] = diverged ? kNaN : x(i);
+    alarm_sd_[static_cast<std::size_t>(i)] = snapshot_.node_sd_K[static_cast<std::size_t>(i)];
+  }
   alarm_values_.back() = winding_res;
   estimators::AlarmInputs ai;
   ai.node_degC = alarm_values_.data();
+  ai.node_sd_K = alarm_sd_.data();
   ai.sensor_degC = measured;
   ai.sensor_model_degC = measured_state_ >= 0 && !diverged ? x(measured_state_) : kNaN;
-  ai.sensor_nis = nis;
+  // A model the plant no longer follows makes the filter disagree with a sound sensor: the
+  // disagreement test is held (neither raised nor cleared) while the mismatch test blames the
+  // plant or has not named the cause yet.
+  const auto ms = snapshot_.mismatch.state;
+  const bool plant_blamed = ms == estimators::MismatchState::kPlantChange ||
+                            ms == estimators::MismatchState::kUnexplained;
+  ai.sensor_nis = plant_blamed ? kNaN : nis;
   ai.telemetry_age_s = static_cast<double>(end_us - last_frame_us_) * 1e-6;
   // The alarms rest on the virtual sensor: it must have converged. The identifier's health is
   // published with its estimate (status) but is no alarm: the filter uses its winding
@@ -279,6 +306,17 @@ void Pump::ThermalStep(std::int64_t end_us) {
   if (now.level != before.level || now.reason != before.reason || now.node != before.node ||
       now.active_reasons != before.active_reasons || now.trip_latched != before.trip_latched) {
     ++snapshot_.alarm_changes;
+  }
+}
+
+void Pump::CheckModel(const estimators::ThermalInputs& in, double measured_degC, std::int64_t end_us) {
+  try {
+    const estimators::MismatchFinding& f =
+        mismatch_.Step(in, period_s_, measured_degC, static_cast<double>(end_us) * 1e-6);
+    if (NewVerdict(f, snapshot_.mismatch)) ++snapshot_.mismatch_changes;
+    snapshot_.mismatch = f;
+  } catch (const std::exception&) {
+    ++counters_.rejected_values;
   }
 }
 
@@ -410,6 +448,8 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   // step (seen in the system test: Rs "not available" right after kill -9).
   snapshot_.resistance = identifier_.estimate();
   sensor_.Restore(x, s);
+  // The mismatch test starts afresh (learning) from the restored level.
+  mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0, static_cast<double>(now_us) * 1e-6);
   held_inputs_ = state.inputs;
   have_inputs_ = true;
   initialised_ = true;

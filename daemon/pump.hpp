@@ -15,6 +15,7 @@
 #include "daemon/config.hpp"
 #include "estimators/alarms.hpp"
 #include "estimators/kalman_virtual_sensor.hpp"
+#include "estimators/mismatch_detector.hpp"
 #include "estimators/motor.hpp"
 #include "estimators/resistance_identifier.hpp"
 #include "estimators/thermal_discretisation.hpp"
@@ -58,6 +59,8 @@ struct PumpSnapshot {
   estimators::AlarmState alarm;
   int time_to_trip_node = -1;             ///< state index the forecast is about (-1: none)
   std::uint64_t alarm_changes = 0;        ///< increments whenever `alarm` changes
+  estimators::MismatchFinding mismatch;   ///< is the model right? (docs/daemon.md, "Model mismatch")
+  std::uint64_t mismatch_changes = 0;     ///< increments when its state, effect or onset changes
 };
 
 /// Saved state of one pump (the state store writes it; docs/daemon.md "State").
@@ -125,6 +128,8 @@ class Pump {
 
  private:
   void ThermalStep(std::int64_t step_end_us);
+  /// Runs the mismatch test on this step's inputs and reading; counts a changed verdict.
+  void CheckModel(const estimators::ThermalInputs& in, double measured_degC, std::int64_t end_us);
   double TimeToTrip_s(const estimators::ThermalInputs& in, int* node);
   void Identify(std::int64_t t_us);
 
@@ -136,6 +141,7 @@ class Pump {
   estimators::ResistanceIdentifier identifier_;
   estimators::VirtualThermalSensor sensor_;
   estimators::AlarmMonitor alarms_;
+  estimators::MismatchDetector mismatch_;
   int measured_state_ = -1;
   std::vector<int> level_states_;        // state index of each alarm node (n states + winding)
   PumpCounters counters_;
@@ -176,6 +182,7 @@ class Pump {
   Eigen::PartialPivLU<Eigen::MatrixXd> forecast_lu_;
   Eigen::VectorXd forecast_ss_;
   std::vector<double> alarm_values_;
+  std::vector<double> alarm_sd_;         // their standard deviations (the winding's: none, NaN)
 };
 
 }  // namespace pumptherm::daemon

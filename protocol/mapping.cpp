@@ -19,7 +19,7 @@ constexpr std::array<std::string_view, kMappingOutputCount> kOutputNames = {
     "winding_res_temp_degC", "rs_ohm",         "flux_Wb",       "rs_status",
     "flux_status",           "alarm_level",    "alarm_reason",  "alarm_node",
     "alarm_value_degC",      "time_to_trip_s", "uptime_s",      "frame_rate_Hz",
-    "drops",                 "bus_state"};
+    "drops",                 "bus_state",      "mismatch_state", "mismatch_effect"};
 
 std::string Where(const toml::source_region& r) {
   const std::string file = r.path ? *r.path : std::string("<mapping>");

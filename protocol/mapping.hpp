@@ -70,8 +70,10 @@ enum class MappingOutput {
   kFrameRateHz,         ///< frame_rate_Hz
   kDrops,               ///< drops
   kBusState,            ///< bus_state
+  kMismatchState,       ///< mismatch_state: estimators::MismatchState
+  kMismatchEffect,      ///< mismatch_effect: estimators::MismatchEffect
 };
-inline constexpr std::size_t kMappingOutputCount = 14;
+inline constexpr std::size_t kMappingOutputCount = 16;
 
 /// The TOML key of an input or output.
 std::string_view MappingInputName(MappingInput input) noexcept;
