@@ -91,7 +91,8 @@ class CsvSink {
       std::string header = "time_s";
       for (const auto& n : p->model().StateNames()) header += fmt::format(",{}_C,{}_sd_K", n, n);
       header += ",winding_resistance_C,resistance_ohm,flux_Wb,ident_status,frame_measured_C,ambient_C,"
-                "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s\n";
+                "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s,mismatch_state,"
+                "mismatch_effect,mismatch_value\n";
       std::fputs(header.c_str(), files_.back()->f);
       last_.push_back(-1);
     }
@@ -104,11 +105,13 @@ class CsvSink {
       std::string row = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6 - origin_s_);
       for (std::size_t k = 0; k < s.node_degC.size(); ++k) row += fmt::format(",{:.4f},{:.4f}", s.node_degC[k], s.node_sd_K[k]);
       const auto& r = s.resistance;
-      row += fmt::format(",{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f}\n",
+      row += fmt::format(",{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f},{},{},{:.3f}\n",
                          s.winding_resistance_degC, r.resistance_ohm, r.flux_Wb, static_cast<int>(r.status),
                          s.frame_measured_degC, s.ambient_degC, s.speed_rpm, s.nis,
                          static_cast<int>(s.alarm.level), static_cast<int>(s.alarm.reason), s.alarm.node,
-                         std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : -1.0);
+                         std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : -1.0,
+                         estimators::MismatchStateName(s.mismatch.state),
+                         estimators::MismatchEffectName(s.mismatch.effect), s.mismatch.value);
       std::fputs(row.c_str(), files_[i]->f);
     }
   }

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "estimators/disturbance_sensor.hpp"
 #include "estimators/kalman_virtual_sensor.hpp"
 #include "estimators/mismatch_detector.hpp"
 #include "estimators/thermal_model.hpp"
@@ -105,6 +106,8 @@ struct CaseResult {
   std::vector<std::string> nodes;
   std::vector<double> max_error_K;   ///< published filter, after the first 300 s
   std::vector<double> coverage;      ///< share of steps with |error| <= 2 sd, after 300 s
+  std::vector<double> dist_max_error_K;  ///< the same for the disturbance-state filter
+  std::vector<double> dist_coverage;
   double detector_step_max_us = 0.0; ///< not filled here (timed by the benchmark)
 };
 
@@ -125,7 +128,8 @@ inline pe::MismatchDetectorConfig DetectorConfig(double sensor_lag_s) {
 
 /// Runs one case. `model_dir` holds tmp-generic.toml.
 inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
-                          const pe::VirtualSensorConfig& vts_config = {}) {
+                          const pe::VirtualSensorConfig& vts_config = {},
+                          pe::DisturbanceSensorConfig dc = {}) {
   const std::string nominal_text = ReadFile(model_dir + "/tmp-generic.toml");
   const auto nominal = pe::ThermalModel::Parse(nominal_text, "tmp-generic");
   const auto faulted = pe::ThermalModel::Parse(FaultedModelText(nominal_text, spec.fault), "tmp-generic+fault");
@@ -144,10 +148,15 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
 
   pe::VirtualThermalSensor vts(nominal, vts_config);
   pe::MismatchDetector det(nominal, DetectorConfig(spec.sensor_lag_s));
+  dc.sensor_lag_s = spec.sensor_lag_s;
+  pe::DisturbanceThermalSensor dist(nominal, dc);
   CaseResult r;
   r.nodes = nominal.StateNames();
   r.max_error_K.assign(static_cast<std::size_t>(n), 0.0);
   r.coverage.assign(static_cast<std::size_t>(n), 0.0);
+  r.dist_max_error_K.assign(static_cast<std::size_t>(n), 0.0);
+  r.dist_coverage.assign(static_cast<std::size_t>(n), 0.0);
+  std::vector<long> dist_covered(static_cast<std::size_t>(n), 0);
   std::vector<long> covered(static_cast<std::size_t>(n), 0);
   long counted = 0;
   bool faulted_now = false;
@@ -178,9 +187,11 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     if (t <= spec.dt_s + 1e-9) {
       vts.Initialise(Eigen::VectorXd::Constant(n, y));
       det.Initialise(y, t);
+      dist.Initialise(y);
     }
     meas(0) = y;
     vts.Step(in, spec.dt_s, meas, std::numeric_limits<double>::quiet_NaN());
+    dist.Step(in, spec.dt_s, y);
     const pe::MismatchFinding& f = det.Step(in, spec.dt_s, y, t);
     const bool named = f.state == pe::MismatchState::kPlantChange ||
                        f.state == pe::MismatchState::kSensorFaultSuspected;
@@ -206,11 +217,16 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
         auto& m = r.max_error_K[static_cast<std::size_t>(i)];
         m = std::max(m, std::abs(err));
         if (std::abs(err) <= 2.0 * sd) ++covered[static_cast<std::size_t>(i)];
+        const double derr = dist.Node_degC(i) - x(i);
+        auto& dm = r.dist_max_error_K[static_cast<std::size_t>(i)];
+        dm = std::max(dm, std::abs(derr));
+        if (std::abs(derr) <= 2.0 * dist.NodeSd_K(i)) ++dist_covered[static_cast<std::size_t>(i)];
       }
     }
   }
   for (int i = 0; i < n; ++i) {
     r.coverage[static_cast<std::size_t>(i)] = counted > 0 ? static_cast<double>(covered[static_cast<std::size_t>(i)]) / counted : 0.0;
+    r.dist_coverage[static_cast<std::size_t>(i)] = counted > 0 ? static_cast<double>(dist_covered[static_cast<std::size_t>(i)]) / counted : 0.0;
   }
   r.at_end = det.Finding();
   return r;

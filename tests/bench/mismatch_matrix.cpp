@@ -29,14 +29,21 @@ int main(int argc, char** argv) {
   double duration_s = 10800.0, fault_s = 3600.0;
   int seeds = 1;
   bool json = false;
+  pe::DisturbanceSensorConfig dc;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--duration-s" && i + 1 < argc) duration_s = std::atof(argv[++i]);
     else if (a == "--fault-s" && i + 1 < argc) fault_s = std::atof(argv[++i]);
     else if (a == "--seeds" && i + 1 < argc) seeds = std::atoi(argv[++i]);
     else if (a == "--json") json = true;
+    else if (a == "--frame-heat-sd-W" && i + 1 < argc) dc.frame_heat_sd_W = std::atof(argv[++i]);
+    else if (a == "--rotor-heat-sd-W" && i + 1 < argc) dc.rotor_heat_sd_W = std::atof(argv[++i]);
+    else if (a == "--loss-scale-sd" && i + 1 < argc) dc.loss_scale_sd = std::atof(argv[++i]);
+    else if (a == "--sd-floor-K" && i + 1 < argc) dc.sd_floor_K = std::atof(argv[++i]);
+    else if (a == "--node-process-sd-K" && i + 1 < argc) dc.node_process_sd_K = std::atof(argv[++i]);
     else {
-      fmt::print(stderr, "usage: mismatch_matrix [--duration-s S] [--fault-s S] [--seeds N] [--json]\n");
+      fmt::print(stderr, "usage: mismatch_matrix [--duration-s S] [--fault-s S] [--seeds N] [--json]\n"
+                          "  [--frame-heat-sd-W W] [--rotor-heat-sd-W W] [--loss-scale-sd S] [--sd-floor-K K] [--node-process-sd-K K]\n");
       return 2;
     }
   }
@@ -55,16 +62,22 @@ int main(int argc, char** argv) {
       spec.fault_s = f == mc::Fault::kNone ? duration_s + 1.0 : fault_s;
       spec.duration_s = duration_s;
       spec.seed = static_cast<std::uint64_t>(seed);
-      const mc::CaseResult r = mc::RunCase(spec, dir);
+      const mc::CaseResult r = mc::RunCase(spec, dir, {}, dc);
       std::string nodes;
       for (std::size_t i = 0; i < r.nodes.size(); ++i) {
         nodes += fmt::format("{}{} {:.2f}/{:.0f}%", i ? ", " : "", r.nodes[i], r.max_error_K[i], 100.0 * r.coverage[i]);
       }
+      nodes += " | disturbance states:";
+      for (std::size_t i = 0; i < r.nodes.size(); ++i) {
+        nodes += fmt::format(" {} {:.2f}/{:.0f}%", r.nodes[i], r.dist_max_error_K[i], 100.0 * r.dist_coverage[i]);
+      }
       if (json) {
         std::string jn;
         for (std::size_t i = 0; i < r.nodes.size(); ++i) {
-          jn += fmt::format("{}\"{}\": {{\"max_error_K\": {:.3f}, \"coverage\": {:.4f}}}", i ? ", " : "",
-                            r.nodes[i], r.max_error_K[i], r.coverage[i]);
+          jn += fmt::format("{}\"{}\": {{\"max_error_K\": {:.3f}, \"coverage\": {:.4f}, "
+                            "\"disturbance_max_error_K\": {:.3f}, \"disturbance_coverage\": {:.4f}}}",
+                            i ? ", " : "", r.nodes[i], r.max_error_K[i], r.coverage[i],
+                            r.dist_max_error_K[i], r.dist_coverage[i]);
         }
         fmt::print("{{\"case\": \"{}\", \"seed\": {}, \"duration_s\": {}, \"fault_s\": {}, \"detect_delay_s\": {}, "
                    "\"name_delay_s\": {}, \"named_first\": \"{}\", \"named_at_end\": \"{}\", \"expected\": \"{}\", "

@@ -1,0 +1,133 @@
+#include "estimators/disturbance_sensor.hpp"
+
+#include <fmt/core.h>
+
+#include <cmath>
+#include <stdexcept>
+
+namespace pumptherm::estimators {
+namespace {
+
+/// Leak of the frame-path heat state, 1/s: a random walk in practice (a week's time constant),
+/// kept only so that the continuous system matrix stays invertible for the discretiser's
+/// relative-change test.
+constexpr double kFrameHeatLeak_per_s = 1.0 / (7.0 * 86400.0);
+
+}  // namespace
+
+DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, DisturbanceSensorConfig config)
+    : model_(model), config_(std::move(config)), discretiser_(1e-3), filter_(0) {
+  const auto& c = config_;
+  frame_ = model_.StateIndex(c.measured_node);
+  if (frame_ < 0) {
+    throw std::invalid_argument(fmt::format(
+        "disturbance sensor: measured node '{}' is not a node with heat capacity of model '{}'",
+        c.measured_node, model_.Name()));
+  }
+  if (!(c.measurement_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) || !(c.sensor_offset_sd_K > 0.0) ||
+      !(c.node_process_sd_K > 0.0) || !(c.frame_heat_sd_W > 0.0) || !(c.rotor_heat_sd_W > 0.0) ||
+      !(c.rotor_heat_tau_s > 0.0) || !(c.loss_scale_sd >= 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0)) {
+    throw std::invalid_argument("disturbance sensor: standard deviations and times must be positive");
+  }
+  rotor_ = c.rotor_node.empty() ? -1 : model_.StateIndex(c.rotor_node);
+  n_ = model_.StateCount();
+  int k = n_;
+  if (c.sensor_lag_s > 0.0) lag_ = k++;
+  df_ = k++;
+  if (rotor_ >= 0) dr_ = k++;
+  if (c.loss_scale_sd > 0.0) ls_ = k++;
+  bias_ = k++;
+  n_aug_ = k;
+  const int nb = n_aug_ - 1;  // everything but the offset is discretised together
+  lin_block_.a_per_s = Eigen::MatrixXd::Zero(nb, nb);
+  lin_block_.f_K_per_s = Eigen::VectorXd::Zero(nb);
+  const Eigen::VectorXd& cap = model_.Capacities_J_per_K();
+  lin_block_.a_per_s(frame_, df_) = 1.0 / cap(frame_);
+  lin_block_.a_per_s(df_, df_) = -kFrameHeatLeak_per_s;
+  if (dr_ >= 0) {
+    lin_block_.a_per_s(rotor_, dr_) = 1.0 / cap(rotor_);
+    lin_block_.a_per_s(dr_, dr_) = -1.0 / c.rotor_heat_tau_s;
+  }
+  if (lag_ >= 0) {
+    lin_block_.a_per_s(lag_, frame_) = 1.0 / c.sensor_lag_s;
+    lin_block_.a_per_s(lag_, lag_) = -1.0 / c.sensor_lag_s;
+  }
+  ad_ = Eigen::MatrixXd::Identity(n_aug_, n_aug_);
+  sp_ = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
+  bu_ = Eigen::VectorXd::Zero(n_aug_);
+  c_ = Eigen::MatrixXd::Zero(1, n_aug_);
+  c_(0, lag_ >= 0 ? lag_ : frame_) = 1.0;
+  c_(0, bias_) = 1.0;
+  sm_ = Eigen::MatrixXd::Constant(1, 1, c.measurement_sd_K * c.measurement_sd_K);
+  y_ = Eigen::VectorXd::Zero(1);
+  c0_ = Eigen::MatrixXd::Zero(0, n_aug_);
+  x_nodes_ = Eigen::VectorXd::Zero(n_);
+  filter_ = KalmanFilter(n_aug_);
+  Initialise(25.0);
+}
+
+void DisturbanceThermalSensor::Initialise(double x0_degC) {
+  const auto& c = config_;
+  const int temps = lag_ >= 0 ? n_ + 1 : n_;  // nodes and the lag: one common level
+  Eigen::MatrixXd s = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
+  for (int i = 0; i < temps; ++i) {
+    const int ii = i < n_ ? i : lag_;
+    for (int j = 0; j < temps; ++j) s(ii, j < n_ ? j : lag_) = c.initial_sd_K * c.initial_sd_K;
+    s(ii, ii) += c.initial_spread_sd_K * c.initial_spread_sd_K;
+  }
+  s(df_, df_) = 1.0;  // W^2: a watt either way at the start
+  if (dr_ >= 0) s(dr_, dr_) = c.rotor_heat_sd_W * c.rotor_heat_sd_W;
+  if (ls_ >= 0) s(ls_, ls_) = 0.01;  // 10 % either way at the start
+  s(bias_, bias_) = c.sensor_offset_sd_K * c.sensor_offset_sd_K;
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(n_aug_);
+  x.head(n_).setConstant(x0_degC);
+  if (lag_ >= 0) x(lag_) = x0_degC;
+  filter_.Reset(x, s);
+}
+
+double DisturbanceThermalSensor::NodeSd_K(int i) const {
+  const double v = std::max(filter_.Covariance()(i, i), 0.0);
+  return std::sqrt(v + config_.sd_floor_K * config_.sd_floor_K);
+}
+
+const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
+                                                         double measured_degC) {
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
+    throw std::domain_error("disturbance sensor: the period must be positive and finite");
+  }
+  const auto& c = config_;
+  const int nb = n_aug_ - 1;
+  x_nodes_ = filter_.State().head(n_);
+  model_.Linearise(in, x_nodes_, lin_);
+  lin_block_.a_per_s.topLeftCorner(n_, n_) = lin_.a_per_s;
+  lin_block_.f_K_per_s.head(n_) = lin_.f_K_per_s;
+  if (ls_ >= 0) {
+    // The losses' share of dx/dt at the estimate: (a x + f) under load minus at rest.
+    ThermalInputs idle = in;
+    idle.speed_rpm = idle.id_A = idle.iq_A = 0.0;
+    model_.Linearise(idle, x_nodes_, lin_idle_);
+    auto col = lin_block_.a_per_s.col(ls_).head(n_);
+    col.noalias() = lin_.a_per_s * x_nodes_;
+    col += lin_.f_K_per_s;
+    col.noalias() -= lin_idle_.a_per_s * x_nodes_;
+    col -= lin_idle_.f_K_per_s;
+    lin_block_.a_per_s(ls_, ls_) = -kFrameHeatLeak_per_s;
+  }
+  discretiser_.Update(lin_block_, dt_s);
+  const ThermalDiscreteModel& d = discretiser_.Current();
+  ad_.topLeftCorner(nb, nb) = d.ad;
+  bu_.head(nb).noalias() = d.phi_s * lin_block_.f_K_per_s;
+  const double q = c.node_process_sd_K * c.node_process_sd_K * dt_s;
+  for (int i = 0; i < n_; ++i) sp_(i, i) = q;
+  sp_(df_, df_) = c.frame_heat_sd_W * c.frame_heat_sd_W * dt_s;
+  if (dr_ >= 0) {  // Gauss-Markov: variance 2 sigma^2 dt / tau per step keeps sigma stationary
+    sp_(dr_, dr_) = 2.0 * c.rotor_heat_sd_W * c.rotor_heat_sd_W * dt_s / c.rotor_heat_tau_s;
+  }
+  if (ls_ >= 0) sp_(ls_, ls_) = c.loss_scale_sd * c.loss_scale_sd * dt_s;
+  filter_.Predict(ad_, bu_, sp_);
+  y_(0) = measured_degC;
+  if (!std::isfinite(measured_degC)) return filter_.Update(c0_, y0_, sm0_);
+  return filter_.Update(c_, y_, sm_);
+}
+
+}  // namespace pumptherm::estimators
