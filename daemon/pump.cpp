@@ -34,10 +34,10 @@ estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c) {
   return m;
 }
 
-/// Whether a finding changed enough to be announced (state, effect or onset).
+/// Whether a finding changed enough to be announced: its state or effect (refits that only move
+/// the size or the fitted start are published on LCM, not announced).
 bool NewVerdict(const estimators::MismatchFinding& a, const estimators::MismatchFinding& b) {
-  const bool same_onset = a.onset_s == b.onset_s || (std::isnan(a.onset_s) && std::isnan(b.onset_s));
-  return a.state != b.state || a.effect != b.effect || !same_onset;
+  return a.state != b.state || a.effect != b.effect;
 }
 
 }  // namespace

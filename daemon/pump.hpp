@@ -60,7 +60,7 @@ struct PumpSnapshot {
   int time_to_trip_node = -1;             ///< state index the forecast is about (-1: none)
   std::uint64_t alarm_changes = 0;        ///< increments whenever `alarm` changes
   estimators::MismatchFinding mismatch;   ///< is the model right? (docs/daemon.md, "Model mismatch")
-  std::uint64_t mismatch_changes = 0;     ///< increments when its state, effect or onset changes
+  std::uint64_t mismatch_changes = 0;     ///< increments when its state or effect changes
 };
 
 /// Saved state of one pump (the state store writes it; docs/daemon.md "State").
