@@ -79,7 +79,7 @@ struct MismatchDetectorConfig {
   double initial_spread_sd_K = 5.0;
   double window_s = 60.0;             ///< NIS window
   double false_alarm_probability = 1e-7;  ///< per window test: sets the chi-square threshold
-  double settle_s = 600.0;            ///< no verdict before this long after Initialise
+  double settle_s = 300.0;            ///< no verdict before this long after Initialise
   double clear_after_s = 600.0;       ///< the test passing this long clears a finding
   double fit_window_s = 1200.0;       ///< history kept for naming
   double fit_onset_step_s = 20.0;     ///< onset grid of the naming fit
