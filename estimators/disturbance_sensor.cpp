@@ -26,7 +26,7 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, Di
   }
   if (!(c.measurement_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) || !(c.sensor_offset_sd_K > 0.0) ||
       !(c.node_process_sd_K > 0.0) || !(c.frame_heat_sd_W > 0.0) || !(c.rotor_heat_sd_W > 0.0) ||
-      !(c.rotor_heat_tau_s > 0.0) || !(c.loss_scale_sd >= 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0)) {
+      !(c.rotor_heat_tau_s > 0.0) || !(c.winding_measurement_sd_K > 0.0) || !(c.loss_scale_sd >= 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0)) {
     throw std::invalid_argument("disturbance sensor: standard deviations and times must be positive");
   }
   rotor_ = c.rotor_node.empty() ? -1 : model_.StateIndex(c.rotor_node);
@@ -61,6 +61,18 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, Di
   sm_ = Eigen::MatrixXd::Constant(1, 1, c.measurement_sd_K * c.measurement_sd_K);
   y_ = Eigen::VectorXd::Zero(1);
   c0_ = Eigen::MatrixXd::Zero(0, n_aug_);
+  cw_ = Eigen::MatrixXd::Zero(1, n_aug_);
+  cw_.row(0).head(n_) = model_.WindingWeights().transpose();
+  const double var_w = c.winding_measurement_sd_K * c.winding_measurement_sd_K;
+  smw_ = Eigen::MatrixXd::Constant(1, 1, var_w);
+  c2_ = Eigen::MatrixXd::Zero(2, n_aug_);
+  c2_.row(0) = c_.row(0);
+  c2_.row(1) = cw_.row(0);
+  sm2_ = Eigen::MatrixXd::Zero(2, 2);
+  sm2_(0, 0) = sm_(0, 0);
+  sm2_(1, 1) = var_w;
+  yw_ = Eigen::VectorXd::Zero(1);
+  y2_ = Eigen::VectorXd::Zero(2);
   x_nodes_ = Eigen::VectorXd::Zero(n_);
   filter_ = KalmanFilter(n_aug_);
   Initialise(25.0);
@@ -91,7 +103,7 @@ double DisturbanceThermalSensor::NodeSd_K(int i) const {
 }
 
 const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
-                                                         double measured_degC) {
+                                                         double measured_degC, double winding_degC) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
     throw std::domain_error("disturbance sensor: the period must be positive and finite");
   }
@@ -125,8 +137,19 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
   }
   if (ls_ >= 0) sp_(ls_, ls_) = c.loss_scale_sd * c.loss_scale_sd * dt_s;
   filter_.Predict(ad_, bu_, sp_);
+  const bool frame = std::isfinite(measured_degC);
+  const bool winding = std::isfinite(winding_degC) && model_.WindingWeights().sum() > 0.0;
+  if (frame && winding) {
+    y2_(0) = measured_degC;
+    y2_(1) = winding_degC;
+    return filter_.Update(c2_, y2_, sm2_);
+  }
+  if (winding) {
+    yw_(0) = winding_degC;
+    return filter_.Update(cw_, yw_, smw_);
+  }
+  if (!frame) return filter_.Update(c0_, y0_, sm0_);
   y_(0) = measured_degC;
-  if (!std::isfinite(measured_degC)) return filter_.Update(c0_, y0_, sm0_);
   return filter_.Update(c_, y_, sm_);
 }
 

@@ -15,6 +15,7 @@
 /// point moves allocates, as in VirtualThermalSensor).
 
 #include <Eigen/Dense>
+#include <limits>
 #include <string>
 
 #include "estimators/kalman_filter.hpp"
@@ -36,6 +37,8 @@ struct DisturbanceSensorConfig {
   /// Random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s); 0 = no state.
   double loss_scale_sd = 0.002;
   double sd_floor_K = 1.0;                ///< added in quadrature to every reported node sd
+  /// Standard deviation of the resistance-based winding temperature when it is fused.
+  double winding_measurement_sd_K = 3.0;
   double initial_sd_K = 20.0;             ///< as VirtualSensorConfig
   double initial_spread_sd_K = 5.0;
 };
@@ -46,8 +49,10 @@ class DisturbanceThermalSensor {
   DisturbanceThermalSensor(const ThermalModel& model, DisturbanceSensorConfig config);
 
   void Initialise(double x0_degC);
-  /// One period; `measured_degC` NaN = no reading. Throws std::domain_error for dt_s <= 0.
-  const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, double measured_degC);
+  /// One period; `measured_degC` NaN = no reading; `winding_degC` (the resistance-based winding
+  /// temperature, Han et al. 2019 eq. 3) fused when finite. Throws std::domain_error for dt_s <= 0.
+  const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,
+                                 double winding_degC = std::numeric_limits<double>::quiet_NaN());
 
   /// Node temperature estimate i (state order of the model) and its reported sd (with the floor).
   double Node_degC(int i) const { return filter_.State()(i); }
@@ -69,6 +74,9 @@ class DisturbanceThermalSensor {
   Eigen::VectorXd bu_, y_, x_nodes_;
   Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows
   Eigen::VectorXd y0_;
+  Eigen::MatrixXd cw_, smw_;  ///< the winding alone (1 row) and frame + winding (2 rows)
+  Eigen::MatrixXd c2_, sm2_;
+  Eigen::VectorXd yw_, y2_;
 };
 
 }  // namespace pumptherm::estimators

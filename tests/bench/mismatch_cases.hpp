@@ -94,6 +94,9 @@ struct CaseSpec {
   std::uint64_t seed = 1;
   double sensor_lag_s = 30.0;
   double truth_process_sd_K = 0.005;  ///< per sqrt(s), as the plant simulator's default
+  /// The resistance-based winding temperature for the disturbance filter: the truth's winding
+  /// (ThermalModel::WindingWeights) plus white noise of this sd, once per step; 0 = not fused.
+  double winding_noise_sd_K = 0.0;
 };
 
 struct CaseResult {
@@ -145,10 +148,12 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   sc.lag_tau_s = spec.sensor_lag_s;
   sc.offset = std::uniform_real_distribution<double>(-0.35, 0.35)(rng);
   pumptherm::sim::Sensor sensor(sc, spec.seed * 31 + 5);
+  std::normal_distribution<double> normal(0.0, 1.0);
 
   pe::VirtualThermalSensor vts(nominal, vts_config);
   pe::MismatchDetector det(nominal, DetectorConfig(spec.sensor_lag_s));
   dc.sensor_lag_s = spec.sensor_lag_s;
+  if (spec.winding_noise_sd_K > 0.0) dc.winding_measurement_sd_K = spec.winding_noise_sd_K;
   pe::DisturbanceThermalSensor dist(nominal, dc);
   CaseResult r;
   r.nodes = nominal.StateNames();
@@ -191,7 +196,10 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     }
     meas(0) = y;
     vts.Step(in, spec.dt_s, meas, std::numeric_limits<double>::quiet_NaN());
-    dist.Step(in, spec.dt_s, y);
+    const double winding = spec.winding_noise_sd_K > 0.0
+                               ? nominal.WindingWeights().dot(x) + spec.winding_noise_sd_K * normal(rng)
+                               : std::numeric_limits<double>::quiet_NaN();
+    dist.Step(in, spec.dt_s, y, winding);
     const pe::MismatchFinding& f = det.Step(in, spec.dt_s, y, t);
     const bool named = f.state == pe::MismatchState::kPlantChange ||
                        f.state == pe::MismatchState::kSensorFaultSuspected;
