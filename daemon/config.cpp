@@ -298,6 +298,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.fuse_winding = r.Bool("fuse_winding", pc.fuse_winding);
       pc.winding_sd_K = r.Number("winding_sd_K", pc.winding_sd_K, 0.01, 100.0);
       pc.frame_sensor_lag_s = r.Number("frame_sensor_lag_s", pc.frame_sensor_lag_s, 0.0, 3600.0);
+      pc.disturbance_states = r.Bool("disturbance_states", pc.disturbance_states);
       pc.alarms = config.alarms;
       if (const toml::table* at = r.Table("alarms")) {
         TableReader ar(*at, r.Join("alarms"), source);

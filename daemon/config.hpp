@@ -92,6 +92,7 @@ struct PumpConfig {
   bool fuse_winding = true;               ///< feed the resistance-based winding temperature
   double winding_sd_K = 3.0;              ///< its standard deviation in the filter
   double frame_sensor_lag_s = 0.0;        ///< first-order lag of the frame sensor (mismatch test)
+  bool disturbance_states = false;        ///< publish the disturbance-state filter's estimates
   AlarmsConfig alarms;                    ///< the gateway's [alarms] with this pump's overrides
   int line = 0;                           ///< line of the [[pump]] table
 };

@@ -14,6 +14,7 @@
 
 #include "daemon/config.hpp"
 #include "estimators/alarms.hpp"
+#include "estimators/disturbance_sensor.hpp"
 #include "estimators/kalman_virtual_sensor.hpp"
 #include "estimators/mismatch_detector.hpp"
 #include "estimators/motor.hpp"
@@ -142,6 +143,8 @@ class Pump {
   estimators::VirtualThermalSensor sensor_;
   estimators::AlarmMonitor alarms_;
   estimators::MismatchDetector mismatch_;
+  estimators::DisturbanceThermalSensor robust_;  // published when config_.disturbance_states
+  Eigen::VectorXd robust_x_, robust_sd_;
   int measured_state_ = -1;
   std::vector<int> level_states_;        // state index of each alarm node (n states + winding)
   PumpCounters counters_;

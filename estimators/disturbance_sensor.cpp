@@ -102,6 +102,19 @@ double DisturbanceThermalSensor::NodeSd_K(int i) const {
   return std::sqrt(v + config_.sd_floor_K * config_.sd_floor_K);
 }
 
+void DisturbanceThermalSensor::Nodes(Eigen::VectorXd& x_degC, Eigen::VectorXd& sd_K) const {
+  for (int i = 0; i < n_; ++i) {
+    x_degC(i) = filter_.State()(i);
+    sd_K(i) = NodeSd_K(i);
+  }
+}
+
+void DisturbanceThermalSensor::AddDisturbanceForcing(ThermalLinearModel& lin) const {
+  const Eigen::VectorXd& cap = model_.Capacities_J_per_K();
+  lin.f_K_per_s(frame_) += filter_.State()(df_) / cap(frame_);
+  if (dr_ >= 0) lin.f_K_per_s(rotor_) += filter_.State()(dr_) / cap(rotor_);
+}
+
 const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
                                                          double measured_degC, double winding_degC) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {

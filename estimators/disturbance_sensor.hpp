@@ -57,6 +57,11 @@ class DisturbanceThermalSensor {
   /// Node temperature estimate i (state order of the model) and its reported sd (with the floor).
   double Node_degC(int i) const { return filter_.State()(i); }
   double NodeSd_K(int i) const;
+  /// Every node's estimate and reported sd into `x_degC`, `sd_K` (sized n; no allocation).
+  void Nodes(Eigen::VectorXd& x_degC, Eigen::VectorXd& sd_K) const;
+  /// Adds the disturbance heats (frame path, rotor) to the forcing of `lin` (n nodes), so that a
+  /// forecast with the nominal model carries the heat the filter has found.
+  void AddDisturbanceForcing(ThermalLinearModel& lin) const;
   double FrameHeat_W() const { return filter_.State()(df_); }
   double RotorHeat_W() const { return dr_ >= 0 ? filter_.State()(dr_) : 0.0; }
   double SensorOffset_K() const { return filter_.State()(bias_); }
