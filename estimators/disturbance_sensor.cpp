@@ -6,15 +6,6 @@
 #include <stdexcept>
 
 namespace pumptherm::estimators {
-namespace {
-
-/// Leak of the frame-path heat state, 1/s: a random walk in practice (a week's time constant),
-/// kept only so that the continuous system matrix stays invertible for the discretiser's
-/// relative-change test.
-constexpr double kFrameHeatLeak_per_s = 1.0 / (7.0 * 86400.0);
-
-}  // namespace
-
 DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, DisturbanceSensorConfig config)
     : model_(model), config_(std::move(config)), discretiser_(1e-3), filter_(0) {
   const auto& c = config_;
@@ -38,16 +29,17 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, Di
   if (c.loss_scale_sd > 0.0) ls_ = k++;
   bias_ = k++;
   n_aug_ = k;
-  const int nb = n_aug_ - 1;  // everything but the offset is discretised together
+  // The nodes and the sensor lag are discretised together (exact ZOH); the disturbances are held
+  // over a step and enter through that discretisation's Phi (Step()), so the matrix exponential is
+  // redone only when the network moves, as in VirtualThermalSensor.
+  const int nb = lag_ >= 0 ? n_ + 1 : n_;
   lin_block_.a_per_s = Eigen::MatrixXd::Zero(nb, nb);
   lin_block_.f_K_per_s = Eigen::VectorXd::Zero(nb);
   const Eigen::VectorXd& cap = model_.Capacities_J_per_K();
-  lin_block_.a_per_s(frame_, df_) = 1.0 / cap(frame_);
-  lin_block_.a_per_s(df_, df_) = -kFrameHeatLeak_per_s;
-  if (dr_ >= 0) {
-    lin_block_.a_per_s(rotor_, dr_) = 1.0 / cap(rotor_);
-    lin_block_.a_per_s(dr_, dr_) = -1.0 / c.rotor_heat_tau_s;
-  }
+  heat_in_ = Eigen::MatrixXd::Zero(nb, 3);  // K/s per unit of d_f, d_r, s
+  phi_heat_ = Eigen::MatrixXd::Zero(nb, 3);
+  heat_in_(frame_, 0) = 1.0 / cap(frame_);
+  if (dr_ >= 0) heat_in_(rotor_, 1) = 1.0 / cap(rotor_);
   if (lag_ >= 0) {
     lin_block_.a_per_s(lag_, frame_) = 1.0 / c.sensor_lag_s;
     lin_block_.a_per_s(lag_, lag_) = -1.0 / c.sensor_lag_s;
@@ -121,7 +113,7 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
     throw std::domain_error("disturbance sensor: the period must be positive and finite");
   }
   const auto& c = config_;
-  const int nb = n_aug_ - 1;
+  const int nb = static_cast<int>(lin_block_.f_K_per_s.size());
   x_nodes_ = filter_.State().head(n_);
   model_.Linearise(in, x_nodes_, lin_);
   lin_block_.a_per_s.topLeftCorner(n_, n_) = lin_.a_per_s;
@@ -131,17 +123,24 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
     ThermalInputs idle = in;
     idle.speed_rpm = idle.id_A = idle.iq_A = 0.0;
     model_.Linearise(idle, x_nodes_, lin_idle_);
-    auto col = lin_block_.a_per_s.col(ls_).head(n_);
+    auto col = heat_in_.col(2).head(n_);
     col.noalias() = lin_.a_per_s * x_nodes_;
     col += lin_.f_K_per_s;
     col.noalias() -= lin_idle_.a_per_s * x_nodes_;
     col -= lin_idle_.f_K_per_s;
-    lin_block_.a_per_s(ls_, ls_) = -kFrameHeatLeak_per_s;
   }
   discretiser_.Update(lin_block_, dt_s);
   const ThermalDiscreteModel& d = discretiser_.Current();
   ad_.topLeftCorner(nb, nb) = d.ad;
   bu_.head(nb).noalias() = d.phi_s * lin_block_.f_K_per_s;
+  // Disturbances held over the step: x(k+1) += Phi b d (eq. 21 with d as an input).
+  phi_heat_.noalias() = d.phi_s * heat_in_;
+  ad_.col(df_).head(nb) = phi_heat_.col(0);
+  if (dr_ >= 0) {
+    ad_.col(dr_).head(nb) = phi_heat_.col(1);
+    ad_(dr_, dr_) = std::exp(-dt_s / c.rotor_heat_tau_s);
+  }
+  if (ls_ >= 0) ad_.col(ls_).head(nb) = phi_heat_.col(2);
   const double q = c.node_process_sd_K * c.node_process_sd_K * dt_s;
   for (int i = 0; i < n_; ++i) sp_(i, i) = q;
   sp_(df_, df_) = c.frame_heat_sd_W * c.frame_heat_sd_W * dt_s;

@@ -79,6 +79,7 @@ class DisturbanceThermalSensor {
   Eigen::VectorXd bu_, y_, x_nodes_;
   Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows
   Eigen::VectorXd y0_;
+  Eigen::MatrixXd heat_in_, phi_heat_;  ///< d_f, d_r, s into the nodes (K/s per unit); Phi times it
   Eigen::MatrixXd cw_, smw_;  ///< the winding alone (1 row) and frame + winding (2 rows)
   Eigen::MatrixXd c2_, sm2_;
   Eigen::VectorXd yw_, y2_;
