@@ -251,6 +251,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     m.disagree_hold_s = r.Number("disagree_hold_s", m.disagree_hold_s, 0.0, 86400.0);
     m.not_converged_grace_s = r.Number("not_converged_grace_s", m.not_converged_grace_s, 0.0, 86400.0);
     m.forecast_horizon_s = r.Number("forecast_horizon_s", m.forecast_horizon_s, 0.0, 86400.0);
+    m.trip_sd_factor = r.Number("trip_sd_factor", m.trip_sd_factor, 0.0, 10.0);
+    m.warning_sd_factor = r.Number("warning_sd_factor", m.warning_sd_factor, 0.0, 10.0);
     a.clear_can_interfaces = r.Strings("clear_can_interfaces");
     a.clear_lcm_sources = r.Strings("clear_lcm_sources");
     ReadClearAuth(r, config.dbc.base_dir, config.clear_auth);
@@ -315,6 +317,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.winding_sd_K = r.Number("winding_sd_K", pc.winding_sd_K, 0.01, 100.0);
       pc.magnet_node = r.String("magnet_node", &pc.magnet_node);
       pc.magnet_min_sd_K = r.Number("magnet_min_sd_K", pc.magnet_min_sd_K, 0.01, 100.0);
+      pc.frame_sensor_lag_s = r.Number("frame_sensor_lag_s", pc.frame_sensor_lag_s, 0.0, 3600.0);
+      pc.disturbance_states = r.Bool("disturbance_states", pc.disturbance_states);
       pc.alarms = config.alarms;
       if (const toml::table* at = r.Table("alarms")) {
         TableReader ar(*at, r.Join("alarms"), source);

@@ -105,6 +105,8 @@ struct PumpConfig {
   /// published: the identifier's covariance sees its noise, not the nameplate flux's error or
   /// the inverter's voltage error.
   double magnet_min_sd_K = 3.0;
+  double frame_sensor_lag_s = 0.0;        ///< first-order lag of the frame sensor (mismatch test)
+  bool disturbance_states = false;        ///< publish the disturbance-state filter's estimates
   AlarmsConfig alarms;                    ///< the gateway's [alarms] with this pump's overrides
   int line = 0;                           ///< line of the [[pump]] table
 };

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <ctime>
 #include <limits>
 #include <map>
 #include <sstream>
@@ -409,6 +410,10 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const
     }
     case MappingOutput::kTimeToTripS:
       return std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : kNaN;
+    case MappingOutput::kMismatchState:
+      return s.initialised ? static_cast<double>(s.mismatch.state) : kNaN;
+    case MappingOutput::kMismatchEffect:
+      return s.initialised ? static_cast<double>(s.mismatch.effect) : kNaN;
     case MappingOutput::kUptimeS:
       return last_now_us_ >= start_us_ ? static_cast<double>(last_now_us_ - start_us_) * 1e-6 : 0.0;
     case MappingOutput::kFrameRateHz: return io_[p].frame_rate_Hz;
@@ -519,6 +524,10 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
           name, AlarmChangeText(a, io.logged_active_reasons, pump.model().StateNames()));
       io.logged_active_reasons = a.active_reasons;
     }
+    if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
+      io.mismatch_changes_logged = pump.snapshot().mismatch_changes;
+      LogMismatch(pump);
+    }
     if (now_us >= io.next_lcm_us) {
       FillTelemetry(p, io.telemetry_msg);
       EncodeInto(io.telemetry_msg, lcm_bytes_);
@@ -626,6 +635,23 @@ void Gateway::FillTelemetry(std::size_t p, pumptherm::telemetry_t& m) const {
   m.status_age_s = io.status_us >= 0 ? static_cast<double>(io.inputs_us - io.status_us) * 1e-6 : kNaN;
 }
 
+void Gateway::LogMismatch(const Pump& pump) const {
+  const estimators::MismatchFinding& f = pump.snapshot().mismatch;
+  const bool fault = f.state == estimators::MismatchState::kPlantChange ||
+                     f.state == estimators::MismatchState::kSensorFaultSuspected ||
+                     f.state == estimators::MismatchState::kUnexplained;
+  std::string since;
+  if (std::isfinite(f.onset_s)) {
+    const auto t = static_cast<std::time_t>(std::floor(f.onset_s));
+    std::tm tm{};
+    gmtime_r(&t, &tm);
+    since = fmt::format(" since {:02}:{:02}:{:02} UTC", tm.tm_hour, tm.tm_min, tm.tm_sec);
+  }
+  Log(fault ? LogLevel::kWarning : LogLevel::kNotice, "pump {}: model {}: {}{} (window NIS {:.0f}, limit {:.0f})",
+      pump.config().name, estimators::MismatchStateName(f.state), estimators::DescribeFinding(f), since,
+      f.window_nis, f.threshold);
+}
+
 std::vector<std::uint8_t> Gateway::EncodeAlarm(const Pump& pump) const {
   pumptherm::alarm_t m;
   FillAlarm(pump, m);
@@ -679,6 +705,10 @@ void Gateway::FillAlarm(const Pump& pump, pumptherm::alarm_t& m) const {
     ac.latched = c.latched;
   }
   m.num_conditions = static_cast<std::int32_t>(m.conditions.size());
+  m.mismatch_state = static_cast<std::int8_t>(s.mismatch.state);
+  m.mismatch_effect = static_cast<std::int8_t>(s.mismatch.effect);
+  m.mismatch_value = s.mismatch.value;
+  m.mismatch_since_utime = std::isfinite(s.mismatch.onset_s) ? static_cast<std::int64_t>(s.mismatch.onset_s * 1e6) : 0;
 }
 
 std::vector<std::uint8_t> Gateway::EncodeHealth(std::int64_t now_us) const {

@@ -161,6 +161,7 @@ class Gateway {
     std::vector<OutputPlan> outputs;
     std::int64_t next_lcm_us = -1;
     std::uint64_t alarm_changes_sent = 0;
+    std::uint64_t mismatch_changes_logged = 0;
     // Latest decoded inputs, for telemetry_t.
     double inputs[protocol::kMappingInputCount];
     std::int64_t inputs_us = -1;
@@ -199,6 +200,8 @@ class Gateway {
   void FillTemperatures(const Pump& p, pumptherm::temperatures_t& m) const;
   void FillTelemetry(std::size_t pump_index, pumptherm::telemetry_t& m) const;
   void FillAlarm(const Pump& p, pumptherm::alarm_t& m) const;
+  /// Journal line for a new mismatch verdict (state, effect, onset).
+  void LogMismatch(const Pump& pump) const;
   void FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) const;
   /// `node`: the model node of a node-indexed frame, else -1.
   double OutputValue(std::size_t pump, protocol::MappingOutput output, int node) const;

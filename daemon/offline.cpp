@@ -98,7 +98,7 @@ class CsvSink {
       header += ",winding_resistance_C,magnet_flux_C,magnet_flux_sd_K,resistance_ohm,flux_Wb,ident_status,"
                 "frame_measured_C,ambient_C,"
                 "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s,alarm_active_reasons,"
-                "sensor_fault,winding_resistance_sd_K,flux_sd_Wb\n";
+                "sensor_fault,winding_resistance_sd_K,flux_sd_Wb,mismatch_state,mismatch_effect,mismatch_value\n";
       std::fputs(header.c_str(), files_.back()->f);
       last_.push_back(-1);
     }
@@ -111,13 +111,15 @@ class CsvSink {
       std::string row = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6 - origin_s_);
       for (std::size_t k = 0; k < s.node_degC.size(); ++k) row += fmt::format(",{:.4f},{:.4f}", s.node_degC[k], s.node_sd_K[k]);
       const auto& r = s.resistance;
-      row += fmt::format(",{:.4f},{:.4f},{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f},{},{},{:.4f},{:.3g}\n",
+      row += fmt::format(",{:.4f},{:.4f},{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f},{},{},{:.4f},{:.3g},{},{},{:.3f}\n",
                          s.winding_resistance_degC, s.magnet_flux_degC, s.magnet_flux_sd_K, r.resistance_ohm, r.flux_Wb, static_cast<int>(r.status),
                          s.frame_measured_degC, s.ambient_degC, s.speed_rpm, s.nis,
                          static_cast<int>(s.alarm.level), static_cast<int>(s.alarm.reason), s.alarm.node,
                          std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : -1.0,
                          s.alarm.active_reasons, static_cast<int>(s.sensor_fault),
-                         std::isfinite(s.winding_resistance_degC) ? r.winding_sd_K : std::nan(""), r.flux_sd_Wb);
+                         std::isfinite(s.winding_resistance_degC) ? r.winding_sd_K : std::nan(""), r.flux_sd_Wb,
+                         estimators::MismatchStateName(s.mismatch.state),
+                         estimators::MismatchEffectName(s.mismatch.effect), s.mismatch.value);
       std::fputs(row.c_str(), files_[i]->f);
     }
   }

@@ -14,7 +14,9 @@
 
 #include "daemon/config.hpp"
 #include "estimators/alarms.hpp"
+#include "estimators/disturbance_sensor.hpp"
 #include "estimators/kalman_virtual_sensor.hpp"
+#include "estimators/mismatch_detector.hpp"
 #include "estimators/motor.hpp"
 #include "estimators/resistance_identifier.hpp"
 #include "estimators/thermal_discretisation.hpp"
@@ -65,6 +67,8 @@ struct PumpSnapshot {
   estimators::AlarmState alarm;
   int time_to_trip_node = -1;             ///< state index the forecast is about (-1: none)
   std::uint64_t alarm_changes = 0;        ///< increments whenever `alarm` changes
+  estimators::MismatchFinding mismatch;   ///< is the model right? (docs/daemon.md, "Model mismatch")
+  std::uint64_t mismatch_changes = 0;     ///< increments when its state or effect changes
 };
 
 /// Saved state of one pump (the state store writes it; docs/daemon.md "State").
@@ -143,6 +147,8 @@ class Pump {
   void PublishMagnetTemperature();
   /// This step's extra filter measurements: the winding from resistance, the magnet from flux.
   const estimators::NodeMeasurements& ExtraMeasurements(double winding_res_degC);
+  /// Runs the mismatch test on this step's inputs and reading; counts a changed verdict.
+  void CheckModel(const estimators::ThermalInputs& in, double measured_degC, std::int64_t end_us);
   double TimeToTrip_s(const estimators::ThermalInputs& in, int* node);
   void Identify(std::int64_t t_us);
   void NoteFastFrame(std::int64_t t_us);
@@ -172,6 +178,9 @@ class Pump {
   estimators::VirtualThermalSensor sensor_;
   estimators::AlarmMonitor alarms_;
   estimators::SensorHealth sensor_health_;
+  estimators::MismatchDetector mismatch_;
+  estimators::DisturbanceThermalSensor robust_;  // published when config_.disturbance_states
+  Eigen::VectorXd robust_x_, robust_sd_;
   int measured_state_ = -1;
   int magnet_state_ = -1;                // state the magnet temperature is fused into (-1: none)
   std::uint64_t identifier_blocks_ = 0;  // block updates seen, to time the flux's freshness
@@ -222,6 +231,7 @@ class Pump {
   Eigen::VectorXd forecast_ss_;
   std::vector<double> alarm_values_;
   Eigen::VectorXd blind_x_;  // worst-case bound while blind (size 0: not blind), degC
+  std::vector<double> alarm_sd_;         // their standard deviations (the winding's: none, NaN)
 };
 
 }  // namespace pumptherm::daemon

@@ -106,15 +106,26 @@ void AlarmMonitor::Update(Channel& ch, AlarmLevel want, double value, double now
   }
 }
 
-AlarmLevel AlarmMonitor::OverLevel(const Channel& ch, double t, const TemperatureLimits& lim) const {
-  if (std::isnan(t)) return ch.level;
+AlarmLevel AlarmMonitor::OverLevel(const Channel& ch, double w, double t,
+                                   const TemperatureLimits& lim) const {
+  if (std::isnan(t) || std::isnan(w)) return ch.level;
   const double h = config_.hysteresis_K;
   if (t >= lim.trip_degC) return AlarmLevel::kTrip;
   if (ch.level == AlarmLevel::kTrip && t > lim.trip_degC - h) return AlarmLevel::kTrip;
-  if (t >= lim.warning_degC) return AlarmLevel::kWarning;
-  if (ch.level >= AlarmLevel::kWarning && t > lim.warning_degC - h) return AlarmLevel::kWarning;
+  if (w >= lim.warning_degC) return AlarmLevel::kWarning;
+  if (ch.level >= AlarmLevel::kWarning && w > lim.warning_degC - h) return AlarmLevel::kWarning;
   return AlarmLevel::kNone;
 }
+
+namespace {
+
+/// mean + k sd; an unknown sd counts as 0 (the mean alone).
+double UpperBound(double mean_degC, const double* sd_K, std::size_t i, double k) {
+  const double sd = sd_K != nullptr && std::isfinite(sd_K[i]) ? sd_K[i] : 0.0;
+  return mean_degC + k * sd;
+}
+
+}  // namespace
 
 const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
   if (std::isnan(start_s_)) start_s_ = now_s;
@@ -123,7 +134,11 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
   for (std::size_t i = 0; i < limits_.size(); ++i) {
     const double t = in.node_degC ? in.node_degC[i] : std::nan("");
     // NaN: not known now; the channel and its pending holds stay as they are.
-    if (Known(t)) Update(over_[i], OverLevel(over_[i], t, limits_[i]), t, now_s, hold);
+    if (Known(t)) {
+      const double w = UpperBound(t, in.node_sd_K, i, config_.warning_sd_factor);
+      const double u = UpperBound(t, in.node_sd_K, i, config_.trip_sd_factor);
+      Update(over_[i], OverLevel(over_[i], w, u, limits_[i]), t, now_s, hold);
+    }
     // Rate of rise over consecutive windows of rate_window_s.
     if (Known(t)) {
       if (std::isnan(window_start_degC_[i])) {
@@ -144,7 +159,7 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
   }
 
   if (Known(in.sensor_degC)) {
-    Update(sensor_over_, OverLevel(sensor_over_, in.sensor_degC, sensor_limits_), in.sensor_degC,
+    Update(sensor_over_, OverLevel(sensor_over_, in.sensor_degC, in.sensor_degC, sensor_limits_), in.sensor_degC,
            now_s, hold);
   }
   Update(stale_, in.telemetry_age_s > config_.stale_after_s ? AlarmLevel::kWarning : AlarmLevel::kNone,

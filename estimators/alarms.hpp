@@ -93,6 +93,10 @@ struct AlarmConfig {
   double not_converged_grace_s = 600.0;  ///< after start, "not converged" is not yet an alarm
   double forecast_horizon_s = 600.0;     ///< warn when time to trip drops below this
   int sensor_node = -1;                  ///< node index the measured sensor sits on (reports)
+  /// Levels act on an upper bound of each estimate, mean + k sd (docs/daemon.md, "Alarm rule"):
+  /// k for the trip and for the warning level.
+  double trip_sd_factor = 2.0;
+  double warning_sd_factor = 0.0;
 };
 
 /// What the pipeline knows at one alarm evaluation.
@@ -100,6 +104,8 @@ struct AlarmInputs {
   /// Temperatures watched for over-temperature and rate of rise, one per configured node (NaN =
   /// not known yet). Order and count as in AlarmMonitor's constructor.
   const double* node_degC = nullptr;
+  /// Standard deviations of those temperatures, K (nullptr or NaN entries: taken as 0).
+  const double* node_sd_K = nullptr;
   double sensor_degC = std::numeric_limits<double>::quiet_NaN();   ///< the measured node
   double sensor_model_degC = std::numeric_limits<double>::quiet_NaN();  ///< model estimate there
   double sensor_nis = std::numeric_limits<double>::quiet_NaN();    ///< last innovation test
@@ -189,7 +195,10 @@ class AlarmMonitor {
   /// Moves `ch` toward `want` (with hold), `want` computed by the caller with hysteresis.
   void Update(Channel& ch, AlarmLevel want, double value, double now_s, double hold_s);
   void StepSensor(double now_s, const AlarmInputs& in);
-  AlarmLevel OverLevel(const Channel& ch, double t_degC, const TemperatureLimits& lim) const;
+  /// The level `ch` should be at: `warn_degC` against the warning level, `trip_degC` against the
+  /// trip level (both the value itself for a measured sensor), with hysteresis.
+  AlarmLevel OverLevel(const Channel& ch, double warn_degC, double trip_degC,
+                       const TemperatureLimits& lim) const;
   /// The published state from the channels (most severe first). Does not allocate.
   void Compose(double time_to_trip_s);
   /// Calls f(channel, reason, detail, node, threshold) for every active channel, in a fixed order.

@@ -21,7 +21,7 @@ constexpr std::array<std::string_view, kMappingOutputCount> kOutputNames = {
     "alarm_value_degC",      "time_to_trip_s", "uptime_s",      "frame_rate_Hz",
     "drops",                 "bus_state",      "magnet_flux_temp_degC", "node_index",
     "node_count",            "node_temp_degC", "node_sd_K",     "winding_res_sd_K",
-    "magnet_flux_sd_K"};
+    "magnet_flux_sd_K",      "mismatch_state", "mismatch_effect"};
 
 std::string Where(const toml::source_region& r) {
   const std::string file = r.path ? *r.path : std::string("<mapping>");

@@ -82,8 +82,10 @@ enum class MappingOutput {
   kNodeSdK,             ///< node_sd_K: its standard deviation (Kalman covariance), K
   kWindingResSdK,       ///< winding_res_sd_K: 1-sigma of the resistance-based temperature, K
   kMagnetFluxSdK,       ///< magnet_flux_sd_K: 1-sigma of the magnet temperature from the flux, K
+  kMismatchState,       ///< mismatch_state: estimators::MismatchState
+  kMismatchEffect,      ///< mismatch_effect: estimators::MismatchEffect
 };
-inline constexpr std::size_t kMappingOutputCount = 21;
+inline constexpr std::size_t kMappingOutputCount = 23;
 
 /// The TOML key of an input or output.
 std::string_view MappingInputName(MappingInput input) noexcept;

@@ -16,6 +16,8 @@
 #include <vector>
 
 #include "estimators/kalman_virtual_sensor.hpp"
+#include "estimators/disturbance_sensor.hpp"
+#include "estimators/mismatch_detector.hpp"
 
 namespace {
 std::atomic<long> g_allocations{0};
@@ -75,6 +77,82 @@ void BM_VirtualSensorStep(benchmark::State& state) {
   state.counters["rediscretisations"] = static_cast<double>(vts.Discretiser().Recomputations());
 }
 BENCHMARK(BM_VirtualSensorStep)->Arg(0)->Arg(1)->ArgName("fuse_winding");
+
+/// One step of the mismatch detector on tmp-generic (4 nodes, the sensor's lag and offset: 6
+/// states) at a steady operating point with the test passing: what the daemon adds per period
+/// and pump. The naming fit runs only when the test fails (BM_MismatchFit).
+void BM_MismatchStep(benchmark::State& state) {
+  const auto model = Load("tmp-generic");
+  pe::MismatchDetectorConfig c;
+  c.sensor_lag_s = 30.0;
+  pe::MismatchDetector det(model, c);
+  det.Initialise(30.0, 0.0);
+  pe::ThermalInputs in;
+  in.speed_rpm = 21000.0;
+  in.iq_A = 2.0;
+  in.ambient_degC = 22.0;
+  double t = 0.0;
+  for (int k = 0; k < 2000; ++k) det.Step(in, 1.0, 30.0, t += 1.0);  // warm up: sized, settled
+  const long before = g_allocations.load();
+  long steps = 0;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(det.Step(in, 1.0, 30.0 + 1e-3 * static_cast<double>(steps & 7), t += 1.0).window_nis);
+    ++steps;
+  }
+  state.counters["allocs_per_step"] =
+      static_cast<double>(g_allocations.load() - before) / static_cast<double>(steps);
+}
+BENCHMARK(BM_MismatchStep);
+
+/// One step of the disturbance-state filter on tmp-generic (4 nodes, lag, frame-path heat,
+/// rotor heat, loss scale, offset: 9 states; two Linearise calls for the loss column) at a
+/// steady operating point.
+void BM_DisturbanceStep(benchmark::State& state) {
+  const auto model = Load("tmp-generic");
+  pe::DisturbanceSensorConfig c;
+  c.sensor_lag_s = 30.0;
+  pe::DisturbanceThermalSensor f(model, c);
+  f.Initialise(30.0);
+  pe::ThermalInputs in;
+  in.speed_rpm = 21000.0;
+  in.iq_A = 2.0;
+  in.ambient_degC = 22.0;
+  for (int k = 0; k < 2000; ++k) f.Step(in, 1.0, 30.0);
+  const long before = g_allocations.load();
+  long steps = 0;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(f.Step(in, 1.0, 30.0 + 1e-3 * static_cast<double>(steps & 7)).nis);
+    ++steps;
+  }
+  state.counters["allocs_per_step"] =
+      static_cast<double>(g_allocations.load() - before) / static_cast<double>(steps);
+}
+BENCHMARK(BM_DisturbanceStep);
+
+/// The naming fit once (20 minutes of history at 1 s, 5 effects, the onset grid): what one
+/// failing test costs at detection and then once a minute.
+void BM_MismatchFit(benchmark::State& state) {
+  const auto model = Load("tmp-generic");
+  pe::MismatchDetectorConfig c;
+  c.sensor_lag_s = 30.0;
+  c.settle_s = 0.0;
+  c.name_after_s = 0.0;
+  c.refit_period_s = 1e-9;  // refit at every failing step
+  pe::MismatchDetector det(model, c);
+  pe::ThermalInputs in;
+  in.speed_rpm = 21000.0;
+  in.iq_A = 2.0;
+  in.ambient_degC = 22.0;
+  double t = 0.0;
+  det.Initialise(22.0, 0.0);
+  for (int k = 0; k < 1300; ++k) det.Step(in, 1.0, 22.0 + 0.01 * (k % 5), t += 1.0);
+  double y = 40.0;  // a reading far off the model: the test fails and the fit runs every step
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(det.Step(in, 1.0, y, t += 1.0).likelihood_ratio);
+    y += 0.01;
+  }
+}
+BENCHMARK(BM_MismatchFit)->Unit(benchmark::kMillisecond);
 
 /// One step of the virtual sensor on `wallscheid2017-4node` with its loss map (issue 11): 7
 /// quantities, 2 table lookups, 4 input-dependent resistances (so the network is re-assembled

@@ -131,9 +131,12 @@ struct NullSink : OutputSink {
   }
 };
 
-TEST(Allocation, NoHeapAllocationPerFrameInSteadyState) {
+/// The demo's configuration over the pipeline recording; `disturbance_states` switches every
+/// pump to the disturbance-state filter.
+void ExpectNoAllocationPerFrame(bool disturbance_states) {
   const std::string config_path = std::string(PUMPTHERM_SOURCE_DIR) + "/tools/demo/pumpthermd-demo.toml";
-  const DaemonConfig config = LoadConfig(config_path);
+  DaemonConfig config = LoadConfig(config_path);
+  for (auto& pump : config.pumps) pump.disturbance_states = disturbance_states;
   Gateway gateway(config);
   std::ifstream in(PUMPTHERM_ALLOCATION_RECORDING);
   ASSERT_TRUE(in) << PUMPTHERM_ALLOCATION_RECORDING << ": cannot open (built by vcan_pipeline_recording)";
@@ -203,6 +206,10 @@ TEST(Allocation, NoHeapAllocationPerFrameInSteadyState) {
                                       << static_cast<double>(g_allocations.load()) / static_cast<double>(counted_frames)
                                       << " per frame); PUMPTHERM_ABORT_ON_ALLOCATION=1 under gdb shows where";
 }
+
+TEST(Allocation, NoHeapAllocationPerFrameInSteadyState) { ExpectNoAllocationPerFrame(false); }
+
+TEST(Allocation, NoHeapAllocationPerFrameWithDisturbanceStates) { ExpectNoAllocationPerFrame(true); }
 
 }  // namespace
 }  // namespace pumptherm::daemon

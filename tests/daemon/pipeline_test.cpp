@@ -151,13 +151,13 @@ class Bench {
       Frame("PUMP_FAST_I", t, {{"Id_A", 0.0}, {"Iq_A", iq_A}, {"SpeedElec_rad_per_s", w}, {"RollingCounter", c}});
       Frame("PUMP_FAST_U", t + 200, {{"Ud_V", -w * 0.24e-3 * iq_A}, {"Uq_V", uq}, {"RollingCounter", c}});
       if (k % 10 == 0) {
-        plant_.Step({.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = 25.0}, 0.1);
+        plant_.Step({.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = truth_ambient_degC}, 0.1);
         truth_ = plant_.State_degC();
         Frame("PUMP_STATUS", t + 400, {{"SpeedMech_rpm", 800.0}, {"DriveState", 2.0},
-                                        {"FrameTemp_degC", truth_(0)}, {"AmbientTemp_degC", 25.0},
+                                        {"FrameTemp_degC", truth_(0) + frame_offset_K}, {"AmbientTemp_degC", 25.0},
                                         {"DcLink_V", 48.0}, {"RollingCounter", static_cast<double>(k / 10 % 16)}});
       } else {
-        plant_.Step({.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = 25.0}, 0.0 + 1e-9);
+        plant_.Step({.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = truth_ambient_degC}, 0.0 + 1e-9);
       }
     }
   }
@@ -170,6 +170,8 @@ class Bench {
   sim::ThermalPlant plant_;
   RecordingSink sink;
   Eigen::VectorXd truth_;
+  double truth_ambient_degC = 25.0;  ///< the plant's ambient (the status frames always say 25)
+  double frame_offset_K = 0.0;       ///< added to the frame reading (a sensor fault)
   std::size_t iface_ = 0;
   std::int64_t t_us_ = 1'763'776'800'000'000;
   int counter_ = 0;
@@ -291,6 +293,87 @@ TEST(Pipeline, ANodeWithoutCanOutputIsAConfigurationErrorNamingIt) {
               std::string::npos) << e.what();
   }
   std::remove(path.c_str());
+}
+
+TEST(Pipeline, DisturbanceStatesPublishAndTheModelIsFoundConsistent) {
+  Bench b(Config("disturbance_states = true\n"));
+  b.Run(900.0, 40.0);
+  const Pump& pump = *b.gateway_.pumps()[0];
+  const PumpSnapshot& s = pump.snapshot();
+  ASSERT_TRUE(s.initialised);
+  for (int i = 0; i < b.truth_.size(); ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    EXPECT_NEAR(s.node_degC[k], b.truth_(i), 1.5) << pump.model().StateNames()[k];
+    EXPECT_GE(s.node_sd_K[k], 1.0) << "the 1 K floor";
+  }
+  // The filter's own model as the truth: the mismatch test passes, on LCM and CAN.
+  EXPECT_EQ(s.mismatch.state, estimators::MismatchState::kConsistent) << estimators::DescribeFinding(s.mismatch);
+  const auto& bytes = std::prev(b.sink.lcm.upper_bound("PUMPTHERM/tmp1/ALARM"))->second;
+  pumptherm::alarm_t m;
+  ASSERT_GT(m.decode(bytes.data(), 0, static_cast<int>(bytes.size())), 0);
+  EXPECT_EQ(m.mismatch_state, pumptherm::alarm_t::MISMATCH_CONSISTENT);
+  EXPECT_EQ(m.mismatch_effect, pumptherm::alarm_t::EFFECT_NONE);
+  const protocol::DbcMessage* alarm = b.dbc_.FindMessage("GW_ALARM");
+  protocol::CanFrame last{};
+  for (const auto& [t, f] : b.sink.frames) {
+    if (f.id == alarm->id + 1) last = f;
+  }
+  const auto& codec = b.codec_.message(static_cast<std::size_t>(alarm - b.dbc_.messages.data()));
+  std::vector<double> v(codec.signal_count());
+  ASSERT_EQ(codec.Decode(std::span<const std::uint8_t>(last.data.data(), last.len), v), protocol::CodecStatus::kOk);
+  EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("MismatchState"))], 0.0);
+}
+
+/// The last GW_ALARM of node 1, decoded: (MismatchState, MismatchEffect).
+std::pair<double, double> LastMismatchOnCan(const Bench& b) {
+  const protocol::DbcMessage* alarm = b.dbc_.FindMessage("GW_ALARM");
+  protocol::CanFrame last{};
+  for (const auto& [t, f] : b.sink.frames) {
+    if (f.id == alarm->id + 1) last = f;
+  }
+  const auto& codec = b.codec_.message(static_cast<std::size_t>(alarm - b.dbc_.messages.data()));
+  std::vector<double> v(codec.signal_count());
+  EXPECT_EQ(codec.Decode(std::span<const std::uint8_t>(last.data.data(), last.len), v), protocol::CodecStatus::kOk);
+  return {v[static_cast<std::size_t>(alarm->FindSignal("MismatchState"))],
+          v[static_cast<std::size_t>(alarm->FindSignal("MismatchEffect"))]};
+}
+
+pumptherm::alarm_t LastAlarmOnLcm(const Bench& b) {
+  const auto& bytes = std::prev(b.sink.lcm.upper_bound("PUMPTHERM/tmp1/ALARM"))->second;
+  pumptherm::alarm_t m;
+  EXPECT_GT(m.decode(bytes.data(), 0, static_cast<int>(bytes.size())), 0);
+  return m;
+}
+
+TEST(Pipeline, AnUnmeasuredAmbientRiseIsAPlantChangeNotAnImplausibleSensor) {
+  Bench b(Config());
+  b.Run(900.0, 40.0);
+  ASSERT_EQ(b.gateway_.pumps()[0]->snapshot().mismatch.state, estimators::MismatchState::kConsistent);
+  b.truth_ambient_degC = 33.0;  // the room warms by 8 K; the ambient sensor still says 25
+  b.Run(600.0, 40.0);
+  const PumpSnapshot& s = b.gateway_.pumps()[0]->snapshot();
+  EXPECT_EQ(s.mismatch.state, estimators::MismatchState::kPlantChange) << estimators::DescribeFinding(s.mismatch);
+  EXPECT_EQ(s.alarm.active_reasons & (1u << static_cast<unsigned>(estimators::AlarmReason::kImplausibleSensor)), 0u);
+  const pumptherm::alarm_t m = LastAlarmOnLcm(b);
+  EXPECT_EQ(m.mismatch_state, pumptherm::alarm_t::MISMATCH_PLANT_CHANGE);
+  EXPECT_EQ(m.mismatch_effect, static_cast<std::int8_t>(s.mismatch.effect));
+  EXPECT_TRUE(std::isfinite(m.mismatch_value));
+  const auto [state, effect] = LastMismatchOnCan(b);
+  EXPECT_EQ(state, 2.0);
+  EXPECT_EQ(effect, static_cast<double>(s.mismatch.effect));
+}
+
+TEST(Pipeline, AFrameSensorJumpIsASuspectedSensorFault) {
+  Bench b(Config());
+  b.Run(900.0, 40.0);
+  b.frame_offset_K = 3.0;
+  b.Run(120.0, 40.0);
+  const PumpSnapshot& s = b.gateway_.pumps()[0]->snapshot();
+  EXPECT_EQ(s.mismatch.state, estimators::MismatchState::kSensorFaultSuspected) << estimators::DescribeFinding(s.mismatch);
+  EXPECT_EQ(s.mismatch.effect, estimators::MismatchEffect::kSensorOffset);
+  EXPECT_NEAR(s.mismatch.value, 3.0, 0.5);
+  EXPECT_EQ(LastAlarmOnLcm(b).mismatch_state, pumptherm::alarm_t::MISMATCH_SENSOR_FAULT_SUSPECTED);
+  EXPECT_EQ(LastMismatchOnCan(b).first, 3.0);
 }
 
 TEST(Pipeline, NothingIsPublishedAsATemperatureBeforeTheFirstEstimate) {

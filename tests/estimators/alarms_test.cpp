@@ -27,6 +27,36 @@ struct Fixture {
   const AlarmState& At(double t) { return m.Step(t, in); }
 };
 
+TEST(Alarms, TripActsOnMeanPlusTwoSdWarningOnTheMean) {
+  Fixture f;
+  double sd[2] = {4.0, 0.0};
+  f.in.node_sd_K = sd;
+  f.nodes[1] = 20.0;
+  f.nodes[0] = 91.0;  // mean below the trip level 100, mean + 2 sd = 99: a warning only
+  for (double t = 0; t <= 5; t += 1) f.At(t);
+  EXPECT_EQ(f.At(6).level, AlarmLevel::kWarning);
+  f.nodes[0] = 92.5;  // mean + 2 sd = 100.5 >= 100: trip, though the mean is 7.5 K below
+  for (double t = 7; t <= 12; t += 1) f.At(t);
+  EXPECT_EQ(f.At(13).level, AlarmLevel::kTrip);
+  EXPECT_EQ(f.At(13).reason, AlarmReason::kEstimatedOverTemperature);
+}
+
+TEST(Alarms, SdFactorsAreSettings) {
+  AlarmConfig c = Config();
+  c.trip_sd_factor = 0.0;
+  c.warning_sd_factor = 1.0;
+  AlarmMonitor m(c, {{80.0, 100.0}}, {70.0, 90.0});
+  double node = 77.0, sd = 4.0;  // mean + 1 sd = 81 >= 80: warning; trip on the mean
+  AlarmInputs in;
+  in.node_degC = &node;
+  in.node_sd_K = &sd;
+  for (double t = 0; t <= 5; t += 1) m.Step(t, in);
+  EXPECT_EQ(m.state().level, AlarmLevel::kWarning);
+  node = 97.0;  // mean + 1 sd above 100, the mean not: no trip with k = 0
+  for (double t = 6; t <= 12; t += 1) m.Step(t, in);
+  EXPECT_EQ(m.state().level, AlarmLevel::kWarning);
+}
+
 TEST(Alarms, QuietBelowLevels) {
   Fixture f;
   f.nodes[0] = 79.9;

@@ -47,7 +47,7 @@ fs::path TempFile(const std::string& name) {
 TEST(DbcCliTest, CheckListsThePumpthermFrameSet) {
   const RunResult r = RunPumptherm("dbc check '" + test::PumpthermDbc().string() + "'");
   EXPECT_EQ(r.exit_code, 0) << r.out;
-  EXPECT_NE(r.out.find("11 messages, 47 signals, 3 nodes"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("11 messages, 49 signals, 3 nodes"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("0x100 PUMP_FAST_I 8 bytes, 10 ms, from PumpDrive"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("n/a raw -32768"), std::string::npos) << r.out;
 }

@@ -114,6 +114,10 @@ void FlattenInto(Flat& f, const std::string& p, const alarm_t& m) {
     f.Integer(c + ".since_utime", m.conditions[i].since_utime);
     f.Bool(c + ".latched", m.conditions[i].latched);
   }
+  f.Integer(p + ".mismatch_state", m.mismatch_state);
+  f.Integer(p + ".mismatch_effect", m.mismatch_effect);
+  f.Number(p + ".mismatch_value", m.mismatch_value);
+  f.Integer(p + ".mismatch_since_utime", m.mismatch_since_utime);
 }
 
 void FlattenInto(Flat& f, const std::string& p, const alarm_clear_t& m) {

@@ -147,6 +147,10 @@ inline alarm_t SampleAlarm(int conditions = 2) {
     m.conditions.push_back(c);
   }
   m.num_conditions = conditions;
+  m.mismatch_state = conditions > 0 ? 2 : 0;
+  m.mismatch_effect = conditions > 0 ? 1 : 0;
+  m.mismatch_value = conditions > 0 ? 3.8 : std::numeric_limits<double>::quiet_NaN();
+  m.mismatch_since_utime = conditions > 0 ? m.utime - 600'000'000 : 0;
   return m;
 }
 
@@ -171,6 +175,10 @@ inline void ExpectSame(const alarm_t& e, const alarm_t& a) {
     EXPECT_EQ(ec.since_utime, ac.since_utime);
     EXPECT_EQ(ec.latched, ac.latched);
   }
+  EXPECT_EQ(e.mismatch_state, a.mismatch_state);
+  EXPECT_EQ(e.mismatch_effect, a.mismatch_effect);
+  EXPECT_TRUE(SameBits(e.mismatch_value, a.mismatch_value));
+  EXPECT_EQ(e.mismatch_since_utime, a.mismatch_since_utime);
 }
 
 inline alarm_clear_t SampleAlarmClear() {

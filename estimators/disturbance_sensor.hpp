@@ -1,0 +1,88 @@
+#pragma once
+/// A virtual thermal sensor whose model error goes into states made for it (docs/virtual-sensor.md,
+/// "Disturbance states"): the network's nodes (Saheba et al. 2010 eqs. 18-34, with a small
+/// process noise: the model is believed) augmented with
+///  - the frame sensor's first-order lag, tau ds/dt = T_frame - s (when it has one),
+///  - the sensor's constant calibration offset b, y = s + b,
+///  - a frame-path disturbance heat d_f (W, a random walk): lost or changed cooling, an
+///    unmeasured ambient, anything that heats or cools the frame from outside the model,
+///  - optionally a relative loss scale s (every loss times 1 + s, a random walk),
+///  - a rotor disturbance heat d_r (W, first-order Gauss-Markov with a stationary sd): heat inside
+///    that the frame barely sees, so its sd (and the rotor's) says how little is known,
+/// and a floor on every reported node sd for the model error no state represents.
+///
+/// Pure library; no allocation per step once sized (the re-discretisation when the operating
+/// point moves allocates, as in VirtualThermalSensor).
+
+#include <Eigen/Dense>
+#include <limits>
+#include <string>
+
+#include "estimators/kalman_filter.hpp"
+#include "estimators/thermal_discretisation.hpp"
+#include "estimators/thermal_model.hpp"
+
+namespace pumptherm::estimators {
+
+struct DisturbanceSensorConfig {
+  std::string measured_node = "frame";
+  std::string rotor_node = "rotor";       ///< absent from the model: no rotor heat state
+  double measurement_sd_K = 0.058;        ///< noise and 0.1 K quantisation
+  double sensor_lag_s = 0.0;              ///< 0: no lag state
+  double sensor_offset_sd_K = 0.5;        ///< a priori calibration offset
+  double node_process_sd_K = 0.005;       ///< per sqrt(s), every node
+  double frame_heat_sd_W = 1.0;           ///< random walk of d_f, W per sqrt(s)
+  double rotor_heat_sd_W = 5.0;           ///< stationary sd of d_r, W
+  double rotor_heat_tau_s = 1800.0;       ///< its correlation time
+  /// Random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s); 0 = no state.
+  double loss_scale_sd = 0.002;
+  double sd_floor_K = 1.0;                ///< added in quadrature to every reported node sd
+  /// Standard deviation of the resistance-based winding temperature when it is fused.
+  double winding_measurement_sd_K = 3.0;
+  double initial_sd_K = 20.0;             ///< as VirtualSensorConfig
+  double initial_spread_sd_K = 5.0;
+};
+
+class DisturbanceThermalSensor {
+ public:
+  /// Throws std::invalid_argument naming an unknown measured node or a bad setting.
+  DisturbanceThermalSensor(const ThermalModel& model, DisturbanceSensorConfig config);
+
+  void Initialise(double x0_degC);
+  /// One period; `measured_degC` NaN = no reading; `winding_degC` (the resistance-based winding
+  /// temperature, Han et al. 2019 eq. 3) fused when finite. Throws std::domain_error for dt_s <= 0.
+  const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,
+                                 double winding_degC = std::numeric_limits<double>::quiet_NaN());
+
+  /// Node temperature estimate i (state order of the model) and its reported sd (with the floor).
+  double Node_degC(int i) const { return filter_.State()(i); }
+  double NodeSd_K(int i) const;
+  /// Every node's estimate and reported sd into `x_degC`, `sd_K` (sized n; no allocation).
+  void Nodes(Eigen::VectorXd& x_degC, Eigen::VectorXd& sd_K) const;
+  /// Adds the disturbance heats (frame path, rotor) to the forcing of `lin` (n nodes), so that a
+  /// forecast with the nominal model carries the heat the filter has found.
+  void AddDisturbanceForcing(ThermalLinearModel& lin) const;
+  double FrameHeat_W() const { return filter_.State()(df_); }
+  double RotorHeat_W() const { return dr_ >= 0 ? filter_.State()(dr_) : 0.0; }
+  double SensorOffset_K() const { return filter_.State()(bias_); }
+  int StateCount() const { return n_aug_; }
+  const KalmanFilter& Filter() const { return filter_; }
+
+ private:
+  const ThermalModel& model_;
+  DisturbanceSensorConfig config_;
+  int n_ = 0, lag_ = -1, df_ = 0, dr_ = -1, ls_ = -1, bias_ = 0, n_aug_ = 0, frame_ = 0, rotor_ = -1;
+  ThermalLinearModel lin_, lin_block_, lin_idle_;
+  ThermalDiscretiser discretiser_;
+  KalmanFilter filter_;
+  Eigen::MatrixXd ad_, sp_, c_, sm_;
+  Eigen::VectorXd bu_, y_, x_nodes_;
+  Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows
+  Eigen::VectorXd y0_;
+  Eigen::MatrixXd heat_in_, phi_heat_;  ///< d_f, d_r, s into the nodes (K/s per unit); Phi times it
+  Eigen::MatrixXd cw_, smw_;  ///< the winding alone (1 row) and frame + winding (2 rows)
+  Eigen::MatrixXd c2_, sm2_;
+  Eigen::VectorXd yw_, y2_;
+};
+
+}  // namespace pumptherm::estimators

@@ -1,0 +1,431 @@
+#include "estimators/mismatch_detector.hpp"
+
+#include <fmt/core.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace pumptherm::estimators {
+namespace {
+
+/// Hypotheses of the naming fit, in column-block order.
+enum Hypothesis : int { kCooling = 0, kRotor, kLoss, kAmbient, kOffset, kHypotheses };
+
+MismatchEffect EffectOf(int h) {
+  switch (h) {
+    case kCooling: return MismatchEffect::kFrameAmbientResistance;
+    case kRotor: return MismatchEffect::kRotorLoss;
+    case kLoss: return MismatchEffect::kLossScale;
+    case kAmbient: return MismatchEffect::kUnmeasuredAmbient;
+    default: return MismatchEffect::kSensorOffset;
+  }
+}
+
+/// Standard normal upper quantile z with Q(z) = p, by bisection on erfc (p in (0, 0.5)).
+double NormalUpperQuantile(double p) {
+  double lo = 0.0, hi = 40.0;
+  for (int i = 0; i < 200; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    if (0.5 * std::erfc(mid / std::sqrt(2.0)) > p) lo = mid; else hi = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+}  // namespace
+
+const char* MismatchStateName(MismatchState state) {
+  switch (state) {
+    case MismatchState::kConsistent: return "consistent";
+    case MismatchState::kLearning: return "learning";
+    case MismatchState::kPlantChange: return "plant_change";
+    case MismatchState::kSensorFaultSuspected: return "sensor_fault_suspected";
+    case MismatchState::kUnexplained: return "unexplained";
+  }
+  return "unknown";
+}
+
+const char* MismatchEffectName(MismatchEffect effect) {
+  switch (effect) {
+    case MismatchEffect::kNone: return "none";
+    case MismatchEffect::kFrameAmbientResistance: return "frame_ambient_resistance";
+    case MismatchEffect::kRotorLoss: return "rotor_loss";
+    case MismatchEffect::kLossScale: return "loss_scale";
+    case MismatchEffect::kUnmeasuredAmbient: return "unmeasured_ambient";
+    case MismatchEffect::kSensorOffset: return "sensor_offset";
+    case MismatchEffect::kSensorStuck: return "sensor_stuck";
+  }
+  return "unknown";
+}
+
+std::string DescribeFinding(const MismatchFinding& f) {
+  if (f.state == MismatchState::kConsistent) return "consistent";
+  if (f.state == MismatchState::kLearning) return "learning";
+  if (f.state == MismatchState::kUnexplained) return "model mismatch, effect not named yet";
+  const double v = f.value;
+  switch (f.effect) {
+    case MismatchEffect::kFrameAmbientResistance:
+      return fmt::format("frame-to-ambient resistance x{:.1f} ({})", v,
+                         v >= 2.0 ? "cooling lost" : v > 1.0 ? "cooling reduced" : "cooling improved");
+    case MismatchEffect::kRotorLoss:
+      return fmt::format("rotor loss {:+.1f} W (heat inside the rotor: bearing, gas friction)", v);
+    case MismatchEffect::kLossScale:
+      return fmt::format("losses x{:.2f} ({:+.0f} %)", v, (v - 1.0) * 100.0);
+    case MismatchEffect::kUnmeasuredAmbient:
+      return fmt::format("boundary {:+.1f} K not seen by the ambient sensor (unmeasured ambient change)", v);
+    case MismatchEffect::kSensorOffset:
+      return fmt::format("sensor offset {:+.1f} K (sensor fault suspected: offset or jump)", v);
+    case MismatchEffect::kSensorStuck:
+      return fmt::format("sensor stuck at {:.1f} degC (sensor fault suspected)", v);
+    case MismatchEffect::kNone: break;
+  }
+  return "model mismatch, effect not named";
+}
+
+double ChiSquareQuantile(double dof, double p_upper) {
+  const double z = NormalUpperQuantile(p_upper);
+  const double h = 2.0 / (9.0 * dof);
+  const double c = 1.0 - h + z * std::sqrt(h);
+  return dof * c * c * c;
+}
+
+MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorConfig config)
+    : model_(model), config_(std::move(config)), discretiser_(1e-3), filter_(0), fit_disc_(1e-3) {
+  const auto& c = config_;
+  frame_ = model_.StateIndex(c.measured_node);
+  if (frame_ < 0) {
+    throw std::invalid_argument(fmt::format(
+        "mismatch detector: measured node '{}' is not a node with heat capacity of model '{}'",
+        c.measured_node, model_.Name()));
+  }
+  rotor_ = c.rotor_node.empty() ? -1 : model_.StateIndex(c.rotor_node);
+  if (!(c.measurement_sd_K > 0.0) || !(c.process_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) ||
+      !(c.sensor_offset_sd_K > 0.0) || !(c.initial_sd_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
+      !(c.window_s > 0.0) || !(c.false_alarm_probability > 0.0 && c.false_alarm_probability < 0.5) ||
+      !(c.fit_window_s > c.window_s) || !(c.fit_onset_step_s > 0.0) || !(c.refit_period_s > 0.0) ||
+      c.stuck_samples < 2) {
+    throw std::invalid_argument("mismatch detector: settings must be positive (window < fit window)");
+  }
+  n_ = model_.StateCount();
+  lag_ = c.sensor_lag_s > 0.0 ? n_ : -1;
+  bias_ = lag_ >= 0 ? n_ + 1 : n_;
+  sensor_ = lag_ >= 0 ? lag_ : frame_;
+  n_aug_ = bias_ + 1;
+  // d f / d T_boundary: how one kelvin more on every boundary heats each node (K/s per K).
+  ThermalInputs a;
+  ThermalInputs b = a;
+  b.ambient_degC += 1.0;
+  b.coolant_degC += 1.0;
+  const Eigen::VectorXd x25 = Eigen::VectorXd::Constant(n_, 25.0);
+  model_.Linearise(a, x25, lin_);
+  boundary_K_per_s_per_K_ = -lin_.f_K_per_s;
+  model_.Linearise(b, x25, lin_);
+  boundary_K_per_s_per_K_ += lin_.f_K_per_s;
+  const int nb = n_aug_ - 1;
+  lin_block_.a_per_s = Eigen::MatrixXd::Zero(nb, nb);
+  lin_block_.f_K_per_s = Eigen::VectorXd::Zero(nb);
+  ad_ = Eigen::MatrixXd::Identity(n_aug_, n_aug_);
+  sp_ = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
+  bu_ = Eigen::VectorXd::Zero(n_aug_);
+  c_ = Eigen::MatrixXd::Zero(1, n_aug_);
+  c_(0, sensor_) = 1.0;
+  c_(0, bias_) = 1.0;
+  sm_ = Eigen::MatrixXd::Constant(1, 1, c.measurement_sd_K * c.measurement_sd_K);
+  y_ = Eigen::VectorXd::Zero(1);
+  x_nodes_ = Eigen::VectorXd::Zero(n_);
+  filter_ = KalmanFilter(n_aug_);
+  Initialise(25.0, 0.0);
+}
+
+void MismatchDetector::Initialise(double x0_degC, double now_s) {
+  const int nb = n_aug_ - 1;
+  const double common = config_.initial_sd_K * config_.initial_sd_K;
+  const double spread = config_.initial_spread_sd_K * config_.initial_spread_sd_K;
+  Eigen::MatrixXd s = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
+  s.topLeftCorner(nb, nb).setConstant(common);
+  s.topLeftCorner(nb, nb).diagonal().array() += spread;
+  s(bias_, bias_) = config_.sensor_offset_sd_K * config_.sensor_offset_sd_K;
+  Eigen::VectorXd x = Eigen::VectorXd::Constant(n_aug_, x0_degC);
+  x(bias_) = 0.0;
+  filter_.Reset(x, s);
+  start_s_ = now_s;
+  passing_since_s_ = now_s;
+  nis_count_ = nis_next_ = 0;
+  nis_sum_ = 0.0;
+  size_ = head_ = 0;
+  finding_ = MismatchFinding{};
+  finding_.threshold = threshold_;
+}
+
+void MismatchDetector::Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_aug) {
+  x_nodes_ = x_aug.head(n_);
+  model_.Linearise(in, x_nodes_, lin_);
+  lin_block_.a_per_s.topLeftCorner(n_, n_) = lin_.a_per_s;
+  lin_block_.f_K_per_s.head(n_) = lin_.f_K_per_s;
+  if (lag_ >= 0) {
+    lin_block_.a_per_s(lag_, frame_) = 1.0 / config_.sensor_lag_s;
+    lin_block_.a_per_s(lag_, lag_) = -1.0 / config_.sensor_lag_s;
+  }
+}
+
+const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt_s,
+                                              double measured_degC, double now_s) {
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
+    throw std::domain_error("mismatch detector: the period must be positive and finite");
+  }
+  const int window = std::max(1, static_cast<int>(std::lround(config_.window_s / dt_s)));
+  if (static_cast<int>(nis_.size()) != window) {
+    // Sized on the first step (and if the period ever changes): the window and history in steps.
+    nis_.assign(static_cast<std::size_t>(window), 0.0);
+    nis_count_ = nis_next_ = 0;
+    nis_sum_ = 0.0;
+    threshold_ = ChiSquareQuantile(window, config_.false_alarm_probability);
+    cap_ = static_cast<int>(std::lround(config_.fit_window_s / dt_s)) + 1;
+    h_in_.assign(static_cast<std::size_t>(cap_), ThermalInputs{});
+    h_dt_.assign(static_cast<std::size_t>(cap_), 0.0);
+    h_y_ = h_nu_ = h_s_ = h_t_ = h_dt_;
+    h_xpre_.setZero(n_aug_, cap_);
+    h_k_.setZero(n_aug_, cap_);
+    const int onset_step = std::max(1, static_cast<int>(std::lround(config_.fit_onset_step_s / dt_s)));
+    const int onsets = cap_ / onset_step + window + 1;
+    fit_onsets_.reserve(static_cast<std::size_t>(onsets));
+    fit_e_.setZero(n_aug_, onsets * kHypotheses);
+    fit_u_col_.setZero(n_aug_);
+    fit_phiu_.setZero(n_aug_, kHypotheses);
+    fit_a_.setZero(onsets * kHypotheses);
+    fit_b_.setZero(onsets * kHypotheses);
+    size_ = head_ = 0;
+  }
+  const int nb = n_aug_ - 1;
+  // History: the state before the step, which the naming fit linearises at.
+  const int slot = head_;
+  h_xpre_.col(slot) = filter_.State();
+  Linearise(in, filter_.State());
+  discretiser_.Update(lin_block_, dt_s);
+  const ThermalDiscreteModel& d = discretiser_.Current();
+  ad_.topLeftCorner(nb, nb) = d.ad;
+  bu_.head(nb).noalias() = d.phi_s * lin_block_.f_K_per_s;
+  const double q = config_.process_sd_K * config_.process_sd_K * dt_s;
+  for (int i = 0; i < n_; ++i) sp_(i, i) = q;
+  filter_.Predict(ad_, bu_, sp_);
+
+  double nu = std::numeric_limits<double>::quiet_NaN(), s_nu = 1.0;
+  h_k_.col(slot).setZero();
+  if (std::isfinite(measured_degC)) {
+    y_(0) = measured_degC;
+    const KalmanUpdateReport& r = filter_.Update(c_, y_, sm_);
+    if (r.ok && r.measurements == 1) {
+      nu = r.innovation(0);
+      s_nu = r.innovation_var(0);
+      h_k_.col(slot) = filter_.Gain().col(0);
+      nis_sum_ += r.nis - nis_[static_cast<std::size_t>(nis_next_)];
+      nis_[static_cast<std::size_t>(nis_next_)] = r.nis;
+      nis_next_ = (nis_next_ + 1) % window;
+      nis_count_ = std::min(nis_count_ + 1, window);
+      if (nis_next_ == 0) {  // re-sum once per window: no drift from the running sum
+        nis_sum_ = 0.0;
+        for (double v : nis_) nis_sum_ += v;
+      }
+    }
+  }
+  h_in_[static_cast<std::size_t>(slot)] = in;
+  h_dt_[static_cast<std::size_t>(slot)] = dt_s;
+  h_y_[static_cast<std::size_t>(slot)] = measured_degC;
+  h_nu_[static_cast<std::size_t>(slot)] = nu;
+  h_s_[static_cast<std::size_t>(slot)] = s_nu;
+  h_t_[static_cast<std::size_t>(slot)] = now_s;
+  head_ = (head_ + 1) % cap_;
+  size_ = std::min(size_ + 1, cap_);
+
+  finding_.window_nis = nis_sum_;
+  finding_.threshold = threshold_;
+  if (now_s - start_s_ < config_.settle_s || nis_count_ < window) {
+    finding_.state = MismatchState::kLearning;
+    return finding_;
+  }
+  const bool failing = nis_sum_ > threshold_;
+  const bool fault_state = finding_.state == MismatchState::kPlantChange ||
+                           finding_.state == MismatchState::kSensorFaultSuspected ||
+                           finding_.state == MismatchState::kUnexplained;
+  if (failing) {
+    passing_since_s_ = now_s;
+    if (!fault_state) {
+      finding_.state = MismatchState::kUnexplained;
+      finding_.effect = MismatchEffect::kNone;
+      finding_.value = finding_.onset_s = std::numeric_limits<double>::quiet_NaN();
+      finding_.detected_s = now_s;
+      last_fit_s_ = -std::numeric_limits<double>::infinity();
+      int first = -1;
+      if (Stuck(&first)) Fit(now_s);
+    }
+    const bool named = finding_.state != MismatchState::kUnexplained;
+    const bool onset_in_window = !(now_s - finding_.onset_s > config_.fit_window_s - config_.window_s);
+    const bool due = named ? now_s - last_fit_s_ >= config_.refit_period_s && onset_in_window
+                           : now_s - finding_.detected_s >= config_.name_after_s;
+    if (due) Fit(now_s);
+  } else if (!fault_state || now_s - passing_since_s_ >= config_.clear_after_s) {
+    finding_ = MismatchFinding{};
+    finding_.state = MismatchState::kConsistent;
+    finding_.window_nis = nis_sum_;
+    finding_.threshold = threshold_;
+  }
+  return finding_;
+}
+
+bool MismatchDetector::Stuck(int* first) const {
+  int count = 0;
+  double v = std::numeric_limits<double>::quiet_NaN();
+  for (int i = 0; i < size_; ++i) {
+    const int k = (head_ - 1 - i + 2 * cap_) % cap_;
+    const double y = h_y_[static_cast<std::size_t>(k)];
+    if (!std::isfinite(y)) continue;
+    if (count == 0) v = y;
+    if (y != v) break;
+    ++count;
+    *first = k;
+  }
+  return count >= config_.stuck_samples;
+}
+
+void MismatchDetector::EffectForcing(int h, const ThermalInputs& in, const Eigen::VectorXd& x_aug,
+                                     double frame_degC, Eigen::VectorXd& u) {
+  u.setZero();
+  switch (h) {
+    case kCooling:  // heat from a relative change theta of the frame's boundary conductance
+      u(frame_) = boundary_K_per_s_per_K_(frame_) * (in.ambient_degC - frame_degC);
+      break;
+    case kRotor:
+      if (rotor_ >= 0) u(rotor_) = 1.0 / model_.Capacities_J_per_K()(rotor_);
+      break;
+    case kLoss: {  // the losses' share of dx/dt: (a x + f) with and without load
+      x_nodes_ = x_aug.head(n_);
+      model_.Linearise(in, x_nodes_, fit_lin_);
+      u.head(n_).noalias() = fit_lin_.a_per_s * x_nodes_;
+      u.head(n_) += fit_lin_.f_K_per_s;
+      ThermalInputs idle = in;
+      idle.speed_rpm = idle.id_A = idle.iq_A = 0.0;
+      model_.Linearise(idle, x_nodes_, lin_zero_);
+      u.head(n_).noalias() -= lin_zero_.a_per_s * x_nodes_;
+      u.head(n_) -= lin_zero_.f_K_per_s;
+      break;
+    }
+    case kAmbient:
+      u.head(n_) = boundary_K_per_s_per_K_;
+      break;
+    default:
+      break;
+  }
+}
+
+void MismatchDetector::FitOnsets(int window) {
+  // Every step over the last NIS window (a fault found fast started recently), every
+  // fit_onset_step_s before it.
+  fit_onsets_.clear();
+  const int onset_step = std::max(1, static_cast<int>(std::lround(
+      config_.fit_onset_step_s / h_dt_[static_cast<std::size_t>((head_ - 1 + cap_) % cap_)])));
+  const int fine_from = std::max(0, size_ - window);
+  for (int i = 0; i < fine_from; i += onset_step) fit_onsets_.push_back(i);
+  for (int i = fine_from; i < size_; ++i) fit_onsets_.push_back(i);
+}
+
+void MismatchDetector::Fit(double now_s) {
+  last_fit_s_ = now_s;
+  int stuck_first = -1;
+  if (Stuck(&stuck_first)) {
+    finding_.state = MismatchState::kSensorFaultSuspected;
+    finding_.effect = MismatchEffect::kSensorStuck;
+    finding_.value = h_y_[static_cast<std::size_t>(stuck_first)];
+    finding_.onset_s = h_t_[static_cast<std::size_t>(stuck_first)];
+    finding_.likelihood_ratio = std::numeric_limits<double>::quiet_NaN();
+    return;
+  }
+  const int nb = n_aug_ - 1;
+  FitOnsets(static_cast<int>(nis_.size()));
+  const int onsets = std::min(static_cast<int>(fit_onsets_.size()), static_cast<int>(fit_e_.cols()) / kHypotheses);
+  fit_e_.setZero();
+  fit_a_.setZero();
+  fit_b_.setZero();
+  const int oldest = (head_ - size_ + cap_) % cap_;
+  int active = 0;
+  for (int i = 0; i < size_; ++i) {
+    const int k = (oldest + i) % cap_;
+    const auto ks = static_cast<std::size_t>(k);
+    const ThermalInputs& in = h_in_[ks];
+    fit_x_ = h_xpre_.col(k);
+    Linearise(in, fit_x_);
+    fit_disc_.Update(lin_block_, h_dt_[ks]);
+    const ThermalDiscreteModel& d = fit_disc_.Current();
+    // The frame temperature for the cooling regressor: the reading less the estimated offset
+    // (the low-noise filter's own frame estimate lags a changed plant).
+    const double y = h_y_[ks];
+    const double frame = std::isfinite(y) ? y - fit_x_(bias_) : fit_x_(frame_);
+    for (int h = 0; h < kHypotheses; ++h) {
+      EffectForcing(h, in, fit_x_, frame, fit_u_col_);
+      fit_phiu_.col(h).setZero();
+      fit_phiu_.col(h).head(nb).noalias() = d.phi_s * fit_u_col_.head(nb);
+    }
+    while (active < onsets && fit_onsets_[static_cast<std::size_t>(active)] <= i) ++active;
+    const bool measured = std::isfinite(h_nu_[ks]);
+    for (int o = 0; o < active; ++o) {
+      for (int h = 0; h < kHypotheses; ++h) {
+        const int col = o * kHypotheses + h;
+        auto e = fit_e_.col(col);
+        fit_tmp_ = e.head(nb);
+        e.head(nb).noalias() = d.ad * fit_tmp_;
+        e += fit_phiu_.col(h);
+        double g = e(sensor_) + e(bias_);
+        if (h == kOffset) g += 1.0;
+        if (!measured) continue;
+        fit_a_(col) += g * h_nu_[ks] / h_s_[ks];
+        fit_b_(col) += g * g / h_s_[ks];
+        e.noalias() -= h_k_.col(k) * g;
+      }
+    }
+  }
+  Choose(onsets, oldest);
+}
+
+void MismatchDetector::Choose(int onsets, int oldest) {
+  double best_per_h[kHypotheses];
+  int col_per_h[kHypotheses];
+  for (int h = 0; h < kHypotheses; ++h) {
+    best_per_h[h] = -1.0;
+    col_per_h[h] = -1;
+  }
+  for (int col = 0; col < onsets * kHypotheses; ++col) {
+    const int h = col % kHypotheses;
+    if ((h == kRotor && rotor_ < 0) || !(fit_b_(col) > 0.0)) continue;
+    const double l = fit_a_(col) * fit_a_(col) / fit_b_(col);
+    if (l > best_per_h[h]) {
+      best_per_h[h] = l;
+      col_per_h[h] = col;
+    }
+  }
+  int h = -1, second = -1;
+  for (int j = 0; j < kHypotheses; ++j) {
+    if (col_per_h[j] < 0) continue;
+    if (h < 0 || best_per_h[j] > best_per_h[h]) {
+      second = h;
+      h = j;
+    } else if (second < 0 || best_per_h[j] > best_per_h[second]) {
+      second = j;
+    }
+  }
+  if (h < 0) return;
+  const int best = col_per_h[h];
+  const double theta = fit_a_(best) / fit_b_(best);
+  finding_.effect = EffectOf(h);
+  finding_.state = h == kOffset ? MismatchState::kSensorFaultSuspected : MismatchState::kPlantChange;
+  finding_.likelihood_ratio = best_per_h[h];
+  finding_.runner_up = second >= 0 ? EffectOf(second) : MismatchEffect::kNone;
+  finding_.runner_up_ratio = second >= 0 ? best_per_h[second] : 0.0;
+  const int onset = fit_onsets_[static_cast<std::size_t>(best / kHypotheses)];
+  finding_.onset_s = h_t_[static_cast<std::size_t>((oldest + onset) % cap_)];
+  switch (h) {
+    case kCooling: finding_.value = 1.0 / std::max(1.0 + theta, 0.05); break;  // R'/R = G/G'
+    case kLoss: finding_.value = 1.0 + theta; break;
+    default: finding_.value = theta; break;
+  }
+}
+
+}  // namespace pumptherm::estimators

@@ -1,0 +1,175 @@
+#pragma once
+/// Model-mismatch detection and naming, online, for one pump (docs/virtual-sensor.md, "Model
+/// mismatch").
+///
+/// A separate low-noise Kalman filter runs on the nominal model (the published filter absorbs
+/// model error into its process noise and so cannot see it). Its state is the network's nodes,
+/// the measuring sensor's first-order lag (tau ds/dt = T - s, when the sensor has one) and the
+/// sensor's constant calibration offset b (y = s + b). Detection: the sum of the last W
+/// normalised innovations squared is chi-square with W degrees of freedom while the model holds
+/// (Bar-Shalom, Li, Kirubarajan, "Estimation with Applications to Tracking and Navigation",
+/// Wiley 2001, section 5.4.2, the time-average NIS test); above its (1 - p) quantile the model
+/// is declared wrong.
+///
+/// Naming: the generalised likelihood ratio of Willsky and Jones ("A generalized likelihood
+/// ratio approach to the detection and estimation of jumps in linear systems", IEEE TAC 21(1),
+/// 1976, eqs. 11-20) for each effect of the discrepancy vocabulary (estimators/model_effects.hpp)
+/// starting at each onset on a grid over the recent window. An effect of size theta starting at
+/// step k0 adds theta g(k) to the innovations, with the signature g from
+///     e-(k) = A_D(k) e+(k-1) + Phi(k) u(k),   g(k) = C e-(k) + m(k),   e+(k) = e-(k) - K(k) g(k)
+/// (u: the effect's heat per unit size, m: its offset on the reading). Then
+///     theta^ = sum g nu / S / sum g^2 / S,   l = (sum g nu / S)^2 / sum g^2 / S,
+/// and the effect and onset of largest l are named (onsets every step over the last NIS window,
+/// every `fit_onset_step_s` before). A reading bit-identical over many samples
+/// while the model moves is a stuck sensor. Sensor effects (offset, stuck) are reported as
+/// `kSensorFaultSuspected`, the rest as `kPlantChange`: the sensor alarm is not decided here.
+///
+/// Pure library: time enters as an argument; no I/O. Allocates at construction; Step() does not
+/// allocate once the operating point is steady; the naming fit (at detection and then every
+/// `refit_period_s` while the test fails) may (matrix exponentials).
+
+#include <Eigen/Dense>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "estimators/kalman_filter.hpp"
+#include "estimators/thermal_discretisation.hpp"
+#include "estimators/thermal_model.hpp"
+
+namespace pumptherm::estimators {
+
+/// Codes published on CAN (pumptherm.dbc MismatchState) and LCM; do not renumber.
+enum class MismatchState : std::uint8_t {
+  kConsistent = 0,            ///< the nominal model explains the measurements
+  kLearning = 1,              ///< too early to say (start, settling)
+  kPlantChange = 2,           ///< the model is wrong: the plant changed (effect named)
+  kSensorFaultSuspected = 3,  ///< the reading, not the plant, changed (offset, jump, stuck)
+  kUnexplained = 4,           ///< the model is wrong; too little data yet to name the effect
+};
+
+/// Effect codes (pumptherm.dbc MismatchEffect); do not renumber. Names follow the discrepancy
+/// vocabulary where it has the effect; `unmeasured_ambient` (a boundary the sensors do not see)
+/// and `loss_scale` (every loss scaled alike) are not in it.
+enum class MismatchEffect : std::uint8_t {
+  kNone = 0,
+  kFrameAmbientResistance = 1,  ///< value: resistance scale (x4 = cooling lost)
+  kRotorLoss = 2,               ///< value: extra rotor heat, W
+  kLossScale = 3,               ///< value: loss scale (1.4 = 40 % more)
+  kUnmeasuredAmbient = 4,       ///< value: boundary temperature offset, K
+  kSensorOffset = 5,            ///< value: offset of the reading, K
+  kSensorStuck = 6,             ///< value: the frozen reading, degC
+};
+inline constexpr int kMismatchEffectCount = 7;
+
+const char* MismatchStateName(MismatchState state);
+/// Vocabulary name ("frame_ambient_resistance", ...).
+const char* MismatchEffectName(MismatchEffect effect);
+
+struct MismatchDetectorConfig {
+  std::string measured_node = "frame";
+  std::string rotor_node = "rotor";   ///< node of the rotor-loss hypothesis (absent: not tried)
+  double measurement_sd_K = 0.06;     ///< white noise and quantisation of the reading
+  double sensor_lag_s = 0.0;          ///< first-order lag of the sensor (0 = none)
+  double sensor_offset_sd_K = 0.5;    ///< a priori calibration offset of the sensor
+  /// Process noise of the nominal filter, K per sqrt(s): small, the model is believed.
+  double process_sd_K = 0.005;
+  double initial_sd_K = 20.0;         ///< as VirtualSensorConfig
+  double initial_spread_sd_K = 5.0;
+  double window_s = 60.0;             ///< NIS window
+  double false_alarm_probability = 1e-7;  ///< per window test: sets the chi-square threshold
+  double settle_s = 300.0;            ///< no verdict before this long after Initialise
+  double clear_after_s = 600.0;       ///< the test passing this long clears a finding
+  double fit_window_s = 1200.0;       ///< history kept for naming
+  double fit_onset_step_s = 20.0;     ///< onset grid of the naming fit
+  double refit_period_s = 60.0;       ///< refit while the test fails
+  double name_after_s = 60.0;         ///< data after the detection before the first naming fit
+  int stuck_samples = 60;             ///< identical readings that make a stuck sensor
+};
+
+/// The detector's verdict.
+struct MismatchFinding {
+  MismatchState state = MismatchState::kLearning;
+  MismatchEffect effect = MismatchEffect::kNone;
+  double value = std::numeric_limits<double>::quiet_NaN();  ///< size, unit per effect
+  double onset_s = std::numeric_limits<double>::quiet_NaN();  ///< fitted start of the effect
+  double detected_s = std::numeric_limits<double>::quiet_NaN();  ///< when the test failed
+  double window_nis = 0.0;       ///< sum of the last W NIS
+  double threshold = 0.0;        ///< its chi-square quantile
+  double likelihood_ratio = 0.0; ///< l of the named effect
+  double runner_up_ratio = 0.0;  ///< l of the best other effect (close to l: hard to tell apart)
+  MismatchEffect runner_up = MismatchEffect::kNone;
+  bool operator==(const MismatchFinding&) const = default;
+};
+
+/// "frame-to-ambient resistance x3.8 (cooling lost)" and the like; "consistent", "learning".
+std::string DescribeFinding(const MismatchFinding& finding);
+
+/// The (1 - p) quantile of chi-square with `dof` degrees of freedom (Wilson and Hilferty, "The
+/// distribution of chi-square", PNAS 17(12), 1931: (x/k)^(1/3) is near normal).
+double ChiSquareQuantile(double dof, double p_upper);
+
+class MismatchDetector {
+ public:
+  /// Keeps a reference to `model`. Throws std::invalid_argument naming an unknown measured node
+  /// or a non-positive setting.
+  MismatchDetector(const ThermalModel& model, MismatchDetectorConfig config);
+
+  /// Starts from every node (and the sensor) at `x0_degC` at time `now_s`.
+  void Initialise(double x0_degC, double now_s);
+
+  /// One period `dt_s` with `inputs` held, ending at `now_s`, reading `measured_degC` (NaN = no
+  /// reading). Throws std::domain_error like VirtualThermalSensor::Step.
+  const MismatchFinding& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,
+                              double now_s);
+
+  const MismatchFinding& Finding() const { return finding_; }
+  /// The nominal filter's node estimates (n) and sensor offset, for reports and tests.
+  Eigen::VectorXd Nodes_degC() const { return filter_.State().head(n_); }
+  double SensorOffset_K() const { return filter_.State()(bias_); }
+  int StateCount() const { return n_aug_; }
+
+ private:
+  void Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_aug);
+  void Record(const ThermalInputs& in, double y, double now_s);
+  void Fit(double now_s);
+  void FitOnsets(int window);
+  /// Names the effect of largest likelihood ratio over the fit's `onsets` columns.
+  void Choose(int onsets, int oldest);
+  bool Stuck(int* first) const;
+  /// Heat per unit effect size of hypothesis h at `in`, with the pre-step state `x_aug`.
+  void EffectForcing(int h, const ThermalInputs& in, const Eigen::VectorXd& x_aug, double frame_degC,
+                     Eigen::VectorXd& u);
+
+  const ThermalModel& model_;
+  MismatchDetectorConfig config_;
+  int n_ = 0, n_aug_ = 0, lag_ = -1, bias_ = 0, sensor_ = 0, frame_ = 0, rotor_ = -1;
+  double threshold_ = 0.0;
+  Eigen::VectorXd boundary_K_per_s_per_K_;  ///< d f / d T_boundary (n)
+  ThermalLinearModel lin_, lin_block_, lin_zero_;
+  ThermalDiscretiser discretiser_;
+  Eigen::MatrixXd ad_, sp_, c_, sm_;
+  Eigen::VectorXd bu_, y_, x_nodes_;
+  KalmanFilter filter_;
+  double start_s_ = 0.0, last_fit_s_ = 0.0, passing_since_s_ = 0.0;
+  bool failing_ = false;
+  // NIS window.
+  std::vector<double> nis_;
+  int nis_next_ = 0, nis_count_ = 0;
+  double nis_sum_ = 0.0;
+  // History for naming (ring buffers, `cap_` steps).
+  int cap_ = 0, head_ = 0, size_ = 0;
+  std::vector<ThermalInputs> h_in_;
+  std::vector<double> h_dt_, h_y_, h_nu_, h_s_, h_t_;
+  Eigen::MatrixXd h_xpre_, h_k_;  ///< state before the step, gain (n_aug x cap)
+  // Fit workspace.
+  ThermalDiscretiser fit_disc_;
+  ThermalLinearModel fit_lin_;
+  std::vector<int> fit_onsets_;  ///< onset steps (chronological history index), ascending
+  Eigen::MatrixXd fit_e_, fit_phiu_;
+  Eigen::VectorXd fit_a_, fit_b_, fit_x_, fit_tmp_, fit_u_col_;
+  MismatchFinding finding_;
+};
+
+}  // namespace pumptherm::estimators

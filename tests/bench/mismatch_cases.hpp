@@ -1,0 +1,243 @@
+#pragma once
+// The fault cases of the mismatch figures (tests/bench/mismatch_matrix.cpp) and of the detector's
+// unit test: tmp-generic as the truth, a turbo pump's load (run-up, then gas-load steps every
+// 10 min), the frame RTD with lag, noise, quantisation and a calibration offset; from
+// `fault_s` on, the truth is changed by one fault. The published virtual sensor (daemon
+// settings) and the mismatch detector run on the same data.
+#include <Eigen/Dense>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "estimators/disturbance_sensor.hpp"
+#include "estimators/kalman_virtual_sensor.hpp"
+#include "estimators/mismatch_detector.hpp"
+#include "estimators/thermal_model.hpp"
+#include "tools/sim/sensor.hpp"
+#include "tools/sim/thermal_plant.hpp"
+
+namespace mismatch_cases {
+
+namespace pe = pumptherm::estimators;
+
+enum class Fault { kNone, kCoolingLost, kRotorLoss, kLosses40, kAmbientRise, kSensorOffset, kSensorStuck };
+
+inline const char* FaultName(Fault f) {
+  switch (f) {
+    case Fault::kNone: return "no fault";
+    case Fault::kCoolingLost: return "cooling lost (frame-ambient R x4)";
+    case Fault::kRotorLoss: return "extra rotor loss +6 W";
+    case Fault::kLosses40: return "losses +40 %";
+    case Fault::kAmbientRise: return "unmeasured ambient +8 K";
+    case Fault::kSensorOffset: return "frame sensor offset +3 K";
+    case Fault::kSensorStuck: return "frame sensor stuck";
+  }
+  return "?";
+}
+
+/// The effect a right answer names.
+inline pe::MismatchEffect ExpectedEffect(Fault f) {
+  switch (f) {
+    case Fault::kNone: return pe::MismatchEffect::kNone;
+    case Fault::kCoolingLost: return pe::MismatchEffect::kFrameAmbientResistance;
+    case Fault::kRotorLoss: return pe::MismatchEffect::kRotorLoss;
+    case Fault::kLosses40: return pe::MismatchEffect::kLossScale;
+    case Fault::kAmbientRise: return pe::MismatchEffect::kUnmeasuredAmbient;
+    case Fault::kSensorOffset: return pe::MismatchEffect::kSensorOffset;
+    case Fault::kSensorStuck: return pe::MismatchEffect::kSensorStuck;
+  }
+  return pe::MismatchEffect::kNone;
+}
+
+inline std::string ReadFile(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw std::runtime_error("cannot read " + path);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+inline std::string Replace(std::string text, const std::string& from, const std::string& to) {
+  const auto at = text.find(from);
+  if (at == std::string::npos) throw std::runtime_error("model text lacks '" + from + "'");
+  return text.replace(at, from.size(), to);
+}
+
+/// The truth model after the fault (the nominal text for faults outside the network).
+inline std::string FaultedModelText(const std::string& nominal, Fault f) {
+  switch (f) {
+    case Fault::kCoolingLost:
+      return Replace(nominal, "resistance_K_per_W = 0.6 ", "resistance_K_per_W = 2.4 ");
+    case Fault::kRotorLoss:  // +6 W at rated speed, on the rotor node
+      return Replace(nominal, "rotor_eddy_W = 3.0", "rotor_eddy_W = 9.0");
+    case Fault::kLosses40: {
+      std::string t = Replace(nominal, "r0_ohm = 0.28 ", "r0_ohm = 0.392 ");
+      t = Replace(t, "kh_W_s = 0.025", "kh_W_s = 0.035");
+      t = Replace(t, "ke_W_s2 = 9.0e-5", "ke_W_s2 = 1.26e-4");
+      t = Replace(t, "rotor_eddy_W = 3.0", "rotor_eddy_W = 4.2");
+      return Replace(t, "rotor_share = 0.05", "rotor_share = 0.07");
+    }
+    default: return nominal;
+  }
+}
+
+struct CaseSpec {
+  Fault fault = Fault::kNone;
+  double fault_s = 3600.0;
+  double duration_s = 10800.0;
+  double dt_s = 1.0;
+  std::uint64_t seed = 1;
+  double sensor_lag_s = 30.0;
+  double truth_process_sd_K = 0.005;  ///< per sqrt(s), as the plant simulator's default
+  /// The resistance-based winding temperature for the disturbance filter: the truth's winding
+  /// (ThermalModel::WindingWeights) plus white noise of this sd, once per step; 0 = not fused.
+  double winding_noise_sd_K = 0.0;
+};
+
+struct CaseResult {
+  double detect_delay_s = std::numeric_limits<double>::quiet_NaN();  ///< after the fault
+  double name_delay_s = std::numeric_limits<double>::quiet_NaN();    ///< first named, after the fault
+  pe::MismatchFinding at_naming;
+  pe::MismatchFinding at_end;
+  int false_alarms = 0;       ///< transitions into a fault state before the fault began
+  double first_false_s = std::numeric_limits<double>::quiet_NaN();
+  std::vector<std::string> nodes;
+  std::vector<double> max_error_K;   ///< published filter, after the first 300 s
+  std::vector<double> coverage;      ///< share of steps with |error| <= 2 sd, after 300 s
+  std::vector<double> dist_max_error_K;  ///< the same for the disturbance-state filter
+  std::vector<double> dist_coverage;
+  double detector_step_max_us = 0.0; ///< not filled here (timed by the benchmark)
+};
+
+/// The gas-load current at time t: run-up at 3 A for 120 s, then steps every 10 minutes.
+inline double LoadCurrent_A(double t_s) {
+  static const double kSteps[] = {1.5, 2.5, 3.5, 2.0, 4.0, 3.0, 1.8, 3.2};
+  if (t_s < 120.0) return 3.0;
+  const int k = static_cast<int>((t_s - 120.0) / 600.0) % 8;
+  return kSteps[k];
+}
+
+inline pe::MismatchDetectorConfig DetectorConfig(double sensor_lag_s) {
+  pe::MismatchDetectorConfig c;
+  c.sensor_lag_s = sensor_lag_s;
+  c.measurement_sd_K = std::sqrt(0.05 * 0.05 + 0.1 * 0.1 / 12.0);  // noise and 0.1 K steps
+  return c;
+}
+
+/// Runs one case. `model_dir` holds tmp-generic.toml.
+inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
+                          const pe::VirtualSensorConfig& vts_config = {},
+                          pe::DisturbanceSensorConfig dc = {}) {
+  const std::string nominal_text = ReadFile(model_dir + "/tmp-generic.toml");
+  const auto nominal = pe::ThermalModel::Parse(nominal_text, "tmp-generic");
+  const auto faulted = pe::ThermalModel::Parse(FaultedModelText(nominal_text, spec.fault), "tmp-generic+fault");
+  const int n = nominal.StateCount();
+  const double ambient = 22.0;
+  pumptherm::sim::ThermalPlantConfig pc;
+  pc.process_sd_K = spec.truth_process_sd_K;
+  auto plant = std::make_unique<pumptherm::sim::ThermalPlant>(nominal, Eigen::VectorXd::Constant(n, ambient), pc, spec.seed);
+  std::mt19937_64 rng(spec.seed * 7919 + 1);
+  pumptherm::sim::SensorConfig sc;
+  sc.noise_sd = 0.05;
+  sc.lsb = 0.1;
+  sc.lag_tau_s = spec.sensor_lag_s;
+  sc.offset = std::uniform_real_distribution<double>(-0.35, 0.35)(rng);
+  pumptherm::sim::Sensor sensor(sc, spec.seed * 31 + 5);
+  std::normal_distribution<double> normal(0.0, 1.0);
+
+  pe::VirtualThermalSensor vts(nominal, vts_config);
+  pe::MismatchDetector det(nominal, DetectorConfig(spec.sensor_lag_s));
+  dc.sensor_lag_s = spec.sensor_lag_s;
+  if (spec.winding_noise_sd_K > 0.0) dc.winding_measurement_sd_K = spec.winding_noise_sd_K;
+  pe::DisturbanceThermalSensor dist(nominal, dc);
+  CaseResult r;
+  r.nodes = nominal.StateNames();
+  r.max_error_K.assign(static_cast<std::size_t>(n), 0.0);
+  r.coverage.assign(static_cast<std::size_t>(n), 0.0);
+  r.dist_max_error_K.assign(static_cast<std::size_t>(n), 0.0);
+  r.dist_coverage.assign(static_cast<std::size_t>(n), 0.0);
+  std::vector<long> dist_covered(static_cast<std::size_t>(n), 0);
+  std::vector<long> covered(static_cast<std::size_t>(n), 0);
+  long counted = 0;
+  bool faulted_now = false;
+  double stuck_value = std::numeric_limits<double>::quiet_NaN();
+  bool was_fault_state = false;
+  Eigen::VectorXd meas(1);
+  for (double t = spec.dt_s; t <= spec.duration_s + 1e-9; t += spec.dt_s) {
+    if (!faulted_now && t > spec.fault_s) {
+      faulted_now = true;
+      plant = std::make_unique<pumptherm::sim::ThermalPlant>(faulted, plant->State_degC(), pc, spec.seed + 99);
+    }
+    pe::ThermalInputs in;
+    in.speed_rpm = std::min(t / 120.0, 1.0) * 21000.0;
+    in.iq_A = LoadCurrent_A(t);
+    in.ambient_degC = in.coolant_degC = ambient;
+    pe::ThermalInputs truth_in = in;
+    if (faulted_now && spec.fault == Fault::kAmbientRise) {
+      const double ramp = std::min((t - spec.fault_s) / 600.0, 1.0);  // 8 K over 10 minutes
+      truth_in.ambient_degC = truth_in.coolant_degC = ambient + 8.0 * ramp;
+    }
+    const Eigen::VectorXd& x = plant->Step(truth_in, spec.dt_s);
+    double y = sensor.Measure(x(nominal.StateIndex("frame")), spec.dt_s);
+    if (faulted_now && spec.fault == Fault::kSensorOffset) y += 3.0;
+    if (faulted_now && spec.fault == Fault::kSensorStuck) {
+      if (std::isnan(stuck_value)) stuck_value = y;
+      y = stuck_value;
+    }
+    if (t <= spec.dt_s + 1e-9) {
+      vts.Initialise(Eigen::VectorXd::Constant(n, y));
+      det.Initialise(y, t);
+      dist.Initialise(y);
+    }
+    meas(0) = y;
+    vts.Step(in, spec.dt_s, meas, std::numeric_limits<double>::quiet_NaN());
+    const double winding = spec.winding_noise_sd_K > 0.0
+                               ? nominal.WindingWeights().dot(x) + spec.winding_noise_sd_K * normal(rng)
+                               : std::numeric_limits<double>::quiet_NaN();
+    dist.Step(in, spec.dt_s, y, winding);
+    const pe::MismatchFinding& f = det.Step(in, spec.dt_s, y, t);
+    const bool named = f.state == pe::MismatchState::kPlantChange ||
+                       f.state == pe::MismatchState::kSensorFaultSuspected;
+    const bool fault_state = named || f.state == pe::MismatchState::kUnexplained;
+    if (named && std::isnan(r.name_delay_s) && t > spec.fault_s) {
+      r.name_delay_s = t - spec.fault_s;
+      r.at_naming = f;
+    }
+    if (fault_state && !was_fault_state) {
+      if (t <= spec.fault_s || spec.fault == Fault::kNone) {
+        ++r.false_alarms;
+        if (std::isnan(r.first_false_s)) r.first_false_s = t;
+      } else if (std::isnan(r.detect_delay_s)) {
+        r.detect_delay_s = t - spec.fault_s;
+      }
+    }
+    was_fault_state = fault_state;
+    if (t > 300.0) {
+      ++counted;
+      for (int i = 0; i < n; ++i) {
+        const double err = vts.Estimate_degC()(i) - x(i);
+        const double sd = std::sqrt(vts.Covariance_K2()(i, i));
+        auto& m = r.max_error_K[static_cast<std::size_t>(i)];
+        m = std::max(m, std::abs(err));
+        if (std::abs(err) <= 2.0 * sd) ++covered[static_cast<std::size_t>(i)];
+        const double derr = dist.Node_degC(i) - x(i);
+        auto& dm = r.dist_max_error_K[static_cast<std::size_t>(i)];
+        dm = std::max(dm, std::abs(derr));
+        if (std::abs(derr) <= 2.0 * dist.NodeSd_K(i)) ++dist_covered[static_cast<std::size_t>(i)];
+      }
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    r.coverage[static_cast<std::size_t>(i)] = counted > 0 ? static_cast<double>(covered[static_cast<std::size_t>(i)]) / counted : 0.0;
+    r.dist_coverage[static_cast<std::size_t>(i)] = counted > 0 ? static_cast<double>(dist_covered[static_cast<std::size_t>(i)]) / counted : 0.0;
+  }
+  r.at_end = det.Finding();
+  return r;
+}
+
+}  // namespace mismatch_cases

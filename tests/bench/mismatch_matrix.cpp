@@ -1,0 +1,103 @@
+// The fault matrix of the mismatch detector and the published virtual sensor (figures tool, not a
+// test): tmp-generic truth, frame RTD only, each fault from `--fault-s` on. Prints a table and,
+// with --json, one JSON object per case. docs/virtual-sensor.md, "Model mismatch".
+#include <fmt/core.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "tests/bench/mismatch_cases.hpp"
+
+namespace mc = mismatch_cases;
+namespace pe = pumptherm::estimators;
+
+namespace {
+
+std::string Named(const pe::MismatchFinding& f) {
+  if (f.state != pe::MismatchState::kPlantChange && f.state != pe::MismatchState::kSensorFaultSuspected) {
+    return pe::MismatchStateName(f.state);
+  }
+  return fmt::format("{} {:.2f} (2nd {} l {:.0f}/{:.0f})", pe::MismatchEffectName(f.effect), f.value,
+                     pe::MismatchEffectName(f.runner_up), f.likelihood_ratio, f.runner_up_ratio);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  double duration_s = 10800.0, fault_s = 3600.0;
+  int seeds = 1;
+  bool json = false;
+  double winding_sd_K = 0.0;
+  pe::DisturbanceSensorConfig dc;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--duration-s" && i + 1 < argc) duration_s = std::atof(argv[++i]);
+    else if (a == "--fault-s" && i + 1 < argc) fault_s = std::atof(argv[++i]);
+    else if (a == "--seeds" && i + 1 < argc) seeds = std::atoi(argv[++i]);
+    else if (a == "--json") json = true;
+    else if (a == "--frame-heat-sd-W" && i + 1 < argc) dc.frame_heat_sd_W = std::atof(argv[++i]);
+    else if (a == "--rotor-heat-sd-W" && i + 1 < argc) dc.rotor_heat_sd_W = std::atof(argv[++i]);
+    else if (a == "--winding-sd-K" && i + 1 < argc) winding_sd_K = std::atof(argv[++i]);
+    else if (a == "--loss-scale-sd" && i + 1 < argc) dc.loss_scale_sd = std::atof(argv[++i]);
+    else if (a == "--sd-floor-K" && i + 1 < argc) dc.sd_floor_K = std::atof(argv[++i]);
+    else if (a == "--node-process-sd-K" && i + 1 < argc) dc.node_process_sd_K = std::atof(argv[++i]);
+    else {
+      fmt::print(stderr, "usage: mismatch_matrix [--duration-s S] [--fault-s S] [--seeds N] [--json]\n"
+                          "  [--frame-heat-sd-W W] [--rotor-heat-sd-W W] [--loss-scale-sd S] [--winding-sd-K K] [--sd-floor-K K] [--node-process-sd-K K]\n");
+      return 2;
+    }
+  }
+  const std::string dir = std::string(PUMPTHERM_SOURCE_DIR) + "/estimators/models";
+  const mc::Fault faults[] = {mc::Fault::kNone, mc::Fault::kCoolingLost, mc::Fault::kRotorLoss,
+                              mc::Fault::kLosses40, mc::Fault::kAmbientRise, mc::Fault::kSensorOffset,
+                              mc::Fault::kSensorStuck};
+  if (!json) {
+    fmt::print("{:<36} {:>4} {:>9} {:>8} {:<60} {:<60} {}\n", "case", "seed", "detect_s", "named_s", "named first",
+               "named at end", "false | max err K / coverage per node (published filter)");
+  }
+  for (mc::Fault f : faults) {
+    for (int seed = 1; seed <= seeds; ++seed) {
+      mc::CaseSpec spec;
+      spec.fault = f;
+      spec.fault_s = f == mc::Fault::kNone ? duration_s + 1.0 : fault_s;
+      spec.duration_s = duration_s;
+      spec.seed = static_cast<std::uint64_t>(seed);
+      spec.winding_noise_sd_K = winding_sd_K;
+      const mc::CaseResult r = mc::RunCase(spec, dir, {}, dc);
+      std::string nodes;
+      for (std::size_t i = 0; i < r.nodes.size(); ++i) {
+        nodes += fmt::format("{}{} {:.2f}/{:.0f}%", i ? ", " : "", r.nodes[i], r.max_error_K[i], 100.0 * r.coverage[i]);
+      }
+      nodes += " | disturbance states:";
+      for (std::size_t i = 0; i < r.nodes.size(); ++i) {
+        nodes += fmt::format(" {} {:.2f}/{:.0f}%", r.nodes[i], r.dist_max_error_K[i], 100.0 * r.dist_coverage[i]);
+      }
+      if (json) {
+        std::string jn;
+        for (std::size_t i = 0; i < r.nodes.size(); ++i) {
+          jn += fmt::format("{}\"{}\": {{\"max_error_K\": {:.3f}, \"coverage\": {:.4f}, "
+                            "\"disturbance_max_error_K\": {:.3f}, \"disturbance_coverage\": {:.4f}}}",
+                            i ? ", " : "", r.nodes[i], r.max_error_K[i], r.coverage[i],
+                            r.dist_max_error_K[i], r.dist_coverage[i]);
+        }
+        fmt::print("{{\"case\": \"{}\", \"seed\": {}, \"duration_s\": {}, \"fault_s\": {}, \"detect_delay_s\": {}, "
+                   "\"name_delay_s\": {}, \"named_first\": \"{}\", \"named_at_end\": \"{}\", \"expected\": \"{}\", "
+                   "\"false_alarms\": {}, \"nodes\": {{{}}}}}\n",
+                   mc::FaultName(f), seed, duration_s, spec.fault_s,
+                   std::isnan(r.detect_delay_s) ? std::string("null") : fmt::format("{:.0f}", r.detect_delay_s),
+                   std::isnan(r.name_delay_s) ? std::string("null") : fmt::format("{:.0f}", r.name_delay_s),
+                   Named(r.at_naming), Named(r.at_end), pe::MismatchEffectName(mc::ExpectedEffect(f)),
+                   r.false_alarms, jn);
+      } else {
+        fmt::print("{:<36} {:>4} {:>9} {:>8} {:<60} {:<60} {} | {}\n", mc::FaultName(f), seed,
+                   std::isnan(r.detect_delay_s) ? std::string("-") : fmt::format("{:.0f}", r.detect_delay_s),
+                   std::isnan(r.name_delay_s) ? std::string("-") : fmt::format("{:.0f}", r.name_delay_s),
+                   std::isnan(r.name_delay_s) ? std::string("-") : Named(r.at_naming), Named(r.at_end),
+                   r.false_alarms, nodes);
+      }
+    }
+  }
+  return 0;
+}

@@ -1,0 +1,104 @@
+// The mismatch detector on simulated pumps (tests/bench/mismatch_cases.hpp): tmp-generic truth,
+// frame RTD with lag, noise, quantisation and a calibration offset, faults from one hour on.
+#include "estimators/mismatch_detector.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <string>
+
+#include "tests/bench/mismatch_cases.hpp"
+
+namespace pe = pumptherm::estimators;
+namespace mc = mismatch_cases;
+
+namespace {
+
+std::string ModelDir() {
+  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
+  return std::string(src != nullptr ? src : PUMPTHERM_SOURCE_DIR) + "/estimators/models";
+}
+
+/// Faults start after an hour, when the pump has (nearly) reached its thermal equilibrium.
+mc::CaseResult RunFault(mc::Fault fault, std::uint64_t seed, double duration_s = 3600.0 + 1500.0) {
+  mc::CaseSpec spec;
+  spec.fault = fault;
+  spec.fault_s = fault == mc::Fault::kNone ? duration_s + 1.0 : 3600.0;
+  spec.duration_s = duration_s;
+  spec.seed = seed;
+  return mc::RunCase(spec, ModelDir());
+}
+
+TEST(ChiSquareQuantile, MatchesTables) {
+  // chi-square upper quantiles (Abramowitz and Stegun, Table 26.8): 60 dof, 0.1 %: 99.607;
+  // 100 dof, 1 %: 135.807. Wilson-Hilferty is within 0.5 % there.
+  EXPECT_NEAR(pe::ChiSquareQuantile(60, 1e-3), 99.607, 0.5);
+  EXPECT_NEAR(pe::ChiSquareQuantile(100, 1e-2), 135.807, 0.5);
+}
+
+TEST(MismatchDetector, NoFalseAlarmOnFaultFreeData) {
+  for (std::uint64_t seed : {11u, 12u}) {
+    const mc::CaseResult r = RunFault(mc::Fault::kNone, seed, 10800.0);
+    EXPECT_EQ(r.false_alarms, 0) << "seed " << seed << " first at " << r.first_false_s << " s";
+    EXPECT_EQ(r.at_end.state, pe::MismatchState::kConsistent) << "seed " << seed;
+  }
+}
+
+TEST(MismatchDetector, DetectsLostCoolingAndNamesTheFramePath) {
+  const mc::CaseResult r = RunFault(mc::Fault::kCoolingLost, 3);
+  ASSERT_FALSE(std::isnan(r.detect_delay_s));
+  EXPECT_LE(r.detect_delay_s, 60.0);
+  EXPECT_EQ(r.at_end.state, pe::MismatchState::kPlantChange);
+  EXPECT_EQ(r.at_end.effect, pe::MismatchEffect::kFrameAmbientResistance) << pe::DescribeFinding(r.at_end);
+  EXPECT_GT(r.at_end.value, 2.0);  // the resistance grew (x4 in the truth)
+  EXPECT_EQ(r.false_alarms, 0);
+}
+
+TEST(MismatchDetector, NamesExtraRotorHeatWithItsSize) {
+  const mc::CaseResult r = RunFault(mc::Fault::kRotorLoss, 4);
+  ASSERT_FALSE(std::isnan(r.detect_delay_s));
+  EXPECT_LE(r.detect_delay_s, 600.0);
+  EXPECT_EQ(r.at_end.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(r.at_end);
+  EXPECT_NEAR(r.at_end.value, 6.0, 1.5);
+}
+
+TEST(MismatchDetector, TellsASensorOffsetFromAPlantChange) {
+  const mc::CaseResult r = RunFault(mc::Fault::kSensorOffset, 5, 3600.0 + 300.0);
+  ASSERT_FALSE(std::isnan(r.name_delay_s));
+  EXPECT_EQ(r.at_naming.state, pe::MismatchState::kSensorFaultSuspected);
+  EXPECT_EQ(r.at_naming.effect, pe::MismatchEffect::kSensorOffset);
+  EXPECT_NEAR(r.at_naming.value, 3.0, 0.3);
+}
+
+TEST(MismatchDetector, TellsAStuckSensor) {
+  const mc::CaseResult r = RunFault(mc::Fault::kSensorStuck, 6, 3600.0 + 600.0);
+  ASSERT_FALSE(std::isnan(r.name_delay_s));
+  EXPECT_EQ(r.at_naming.state, pe::MismatchState::kSensorFaultSuspected);
+  EXPECT_EQ(r.at_naming.effect, pe::MismatchEffect::kSensorStuck);
+}
+
+TEST(MismatchDetector, RejectsAnUnknownNode) {
+  const std::string text = mc::ReadFile(ModelDir() + "/tmp-generic.toml");
+  const auto model = pe::ThermalModel::Parse(text, "tmp-generic");
+  pe::MismatchDetectorConfig c;
+  c.measured_node = "housing";
+  try {
+    pe::MismatchDetector d(model, c);
+    FAIL() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'housing'"), std::string::npos) << e.what();
+  }
+}
+
+TEST(MismatchDetector, DescribesFindings) {
+  pe::MismatchFinding f;
+  f.state = pe::MismatchState::kPlantChange;
+  f.effect = pe::MismatchEffect::kFrameAmbientResistance;
+  f.value = 3.8;
+  EXPECT_EQ(pe::DescribeFinding(f), "frame-to-ambient resistance x3.8 (cooling lost)");
+  f.state = pe::MismatchState::kConsistent;
+  EXPECT_EQ(pe::DescribeFinding(f), "consistent");
+}
+
+}  // namespace
