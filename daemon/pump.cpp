@@ -61,6 +61,8 @@ void WithoutBoundaryPaths(estimators::ThermalLinearModel& lin, double boundary_d
     lin.a_per_s(i, i) -= leak_per_s;
     lin.f_K_per_s(i) += leak_per_s * boundary_degC;
   }
+}
+
 estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c) {
   estimators::MismatchDetectorConfig m;
   m.measured_node = c.measured_node;
