@@ -19,7 +19,8 @@ dpkg-deb --contents "$deb" | awk '{ print $6 }' | sed 's|^\./|/|; s|/$||' > "$tm
 for f in /usr/sbin/pumpthermd /usr/bin/pumptherm /usr/bin/pumptherm-spy /usr/bin/pumptherm-lcm-demo \
          /lib/systemd/system/pumpthermd.service /etc/pumptherm/pumpthermd.toml.example \
          /usr/share/pumptherm/dbc/pumptherm.dbc /usr/share/pumptherm/dbc/mapping_pumptherm.toml \
-         /usr/share/pumptherm/java/pumptherm_lcm_types.jar /usr/share/pumptherm/models/tmp-generic.toml \
+         /usr/share/pumptherm/java/pumptherm_lcm_types.jar /usr/share/pumptherm/java/pumptherm_spy_plugin.jar \
+         /usr/share/pumptherm/models/tmp-generic.toml \
          /usr/share/pumptherm/motors/han2019-tmp.toml /usr/share/pumptherm/scenarios/demo.toml \
          /usr/share/man/man8/pumpthermd.8.gz /usr/share/man/man5/pumpthermd.toml.5.gz \
          /usr/share/man/man1/pumptherm.1.gz /usr/share/man/man1/pumptherm-spy.1.gz \
