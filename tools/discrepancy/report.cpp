@@ -469,8 +469,10 @@ std::string CriterionHtml(const Options& o) {
 
 /// Residual autocorrelation and cross-correlation with the inputs (speed, current), as
 /// MATLAB's resid shows them. Bands: +/- 1.96/sqrt(N) for the autocorrelation (white residuals);
-/// for the cross-correlation Bartlett's large-lag variance (1/N) sum_j r_ee(j) r_uu(j) of two
-/// independent autocorrelated series (Box, Jenkins & Reinsel, Time Series Analysis, eq. 11.1.7).
+/// for the cross-correlation 1.96 sqrt(var), var = (1/N) sum_j r_ee(j) r_uu(j) over the plotted
+/// lags: Bartlett's variance of a sample cross-correlation (Bartlett 1978, An Introduction to
+/// Stochastic Processes, 3rd ed., p. 352) with the true cross-correlation zero, 1/(N - k) taken
+/// as 1/N (lags at most N/4).
 std::string CorrelationHtml(const std::string& node, const std::vector<double>& t_s,
                             const std::vector<double>& res, const std::vector<std::pair<std::string,
                             const std::vector<double>*>>& inputs) {
