@@ -101,8 +101,8 @@ public class PumpthermSpyPlugin implements SpyPlugin {
   static final class View extends JInternalFrame {
     private static final long serialVersionUID = 1L;
     private final ChannelData cd;
-    private final JLabel header = new JLabel(" ");
-    private final DefaultTableModel model = new DefaultTableModel();
+    final JLabel header = new JLabel(" ");  // package-private: read by tests/protocol/SpyPluginCheck
+    final DefaultTableModel model = new DefaultTableModel();
     private Object shown;
 
     View(ChannelData cd) {
