@@ -136,5 +136,5 @@ add_custom_target(deb
   WORKING_DIRECTORY "${PROJECT_BINARY_DIR}"
   COMMENT "cpack -G DEB: ${PROJECT_BINARY_DIR}/pumptherm{,-tools}_${PROJECT_VERSION}_<arch>.deb"
   USES_TERMINAL)
-add_dependencies(deb pumpthermd pumptherm pumptherm_lcm_demo pumptherm_lcm_types_jar
+add_dependencies(deb pumpthermd pumptherm pumptherm_lcm_demo pumptherm_lcm_types_jar pumptherm_spy_plugin_jar
   pumptherm_man_pages)

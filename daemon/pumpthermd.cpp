@@ -107,6 +107,12 @@ int main(int argc, char** argv) {
       }
       in = &file;
     }
+    // Offline runs publish LCM only to the log file: say so, a configured lcm.url stays silent.
+    if (!gateway->pumps().empty())
+      Log(LogLevel::kNotice, "offline: LCM is written only to --lcm-log ({}), not to lcm.url ({}); "
+          "replay it with lcm-logplayer --lcm-url=URL FILE",
+          offline.lcm_log.empty() ? "none given" : offline.lcm_log,
+          config.lcm.url.empty() ? "unset" : config.lcm.url);
     OfflineResult r;
     try {
       r = RunOffline(*in, source, *gateway, offline);

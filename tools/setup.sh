@@ -15,6 +15,7 @@ packages=(
   clang libclang-rt-14-dev
   can-utils iproute2 kmod cpio gzip busybox-static qemu-system-x86 debootstrap e2fsprogs
   gnuplot-nox default-jdk-headless libjchart2d-java xvfb xauth xdotool x11-apps imagemagick
+  chromium
   lintian dpkg-dev groff-base time
   python3-canmatrix   # the independent DBC decoder of tests/protocol/codec_canmatrix_test.cpp
 )

@@ -37,7 +37,8 @@ holds "$tmp/files" pumptherm /usr/sbin/pumpthermd \
   /usr/share/doc/pumptherm/copyright /usr/share/doc/pumptherm/changelog.gz \
   /usr/share/doc/pumptherm/operator-guide.md
 holds "$tmp/tools_files" pumptherm-tools /usr/bin/pumptherm /usr/bin/pumptherm-spy /usr/bin/pumptherm-lcm-demo \
-  /usr/share/pumptherm/java/pumptherm_lcm_types.jar /usr/share/pumptherm/scenarios/demo.toml \
+  /usr/share/pumptherm/java/pumptherm_lcm_types.jar /usr/share/pumptherm/java/pumptherm_spy_plugin.jar \
+  /usr/share/pumptherm/scenarios/demo.toml \
   /usr/share/man/man1/pumptherm.1.gz /usr/share/man/man1/pumptherm-spy.1.gz \
   /usr/share/doc/pumptherm-tools/copyright /usr/share/doc/pumptherm-tools/changelog.gz
 # No file in both (dpkg would refuse the second), and together everything a plain install has.

@@ -37,6 +37,10 @@ case "$cp" in
   *) fail "build tree class path: $cp" ;;
 esac
 [ "$(readlink -f "${cp##*:}")" = "$(readlink -f "$build_jar")" ] || fail "build tree jar: ${cp##*:}"
+case ":$cp:" in
+  *:*/protocol/lcm/pumptherm_spy_plugin.jar:*) ;;
+  *) fail "build tree class path lacks the plugin jar: $cp" ;;
+esac
 tail -n 3 "$work/args" > "$work/tail"
 printf '%s\n' lcm.spy.Spy '--lcm-url=udpm://239.255.76.67:7667?ttl=0' 'two words' | cmp -s - "$work/tail" ||
   fail "arguments not passed through: $(cat "$work/tail")"
@@ -46,7 +50,8 @@ grep -q -x -- -Xincgc "$work/args" && fail "-Xincgc passed to java"
 mkdir -p "$work/prefix/bin" "$work/prefix/share/pumptherm/java"
 cp "$source_dir/tools/pumptherm-spy" "$work/prefix/bin/"
 cp "$build_jar" "$work/prefix/share/pumptherm/java/"
-"$work/prefix/bin/pumptherm-spy"
+"$work/prefix/bin/pumptherm-spy" 2> "$work/err"
+grep -q "pumptherm_spy_plugin.jar not found" "$work/err" || fail "no warning without the plugin jar: $(cat "$work/err")"
 cp=$(classpath)
 [ "$(readlink -f "${cp##*:}")" = "$(readlink -f "$work/prefix/share/pumptherm/java/pumptherm_lcm_types.jar")" ] ||
   fail "installed class path: $cp"

@@ -5,7 +5,9 @@
 #   spy_screenshot.sh BUILD_DIR [OUT.png]   screenshot of the spy with decoded messages open
 #                                           (default docs/img/pumptherm-spy.png)
 #   spy_screenshot.sh --check BUILD_DIR     smoke test: the spy finds every type of
-#                                           protocol/lcm and opens a decoded view per type
+#                                           protocol/lcm and opens a decoded view per type,
+#                                           and the pumptherm view of a TEMPS and an ALARM
+#                                           channel names their statuses
 #
 # Needs root (ip netns), Xvfb, xdotool, java; for the screenshot also xwd (x11-apps) and
 # ImageMagick's convert. Exits 77 (skip) when something is missing, 1 on failure.
@@ -53,7 +55,7 @@ for tool in $tools; do
 done
 spy=$build_dir/tools/pumptherm-spy
 demo=$build_dir/tools/pumptherm-lcm-demo
-[ -x "$spy" ] && [ -x "$demo" ] || fail "build $spy and $demo first (targets pumptherm_lcm_demo, pumptherm_lcm_types_jar)"
+[ -x "$spy" ] && [ -x "$demo" ] || fail "build $spy and $demo first (targets pumptherm_lcm_demo, pumptherm_lcm_types_jar, pumptherm_spy_plugin_jar)"
 
 work=$(mktemp -d /tmp/pumptherm-spy.XXXXXX)
 ns=pumptherm-spy-$$
@@ -200,11 +202,43 @@ xdo windowraise "$main"
 apply_layout
 sleep 1
 
+# The pumptherm view (tools/spy's plugin): a right click on the channel's row opens lcm-spy's
+# "Viewers" menu, its second entry is the plugin's. The plugin puts a summary of the message it
+# decoded (statuses by name) in its window's title, which is what this test can read.
+open_plugin() {
+  channel=$1
+  row=$(printf '%s\n' "$channels" | grep -n -x "$channel" | cut -d: -f1)
+  y=$((row_top_px + row_px * (row - 1) + row_px / 2))
+  view=""
+  for _ in 1 2 3 4 5; do
+    xdo windowraise "$main"
+    sleep 0.3
+    xdo mousemove 90 "$y" click 3
+    sleep 0.7
+    xdo key Down Down Return
+    view=$(wait_window "^$channel: $2\$" 50) && break
+    xdo key Escape
+  done
+  if [ -z "$view" ]; then
+    for w in $(xdo search --name . 2> /dev/null); do
+      echo "  window: $(xdo getwindowname "$w")" >&2
+    done
+    fail "no pumptherm view of $channel showing '$2'"
+  fi
+  echo "pumptherm view: $(xdo getwindowname "$view")"
+  xdo windowmove "$view" 1300 700
+}
+if [ "$mode" = check ]; then
+  open_plugin PUMPTHERM/tmp1/TEMPS 'pump tmp1, [0-9]+ nodes, filter (not started|converging|tracking|rejecting|fault)'
+  open_plugin PUMPTHERM/tmp2/ALARM 'pump tmp2, alarm warning, conditions: rate of rise'
+  sleep 1
+fi
+
 if grep -q -i -E "exception|error" "$work/spy.log"; then
   fail "lcm-spy reported errors"
 fi
 if [ "$mode" = check ]; then
-  echo "pumptherm-spy found $types types and opened decoded views of 4 channels"
+  echo "pumptherm-spy found $types types, opened decoded views of 4 channels and 2 pumptherm views"
   exit 0
 fi
 mkdir -p "$(dirname "$out")"

@@ -2,7 +2,9 @@
 // and bad CSV input as exit code 2 naming row and column.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -77,4 +79,96 @@ TEST(DiscrepancyCli, UnknownEffectIsExit2) {
                             "/u --effects no_such_effect");
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("no_such_effect"), std::string::npos) << r.err;
+}
+
+namespace {
+
+// Facts the rendered page reports about itself, appended to report.html as a script: sizes
+// come from the browser's layout, the text is what a reader sees (innerText).
+constexpr const char* kFactsScript = R"(<script>
+(() => {
+  const body = document.body.clientWidth;
+  const svgs = [...document.querySelectorAll('svg')];
+  const title = s => (s.querySelector('text') || {textContent: ''}).textContent;
+  const time = svgs.filter(s => /: temperature$|^input: |: residual \(/.test(title(s)));
+  const corr = svgs.filter(s => /: residual (autocorrelation|x )/.test(title(s)));
+  const links = [...document.querySelectorAll('a')].map(a => a.getAttribute('href')).join(',');
+  const lines = ['time_plots=' + time.length,
+    'narrow_time_plots=' + time.filter(s => s.getBoundingClientRect().width < 0.95 * body).length,
+    'corr_plots=' + corr.length,
+    'overflow_px=' + (document.documentElement.scrollWidth - document.documentElement.clientWidth),
+    'links=' + links, 'TEXT', document.body.innerText];
+  const pre = document.createElement('pre');
+  pre.id = 'facts';
+  pre.textContent = 'FACTS\n' + lines.join('\n') + '\nEND_FACTS';
+  document.body.appendChild(pre);
+})();
+</script>)";
+
+std::string Fact(const std::string& facts, const std::string& key) {
+  const std::size_t p = facts.find("\n" + key + "=");
+  if (p == std::string::npos) return "";
+  const std::size_t b = p + key.size() + 2;
+  return facts.substr(b, facts.find('\n', b) - b);
+}
+
+}  // namespace
+
+// report.html as a browser renders it: Chromium (Debian's `chromium`) headless at 1200 px, the
+// page's own script reporting layout and visible text.
+TEST(DiscrepancyCli, ReportRendersInChromium) {
+  const char* ci = std::getenv("CI");
+  if (std::system("command -v chromium > /dev/null 2>&1") != 0) {
+    if (ci != nullptr && std::string(ci) == "true") FAIL() << "chromium is not installed (tools/setup.sh installs it)";
+    GTEST_SKIP() << "chromium is not installed (Debian package chromium; CI=true makes this a failure)";
+  }
+  const std::string dir = Dir() + "/chromium_" + std::to_string(getpid());
+  std::filesystem::create_directories(dir);
+  auto [train, validate] =
+      pumptherm::tests::HiddenCase("saheba2010-baseline", {{"iron_loss_scale", {2.0}, {}}}, 4.0, 60.0);
+  pd::WriteData(dir + "/train.csv", train, false);
+  pd::WriteData(dir + "/validate.csv", validate, false);
+  const CliRun r = Discrepancy("--model saheba2010-baseline --train " + dir + "/train.csv --validate " + dir +
+                               "/validate.csv --out " + dir + "/out --max-effects 2 " +
+                               "--effects iron_loss_scale,rotor_loss,frame_thermal_mass --quiet");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::string html = Slurp(dir + "/out/report.html");
+  html.insert(html.rfind("</body>"), kFactsScript);
+  std::ofstream(dir + "/out/check.html") << html;
+  const std::string cmd = "timeout 120 chromium --headless --no-sandbox --disable-gpu --disable-background-networking "
+                          "--no-first-run --disable-component-update --disable-sync --user-data-dir='" + dir +
+                          "/profile' --window-size=1200,900 --dump-dom 'file://" + dir + "/out/check.html' > '" +
+                          dir + "/dom.html' 2> '" + dir + "/chromium.log'";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << Slurp(dir + "/chromium.log");
+  const std::string dom = Slurp(dir + "/dom.html");
+  const std::size_t b = dom.find("FACTS\n"), e = dom.find("\nEND_FACTS");
+  ASSERT_TRUE(b != std::string::npos && e != std::string::npos) << "the page's script did not run:\n" << dom.substr(0, 2000);
+  const std::string facts = dom.substr(b, e - b + 1);
+  const std::string text = facts.substr(facts.find("\nTEXT\n"));
+  // Five measured nodes, each: temperature, speed strip, current strip, residual; three
+  // correlation plots; every time plot as wide as the page, nothing wider than the window.
+  EXPECT_EQ(Fact(facts, "time_plots"), "20") << facts.substr(0, 400);
+  EXPECT_EQ(Fact(facts, "narrow_time_plots"), "0");
+  EXPECT_EQ(Fact(facts, "corr_plots"), "15");
+  EXPECT_EQ(Fact(facts, "overflow_px"), "0");
+  EXPECT_EQ(Fact(facts, "links"), "model.toml,report.json");
+  EXPECT_TRUE(std::filesystem::exists(dir + "/out/model.toml") && std::filesystem::exists(dir + "/out/report.json"));
+  for (const char* must : {"Verdict: named", "iron_loss_scale = ", "(95 % ", "why not named", "named",
+                           "- power_W = 'k_e_W_s2", "+ power_W = 'iron_loss_scale * (", "lower is better",
+                           "W/(1000 r/min)^2", "J/K", "Round 1: named", "Round 2: "})
+    EXPECT_NE(text.find(must), std::string::npos) << must << "\n" << text.substr(0, 3000);
+  // The named effect's interval is printed with digits that show its width.
+  const std::size_t v = text.find("iron_loss_scale = ");
+  const std::string line = text.substr(v, text.find('\n', v) - v);
+  double value = 0, low = 0, high = 0;
+  ASSERT_EQ(std::sscanf(line.c_str(), "iron_loss_scale = %lf (95 %% %lf to %lf)", &value, &low, &high), 3) << line;
+  EXPECT_LT(low, value) << line;
+  EXPECT_LT(value, high) << line;
+  EXPECT_NEAR(value, 2.0, 0.05) << line;
+  // An ambiguity, when there is one, is stated inside its round, never before the first round.
+  const std::size_t amb = text.find("Cannot tell apart");
+  if (amb != std::string::npos) {
+    EXPECT_GT(amb, text.find("Round 1")) << text;
+  }
+  std::filesystem::remove_all(dir);
 }

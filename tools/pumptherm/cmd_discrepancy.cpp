@@ -61,7 +61,11 @@ int RunDiscrepancy(const DiscrepancyOptions& o) {
   } catch (const std::invalid_argument& e) {
     throw InputError(e.what());
   }
-  discrepancy::WriteReport(o.out, r, o.model, o.train, o.validate);
+  discrepancy::ReportContext context;
+  context.input_model_toml = estimators::ApplyModelEffects(text, path, {}, daemon::DirectoryOf(path));
+  context.options = opt;
+  context.validate = &validate;
+  discrepancy::WriteReport(o.out, r, o.model, o.train, o.validate, context);
   if (!o.quiet) {
     const auto& vb = r.validate_before.back();
     const auto& va = r.validate_after.back();

@@ -1,0 +1,76 @@
+package pumptherm.spy;
+
+import lcm.spy.ChannelData;
+
+/**
+ * The pumptherm view without a display (java.awt.headless): statuses and reasons by name, codes
+ * the types do not name as numbers, NaN as "-", a field the type lacks read as absent, and which
+ * fingerprints the plugin takes. Exit status 1 and a FAIL line per failed check.
+ */
+public final class SpyPluginCheck {
+  private static int failures = 0;
+
+  private static void expect(boolean ok, String what) {
+    if (!ok) {
+      System.err.println("FAIL: " + what);
+      ++failures;
+    }
+  }
+
+  private static PumpthermSpyPlugin.View view(String channel, Object message) {
+    ChannelData cd = new ChannelData();
+    cd.name = channel;
+    cd.last = message;
+    return new PumpthermSpyPlugin.View(cd);
+  }
+
+  public static void main(String[] args) {
+    pumptherm.temperatures_t t = new pumptherm.temperatures_t();
+    t.pump = "p1";
+    t.ident_status = pumptherm.temperatures_t.IDENT_CONVERGED;
+    t.filter_status = 9;  // no FILTER_ constant has this value
+    t.nis = Double.NaN;
+    t.num_nodes = 2;
+    t.node_names = new String[] {"frame", "rotor"};
+    t.node_degC = new double[] {41.24, Double.NaN};
+    t.node_sd_K = new double[] {0.5, 1.25};
+    PumpthermSpyPlugin.View tv = view("PUMPTHERM/p1/TEMPS", t);
+    String h = tv.header.getText();
+    expect(h.contains("identification: <b>converged</b>"), "ident status by name: " + h);
+    expect(h.contains("filter: <b>code 9</b>"), "unknown filter status as its number: " + h);
+    expect(h.contains("NIS -"), "NaN as '-': " + h);
+    expect(tv.model.getRowCount() == 2, "two node rows: " + tv.model.getRowCount());
+    expect("frame".equals(tv.model.getValueAt(0, 0)) && "41.2".equals(tv.model.getValueAt(0, 1))
+               && "0.50".equals(tv.model.getValueAt(0, 2)),
+           "row frame 41.2 0.50: " + tv.model.getValueAt(0, 0) + " " + tv.model.getValueAt(0, 1));
+    expect("-".equals(tv.model.getValueAt(1, 1)), "NaN node temperature as '-'");
+
+    pumptherm.alarm_t a = new pumptherm.alarm_t();
+    a.pump = "p2";
+    a.level = pumptherm.alarm_t.LEVEL_TRIP;
+    a.time_to_trip_s = Double.POSITIVE_INFINITY;
+    a.forecast_node = "rotor";
+    a.num_conditions = 2;
+    a.conditions = new pumptherm.alarm_condition_t[] {new pumptherm.alarm_condition_t(),
+                                                      new pumptherm.alarm_condition_t()};
+    a.conditions[0].level = pumptherm.alarm_t.LEVEL_TRIP;
+    a.conditions[0].reason = pumptherm.alarm_condition_t.REASON_MEASURED_OVER_TEMPERATURE;
+    a.conditions[0].node = "frame";
+    a.conditions[1].level = pumptherm.alarm_t.LEVEL_WARNING;
+    a.conditions[1].reason = 42;  // no REASON_ constant has this value
+    a.conditions[1].node = "rotor";
+    PumpthermSpyPlugin.View av = view("PUMPTHERM/p2/ALARM", a);
+    expect(av.header.getText().contains("alarm: <b>trip</b>"), "alarm level by name: " + av.header.getText());
+    expect(av.model.getRowCount() == 2, "two condition rows");
+    expect("measured over temperature".equals(av.model.getValueAt(0, 1)), "reason by name: " + av.model.getValueAt(0, 1));
+    expect("code 42".equals(av.model.getValueAt(1, 1)), "unknown reason as its number: " + av.model.getValueAt(1, 1));
+
+    expect(PumpthermSpyPlugin.get(t, "magnet_flux_degC") == null, "a field the type lacks reads as absent");
+    PumpthermSpyPlugin plugin = new PumpthermSpyPlugin();
+    expect(plugin.canHandle(pumptherm.temperatures_t.LCM_FINGERPRINT), "takes temperatures_t");
+    expect(plugin.canHandle(pumptherm.alarm_t.LCM_FINGERPRINT), "takes alarm_t");
+    expect(!plugin.canHandle(pumptherm.telemetry_t.LCM_FINGERPRINT), "leaves telemetry_t to lcm-spy");
+    System.out.println(failures == 0 ? "pumptherm view: all checks passed" : failures + " checks failed");
+    System.exit(failures == 0 ? 0 : 1);  // also stops the views' timers
+  }
+}
