@@ -65,7 +65,7 @@ public final class SpyPluginCheck {
     expect("measured over temperature".equals(av.model.getValueAt(0, 1)), "reason by name: " + av.model.getValueAt(0, 1));
     expect("code 42".equals(av.model.getValueAt(1, 1)), "unknown reason as its number: " + av.model.getValueAt(1, 1));
 
-    expect(PumpthermSpyPlugin.get(t, "magnet_flux_degC") == null, "a field the type lacks reads as absent");
+    expect(PumpthermSpyPlugin.get(t, "no_such_field_degC") == null, "a field the type lacks reads as absent");
     PumpthermSpyPlugin plugin = new PumpthermSpyPlugin();
     expect(plugin.canHandle(pumptherm.temperatures_t.LCM_FINGERPRINT), "takes temperatures_t");
     expect(plugin.canHandle(pumptherm.alarm_t.LCM_FINGERPRINT), "takes alarm_t");
