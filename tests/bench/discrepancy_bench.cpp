@@ -68,9 +68,10 @@ int main(int argc, char** argv) {
   fmt::print(
       "{{\"benchmark\": \"discrepancy_whole_run\", \"hours\": {}, \"step_s\": {}, \"rows_per_file\": {}, "
       "\"measured_nodes\": {}, \"run_time_s\": {:.2f}, \"cpu_time_s\": {:.2f}, \"verdict\": \"{}\", \"effects\": \"{}\", "
-      "\"validate_max_abs_K\": [{:.3f}, {:.3f}], \"goal_s\": 60}}\n",
+      "\"validate_max_abs_K\": [{:.3f}, {:.3f}], \"simulation\": \"{}\", \"averaging_cost_K\": [{:.4f}, {:.4f}], "
+      "\"goal_s\": 60}}\n",
       hours, step_s, train.size(), train.measured.size(), s, cpu_s, r.verdict, named, r.validate_before.back().max_abs_K,
-      r.validate_after.back().max_abs_K);
+      r.validate_after.back().max_abs_K, r.simulation, r.averaging_cost_train_K, r.averaging_cost_validate_K);
   std::filesystem::remove_all(dir);
   return 0;
 }
