@@ -50,7 +50,9 @@ std::string SharedDir() {
 std::string ModelFile(const std::string& name) {
   std::string text = pumptherm::tests::ReadShippedModel(name);
   const std::string rel = "../../../shared";
-  for (std::size_t p; (p = text.find(rel)) != std::string::npos;) text.replace(p, rel.size(), SharedDir());
+  const std::string shared = SharedDir();
+  for (std::size_t p = text.find(rel); p != std::string::npos; p = text.find(rel, p + shared.size()))
+    text.replace(p, rel.size(), shared);
   const std::string path = Dir() + "/" + name + ".toml";
   std::ofstream(path) << text;
   return path;
