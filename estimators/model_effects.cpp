@@ -144,6 +144,10 @@ EffectTargets FindEffectTargets(std::string_view toml_text, const std::string& s
         auto [a, b] = Ends(*et);
         if (IsBoundary(a)) std::swap(a, b);
         if (!t.frame.empty() && a == t.frame && IsBoundary(b)) t.frame_edges.push_back(i);
+        if (IsBoundary(b) && !IsBoundary(a)) {
+          t.cooling_edges.push_back(i);
+          if (t.cooled.find(a) == std::string::npos) t.cooled += (t.cooled.empty() ? "" : ", ") + a;
+        }
         const bool wa = std::find(winding.begin(), winding.end(), a) != winding.end();
         const bool wb = std::find(winding.begin(), winding.end(), b) != winding.end();
         if (wa && wb && a != b && t.winding_edge < 0) t.winding_edge = i;
@@ -157,8 +161,9 @@ EffectTargets FindEffectTargets(std::string_view toml_text, const std::string& s
 std::string EffectNotApplicable(const EffectSpec& effect, const EffectTargets& t) {
   const std::string& n = effect.name;
   if (n == "frame_thermal_mass" && t.frame.empty()) return "no frame node";
-  if ((n == "frame_ambient_resistance" || n == "speed_dependent_cooling") && t.frame_edges.empty())
+  if (n == "frame_ambient_resistance" && t.frame_edges.empty())
     return "no edge between the frame and a boundary";
+  if (n == "speed_dependent_cooling" && t.cooling_edges.empty()) return "no edge to a boundary";
   if (n == "winding_conductance" && t.winding_edge < 0)
     return "no edge between two winding (copper-loss temperature) nodes";
   if (n == "copper_temperature_coefficient" && t.copper_losses.empty())
@@ -227,7 +232,7 @@ std::string ApplyModelEffects(std::string_view toml_text, const std::string& sou
         edit(*edges->get(static_cast<std::size_t>(i))->as_table(), "resistance_K_per_W", "edge",
              [&](const std::string& old) { return p + " * " + old; });
     } else if (e.name == "speed_dependent_cooling") {
-      for (int i : t.frame_edges)
+      for (int i : t.cooling_edges)
         edit(*edges->get(static_cast<std::size_t>(i))->as_table(), "resistance_K_per_W", "edge",
              [&](const std::string& old) {
                return old + " / max(1 + " + p + " * abs(speed_rpm) / 1000, 0.05)";
@@ -309,8 +314,8 @@ std::string PhysicalReading(const Effect& e, const EffectTargets& t) {
                        "({} cooling)",
                        t.frame, v, v < 1.0 ? "better" : "worse");
   if (e.name == "speed_dependent_cooling")
-    return fmt::format("the {}'s cooling conductance grows by {:.3g} % per 1000 r/min", t.frame,
-                       100.0 * v);
+    return fmt::format("the cooling conductance to the boundary ({}) grows by {:.3g} % per 1000 r/min",
+                       t.cooled, 100.0 * v);
   if (e.name == "winding_conductance")
     return fmt::format("the slot to end-winding resistance is {:.3g} times the model's", v);
   if (e.name == "copper_temperature_coefficient")

@@ -14,7 +14,7 @@
 /// | --- | --- | --- |
 /// | frame_thermal_mass | frame_extra_capacity_J_per_K (0) | C_frame' = C_frame + dC |
 /// | frame_ambient_resistance | frame_resistance_scale (1) | R_fb' = s R_fb, every frame-boundary edge |
-/// | speed_dependent_cooling | cooling_speed_gain_per_krpm (0) | R_fb' = R_fb / max(1 + g abs(n)/1000, 0.05) |
+/// | speed_dependent_cooling | cooling_speed_gain_per_krpm (0) | R_c' = R_c / max(1 + g abs(n)/1000, 0.05), every edge to a boundary |
 /// | winding_conductance | winding_resistance_scale (1) | R_w' = s R_w, the edge between two winding nodes |
 /// | copper_temperature_coefficient | copper_alpha_delta_per_K (0) | alpha' = alpha + d_alpha (copper loss terms) |
 /// | iron_loss_scale | iron_loss_scale (1) | P_Fe' = s P_Fe (loss terms named iron*) |
@@ -68,6 +68,8 @@ struct EffectTargets {
                                  ///< to a boundary that is not the rotor
   std::string rotor;             ///< node `rotor`, `pm` or `magnet`, else one containing `rotor`
   std::vector<int> frame_edges;  ///< indices of the [[edge]]s between frame and a boundary
+  std::vector<int> cooling_edges;  ///< the cooling path: every [[edge]] to ambient or coolant
+  std::string cooled;              ///< the nodes on the cooling path, "a, b" (for readings)
   int winding_edge = -1;         ///< [[edge]] joining two temperature nodes of the copper loss
   std::vector<int> copper_losses;  ///< [[loss]]es with temperature nodes and a positive coefficient
   std::vector<int> iron_losses;    ///< [[loss]]es whose name starts with "iron"

@@ -2,7 +2,7 @@
 // measured nodes, train and validate each, the whole run timed from reading the CSV files to
 // writing report.json, model.toml and report.html. Prints the figure as JSON; never fails on time.
 //
-//   build/tests/bench/discrepancy_bench [--hours 24] [--step-s 1]
+//   build/tests/bench/discrepancy_bench [--hours 24] [--step-s 1] [--max-exact-rows 20000]
 #include <fmt/core.h>
 
 #include <chrono>
@@ -32,10 +32,12 @@ std::string Read(const std::string& path) {
 
 int main(int argc, char** argv) {
   double hours = 24.0, step_s = 1.0;
+  pd::Options options;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string a = argv[i];
     if (a == "--hours") hours = std::atof(argv[i + 1]);
     if (a == "--step-s") step_s = std::atof(argv[i + 1]);
+    if (a == "--max-exact-rows") options.max_exact_rows = std::atol(argv[i + 1]);
   }
   const std::string src = PUMPTHERM_SOURCE_DIR;
   const std::string model_path = src + "/estimators/models/saheba2010-baseline.toml";
@@ -59,7 +61,7 @@ int main(int argc, char** argv) {
   const auto model = pumptherm::estimators::ThermalModel::Parse(text, model_path);
   const pd::Data train = pd::ReadData(train_csv, model);
   const pd::Data validate = pd::ReadData(val_csv, model);
-  const pd::Result r = pd::Run(text, model_path, train, validate, pd::Options{});
+  const pd::Result r = pd::Run(text, model_path, train, validate, options);
   pd::WriteReport((dir / "out").string(), r, "saheba2010-baseline", train_csv, val_csv);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const double cpu_s = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
@@ -68,9 +70,10 @@ int main(int argc, char** argv) {
   fmt::print(
       "{{\"benchmark\": \"discrepancy_whole_run\", \"hours\": {}, \"step_s\": {}, \"rows_per_file\": {}, "
       "\"measured_nodes\": {}, \"run_time_s\": {:.2f}, \"cpu_time_s\": {:.2f}, \"verdict\": \"{}\", \"effects\": \"{}\", "
-      "\"validate_max_abs_K\": [{:.3f}, {:.3f}], \"goal_s\": 60}}\n",
+      "\"validate_max_abs_K\": [{:.3f}, {:.3f}], \"simulation\": \"{}\", \"averaging_cost_K\": [{:.4f}, {:.4f}], "
+      "\"goal_s\": 60}}\n",
       hours, step_s, train.size(), train.measured.size(), s, cpu_s, r.verdict, named, r.validate_before.back().max_abs_K,
-      r.validate_after.back().max_abs_K);
+      r.validate_after.back().max_abs_K, r.simulation, r.averaging_cost_train_K, r.averaging_cost_validate_K);
   std::filesystem::remove_all(dir);
   return 0;
 }

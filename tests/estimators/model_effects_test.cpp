@@ -69,10 +69,14 @@ TEST(ModelEffects, TargetsOfTheShippedModels) {
   EXPECT_EQ(s.winding_edge, 15);  // R46, slot_winding - end_winding
   EXPECT_EQ(s.copper_losses.size(), 1u);
   EXPECT_EQ(s.iron_losses.size(), 1u);
+  EXPECT_EQ(s.cooling_edges, s.frame_edges);  // the frame is its only path to the ambient
   const pe::EffectTargets w = pe::FindEffectTargets(ReadModel("wallscheid2017-4node"), "w");
   EXPECT_EQ(w.frame, "stator_yoke");
   EXPECT_EQ(w.rotor, "pm");
   EXPECT_EQ(w.winding_edge, -1);  // one winding node
+  // The cooling path: stator_yoke - coolant, pm - ambient, pm - coolant (the file's edges 3, 6, 7).
+  EXPECT_EQ(w.cooling_edges, (std::vector<int>{3, 6, 7}));
+  EXPECT_EQ(w.cooled, "stator_yoke, pm");
   EXPECT_FALSE(pe::EffectNotApplicable(*pe::FindEffect("winding_conductance"), w).empty());
 }
 

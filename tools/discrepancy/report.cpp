@@ -413,6 +413,8 @@ std::string ReportJson(const Result& r, const std::string& model, const std::str
       "  \"gap\": {{\n    \"train\": {{\"before\": {}, \"after\": {}}},\n    \"validate\": {{\"before\": {}, "
       "\"after\": {}}}\n  }},\n",
       Gap(r.train_before), Gap(r.train_after), Gap(r.validate_before), Gap(r.validate_after));
+  j += fmt::format("  \"simulation\": {}, \"averaging_cost_K\": {{\"train\": {}, \"validate\": {}}},\n",
+                   Str(r.simulation), Num(r.averaging_cost_train_K), Num(r.averaging_cost_validate_K));
   j += fmt::format("  \"run_time_s\": {}\n}}\n", Num(r.seconds));
   return j;
 }

@@ -17,78 +17,127 @@ namespace pumptherm::tools::discrepancy {
 namespace pe = pumptherm::estimators;
 namespace {
 
-/// A data set thinned to the simulation grid.
+/// A data set on the simulation grid. The simulation steps over `rows` (each row's inputs held
+/// until the next row); the residuals are taken at the grid points, rows `at[j]`.
 struct Grid {
-  std::vector<double> t_s;
-  std::vector<pe::ThermalInputs> in;  ///< in[j] acts over [t_j, t_j+1)
-  std::vector<char> rediscretise;     ///< step j needs a new exp(A tau): decided by the inputs
+  std::vector<double> t_s;               ///< grid points' times
+  std::vector<std::size_t> at;           ///< grid point j is row at[j]
+  std::vector<double> row_t_s;           ///< rows' times
+  std::vector<pe::ThermalInputs> in;     ///< in[k] acts over [row_t_k, row_t_k+1)
+  std::vector<char> rediscretise;        ///< row step k needs a new exp(A tau): fixed by the data
+  bool averaged = false;                 ///< rows are averages over grid steps, not the data's rows
   std::vector<std::string> nodes;
   std::vector<std::vector<double>> measured;  ///< [node][j]
 };
 
-Grid MakeGrid(const Data& d, const Options& o) {
-  Grid g;
-  const std::size_t n = d.size();
+/// Grid points: the data thinned to steps of at least min_grid_step_s and at most
+/// max_grid_points points (indices into the data's rows).
+std::vector<std::size_t> GridPoints(const Data& d, const Options& o) {
   const double span = d.time_s.back() - d.time_s.front();
   const double step = std::max(o.min_grid_step_s, span / std::max(1, o.max_grid_points - 1));
   std::vector<std::size_t> idx{0};
-  for (std::size_t k = 1; k < n; ++k)
+  for (std::size_t k = 1; k < d.size(); ++k)
     if (d.time_s[k] - d.time_s[idx.back()] >= step * (1.0 - 1e-9)) idx.push_back(k);
-  for (const auto& m : d.measured) {
-    g.nodes.push_back(m.node);
-    g.measured.emplace_back();
+  return idx;
+}
+
+/// Inputs averaged over rows [a, b) by time: the currents as root mean squares (the copper loss,
+/// i^2, is kept; the sign of iq is the step's mean sign), the rest as means.
+pe::ThermalInputs AverageInputs(const Data& d, std::size_t a, std::size_t b) {
+  const std::size_t n = d.size();
+  double w = 0.0, sp = 0.0, id2 = 0.0, iq2 = 0.0, iq = 0.0, amb = 0.0, cool = 0.0;
+  for (std::size_t k = a; k < b; ++k) {
+    const double dt = k + 1 < n ? d.time_s[k + 1] - d.time_s[k] : 1.0;
+    w += dt;
+    sp += dt * d.speed_rpm[k];
+    id2 += dt * d.id_A[k] * d.id_A[k];
+    iq2 += dt * d.iq_A[k] * d.iq_A[k];
+    iq += dt * d.iq_A[k];
+    amb += dt * d.ambient_degC[k];
+    cool += dt * d.coolant_degC[k];
   }
-  for (std::size_t j = 0; j < idx.size(); ++j) {
-    const std::size_t a = idx[j];
-    const std::size_t b = j + 1 < idx.size() ? idx[j + 1] : std::min(a + 1, n);
-    // Time-weighted means over the samples whose hold intervals make up this grid step; the
-    // currents as root mean squares so the copper loss (i^2) is kept.
-    double w = 0.0, sp = 0.0, id2 = 0.0, iq2 = 0.0, amb = 0.0, cool = 0.0;
-    for (std::size_t k = a; k < b; ++k) {
-      const double dt = k + 1 < n ? d.time_s[k + 1] - d.time_s[k] : 1.0;
-      w += dt;
-      sp += dt * d.speed_rpm[k];
-      id2 += dt * d.id_A[k] * d.id_A[k];
-      iq2 += dt * d.iq_A[k] * d.iq_A[k];
-      amb += dt * d.ambient_degC[k];
-      cool += dt * d.coolant_degC[k];
-    }
-    pe::ThermalInputs in;
-    in.speed_rpm = sp / w;
-    in.id_A = std::sqrt(id2 / w);
-    in.iq_A = std::sqrt(iq2 / w);
-    in.ambient_degC = amb / w;
-    in.coolant_degC = cool / w;
-    g.t_s.push_back(d.time_s[a]);
-    g.in.push_back(in);
-    for (std::size_t i = 0; i < d.measured.size(); ++i)
-      g.measured[i].push_back(d.measured[i].value_degC[a]);
-  }
-  // Re-discretise only where the inputs move (by 2 % of current squared or speed, 1 K of a
-  // boundary) or the step changes: the schedule then does not depend on the fitted parameters,
-  // so the simulated series is a smooth function of them (numeric derivatives need that).
-  g.rediscretise.assign(g.t_s.size(), 0);
+  pe::ThermalInputs in;
+  in.speed_rpm = sp / w;
+  in.id_A = std::sqrt(id2 / w);
+  in.iq_A = std::copysign(std::sqrt(iq2 / w), iq);
+  in.ambient_degC = amb / w;
+  in.coolant_degC = cool / w;
+  return in;
+}
+
+/// Re-discretisation schedule of averaged rows: where the inputs move (by 2 % of current
+/// squared or speed, 1 K of a boundary) or the step changes.
+std::vector<char> CoarseSchedule(const Grid& g) {
+  std::vector<char> out(g.row_t_s.size(), 0);
   std::size_t ref = 0;
-  for (std::size_t j = 0; j + 1 < g.t_s.size(); ++j) {
+  for (std::size_t j = 0; j + 1 < g.row_t_s.size(); ++j) {
     const auto& a = g.in[ref];
     const auto& b = g.in[j];
     const double i2a = a.id_A * a.id_A + a.iq_A * a.iq_A, i2b = b.id_A * b.id_A + b.iq_A * b.iq_A;
-    const double dta = ref + 1 < g.t_s.size() ? g.t_s[ref + 1] - g.t_s[ref] : 0.0;
-    const double dtb = g.t_s[j + 1] - g.t_s[j];
+    const double dta = ref + 1 < g.row_t_s.size() ? g.row_t_s[ref + 1] - g.row_t_s[ref] : 0.0;
+    const double dtb = g.row_t_s[j + 1] - g.row_t_s[j];
     const bool moved = j == 0 || std::abs(i2a - i2b) > 0.02 * std::max(i2a, 1.0) ||
                        std::abs(a.speed_rpm - b.speed_rpm) > 0.02 * std::max(std::abs(a.speed_rpm), 50.0) ||
                        std::abs(a.ambient_degC - b.ambient_degC) > 1.0 ||
                        std::abs(a.coolant_degC - b.coolant_degC) > 1.0 ||
                        std::abs(dta - dtb) > 1e-6 * dtb;
     if (moved) {
-      g.rediscretise[j] = 1;
+      out[j] = 1;
       ref = j;
     }
+  }
+  return out;
+}
+
+/// Re-discretisation schedule of the data's rows: where `pumptherm simulate`'s discretiser
+/// (relative tolerance 1e-4 on the base model's A) redoes exp(A tau). Fixed by the data and the
+/// base model, so the simulated series stays a smooth function of the fitted parameters
+/// (numeric derivatives need that), and the base model is simulated as `simulate` does.
+std::vector<char> ExactSchedule(const Grid& g, const pe::ThermalModel& base) {
+  std::vector<char> out(g.row_t_s.size(), 0);
+  pe::ThermalLinearModel lin;
+  pe::ThermalDiscretiser disc(1e-4);
+  for (std::size_t k = 0; k + 1 < g.row_t_s.size(); ++k) {
+    base.Linearise(g.in[k], lin);
+    out[k] = disc.Update(lin, g.row_t_s[k + 1] - g.row_t_s[k]) ? 1 : 0;
+  }
+  return out;
+}
+
+/// Row by row (exact: the data's rows, inputs held over each, as `pumptherm simulate`) when the
+/// data has at most options.max_exact_rows rows; otherwise rows averaged over the grid steps.
+Grid MakeGrid(const Data& d, const Options& o, const pe::ThermalModel& base) {
+  Grid g;
+  const std::vector<std::size_t> idx = GridPoints(d, o);
+  g.averaged = static_cast<long>(d.size()) > o.max_exact_rows;
+  for (const auto& m : d.measured) {
+    g.nodes.push_back(m.node);
+    g.measured.emplace_back();
+  }
+  for (std::size_t j = 0; j < idx.size(); ++j) {
+    g.t_s.push_back(d.time_s[idx[j]]);
+    for (std::size_t i = 0; i < d.measured.size(); ++i)
+      g.measured[i].push_back(d.measured[i].value_degC[idx[j]]);
+  }
+  if (g.averaged) {
+    for (std::size_t j = 0; j < idx.size(); ++j) {
+      const std::size_t b = j + 1 < idx.size() ? idx[j + 1] : std::min(idx[j] + 1, d.size());
+      g.at.push_back(j);
+      g.row_t_s.push_back(d.time_s[idx[j]]);
+      g.in.push_back(AverageInputs(d, idx[j], b));
+    }
+    g.rediscretise = CoarseSchedule(g);
+  } else {
+    g.at = idx;
+    g.row_t_s.assign(d.time_s.begin(), d.time_s.begin() + static_cast<long>(idx.back()) + 1);
+    for (std::size_t k = 0; k <= idx.back(); ++k) g.in.push_back(d.Inputs(k));
+    g.rediscretise = ExactSchedule(g, base);
   }
   return g;
 }
 
-/// Simulates `model` over the grid; returns the measured nodes' temperatures [node][j].
+/// Simulates `model` over the grid's rows; returns the measured nodes' temperatures at the grid
+/// points [node][j].
 std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const Grid& g) {
   const int n = model.StateCount();
   std::vector<int> state(g.nodes.size()), all(g.nodes.size());
@@ -117,6 +166,7 @@ std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const G
   pe::ThermalLinearModel lin;
   pe::ThermalDiscreteModel disc;
   Eigen::VectorXd next(n);
+  // Massless nodes from the row's own inputs (the point's inputs, as `simulate` writes them).
   auto record = [&](std::size_t j, const pe::ThermalInputs& in) {
     Eigen::VectorXd full;
     if (need_all) full = model.AllTemperatures_degC(in, x);
@@ -124,12 +174,13 @@ std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const G
       out[i][j] = state[i] >= 0 ? x(state[i]) : full(all[i]);
   };
   record(0, g.in[0]);
-  for (std::size_t j = 0; j + 1 < g.t_s.size(); ++j) {
-    model.Linearise(g.in[j], lin);
-    if (g.rediscretise[j]) pe::DiscretiseZoh(lin.a_per_s, g.t_s[j + 1] - g.t_s[j], disc);
+  std::size_t j = 1;
+  for (std::size_t k = 0; j < g.at.size(); ++k) {
+    model.Linearise(g.in[k], x, lin);
+    if (g.rediscretise[k]) pe::DiscretiseZoh(lin.a_per_s, g.row_t_s[k + 1] - g.row_t_s[k], disc);
     next.noalias() = disc.ad * x + disc.phi_s * lin.f_K_per_s;
     x = next;
-    record(j + 1, g.in[j]);
+    if (k + 1 == g.at[j]) record(j++, g.in[g.averaged ? k : k + 1]);
   }
   return out;
 }
@@ -336,7 +387,29 @@ FitResult Fit(Evaluator& ev, std::vector<double> p0, const Grid& g, const Option
 
 std::string Label(const pe::Effect& e) { return e.node.empty() ? e.name : e.name + "(" + e.node + ")"; }
 
+/// RMSE between two simulations on the same grid points (every node, points 1..).
+double SeriesRmse(const std::vector<std::vector<double>>& a, const std::vector<std::vector<double>>& b) {
+  double ss = 0.0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < a.size(); ++i)
+    for (std::size_t j = 1; j < a[i].size(); ++j, ++n) ss += (a[i][j] - b[i][j]) * (a[i][j] - b[i][j]);
+  return n ? std::sqrt(ss / static_cast<double>(n)) : 0.0;
+}
+
+/// The cost of averaging: the base model row by row against `averaged` on the same points.
+double AveragingCost(const pe::ThermalModel& base, const Data& d, const Options& o,
+                     const std::vector<std::vector<double>>& averaged) {
+  Options exact = o;
+  exact.max_exact_rows = static_cast<long>(d.size());
+  return SeriesRmse(Simulate(base, MakeGrid(d, exact, base)), averaged);
+}
+
 }  // namespace
+
+Simulated SimulateModel(const pe::ThermalModel& model, const Data& data, const Options& options) {
+  const Grid g = MakeGrid(data, options, model);
+  return {g.t_s, g.nodes, Simulate(model, g), g.averaged};
+}
 
 std::string SeparatingExperiment(const std::vector<std::string>& effects) {
   static const std::map<std::string, std::string> kHow{
@@ -381,8 +454,8 @@ Result Run(const std::string& text, const std::string& source, const Data& train
       if (std::none_of(base.Nodes().begin(), base.Nodes().end(),
                        [&](const auto& n) { return n.name == m.node; }))
         throw std::invalid_argument(fmt::format("{}: node {} is not in the model", d->source, m.node));
-  const Grid gt = MakeGrid(train, o);
-  const Grid gv = MakeGrid(validate, o);
+  const Grid gt = MakeGrid(train, o, base);
+  const Grid gv = MakeGrid(validate, o, base);
   const pe::EffectTargets targets = pe::FindEffectTargets(text, source);
 
   // Candidate list: model effects once, sensor effects once per node measured in both sets.
@@ -417,6 +490,14 @@ Result Run(const std::string& text, const std::string& source, const Data& train
   const auto before_train = current.train_series;
   const auto before_val = base_ev.Series(nullptr, gv);
   double current_val_rmse = ResidualStats(Residuals(before_val, gv), gv.nodes.size()).rmse;
+  if (gt.averaged || gv.averaged) {
+    res.simulation = "averaged";
+    if (gt.averaged) res.averaging_cost_train_K = AveragingCost(base, train, o, before_train);
+    if (gv.averaged) res.averaging_cost_validate_K = AveragingCost(base, validate, o, before_val);
+    progress(fmt::format("inputs averaged over grid steps: costs {:.3f} K RMSE on train, {:.3f} K on "
+                         "validate (input model against row by row)",
+                         res.averaging_cost_train_K, res.averaging_cost_validate_K));
+  }
   progress(fmt::format("model {}: gap train RMSE {:.3f} K, validate RMSE {:.3f} K", source,
                        current.stats.rmse, current_val_rmse));
 

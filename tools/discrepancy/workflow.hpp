@@ -17,10 +17,14 @@ namespace pumptherm::tools::discrepancy {
 struct Options {
   std::vector<std::string> effects;  ///< candidate effect names; empty = the whole vocabulary
   int max_effects = 3;
-  /// Simulation grid: samples are thinned to steps of at least min_grid_step_s and at most
-  /// max_grid_points points; inputs are averaged over each grid step.
+  /// Simulation grid: the residuals are taken at samples thinned to steps of at least
+  /// min_grid_step_s and at most max_grid_points points. Data of at most max_exact_rows rows are
+  /// simulated row by row (each row's inputs held until the next, as `pumptherm simulate`);
+  /// longer data with the inputs averaged over each grid step (an approximation whose cost the
+  /// result reports).
   double min_grid_step_s = 10.0;
   int max_grid_points = 2000;
+  long max_exact_rows = 20000;
   // Decision rule (docs/discrepancy.md).
   double ic_threshold = 10.0;      ///< delta IC at least this far below the current model
   double min_validation_gain = 0.10;  ///< validation RMSE cut by at least this fraction
@@ -83,7 +87,22 @@ struct Result {
   std::string model_toml;  ///< the input model with the effects added
   PlotSeries validate_plot, train_plot;
   double seconds = 0.0;
+  /// "rows" (every data row, exact) or "averaged" (inputs averaged over grid steps); for
+  /// averaged, the input model's RMSE between the averaged and the row-by-row simulation at the
+  /// grid points, on train and on validation data: what the approximation costs.
+  std::string simulation = "rows";
+  double averaging_cost_train_K = 0.0, averaging_cost_validate_K = 0.0;
 };
+
+/// The workflow's simulation of `model` on `data` at its grid points (the same grid, start and
+/// stepping as Run uses for its input model).
+struct Simulated {
+  std::vector<double> time_s;
+  std::vector<std::string> nodes;               ///< the measured nodes
+  std::vector<std::vector<double>> temps_degC;  ///< [node][point]
+  bool averaged = false;
+};
+Simulated SimulateModel(const estimators::ThermalModel& model, const Data& data, const Options& options);
 
 /// Runs the workflow. `model_text` is the model file, `source` its name, `files` how the tables
 /// it names are read (estimators/thermal_model.hpp); the model.toml of the result names those
