@@ -138,6 +138,8 @@ class CsvSink {
 std::int64_t OfflineClock::Now(std::int64_t stamp_us) {
   if (last_stamp_us_ >= 0 && stamp_us < last_stamp_us_ - kClockStepUs) {
     // The recording's clock was stepped back: time holds here and runs on from the new stamps.
+    ++steps_back_;
+    last_step_back_us_ = last_stamp_us_ - stamp_us;
     offset_us_ = last_now_us_ - stamp_us;
   }
   last_stamp_us_ = stamp_us;
@@ -182,6 +184,15 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       last_index = gateway.Interface(last_interface);
     }
     const std::int64_t now = clock.Now(p.record.time_us);
+    if (clock.steps_back() > r.time_steps_back) {
+      r.time_steps_back = clock.steps_back();
+      if (r.time_steps_back <= options.max_reported) {
+        Log(LogLevel::kWarning,
+            "{}:{}: time goes back {:.3f} s (logs concatenated, or the recording host's clock set back): "
+            "the pipeline's time holds here and runs on from the new stamps",
+            source, r.lines, static_cast<double>(clock.last_step_back_us()) * 1e-6);
+      }
+    }
     if (log_start_us < 0) log_start_us = now;
     gateway.OnFrame(last_index, protocol::TimedFrame{now, p.record.frame});
     gateway.Advance(now, sink);
@@ -200,6 +211,9 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
         next_table_us = now + static_cast<std::int64_t>(options.table_period_s * 1e6);
       }
     }
+  }
+  if (r.time_steps_back > options.max_reported) {
+    Log(LogLevel::kWarning, "{}: time went back {} times in all", source, r.time_steps_back);
   }
   if (r.bad_lines > options.max_reported) {
     Log(LogLevel::kWarning, "{}: {} more malformed lines skipped", source, r.bad_lines - options.max_reported);

@@ -29,6 +29,10 @@ struct OfflineResult {
   std::uint64_t lines = 0;
   std::uint64_t frames = 0;
   std::uint64_t bad_lines = 0;   ///< malformed lines: reported (first few) and counted, skipped
+  /// Stamps more than OfflineClock::kClockStepUs behind the one before (two logs concatenated,
+  /// the recording host's clock set back): warned with file:line (first few) and counted; their
+  /// frames are used, time holding at the step (OfflineClock).
+  std::uint64_t time_steps_back = 0;
   std::uint64_t frames_out = 0;
   std::uint64_t lcm_out = 0;
 };
@@ -45,11 +49,16 @@ class OfflineClock {
   static constexpr std::int64_t kClockStepUs = 1'000'000;
   /// The pipeline time (us) for a frame stamped `stamp_us`.
   std::int64_t Now(std::int64_t stamp_us);
+  /// Backward steps over kClockStepUs seen so far, and the size of the last one (us).
+  std::uint64_t steps_back() const { return steps_back_; }
+  std::int64_t last_step_back_us() const { return last_step_back_us_; }
 
  private:
   std::int64_t last_stamp_us_ = -1;
   std::int64_t last_now_us_ = -1;
   std::int64_t offset_us_ = 0;
+  std::uint64_t steps_back_ = 0;
+  std::int64_t last_step_back_us_ = 0;
 };
 
 /// Feeds every frame of the candump log in `in` to `gateway`. `source` names the log in error

@@ -4,10 +4,13 @@
 
 #include <cmath>
 #include <memory>
+#include <sstream>
+#include <string>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include "daemon/config.hpp"
+#include "daemon/gateway.hpp"
 #include "daemon/live_loop.hpp"
 #include "daemon/offline.hpp"
 #include "daemon/pump.hpp"
@@ -69,6 +72,24 @@ TEST(PipelineClock, OfflineBackwardStepHoldsThenRunsOn) {
   EXPECT_EQ(c.Now(t0 - 199'000'000), t0 + 1'000'000);        // set back 200 s
   EXPECT_EQ(c.Now(t0 - 198'000'000), t0 + 2'000'000);        // runs on, 1 s later
   EXPECT_EQ(c.Now(t0 + 100'000'000), t0 + 300'000'000);      // forward: elapsed
+  EXPECT_EQ(c.steps_back(), 1u);                             // the 1 ms reorder is no step
+  EXPECT_EQ(c.last_step_back_us(), 199'999'000);             // from the stamp just before it
+}
+
+// Two logs concatenated: the second's stamps go back. Warned with the line, counted, and its
+// frames used (the pipeline's time holds at the step).
+TEST(PipelineClock, TwoConcatenatedLogsAreWarnedAndCounted) {
+  const std::string log =
+      "(1767225600.000000) can0 123#00\n(1767225660.000000) can0 123#00\n"
+      "(1767225000.000000) can0 123#00\n(1767225001.000000) can0 123#00\n";
+  std::istringstream in(log);
+  Gateway g(ParseConfig("[[can]]\ninterface = \"can0\"\n", "p.toml"));
+  testing::internal::CaptureStderr();
+  const OfflineResult r = RunOffline(in, "two.log", g);
+  const std::string err = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(r.frames, 4u);
+  EXPECT_EQ(r.time_steps_back, 1u);
+  EXPECT_NE(err.find("two.log:3: time goes back 660.000 s"), std::string::npos) << err;
 }
 
 // Live, the kernel's receive stamps are wall time: mapped to the monotonic clock, they stay in
