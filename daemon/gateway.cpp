@@ -21,6 +21,12 @@
 namespace pumptherm::daemon {
 namespace {
 
+/// Whether the alarm state is worth sending: with an estimate, with a latched trip (also while
+/// the filter has none), or with any condition raised (a pump never heard from is stale).
+bool AlarmKnown(const PumpSnapshot& s) {
+  return s.initialised || s.alarm.trip_latched || s.alarm.level != estimators::AlarmLevel::kNone;
+}
+
 /// The journal's line for an alarm change: the worst level with its reason, node and value, every
 /// active reason, and which reasons were raised and cleared since `logged_reasons` (the set the
 /// previous line showed), e.g. "alarm trip (estimated_over_temperature, winding, value 121.30);
@@ -392,9 +398,9 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const
     // A latched trip goes out as a trip even while the filter has no estimate (just reset, or
     // restarted with only its trips restored).
     case MappingOutput::kAlarmLevel:
-      return s.initialised || s.alarm.trip_latched ? static_cast<double>(s.alarm.level) : kNaN;
+      return AlarmKnown(s) ? static_cast<double>(s.alarm.level) : kNaN;
     case MappingOutput::kAlarmReason:
-      return s.initialised || s.alarm.trip_latched ? static_cast<double>(s.alarm.reason) : kNaN;
+      return AlarmKnown(s) ? static_cast<double>(s.alarm.reason) : kNaN;
     case MappingOutput::kAlarmNode: {
       // The model's node index (as node_index), or the winding temperature from resistance.
       if (!s.initialised || (s.alarm.node < 0 && s.alarm.reason != estimators::AlarmReason::kEstimatedOverTemperature)) return kNaN;
@@ -492,9 +498,16 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
     const bool latched = pump.snapshot().alarm.trip_latched;
     if (latched && !io.trip_latched) ++counters_.trip_latches;
     io.trip_latched = latched;
-    if (pump.last_frame_us() < 0) continue;  // nothing heard from this pump yet: nothing to say
+    // A pump never heard from raises stale telemetry after stale_after_s, as one that fell silent;
+    // only its alarm frames go out (nothing else is known of it).
+    const bool never_heard = pump.last_frame_us() < 0;
+    if (never_heard && !pump.CheckNeverHeard(start_us_, now_us) &&
+        pump.snapshot().alarm.level == estimators::AlarmLevel::kNone) {
+      continue;
+    }
     const bool alarm_changed = pump.snapshot().alarm_changes != io.alarm_changes_sent;
     for (OutputPlan& plan : io.outputs) {
+      if (never_heard && !plan.alarm) continue;
       if (plan.next_due_us < 0) plan.next_due_us = now_us;
       if (now_us >= plan.next_due_us || (plan.alarm && alarm_changed)) {
         Emit(p, plan, now_us, sink);
@@ -793,20 +806,43 @@ bool Gateway::Clear(const std::string& pump_name, const std::string& source, con
 std::string Gateway::StatusLine() const {
   int warnings = 0;
   int trips = 0;
+  int never_heard = 0;
   for (const auto& p : pumps_) {
     warnings += p->snapshot().alarm.level == estimators::AlarmLevel::kWarning;
     trips += p->snapshot().alarm.level == estimators::AlarmLevel::kTrip;
+    never_heard += p->last_frame_us() < 0;
   }
   std::uint64_t error_frames = 0;
   for (const auto& c : counter_.interfaces()) error_frames += c.rx_error_frames;
-  std::string line = fmt::format("{} pumps, {} warning, {} trip; {}; {} unknown, {} bad length, {} error frames",
-                                 pumps_.size(), warnings, trips, counter_.StatusLine(), counters_.rx_unknown_id,
-                                 counters_.rx_bad_length, error_frames);
+  std::string line = fmt::format("{} pumps, {} warning, {} trip", pumps_.size(), warnings, trips);
+  if (never_heard > 0) line += fmt::format(", {} never heard", never_heard);
+  line += fmt::format("; {}; {} unknown, {} bad length, {} error frames", counter_.StatusLine(),
+                      counters_.rx_unknown_id, counters_.rx_bad_length, error_frames);
   if (!config_.lcm.url.empty()) {
     line += fmt::format("; lcm {} sent, {} failed", counters_.lcm_published, counters_.lcm_failed);
   }
   return line;
 }
+
+namespace {
+
+/// The table's Rs: "-" before identification and while the estimate is outside the motor's
+/// plausible band (its number then says nothing of the winding).
+template <typename Num>
+std::string RsCell(const estimators::ResistanceEstimate& r, Num num) {
+  using S = estimators::ResistanceStatus;
+  if (r.status == S::kInitialising) return "-";
+  if (r.status == S::kImplausible) return "implaus.";
+  return num(r.resistance_ohm, 4);
+}
+
+/// The table's alarm column; a pump never heard from says so with its alarm.
+std::string TableAlarmCell(const Pump& p, const std::string& alarm) {
+  if (p.last_frame_us() < 0) return "never heard; " + alarm;
+  return p.snapshot().initialised || p.snapshot().alarm.trip_latched ? alarm : "no estimate yet";
+}
+
+}  // namespace
 
 std::string Gateway::PumpTable() const {
   std::string out = fmt::format("{:<12} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8}  {}\n", "pump", "speed",
@@ -830,8 +866,7 @@ std::string Gateway::PumpTable() const {
                        hottest >= 0 ? p->model().StateNames()[static_cast<std::size_t>(hottest)] : "-",
                        hottest >= 0 ? num(s.node_degC[static_cast<std::size_t>(hottest)], 1) : "-",
                        num(s.winding_resistance_degC, 1),
-                       s.resistance.status == estimators::ResistanceStatus::kInitialising ? "-" : num(s.resistance.resistance_ohm, 4),
-                       s.initialised ? alarm : "no estimate yet");
+                       RsCell(s.resistance, num), TableAlarmCell(*p, alarm));
   }
   return out;
 }

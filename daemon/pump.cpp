@@ -251,9 +251,24 @@ void Pump::OnStatus(std::int64_t t_us, double speed_rpm, double /*drive_state*/,
   if (std::isfinite(ambient_degC)) ambient_degC_ = ambient_degC;
 }
 
+bool Pump::CheckNeverHeard(std::int64_t since_us, std::int64_t t_us) {
+  if (last_frame_us_ >= 0 || since_us < 0) return false;
+  if (next_step_us_ >= 0 && t_us < next_step_us_) return false;
+  next_step_us_ = t_us + period_us_;
+  std::fill(alarm_values_.begin(), alarm_values_.end(), kNaN);  // nothing known of any node
+  estimators::AlarmInputs ai;
+  ai.node_degC = alarm_values_.data();
+  ai.telemetry_age_s = static_cast<double>(t_us - since_us) * 1e-6;
+  const estimators::AlarmState before = snapshot_.alarm;
+  snapshot_.alarm = alarms_.Step(static_cast<double>(t_us) * 1e-6, ai);
+  if (!(snapshot_.alarm == before)) ++snapshot_.alarm_changes;
+  return !(snapshot_.alarm == before);
+}
+
 bool Pump::Advance(std::int64_t t_us) {
   if (last_frame_us_ < 0) return false;
-  if (next_step_us_ < 0) next_step_us_ = last_frame_us_ + period_us_;
+  if (next_step_us_ < 0 || !heard_) next_step_us_ = last_frame_us_ + period_us_;
+  heard_ = true;
   const std::uint64_t before = snapshot_.alarm_changes;
   if (t_us >= next_step_us_) {
     const std::int64_t steps = (t_us - next_step_us_) / period_us_ + 1;

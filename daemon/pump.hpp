@@ -125,6 +125,12 @@ class Pump {
   const PumpCounters& counters() const { return counters_; }
   /// Time of the last telemetry frame (fast or status), us; -1 before any.
   std::int64_t last_frame_us() const { return last_frame_us_; }
+  /// Whether a frame was heard and the thermal steps run (false before the first frame).
+  bool heard() const { return heard_; }
+  /// For a pump never heard from: runs its alarms (once per thermal period) with every input
+  /// `t_us - since_us` old, so that after `stale_after_s` it raises stale telemetry like a pump
+  /// that fell silent. Returns whether the alarm changed. No effect once a frame was heard.
+  bool CheckNeverHeard(std::int64_t since_us, std::int64_t t_us);
 
   PumpSavedState Save() const;
   /// Continues from `state` saved at state.time_us, aged to `now_us` by the thermal model with
@@ -219,6 +225,7 @@ class Pump {
   estimators::ThermalInputs held_inputs_;
   bool have_inputs_ = false;
   std::int64_t next_step_us_ = -1;
+  bool heard_ = false;  // a frame was heard (Advance runs thermal steps from then on)
   bool initialised_ = false;
 
   Eigen::VectorXd measurement_ = Eigen::VectorXd::Constant(1, kNaN);  // the frame sensor, per step

@@ -411,4 +411,31 @@ TEST(UnconfiguredNode, WarnsOnceAMinuteNamingTheSilentPump) {
 }
 
 }  // namespace
+// A configured pump that is never heard from raises stale telemetry after stale_after_s (2 s by
+// default), as one that fell silent: in its snapshot, on CAN (GW_ALARM level 1, reason 4) and in
+// the status line; its temperatures stay "not available".
+TEST(NeverHeardPump, RaisesStaleTelemetryOnCanAndInTheStatusLine) {
+  Gateway g(ParseConfig(kGatewayConfig, std::string(PUMPTHERM_SOURCE_DIR) + "/p.toml"));
+  struct Frames : OutputSink {
+    std::vector<protocol::CanFrame> sent;
+    void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame& f) override { sent.push_back(f); }
+    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override { return true; }
+  } sink;
+  const std::int64_t t0 = 1'700'000'000'000'000;
+  g.Advance(t0, sink);
+  EXPECT_EQ(g.pumps()[0]->snapshot().alarm.level, estimators::AlarmLevel::kNone);
+  EXPECT_NE(g.StatusLine().find("1 never heard"), std::string::npos) << g.StatusLine();
+  for (int k = 1; k <= 10; ++k) g.Advance(t0 + k * 1'000'000, sink);
+  const auto& a = g.pumps()[0]->snapshot().alarm;
+  EXPECT_EQ(a.level, estimators::AlarmLevel::kWarning);
+  EXPECT_EQ(a.reason, estimators::AlarmReason::kStaleTelemetry);
+  EXPECT_NE(g.StatusLine().find("1 warning"), std::string::npos) << g.StatusLine();
+  EXPECT_NE(g.PumpTable().find("never heard; warning (stale_telemetry)"), std::string::npos) << g.PumpTable();
+  bool alarm_frame = false;
+  for (const auto& f : sink.sent) {
+    if (f.id == 0x201) alarm_frame = alarm_frame || (f.data[0] & 0x3) == 1;  // GW_ALARM of node 1: warning
+  }
+  EXPECT_TRUE(alarm_frame) << sink.sent.size() << " frames sent";
+}
+
 }  // namespace pumptherm::daemon
