@@ -30,12 +30,6 @@ estimators::ResistanceIdentifierConfig IdentifierConfig(const estimators::MotorD
   return c;
 }
 
-/// Standard deviation of the identified flux: the mixture covariance of the identifier's
-/// magnet hypotheses (ResistanceIdentifier::p()), Wb.
-double FluxSd_Wb(const estimators::ResistanceIdentifier& identifier) {
-  return std::sqrt(std::max(identifier.p()(estimators::kStateFlux, estimators::kStateFlux), 0.0));
-}
-
 /// Whether the identifier's back-EMF line E = psi_f + Rs iq/w is fitted to data: not the
 /// nameplate (initialising) and not from invalid input. It is usable whatever the split between
 /// its two terms: at constant current a falling flux (a heating magnet) can move Rs out of its
@@ -465,7 +459,6 @@ void Pump::BackEmfMeasurement(std::int64_t end_us, double iq_A, double w) {
 }
 
 void Pump::PublishMagnetTemperature() {
-  snapshot_.flux_sd_Wb = FluxSd_Wb(identifier_);
   snapshot_.magnet_flux_degC = snapshot_.magnet_flux_sd_K = kNaN;
   if (!std::isfinite(magnet_z_degC_) || !snapshot_.initialised) return;
   // T_magnet = z - g T_winding at the filter's winding estimate, var = var_z + g^2 w^T S w,

@@ -57,7 +57,6 @@ struct PumpSnapshot {
   /// the identification is fresh, usable and at speed.
   double magnet_flux_degC = kNaN;
   double magnet_flux_sd_K = kNaN;
-  double flux_sd_Wb = kNaN;               ///< sd of the identified flux (mixture covariance)
   double frame_measured_degC = kNaN;      ///< the frame sensor as fused (NaN: not fused)
   estimators::SensorFault sensor_fault = estimators::SensorFault::kNone;
   double ambient_degC = kNaN;
