@@ -2,11 +2,13 @@
 // candump log whose frames our encoder wrote.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <poll.h>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <vector>
@@ -147,6 +149,115 @@ TEST(DbcCliTest, DecodeSkipsAndCountsBadLogLines) {
   EXPECT_NE(r.out.find("\"time_s\":4.000000"), std::string::npos) << r.out;  // reading went on
   EXPECT_NE(r.out.find("2 frames decoded, 0 with IDs not in pumptherm.dbc, 0 shorter than their message, 2 bad lines skipped"),
             std::string::npos) << r.out;
+}
+
+/// PUMP_FAST_I of pump 3 as our encoder writes it (Id 12.345 A, Iq -0.5 A, 2199.11 rad/s, counter 7).
+CanFrame FastFrameOfPump3() {
+  const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "pumptherm.dbc");
+  const DbcMessage& fast = *dbc.FindMessage("PUMP_FAST_I");
+  CanFrame f;
+  f.id = fast.id + 3;
+  f.len = 8;
+  const std::vector<double> values = {12.345, -0.5, 2199.11, 7};
+  EXPECT_EQ(MessageCodec(fast).Encode(values, std::span<std::uint8_t>(f.data.data(), 8)).status, CodecStatus::kOk);
+  return f;
+}
+
+TEST(DbcCliTest, AnnotateEchoesEveryLineAsCantoolsDecodeDoes) {
+  const CanFrame f = FastFrameOfPump3();
+  CanFrame unknown = f;
+  unknown.id = 0x7FF;
+  const std::string frame_line = FormatCandumpLine(1700000000123456, "vcan0", f);
+  const fs::path log = TempFile("annotate.log");
+  std::ofstream(log) << "# recorded on the bench\n" << frame_line << '\n'
+                     << FormatCandumpLine(1700000000133456, "vcan0", unknown) << '\n'
+                     << "(2.0) vcan0 10Z#00\n";
+  RunResult r = RunPumptherm("dbc decode --dbc pumptherm.dbc --node-id-limit 16 --format annotate -s", log.string());
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  // Lines that are not frames come back unchanged; a frame gets " ::" and its message.
+  EXPECT_NE(r.out.find("# recorded on the bench\n" + frame_line +
+                       " :: PUMP_FAST_I[node 3](Id_A: 12.345 A, Iq_A: -0.5 A, SpeedElec_rad_per_s: 2199.11 rad/s, "
+                       "RollingCounter: 7)\n(1700000000.133456) vcan0 7FF#"),
+            std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" :: Unknown frame id 2047 (0x7ff)\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\n(2.0) vcan0 10Z#00\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("<stdin>:4:15: warning: expected a hexadecimal CAN ID; line passed through undecoded"),
+            std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("1 frames decoded, 1 with IDs not in pumptherm.dbc, 0 shorter than their message, 1 bad "
+                       "lines passed through undecoded"), std::string::npos) << r.out;
+
+  // Without -s: one signal per indented line, as cantools decode's default.
+  r = RunPumptherm("dbc decode --dbc pumptherm.dbc --node-id-limit 16 --format annotate '" + log.string() + "'");
+  EXPECT_NE(r.out.find(frame_line + " ::\nPUMP_FAST_I[node 3](\n    Id_A: 12.345 A,\n    Iq_A: -0.5 A,\n"
+                       "    SpeedElec_rad_per_s: 2199.11 rad/s,\n    RollingCounter: 7\n)\n"),
+            std::string::npos) << r.out;
+  fs::remove(log);
+}
+
+TEST(DbcCliTest, AnnotatePrintsValueLabelsAndLeavesOutUnselectedMuxSignals) {
+  const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "pumptherm.dbc");
+  const DbcMessage& alarm = *dbc.FindMessage("GW_ALARM");
+  std::vector<double> values(alarm.signals.size(), 0.0);
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    if (alarm.signals[i].name == "AlarmNode") values[i] = std::nan("");  // raw 15: VAL_ "none"
+  }
+  CanFrame f;
+  f.id = alarm.id;
+  f.len = static_cast<std::uint8_t>(alarm.size_bytes);
+  ASSERT_EQ(MessageCodec(alarm).Encode(values, std::span<std::uint8_t>(f.data.data(), f.len)).status, CodecStatus::kOk);
+  const fs::path log = TempFile("alarm.log");
+  std::ofstream(log) << FormatCandumpLine(1, "can0", f) << '\n';
+  RunResult r = RunPumptherm("dbc decode --dbc pumptherm.dbc --format annotate -s '" + log.string() + "'");
+  EXPECT_NE(r.out.find("AlarmNode: none"), std::string::npos) << r.out;
+
+  // Multiplexed signals: only those the multiplexer selects are printed (as cantools does).
+  const fs::path mux_dbc = TempFile("mux.dbc");
+  std::ofstream(mux_dbc) << "BO_ 100 MUXED: 2 X\n SG_ Sel M : 0|8@1+ (1,0) [0|1] \"\" X\n"
+                         << " SG_ A_V m0 : 8|8@1+ (1,0) [0|255] \"V\" X\n SG_ B_A m1 : 8|8@1+ (1,0) [0|255] \"A\" X\n";
+  std::ofstream(log) << "(1.000000) can0 064#0105\n(2.000000) can0 064#0007\n";
+  r = RunPumptherm("dbc decode --dbc '" + mux_dbc.string() + "' --format annotate -s '" + log.string() + "'");
+  EXPECT_NE(r.out.find("064#0105 :: MUXED(Sel: 1, B_A: 5 A)\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("064#0007 :: MUXED(Sel: 0, A_V: 7 V)\n"), std::string::npos) << r.out;
+  fs::remove(mux_dbc);
+  fs::remove(log);
+}
+
+TEST(DbcCliTest, AnnotateFromAPipeAnswersEachLineAtOnce) {
+  // A live pipe (candump | pumptherm dbc decode): the answer to a line must come before stdin
+  // closes, so the output is flushed line by line.
+  int to_child[2], from_child[2];
+  ASSERT_EQ(pipe(to_child), 0);
+  ASSERT_EQ(pipe(from_child), 0);
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    dup2(to_child[0], 0);
+    dup2(from_child[1], 1);
+    close(to_child[1]);
+    close(from_child[0]);
+    execl(PUMPTHERM_BIN, PUMPTHERM_BIN, "dbc", "decode", "--dbc", "pumptherm.dbc", "--node-id-limit", "16",
+          "--format", "annotate", "-s", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  close(to_child[0]);
+  close(from_child[1]);
+  const std::string line = FormatCandumpLine(1700000000123456, "vcan0", FastFrameOfPump3()) + "\n";
+  ASSERT_EQ(write(to_child[1], line.data(), line.size()), static_cast<ssize_t>(line.size()));
+  // Read until the newline of the answer, with stdin still open; 10 s is a hang, not slowness.
+  std::string out;
+  pollfd pfd{from_child[0], POLLIN, 0};
+  while (out.find('\n') == std::string::npos && poll(&pfd, 1, 10000) == 1) {
+    char buf[512];
+    const ssize_t n = read(from_child[0], buf, sizeof buf);
+    if (n <= 0) break;
+    out.append(buf, static_cast<std::size_t>(n));
+  }
+  close(to_child[1]);
+  close(from_child[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  EXPECT_NE(out.find(" :: PUMP_FAST_I[node 3](Id_A: 12.345 A"), std::string::npos) << "got: '" << out << "'";
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
 }
 
 }  // namespace

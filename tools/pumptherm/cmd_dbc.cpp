@@ -1,5 +1,6 @@
 // pumptherm dbc check FILE            load a DBC, list its messages and signals, report problems
-// pumptherm dbc decode --dbc FILE [LOG] candump log (file or stdin) -> JSON lines or CSV
+// pumptherm dbc decode --dbc FILE [LOG] candump log (file or stdin) -> JSON lines, CSV, or the
+//                                       log annotated line by line as cantools decode does
 #include <fmt/format.h>
 
 #include <CLI/CLI.hpp>
@@ -8,6 +9,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -124,106 +126,230 @@ struct DecodeOptions {
   std::string format = "json";
   std::vector<std::string> messages;
   unsigned node_id_limit = 1;
+  bool single_line = false;
 };
 
-int Decode(const DecodeOptions& o) {
-  const Dbc dbc = LoadDbc(o.dbc_path);
-  const protocol::DbcCodec codec(dbc);
+/// The DBC message a frame is (CAN ID = DBC ID + node ID, node below the limit), or index -1.
+struct FrameMatch {
+  int index = -1;
+  unsigned node = 0;
+};
+
+FrameMatch MatchFrame(const protocol::DbcCodec& codec, const protocol::CanFrame& f, unsigned node_id_limit) {
+  for (unsigned node = 0; node < node_id_limit && node <= f.id; ++node) {
+    const int index = codec.Find(f.id - node, f.extended);
+    if (index >= 0) return {index, node};
+  }
+  return {};
+}
+
+/// Whether a signal is in this frame: always, or its multiplexer's raw value is in its ranges.
+bool SignalPresent(const DbcMessage& m, std::size_t i, const std::vector<double>& values) {
+  const DbcSignal& s = m.signals[i];
+  if (s.multiplexer_switch.empty()) return true;
+  for (std::size_t k = 0; k < m.signals.size(); ++k) {
+    const DbcSignal& sw = m.signals[k];
+    if (sw.name != s.multiplexer_switch || !std::isfinite(values[k])) continue;
+    const double raw = std::round((values[k] - sw.offset) / sw.factor);
+    for (const auto& r : s.multiplexer_ranges) {
+      if (raw >= static_cast<double>(r.low) && raw <= static_cast<double>(r.high)) return true;
+    }
+  }
+  return false;
+}
+
+/// One signal as cantools decode prints it: "Name: value unit", or "Name: label" for a value
+/// with a VAL_ description; "n/a" for the declared not-available raw value.
+std::string CantoolsSignal(const DbcSignal& s, double value) {
+  // NaN here is the declared not-available raw value, which may have a label of its own.
+  const std::optional<std::int64_t> raw =
+      std::isfinite(value) ? std::optional<std::int64_t>(std::llround((value - s.offset) / s.factor))
+                           : s.not_available_raw;
+  if (raw) {
+    if (const auto it = s.value_descriptions.find(*raw); it != s.value_descriptions.end()) {
+      return fmt::format("{}: {}", s.name, it->second);
+    }
+  }
+  if (!std::isfinite(value)) return fmt::format("{}: n/a", s.name);
+  return s.unit.empty() ? fmt::format("{}: {}", s.name, Number(value))
+                        : fmt::format("{}: {} {}", s.name, Number(value), s.unit);
+}
+
+/// The text cantools decode appends after " ::" to a frame's line: the message name (with the
+/// node ID when it is not 0) and its signals, on one line or one signal per indented line.
+std::string CantoolsMessage(const DbcMessage& m, unsigned node, const std::vector<double>& values,
+                            bool single_line) {
+  std::vector<std::string> signals;
+  for (std::size_t i = 0; i < m.signals.size(); ++i) {
+    if (SignalPresent(m, i, values)) signals.push_back(CantoolsSignal(m.signals[i], values[i]));
+  }
+  const std::string name = node == 0 ? m.name : fmt::format("{}[node {}]", m.name, node);
+  if (single_line) return fmt::format(" {}({})", name, fmt::join(signals, ", "));
+  std::string out = fmt::format("\n{}(\n", name);
+  for (std::size_t i = 0; i < signals.size(); ++i) {
+    out += fmt::format("    {}{}\n", signals[i], i + 1 < signals.size() ? "," : "");
+  }
+  return out + ")";
+}
+
+std::string TimeText(std::int64_t time_us) {
+  return fmt::format("{}{}.{:06}", time_us < 0 ? "-" : "", std::llabs(time_us) / 1000000,
+                     std::llabs(time_us) % 1000000);
+}
+
+std::string CanIdText(const protocol::CanFrame& f) {
+  return f.extended ? fmt::format("0x{:08X}", f.id) : fmt::format("0x{:03X}", f.id);
+}
+
+/// Counts of one decode run, reported on stderr at the end.
+struct DecodeCounts {
+  std::size_t decoded = 0, unknown = 0, too_short = 0, bad_lines = 0;
+};
+
+/// Writes decoded frames as JSON lines, CSV rows, or the input annotated as cantools decode does.
+class DecodeWriter {
+ public:
+  DecodeWriter(const Dbc& dbc, const DecodeOptions& o, std::vector<bool> wanted)
+      : dbc_(dbc), o_(o), wanted_(std::move(wanted)), first_column_(dbc.messages.size(), 0) {}
+
+  /// The CSV header: one column per signal of every selected message.
+  void Header() {
+    if (o_.format != "csv") return;
+    std::string header = "time_s,interface,can_id,node,message";
+    for (std::size_t i = 0; i < dbc_.messages.size(); ++i) {
+      if (!wanted_[i]) continue;
+      first_column_[i] = columns_;
+      for (const auto& s : dbc_.messages[i].signals) {
+        header += fmt::format(",{}.{}", dbc_.messages[i].name, s.name);
+        ++columns_;
+      }
+    }
+    fmt::print("{}\n", header);
+  }
+
+  bool Wanted(int index) const { return index >= 0 && wanted_[static_cast<std::size_t>(index)]; }
+
+  /// A frame decoded into `values` (the message's signal order).
+  void Frame(const protocol::CandumpRecord& r, const FrameMatch& m, const std::vector<double>& values) {
+    const DbcMessage& msg = dbc_.messages[static_cast<std::size_t>(m.index)];
+    if (o_.format == "csv") {
+      std::vector<std::string> row(columns_);
+      const std::size_t first = first_column_[static_cast<std::size_t>(m.index)];
+      for (std::size_t i = 0; i < values.size(); ++i) row[first + i] = Number(values[i]);
+      fmt::print("{},{},{},{},{},{}\n", TimeText(r.time_us), r.interface, CanIdText(r.frame), m.node, msg.name,
+                 fmt::join(row, ","));
+      return;
+    }
+    std::string out = fmt::format(R"({{"time_s":{},"interface":"{}","can_id":"{}","node":{},"message":"{}","signals":{{)",
+                                  TimeText(r.time_us), JsonEscape(r.interface), CanIdText(r.frame), m.node,
+                                  JsonEscape(msg.name));
+    for (std::size_t i = 0; i < values.size(); ++i) {
+      const std::string v = Number(values[i]);
+      out += fmt::format(R"({}"{}":{})", i == 0 ? "" : ",", JsonEscape(msg.signals[i].name), v.empty() ? "null" : v);
+    }
+    fmt::print("{}}}}}\n", out);
+  }
+
+ private:
+  const Dbc& dbc_;
+  const DecodeOptions& o_;
+  std::vector<bool> wanted_;
+  std::vector<std::size_t> first_column_;
+  std::size_t columns_ = 0;
+};
+
+std::vector<bool> WantedMessages(const Dbc& dbc, const DecodeOptions& o) {
   std::vector<bool> wanted(dbc.messages.size(), o.messages.empty());
   for (const auto& name : o.messages) {
     const DbcMessage* m = dbc.FindMessage(name);
     if (m == nullptr) throw InputError(fmt::format("--message {}: no such message in {}", name, o.dbc_path));
     wanted[static_cast<std::size_t>(m - dbc.messages.data())] = true;
   }
-  const bool csv = o.format == "csv";
-  // CSV: one column per signal of every selected message; a row fills its own message's columns.
-  std::vector<std::size_t> first_column(dbc.messages.size(), 0);
-  std::size_t columns = 0;
-  if (csv) {
-    std::string header = "time_s,interface,can_id,node,message";
-    for (std::size_t i = 0; i < dbc.messages.size(); ++i) {
-      if (!wanted[i]) continue;
-      first_column[i] = columns;
-      for (const auto& s : dbc.messages[i].signals) {
-        header += fmt::format(",{}.{}", dbc.messages[i].name, s.name);
-        ++columns;
-      }
-    }
-    fmt::print("{}\n", header);
+  return wanted;
+}
+
+/// What one input line gives: a decoded frame, or why not (as cantools decode appends it).
+enum class LineResult { kNotAFrame, kBadLine, kUnknownId, kNotWanted, kTooShort, kDecoded };
+
+/// One parsed line against the DBC: its result, the message matched and the decoded values.
+LineResult DecodeLine(const protocol::CandumpParse& p, const protocol::DbcCodec& codec, const DecodeWriter& writer,
+                      unsigned node_id_limit, FrameMatch& match, std::vector<double>& values) {
+  if (p.skip) return LineResult::kNotAFrame;
+  if (!p.ok) return LineResult::kBadLine;
+  const protocol::CanFrame& f = p.record.frame;
+  if (f.error || f.remote) return LineResult::kNotAFrame;
+  match = MatchFrame(codec, f, node_id_limit);
+  if (match.index < 0) return LineResult::kUnknownId;
+  if (!writer.Wanted(match.index)) return LineResult::kNotWanted;
+  const protocol::MessageCodec& mc = codec.message(static_cast<std::size_t>(match.index));
+  values.resize(mc.signal_count());
+  const auto payload = std::span<const std::uint8_t>(f.data.data(), f.len);
+  return mc.Decode(payload, values) == protocol::CodecStatus::kOk ? LineResult::kDecoded : LineResult::kTooShort;
+}
+
+/// The text cantools decode appends to a line (empty for a line that is not a frame).
+std::string Annotation(LineResult result, const protocol::CanFrame& f, const Dbc& dbc, const FrameMatch& match,
+                       const std::vector<double>& values, bool single_line) {
+  switch (result) {
+    case LineResult::kDecoded:
+      return " ::" + CantoolsMessage(dbc.messages[static_cast<std::size_t>(match.index)], match.node, values,
+                                     single_line);
+    case LineResult::kUnknownId: return fmt::format(" :: Unknown frame id {0} (0x{0:x})", f.id);
+    case LineResult::kTooShort:
+      return fmt::format(" :: {}: {} bytes, shorter than the message",
+                         dbc.messages[static_cast<std::size_t>(match.index)].name, f.len);
+    default: return {};
   }
+}
+
+int Decode(const DecodeOptions& o) {
+  const Dbc dbc = LoadDbc(o.dbc_path);
+  const protocol::DbcCodec codec(dbc);
+  DecodeWriter writer(dbc, o, WantedMessages(dbc, o));
+  const bool annotate = o.format == "annotate";
+  writer.Header();
 
   std::unique_ptr<std::ifstream> file;
   std::istream* in = &std::cin;
-  const std::string log_name = o.log_path.empty() || o.log_path == "-" ? "<stdin>" : o.log_path;
-  if (log_name != "<stdin>") {
+  const bool from_stdin = o.log_path.empty() || o.log_path == "-";
+  const std::string log_name = from_stdin ? "<stdin>" : o.log_path;
+  if (!from_stdin) {
     file = std::make_unique<std::ifstream>(o.log_path);
     if (!*file) throw InputError(fmt::format("{}: cannot open", o.log_path));
     in = file.get();
   }
 
   std::vector<double> values;
-  std::vector<std::string> row(columns);
   std::string line;
-  std::size_t line_no = 0, decoded = 0, unknown = 0, too_short = 0, bad_lines = 0;
+  std::size_t line_no = 0;
+  DecodeCounts n;
   while (std::getline(*in, line)) {
     ++line_no;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
-    if (p.skip) continue;
-    if (!p.ok) {
-      if (++bad_lines <= kMaxReportedBadLines) {
-        fmt::print(stderr, "{}:{}:{}: warning: {}; line skipped\n", log_name, line_no, p.column, p.error);
-      }
-      continue;
+    FrameMatch match;
+    const LineResult result = DecodeLine(p, codec, writer, o.node_id_limit, match, values);
+    if (result == LineResult::kBadLine && ++n.bad_lines <= kMaxReportedBadLines) {
+      fmt::print(stderr, "{}:{}:{}: warning: {}; {}\n", log_name, line_no, p.column, p.error,
+                 annotate ? "line passed through undecoded" : "line skipped");
     }
-    const protocol::CanFrame& f = p.record.frame;
-    if (f.error || f.remote) continue;
-    int index = -1;
-    unsigned node = 0;
-    for (; node < o.node_id_limit && node <= f.id; ++node) {
-      index = codec.Find(f.id - node, f.extended);
-      if (index >= 0) break;
+    n.unknown += result == LineResult::kUnknownId;
+    n.too_short += result == LineResult::kTooShort;
+    n.decoded += result == LineResult::kDecoded;
+    if (annotate) {
+      fmt::print("{}{}\n", line, Annotation(result, p.record.frame, dbc, match, values, o.single_line));
+    } else if (result == LineResult::kDecoded) {
+      writer.Frame(p.record, match, values);
     }
-    if (index < 0 || !wanted[static_cast<std::size_t>(index)]) {
-      if (index < 0) ++unknown;
-      continue;
-    }
-    const DbcMessage& m = dbc.messages[static_cast<std::size_t>(index)];
-    const protocol::MessageCodec& mc = codec.message(static_cast<std::size_t>(index));
-    values.resize(mc.signal_count());
-    if (mc.Decode(std::span<const std::uint8_t>(f.data.data(), f.len), values) != protocol::CodecStatus::kOk) {
-      ++too_short;
-      continue;
-    }
-    ++decoded;
-    const std::string time_s = fmt::format("{}{}.{:06}", p.record.time_us < 0 ? "-" : "",
-                                           std::llabs(p.record.time_us) / 1000000,
-                                           std::llabs(p.record.time_us) % 1000000);
-    const std::string can_id = f.extended ? fmt::format("0x{:08X}", f.id) : fmt::format("0x{:03X}", f.id);
-    if (csv) {
-      std::fill(row.begin(), row.end(), std::string());
-      for (std::size_t i = 0; i < values.size(); ++i) row[first_column[static_cast<std::size_t>(index)] + i] = Number(values[i]);
-      std::string out = fmt::format("{},{},{},{},{}", time_s, p.record.interface, can_id, node, m.name);
-      for (const auto& cell : row) {
-        out += ',';
-        out += cell;
-      }
-      fmt::print("{}\n", out);
-    } else {
-      std::string out = fmt::format(R"({{"time_s":{},"interface":"{}","can_id":"{}","node":{},"message":"{}","signals":{{)",
-                                    time_s, JsonEscape(p.record.interface), can_id, node, JsonEscape(m.name));
-      for (std::size_t i = 0; i < values.size(); ++i) {
-        const std::string v = Number(values[i]);
-        out += fmt::format(R"({}"{}":{})", i == 0 ? "" : ",", JsonEscape(m.signals[i].name), v.empty() ? "null" : v);
-      }
-      fmt::print("{}}}}}\n", out);
-    }
+    // Live from a pipe (candump | pumptherm dbc decode): each line's result as it comes.
+    if (from_stdin) std::fflush(stdout);
   }
   std::fflush(stdout);
   fmt::print(stderr,
              "{}: {} frames decoded, {} with IDs not in {}, {} shorter than their message, {} bad "
-             "lines skipped\n",
-             log_name, decoded, unknown, o.dbc_path, too_short, bad_lines);
+             "lines {}\n",
+             log_name, n.decoded, n.unknown, o.dbc_path, n.too_short, n.bad_lines,
+             annotate ? "passed through undecoded" : "skipped");
   return 0;
 }
 
@@ -235,6 +361,7 @@ const SubcommandRegistrar kRegistrar{
           "Examples:\n"
           "  pumptherm dbc check protocol/pumptherm.dbc\n"
           "  candump -L vcan0 | pumptherm dbc decode --dbc protocol/pumptherm.dbc --node-id-limit 16\n"
+          "  candump -L vcan0 | pumptherm dbc decode --dbc pumptherm.dbc --format annotate -s\n"
           "  pumptherm dbc decode --dbc protocol/pumptherm.dbc --format csv recording.log > frames.csv");
 
       auto check_path = std::make_shared<std::string>();
@@ -251,8 +378,12 @@ const SubcommandRegistrar kRegistrar{
           "decode", "Decode a candump log (file or stdin) to JSON lines or CSV, one row per decoded frame");
       decode->add_option("--dbc", opts->dbc_path, "DBC file, or a shipped one by name (pumptherm.dbc)")->required();
       decode->add_option("LOG", opts->log_path, "candump -l/-L log; stdin if absent or '-'");
-      decode->add_option("--format", opts->format, "json (JSON lines, NaN as null) or csv")
-          ->check(CLI::IsMember({"json", "csv"}));
+      decode->add_option("--format", opts->format,
+                         "json (JSON lines, NaN as null), csv, or annotate (every input line echoed, a "
+                         "frame's decoded message appended after ' ::', as cantools decode prints it)")
+          ->check(CLI::IsMember({"json", "csv", "annotate"}));
+      decode->add_flag("-s,--single-line", opts->single_line,
+                       "annotate: the decoded message on the frame's own line (cantools decode -s)");
       decode->add_option("--message", opts->messages, "decode only this message (repeatable)");
       decode->add_option("--node-id-limit", opts->node_id_limit,
                          "match CAN ID = DBC ID + node ID for node IDs below this (pumptherm.dbc: 16)")
@@ -260,8 +391,10 @@ const SubcommandRegistrar kRegistrar{
       decode->footer(
           "Example: pumptherm dbc decode --dbc protocol/pumptherm.dbc --node-id-limit 16 run.log\n"
           "Signals a frame's multiplexer does not select, and 'not available' raw values, are empty\n"
-          "(CSV) or null (JSON). Frames shorter than their message are counted and skipped; so are\n"
-          "malformed log lines, with a file:line:column warning for each of the first 10.");
+          "(CSV) or null (JSON), left out or 'n/a' (annotate). Frames shorter than their message are\n"
+          "counted and skipped; so are malformed log lines, with a file:line:column warning for each\n"
+          "of the first 10 (annotate echoes them undecoded). Reading stdin, each line's output is\n"
+          "flushed at once, so the command works at the end of a live pipe.");
 
       return [check, decode, check_path, strict, opts]() -> int {
         if (check->parsed()) return Check(*check_path, *strict);
