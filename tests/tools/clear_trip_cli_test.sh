@@ -55,7 +55,17 @@ expect 0 "d.toml: OK" -- "$daemon" --check-config "$tmp/d.toml"
 head -c 16 /dev/urandom > "$tmp/clear.key"
 expect 2 "clear.key holds 16 bytes; a clear key is 32 random bytes" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml"
 sed -i '/clear_key/d' "$tmp/d.toml"
-expect 2 "d.toml: no alarms.clear_key_file: LCM clears are off in this configuration" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml"
+# No key and no CAN clear interface: no route, and the message names both.
+expect 2 "d.toml: pump 'tmp1' is on interface 'can0', which is not in alarms.clear_can_interfaces \(empty\).*LCM clears need lcm.url and alarms.clear_key_file" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml"
+expect 2 "d.toml: LCM clears need lcm.url and alarms.clear_key_file" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml" --via lcm
 expect 0 "d.toml: OK" -- "$daemon" --check-config "$tmp/d.toml"
 expect 0 "clear_lcm_sources is set but alarms.clear_key_file is not: every LCM clear will be refused" -- "$daemon" --check-config "$tmp/d.toml"
+# The pump's interface among the CAN clear interfaces: the CAN route is taken (this host has no
+# SocketCAN, so opening the socket is what fails; the vcan guest has no clear-trip test).
+sed -i 's/^\[alarms\]$/[alarms]\nclear_can_interfaces = ["can0"]/' "$tmp/d.toml"
+if [[ -d /proc/sys/net/can ]]; then
+  echo "skip: this kernel has SocketCAN; the no-CAN expectation below does not apply"
+else
+  expect 1 "interface 'can0': cannot open a CAN socket" -- "$tool" clear-trip tmp1 -c "$tmp/d.toml" --timeout-s 0.2
+fi
 exit $fail
