@@ -13,6 +13,16 @@ TEST(Sensor, QuantiseRoundsAndClamps) {
   EXPECT_DOUBLE_EQ(Quantise(0.123, 0.0, -1.0, 1.0), 0.123);
 }
 
+TEST(Sensor, QuantiseToADecimalStepGivesTheDecimalsDouble) {
+  // 217 * 0.1 is 21.700000000000003 in binary; the reading 21.7 is the double nearest 21.7, so a
+  // CSV writer printing the shortest round-trip form writes "21.7".
+  EXPECT_EQ(Quantise(21.68, 0.1, -50.0, 200.0), 21.7);
+  EXPECT_EQ(Quantise(22.21, 0.1, -50.0, 200.0), 22.2);
+  EXPECT_EQ(Quantise(21.9049, 0.01, -50.0, 200.0), 21.9);
+  // A binary step stays exact as before.
+  EXPECT_EQ(Quantise(2.99, 0.01953125, -100.0, 100.0), 2.98828125);
+}
+
 // A first-order lag driven by a step reaches 1 - e^-1 of the step after one time constant.
 TEST(Sensor, LagFollowsFirstOrderStepResponse) {
   Sensor s({.lag_tau_s = 30.0}, 1);

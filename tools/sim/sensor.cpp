@@ -6,8 +6,13 @@
 namespace pumptherm::sim {
 
 double Quantise(double value, double lsb, double min, double max) noexcept {
-  double q = lsb > 0.0 ? std::round(value / lsb) * lsb : value;
-  return std::clamp(q, min, max);
+  if (!(lsb > 0.0)) return std::clamp(value, min, max);
+  // A decimal step (0.1, 0.01 = 1/k): n / k is the double nearest the decimal n * lsb (21.7),
+  // where n * lsb carries the step's binary error (21.700000000000003) into every CSV.
+  const double per_unit = std::round(1.0 / lsb);
+  const double n = std::round(value / lsb);
+  const bool decimal = per_unit >= 1.0 && std::abs(per_unit * lsb - 1.0) < 1e-12;
+  return std::clamp(decimal ? n / per_unit : n * lsb, min, max);
 }
 
 double Sensor::Measure(double true_value, double dt_s) {
