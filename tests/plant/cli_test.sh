@@ -47,6 +47,22 @@ printf 'time_s,alarm_level,alarm_reason\n0,0,0\n8,1,1\n15,2,1\n' > "$tmp/events.
   || { cat "$tmp/out.txt"; fail "plot png"; }
 [ "$(head -c 4 "$tmp/p.png" | od -An -c | tr -d ' ')" = "211PNG" ] || fail "not a PNG"
 grep -q "alarm warning     8 s  trip    15 s" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "alarm moments not reported"; }
+# Alarm events in Unix time (the daemon's CSV) against the plant's relative truth: put on the
+# truth's axis by --time-origin (the plant's start_epoch_s), else by their own first second; the
+# choice is said on stderr.
+printf 'time_s,alarm_level\n1767225601.0,0\n1767225608.0,1\n1767225615.0,2\n' > "$tmp/unix_events.csv"
+"$exe" plot --truth "$tmp/a/pump3.truth.csv" --nodes frame --events "$tmp/unix_events.csv" --time-origin 1767225600 \
+  --out "$tmp/u.png" > "$tmp/out.txt" 2>&1 || { cat "$tmp/out.txt"; fail "plot with Unix-time events"; }
+grep -q "alarm warning     8 s  trip    15 s" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "Unix-time events not aligned by --time-origin"; }
+grep -q "unix_events.csv: time_s is Unix time, drawn as time since 1767225600.000 (--time-origin" "$tmp/out.txt" \
+  || { cat "$tmp/out.txt"; fail "alignment not said"; }
+grep -q "pump3.truth.csv: time_s is time since its run's start, drawn as written" "$tmp/out.txt" \
+  || { cat "$tmp/out.txt"; fail "relative time not said"; }
+"$exe" plot --truth "$tmp/a/pump3.truth.csv" --nodes frame --events "$tmp/unix_events.csv" --out "$tmp/u.png" \
+  > "$tmp/out.txt" 2>&1 || { cat "$tmp/out.txt"; fail "plot with Unix-time events, no origin"; }
+grep -q "alarm warning     7 s  trip    14 s" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "Unix-time events: own first second"; }
+grep -q "drawn as time since 1767225601.000 (the earliest Unix-time file's first whole second" "$tmp/out.txt" \
+  || { cat "$tmp/out.txt"; fail "default origin not said"; }
 "$exe" plot --truth "$tmp/a/pump1.truth.csv" --nodes winding,frame --out "$tmp/p.svg" > /dev/null 2>&1 || fail "plot svg"
 grep -q "<svg" "$tmp/p.svg" || fail "not an SVG"
 # Missing column: exit 2 naming it; no gnuplot: exit 1 saying so.

@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <system_error>
@@ -43,6 +44,7 @@ struct PlotOptions {
   int width_px = 1200;
   int row_height_px = 320;
   bool keep_script = false;
+  double time_origin_s = std::nan("");  ///< Unix time drawn as t = 0 (NaN: from the files)
 };
 
 /// One pump's series.
@@ -69,12 +71,55 @@ std::vector<double> Col(const CsvTable& t, std::string_view name) {
   }
 }
 
-std::vector<double> Times(const CsvTable& t) {
+std::vector<double> RawTimes(const CsvTable& t) {
   try {
     return t.Time();
   } catch (const CsvError& e) {
     throw InputError(e.what());
   }
+}
+
+/// A time_s from this on is Unix time (2001-09-09): no run is 31 years long, so a file whose
+/// first time is at or above it holds Unix time, and one below it time since its run's start.
+constexpr double kUnixTimeFrom_s = 1e9;
+
+/// The common time axis: Unix-time files are drawn less `origin_s`, relative ones as written.
+struct TimeAxis {
+  double origin_s = 0.0;
+};
+
+std::vector<double> Times(const CsvTable& t, const TimeAxis& axis) {
+  std::vector<double> time = RawTimes(t);
+  if (!time.empty() && time.front() >= kUnixTimeFrom_s) {
+    for (double& x : time) x -= axis.origin_s;
+  }
+  return time;
+}
+
+/// The origin that puts Unix-time files on the relative files' axis: `given_s` if set (the
+/// Unix time of the relative files' t = 0, e.g. the recording's first timestamp), else the
+/// earliest Unix-time file's first time, down to the whole second. Says on stderr, per file,
+/// how its time is drawn.
+TimeAxis AlignTimes(const std::vector<const CsvTable*>& tables, double given_s) {
+  TimeAxis axis;
+  double earliest = std::numeric_limits<double>::infinity();
+  for (const CsvTable* t : tables) {
+    const std::vector<double> time = RawTimes(*t);
+    if (!time.empty() && time.front() >= kUnixTimeFrom_s) earliest = std::min(earliest, time.front());
+  }
+  axis.origin_s = std::isfinite(given_s) ? given_s : std::isfinite(earliest) ? std::floor(earliest) : 0.0;
+  for (const CsvTable* t : tables) {
+    const std::vector<double> time = RawTimes(*t);
+    if (time.empty() || time.front() < kUnixTimeFrom_s) {
+      fmt::print(stderr, "plot: {}: time_s is time since its run's start, drawn as written\n", t->source());
+    } else {
+      fmt::print(stderr, "plot: {}: time_s is Unix time, drawn as time since {:.3f} ({}; --time-origin sets "
+                 "another); its first row at {:.3f} s\n", t->source(), axis.origin_s,
+                 std::isfinite(given_s) ? "--time-origin" : "the earliest Unix-time file's first whole second",
+                 time.front() - axis.origin_s);
+    }
+  }
+  return axis;
 }
 
 /// A gnuplot single-quoted string (no escapes inside; a quote is doubled). The terminals are
@@ -112,8 +157,9 @@ double FirstAtOrAbove(const std::vector<double>& t, const std::vector<double>& v
 
 /// Appends to `lines` a translucent band estimate +- 2 sd (from `<node>_sd_K`) per node that
 /// has one, in the node's colour, written to `file`.
-void AddBands(const CsvTable& t, const std::vector<std::string>& nodes, const fs::path& file, std::string& lines) {
-  const std::vector<double> time = Times(t);
+void AddBands(const CsvTable& t, const TimeAxis& axis, const std::vector<std::string>& nodes, const fs::path& file,
+              std::string& lines) {
+  const std::vector<double> time = Times(t, axis);
   std::vector<std::vector<double>> cols{std::vector<double>(time.size())};
   for (std::size_t r = 0; r < time.size(); ++r) cols[0][r] = time[r] / 60.0;
   std::vector<std::size_t> colours;
@@ -140,10 +186,10 @@ void AddBands(const CsvTable& t, const std::vector<std::string>& nodes, const fs
 }
 
 /// Appends to `lines` the extra estimate columns as small points (colour 0: black).
-void AddExtras(const CsvTable& t, const std::vector<std::pair<std::string, std::size_t>>& extras,
+void AddExtras(const CsvTable& t, const TimeAxis& axis, const std::vector<std::pair<std::string, std::size_t>>& extras,
                const fs::path& file, std::string& lines) {
   if (extras.empty()) return;
-  const std::vector<double> time = Times(t);
+  const std::vector<double> time = Times(t, axis);
   std::vector<std::vector<double>> cols{std::vector<double>(time.size())};
   for (std::size_t r = 0; r < time.size(); ++r) cols[0][r] = time[r] / 60.0;
   for (const auto& e : extras) cols.push_back(Col(t, e.first));
@@ -185,6 +231,17 @@ int RunPlot(const PlotOptions& o) {
               : !o.truth.empty()  ? fs::path(o.truth[i]).stem().stem().string()
                                   : fs::path(o.estimate[i]).stem().string();
   }
+
+  std::vector<const CsvTable*> tables;
+  for (const Series& s : series) {
+    for (const auto* t : {&s.truth, &s.estimate, &s.events}) {
+      // The events default to a copy of the estimate: one line per file.
+      const bool seen = *t && std::any_of(tables.begin(), tables.end(),
+                                          [&](const CsvTable* x) { return x->source() == (*t)->source(); });
+      if (*t && !seen) tables.push_back(&**t);
+    }
+  }
+  const TimeAxis axis = AlignTimes(tables, o.time_origin_s);
 
   // Nodes: given, or every <node>_C column the truth and the estimate share (else the truth's).
   std::vector<std::string> nodes = o.nodes;
@@ -244,7 +301,7 @@ int RunPlot(const PlotOptions& o) {
     Series& s = series[i];
     std::string lines;
     auto add_table = [&](const CsvTable& t, const std::string& tag, const char* dash) {
-      const std::vector<double> time = Times(t);
+      const std::vector<double> time = Times(t, axis);
       std::vector<std::vector<double>> cols{std::vector<double>(time.size())};
       for (std::size_t r = 0; r < time.size(); ++r) cols[0][r] = time[r] / 60.0;
       if (!time.empty()) t_max_min = std::max(t_max_min, time.back() / 60.0);
@@ -265,21 +322,21 @@ int RunPlot(const PlotOptions& o) {
     if (s.truth) {
       add_table(*s.truth, "truth", "1");
       if (std::isfinite(o.warning_degC) && s.truth->Has(level_node + "_C")) {
-        const auto t = Times(*s.truth);
+        const auto t = Times(*s.truth, axis);
         const auto v = Col(*s.truth, level_node + "_C");
         s.truth_warning_s = FirstAtOrAbove(t, v, o.warning_degC);
         if (std::isfinite(o.trip_degC)) s.truth_trip_s = FirstAtOrAbove(t, v, o.trip_degC);
       }
     }
     if (s.estimate) {
-      if (!o.no_bands) AddBands(*s.estimate, nodes, dir / fmt::format("p{}_band.dat", i), lines);
+      if (!o.no_bands) AddBands(*s.estimate, axis, nodes, dir / fmt::format("p{}_band.dat", i), lines);
       add_table(*s.estimate, o.estimate_name, "2");
-      AddExtras(*s.estimate, extras, dir / fmt::format("p{}_extra.dat", i), lines);
+      AddExtras(*s.estimate, axis, extras, dir / fmt::format("p{}_extra.dat", i), lines);
     }
     std::string marks;
     if (s.events) {
       any_events = true;
-      const auto t = Times(*s.events);
+      const auto t = Times(*s.events, axis);
       const auto level = Col(*s.events, "alarm_level");
       s.first_warning_s = FirstAtOrAbove(t, level, 1.0);
       s.first_trip_s = FirstAtOrAbove(t, level, 2.0);
@@ -307,7 +364,7 @@ int RunPlot(const PlotOptions& o) {
     std::string lines;
     for (std::size_t i = 0; i < n; ++i) {
       if (!series[i].events) continue;
-      const auto t = Times(*series[i].events);
+      const auto t = Times(*series[i].events, axis);
       std::vector<std::vector<double>> cols{std::vector<double>(t.size()), Col(*series[i].events, "alarm_level")};
       for (std::size_t r = 0; r < t.size(); ++r) cols[0][r] = t[r] / 60.0;
       for (double& v : cols[1]) v += 0.04 * static_cast<double>(i);  // keep overlapping steps apart
@@ -407,6 +464,10 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--row-height", o->row_height_px, "Height of one panel in pixels")->capture_default_str();
       app.add_option("--gnuplot", o->gnuplot, "gnuplot executable")->capture_default_str();
       app.add_flag("--keep-script", o->keep_script, "Keep the generated gnuplot script and data files");
+      app.add_option("--time-origin", o->time_origin_s,
+                     "Unix time (s) drawn as t = 0 for files whose time_s is Unix time (the daemon's CSV "
+                     "without --csv-time-origin), e.g. the recording's first timestamp; default: the "
+                     "earliest such file's first whole second");
       app.footer(
           "Example:\n"
           "  pumptherm plot --truth out/pump3.truth.csv --estimate est3.csv --nodes winding,frame \\\n"
@@ -414,7 +475,9 @@ const SubcommandRegistrar kRegistrar{
           "One panel per pump (repeat --truth/--estimate/--label in the same order), then the alarm\n"
           "timeline when alarm levels are given. Solid: truth; dashed: estimate; vertical lines: alarm\n"
           "moments (solid) and true level crossings (dotted); shaded: estimate +-2 sd where the\n"
-          "estimate has <node>_sd_K; points: --extra columns.");
+          "estimate has <node>_sd_K; points: --extra columns.\n"
+          "Time: a file whose time_s is Unix time (pumpthermd --csv-dir) is put on the axis of the\n"
+          "relative files (plant, estimate) by --time-origin; standard error says, per file, how.");
       return [o] { return RunPlot(*o); };
     }};
 
