@@ -128,6 +128,7 @@ Gateway::Gateway(const DaemonConfig& config)
   } catch (const std::exception& e) {
     throw fail(0, "dbc.mapping", e.what());
   }
+  for (const std::string& d : mapping_.deprecations) Log(LogLevel::kWarning, "{}", d);
   codec_ = std::make_unique<protocol::DbcCodec>(dbc_);
   std::size_t max_signals = 1;
   for (const auto& m : dbc_.messages) max_signals = std::max(max_signals, m.signals.size());

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 namespace pumptherm::protocol {
@@ -16,17 +17,49 @@ constexpr std::array<std::string_view, kMappingInputCount> kInputNames = {
     "frame_temp_degC", "ambient_temp_degC", "dc_link_V", "alarm_clear"};
 
 constexpr std::array<std::string_view, kMappingOutputCount> kOutputNames = {
-    "winding_res_temp_degC", "rs_ohm",         "flux_Wb",       "rs_status",
-    "flux_status",           "alarm_level",    "alarm_reason",  "alarm_node",
-    "alarm_value_degC",      "time_to_trip_s", "uptime_s",      "frame_rate_Hz",
-    "drops",                 "bus_state",      "magnet_flux_temp_degC", "node_index",
-    "node_count",            "node_temp_degC", "node_sd_K",     "winding_res_sd_K",
-    "magnet_flux_sd_K",      "mismatch_state", "mismatch_effect"};
+    "winding_resistance_degC", "rs_ohm",       "flux_Wb",       "rs_status",
+    "flux_status",             "alarm_level",  "alarm_reason",  "alarm_node",
+    "alarm_value_degC",        "time_to_trip_s", "uptime_s",    "frame_rate_Hz",
+    "drops",                   "bus_state",    "magnet_flux_degC", "node_index",
+    "node_count",              "node_temp_degC", "node_sd_K",   "winding_resistance_sd_K",
+    "magnet_flux_sd_K",        "mismatch_state", "mismatch_effect"};
 
 std::string Where(const toml::source_region& r) {
   const std::string file = r.path ? *r.path : std::string("<mapping>");
   return fmt::format("{}:{}:{}", file, r.begin.line, r.begin.column);
 }
+
+/// Output keys renamed to one name per quantity (docs/daemon.md, "Names"): old -> current.
+/// Mapping files in the field keep working; the old key is reported as deprecated.
+struct RenamedKey {
+  std::string_view old_name;
+  MappingOutput output;
+};
+constexpr std::array<RenamedKey, 3> kRenamedOutputs = {{
+    {"winding_res_temp_degC", MappingOutput::kWindingResTempDegC},
+    {"winding_res_sd_K", MappingOutput::kWindingResSdK},
+    {"magnet_flux_temp_degC", MappingOutput::kMagnetFluxTempDegC},
+}};
+
+/// Index into `names` of key `k` in `section`, or of the current name of a renamed output key
+/// (recorded in `deprecations`); nullopt when unknown.
+template <std::size_t N>
+std::optional<std::size_t> KeyIndex(std::string_view section, std::string_view k,
+                                    const std::array<std::string_view, N>& names, const toml::node& at,
+                                    std::vector<std::string>* deprecations) {
+  const auto it = std::find(names.begin(), names.end(), k);
+  if (it != names.end()) return static_cast<std::size_t>(it - names.begin());
+  if (section != "outputs") return std::nullopt;
+  for (const RenamedKey& r : kRenamedOutputs) {
+    if (r.old_name != k) continue;
+    const auto index = static_cast<std::size_t>(r.output);
+    deprecations->push_back(fmt::format("{}: key outputs.{} is deprecated: it is now outputs.{}",
+                                        Where(at.source()), k, kOutputNames[index]));
+    return index;
+  }
+  return std::nullopt;
+}
+
 
 [[noreturn]] void Fail(const toml::node& at, const std::string& key, const std::string& what) {
   throw MappingError(fmt::format("{}: key {}: {}", Where(at.source()), key, what));
@@ -75,7 +108,7 @@ SignalRef Resolve(const toml::node& node, const std::string& key, const Dbc& dbc
 template <std::size_t N, typename Slot>
 void ResolveSection(const toml::table& root, std::string_view section,
                     const std::array<std::string_view, N>& names, std::array<Slot, N>& out,
-                    const Dbc& dbc, const toml::table** nested_nodes) {
+                    const Dbc& dbc, const toml::table** nested_nodes, std::vector<std::string>* deprecations) {
   const toml::node* n = root.get(section);
   if (n == nullptr) return;
   const toml::table* t = n->as_table();
@@ -87,14 +120,16 @@ void ResolveSection(const toml::table& root, std::string_view section,
       if (*nested_nodes == nullptr) Fail(v, key, "expected a table of node name = { message, signal }");
       continue;
     }
-    const auto it = std::find(names.begin(), names.end(), k.str());
-    if (it == names.end()) {
+    const std::optional<std::size_t> index = KeyIndex(section, k.str(), names, v, deprecations);
+    if (!index) {
       std::string known;
       for (auto name : names) known += fmt::format("{}{}", known.empty() ? "" : ", ", name);
       Fail(v, key, fmt::format("unknown {} (known: {}{})", section, known,
                                nested_nodes != nullptr ? ", nodes" : ""));
     }
-    out[static_cast<std::size_t>(it - names.begin())] = Resolve(v, key, dbc);
+    if (out[*index]) Fail(v, key, fmt::format("{}.{} is given twice (under its old and its current name)",
+                                              section, names[*index]));
+    out[*index] = Resolve(v, key, dbc);
   }
 }
 
@@ -146,9 +181,9 @@ SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
     if (!v || *v < 1 || *v > 65536) Fail(*n, "node_id_limit", "expected an integer from 1 to 65536");
     mapping.node_id_limit = static_cast<std::uint32_t>(*v);
   }
-  ResolveSection(table, "inputs", kInputNames, mapping.inputs, dbc, nullptr);
+  ResolveSection(table, "inputs", kInputNames, mapping.inputs, dbc, nullptr, &mapping.deprecations);
   const toml::table* nodes = nullptr;
-  ResolveSection(table, "outputs", kOutputNames, mapping.outputs, dbc, &nodes);
+  ResolveSection(table, "outputs", kOutputNames, mapping.outputs, dbc, &nodes, &mapping.deprecations);
   if (nodes != nullptr) {
     for (const auto& [k, v] : *nodes) {
       mapping.node_temperatures.emplace(std::string(k.str()),

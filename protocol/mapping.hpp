@@ -10,7 +10,7 @@
 ///     speed_elec_rad_per_s = { message = "PUMP_FAST_I", signal = "SpeedElec_rad_per_s" }
 ///     frame_temp_degC = { message = "PUMP_STATUS", signal = "FrameTemp_degC", scale = 1.0, offset = 0.0 }
 ///     [outputs]
-///     winding_res_temp_degC = { message = "GW_TEMPS_A", signal = "WindingRes_degC" }
+///     winding_resistance_degC = { message = "GW_TEMPS_A", signal = "WindingRes_degC" }
 ///     node_index = { message = "GW_NODE_TEMP", signal = "NodeIndex" }    # node-indexed message:
 ///     node_temp_degC = { message = "GW_NODE_TEMP", signal = "NodeTemp_degC" }  # any model's nodes
 ///     [outputs.nodes]                     # thermal-model node name -> signal, degC
@@ -58,7 +58,7 @@ inline constexpr std::size_t kMappingInputCount = 12;
 /// What the daemon writes per pump (besides the node temperatures, which are named by the
 /// thermal model and listed in SignalMapping::node_temperatures).
 enum class MappingOutput {
-  kWindingResTempDegC,  ///< winding_res_temp_degC: resistance-based winding temperature
+  kWindingResTempDegC,  ///< winding_resistance_degC: resistance-based winding temperature
   kRsOhm,               ///< rs_ohm: identified stator resistance
   kFluxWb,              ///< flux_Wb: identified magnet flux linkage
   kRsStatus,            ///< rs_status
@@ -72,7 +72,7 @@ enum class MappingOutput {
   kFrameRateHz,         ///< frame_rate_Hz
   kDrops,               ///< drops
   kBusState,            ///< bus_state
-  kMagnetFluxTempDegC,  ///< magnet_flux_temp_degC: magnet temperature from the identified flux
+  kMagnetFluxTempDegC,  ///< magnet_flux_degC: magnet temperature from the identified flux
   /// node_index: the multiplexer of a node-indexed message; the frame carries the thermal
   /// model's node with this index (model order), so any model's nodes reach the bus. The
   /// gateway sends the nodes in turn, each once per period.
@@ -80,7 +80,7 @@ enum class MappingOutput {
   kNodeCount,           ///< node_count: how many nodes the pump's model has
   kNodeTempDegC,        ///< node_temp_degC: that node's estimated temperature
   kNodeSdK,             ///< node_sd_K: its standard deviation (Kalman covariance), K
-  kWindingResSdK,       ///< winding_res_sd_K: 1-sigma of the resistance-based temperature, K
+  kWindingResSdK,       ///< winding_resistance_sd_K: 1-sigma of the resistance-based temperature, K
   kMagnetFluxSdK,       ///< magnet_flux_sd_K: 1-sigma of the magnet temperature from the flux, K
   kMismatchState,       ///< mismatch_state: estimators::MismatchState
   kMismatchEffect,      ///< mismatch_effect: estimators::MismatchEffect
@@ -107,6 +107,9 @@ struct SignalMapping {
   std::array<std::optional<SignalRef>, kMappingOutputCount> outputs;
   std::map<std::string, SignalRef, std::less<>> node_temperatures;  ///< node name -> signal, degC
   std::uint32_t node_id_limit = 16;
+  /// One line per deprecated key the file used (source:line:column, old and current name); the
+  /// caller reports them. The old keys still work.
+  std::vector<std::string> deprecations;
 
   const std::optional<SignalRef>& input(MappingInput i) const noexcept {
     return inputs[static_cast<std::size_t>(i)];

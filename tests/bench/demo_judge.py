@@ -5,7 +5,7 @@ Runs `pumptherm plant demo` (unless --reuse), the gateway offline on its recordi
 (`pumpthermd -r`, no pacing) with tools/demo/pumpthermd-demo.toml, and reports per pump:
   - per estimated node, after --skip-s (300 s): max |estimate - truth| and the share of steps in
     which the truth lies within estimate +- 2 sd (coverage);
-  - the same for the winding temperature from resistance (against the truth's winding_res_C)
+  - the same for the winding temperature from resistance (against the truth's winding_resistance_C)
     and, when the CSV has it, the magnet temperature from the flux (against the truth of the
     magnet node, by its sd);
   - the first warning and trip against the truth's first crossings (summary.json).
@@ -113,14 +113,17 @@ def main():
         tt, et = truth["time_s"], est["time_s"]
         nodes = {}
         for col in est:
-            if col.endswith("_sd_K") and col[:-5] + "_C" in est and col[:-5] + "_C" in truth:
+            if (col.endswith("_sd_K") and col[:-5] + "_C" in est and col[:-5] + "_C" in truth
+                    and col != "winding_resistance_sd_K"):
                 node = col[:-5]
                 nodes[node] = judge_series(et, est[node + "_C"], est[col], tt, truth[node + "_C"], a.skip_s)
         extra = {}
-        if "winding_resistance_C" in est and "winding_res_C" in truth:
+        # The truth's column before one name per quantity was winding_res_C.
+        truth_w = next((c for c in ("winding_resistance_C", "winding_res_C") if c in truth), None)
+        if "winding_resistance_C" in est and truth_w:
             sd = est.get("winding_resistance_sd_K", [math.nan] * len(et))
             extra["winding_from_resistance"] = judge_series(et, est["winding_resistance_C"], sd, tt,
-                                                            truth["winding_res_C"], a.skip_s)
+                                                            truth[truth_w], a.skip_s)
         if "magnet_flux_C" in est and a.magnet_node + "_C" in truth:
             extra["magnet_from_flux"] = judge_series(et, est["magnet_flux_C"], est["magnet_flux_sd_K"], tt,
                                                      truth[a.magnet_node + "_C"], a.skip_s)

@@ -66,7 +66,7 @@ run() {
     max_changes=$((max_changes + extra))
     local truth=$tmp/$pump.truth.csv csv=$est/$pump.csv
     local tt at sf ch
-    tt=$(first "$truth" winding_res_C 120)
+    tt=$(first "$truth" winding_resistance_C 120)
     at=$(first "$csv" alarm_level 2)
     # Map the daemon's time back to the recording's time.
     if [[ $at != none ]]; then

@@ -118,17 +118,17 @@ TEST(IdentifyCli, IdentifiesSimulatedTelemetry) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const tools::CsvTable out = tools::CsvTable::Read(TempPath("good.out.csv"));
   EXPECT_EQ(out.columns(), (std::vector<std::string>{"time_s", "resistance_ohm", "flux_Wb",
-                                                     "winding_degC", "status", "winding_sd_K",
+                                                     "winding_resistance_C", "status", "winding_resistance_sd_K",
                                                      "flux_sd_Wb"}));
   EXPECT_EQ(out.rows(), 60000u);
   const auto rs = out.Column("resistance_ohm");
-  const auto temp = out.Column("winding_degC");
+  const auto temp = out.Column("winding_resistance_C");
   const auto status = out.Column("status");
   EXPECT_NEAR(rs.back(), true_r, 0.005 * true_r);
   EXPECT_NEAR(temp.back(), 45.0, 1.5);
   EXPECT_EQ(status.front(), 0.0);  // initialising
   for (double st : status) ASSERT_TRUE(st >= 0.0 && st <= 6.0 && st == std::floor(st)) << st;
-  const auto sd = out.Column("winding_sd_K");
+  const auto sd = out.Column("winding_resistance_sd_K");
   for (std::size_t k = 100; k < sd.size(); ++k) ASSERT_TRUE(sd[k] > 0.0 && std::isfinite(sd[k])) << k;
   EXPECT_LT(sd.back(), 1.0) << "the last 1-sigma, K";
 }

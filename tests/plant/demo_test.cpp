@@ -29,7 +29,7 @@ TEST(PlantDemo, Pump3WarnsThenTripsPumps1And2StayBelowWarning) {
   const Scenario sc = ParseScenario(ReadFile(path), path.string());
   ASSERT_EQ(sc.pumps.size(), 3u);
   EXPECT_DOUBLE_EQ(sc.duration_s, 1200.0);
-  EXPECT_EQ(sc.levels.node, "winding_res");
+  EXPECT_EQ(sc.levels.node, "winding_resistance");
   EXPECT_DOUBLE_EQ(sc.levels.warning_degC, 100.0);
   EXPECT_DOUBLE_EQ(sc.levels.trip_degC, 120.0);
 
@@ -62,7 +62,7 @@ TEST(PlantDemo, Pump3WarnsThenTripsPumps1And2StayBelowWarning) {
   // The truth CSV says the same (it is what the daemon's demo test compares against).
   const tools::CsvTable truth = tools::CsvTable::Read((out / "pump3.truth.csv").string());
   const auto t = truth.Time();
-  const auto w = truth.Column("winding_res_C");
+  const auto w = truth.Column("winding_resistance_C");
   double first_warning = -1.0;
   for (std::size_t k = 0; k < w.size(); ++k) {
     if (w[k] > 100.0) {

@@ -338,7 +338,7 @@ TEST(Plant, WindingTemperatureFeedsTheResistance) {
   RunScenario(ScenarioText(), out);
   const tools::CsvTable t = tools::CsvTable::Read((out / "b.truth.csv").string());
   const auto rs = t.Column("resistance_ohm");
-  const auto tw = t.Column("winding_res_C");
+  const auto tw = t.Column("winding_resistance_C");
   const auto winding = t.Column("winding_C");
   for (std::size_t i = 0; i < rs.size(); ++i) {
     EXPECT_NEAR(rs[i], 0.28 * (1.0 + 4.1e-3 * (tw[i] - 27.2)), 1e-9);  // Han 2019 eq. 2

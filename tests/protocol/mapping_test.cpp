@@ -45,6 +45,7 @@ TEST(MappingTest, ShippedMappingResolvesEverySignal) {
     EXPECT_TRUE(m.outputs[i].has_value()) << MappingOutputName(static_cast<MappingOutput>(i));
   }
   EXPECT_EQ(m.node_temperatures.size(), 7u);
+  EXPECT_TRUE(m.deprecations.empty()) << m.deprecations.front();
   const SignalRef& id = *m.input(MappingInput::kIdA);
   const DbcMessage& fast = dbc.messages[static_cast<std::size_t>(id.message_index)];
   EXPECT_EQ(fast.name, "PUMP_FAST_I");
@@ -67,6 +68,40 @@ TEST(MappingTest, ScaleAndOffsetAreRead) {
   EXPECT_EQ(m.input(MappingInput::kSpeedMechRpm)->scale, 0.5);
   EXPECT_EQ(m.input(MappingInput::kSpeedMechRpm)->offset, -1.0);
   EXPECT_FALSE(m.input(MappingInput::kDcLinkV).has_value());
+}
+
+TEST(MappingTest, OldOutputKeysStillWorkAndAreReportedDeprecated) {
+  const Dbc dbc = PumpthermDbc();
+  const std::string kWithSpeed =
+      std::string(kMinimal) + "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
+  // The names before one name per quantity (docs/daemon.md, "Names").
+  const SignalMapping m = ParseMapping(
+      kWithSpeed + "[outputs]\n"
+          "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n"
+          "winding_res_sd_K = { message = \"GW_IDENT_SD\", signal = \"WindingResSd_K\" }\n"
+          "magnet_flux_temp_degC = { message = \"GW_IDENT\", signal = \"MagnetFlux_degC\" }\n",
+      "m.toml", dbc);
+  EXPECT_TRUE(m.output(MappingOutput::kWindingResTempDegC).has_value());
+  EXPECT_TRUE(m.output(MappingOutput::kWindingResSdK).has_value());
+  EXPECT_TRUE(m.output(MappingOutput::kMagnetFluxTempDegC).has_value());
+  ASSERT_EQ(m.deprecations.size(), 3u);
+  std::string all;
+  for (const auto& d : m.deprecations) all += d + "\n";
+  EXPECT_NE(all.find("m.toml:9:25: key outputs.winding_res_temp_degC is deprecated: it is now "
+                     "outputs.winding_resistance_degC\n"), std::string::npos) << all;
+  EXPECT_NE(all.find("key outputs.winding_res_sd_K is deprecated: it is now outputs.winding_resistance_sd_K"),
+            std::string::npos) << all;
+  EXPECT_NE(all.find("key outputs.magnet_flux_temp_degC is deprecated: it is now outputs.magnet_flux_degC"),
+            std::string::npos) << all;
+  // The current names give no such line; both names at once are an error.
+  const SignalMapping now = ParseMapping(
+      kWithSpeed + "[outputs]\nwinding_resistance_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
+      "m.toml", dbc);
+  EXPECT_TRUE(now.deprecations.empty());
+  ExpectMappingError(kWithSpeed + "[outputs]\n"
+                         "winding_resistance_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n"
+                         "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
+                     dbc, {"outputs.winding_resistance_degC is given twice"});
 }
 
 TEST(MappingTest, UnknownMessageOrSignalIsNamed) {

@@ -25,6 +25,22 @@ TEST(Csv, ReadsColumnsByName) {
   EXPECT_FALSE(t.Has("y"));
 }
 
+TEST(Csv, OldColumnNamesAreReadUnderTheCurrentOneWithAWarning) {
+  // pumptherm plant's truth before one name per quantity, and identify's output.
+  const auto plant = CsvTable::Parse("time_s,winding_C,winding_res_C\n0,40,41.5\n", "truth.csv");
+  EXPECT_EQ(plant.Column("winding_resistance_C"), std::vector<double>{41.5});
+  EXPECT_FALSE(plant.Has("winding_res_C"));
+  ASSERT_EQ(plant.deprecations().size(), 1U);
+  EXPECT_EQ(plant.deprecations()[0], "truth.csv:1: column 'winding_res_C' is deprecated: read as 'winding_resistance_C'");
+  const auto identify = CsvTable::Parse("time_s,winding_degC\n0,30\n", "rs.csv");
+  EXPECT_EQ(identify.Column("winding_resistance_C"), std::vector<double>{30.0});
+  // A file with the current name is read as it is, and one with both keeps both.
+  const auto both = CsvTable::Parse("time_s,winding_res_C,winding_resistance_C\n0,1,2\n", "b.csv");
+  EXPECT_TRUE(both.deprecations().empty());
+  EXPECT_EQ(both.Column("winding_resistance_C"), std::vector<double>{2.0});
+  EXPECT_TRUE(CsvTable::Parse("time_s,winding_resistance_C\n0,1\n", "n.csv").deprecations().empty());
+}
+
 TEST(Csv, ErrorsNameFileRowAndColumn) {
   const auto t = CsvTable::Parse("time_s,iq_A\n0,1\n1,abc\n2,nan\n3,inf\n", "t.csv");
   EXPECT_EQ(ErrorOf([&] { t.Column("iq_A"); }), "t.csv: row 3, column 'iq_A': 'abc' is not a number");

@@ -34,7 +34,29 @@ std::vector<std::string> SplitCells(std::string_view line) {
   return cells;
 }
 
+/// Column names renamed to one name per quantity (docs/daemon.md, "Names"): old -> current.
+/// Files written before keep working. `winding_sd_K` of old `identify` output is not among them:
+/// it is also the standard deviation of a model node named "winding".
+struct RenamedColumn {
+  std::string_view old_name, name;
+};
+constexpr RenamedColumn kRenamedColumns[] = {
+    {"winding_res_C", "winding_resistance_C"},  // pumptherm plant's truth
+    {"winding_degC", "winding_resistance_C"},   // pumptherm identify
+};
+
 }  // namespace
+
+void CsvTable::RenameDeprecatedColumns(std::size_t header_line) {
+  for (const RenamedColumn& r : kRenamedColumns) {
+    const auto old_index = Index(r.old_name);
+    if (!old_index || Index(r.name)) continue;
+    columns_[*old_index] = std::string(r.name);
+    deprecations_.push_back(fmt::format("{}:{}: column '{}' is deprecated: read as '{}'", source_, header_line,
+                                        r.old_name, r.name));
+    fmt::print(stderr, "warning: {}\n", deprecations_.back());
+  }
+}
 
 CsvTable CsvTable::Parse(std::string_view text, std::string source) {
   CsvTable t;
@@ -65,6 +87,7 @@ CsvTable CsvTable::Parse(std::string_view text, std::string source) {
           }
         }
       }
+      t.RenameDeprecatedColumns(line_no);
       have_header = true;
       continue;
     }

@@ -53,7 +53,12 @@ class CsvTable {
   /// File line number (1-based) of data row `row` (0-based), for error messages.
   std::size_t LineOf(std::size_t row) const { return lines_[row]; }
 
+  /// One line per header column read under its current name because the file has the old one
+  /// (`winding_res_C` -> `winding_resistance_C`); Parse also prints each as a warning on stderr.
+  const std::vector<std::string>& deprecations() const { return deprecations_; }
+
  private:
+  void RenameDeprecatedColumns(std::size_t header_line);
   std::optional<std::size_t> Index(std::string_view column) const;
   std::vector<double> Numbers(std::string_view column, bool allow_nan) const;
 
@@ -61,6 +66,7 @@ class CsvTable {
   std::vector<std::string> columns_;
   std::vector<std::vector<std::string>> rows_;
   std::vector<std::size_t> lines_;
+  std::vector<std::string> deprecations_;
 };
 
 /// Writes a CSV file: header, then rows of numbers with `%.9g`-style shortest round-trip text.

@@ -153,7 +153,7 @@ struct PumpState {
   Eigen::VectorXd winding_weights;
   int magnet_state = -1;
   int frame_node = -1;   // index into Nodes()
-  int level_node = -1;   // index into Nodes(), -1 = winding_res
+  int level_node = -1;   // index into Nodes(), -1 = the winding from resistance
   std::mt19937_64 rng_drive, rng_thermal, rng_bus, rng_jitter;
   std::normal_distribution<double> normal{0.0, 1.0};
   std::uniform_real_distribution<double> uniform{0.0, 1.0};
@@ -338,9 +338,9 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
                                       spec.model, name, list));
     };
     ps->frame_node = node_index(spec.frame_sensor.node);
-    if (sc.levels.node != "winding_res") ps->level_node = node_index(sc.levels.node);
+    if (sc.levels.node != kWindingResistanceLevel) ps->level_node = node_index(sc.levels.node);
     ps->winding_weights = m.WindingWeights();
-    if (ps->winding_weights.sum() <= 0.0 && (electrical || sc.levels.node == "winding_res")) {
+    if (ps->winding_weights.sum() <= 0.0 && (electrical || sc.levels.node == kWindingResistanceLevel)) {
       throw ScenarioError(fmt::format("{}: model '{}' has no temperature-dependent copper loss, so "
                                       "it defines no winding temperature",
                                       where, spec.model));
@@ -389,7 +389,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
 
     std::vector<std::string> tcols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C"};
     for (const auto& n : m.Nodes()) tcols.push_back(n.name + "_C");
-    tcols.insert(tcols.end(), {"winding_res_C", "resistance_ohm", "flux_Wb"});
+    tcols.insert(tcols.end(), {"winding_resistance_C", "resistance_ohm", "flux_Wb"});
     for (const auto& n : m.Nodes()) tcols.push_back("loss_" + n.name + "_W");
     tcols.insert(tcols.end(), {"loss_total_W", "cooling_model", "drive_state"});
     ps->truth = std::make_unique<tools::CsvWriter>((fs::path(out_dir) / (spec.name + ".truth.csv")).string(), tcols);

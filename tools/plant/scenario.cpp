@@ -344,6 +344,12 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
     CheckKeys(*lv, {"node", "warning_C", "trip_C"}, source, "levels.");
     Reader r(lv, nullptr, source, "levels.", LineOf(*lv));
     sc.levels.node = r.String("node", sc.levels.node);
+    // The resistance-based winding's name before one name per quantity (docs/daemon.md, "Names").
+    if (sc.levels.node == "winding_res") {
+      fmt::print(stderr, "warning: {}:{}: levels.node = \"winding_res\" is deprecated: read as \"{}\"\n", source,
+                 LineOf(*lv), kWindingResistanceLevel);
+      sc.levels.node = kWindingResistanceLevel;
+    }
     sc.levels.warning_degC = r.Number("warning_C", sc.levels.warning_degC, -50.0, 1000.0);
     sc.levels.trip_degC = r.Number("trip_C", sc.levels.trip_degC, -50.0, 1000.0);
     if (!(sc.levels.trip_degC > sc.levels.warning_degC)) {

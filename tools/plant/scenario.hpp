@@ -112,9 +112,13 @@ struct PumpSpec {
   int line = 0;
 };
 
+/// The levels' node name for the winding temperature from resistance (the copper-loss-weighted
+/// mean of the model's nodes), as the daemon's [alarms.levels] names it.
+inline constexpr const char* kWindingResistanceLevel = "winding_resistance";
+
 /// Alarm levels used to summarise the truth (not an alarm logic: the daemon has its own).
 struct TruthLevels {
-  std::string node = "winding_res";  ///< model node, or "winding_res": the copper-loss mean
+  std::string node = kWindingResistanceLevel;  ///< model node, or the copper-loss mean
   double warning_degC = 100.0;
   double trip_degC = 120.0;
 };

@@ -65,8 +65,9 @@ int Run(const std::string& input, const RecordingSource& recording, const std::s
   config.block_samples = block_samples;
   config.min_current_A = min_current_A;
   est::ResistanceIdentifier identifier(motor, config);
-  CsvWriter out(output, {"time_s", "resistance_ohm", "flux_Wb", "winding_degC", "status",
-                         "winding_sd_K", "flux_sd_Wb"});
+  // Column names as the daemon's CSV names the same quantities (docs/daemon.md, "Names").
+  CsvWriter out(output, {"time_s", "resistance_ohm", "flux_Wb", "winding_resistance_C", "status",
+                         "winding_resistance_sd_K", "flux_sd_Wb"});
   // The first sample's period is taken from the second (the data give no earlier time).
   const double first_dt = t.size() > 1 ? t[1] - t[0] : 0.0;
   for (std::size_t k = 0; k < t.size(); ++k) {
@@ -101,8 +102,8 @@ const SubcommandRegistrar kRegistrar{
                      "r/min), any order; '-' reads standard input (or --log)");
       AddRecordingOptions(app, opt->recording);
       app.add_option("--output,-o", opt->output,
-                     "CSV written with time_s, resistance_ohm, flux_Wb, winding_degC, status, "
-                     "winding_sd_K, flux_sd_Wb; "
+                     "CSV written with time_s, resistance_ohm, flux_Wb, winding_resistance_C, status, "
+                     "winding_resistance_sd_K, flux_sd_Wb; "
                      "'-' is standard output (the default)")
           ->capture_default_str();
       app.add_option("--motor", opt->motor,
