@@ -10,8 +10,10 @@
 #include <poll.h>
 
 #include <algorithm>
+#include <cmath>
 #include <lcm/lcm-cpp.hpp>
 #include <memory>
+#include <system_error>
 
 #include "daemon/alarm_clear_auth.hpp"
 #include "daemon/can_socket.hpp"
@@ -179,9 +181,19 @@ std::optional<GatewayAlarmLevel> ReadAlarmLevels(daemon::CanSocket& sock, const 
 
 int RunCanClear(const ClearTripOptions& o, const daemon::DaemonConfig& c, const daemon::PumpConfig& pump,
                 const std::string& interface) {
+  if (!o.node.empty() || !o.comment.empty()) {
+    fmt::print(stderr, "{}: note: PUMP_CLEAR carries no node and no comment: every latched trip of the pump is "
+               "cleared, and the gateway logs the interface as the source\n", o.pump);
+  }
   const auto [dbc, mapping] = LoadFrameSet(c);
   const protocol::CanFrame clear = EncodeClearFrame(dbc, mapping, pump.node_id);
-  daemon::CanSocket sock = daemon::CanSocket::Open(interface, false);
+  daemon::CanSocket sock;
+  try {
+    sock = daemon::CanSocket::Open(interface, false);
+  } catch (const std::system_error& e) {
+    throw std::runtime_error(fmt::format("{}: cannot open CAN interface '{}' to send PUMP_CLEAR: {}", o.pump,
+                                         interface, e.code().message()));
+  }
   CanClearOutcome outcome;
   // GW_ALARM comes at 10 Hz: the level before the clear, if the gateway is there.
   outcome.before = ReadAlarmLevels(sock, dbc, mapping, pump.node_id, MonotonicS() + std::min(1.0, o.timeout_s),
