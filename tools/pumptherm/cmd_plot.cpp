@@ -113,9 +113,10 @@ TimeAxis AlignTimes(const std::vector<const CsvTable*>& tables, double given_s) 
     if (time.empty() || time.front() < kUnixTimeFrom_s) {
       fmt::print(stderr, "plot: {}: time_s is time since its run's start, drawn as written\n", t->source());
     } else {
-      fmt::print(stderr, "plot: {}: time_s is Unix time, drawn as time since {:.3f} ({}; --time-origin sets "
-                 "another); its first row at {:.3f} s\n", t->source(), axis.origin_s,
-                 std::isfinite(given_s) ? "--time-origin" : "the earliest Unix-time file's first whole second",
+      fmt::print(stderr, "plot: {}: time_s is Unix time, drawn as time since {:.3f} ({}); its first row at {:.3f} s\n",
+                 t->source(), axis.origin_s,
+                 std::isfinite(given_s) ? "--time-origin"
+                                        : "the earliest Unix-time file's first whole second; --time-origin sets another",
                  time.front() - axis.origin_s);
     }
   }
