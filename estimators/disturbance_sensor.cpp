@@ -32,7 +32,7 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, Di
           c.magnet_node, model_.Name()));
     }
   }
-  const bool has_winding = model_.WindingWeights().sum() > 0.0;
+  const bool has_winding = c.winding_reading && model_.WindingWeights().sum() > 0.0;
   n_ = model_.StateCount();
   int k = n_;
   if (c.sensor_lag_s > 0.0) lag_ = k++;
@@ -78,7 +78,7 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, Di
 // row is present in every update once any reading is; a missing reading's row is zero, so the
 // matrices keep their size and the step allocates nothing.
 void DisturbanceThermalSensor::BuildRows() {
-  const bool has_winding = model_.WindingWeights().sum() > 0.0;
+  const bool has_winding = config_.winding_reading && model_.WindingWeights().sum() > 0.0;
   int m = 1;
   if (has_winding) row_w_ = m++;
   if (magnet_ >= 0) row_m_ = m++;

@@ -42,6 +42,9 @@ struct DisturbanceSensorConfig {
   /// Random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s); 0 = no state.
   double loss_scale_sd = 0.002;
   double sd_floor_K = 1.0;                ///< added in quadrature to every reported node sd
+  /// Whether the resistance-based winding temperature is fused: the update then has a winding
+  /// row (and a bias state); without it a winding reading given to Step() is not used.
+  bool winding_reading = false;
   /// Standard deviation of the resistance-based winding temperature when it is fused (white).
   double winding_measurement_sd_K = 3.0;
   /// Stationary sd and correlation time of the winding reading's bias; sd 0 = no bias state.
@@ -78,7 +81,7 @@ class DisturbanceThermalSensor {
 
   void Initialise(double x0_degC);
   /// One period; `measured_degC` NaN = no reading; `winding_degC` (the resistance-based winding
-  /// temperature, Han et al. 2019 eq. 3) fused when finite. Throws std::domain_error for dt_s <= 0.
+  /// temperature, Han et al. 2019 eq. 3) fused when finite and `winding_reading` is set. Throws std::domain_error for dt_s <= 0.
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,
                                  double winding_degC = std::numeric_limits<double>::quiet_NaN());
   /// One period with every reading. The update has one row per reading the filter has a state

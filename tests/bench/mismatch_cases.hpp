@@ -160,7 +160,10 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   pe::VirtualThermalSensor vts(nominal, vts_config);
   pe::MismatchDetector det(nominal, DetectorConfig(spec.sensor_lag_s));
   dc.sensor_lag_s = spec.sensor_lag_s;
-  if (spec.winding_noise_sd_K > 0.0) dc.winding_measurement_sd_K = spec.winding_noise_sd_K;
+  if (spec.winding_noise_sd_K > 0.0) {
+    dc.winding_reading = true;
+    dc.winding_measurement_sd_K = spec.winding_noise_sd_K;
+  }
   if (spec.magnet_noise_sd_K > 0.0) dc.magnet_node = "rotor";
   const int rotor = nominal.StateIndex("rotor");
   std::mt19937_64 magnet_rng(spec.seed * 104729 + 3);  // its own: the other cases' draws stay as they were
