@@ -57,10 +57,13 @@ void WithoutBoundaryPaths(estimators::ThermalLinearModel& lin, double boundary_d
   }
 }
 
-estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c) {
+estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c, const estimators::ThermalModel& model) {
   estimators::MismatchDetectorConfig m;
   m.measured_node = c.measured_node;
   m.sensor_lag_s = c.frame_sensor_lag_s;
+  // The magnet from the flux helps name an effect (heat inside the rotor or not); an unknown
+  // node is reported by the pump with its config line, not here.
+  if (model.StateIndex(c.magnet_node) >= 0) m.magnet_node = c.magnet_node;
   return m;
 }
 
@@ -125,7 +128,7 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
       }()),
       sensor_health_(config.alarms.monitor),
 
-      mismatch_(*model_, MismatchConfig(config)),
+      mismatch_(*model_, MismatchConfig(config, *model_)),
       robust_(*model_, RobustConfig(config, *model_)) {
   measured_state_ = model_->StateIndex(config_.measured_node);
   if (!config_.magnet_node.empty()) {
@@ -548,8 +551,14 @@ double Pump::TelemetryAge_s(std::int64_t t_us) const {
 
 void Pump::CheckModel(const estimators::ThermalInputs& in, double measured_degC, std::int64_t end_us) {
   try {
+    // The magnet temperature of this step's back-EMF row at the published winding estimate.
+    double magnet_degC = kNaN;
+    if (magnet_state_ >= 0 && std::isfinite(magnet_z_degC_)) {
+      const Eigen::VectorXd& x = config_.disturbance_states ? robust_x_ : sensor_.Estimate_degC();
+      magnet_degC = magnet_z_degC_ - magnet_gain_ * model_->WindingWeights().dot(x);
+    }
     const estimators::MismatchFinding& f =
-        mismatch_.Step(in, period_s_, measured_degC, static_cast<double>(end_us) * 1e-6);
+        mismatch_.Step(in, period_s_, measured_degC, static_cast<double>(end_us) * 1e-6, magnet_degC);
     if (NewVerdict(f, snapshot_.mismatch)) ++snapshot_.mismatch_changes;
     snapshot_.mismatch = f;
   } catch (const std::exception&) {

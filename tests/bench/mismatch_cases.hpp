@@ -104,6 +104,7 @@ struct CaseSpec {
   double magnet_noise_sd_K = 0.0;
   double magnet_bias_sd_K = 2.0;
   double magnet_bias_tau_s = 1800.0;
+  bool magnet_to_detector = true;  ///< the magnet reading also in the detector's naming fit
 };
 
 struct CaseResult {
@@ -158,7 +159,9 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   std::normal_distribution<double> normal(0.0, 1.0);
 
   pe::VirtualThermalSensor vts(nominal, vts_config);
-  pe::MismatchDetector det(nominal, DetectorConfig(spec.sensor_lag_s));
+  pe::MismatchDetectorConfig detector_config = DetectorConfig(spec.sensor_lag_s);
+  if (spec.magnet_noise_sd_K > 0.0 && spec.magnet_to_detector) detector_config.magnet_node = "rotor";
+  pe::MismatchDetector det(nominal, detector_config);
   dc.sensor_lag_s = spec.sensor_lag_s;
   if (spec.winding_noise_sd_K > 0.0) {
     dc.winding_reading = true;
@@ -224,7 +227,7 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
       readings.magnet_sd_K = spec.magnet_noise_sd_K;
     }
     dist.Step(in, spec.dt_s, readings);
-    const pe::MismatchFinding& f = det.Step(in, spec.dt_s, y, t);
+    const pe::MismatchFinding& f = det.Step(in, spec.dt_s, y, t, readings.magnet_degC);
     const bool named = f.state == pe::MismatchState::kPlantChange ||
                        f.state == pe::MismatchState::kSensorFaultSuspected;
     const bool fault_state = named || f.state == pe::MismatchState::kUnexplained;
