@@ -150,6 +150,8 @@ class Pump {
   void BackEmfMeasurement(std::int64_t step_end_us, double iq_A, double w_rad_per_s);
   /// The magnet temperature at the filter's (updated) winding estimate into the snapshot.
   void PublishMagnetTemperature();
+  /// The disturbance-state filter's readings of this step: the frame and the back-EMF magnet row.
+  estimators::DisturbanceReadings RobustReadings(double frame_degC) const;
   /// This step's extra filter measurements: the winding from resistance, the magnet from flux.
   const estimators::NodeMeasurements& ExtraMeasurements(double winding_res_degC);
   /// Runs the mismatch test on this step's inputs and reading; counts a changed verdict.

@@ -17,10 +17,22 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, Di
   }
   if (!(c.measurement_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) || !(c.sensor_offset_sd_K > 0.0) ||
       !(c.node_process_sd_K > 0.0) || !(c.frame_heat_sd_W > 0.0) || !(c.rotor_heat_sd_W > 0.0) ||
-      !(c.rotor_heat_tau_s > 0.0) || !(c.winding_measurement_sd_K > 0.0) || !(c.loss_scale_sd >= 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0)) {
+      !(c.rotor_heat_tau_s > 0.0) || !(c.winding_measurement_sd_K > 0.0) || !(c.loss_scale_sd >= 0.0) ||
+      !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) || !(c.winding_bias_sd_K >= 0.0) ||
+      !(c.winding_bias_tau_s > 0.0) || !(c.magnet_bias_sd_K >= 0.0) || !(c.magnet_bias_tau_s > 0.0) ||
+      !(c.magnet_min_white_sd_K > 0.0)) {
     throw std::invalid_argument("disturbance sensor: standard deviations and times must be positive");
   }
   rotor_ = c.rotor_node.empty() ? -1 : model_.StateIndex(c.rotor_node);
+  if (!c.magnet_node.empty()) {
+    magnet_ = model_.StateIndex(c.magnet_node);
+    if (magnet_ < 0) {
+      throw std::invalid_argument(fmt::format(
+          "disturbance sensor: magnet node '{}' is not a node with heat capacity of model '{}'",
+          c.magnet_node, model_.Name()));
+    }
+  }
+  const bool has_winding = c.winding_reading && model_.WindingWeights().sum() > 0.0;
   n_ = model_.StateCount();
   int k = n_;
   if (c.sensor_lag_s > 0.0) lag_ = k++;
@@ -28,6 +40,8 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, Di
   if (rotor_ >= 0) dr_ = k++;
   if (c.loss_scale_sd > 0.0) ls_ = k++;
   bias_ = k++;
+  if (has_winding && c.winding_bias_sd_K > 0.0) wb_ = k++;
+  if (magnet_ >= 0 && c.magnet_bias_sd_K > 0.0) mb_ = k++;
   n_aug_ = k;
   // The nodes and the sensor lag are discretised together (exact ZOH); the disturbances are held
   // over a step and enter through that discretisation's Phi (Step()), so the matrix exponential is
@@ -53,21 +67,41 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, Di
   sm_ = Eigen::MatrixXd::Constant(1, 1, c.measurement_sd_K * c.measurement_sd_K);
   y_ = Eigen::VectorXd::Zero(1);
   c0_ = Eigen::MatrixXd::Zero(0, n_aug_);
-  cw_ = Eigen::MatrixXd::Zero(1, n_aug_);
-  cw_.row(0).head(n_) = model_.WindingWeights().transpose();
-  const double var_w = c.winding_measurement_sd_K * c.winding_measurement_sd_K;
-  smw_ = Eigen::MatrixXd::Constant(1, 1, var_w);
-  c2_ = Eigen::MatrixXd::Zero(2, n_aug_);
-  c2_.row(0) = c_.row(0);
-  c2_.row(1) = cw_.row(0);
-  sm2_ = Eigen::MatrixXd::Zero(2, 2);
-  sm2_(0, 0) = sm_(0, 0);
-  sm2_(1, 1) = var_w;
-  yw_ = Eigen::VectorXd::Zero(1);
-  y2_ = Eigen::VectorXd::Zero(2);
+  BuildRows();
   x_nodes_ = Eigen::VectorXd::Zero(n_);
   filter_ = KalmanFilter(n_aug_);
   Initialise(25.0);
+}
+
+// The rows of the update: the frame, then the winding (the model's winding weights plus its
+// bias), then the magnet (its node plus its bias; the winding gain is added per step). Every
+// row is present in every update once any reading is; a missing reading's row is zero, so the
+// matrices keep their size and the step allocates nothing.
+void DisturbanceThermalSensor::BuildRows() {
+  const bool has_winding = config_.winding_reading && model_.WindingWeights().sum() > 0.0;
+  int m = 1;
+  if (has_winding) row_w_ = m++;
+  if (magnet_ >= 0) row_m_ = m++;
+  c_all_ = Eigen::MatrixXd::Zero(m, n_aug_);
+  sm_all_ = Eigen::MatrixXd::Zero(m, m);
+  y_all_ = Eigen::VectorXd::Zero(m);
+  cw_row_ = Eigen::MatrixXd::Zero(1, n_aug_);
+  cm_row_ = Eigen::MatrixXd::Zero(1, n_aug_);
+  if (has_winding) {
+    cw_row_.row(0).head(n_) = model_.WindingWeights().transpose();
+    if (wb_ >= 0) cw_row_(0, wb_) = 1.0;
+  }
+  if (magnet_ >= 0) {
+    cm_row_(0, magnet_) = 1.0;
+    if (mb_ >= 0) cm_row_(0, mb_) = 1.0;
+  }
+}
+
+void DisturbanceThermalSensor::GaussMarkov(int state, double sd, double tau_s, double dt_s) {
+  // Exact discretisation of db/dt = -b/tau + w with stationary sd: a = e^(-dt/tau), q = sd^2 (1 - a^2).
+  const double a = std::exp(-dt_s / tau_s);
+  ad_(state, state) = a;
+  sp_(state, state) = sd * sd * (1.0 - a * a);
 }
 
 void DisturbanceThermalSensor::Initialise(double x0_degC) {
@@ -83,6 +117,8 @@ void DisturbanceThermalSensor::Initialise(double x0_degC) {
   if (dr_ >= 0) s(dr_, dr_) = c.rotor_heat_sd_W * c.rotor_heat_sd_W;
   if (ls_ >= 0) s(ls_, ls_) = 0.01;  // 10 % either way at the start
   s(bias_, bias_) = c.sensor_offset_sd_K * c.sensor_offset_sd_K;
+  if (wb_ >= 0) s(wb_, wb_) = c.winding_bias_sd_K * c.winding_bias_sd_K;
+  if (mb_ >= 0) s(mb_, mb_) = c.magnet_bias_sd_K * c.magnet_bias_sd_K;
   Eigen::VectorXd x = Eigen::VectorXd::Zero(n_aug_);
   x.head(n_).setConstant(x0_degC);
   if (lag_ >= 0) x(lag_) = x0_degC;
@@ -109,6 +145,14 @@ void DisturbanceThermalSensor::AddDisturbanceForcing(ThermalLinearModel& lin) co
 
 const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
                                                          double measured_degC, double winding_degC) {
+  DisturbanceReadings r;
+  r.frame_degC = measured_degC;
+  r.winding_degC = winding_degC;
+  return Step(in, dt_s, r);
+}
+
+const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
+                                                         const DisturbanceReadings& r) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
     throw std::domain_error("disturbance sensor: the period must be positive and finite");
   }
@@ -148,21 +192,44 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
     sp_(dr_, dr_) = 2.0 * c.rotor_heat_sd_W * c.rotor_heat_sd_W * dt_s / c.rotor_heat_tau_s;
   }
   if (ls_ >= 0) sp_(ls_, ls_) = c.loss_scale_sd * c.loss_scale_sd * dt_s;
+  if (wb_ >= 0) GaussMarkov(wb_, c.winding_bias_sd_K, c.winding_bias_tau_s, dt_s);
+  if (mb_ >= 0) GaussMarkov(mb_, c.magnet_bias_sd_K, c.magnet_bias_tau_s, dt_s);
   filter_.Predict(ad_, bu_, sp_);
-  const bool frame = std::isfinite(measured_degC);
-  const bool winding = std::isfinite(winding_degC) && model_.WindingWeights().sum() > 0.0;
-  if (frame && winding) {
-    y2_(0) = measured_degC;
-    y2_(1) = winding_degC;
-    return filter_.Update(c2_, y2_, sm2_);
+  const bool frame = std::isfinite(r.frame_degC);
+  const bool winding = row_w_ >= 0 && std::isfinite(r.winding_degC);
+  const bool magnet = row_m_ >= 0 && std::isfinite(r.magnet_degC) && std::isfinite(r.magnet_winding_gain);
+  if (!frame && !winding && !magnet) return filter_.Update(c0_, y0_, sm0_);
+  // A missing reading: a zero row, zero innovation, unit variance (no gain, no effect).
+  c_all_.setZero();
+  sm_all_.setZero();
+  y_all_.setZero();
+  sm_all_(0, 0) = 1.0;
+  if (frame) {
+    c_all_.row(0) = c_.row(0);
+    sm_all_(0, 0) = sm_(0, 0);
+    y_all_(0) = r.frame_degC;
   }
-  if (winding) {
-    yw_(0) = winding_degC;
-    return filter_.Update(cw_, yw_, smw_);
+  if (row_w_ >= 0) {
+    sm_all_(row_w_, row_w_) = 1.0;
+    if (winding) {
+      c_all_.row(row_w_) = cw_row_.row(0);
+      sm_all_(row_w_, row_w_) = c.winding_measurement_sd_K * c.winding_measurement_sd_K;
+      y_all_(row_w_) = r.winding_degC;
+    }
   }
-  if (!frame) return filter_.Update(c0_, y0_, sm0_);
-  y_(0) = measured_degC;
-  return filter_.Update(c_, y_, sm_);
+  if (row_m_ >= 0) {
+    sm_all_(row_m_, row_m_) = 1.0;
+    if (magnet) {
+      // z = T_magnet + g T_winding + bias + white noise.
+      c_all_.row(row_m_) = cm_row_.row(0);
+      c_all_.row(row_m_).head(n_) += r.magnet_winding_gain * model_.WindingWeights().transpose();
+      const double sd = std::isfinite(r.magnet_sd_K) ? std::max(r.magnet_sd_K, c.magnet_min_white_sd_K)
+                                                     : c.magnet_min_white_sd_K;
+      sm_all_(row_m_, row_m_) = sd * sd;
+      y_all_(row_m_) = r.magnet_degC;
+    }
+  }
+  return filter_.Update(c_all_, y_all_, sm_all_);
 }
 
 }  // namespace pumptherm::estimators

@@ -9,6 +9,11 @@
 ///  - optionally a relative loss scale s (every loss times 1 + s, a random walk),
 ///  - a rotor disturbance heat d_r (W, first-order Gauss-Markov with a stationary sd): heat inside
 ///    that the frame barely sees, so its sd (and the rotor's) says how little is known,
+///  - for each slow reading fused besides the frame (the winding from resistance, the magnet
+///    from the flux) a bias of that reading (K, first-order Gauss-Markov): their errors are slow
+///    (a nameplate flux or R0 a little off, the inverter's voltage error), and taken as white
+///    noise at one reading per second the filter would average them away and claim an sd far
+///    below the error,
 /// and a floor on every reported node sd for the model error no state represents.
 ///
 /// Pure library; no allocation per step once sized (the re-discretisation when the operating
@@ -37,10 +42,36 @@ struct DisturbanceSensorConfig {
   /// Random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s); 0 = no state.
   double loss_scale_sd = 0.002;
   double sd_floor_K = 1.0;                ///< added in quadrature to every reported node sd
-  /// Standard deviation of the resistance-based winding temperature when it is fused.
+  /// Whether the resistance-based winding temperature is fused: the update then has a winding
+  /// row (and a bias state); without it a winding reading given to Step() is not used.
+  bool winding_reading = false;
+  /// Standard deviation of the resistance-based winding temperature when it is fused (white).
   double winding_measurement_sd_K = 3.0;
+  /// Stationary sd and correlation time of the winding reading's bias; sd 0 = no bias state.
+  double winding_bias_sd_K = 3.0;
+  double winding_bias_tau_s = 3600.0;
+  /// The node the magnet temperature from the flux measures (with a winding gain, see
+  /// DisturbanceReadings); empty or absent from the model = no magnet reading.
+  std::string magnet_node;
+  /// Stationary sd and correlation time of the magnet reading's bias (a Gauss-Markov state).
+  double magnet_bias_sd_K = 3.0;
+  double magnet_bias_tau_s = 3600.0;
+  /// Least white sd of the magnet reading (its own sd, from the identifier, may be smaller).
+  double magnet_min_white_sd_K = 0.3;
   double initial_sd_K = 20.0;             ///< as VirtualSensorConfig
   double initial_spread_sd_K = 5.0;
+};
+
+/// The readings of one period; NaN = not read this period.
+struct DisturbanceReadings {
+  double frame_degC = std::numeric_limits<double>::quiet_NaN();    ///< the frame sensor
+  /// The resistance-based winding temperature (Han et al. 2019 eq. 3).
+  double winding_degC = std::numeric_limits<double>::quiet_NaN();
+  /// The magnet reading z = T_magnet + g T_winding (the back-EMF row, docs/virtual-sensor.md,
+  /// "Magnet temperature from the flux"), its white sd and g (dimensionless).
+  double magnet_degC = std::numeric_limits<double>::quiet_NaN();
+  double magnet_sd_K = std::numeric_limits<double>::quiet_NaN();
+  double magnet_winding_gain = 0.0;
 };
 
 class DisturbanceThermalSensor {
@@ -50,9 +81,13 @@ class DisturbanceThermalSensor {
 
   void Initialise(double x0_degC);
   /// One period; `measured_degC` NaN = no reading; `winding_degC` (the resistance-based winding
-  /// temperature, Han et al. 2019 eq. 3) fused when finite. Throws std::domain_error for dt_s <= 0.
+  /// temperature, Han et al. 2019 eq. 3) fused when finite and `winding_reading` is set. Throws std::domain_error for dt_s <= 0.
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,
                                  double winding_degC = std::numeric_limits<double>::quiet_NaN());
+  /// One period with every reading. The update has one row per reading the filter has a state
+  /// for (frame, winding, magnet, in this order) whenever any is finite; a missing reading's row
+  /// is zero (no effect). Throws std::domain_error for dt_s <= 0.
+  const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, const DisturbanceReadings& readings);
 
   /// Node temperature estimate i (state order of the model) and its reported sd (with the floor).
   double Node_degC(int i) const { return filter_.State()(i); }
@@ -65,13 +100,20 @@ class DisturbanceThermalSensor {
   double FrameHeat_W() const { return filter_.State()(df_); }
   double RotorHeat_W() const { return dr_ >= 0 ? filter_.State()(dr_) : 0.0; }
   double SensorOffset_K() const { return filter_.State()(bias_); }
+  /// The magnet reading's estimated bias, K (0 without a magnet reading).
+  double MagnetBias_K() const { return mb_ >= 0 ? filter_.State()(mb_) : 0.0; }
   int StateCount() const { return n_aug_; }
   const KalmanFilter& Filter() const { return filter_; }
 
  private:
   const ThermalModel& model_;
   DisturbanceSensorConfig config_;
+  void BuildRows();
+  void GaussMarkov(int state, double sd, double tau_s, double dt_s);
+
   int n_ = 0, lag_ = -1, df_ = 0, dr_ = -1, ls_ = -1, bias_ = 0, n_aug_ = 0, frame_ = 0, rotor_ = -1;
+  int wb_ = -1, mb_ = -1, magnet_ = -1;  ///< winding and magnet reading biases, the magnet node
+  int row_w_ = -1, row_m_ = -1;          ///< their rows in the update (-1: none)
   ThermalLinearModel lin_, lin_block_, lin_idle_;
   ThermalDiscretiser discretiser_;
   KalmanFilter filter_;
@@ -80,9 +122,9 @@ class DisturbanceThermalSensor {
   Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows
   Eigen::VectorXd y0_;
   Eigen::MatrixXd heat_in_, phi_heat_;  ///< d_f, d_r, s into the nodes (K/s per unit); Phi times it
-  Eigen::MatrixXd cw_, smw_;  ///< the winding alone (1 row) and frame + winding (2 rows)
-  Eigen::MatrixXd c2_, sm2_;
-  Eigen::VectorXd yw_, y2_;
+  Eigen::MatrixXd c_all_, sm_all_;  ///< every reading's row (m x n_aug, m x m)
+  Eigen::MatrixXd cw_row_, cm_row_;  ///< the winding and magnet rows (1 x n_aug), magnet without g
+  Eigen::VectorXd y_all_;
 };
 
 }  // namespace pumptherm::estimators

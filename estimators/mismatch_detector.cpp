@@ -99,6 +99,10 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
         c.measured_node, model_.Name()));
   }
   rotor_ = c.rotor_node.empty() ? -1 : model_.StateIndex(c.rotor_node);
+  magnet_ = c.magnet_node.empty() ? -1 : model_.StateIndex(c.magnet_node);
+  if (!(c.magnet_sd_K > 0.0) || !(c.magnet_period_s > 0.0)) {
+    throw std::invalid_argument("mismatch detector: magnet_sd_K and magnet_period_s must be positive");
+  }
   if (!(c.measurement_sd_K > 0.0) || !(c.process_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) ||
       !(c.sensor_offset_sd_K > 0.0) || !(c.initial_sd_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
       !(c.window_s > 0.0) || !(c.false_alarm_probability > 0.0 && c.false_alarm_probability < 0.5) ||
@@ -169,7 +173,7 @@ void MismatchDetector::Linearise(const ThermalInputs& in, const Eigen::VectorXd&
 }
 
 const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt_s,
-                                              double measured_degC, double now_s) {
+                                              double measured_degC, double now_s, double magnet_degC) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
     throw std::domain_error("mismatch detector: the period must be positive and finite");
   }
@@ -183,7 +187,7 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
     cap_ = static_cast<int>(std::lround(config_.fit_window_s / dt_s)) + 1;
     h_in_.assign(static_cast<std::size_t>(cap_), ThermalInputs{});
     h_dt_.assign(static_cast<std::size_t>(cap_), 0.0);
-    h_y_ = h_nu_ = h_s_ = h_t_ = h_dt_;
+    h_y_ = h_nu_ = h_s_ = h_t_ = h_m_ = h_xm_ = h_dt_;
     h_xpre_.setZero(n_aug_, cap_);
     h_k_.setZero(n_aug_, cap_);
     const int onset_step = std::max(1, static_cast<int>(std::lround(config_.fit_onset_step_s / dt_s)));
@@ -194,6 +198,10 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
     fit_phiu_.setZero(n_aug_, kHypotheses);
     fit_a_.setZero(onsets * kHypotheses);
     fit_b_.setZero(onsets * kHypotheses);
+    fit_me_.setZero(onsets * kHypotheses);
+    fit_mee_.setZero(onsets * kHypotheses);
+    fit_mre_.setZero(onsets * kHypotheses);
+    fit_veto_.assign(static_cast<std::size_t>(onsets * kHypotheses), 0);
     size_ = head_ = 0;
   }
   const int nb = n_aug_ - 1;
@@ -234,6 +242,8 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
   h_nu_[static_cast<std::size_t>(slot)] = nu;
   h_s_[static_cast<std::size_t>(slot)] = s_nu;
   h_t_[static_cast<std::size_t>(slot)] = now_s;
+  h_m_[static_cast<std::size_t>(slot)] = magnet_ >= 0 ? magnet_degC : std::numeric_limits<double>::quiet_NaN();
+  h_xm_[static_cast<std::size_t>(slot)] = magnet_ >= 0 ? filter_.State()(magnet_) : 0.0;
   head_ = (head_ + 1) % cap_;
   size_ = std::min(size_ + 1, cap_);
 
@@ -345,8 +355,17 @@ void MismatchDetector::Fit(double now_s) {
   fit_e_.setZero();
   fit_a_.setZero();
   fit_b_.setZero();
+  fit_me_.setZero();
+  fit_mee_.setZero();
+  fit_mre_.setZero();
   const int oldest = (head_ - size_ + cap_) % cap_;
   int active = 0;
+  // The magnet channel: one sample per magnet_period_s, r = reading - the filter's estimate.
+  const int magnet_every = std::max(1, static_cast<int>(std::lround(
+      config_.magnet_period_s / h_dt_[static_cast<std::size_t>((head_ - 1 + cap_) % cap_)])));
+  double magnet_sum_r = 0.0, magnet_sum_rr = 0.0;
+  int magnet_samples = 0;
+  std::fill(fit_veto_.begin(), fit_veto_.end(), 0);
   for (int i = 0; i < size_; ++i) {
     const int k = (oldest + i) % cap_;
     const auto ks = static_cast<std::size_t>(k);
@@ -381,8 +400,41 @@ void MismatchDetector::Fit(double now_s) {
         e.noalias() -= h_k_.col(k) * g;
       }
     }
+    if (magnet_ >= 0 && i % magnet_every == 0 && std::isfinite(h_m_[ks])) {
+      const double r = h_m_[ks] - h_xm_[ks];
+      magnet_sum_r += r;
+      magnet_sum_rr += r * r;
+      ++magnet_samples;
+      for (int col = 0; col < active * kHypotheses; ++col) {
+        const double em = fit_e_(magnet_, col);  // after the update: truth less estimate, per unit
+        fit_me_(col) += em;
+        fit_mee_(col) += em * em;
+        fit_mre_(col) += r * em;
+      }
+    }
   }
+  AddMagnetChannel(onsets * kHypotheses, magnet_sum_r, magnet_sum_rr, magnet_samples);
   Choose(onsets, oldest);
+}
+
+void MismatchDetector::AddMagnetChannel(int columns, double sum_r, double sum_rr, int samples) {
+  if (samples < 2) return;
+  // Least squares of r = theta e + b + noise with b unknown: the sums about their means.
+  const double w = 1.0 / (config_.magnet_sd_K * config_.magnet_sd_K);
+  const double mean_r = sum_r / samples;
+  const double rr = sum_rr - sum_r * mean_r;
+  const double limit = ChiSquareQuantile(samples - 1, config_.magnet_veto_probability);
+  for (int col = 0; col < columns; ++col) {
+    const double re = fit_mre_(col) - mean_r * fit_me_(col);
+    const double ee = fit_mee_(col) - fit_me_(col) * fit_me_(col) / samples;
+    fit_a_(col) += w * re;
+    fit_b_(col) += w * ee;
+    if (!(fit_b_(col) > 0.0)) continue;
+    // The magnet samples' residual at the size fitted on both channels.
+    const double theta = fit_a_(col) / fit_b_(col);
+    const double chi = w * (rr - 2.0 * theta * re + theta * theta * ee);
+    fit_veto_[static_cast<std::size_t>(col)] = chi > limit ? 1 : 0;
+  }
 }
 
 void MismatchDetector::Choose(int onsets, int oldest) {
@@ -392,9 +444,15 @@ void MismatchDetector::Choose(int onsets, int oldest) {
     best_per_h[h] = -1.0;
     col_per_h[h] = -1;
   }
+  // Columns the magnet channel contradicts are left out, unless it contradicts every one.
+  bool any_kept = false;
+  for (int col = 0; col < onsets * kHypotheses; ++col) {
+    any_kept = any_kept || (fit_b_(col) > 0.0 && !fit_veto_[static_cast<std::size_t>(col)]);
+  }
   for (int col = 0; col < onsets * kHypotheses; ++col) {
     const int h = col % kHypotheses;
     if ((h == kRotor && rotor_ < 0) || !(fit_b_(col) > 0.0)) continue;
+    if (any_kept && fit_veto_[static_cast<std::size_t>(col)]) continue;
     const double l = fit_a_(col) * fit_a_(col) / fit_b_(col);
     if (l > best_per_h[h]) {
       best_per_h[h] = l;

@@ -24,6 +24,17 @@
 /// while the model moves is a stuck sensor. Sensor effects (offset, stuck) are reported as
 /// `kSensorFaultSuspected`, the rest as `kPlantChange`: the sensor alarm is not decided here.
 ///
+/// With a magnet reading (the magnet temperature from the flux, of `magnet_node`) the fit has a
+/// second channel: the reading less the filter's estimate of that node is theta e+(k) of the
+/// node plus the reading's bias and noise. The bias is slow, so it is taken as one unknown
+/// constant over the window (removed by the channel's mean, pre-onset samples included), and
+/// one sample per `magnet_period_s` enters with sd `magnet_sd_K`; the channel adds to both sums
+/// of theta^ and l. The frame's innovations (sd 0.06 K) outweigh it in l, so it also vetoes: an
+/// effect and onset whose fitted size leaves the magnet samples a sum of squared residuals above
+/// the chi-square quantile (samples - 1 degrees of freedom, `magnet_veto_probability`) is not
+/// named while another is not vetoed. The reading is not fused into the filter: the detection
+/// stays the frame's.
+///
 /// Pure library: time enters as an argument; no I/O. Allocates at construction; Step() does not
 /// allocate once the operating point is steady; the naming fit (at detection and then every
 /// `refit_period_s` while the test fails) may (matrix exponentials).
@@ -86,6 +97,13 @@ struct MismatchDetectorConfig {
   double refit_period_s = 60.0;       ///< refit while the test fails
   double name_after_s = 60.0;         ///< data after the detection before the first naming fit
   int stuck_samples = 60;             ///< identical readings that make a stuck sensor
+  /// Node the magnet reading measures (empty or absent: no magnet channel in the naming fit).
+  std::string magnet_node;
+  /// Sd of one magnet sample about its window mean: the slow error of the flux (the demo's
+  /// magnet temperature was 1.3-1.7 K off; the fault matrix emulates a 2 K bias).
+  double magnet_sd_K = 2.0;
+  double magnet_period_s = 10.0;      ///< one magnet sample per this period enters the fit
+  double magnet_veto_probability = 1e-3;  ///< of a right effect being vetoed, per fit
 };
 
 /// The detector's verdict.
@@ -120,9 +138,11 @@ class MismatchDetector {
   void Initialise(double x0_degC, double now_s);
 
   /// One period `dt_s` with `inputs` held, ending at `now_s`, reading `measured_degC` (NaN = no
-  /// reading). Throws std::domain_error like VirtualThermalSensor::Step.
+  /// reading) and, for the naming fit only, the magnet reading `magnet_degC` of `magnet_node`
+  /// (NaN = none). Throws std::domain_error like VirtualThermalSensor::Step.
   const MismatchFinding& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,
-                              double now_s);
+                              double now_s,
+                              double magnet_degC = std::numeric_limits<double>::quiet_NaN());
 
   const MismatchFinding& Finding() const { return finding_; }
   /// The nominal filter's node estimates (n) and sensor offset, for reports and tests.
@@ -138,13 +158,16 @@ class MismatchDetector {
   /// Names the effect of largest likelihood ratio over the fit's `onsets` columns.
   void Choose(int onsets, int oldest);
   bool Stuck(int* first) const;
+  /// Adds the magnet channel's sums (de-meaned over the window) to fit_a_, fit_b_, and marks in
+  /// fit_veto_ the columns whose fitted size the magnet samples contradict.
+  void AddMagnetChannel(int columns, double sum_r, double sum_rr, int samples);
   /// Heat per unit effect size of hypothesis h at `in`, with the pre-step state `x_aug`.
   void EffectForcing(int h, const ThermalInputs& in, const Eigen::VectorXd& x_aug, double frame_degC,
                      Eigen::VectorXd& u);
 
   const ThermalModel& model_;
   MismatchDetectorConfig config_;
-  int n_ = 0, n_aug_ = 0, lag_ = -1, bias_ = 0, sensor_ = 0, frame_ = 0, rotor_ = -1;
+  int n_ = 0, n_aug_ = 0, lag_ = -1, bias_ = 0, sensor_ = 0, frame_ = 0, rotor_ = -1, magnet_ = -1;
   double threshold_ = 0.0;
   Eigen::VectorXd boundary_K_per_s_per_K_;  ///< d f / d T_boundary (n)
   ThermalLinearModel lin_, lin_block_, lin_zero_;
@@ -162,6 +185,7 @@ class MismatchDetector {
   int cap_ = 0, head_ = 0, size_ = 0;
   std::vector<ThermalInputs> h_in_;
   std::vector<double> h_dt_, h_y_, h_nu_, h_s_, h_t_;
+  std::vector<double> h_m_, h_xm_;  ///< magnet reading, the filter's estimate of its node after the step
   Eigen::MatrixXd h_xpre_, h_k_;  ///< state before the step, gain (n_aug x cap)
   // Fit workspace.
   ThermalDiscretiser fit_disc_;
@@ -169,6 +193,8 @@ class MismatchDetector {
   std::vector<int> fit_onsets_;  ///< onset steps (chronological history index), ascending
   Eigen::MatrixXd fit_e_, fit_phiu_;
   Eigen::VectorXd fit_a_, fit_b_, fit_x_, fit_tmp_, fit_u_col_;
+  Eigen::VectorXd fit_me_, fit_mee_, fit_mre_;  ///< magnet channel: sums of e, e^2, r e per column
+  std::vector<char> fit_veto_;                    ///< per column: contradicted by the magnet
   MismatchFinding finding_;
 };
 

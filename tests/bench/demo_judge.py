@@ -10,9 +10,14 @@ Runs `pumptherm plant demo` (unless --reuse), the gateway offline on its recordi
     magnet node, by its sd);
   - the first warning and trip against the truth's first crossings (summary.json).
 Prints a table and writes judge.json into the output directory. Standard library only.
+With --check it exits 1 when a goal of the demo is missed (docs/virtual-sensor.md, "The demo
+judged node by node"): a node more than --max-error-K off or covered less than --min-coverage
+of the time, or an alarm on a pump whose truth never crosses the level, or a warning or trip
+later than 30 s after (or earlier than 120 s before) the true crossing.
 
 Example:
   tests/bench/demo_judge.py --build build --out /tmp/demo-judge
+  tests/bench/demo_judge.py --build build --out /tmp/demo-judge --check   # as CTest's demo_judge
 """
 import argparse
 import bisect
@@ -88,6 +93,9 @@ def main():
     ap.add_argument("--skip-s", type=float, default=300.0, help="judge from this time on, s")
     ap.add_argument("--magnet-node", default="rotor", help="truth node the magnet temperature is judged against")
     ap.add_argument("--reuse", action="store_true", help="reuse the recording and estimates in --out")
+    ap.add_argument("--check", action="store_true", help="exit 1 when a goal is missed")
+    ap.add_argument("--max-error-K", type=float, default=3.0, help="goal for every node's max |error|, K")
+    ap.add_argument("--min-coverage", type=float, default=0.9, help="goal for every node's coverage")
     a = ap.parse_args()
 
     est_dir = os.path.join(a.out, "estimates")
@@ -141,7 +149,31 @@ def main():
               f"(truth {al['true_trip_s']})")
     with open(os.path.join(a.out, "judge.json"), "w") as f:
         json.dump(report, f, indent=1)
+    if a.check:
+        missed = Missed(report, a.max_error_K, a.min_coverage)
+        for m in missed:
+            print("MISSED: " + m)
+        return 1 if missed else 0
     return 0
+
+
+def Missed(report, max_error_K, min_coverage):
+    """The goals the report misses, one line each."""
+    out = []
+    for p in report["pumps"]:
+        for node, v in p["nodes"].items():
+            if v["max_abs_error_K"] is None or v["max_abs_error_K"] > max_error_K:
+                out.append(f"{p['name']} {node}: max |error| {v['max_abs_error_K']} K > {max_error_K} K")
+            if v["coverage_2sd"] is None or v["coverage_2sd"] < min_coverage:
+                out.append(f"{p['name']} {node}: coverage {v['coverage_2sd']} < {min_coverage}")
+        al = p["alarms"]
+        for level in ("warning", "trip"):
+            got, truth = al[level + "_s"], al["true_" + level + "_s"]
+            if truth is None and got is not None:
+                out.append(f"{p['name']}: {level} at {got} s, the truth never crosses")
+            elif truth is not None and (got is None or not truth - 120.0 <= got <= truth + 30.0):
+                out.append(f"{p['name']}: {level} at {got} s, outside [{truth} - 120, {truth} + 30] s")
+    return out
 
 
 if __name__ == "__main__":

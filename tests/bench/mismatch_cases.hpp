@@ -97,6 +97,14 @@ struct CaseSpec {
   /// The resistance-based winding temperature for the disturbance filter: the truth's winding
   /// (ThermalModel::WindingWeights) plus white noise of this sd, once per step; 0 = not fused.
   double winding_noise_sd_K = 0.0;
+  /// The magnet temperature from the flux for the disturbance filter: the truth's rotor plus
+  /// white noise of this sd plus a slow bias (first-order Gauss-Markov, stationary sd
+  /// `magnet_bias_sd_K`, correlation `magnet_bias_tau_s`, started from its stationary law) as
+  /// the flux gives (nameplate flux, inverter voltage error); 0 = not fused.
+  double magnet_noise_sd_K = 0.0;
+  double magnet_bias_sd_K = 2.0;
+  double magnet_bias_tau_s = 1800.0;
+  bool magnet_to_detector = true;  ///< the magnet reading also in the detector's naming fit
 };
 
 struct CaseResult {
@@ -151,9 +159,19 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   std::normal_distribution<double> normal(0.0, 1.0);
 
   pe::VirtualThermalSensor vts(nominal, vts_config);
-  pe::MismatchDetector det(nominal, DetectorConfig(spec.sensor_lag_s));
+  pe::MismatchDetectorConfig detector_config = DetectorConfig(spec.sensor_lag_s);
+  if (spec.magnet_noise_sd_K > 0.0 && spec.magnet_to_detector) detector_config.magnet_node = "rotor";
+  pe::MismatchDetector det(nominal, detector_config);
   dc.sensor_lag_s = spec.sensor_lag_s;
-  if (spec.winding_noise_sd_K > 0.0) dc.winding_measurement_sd_K = spec.winding_noise_sd_K;
+  if (spec.winding_noise_sd_K > 0.0) {
+    dc.winding_reading = true;
+    dc.winding_measurement_sd_K = spec.winding_noise_sd_K;
+  }
+  if (spec.magnet_noise_sd_K > 0.0) dc.magnet_node = "rotor";
+  const int rotor = nominal.StateIndex("rotor");
+  std::mt19937_64 magnet_rng(spec.seed * 104729 + 3);  // its own: the other cases' draws stay as they were
+  std::normal_distribution<double> magnet_normal(0.0, 1.0);
+  double magnet_bias_K = spec.magnet_bias_sd_K * magnet_normal(magnet_rng);
   pe::DisturbanceThermalSensor dist(nominal, dc);
   CaseResult r;
   r.nodes = nominal.StateNames();
@@ -199,8 +217,17 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     const double winding = spec.winding_noise_sd_K > 0.0
                                ? nominal.WindingWeights().dot(x) + spec.winding_noise_sd_K * normal(rng)
                                : std::numeric_limits<double>::quiet_NaN();
-    dist.Step(in, spec.dt_s, y, winding);
-    const pe::MismatchFinding& f = det.Step(in, spec.dt_s, y, t);
+    pe::DisturbanceReadings readings;
+    readings.frame_degC = y;
+    readings.winding_degC = winding;
+    if (spec.magnet_noise_sd_K > 0.0) {
+      const double a = std::exp(-spec.dt_s / spec.magnet_bias_tau_s);
+      magnet_bias_K = a * magnet_bias_K + spec.magnet_bias_sd_K * std::sqrt(1.0 - a * a) * magnet_normal(magnet_rng);
+      readings.magnet_degC = x(rotor) + magnet_bias_K + spec.magnet_noise_sd_K * magnet_normal(magnet_rng);
+      readings.magnet_sd_K = spec.magnet_noise_sd_K;
+    }
+    dist.Step(in, spec.dt_s, readings);
+    const pe::MismatchFinding& f = det.Step(in, spec.dt_s, y, t, readings.magnet_degC);
     const bool named = f.state == pe::MismatchState::kPlantChange ||
                        f.state == pe::MismatchState::kSensorFaultSuspected;
     const bool fault_state = named || f.state == pe::MismatchState::kUnexplained;

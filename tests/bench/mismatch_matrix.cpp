@@ -29,7 +29,7 @@ int main(int argc, char** argv) {
   double duration_s = 10800.0, fault_s = 3600.0;
   int seeds = 1;
   bool json = false;
-  double winding_sd_K = 0.0;
+  double winding_sd_K = 0.0, magnet_sd_K = 0.0, magnet_bias_K = 2.0;
   pe::DisturbanceSensorConfig dc;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -40,12 +40,18 @@ int main(int argc, char** argv) {
     else if (a == "--frame-heat-sd-W" && i + 1 < argc) dc.frame_heat_sd_W = std::atof(argv[++i]);
     else if (a == "--rotor-heat-sd-W" && i + 1 < argc) dc.rotor_heat_sd_W = std::atof(argv[++i]);
     else if (a == "--winding-sd-K" && i + 1 < argc) winding_sd_K = std::atof(argv[++i]);
+    else if (a == "--magnet-sd-K" && i + 1 < argc) magnet_sd_K = std::atof(argv[++i]);
+    else if (a == "--magnet-bias-K" && i + 1 < argc) magnet_bias_K = std::atof(argv[++i]);
+    else if (a == "--magnet-bias-sd-K" && i + 1 < argc) dc.magnet_bias_sd_K = std::atof(argv[++i]);
+    else if (a == "--rotor-heat-tau-s" && i + 1 < argc) dc.rotor_heat_tau_s = std::atof(argv[++i]);
     else if (a == "--loss-scale-sd" && i + 1 < argc) dc.loss_scale_sd = std::atof(argv[++i]);
     else if (a == "--sd-floor-K" && i + 1 < argc) dc.sd_floor_K = std::atof(argv[++i]);
     else if (a == "--node-process-sd-K" && i + 1 < argc) dc.node_process_sd_K = std::atof(argv[++i]);
     else {
       fmt::print(stderr, "usage: mismatch_matrix [--duration-s S] [--fault-s S] [--seeds N] [--json]\n"
-                          "  [--frame-heat-sd-W W] [--rotor-heat-sd-W W] [--loss-scale-sd S] [--winding-sd-K K] [--sd-floor-K K] [--node-process-sd-K K]\n");
+                          "  [--frame-heat-sd-W W] [--rotor-heat-sd-W W] [--loss-scale-sd S] [--winding-sd-K K] [--sd-floor-K K] [--node-process-sd-K K]\n"
+                          "  [--magnet-sd-K K (emulated rotor reading: white sd)] [--magnet-bias-K K (its slow bias, sd)]\n"
+                          "  [--magnet-bias-sd-K K (the filter's bias state)] [--rotor-heat-tau-s S]\n");
       return 2;
     }
   }
@@ -65,6 +71,8 @@ int main(int argc, char** argv) {
       spec.duration_s = duration_s;
       spec.seed = static_cast<std::uint64_t>(seed);
       spec.winding_noise_sd_K = winding_sd_K;
+      spec.magnet_noise_sd_K = magnet_sd_K;
+      spec.magnet_bias_sd_K = magnet_bias_K;
       const mc::CaseResult r = mc::RunCase(spec, dir, {}, dc);
       std::string nodes;
       for (std::size_t i = 0; i < r.nodes.size(); ++i) {

@@ -106,28 +106,39 @@ BENCHMARK(BM_MismatchStep);
 
 /// One step of the disturbance-state filter on tmp-generic (4 nodes, lag, frame-path heat,
 /// rotor heat, loss scale, offset: 9 states; two Linearise calls for the loss column) at a
-/// steady operating point.
+/// steady operating point; with magnet:1 also the magnet reading on the rotor (its bias state: 10
+/// states, a 2-row update).
 void BM_DisturbanceStep(benchmark::State& state) {
   const auto model = Load("tmp-generic");
   pe::DisturbanceSensorConfig c;
   c.sensor_lag_s = 30.0;
+  const bool magnet = state.range(0) != 0;
+  if (magnet) c.magnet_node = "rotor";
   pe::DisturbanceThermalSensor f(model, c);
   f.Initialise(30.0);
   pe::ThermalInputs in;
   in.speed_rpm = 21000.0;
   in.iq_A = 2.0;
   in.ambient_degC = 22.0;
-  for (int k = 0; k < 2000; ++k) f.Step(in, 1.0, 30.0);
+  pe::DisturbanceReadings r;
+  r.frame_degC = 30.0;
+  if (magnet) {
+    r.magnet_degC = 40.0;
+    r.magnet_sd_K = 0.5;
+    r.magnet_winding_gain = -0.13;
+  }
+  for (int k = 0; k < 2000; ++k) f.Step(in, 1.0, r);
   const long before = g_allocations.load();
   long steps = 0;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(f.Step(in, 1.0, 30.0 + 1e-3 * static_cast<double>(steps & 7)).nis);
+    r.frame_degC = 30.0 + 1e-3 * static_cast<double>(steps & 7);
+    benchmark::DoNotOptimize(f.Step(in, 1.0, r).nis);
     ++steps;
   }
   state.counters["allocs_per_step"] =
       static_cast<double>(g_allocations.load() - before) / static_cast<double>(steps);
 }
-BENCHMARK(BM_DisturbanceStep);
+BENCHMARK(BM_DisturbanceStep)->ArgName("magnet")->Arg(0)->Arg(1);
 
 /// The naming fit once (20 minutes of history at 1 s, 5 effects, the onset grid): what one
 /// failing test costs at detection and then once a minute.

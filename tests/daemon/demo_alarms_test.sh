@@ -2,10 +2,10 @@
 # Issue 9's done criterion: the `demo` recording replayed through the daemon gives alarms that
 # agree with the truth. Stated delays (docs/daemon.md, "Alarms on the demo"): each alarm level
 # comes no later than 30 s after the true winding temperature crosses it, and no earlier than
-# 120 s before (the gateway's model does not know the cooling has failed, so it reads the hot
-# frame as internal heat and runs ahead); a warning for the frame sensor disagreeing with the
-# model (implausible_sensor) may come earlier, but not before the cooling fails (240 s); pumps
-# 1 and 2 never alarm.
+# 120 s before (a trip fires on the estimate plus 2 sd, and a filter that does not model the lost
+# cooling reads the hot frame as internal heat and runs ahead); a warning for the frame sensor
+# disagreeing with the model (implausible_sensor) may come earlier, but not before the cooling
+# fails (240 s); pumps 1 and 2 never alarm.
 set -euo pipefail
 pumptherm=$1
 pumpthermd=$2

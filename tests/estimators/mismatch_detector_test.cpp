@@ -21,8 +21,10 @@ std::string ModelDir() {
 }
 
 /// Faults start after an hour, when the pump has (nearly) reached its thermal equilibrium.
-mc::CaseResult RunFault(mc::Fault fault, std::uint64_t seed, double duration_s = 3600.0 + 1500.0) {
+mc::CaseResult RunFault(mc::Fault fault, std::uint64_t seed, double duration_s = 3600.0 + 1500.0,
+                        double magnet_white_sd_K = 0.0) {
   mc::CaseSpec spec;
+  spec.magnet_noise_sd_K = magnet_white_sd_K;  // with the default 2 K slow bias
   spec.fault = fault;
   spec.fault_s = fault == mc::Fault::kNone ? duration_s + 1.0 : 3600.0;
   spec.duration_s = duration_s;
@@ -61,6 +63,26 @@ TEST(MismatchDetector, NamesExtraRotorHeatWithItsSize) {
   EXPECT_LE(r.detect_delay_s, 600.0);
   EXPECT_EQ(r.at_end.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(r.at_end);
   EXPECT_NEAR(r.at_end.value, 6.0, 1.5);
+}
+
+TEST(MismatchDetector, TheFluxReadingKeepsAnAmbientRiseOffTheRotor) {
+  // From the frame alone an unmeasured ambient rise looks like heat inside the rotor (named
+  // rotor_loss about 17 W); a rotor reading with a 2 K slow bias contradicts that size.
+  const mc::CaseResult frame_only = RunFault(mc::Fault::kAmbientRise, 7);
+  EXPECT_EQ(frame_only.at_end.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(frame_only.at_end);
+  const mc::CaseResult r = RunFault(mc::Fault::kAmbientRise, 7, 3600.0 + 1500.0, 1.0);
+  EXPECT_EQ(r.at_end.state, pe::MismatchState::kPlantChange);
+  EXPECT_NE(r.at_end.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(r.at_end);
+  EXPECT_EQ(r.false_alarms, 0);
+}
+
+TEST(MismatchDetector, TheFluxReadingNamesRotorHeatAtFirst) {
+  // Seed 2: from the frame alone the first name is loss_scale; with the rotor reading, rotor_loss.
+  const mc::CaseResult frame_only = RunFault(mc::Fault::kRotorLoss, 2, 3600.0 + 600.0);
+  EXPECT_NE(frame_only.at_naming.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(frame_only.at_naming);
+  const mc::CaseResult r = RunFault(mc::Fault::kRotorLoss, 2, 3600.0 + 600.0, 1.0);
+  ASSERT_FALSE(std::isnan(r.name_delay_s));
+  EXPECT_EQ(r.at_naming.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(r.at_naming);
 }
 
 TEST(MismatchDetector, TellsASensorOffsetFromAPlantChange) {
