@@ -517,7 +517,8 @@ void Pump::StepAlarmBounds(bool diverged, bool fresh_inputs, double lagging_degC
   }
   const auto n = static_cast<Eigen::Index>(snapshot_.node_sd_K.size());
   silence_.Step(*model_, in, fresh_inputs, x, Eigen::Map<const Eigen::VectorXd>(snapshot_.node_sd_K.data(), n),
-                period_s_, config_.alarms.monitor.stale_after_s, config_.alarms.monitor.trip_sd_factor);
+                static_cast<double>(snapshot_.time_us) * 1e-6, period_s_, config_.alarms.monitor.stale_after_s,
+                config_.alarms.monitor.trip_sd_factor);
 }
 
 double Pump::AlarmValue_degC(int i, double estimate_degC) const {

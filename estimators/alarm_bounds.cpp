@@ -57,22 +57,21 @@ bool SilenceBound::Propagate(const ThermalModel& model, const ThermalInputs& in,
 void SilenceBound::Reset() {
   start_degC_.resize(0);
   bound_degC_.resize(0);
-  silent_steps_ = 0;
 }
 
 void SilenceBound::Step(const ThermalModel& model, const ThermalInputs& in, bool fresh,
-                        const Eigen::VectorXd& x_degC, const Eigen::Ref<const Eigen::VectorXd>& sd_K, double period_s,
-                        double min_silence_s, double k) {
+                        const Eigen::VectorXd& x_degC, const Eigen::Ref<const Eigen::VectorXd>& sd_K, double end_s,
+                        double period_s, double min_silence_s, double k) {
   if (!fresh) {
-    ++silent_steps_;
     if (bound_degC_.size() > 0 && !Propagate(model, in, period_s, bound_degC_)) bound_degC_.resize(0);
     return;
   }
-  const double silence_s = silent_steps_ * period_s;
-  if (start_degC_.size() == x_degC.size() && silence_s > min_silence_s) {
+  // The silence: the steps between the last one with inputs and this one.
+  const double since_s = end_s - start_s_;
+  if (start_degC_.size() == x_degC.size() && since_s - period_s > min_silence_s) {
     // The frames are back: the silence and this step again, at the worse of the two loads.
     Eigen::VectorXd b = start_degC_;
-    const bool ok = Propagate(model, WorseInputs(start_inputs_, in), silence_s + period_s, b);
+    const bool ok = Propagate(model, WorseInputs(start_inputs_, in), since_s, b);
     if (ok && (bound_degC_.size() != b.size())) bound_degC_ = b;
     else if (ok) bound_degC_ = bound_degC_.cwiseMax(b);
   } else if (bound_degC_.size() > 0 && !Propagate(model, in, period_s, bound_degC_)) {
@@ -84,7 +83,7 @@ void SilenceBound::Step(const ThermalModel& model, const ThermalInputs& in, bool
   }
   start_degC_ = x_degC;
   start_inputs_ = in;
-  silent_steps_ = 0;
+  start_s_ = end_s;
 }
 
 }  // namespace pumptherm::estimators

@@ -45,13 +45,14 @@ class LagBias {
 /// lies above the estimate's upper bound (mean + k sd) on any node.
 class SilenceBound {
  public:
-  /// One thermal step of `period_s`. `fresh`: this step had telemetry inputs; `in` its inputs
-  /// (the held ones when not fresh); `x_degC` and `sd_K` the estimate after the step (n
-  /// states); `min_silence_s` a silence shorter than this is not one (stale_after_s);
-  /// `k` the factor of the upper bound that ends the bound. A model that cannot be linearised
-  /// at these inputs drops the bound (never throws).
+  /// One thermal step of `period_s` ending at `end_s` (monotonic). `fresh`: this step had
+  /// telemetry inputs; `in` its inputs (the held ones when not fresh); `x_degC` and `sd_K` the
+  /// estimate after the step (n states); `min_silence_s` a silence shorter than this is not one
+  /// (stale_after_s); `k` the factor of the upper bound that ends the bound. A model that cannot
+  /// be linearised at these inputs drops the bound (never throws).
   void Step(const ThermalModel& model, const ThermalInputs& in, bool fresh, const Eigen::VectorXd& x_degC,
-            const Eigen::Ref<const Eigen::VectorXd>& sd_K, double period_s, double min_silence_s, double k);
+            const Eigen::Ref<const Eigen::VectorXd>& sd_K, double end_s, double period_s, double min_silence_s,
+            double k);
   /// Forgets everything (the filter was reset).
   void Reset();
   /// The bound, degC per state; size 0 while there is none.
@@ -63,7 +64,7 @@ class SilenceBound {
 
   Eigen::VectorXd start_degC_;  // the estimate after the last step with inputs
   ThermalInputs start_inputs_;  // that step's inputs (held through the silence)
-  int silent_steps_ = 0;
+  double start_s_ = 0.0;        // that step's end
   Eigen::VectorXd bound_degC_;
 };
 

@@ -73,7 +73,8 @@ struct SilenceFixture {
   SilenceBound bound;
   Eigen::VectorXd x = Eigen::VectorXd::Constant(1, 30.0);
   Eigen::VectorXd sd = Eigen::VectorXd::Constant(1, 0.5);
-  void Step(double iq_A, bool fresh) { bound.Step(*model, Load(iq_A), fresh, x, sd, 1.0, 2.0, 2.0); }
+  double t_s = 0.0;
+  void Step(double iq_A, bool fresh) { bound.Step(*model, Load(iq_A), fresh, x, sd, t_s += 1.0, 1.0, 2.0, 2.0); }
 };
 
 TEST(SilenceBound, ReRunsTheSilenceAtTheWorseLoad) {
@@ -102,6 +103,16 @@ TEST(SilenceBound, RunsOnAtTheLiveLoadAndEndsBelowTheUpperBound) {
   f.x(0) = f.bound.bound_degC()(0);  // the estimate has caught up: the bound ends
   f.Step(2.0, true);
   EXPECT_EQ(f.bound.bound_degC().size(), 0);
+}
+
+TEST(SilenceBound, TheSilenceIsTimedByTheStepsEndsNotCounted) {
+  // Offline, a long gap in a log runs as one step: the bound still re-runs all of it.
+  SilenceFixture f;
+  f.Step(1.0, true);  // ends at 1 s
+  f.x(0) = 25.0;
+  f.bound.Step(*f.model, Load(3.0), true, f.x, f.sd, 200.0, 1.0, 2.0, 2.0);
+  ASSERT_EQ(f.bound.bound_degC().size(), 1);
+  EXPECT_NEAR(f.bound.bound_degC()(0), Closed(30.0, 20.0, 18.0, 199.0), 1e-6);
 }
 
 TEST(SilenceBound, AShortGapIsNoSilence) {
