@@ -687,6 +687,8 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   // step (seen in the system test: Rs "not available" right after kill -9).
   snapshot_.resistance = identifier_.estimate();
   sensor_.Restore(x, s);
+  // The time the daemon was down is a telemetry silence: the load may have risen in it.
+  silence_.Begin(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6);
   // The mismatch test starts afresh (learning) from the restored level.
   mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0, static_cast<double>(now_us) * 1e-6);
   robust_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0);

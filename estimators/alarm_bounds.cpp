@@ -54,6 +54,13 @@ bool SilenceBound::Propagate(const ThermalModel& model, const ThermalInputs& in,
   return x.allFinite();
 }
 
+void SilenceBound::Begin(const Eigen::VectorXd& x_degC, const ThermalInputs& in, double start_s) {
+  start_degC_ = x_degC;
+  start_inputs_ = in;
+  start_s_ = start_s;
+  bound_degC_.resize(0);
+}
+
 void SilenceBound::Reset() {
   start_degC_.resize(0);
   bound_degC_.resize(0);

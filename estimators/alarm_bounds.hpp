@@ -53,6 +53,10 @@ class SilenceBound {
   void Step(const ThermalModel& model, const ThermalInputs& in, bool fresh, const Eigen::VectorXd& x_degC,
             const Eigen::Ref<const Eigen::VectorXd>& sd_K, double end_s, double period_s, double min_silence_s,
             double k);
+  /// Starts a silence at `start_s` from the estimate `x_degC` with the inputs `in` then held (a
+  /// restart: the state saved before it; while the daemon was down the load may have risen
+  /// too). The next step with inputs ends it as any silence.
+  void Begin(const Eigen::VectorXd& x_degC, const ThermalInputs& in, double start_s);
   /// Forgets everything (the filter was reset).
   void Reset();
   /// The bound, degC per state; size 0 while there is none.

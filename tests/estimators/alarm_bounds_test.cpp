@@ -115,6 +115,15 @@ TEST(SilenceBound, TheSilenceIsTimedByTheStepsEndsNotCounted) {
   EXPECT_NEAR(f.bound.bound_degC()(0), Closed(30.0, 20.0, 18.0, 199.0), 1e-6);
 }
 
+TEST(SilenceBound, ARestartIsASilenceFromTheSavedState) {
+  SilenceFixture f;
+  f.bound.Begin(Eigen::VectorXd::Constant(1, 30.0), Load(1.0), -100.0);  // saved 100 s before 0 s
+  f.x(0) = 25.0;
+  f.Step(3.0, true);  // the first step with inputs after the restart ends at 1 s
+  ASSERT_EQ(f.bound.bound_degC().size(), 1);
+  EXPECT_NEAR(f.bound.bound_degC()(0), Closed(30.0, 20.0, 18.0, 101.0), 1e-6);
+}
+
 TEST(SilenceBound, AShortGapIsNoSilence) {
   SilenceFixture f;
   f.Step(1.0, true);
