@@ -245,9 +245,9 @@ class Pump {
   Eigen::VectorXd forecast_ss_;
   std::vector<double> alarm_values_;
   Eigen::VectorXd blind_x_;  // worst-case bound while blind (size 0: not blind), degC
+  std::vector<double> alarm_sd_;         // their standard deviations (the winding's: none, NaN)
   estimators::LagBias lag_bias_;          // the frame reading's lag, added to the levels' values
   estimators::SilenceBound silence_;      // the load that may have risen in a telemetry silence
-  std::vector<double> alarm_sd_;         // their standard deviations (the winding's: none, NaN)
 };
 
 }  // namespace pumptherm::daemon
