@@ -491,6 +491,7 @@ void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
     next_health_us_ = now_us;
   }
   last_now_us_ = now_us;
+  ReportRefusedClearsHeldBack(now_us);
   const auto lcm_period_us = static_cast<std::int64_t>(std::llround(config_.lcm.period_s * 1e6));
   for (std::size_t p = 0; p < pumps_.size(); ++p) {
     Pump& pump = *pumps_[p];
@@ -783,14 +784,18 @@ bool Gateway::Clear(const std::string& pump_name, const std::string& source, con
       // A source name alone proves nothing: LCM clears go through ClearFromLcm.
       ++counters_.clears_refused;
       ++counters_.clears_unauthenticated;
-      Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' refused (no authentication code){}",
-          pump_name, source, comment.empty() ? "" : ": " + comment);
+      if (std::string note; AllowRefusedClearLog(&note)) {
+        Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' refused (no authentication code){}{}",
+            pump_name, source, comment.empty() ? "" : ": " + comment, note);
+      }
       return false;
     }
     if (!allowed) {
       ++counters_.clears_refused;
-      Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' refused (not a configured source){}",
-          pump_name, source, comment.empty() ? "" : ": " + comment);
+      if (std::string note; AllowRefusedClearLog(&note)) {
+        Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' refused (not a configured source){}{}",
+            pump_name, source, comment.empty() ? "" : ": " + comment, note);
+      }
       return false;
     }
     ++counters_.clears_accepted;
@@ -800,8 +805,28 @@ bool Gateway::Clear(const std::string& pump_name, const std::string& source, con
     return true;
   }
   ++counters_.clears_refused;
-  Log(LogLevel::kWarning, "alarm clear for unknown pump '{}' from '{}' ignored", pump_name, source);
+  if (std::string note; AllowRefusedClearLog(&note)) {
+    Log(LogLevel::kWarning, "alarm clear for unknown pump '{}' from '{}' ignored{}", pump_name, source, note);
+  }
   return false;
+}
+
+bool Gateway::AllowRefusedClearLog(std::string* note) {
+  // On the pipeline's clock (the last Advance): monotonic live, the log's time offline.
+  std::uint64_t held_back = 0;
+  if (!refused_clear_log_.Allow(last_now_us_, &held_back)) return false;
+  if (held_back > 0) {
+    *note = fmt::format(" ({} refused clear(s) before this one not logged: at most {} lines per {} s)", held_back,
+                        kRefusedClearLogBurst, kRefusedClearLogWindow_s);
+  }
+  return true;
+}
+
+void Gateway::ReportRefusedClearsHeldBack(std::int64_t now_us) {
+  if (const std::uint64_t n = refused_clear_log_.TakeHeldBack(now_us); n > 0) {
+    Log(LogLevel::kWarning, "{} refused alarm clear(s) not logged (at most {} lines per {} s; all counted in "
+        "clears_refused)", n, kRefusedClearLogBurst, kRefusedClearLogWindow_s);
+  }
 }
 
 std::string Gateway::StatusLine() const {

@@ -14,6 +14,7 @@
 #include "daemon/alarm_clear_auth.hpp"
 #include "daemon/config.hpp"
 #include "daemon/frame_counter.hpp"
+#include "daemon/log.hpp"
 #include "daemon/pump.hpp"
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
@@ -189,6 +190,11 @@ class Gateway {
   static constexpr std::size_t kAlarmNodeWindingRes = 14;
 
   void RateLimitedClear(PumpIo& io, const std::string& pump, const std::string& iface);
+  /// Whether a refused clear may be logged now (refused_clear_log_); `note` gets what to append
+  /// (the count of refusals not logged before it, or nothing).
+  bool AllowRefusedClearLog(std::string* note);
+  /// A summary line for refusals not logged, once their window has ended.
+  void ReportRefusedClearsHeldBack(std::int64_t now_us);
   void Emit(std::size_t pump, OutputPlan& plan, std::int64_t time_us, OutputSink& sink);
   void PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us, OutputSink& sink);
   /// One frame of `plan`; `node` is the model node of a node-indexed message, else -1.
@@ -223,6 +229,11 @@ class Gateway {
   std::vector<std::uint8_t> lcm_bytes_;        // LCM encoding buffer (largest message)
   mutable std::vector<estimators::AlarmCondition> conditions_;  // FillAlarm's buffer
   ClearAuthenticator clear_auth_;
+  /// Refused clears can come as fast as anyone sends them: at most kRefusedClearLogBurst lines
+  /// per kRefusedClearLogWindow_s (every one is counted in clears_refused).
+  static constexpr int kRefusedClearLogBurst = 5;
+  static constexpr double kRefusedClearLogWindow_s = 60.0;
+  LogRateLimiter refused_clear_log_{kRefusedClearLogBurst, kRefusedClearLogWindow_s};
   std::int64_t start_us_ = -1;
   std::int64_t next_health_us_ = -1;
   std::int64_t last_now_us_ = -1;

@@ -26,13 +26,18 @@ bool Gateway::ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_u
   if (!m) {
     ++counters_.clears_refused;
     ++counters_.clears_unauthenticated;
-    Log(LogLevel::kWarning, "alarm clear refused: the message does not decode as alarm_clear_t (an old sender?)");
+    if (std::string note; AllowRefusedClearLog(&note)) {
+      Log(LogLevel::kWarning, "alarm clear refused: the message does not decode as alarm_clear_t (an old sender?){}",
+          note);
+    }
     return false;
   }
   const auto pump = std::find_if(pumps_.begin(), pumps_.end(), [&](const auto& p) { return p->config().name == m->pump; });
   if (pump == pumps_.end()) {
     ++counters_.clears_refused;
-    Log(LogLevel::kWarning, "alarm clear for unknown pump '{}' from '{}' ignored", m->pump, m->source);
+    if (std::string note; AllowRefusedClearLog(&note)) {
+      Log(LogLevel::kWarning, "alarm clear for unknown pump '{}' from '{}' ignored{}", m->pump, m->source, note);
+    }
     return false;
   }
   const auto& sources = (*pump)->config().alarms.clear_lcm_sources;
@@ -48,8 +53,10 @@ bool Gateway::ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_u
   } else {
     ++counters_.clears_refused;
     if (result == R::RESULT_BAD_MAC || result == R::RESULT_NO_KEY) ++counters_.clears_unauthenticated;
-    Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' (counter {}) refused: {}{}", m->pump, m->source,
-        m->counter, reason, comment);
+    if (std::string note; AllowRefusedClearLog(&note)) {
+      Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' (counter {}) refused: {}{}{}", m->pump, m->source,
+          m->counter, reason, comment, note);
+    }
   }
   // The snapshot lags a clear until the next thermal step; the saved latch does not.
   const bool latched = !(*pump)->Save().latched_trips.empty();

@@ -129,7 +129,8 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
       sensor_health_(config.alarms.monitor),
 
       mismatch_(*model_, MismatchConfig(config, *model_)),
-      robust_(*model_, RobustConfig(config, *model_)) {
+      robust_(*model_, RobustConfig(config, *model_)),
+      lag_bias_(config.frame_sensor_lag_s, thermal_period_s) {
   measured_state_ = model_->StateIndex(config_.measured_node);
   if (!config_.magnet_node.empty()) {
     magnet_state_ = model_->StateIndex(config_.magnet_node);
@@ -289,7 +290,8 @@ bool Pump::Advance(std::int64_t t_us) {
 void Pump::ThermalStep(std::int64_t end_us) {
   estimators::ThermalInputs in = held_inputs_;
   double mean_iq_A = kNaN;
-  if (n_inputs_ > 0) {
+  const bool fresh_inputs = n_inputs_ > 0;
+  if (fresh_inputs) {
     in.id_A = std::sqrt(sum_id2_ / n_inputs_);
     in.iq_A = std::sqrt(sum_iq2_ / n_inputs_);
     in.speed_rpm = sum_speed_ / n_inputs_;
@@ -392,9 +394,9 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const bool blind = !diverged && !measured_again &&
                      (fault_alarm != estimators::SensorFault::kNone || blind_x_.size() > 0);
   StepBlindBound(blind, in);
+  StepAlarmBounds(diverged, fresh_inputs, robust ? kNaN : measured, in, x);
   for (int i = 0; i < x.size(); ++i) {
-    const double bound = blind_x_.size() == x.size() ? blind_x_(i) : kNaN;
-    alarm_values_[static_cast<std::size_t>(i)] = diverged ? kNaN : std::isnan(bound) ? x(i) : std::max(x(i), bound);
+    alarm_values_[static_cast<std::size_t>(i)] = diverged ? kNaN : AlarmValue_degC(i, x(i));
     alarm_sd_[static_cast<std::size_t>(i)] = snapshot_.node_sd_K[static_cast<std::size_t>(i)];
   }
   alarm_values_.back() = winding_res;
@@ -522,6 +524,31 @@ void Pump::StepBlindBound(bool blind, const estimators::ThermalInputs& in) {
   } catch (const std::exception&) {
     blind_x_.setConstant(kNaN);  // no bound at these inputs: the levels see the estimate alone
   }
+}
+
+void Pump::StepAlarmBounds(bool diverged, bool fresh_inputs, double lagging_degC,
+                           const estimators::ThermalInputs& in, const Eigen::VectorXd& x) {
+  // The disturbance-state filter models the frame sensor's lag itself: no bias then (NaN).
+  lag_bias_.Step(lagging_degC);
+  if (diverged) {
+    silence_.Reset();
+    return;
+  }
+  const auto n = static_cast<Eigen::Index>(snapshot_.node_sd_K.size());
+  silence_.Step(*model_, in, fresh_inputs, x, Eigen::Map<const Eigen::VectorXd>(snapshot_.node_sd_K.data(), n),
+                static_cast<double>(snapshot_.time_us) * 1e-6, period_s_, config_.alarms.monitor.stale_after_s,
+                config_.alarms.monitor.trip_sd_factor);
+}
+
+double Pump::AlarmValue_degC(int i, double estimate_degC) const {
+  // The levels act on the highest of: the estimate raised by the lagging reading's bias, the
+  // worst case while running blind, the worst case of a telemetry silence (docs/daemon.md,
+  // "Alarm rule").
+  double v = estimate_degC + lag_bias_.bias_K();
+  for (const Eigen::VectorXd* b : {&blind_x_, &silence_.bound_degC()}) {
+    if (b->size() > i && !std::isnan((*b)(i))) v = std::max(v, (*b)(i));
+  }
+  return v;
 }
 
 double Pump::FreshWindingResistance_degC(std::int64_t t_us) const {
@@ -685,6 +712,8 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   // step (seen in the system test: Rs "not available" right after kill -9).
   snapshot_.resistance = identifier_.estimate();
   sensor_.Restore(x, s);
+  // The time the daemon was down is a telemetry silence: the load may have risen in it.
+  silence_.Begin(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6);
   // The mismatch test starts afresh (learning) from the restored level.
   mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0, static_cast<double>(now_us) * 1e-6);
   robust_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0);

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "daemon/config.hpp"
+#include "estimators/alarm_bounds.hpp"
 #include "estimators/alarms.hpp"
 #include "estimators/disturbance_sensor.hpp"
 #include "estimators/kalman_virtual_sensor.hpp"
@@ -170,6 +171,13 @@ class Pump {
   /// Advances (or, when not `blind`, drops) the worst-case bound used for the levels while no
   /// temperature is measured.
   void StepBlindBound(bool blind, const estimators::ThermalInputs& in);
+  /// Steps the lagging reading's bias (`lagging_degC`: the fused reading the estimate follows
+  /// without modelling its lag, else NaN) and the silence bound (`fresh_inputs`: this step had
+  /// telemetry; `x` the estimate after it).
+  void StepAlarmBounds(bool diverged, bool fresh_inputs, double lagging_degC,
+                       const estimators::ThermalInputs& in, const Eigen::VectorXd& x);
+  /// The value state `i`'s levels act on, from its estimate and the bounds.
+  double AlarmValue_degC(int i, double estimate_degC) const;
   /// The sensor fault to alarm on: `fault`, except a missing sensor while the fast frames are
   /// silent too (the link, not the sensor).
   estimators::SensorFault SensorFaultAlarm(estimators::SensorFault fault, std::int64_t t_us) const;
@@ -240,6 +248,8 @@ class Pump {
   std::vector<double> alarm_values_;
   Eigen::VectorXd blind_x_;  // worst-case bound while blind (size 0: not blind), degC
   std::vector<double> alarm_sd_;         // their standard deviations (the winding's: none, NaN)
+  estimators::LagBias lag_bias_;          // the frame reading's lag, added to the levels' values
+  estimators::SilenceBound silence_;      // the load that may have risen in a telemetry silence
 };
 
 }  // namespace pumptherm::daemon

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <cstdio>
+#include <stdexcept>
 #include <lcm/lcm-cpp.hpp>
 #include <string>
 #include <toml++/toml.h>
@@ -15,6 +16,7 @@
 #include "daemon/alarm_clear_auth.hpp"
 #include "daemon/config.hpp"
 #include "daemon/gateway.hpp"
+#include "daemon/log.hpp"
 #include "daemon/state_store.hpp"
 #include "protocol/lcm/channels.hpp"
 #include "pumptherm/alarm_clear_reply_t.hpp"
@@ -276,6 +278,53 @@ TEST(ClearAuth, GatewayWithoutAKeyRefusesEveryLcmClear) {
   Sign(Key(1), m);
   EXPECT_FALSE(g.ClearFromLcm(&m, kNowUs, sink));
   EXPECT_EQ(sink.result, Reply::RESULT_NO_KEY);
+}
+
+TEST(LogRateLimiter, BurstPerWindowThenCountsAndReportsWhatWasHeldBack) {
+  LogRateLimiter limit(2, 10.0);
+  std::uint64_t held = 99;
+  EXPECT_TRUE(limit.Allow(0, &held));
+  EXPECT_EQ(held, 0U);
+  EXPECT_TRUE(limit.Allow(1'000'000));
+  for (int i = 0; i < 7; ++i) EXPECT_FALSE(limit.Allow(2'000'000 + i));
+  EXPECT_EQ(limit.TakeHeldBack(9'000'000), 0U);  // the window still runs
+  EXPECT_TRUE(limit.Allow(10'000'000, &held));    // a new window: the line carries the 7
+  EXPECT_EQ(held, 7U);
+  EXPECT_TRUE(limit.Allow(10'500'000, &held));
+  EXPECT_EQ(held, 0U);
+  EXPECT_FALSE(limit.Allow(11'000'000));
+  EXPECT_EQ(limit.TakeHeldBack(20'000'000), 1U);  // no further line came: a summary reports it
+  EXPECT_EQ(limit.TakeHeldBack(20'000'000), 0U);
+  EXPECT_EQ(limit.held_back_total(), 8U);
+  EXPECT_THROW(LogRateLimiter(0, 1.0), std::invalid_argument);
+}
+
+TEST(ClearAuth, RefusedClearsAreLoggedRateLimitedWithTheCountOfTheRest) {
+  Gateway g(ParseConfig("[alarms]\nclear_can_interfaces = [\"can0\"]\n[[can]]\ninterface = \"can0\"\n"
+                        "[[pump]]\nname = \"tmp1\"\nnode_id = 1\n",
+                        std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml"));
+  struct Sink : OutputSink {
+    void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
+    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override { return true; }
+  } sink;
+  auto lines = [](const std::string& text, const std::string& what) {
+    std::size_t n = 0;
+    for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+    return n;
+  };
+  g.Advance(kNowUs, sink);
+  testing::internal::CaptureStderr();
+  for (int i = 0; i < 100; ++i) EXPECT_FALSE(g.Clear("tmp1", "can:can9", "flood"));
+  const std::string flood = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(g.counters().clears_refused, 100U);
+  EXPECT_EQ(lines(flood, "refused (not a configured source)"), 5U) << flood;
+  // After the window: a summary of the 95 not logged, then the next refusal is logged again.
+  testing::internal::CaptureStderr();
+  g.Advance(kNowUs + 61'000'000, sink);
+  EXPECT_FALSE(g.Clear("nosuch", "can:can0", ""));
+  const std::string after = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(lines(after, "95 refused alarm clear(s) not logged"), 1U) << after;
+  EXPECT_EQ(lines(after, "alarm clear for unknown pump 'nosuch'"), 1U) << after;
 }
 
 TEST(ClearAuth, StateWithoutCountersLoadsAndCountersNeverGoDown) {

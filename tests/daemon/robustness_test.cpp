@@ -130,6 +130,44 @@ TEST(PumpRobustness, FrozenAndSilentSensorsAreFaultsAndLeftOut) {
   }
 }
 
+// The time the daemon was down is a telemetry silence (docs/daemon.md, "The pipeline, per
+// pump"): a pump saved at 5 A that is heard again at 12 A 300 s later may have run 12 A all that
+// time, so it trips at once (winding trip level 110 degC; 12 A for 300 s from about 70 degC goes
+// far above it); heard again at once, its estimate (about 70 degC) only starts rising.
+TEST(PumpRobustness, ARestartIsATelemetrySilence) {
+  auto level_after_restart = [](std::int64_t down_us) {
+    PumpConfig pc;
+    pc.name = "tmp1";
+    pc.measured_node = "frame";
+    pc.alarms.levels["winding"].limits = {100.0, 110.0};
+    auto model = std::make_shared<const estimators::ThermalModel>(estimators::ThermalModel::Parse(
+        ReadTextFile(ResolveResource(ResourceKind::kModel, "tmp-generic")), "tmp-generic"));
+    const auto motor = estimators::MotorPreset("han2019-tmp");
+    // frames FROM_US STEPS IQ_A: 10 Hz currents and a live frame reading, then Advance.
+    auto frames = [](Pump& p, std::int64_t from_us, int steps, double iq_A) {
+      for (int k = 0; k < steps; ++k) {
+        const std::int64_t t = from_us + std::int64_t{k} * 100'000;
+        p.OnCurrents(t, 0.0, iq_A, 2199.0, kNaN);
+        p.OnStatus(t, 21000.0, 2.0, 46.6 + 0.1 * (k % 3), 22.0);
+        p.Advance(t);
+      }
+    };
+    const std::int64_t t0 = 1'700'000'000'000'000;
+    Pump before(pc, motor, model, 1.0);
+    frames(before, t0, 2000, 5.0);  // 200 s at 5 A
+    EXPECT_EQ(before.snapshot().alarm.level, estimators::AlarmLevel::kNone);
+    const PumpSavedState saved = before.Save();
+    Pump after(pc, motor, model, 1.0);
+    EXPECT_TRUE(after.Restore(saved, saved.time_us + down_us));
+    frames(after, saved.time_us + down_us + 100'000, 50, 12.0);  // 5 s at 12 A
+    return after.snapshot().alarm;
+  };
+  const estimators::AlarmState late = level_after_restart(300'000'000);
+  EXPECT_EQ(late.level, estimators::AlarmLevel::kTrip) << "value " << late.value;
+  const estimators::AlarmState at_once = level_after_restart(0);
+  EXPECT_NE(at_once.level, estimators::AlarmLevel::kTrip) << "value " << at_once.value;
+}
+
 // Security (issue 8): a configuration anyone may write decides the alarm levels and who may
 // clear trips, so the daemon warns about it; the saved state is the service's alone (0600).
 TEST(FilePermissions, ConfigWritableByOthersIsWarnedAbout) {

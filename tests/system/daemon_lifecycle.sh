@@ -11,7 +11,11 @@
 #   3. `systemctl reload` with a new configuration (a fourth pump): applied without a restart,
 #      the three pumps carry their estimates over, the new pump's frames appear on the bus;
 #   4. `systemctl reload` with an invalid configuration: refused (logged with the key), the
-#      running configuration stays (same process, still four pumps, frames still going out).
+#      running configuration stays (same process, still four pumps, frames still going out);
+#   5. a latched trip (pump1's frame sensor above a test trip level) survives `systemctl
+#      restart` with the clock set a day behind the saved state: latched in the state file
+#      before, and on CAN (GW_ALARM at trip level) from the first frame after the restart,
+#      before any hold could raise it again, and in the state the new process saves.
 # Runs as root in the guest (tests/system/run_system_test.sh); vcan0 is up.
 set -eu
 T=daemon_lifecycle
@@ -53,7 +57,10 @@ cp "$DATA_DIR/han2019-tmp.toml" /usr/share/pumptherm/motors/
 # The demo's configuration on vcan0, LCM off, state saved every second, the hang switch on.
 sed -e 's/^interface = "can0"/interface = "vcan0"/' -e '/^url = /d' \
     -e 's/^thermal_period_s = 1.0/thermal_period_s = 1.0\nstate_save_period_s = 1.0\ntest_hang_switch = true/' \
-    "$DATA_DIR/pumpthermd-demo.toml" >"$cfg"
+    "$DATA_DIR/pumpthermd-demo.toml" |
+  # pump1 (the first [[pump]]): a trip level on its frame sensor below the recording's 22 degC.
+  awk '/^\[\[pump\]\]/ && ++n == 2 { print "[pump.alarms.levels]"
+         print "sensor = { warning_degC = 19.0, trip_degC = 20.0 }\n" } { print }' >"$cfg"
 chmod 0644 "$cfg"
 /usr/sbin/pumpthermd --check-config "$cfg" || fail "the test configuration is invalid"
 grep -q '^test_hang_switch = true' "$cfg" || fail "the test configuration lacks test_hang_switch"
@@ -69,6 +76,7 @@ part 0 20 >"$WORK_DIR/input.log"
 # one period later): the restored estimate, or "not available" after a cold start.
 part 20 20.5 >"$WORK_DIR/burst1.log"
 part 20.5 21 >"$WORK_DIR/burst2.log"
+part 21 21.5 >"$WORK_DIR/burst3.log"
 echo "$T: replaying $(wc -l <"$WORK_DIR/input.log") frames (20 s of 3 pumps)"
 
 # Every GW_TEMPS_A (0x401..0x40F) and GW_IDENT (0x421..0x42F) frame, for the whole test.
@@ -133,6 +141,7 @@ cansend vcan0 184#0000000000000000
 sleep 2
 
 # 4. Reload with an invalid configuration: refused, the old one keeps running.
+cp "$cfg" "$WORK_DIR/four.toml"
 printf '\n[gateway2]\nnot_a_key = 1\n' >>"$cfg"
 if systemctl reload "$unit"; then fail "systemctl reload accepted an invalid configuration (exit 0)"; fi
 wait_for 20 journal_has_n "key 'gateway2': unknown key" 1 || fail "the refused configuration's reason is not in the journal"
@@ -144,10 +153,43 @@ show StatusText | grep -q '^4 pumps' || fail "StatusText '$(show StatusText)' lo
 cansend vcan0 184#0000000000000000
 sleep 2
 [ "$(show NRestarts)" = 2 ] || fail "NRestarts=$(show NRestarts) at the end, want 2"
-systemctl stop "$unit" || fail "systemctl stop failed"
-[ "$(show Result)" = success ] || fail "Result=$(show Result) after stop, want success"
+# The frames of checks 1-4 end here: the clock steps below would put later ones in their windows.
 kill "$candump_pid" 2>/dev/null || true
 wait "$candump_pid" 2>/dev/null || true
+
+# 5. A latched trip across `systemctl restart`, with the clock a day behind the saved state.
+# pump_state KEY: the line of [pump.pump1] in the saved state starting with KEY.
+pump_state() { awk -v k="$1" '/^\[/ { in1 = ($0 == "[pump.pump1]") } in1 && index($0, k) == 1' "$state"; }
+latched_in_state() { pump_state latched_trip_nodes | grep -q "'sensor'"; }
+wait_for 5 latched_in_state || fail "pump1's trip is not latched in the saved state: $(pump_state latched_trip_nodes)"
+cp "$WORK_DIR/four.toml" "$cfg"  # the running configuration, not the refused one
+candump -L vcan0,201:7FF,7FE:7FF >"$WORK_DIR/alarm.log" &
+alarm_pid=$!
+sleep 1.5
+before=$(grep " 201#" "$WORK_DIR/alarm.log" | tail -n 1 | sed 's/.*#//')
+# GW_ALARM byte 0: AlarmLevel in bits 0-1 (2: trip), so its low hex digit is 2, 6, A or E.
+tripped() { case $(echo "$1" | cut -c2) in 2 | 6 | A | E) return 0 ;; esac; return 1; }
+tripped "$before" || fail "pump1's GW_ALARM before the restart is $before, not at trip level"
+date -s "@$(($(date +%s) - 86400))" >/dev/null || fail "date -s (a day back) failed"
+systemctl restart "$unit" || fail "systemctl restart failed"
+pid4=$(show MainPID)
+running || fail "not running after systemctl restart"
+[ "$pid4" != "$pid3" ] || fail "systemctl restart kept MainPID $pid3"
+cansend vcan0 7FE#05  # marks the restart in alarm.log
+canplayer -I "$WORK_DIR/burst3.log" || fail "canplayer (burst 3) failed"
+sleep 2
+kill "$alarm_pid" 2>/dev/null || true
+wait "$alarm_pid" 2>/dev/null || true
+after=$(awk '{ split($3, f, "#") } f[1] == "7FE" { m = 1 } m && f[1] == "201" { print f[2]; exit }' "$WORK_DIR/alarm.log")
+n_after=$(awk '{ split($3, f, "#") } f[1] == "7FE" { m = 1 } m && f[1] == "201"' "$WORK_DIR/alarm.log" | wc -l)
+echo "$T: restart with the clock a day behind: pump1 GW_ALARM before $before, first after ${after:-none} ($n_after after the restart); journal: $(journalctl -u "$unit" -o cat | grep -E 'restored the state|start cold' | tail -n 1)"
+[ -n "$after" ] || fail "no GW_ALARM of pump1 after the restart"
+tripped "$after" || fail "pump1's first GW_ALARM after the restart is $after: the latched trip was lost"
+wait_for 5 latched_in_state || fail "the restarted daemon's saved state lost pump1's trip"
+date -s "@$(($(date +%s) + 86400))" >/dev/null || true
+systemctl stop "$unit" || fail "systemctl stop failed"
+[ "$(show Result)" = success ] || fail "Result=$(show Result) after stop, want success"
+cp "$WORK_DIR/alarm.log" "$OUT_DIR/alarm.log"
 cp "$WORK_DIR/out.log" "$OUT_DIR/frames.log"
 journalctl -u "$unit" --no-pager -o short-monotonic >"$OUT_DIR/journal.txt" 2>&1 || true
 
