@@ -316,6 +316,8 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
     pump.OnStatus(tf.time_us, at(MappingInput::kSpeedMechRpm), at(MappingInput::kDriveState),
                   at(MappingInput::kFrameTempDegC), at(MappingInput::kAmbientTempDegC));
   }
+  // A pump's first frame starts its thermal steps and outputs at the next Advance.
+  if (!pump.heard() && pump.last_frame_us() >= 0) MarkDue(r.pump);
 }
 
 void Gateway::WarnUnconfiguredNode(std::size_t iface, const protocol::TimedFrame& tf) {
@@ -485,97 +487,134 @@ void Gateway::EmitFrame(std::size_t p, OutputPlan& plan, int node, std::int64_t 
 }
 
 void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
+  last_now_us_ = now_us;
+  if (now_us < next_due_us_) return;
   if (start_us_ < 0) {
     start_us_ = now_us;
     next_health_us_ = now_us;
   }
-  last_now_us_ = now_us;
-  const auto lcm_period_us = static_cast<std::int64_t>(std::llround(config_.lcm.period_s * 1e6));
+  std::int64_t next_due_us = std::numeric_limits<std::int64_t>::max();
   for (std::size_t p = 0; p < pumps_.size(); ++p) {
-    Pump& pump = *pumps_[p];
-    PumpIo& io = io_[p];
-    pump.Advance(now_us);
-    const bool latched = pump.snapshot().alarm.trip_latched;
-    if (latched && !io.trip_latched) ++counters_.trip_latches;
-    io.trip_latched = latched;
-    // A pump never heard from raises stale telemetry after stale_after_s, as one that fell silent;
-    // only its alarm frames go out (nothing else is known of it).
-    const bool never_heard = pump.last_frame_us() < 0;
-    if (never_heard && !pump.CheckNeverHeard(start_us_, now_us) &&
-        pump.snapshot().alarm.level == estimators::AlarmLevel::kNone) {
-      continue;
+    if (io_[p].due_us <= now_us) {
+      AdvancePump(p, now_us, sink);
+      io_[p].due_us = PumpDueUs(p);
     }
-    const bool alarm_changed = pump.snapshot().alarm_changes != io.alarm_changes_sent;
-    for (OutputPlan& plan : io.outputs) {
-      if (never_heard && !plan.alarm) continue;
-      if (plan.next_due_us < 0) plan.next_due_us = now_us;
-      if (now_us >= plan.next_due_us || (plan.alarm && alarm_changed)) {
-        Emit(p, plan, now_us, sink);
-        plan.next_due_us += plan.period_us;
-        if (plan.next_due_us <= now_us) plan.next_due_us = now_us + plan.period_us;
-      }
-    }
-    if (io.next_lcm_us < 0) io.next_lcm_us = now_us;
-    const std::string& name = pump.config().name;
-    auto publish = [&](const std::string& channel) {
-      if (sink.PublishLcm(channel, now_us, lcm_bytes_)) {
-        ++counters_.lcm_published;
-      } else {
-        ++counters_.lcm_failed;
-      }
-    };
-    auto publish_alarm = [&] {
-      FillAlarm(pump, io.alarm_msg);
-      EncodeInto(io.alarm_msg, lcm_bytes_);
-      publish(io.channel_alarm);
-    };
-    if (alarm_changed) {
-      io.alarm_changes_sent = pump.snapshot().alarm_changes;
-      publish_alarm();
-      const auto& a = pump.snapshot().alarm;
-      Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning, "pump {}: {}",
-          name, AlarmChangeText(a, io.logged_active_reasons, pump.model().StateNames()));
-      io.logged_active_reasons = a.active_reasons;
-    }
-    if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
-      io.mismatch_changes_logged = pump.snapshot().mismatch_changes;
-      LogMismatch(pump);
-    }
-    if (now_us >= io.next_lcm_us) {
-      FillTelemetry(p, io.telemetry_msg);
-      EncodeInto(io.telemetry_msg, lcm_bytes_);
-      publish(io.channel_telemetry);
-      if (pump.snapshot().initialised) {
-        FillTemperatures(pump, io.temperatures_msg);
-        EncodeInto(io.temperatures_msg, lcm_bytes_);
-        publish(io.channel_temperatures);
-      }
-      if (!alarm_changed) publish_alarm();
-      io.next_lcm_us += lcm_period_us;
-      if (io.next_lcm_us <= now_us) io.next_lcm_us = now_us + lcm_period_us;
+    next_due_us = std::min(next_due_us, io_[p].due_us);
+  }
+  AdvanceHealth(now_us, sink);
+  next_due_us_ = std::min(next_due_us, next_health_us_);
+}
+
+void Gateway::MarkAllDue() {
+  for (PumpIo& io : io_) io.due_us = kDueNow;
+  next_due_us_ = kDueNow;
+}
+
+std::int64_t Gateway::PumpDueUs(std::size_t p) const {
+  const Pump& pump = *pumps_[p];
+  const PumpIo& io = io_[p];
+  std::int64_t due = pump.NextDueUs();
+  const bool never_heard = pump.last_frame_us() < 0;
+  // A silent pump without an alarm sends nothing (AdvancePump): only its silence is timed.
+  if (never_heard && pump.snapshot().alarm.level == estimators::AlarmLevel::kNone) return due;
+  if (pump.snapshot().alarm_changes != io.alarm_changes_sent ||
+      pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
+    return kDueNow;
+  }
+  for (const OutputPlan& plan : io.outputs) {
+    if (never_heard && !plan.alarm) continue;
+    due = std::min(due, plan.next_due_us < 0 ? kDueNow : plan.next_due_us);
+  }
+  return std::min(due, io.next_lcm_us < 0 ? kDueNow : io.next_lcm_us);
+}
+
+void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) {
+  const auto lcm_period_us = static_cast<std::int64_t>(std::llround(config_.lcm.period_s * 1e6));
+  Pump& pump = *pumps_[p];
+  PumpIo& io = io_[p];
+  pump.Advance(now_us);
+  const bool latched = pump.snapshot().alarm.trip_latched;
+  if (latched && !io.trip_latched) ++counters_.trip_latches;
+  io.trip_latched = latched;
+  // A pump never heard from raises stale telemetry after stale_after_s, as one that fell silent;
+  // only its alarm frames go out (nothing else is known of it).
+  const bool never_heard = pump.last_frame_us() < 0;
+  if (never_heard && !pump.CheckNeverHeard(start_us_, now_us) &&
+      pump.snapshot().alarm.level == estimators::AlarmLevel::kNone) {
+    return;
+  }
+  const bool alarm_changed = pump.snapshot().alarm_changes != io.alarm_changes_sent;
+  for (OutputPlan& plan : io.outputs) {
+    if (never_heard && !plan.alarm) continue;
+    if (plan.next_due_us < 0) plan.next_due_us = now_us;
+    if (now_us >= plan.next_due_us || (plan.alarm && alarm_changed)) {
+      Emit(p, plan, now_us, sink);
+      plan.next_due_us += plan.period_us;
+      if (plan.next_due_us <= now_us) plan.next_due_us = now_us + plan.period_us;
     }
   }
-  if (now_us >= next_health_us_) {
-    for (std::size_t p = 0; p < pumps_.size(); ++p) {
-      PumpIo& io = io_[p];
-      const auto& c = pumps_[p]->counters();
-      const std::uint64_t frames = c.fast_frames + c.status_frames;
-      if (io.last_health_us >= 0 && now_us > io.last_health_us) {
-        io.frame_rate_Hz = static_cast<double>(frames - io.frames_at_last_health) /
-                           (static_cast<double>(now_us - io.last_health_us) * 1e-6);
-      }
-      io.frames_at_last_health = frames;
-      io.last_health_us = now_us;
-    }
-    FillHealth(now_us, health_msg_);
-    EncodeInto(health_msg_, lcm_bytes_);
-    if (sink.PublishLcm(channel_health_, now_us, lcm_bytes_)) {
+  if (io.next_lcm_us < 0) io.next_lcm_us = now_us;
+  const std::string& name = pump.config().name;
+  auto publish = [&](const std::string& channel) {
+    if (sink.PublishLcm(channel, now_us, lcm_bytes_)) {
       ++counters_.lcm_published;
     } else {
       ++counters_.lcm_failed;
     }
-    next_health_us_ = now_us + static_cast<std::int64_t>(std::llround(config_.lcm.health_period_s * 1e6));
+  };
+  auto publish_alarm = [&] {
+    FillAlarm(pump, io.alarm_msg);
+    EncodeInto(io.alarm_msg, lcm_bytes_);
+    publish(io.channel_alarm);
+  };
+  if (alarm_changed) {
+    io.alarm_changes_sent = pump.snapshot().alarm_changes;
+    publish_alarm();
+    const auto& a = pump.snapshot().alarm;
+    Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning, "pump {}: {}",
+        name, AlarmChangeText(a, io.logged_active_reasons, pump.model().StateNames()));
+    io.logged_active_reasons = a.active_reasons;
   }
+  if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
+    io.mismatch_changes_logged = pump.snapshot().mismatch_changes;
+    LogMismatch(pump);
+  }
+  if (now_us >= io.next_lcm_us) {
+    FillTelemetry(p, io.telemetry_msg);
+    EncodeInto(io.telemetry_msg, lcm_bytes_);
+    publish(io.channel_telemetry);
+    if (pump.snapshot().initialised) {
+      FillTemperatures(pump, io.temperatures_msg);
+      EncodeInto(io.temperatures_msg, lcm_bytes_);
+      publish(io.channel_temperatures);
+    }
+    if (!alarm_changed) publish_alarm();
+    io.next_lcm_us += lcm_period_us;
+    if (io.next_lcm_us <= now_us) io.next_lcm_us = now_us + lcm_period_us;
+  }
+}
+
+void Gateway::AdvanceHealth(std::int64_t now_us, OutputSink& sink) {
+  if (now_us < next_health_us_) return;
+  for (std::size_t p = 0; p < pumps_.size(); ++p) {
+    PumpIo& io = io_[p];
+    const auto& c = pumps_[p]->counters();
+    const std::uint64_t frames = c.fast_frames + c.status_frames;
+    if (io.last_health_us >= 0 && now_us > io.last_health_us) {
+      io.frame_rate_Hz = static_cast<double>(frames - io.frames_at_last_health) /
+                         (static_cast<double>(now_us - io.last_health_us) * 1e-6);
+    }
+    io.frames_at_last_health = frames;
+    io.last_health_us = now_us;
+  }
+  FillHealth(now_us, health_msg_);
+  EncodeInto(health_msg_, lcm_bytes_);
+  if (sink.PublishLcm(channel_health_, now_us, lcm_bytes_)) {
+    ++counters_.lcm_published;
+  } else {
+    ++counters_.lcm_failed;
+  }
+  next_health_us_ = now_us + static_cast<std::int64_t>(std::llround(config_.lcm.health_period_s * 1e6));
 }
 
 std::vector<std::uint8_t> Gateway::EncodeTemperatures(const Pump& pump) const {
@@ -793,6 +832,7 @@ bool Gateway::Clear(const std::string& pump_name, const std::string& source, con
       return false;
     }
     ++counters_.clears_accepted;
+    MarkAllDue();
     const bool was = pump->ClearTrips();
     Log(LogLevel::kNotice, "pump {}: alarm clear from '{}' accepted ({}){}", pump_name, source,
         was ? "latched trip cleared" : "nothing was latched", comment.empty() ? "" : ": " + comment);
@@ -956,6 +996,7 @@ std::string Gateway::SaveState() const {
 }
 
 int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::string* warning) {
+  MarkAllDue();  // restored estimates and latched trips go out at the next Advance
   toml::table root;
   try {
     root = toml::parse(std::string_view(text), std::string_view("saved state"));
