@@ -7,6 +7,14 @@
 #include <limits>
 
 namespace pumptherm::daemon {
+namespace {
+
+/// The count key as one integer: interface index, extended flag, CAN ID.
+std::uint64_t PackedKey(std::size_t iface, bool extended, std::uint32_t id) {
+  return (static_cast<std::uint64_t>(iface) << 33) | (static_cast<std::uint64_t>(extended) << 32) | id;
+}
+
+}  // namespace
 
 BusState NextBusState(BusState state, const protocol::CanFrame& frame) {
   if (!frame.error) return state;
@@ -40,7 +48,17 @@ void FrameCounter::OnFrame(std::size_t iface, const protocol::TimedFrame& timed)
   }
   ++c.rx_frames;
   ++total_rx_;
-  ++counts_[CountKey{iface, timed.frame.extended, timed.frame.id}];
+  ++counts_[PackedKey(iface, timed.frame.extended, timed.frame.id)];
+}
+
+std::map<FrameCounter::CountKey, std::uint64_t> FrameCounter::counts() const {
+  std::map<CountKey, std::uint64_t> sorted;
+  for (const auto& [key, n] : counts_) {
+    sorted.emplace(CountKey{static_cast<std::size_t>(key >> 33), ((key >> 32) & 1U) != 0,
+                            static_cast<std::uint32_t>(key & 0xFFFFFFFFU)},
+                   n);
+  }
+  return sorted;
 }
 
 std::optional<protocol::CanFrame> FrameCounter::HeartbeatDue(std::int64_t now_us) {
@@ -88,7 +106,7 @@ std::string FrameCounter::StatusLine() const {
 
 std::string FrameCounter::CountTable() const {
   std::string out = fmt::format("{:<16} {:>8} {:>12}\n", "interface", "can_id", "frames");
-  for (const auto& [key, n] : counts_) {
+  for (const auto& [key, n] : counts()) {
     const auto& [iface, extended, id] = key;
     out += fmt::format("{:<16} {:>8} {:>12}\n", interfaces_[iface].name,
                        extended ? fmt::format("{:08X}", id) : fmt::format("{:03X}", id), n);

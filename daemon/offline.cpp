@@ -12,6 +12,8 @@
 #include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
 #include <thread>
+#include <string_view>
+#include <vector>
 
 #include "daemon/log.hpp"
 #include "protocol/candump_log.hpp"
@@ -133,6 +135,53 @@ class CsvSink {
   std::vector<std::int64_t> last_;
 };
 
+/// The lines of a stream, read in large blocks and split with memchr (no per-line stream
+/// calls): the view Next gives stays valid until the next call. A last line without a newline
+/// is a line, as std::getline has it.
+class LineReader {
+ public:
+  explicit LineReader(std::istream& in) : in_(in), buffer_(kBlockBytes) {}
+  bool Next(std::string_view& line) {
+    for (;;) {
+      const char* begin = buffer_.data() + pos_;
+      if (const void* nl = std::memchr(begin, '\n', end_ - pos_)) {
+        const auto len = static_cast<std::size_t>(static_cast<const char*>(nl) - begin);
+        line = std::string_view(begin, len);
+        pos_ += len + 1;
+        return true;
+      }
+      if (eof_) {
+        if (pos_ == end_) return false;
+        line = std::string_view(begin, end_ - pos_);
+        pos_ = end_;
+        return true;
+      }
+      Refill();
+    }
+  }
+
+ private:
+  static constexpr std::size_t kBlockBytes = 1 << 20;
+  /// Moves the unfinished line to the front (growing the buffer if it fills it) and reads on.
+  void Refill() {
+    std::memmove(buffer_.data(), buffer_.data() + pos_, end_ - pos_);
+    end_ -= pos_;
+    pos_ = 0;
+    if (end_ == buffer_.size()) buffer_.resize(2 * buffer_.size());
+    const std::streamsize n = in_.rdbuf()->sgetn(buffer_.data() + end_,
+                                                 static_cast<std::streamsize>(buffer_.size() - end_));
+    if (n <= 0) {
+      eof_ = true;
+    } else {
+      end_ += static_cast<std::size_t>(n);
+    }
+  }
+  std::istream& in_;
+  std::vector<char> buffer_;
+  std::size_t pos_ = 0, end_ = 0;
+  bool eof_ = false;
+};
+
 }  // namespace
 
 std::int64_t OfflineClock::Now(std::int64_t stamp_us) {
@@ -153,7 +202,8 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
   OfflineResult r;
   LogSink sink(options, gateway);
   CsvSink csv(options.csv_dir, options.csv_time_origin_s, gateway);
-  std::string line;
+  LineReader reader(in);
+  std::string_view line;
   std::string last_interface;
   std::size_t last_index = 0;
   std::int64_t last_time_us = -1;
@@ -169,13 +219,21 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
     std::fputs(text.c_str(), stderr);
     std::fflush(stderr);
   };
-  while (std::getline(in, line)) {
+  while (reader.Next(line)) {
     ++r.lines;
     const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
     if (p.skip) continue;
     if (!p.ok) {
       if (++r.bad_lines <= options.max_reported) {
         Log(LogLevel::kWarning, "{}:{}:{}: {}; line skipped", source, r.lines, p.column, p.error);
+      }
+      continue;
+    }
+    if (!p.record.has_time) {
+      if (++r.untimed_lines <= options.max_reported) {
+        Log(LogLevel::kWarning,
+            "{}:{}: no timestamp (candump's screen format without -t a): the pipeline runs on the "
+            "receive times; line skipped (record with candump -l, -L or -t a)", source, r.lines);
       }
       continue;
     }
@@ -195,8 +253,12 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
     }
     if (log_start_us < 0) log_start_us = now;
     gateway.OnFrame(last_index, protocol::TimedFrame{now, p.record.frame});
-    gateway.Advance(now, sink);
-    csv.Write(gateway);
+    // Time-driven work only when some is due: a frame that brings nothing due costs nothing
+    // here. The CSV rows follow the thermal steps, which happen only in Advance.
+    if (now >= gateway.NextDueUs()) {
+      gateway.Advance(now, sink);
+      csv.Write(gateway);
+    }
     last_time_us = now;
     ++r.frames;
     if (options.pace > 0.0) {
@@ -214,6 +276,10 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
   }
   if (r.time_steps_back > options.max_reported) {
     Log(LogLevel::kWarning, "{}: time went back {} times in all", source, r.time_steps_back);
+  }
+  if (r.untimed_lines > options.max_reported) {
+    Log(LogLevel::kWarning, "{}: {} more lines without a timestamp skipped", source,
+        r.untimed_lines - options.max_reported);
   }
   if (r.bad_lines > options.max_reported) {
     Log(LogLevel::kWarning, "{}: {} more malformed lines skipped", source, r.bad_lines - options.max_reported);
