@@ -279,8 +279,16 @@ CandumpParse ParseCandumpLine(std::string_view line) noexcept {
     if (const char* e = ParseId(line, i, '#', r.frame)) return Fail(i + 1, e);
     ++i;  // '#'
     if (const char* e = ParseCompactPayload(line, i, r.frame)) return Fail(i + 1, e);
-  } else if (const char* e = ParseLongFrame(line, i, r)) {
-    return Fail(i + 1, e);
+  } else {
+    const std::size_t frame_begin = i;
+    if (const char* e = ParseLongFrame(line, i, r)) {
+      // Without a timestamp and a CAN ID after the first word, it is not candump's output at all.
+      if (!r.has_time && i <= token_end && i >= frame_begin) {
+        return Fail(if_begin + 1, "not a candump line: expected '(' and a timestamp, or an interface, a CAN ID "
+                                  "and [length]");
+      }
+      return Fail(i + 1, e);
+    }
   }
   p.ok = true;
   return p;

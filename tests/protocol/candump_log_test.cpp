@@ -200,6 +200,8 @@ TEST(CandumpLog, ScreenFormatErrorsSayWhatIsWrong) {
       {"  can0  123   8  11", 15, "expected '['"},
       {"  can0  123   [2]  1 22", 20, "two hex digits"},
       {"  can0  RX x -  123   [0]", 12, "candump -x flags"},
+      {"this is not a candump line", 1, "not a candump line"},
+      {"  can0", 3, "not a candump line"},
   };
   for (const auto& c : cases) {
     const auto p = ParseCandumpLine(c.line);
