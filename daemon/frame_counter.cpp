@@ -36,6 +36,7 @@ std::size_t FrameCounter::Interface(std::string_view name) {
     if (interfaces_[i].name == name) return i;
   }
   interfaces_.push_back(InterfaceCounters{.name = std::string(name)});
+  standard_counts_.resize(interfaces_.size() * kStandardIds, 0);
   return interfaces_.size() - 1;
 }
 
@@ -48,12 +49,25 @@ void FrameCounter::OnFrame(std::size_t iface, const protocol::TimedFrame& timed)
   }
   ++c.rx_frames;
   ++total_rx_;
-  ++counts_[PackedKey(iface, timed.frame.extended, timed.frame.id)];
+  if (!timed.frame.extended && timed.frame.id < kStandardIds) {
+    std::uint64_t& n = standard_counts_[iface * kStandardIds + timed.frame.id];
+    distinct_ids_ += n == 0;
+    ++n;
+    return;
+  }
+  std::uint64_t& n = extended_counts_[PackedKey(iface, timed.frame.extended, timed.frame.id)];
+  distinct_ids_ += n == 0;
+  ++n;
 }
 
 std::map<FrameCounter::CountKey, std::uint64_t> FrameCounter::counts() const {
   std::map<CountKey, std::uint64_t> sorted;
-  for (const auto& [key, n] : counts_) {
+  for (std::size_t k = 0; k < standard_counts_.size(); ++k) {
+    if (standard_counts_[k] == 0) continue;
+    sorted.emplace(CountKey{k / kStandardIds, false, static_cast<std::uint32_t>(k % kStandardIds)},
+                   standard_counts_[k]);
+  }
+  for (const auto& [key, n] : extended_counts_) {
     sorted.emplace(CountKey{static_cast<std::size_t>(key >> 33), ((key >> 32) & 1U) != 0,
                             static_cast<std::uint32_t>(key & 0xFFFFFFFFU)},
                    n);
@@ -101,7 +115,7 @@ std::string FrameCounter::StatusLine() const {
     states += fmt::format(" {}:{}", c.name, c.up ? "up" : "DOWN");
   }
   return fmt::format("rx {} frames, {} IDs, {} rx drops; tx {} frames, {} tx dropped;{}",
-                     total_rx_, counts_.size(), drops, tx, tx_dropped, states);
+                     total_rx_, distinct_ids_, drops, tx, tx_dropped, states);
 }
 
 std::string FrameCounter::CountTable() const {

@@ -77,8 +77,12 @@ class FrameCounter {
  private:
   GatewayConfig config_;
   std::vector<InterfaceCounters> interfaces_;
-  /// Frames per PackedKey(iface, extended, id).
-  std::unordered_map<std::uint64_t, std::uint64_t> counts_;
+  /// Frames per 11-bit ID, kStandardIds per interface (an index, no hashing: the common case),
+  /// and per PackedKey(iface, extended, id) for 29-bit IDs.
+  static constexpr std::size_t kStandardIds = 2048;
+  std::vector<std::uint64_t> standard_counts_;
+  std::unordered_map<std::uint64_t, std::uint64_t> extended_counts_;
+  std::size_t distinct_ids_ = 0;
   std::uint64_t total_rx_ = 0;
   std::int64_t start_us_ = -1;
   std::int64_t next_heartbeat_us_ = -1;

@@ -250,7 +250,14 @@ Gateway::Gateway(const DaemonConfig& config)
       if (routes_.count(route_key)) {
         throw fail(pc.line, key + ".node_id", fmt::format("CAN ID {:X} on '{}' is already used", id, pc.interface));
       }
-      routes_[route_key] = Route{static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(m)};
+      const Route route{static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(m)};
+      routes_[route_key] = route;
+      if (!msg.extended && id < kStandardIds) {
+        if (standard_routes_.size() < (io.iface + 1) * kStandardIds) {
+          standard_routes_.resize((io.iface + 1) * kStandardIds, Route{kNoPump, 0});
+        }
+        standard_routes_[io.iface * kStandardIds + id] = route;
+      }
     }
     const std::string& prefix = config_.lcm.channel_prefix;
     io.channel_telemetry = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTelemetry);
@@ -266,13 +273,12 @@ std::size_t Gateway::Interface(std::string_view name) { return counter_.Interfac
 void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
   counter_.OnFrame(iface, tf);
   if (tf.frame.error || tf.frame.remote) return;
-  const auto it = routes_.find(RouteKey(iface, tf.frame.extended, tf.frame.id));
-  if (it == routes_.end()) {
+  const Route r = FindRoute(iface, tf.frame);
+  if (r.pump == kNoPump) {
     ++counters_.rx_unknown_id;
     WarnUnconfiguredNode(iface, tf);
     return;
   }
-  const Route r = it->second;
   const InputMessage& im = inputs_[r.message];
   const auto& codec = codec_->message(static_cast<std::size_t>(im.message_index));
   if (codec.Decode(std::span<const std::uint8_t>(tf.frame.data.data(), tf.frame.len), values_) !=
@@ -318,6 +324,15 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
   }
   // A pump's first frame starts its thermal steps and outputs at the next Advance.
   if (!pump.heard() && pump.last_frame_us() >= 0) MarkDue(r.pump);
+}
+
+Gateway::Route Gateway::FindRoute(std::size_t iface, const protocol::CanFrame& f) const {
+  if (!f.extended && f.id < kStandardIds) {
+    const std::size_t k = iface * kStandardIds + f.id;
+    return k < standard_routes_.size() ? standard_routes_[k] : Route{kNoPump, 0};
+  }
+  const auto it = routes_.find(RouteKey(iface, f.extended, f.id));
+  return it == routes_.end() ? Route{kNoPump, 0} : it->second;
 }
 
 void Gateway::WarnUnconfiguredNode(std::size_t iface, const protocol::TimedFrame& tf) {

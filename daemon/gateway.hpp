@@ -195,6 +195,8 @@ class Gateway {
     std::uint32_t pump;
     std::uint32_t message;  // into inputs_
   };
+  /// The route of frame `f` on interface `iface`; pump kNoPump when no pump uses it.
+  Route FindRoute(std::size_t iface, const protocol::CanFrame& f) const;
 
   /// alarm_node's value for the winding temperature from resistance; the next value is "none".
   static constexpr std::size_t kAlarmNodeWindingRes = 14;
@@ -242,6 +244,11 @@ class Gateway {
   std::vector<std::unique_ptr<Pump>> pumps_;
   std::vector<PumpIo> io_;
   std::unordered_map<std::uint64_t, Route> routes_;
+  /// The routes of 11-bit IDs again, kStandardIds per interface (pump kNoPump: none): an index
+  /// instead of a hash lookup for the common case.
+  static constexpr std::size_t kStandardIds = 2048;
+  static constexpr std::uint32_t kNoPump = std::numeric_limits<std::uint32_t>::max();
+  std::vector<Route> standard_routes_;
   std::vector<double> values_;   // decode/encode buffer (largest message)
   std::string channel_health_;
   pumptherm::gateway_health_t health_msg_;

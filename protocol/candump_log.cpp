@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <iterator>
 
 namespace pumptherm::protocol {
@@ -10,12 +11,20 @@ namespace {
 
 constexpr std::uint32_t kErrorFlag = 0x20000000U;  // CAN_ERR_FLAG in linux/can.h
 
-int HexValue(char c) noexcept {
-  if (c >= '0' && c <= '9') return c - '0';
-  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
-  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
-  return -1;
-}
+/// Value of each byte as a hex digit, -1 for the others: one load per digit instead of three
+/// range tests (the log format is almost all hex digits).
+constexpr std::array<std::int8_t, 256> kHexValues = [] {
+  std::array<std::int8_t, 256> t{};
+  for (auto& v : t) v = -1;
+  for (int c = 0; c < 10; ++c) t[static_cast<std::size_t>('0' + c)] = static_cast<std::int8_t>(c);
+  for (int c = 0; c < 6; ++c) {
+    t[static_cast<std::size_t>('a' + c)] = static_cast<std::int8_t>(10 + c);
+    t[static_cast<std::size_t>('A' + c)] = static_cast<std::int8_t>(10 + c);
+  }
+  return t;
+}();
+
+int HexValue(char c) noexcept { return kHexValues[static_cast<unsigned char>(c)]; }
 
 bool IsBlank(char c) noexcept { return c == ' ' || c == '\t'; }
 
@@ -264,7 +273,11 @@ CandumpParse ParseCandumpLine(std::string_view line) noexcept {
   if (!r.has_time && r.interface.find(')') != std::string_view::npos) {
     return Fail(if_begin + 1, "expected '(' starting the timestamp");
   }
-  if (r.interface.size() > 15) return Fail(if_begin + 1, "interface name longer than 15 characters");
+  if (r.interface.size() > 15) {
+    return Fail(if_begin + 1, r.has_time ? "interface name longer than 15 characters"
+                                         : "not a candump line: expected '(' and a timestamp, or an interface "
+                                           "(at most 15 characters)");
+  }
   i = SkipBlanks(line, i);
   std::size_t token_end = i;
   while (token_end < line.size() && !IsBlank(line[token_end]) && line[token_end] != '#') ++token_end;
