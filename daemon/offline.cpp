@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -182,6 +183,48 @@ class LineReader {
   bool eof_ = false;
 };
 
+/// Interface indices by name for the offline loop: every line names an interface, nearly always
+/// one of very few, so a name is compared as two words (no string compare per frame) with the
+/// ones seen before; a new one is registered with the gateway.
+class InterfaceCache {
+ public:
+  explicit InterfaceCache(Gateway& gateway) : gateway_(gateway) {}
+  std::size_t Index(std::string_view name) {
+    const Key key = KeyOf(name);
+    for (const Entry& e : entries_) {
+      if (e.key == key) return e.index;
+    }
+    entries_.push_back({key, gateway_.Interface(name)});
+    return entries_.back().index;
+  }
+
+ private:
+  struct Key {
+    std::uint64_t lo = 0, hi = 0;
+    bool operator==(const Key&) const = default;
+  };
+  struct Entry {
+    Key key;
+    std::size_t index;
+  };
+  /// The name's bytes (ParseCandumpLine allows at most 15) and, in the last byte, its length.
+  static Key KeyOf(std::string_view name) {
+    Key k;
+    for (std::size_t i = 0; i < name.size() && i < 15; ++i) {
+      const auto c = static_cast<std::uint64_t>(static_cast<unsigned char>(name[i]));
+      if (i < 8) {
+        k.lo |= c << (8 * i);
+      } else {
+        k.hi |= c << (8 * (i - 8));
+      }
+    }
+    k.hi |= static_cast<std::uint64_t>(std::min<std::size_t>(name.size(), 255)) << 56;
+    return k;
+  }
+  Gateway& gateway_;
+  std::vector<Entry> entries_;
+};
+
 }  // namespace
 
 std::int64_t OfflineClock::Now(std::int64_t stamp_us) {
@@ -204,8 +247,7 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
   CsvSink csv(options.csv_dir, options.csv_time_origin_s, gateway);
   LineReader reader(in);
   std::string_view line;
-  std::string last_interface;
-  std::size_t last_index = 0;
+  InterfaceCache interfaces(gateway);
   std::int64_t last_time_us = -1;
   std::int64_t next_table_us = -1;
   OfflineClock clock;
@@ -237,10 +279,7 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       }
       continue;
     }
-    if (p.record.interface != last_interface) {
-      last_interface = p.record.interface;
-      last_index = gateway.Interface(last_interface);
-    }
+    const std::size_t iface = interfaces.Index(p.record.interface);
     const std::int64_t now = clock.Now(p.record.time_us);
     if (clock.steps_back() > r.time_steps_back) {
       r.time_steps_back = clock.steps_back();
@@ -252,7 +291,7 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       }
     }
     if (log_start_us < 0) log_start_us = now;
-    gateway.OnFrame(last_index, protocol::TimedFrame{now, p.record.frame});
+    gateway.OnFrame(iface, protocol::TimedFrame{now, p.record.frame});
     // Time-driven work only when some is due: a frame that brings nothing due costs nothing
     // here. The CSV rows follow the thermal steps, which happen only in Advance.
     if (now >= gateway.NextDueUs()) {
