@@ -7,6 +7,14 @@
 #include <limits>
 
 namespace pumptherm::daemon {
+namespace {
+
+/// The count key as one integer: interface index, extended flag, CAN ID.
+std::uint64_t PackedKey(std::size_t iface, bool extended, std::uint32_t id) {
+  return (static_cast<std::uint64_t>(iface) << 33) | (static_cast<std::uint64_t>(extended) << 32) | id;
+}
+
+}  // namespace
 
 BusState NextBusState(BusState state, const protocol::CanFrame& frame) {
   if (!frame.error) return state;
@@ -28,6 +36,7 @@ std::size_t FrameCounter::Interface(std::string_view name) {
     if (interfaces_[i].name == name) return i;
   }
   interfaces_.push_back(InterfaceCounters{.name = std::string(name)});
+  standard_counts_.resize(interfaces_.size() * kStandardIds, 0);
   return interfaces_.size() - 1;
 }
 
@@ -40,7 +49,30 @@ void FrameCounter::OnFrame(std::size_t iface, const protocol::TimedFrame& timed)
   }
   ++c.rx_frames;
   ++total_rx_;
-  ++counts_[CountKey{iface, timed.frame.extended, timed.frame.id}];
+  if (!timed.frame.extended && timed.frame.id < kStandardIds) {
+    std::uint64_t& n = standard_counts_[iface * kStandardIds + timed.frame.id];
+    distinct_ids_ += n == 0;
+    ++n;
+    return;
+  }
+  std::uint64_t& n = extended_counts_[PackedKey(iface, timed.frame.extended, timed.frame.id)];
+  distinct_ids_ += n == 0;
+  ++n;
+}
+
+std::map<FrameCounter::CountKey, std::uint64_t> FrameCounter::counts() const {
+  std::map<CountKey, std::uint64_t> sorted;
+  for (std::size_t k = 0; k < standard_counts_.size(); ++k) {
+    if (standard_counts_[k] == 0) continue;
+    sorted.emplace(CountKey{k / kStandardIds, false, static_cast<std::uint32_t>(k % kStandardIds)},
+                   standard_counts_[k]);
+  }
+  for (const auto& [key, n] : extended_counts_) {
+    sorted.emplace(CountKey{static_cast<std::size_t>(key >> 33), ((key >> 32) & 1U) != 0,
+                            static_cast<std::uint32_t>(key & 0xFFFFFFFFU)},
+                   n);
+  }
+  return sorted;
 }
 
 std::optional<protocol::CanFrame> FrameCounter::HeartbeatDue(std::int64_t now_us) {
@@ -83,12 +115,12 @@ std::string FrameCounter::StatusLine() const {
     states += fmt::format(" {}:{}", c.name, c.up ? "up" : "DOWN");
   }
   return fmt::format("rx {} frames, {} IDs, {} rx drops; tx {} frames, {} tx dropped;{}",
-                     total_rx_, counts_.size(), drops, tx, tx_dropped, states);
+                     total_rx_, distinct_ids_, drops, tx, tx_dropped, states);
 }
 
 std::string FrameCounter::CountTable() const {
   std::string out = fmt::format("{:<16} {:>8} {:>12}\n", "interface", "can_id", "frames");
-  for (const auto& [key, n] : counts_) {
+  for (const auto& [key, n] : counts()) {
     const auto& [iface, extended, id] = key;
     out += fmt::format("{:<16} {:>8} {:>12}\n", interfaces_[iface].name,
                        extended ? fmt::format("{:08X}", id) : fmt::format("{:03X}", id), n);

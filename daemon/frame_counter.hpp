@@ -9,6 +9,7 @@
 #include <string>
 #include <string_view>
 #include <tuple>
+#include <unordered_map>
 #include <vector>
 
 #include "daemon/config.hpp"
@@ -63,7 +64,8 @@ class FrameCounter {
 
   /// Frames per (interface index, extended, CAN ID).
   using CountKey = std::tuple<std::size_t, bool, std::uint32_t>;
-  const std::map<CountKey, std::uint64_t>& counts() const { return counts_; }
+  /// Sorted by key; made on each call (the count itself is a hash lookup per frame).
+  std::map<CountKey, std::uint64_t> counts() const;
   std::uint64_t total_rx() const { return total_rx_; }
 
   /// One line for systemd's STATUS= and the journal: totals, drops and interface states.
@@ -75,7 +77,12 @@ class FrameCounter {
  private:
   GatewayConfig config_;
   std::vector<InterfaceCounters> interfaces_;
-  std::map<CountKey, std::uint64_t> counts_;
+  /// Frames per 11-bit ID, kStandardIds per interface (an index, no hashing: the common case),
+  /// and per PackedKey(iface, extended, id) for 29-bit IDs.
+  static constexpr std::size_t kStandardIds = 2048;
+  std::vector<std::uint64_t> standard_counts_;
+  std::unordered_map<std::uint64_t, std::uint64_t> extended_counts_;
+  std::size_t distinct_ids_ = 0;
   std::uint64_t total_rx_ = 0;
   std::int64_t start_us_ = -1;
   std::int64_t next_heartbeat_us_ = -1;

@@ -251,7 +251,14 @@ Gateway::Gateway(const DaemonConfig& config)
       if (routes_.count(route_key)) {
         throw fail(pc.line, key + ".node_id", fmt::format("CAN ID {:X} on '{}' is already used", id, pc.interface));
       }
-      routes_[route_key] = Route{static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(m)};
+      const Route route{static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(m)};
+      routes_[route_key] = route;
+      if (!msg.extended && id < kStandardIds) {
+        if (standard_routes_.size() < (io.iface + 1) * kStandardIds) {
+          standard_routes_.resize((io.iface + 1) * kStandardIds, Route{kNoPump, 0});
+        }
+        standard_routes_[io.iface * kStandardIds + id] = route;
+      }
     }
     const std::string& prefix = config_.lcm.channel_prefix;
     io.channel_telemetry = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTelemetry);
@@ -267,13 +274,12 @@ std::size_t Gateway::Interface(std::string_view name) { return counter_.Interfac
 void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
   counter_.OnFrame(iface, tf);
   if (tf.frame.error || tf.frame.remote) return;
-  const auto it = routes_.find(RouteKey(iface, tf.frame.extended, tf.frame.id));
-  if (it == routes_.end()) {
+  const Route r = FindRoute(iface, tf.frame);
+  if (r.pump == kNoPump) {
     ++counters_.rx_unknown_id;
     WarnUnconfiguredNode(iface, tf);
     return;
   }
-  const Route r = it->second;
   const InputMessage& im = inputs_[r.message];
   const auto& codec = codec_->message(static_cast<std::size_t>(im.message_index));
   if (codec.Decode(std::span<const std::uint8_t>(tf.frame.data.data(), tf.frame.len), values_) !=
@@ -317,6 +323,17 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
     pump.OnStatus(tf.time_us, at(MappingInput::kSpeedMechRpm), at(MappingInput::kDriveState),
                   at(MappingInput::kFrameTempDegC), at(MappingInput::kAmbientTempDegC));
   }
+  // A pump's first frame starts its thermal steps and outputs at the next Advance.
+  if (!pump.heard() && pump.last_frame_us() >= 0) MarkDue(r.pump);
+}
+
+Gateway::Route Gateway::FindRoute(std::size_t iface, const protocol::CanFrame& f) const {
+  if (!f.extended && f.id < kStandardIds) {
+    const std::size_t k = iface * kStandardIds + f.id;
+    return k < standard_routes_.size() ? standard_routes_[k] : Route{kNoPump, 0};
+  }
+  const auto it = routes_.find(RouteKey(iface, f.extended, f.id));
+  return it == routes_.end() ? Route{kNoPump, 0} : it->second;
 }
 
 void Gateway::WarnUnconfiguredNode(std::size_t iface, const protocol::TimedFrame& tf) {
@@ -486,98 +503,137 @@ void Gateway::EmitFrame(std::size_t p, OutputPlan& plan, int node, std::int64_t 
 }
 
 void Gateway::Advance(std::int64_t now_us, OutputSink& sink) {
+  last_now_us_ = now_us;
+  if (now_us < next_due_us_) return;
   if (start_us_ < 0) {
     start_us_ = now_us;
     next_health_us_ = now_us;
   }
-  last_now_us_ = now_us;
+  // The summary of refused clears held back is at most one health period late (Advance runs at
+  // least that often).
   ReportRefusedClearsHeldBack(now_us);
-  const auto lcm_period_us = static_cast<std::int64_t>(std::llround(config_.lcm.period_s * 1e6));
+  std::int64_t next_due_us = std::numeric_limits<std::int64_t>::max();
   for (std::size_t p = 0; p < pumps_.size(); ++p) {
-    Pump& pump = *pumps_[p];
-    PumpIo& io = io_[p];
-    pump.Advance(now_us);
-    const bool latched = pump.snapshot().alarm.trip_latched;
-    if (latched && !io.trip_latched) ++counters_.trip_latches;
-    io.trip_latched = latched;
-    // A pump never heard from raises stale telemetry after stale_after_s, as one that fell silent;
-    // only its alarm frames go out (nothing else is known of it).
-    const bool never_heard = pump.last_frame_us() < 0;
-    if (never_heard && !pump.CheckNeverHeard(start_us_, now_us) &&
-        pump.snapshot().alarm.level == estimators::AlarmLevel::kNone) {
-      continue;
+    if (io_[p].due_us <= now_us) {
+      AdvancePump(p, now_us, sink);
+      io_[p].due_us = PumpDueUs(p);
     }
-    const bool alarm_changed = pump.snapshot().alarm_changes != io.alarm_changes_sent;
-    for (OutputPlan& plan : io.outputs) {
-      if (never_heard && !plan.alarm) continue;
-      if (plan.next_due_us < 0) plan.next_due_us = now_us;
-      if (now_us >= plan.next_due_us || (plan.alarm && alarm_changed)) {
-        Emit(p, plan, now_us, sink);
-        plan.next_due_us += plan.period_us;
-        if (plan.next_due_us <= now_us) plan.next_due_us = now_us + plan.period_us;
-      }
-    }
-    if (io.next_lcm_us < 0) io.next_lcm_us = now_us;
-    const std::string& name = pump.config().name;
-    auto publish = [&](const std::string& channel) {
-      if (sink.PublishLcm(channel, now_us, lcm_bytes_)) {
-        ++counters_.lcm_published;
-      } else {
-        ++counters_.lcm_failed;
-      }
-    };
-    auto publish_alarm = [&] {
-      FillAlarm(pump, io.alarm_msg);
-      EncodeInto(io.alarm_msg, lcm_bytes_);
-      publish(io.channel_alarm);
-    };
-    if (alarm_changed) {
-      io.alarm_changes_sent = pump.snapshot().alarm_changes;
-      publish_alarm();
-      const auto& a = pump.snapshot().alarm;
-      Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning, "pump {}: {}",
-          name, AlarmChangeText(a, io.logged_active_reasons, pump.model().StateNames()));
-      io.logged_active_reasons = a.active_reasons;
-    }
-    if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
-      io.mismatch_changes_logged = pump.snapshot().mismatch_changes;
-      LogMismatch(pump);
-    }
-    if (now_us >= io.next_lcm_us) {
-      FillTelemetry(p, io.telemetry_msg);
-      EncodeInto(io.telemetry_msg, lcm_bytes_);
-      publish(io.channel_telemetry);
-      if (pump.snapshot().initialised) {
-        FillTemperatures(pump, io.temperatures_msg);
-        EncodeInto(io.temperatures_msg, lcm_bytes_);
-        publish(io.channel_temperatures);
-      }
-      if (!alarm_changed) publish_alarm();
-      io.next_lcm_us += lcm_period_us;
-      if (io.next_lcm_us <= now_us) io.next_lcm_us = now_us + lcm_period_us;
+    next_due_us = std::min(next_due_us, io_[p].due_us);
+  }
+  AdvanceHealth(now_us, sink);
+  next_due_us_ = std::min(next_due_us, next_health_us_);
+}
+
+void Gateway::MarkAllDue() {
+  for (PumpIo& io : io_) io.due_us = kDueNow;
+  next_due_us_ = kDueNow;
+}
+
+std::int64_t Gateway::PumpDueUs(std::size_t p) const {
+  const Pump& pump = *pumps_[p];
+  const PumpIo& io = io_[p];
+  std::int64_t due = pump.NextDueUs();
+  const bool never_heard = pump.last_frame_us() < 0;
+  // A silent pump without an alarm sends nothing (AdvancePump): only its silence is timed.
+  if (never_heard && pump.snapshot().alarm.level == estimators::AlarmLevel::kNone) return due;
+  if (pump.snapshot().alarm_changes != io.alarm_changes_sent ||
+      pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
+    return kDueNow;
+  }
+  for (const OutputPlan& plan : io.outputs) {
+    if (never_heard && !plan.alarm) continue;
+    due = std::min(due, plan.next_due_us < 0 ? kDueNow : plan.next_due_us);
+  }
+  return std::min(due, io.next_lcm_us < 0 ? kDueNow : io.next_lcm_us);
+}
+
+void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) {
+  const auto lcm_period_us = static_cast<std::int64_t>(std::llround(config_.lcm.period_s * 1e6));
+  Pump& pump = *pumps_[p];
+  PumpIo& io = io_[p];
+  pump.Advance(now_us);
+  const bool latched = pump.snapshot().alarm.trip_latched;
+  if (latched && !io.trip_latched) ++counters_.trip_latches;
+  io.trip_latched = latched;
+  // A pump never heard from raises stale telemetry after stale_after_s, as one that fell silent;
+  // only its alarm frames go out (nothing else is known of it).
+  const bool never_heard = pump.last_frame_us() < 0;
+  if (never_heard && !pump.CheckNeverHeard(start_us_, now_us) &&
+      pump.snapshot().alarm.level == estimators::AlarmLevel::kNone) {
+    return;
+  }
+  const bool alarm_changed = pump.snapshot().alarm_changes != io.alarm_changes_sent;
+  for (OutputPlan& plan : io.outputs) {
+    if (never_heard && !plan.alarm) continue;
+    if (plan.next_due_us < 0) plan.next_due_us = now_us;
+    if (now_us >= plan.next_due_us || (plan.alarm && alarm_changed)) {
+      Emit(p, plan, now_us, sink);
+      plan.next_due_us += plan.period_us;
+      if (plan.next_due_us <= now_us) plan.next_due_us = now_us + plan.period_us;
     }
   }
-  if (now_us >= next_health_us_) {
-    for (std::size_t p = 0; p < pumps_.size(); ++p) {
-      PumpIo& io = io_[p];
-      const auto& c = pumps_[p]->counters();
-      const std::uint64_t frames = c.fast_frames + c.status_frames;
-      if (io.last_health_us >= 0 && now_us > io.last_health_us) {
-        io.frame_rate_Hz = static_cast<double>(frames - io.frames_at_last_health) /
-                           (static_cast<double>(now_us - io.last_health_us) * 1e-6);
-      }
-      io.frames_at_last_health = frames;
-      io.last_health_us = now_us;
-    }
-    FillHealth(now_us, health_msg_);
-    EncodeInto(health_msg_, lcm_bytes_);
-    if (sink.PublishLcm(channel_health_, now_us, lcm_bytes_)) {
+  if (io.next_lcm_us < 0) io.next_lcm_us = now_us;
+  const std::string& name = pump.config().name;
+  auto publish = [&](const std::string& channel) {
+    if (sink.PublishLcm(channel, now_us, lcm_bytes_)) {
       ++counters_.lcm_published;
     } else {
       ++counters_.lcm_failed;
     }
-    next_health_us_ = now_us + static_cast<std::int64_t>(std::llround(config_.lcm.health_period_s * 1e6));
+  };
+  auto publish_alarm = [&] {
+    FillAlarm(pump, io.alarm_msg);
+    EncodeInto(io.alarm_msg, lcm_bytes_);
+    publish(io.channel_alarm);
+  };
+  if (alarm_changed) {
+    io.alarm_changes_sent = pump.snapshot().alarm_changes;
+    publish_alarm();
+    const auto& a = pump.snapshot().alarm;
+    Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning, "pump {}: {}",
+        name, AlarmChangeText(a, io.logged_active_reasons, pump.model().StateNames()));
+    io.logged_active_reasons = a.active_reasons;
   }
+  if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
+    io.mismatch_changes_logged = pump.snapshot().mismatch_changes;
+    LogMismatch(pump);
+  }
+  if (now_us >= io.next_lcm_us) {
+    FillTelemetry(p, io.telemetry_msg);
+    EncodeInto(io.telemetry_msg, lcm_bytes_);
+    publish(io.channel_telemetry);
+    if (pump.snapshot().initialised) {
+      FillTemperatures(pump, io.temperatures_msg);
+      EncodeInto(io.temperatures_msg, lcm_bytes_);
+      publish(io.channel_temperatures);
+    }
+    if (!alarm_changed) publish_alarm();
+    io.next_lcm_us += lcm_period_us;
+    if (io.next_lcm_us <= now_us) io.next_lcm_us = now_us + lcm_period_us;
+  }
+}
+
+void Gateway::AdvanceHealth(std::int64_t now_us, OutputSink& sink) {
+  if (now_us < next_health_us_) return;
+  for (std::size_t p = 0; p < pumps_.size(); ++p) {
+    PumpIo& io = io_[p];
+    const auto& c = pumps_[p]->counters();
+    const std::uint64_t frames = c.fast_frames + c.status_frames;
+    if (io.last_health_us >= 0 && now_us > io.last_health_us) {
+      io.frame_rate_Hz = static_cast<double>(frames - io.frames_at_last_health) /
+                         (static_cast<double>(now_us - io.last_health_us) * 1e-6);
+    }
+    io.frames_at_last_health = frames;
+    io.last_health_us = now_us;
+  }
+  FillHealth(now_us, health_msg_);
+  EncodeInto(health_msg_, lcm_bytes_);
+  if (sink.PublishLcm(channel_health_, now_us, lcm_bytes_)) {
+    ++counters_.lcm_published;
+  } else {
+    ++counters_.lcm_failed;
+  }
+  next_health_us_ = now_us + static_cast<std::int64_t>(std::llround(config_.lcm.health_period_s * 1e6));
 }
 
 std::vector<std::uint8_t> Gateway::EncodeTemperatures(const Pump& pump) const {
@@ -799,6 +855,7 @@ bool Gateway::Clear(const std::string& pump_name, const std::string& source, con
       return false;
     }
     ++counters_.clears_accepted;
+    MarkAllDue();
     const bool was = pump->ClearTrips();
     Log(LogLevel::kNotice, "pump {}: alarm clear from '{}' accepted ({}){}", pump_name, source,
         was ? "latched trip cleared" : "nothing was latched", comment.empty() ? "" : ": " + comment);
@@ -982,6 +1039,7 @@ std::string Gateway::SaveState() const {
 }
 
 int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::string* warning) {
+  MarkAllDue();  // restored estimates and latched trips go out at the next Advance
   toml::table root;
   try {
     root = toml::parse(std::string_view(text), std::string_view("saved state"));

@@ -5,6 +5,7 @@
 /// recording equal a live run of it (docs/architecture.md, "Data flow of the daemon").
 
 #include <cstdint>
+#include <limits>
 #include <map>
 #include <memory>
 #include <string>
@@ -69,9 +70,16 @@ class Gateway {
   /// No allocation in steady state, never throws.
   void OnFrame(std::size_t iface, const protocol::TimedFrame& frame);
 
-  /// Brings every pump up to time `now_us` (thermal steps, alarms), and sends the outputs that
-  /// are due through `sink`. Live: called from the loop's timer; offline: after each frame.
+  /// Brings every pump up to time `now_us` (thermal steps, alarms, stale checks), and sends the
+  /// outputs that are due through `sink`. Live: called from the loop's timer and after frames;
+  /// offline: after each frame. Only the pumps with something due are visited; before
+  /// NextDueUs() it returns at once.
   void Advance(std::int64_t now_us, OutputSink& sink);
+
+  /// The earliest pipeline time (us) at which Advance has work: a thermal step, an output
+  /// frame or LCM message, the health message, a pump's silence to time, or (INT64_MIN) at once
+  /// after a frame or command that changes what is due. An Advance before it changes nothing.
+  std::int64_t NextDueUs() const { return next_due_us_; }
 
   /// An alarm-clear command for pump `pump` from `source` (an LCM source name, or
   /// "can:<interface>"). Accepted only from configured sources; every attempt is logged.
@@ -157,8 +165,11 @@ class Gateway {
     int next_node = 0;               // node_table: the node the next frame carries
   };
   std::map<std::uint64_t, std::int64_t> unconfigured_warned_us_;  ///< (iface, node) -> last warning
+  /// A due time that every time has reached: work at the next Advance.
+  static constexpr std::int64_t kDueNow = std::numeric_limits<std::int64_t>::min();
   struct PumpIo {
     std::size_t iface = 0;           // FrameCounter index
+    std::int64_t due_us = kDueNow;   // earliest time AdvancePump has work (PumpDueUs)
     std::vector<OutputPlan> outputs;
     std::int64_t next_lcm_us = -1;
     std::uint64_t alarm_changes_sent = 0;
@@ -185,10 +196,26 @@ class Gateway {
     std::uint32_t pump;
     std::uint32_t message;  // into inputs_
   };
+  /// The route of frame `f` on interface `iface`; pump kNoPump when no pump uses it.
+  Route FindRoute(std::size_t iface, const protocol::CanFrame& f) const;
 
   /// alarm_node's value for the winding temperature from resistance; the next value is "none".
   static constexpr std::size_t kAlarmNodeWindingRes = 14;
 
+  /// Advance's work for pump `p`: its thermal steps or silence check, then its due outputs.
+  void AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink);
+  /// Gateway health: per-pump frame rates and the health message, when due.
+  void AdvanceHealth(std::int64_t now_us, OutputSink& sink);
+  /// The earliest time AdvancePump(p) has work: the pump's next thermal step or silence check,
+  /// and, unless only its silence is timed, its output plans and LCM period; kDueNow while an
+  /// alarm or mismatch change is unsent.
+  std::int64_t PumpDueUs(std::size_t p) const;
+  /// Pump `p` (or every pump) has work at the next Advance.
+  void MarkDue(std::size_t p) {
+    io_[p].due_us = kDueNow;
+    next_due_us_ = kDueNow;
+  }
+  void MarkAllDue();
   void RateLimitedClear(PumpIo& io, const std::string& pump, const std::string& iface);
   /// Whether a refused clear may be logged now (refused_clear_log_); `note` gets what to append
   /// (the count of refusals not logged before it, or nothing).
@@ -223,6 +250,11 @@ class Gateway {
   std::vector<std::unique_ptr<Pump>> pumps_;
   std::vector<PumpIo> io_;
   std::unordered_map<std::uint64_t, Route> routes_;
+  /// The routes of 11-bit IDs again, kStandardIds per interface (pump kNoPump: none): an index
+  /// instead of a hash lookup for the common case.
+  static constexpr std::size_t kStandardIds = 2048;
+  static constexpr std::uint32_t kNoPump = std::numeric_limits<std::uint32_t>::max();
+  std::vector<Route> standard_routes_;
   std::vector<double> values_;   // decode/encode buffer (largest message)
   std::string channel_health_;
   pumptherm::gateway_health_t health_msg_;
@@ -237,6 +269,7 @@ class Gateway {
   std::int64_t start_us_ = -1;
   std::int64_t next_health_us_ = -1;
   std::int64_t last_now_us_ = -1;
+  std::int64_t next_due_us_ = kDueNow;  ///< min of next_health_us_ and every io_[p].due_us
 };
 
 }  // namespace pumptherm::daemon

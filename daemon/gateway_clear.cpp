@@ -47,6 +47,7 @@ bool Gateway::ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_u
   const std::string comment = m->comment.empty() ? "" : ": " + m->comment;
   if (result == R::RESULT_ACCEPTED) {
     ++counters_.clears_accepted;
+    MarkAllDue();
     reason = (*pump)->ClearTrips() ? "latched trip cleared" : "nothing was latched";
     Log(LogLevel::kNotice, "pump {}: alarm clear from '{}' (counter {}) accepted ({}){}", m->pump, m->source,
         m->counter, reason, comment);

@@ -38,7 +38,9 @@ constexpr std::uint64_t kTimerTag = 1;
 constexpr std::uint64_t kLcmTag = 2;
 constexpr std::uint64_t kFirstSocketTag = 3;
 constexpr std::int64_t kReopenPeriodUs = 1000000;   // check and reopen interfaces every second
-constexpr std::int64_t kMaxTickUs = 10000;          // outputs are due at 10 ms granularity
+// The timer is armed for the gateway's next due time (Gateway::NextDueUs) and the loop's own
+// periods; this only bounds the sleep.
+constexpr std::int64_t kMaxTickUs = 1000000;
 constexpr int kRxBudget = 256;                      // frames per socket per wake-up (fairness)
 // A failure that repeats (LCM sends, state writes) is logged at once, then at most this often.
 constexpr std::int64_t kFailureReminderUs = 600'000'000;
@@ -82,6 +84,7 @@ struct LiveLoop::Impl : OutputSink {
   SystemdNotifier notifier;
   std::int64_t next_status_us = 0;
   std::int64_t next_reopen_us = 0;
+  std::int64_t armed_us = 0;  // the time the timer is armed for (ArmTimer)
   std::int64_t next_save_us = 0;
   std::int64_t next_table_us = std::numeric_limits<std::int64_t>::max();  // no table: never
   std::string state_path;
@@ -448,8 +451,8 @@ struct LiveLoop::Impl : OutputSink {
   }
 
   void ArmTimer(std::int64_t mono_now) {
-    std::int64_t next = std::min({gateway->counter().NextHeartbeatUs(), next_status_us, next_reopen_us,
-                                  next_save_us, next_table_us, mono_now + kMaxTickUs});
+    std::int64_t next = std::min({gateway->NextDueUs(), gateway->counter().NextHeartbeatUs(), next_status_us,
+                                  next_reopen_us, next_save_us, next_table_us, mono_now + kMaxTickUs});
     const std::int64_t wd = notifier.watchdog_half_period_us();
     if (wd > 0) next = std::min(next, mono_now + wd);
     next = std::max(next, mono_now + 1000);  // at least 1 ms ahead
@@ -457,6 +460,7 @@ struct LiveLoop::Impl : OutputSink {
     its.it_value.tv_sec = next / 1000000;
     its.it_value.tv_nsec = (next % 1000000) * 1000;
     if (timerfd_settime(timer_fd.get(), TFD_TIMER_ABSTIME, &its, nullptr) < 0) ThrowErrno("timerfd_settime");
+    armed_us = next;
   }
 
   void OnTimer() {
@@ -603,7 +607,10 @@ int LiveLoop::Run() {
         }
       }
     }
-    if (frames) m.AdvanceGateway();
+    // Frames, commands and reloads can make work due at once or sooner than the timer.
+    const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
+    if (frames || m.gateway->NextDueUs() <= mono) m.AdvanceGateway();
+    if (m.gateway->NextDueUs() < m.armed_us) m.ArmTimer(mono);
   }
   m.notifier.Stopping();
   m.SaveState();

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -12,6 +13,8 @@
 #include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
 #include <thread>
+#include <string_view>
+#include <vector>
 
 #include "daemon/log.hpp"
 #include "protocol/candump_log.hpp"
@@ -133,6 +136,95 @@ class CsvSink {
   std::vector<std::int64_t> last_;
 };
 
+/// The lines of a stream, read in large blocks and split with memchr (no per-line stream
+/// calls): the view Next gives stays valid until the next call. A last line without a newline
+/// is a line, as std::getline has it.
+class LineReader {
+ public:
+  explicit LineReader(std::istream& in) : in_(in), buffer_(kBlockBytes) {}
+  bool Next(std::string_view& line) {
+    for (;;) {
+      const char* begin = buffer_.data() + pos_;
+      if (const void* nl = std::memchr(begin, '\n', end_ - pos_)) {
+        const auto len = static_cast<std::size_t>(static_cast<const char*>(nl) - begin);
+        line = std::string_view(begin, len);
+        pos_ += len + 1;
+        return true;
+      }
+      if (eof_) {
+        if (pos_ == end_) return false;
+        line = std::string_view(begin, end_ - pos_);
+        pos_ = end_;
+        return true;
+      }
+      Refill();
+    }
+  }
+
+ private:
+  static constexpr std::size_t kBlockBytes = 1 << 20;
+  /// Moves the unfinished line to the front (growing the buffer if it fills it) and reads on.
+  void Refill() {
+    std::memmove(buffer_.data(), buffer_.data() + pos_, end_ - pos_);
+    end_ -= pos_;
+    pos_ = 0;
+    if (end_ == buffer_.size()) buffer_.resize(2 * buffer_.size());
+    const std::streamsize n = in_.rdbuf()->sgetn(buffer_.data() + end_,
+                                                 static_cast<std::streamsize>(buffer_.size() - end_));
+    if (n <= 0) {
+      eof_ = true;
+    } else {
+      end_ += static_cast<std::size_t>(n);
+    }
+  }
+  std::istream& in_;
+  std::vector<char> buffer_;
+  std::size_t pos_ = 0, end_ = 0;
+  bool eof_ = false;
+};
+
+/// Interface indices by name for the offline loop: every line names an interface, nearly always
+/// one of very few, so a name is compared as two words (no string compare per frame) with the
+/// ones seen before; a new one is registered with the gateway.
+class InterfaceCache {
+ public:
+  explicit InterfaceCache(Gateway& gateway) : gateway_(gateway) {}
+  std::size_t Index(std::string_view name) {
+    const Key key = KeyOf(name);
+    for (const Entry& e : entries_) {
+      if (e.key == key) return e.index;
+    }
+    entries_.push_back({key, gateway_.Interface(name)});
+    return entries_.back().index;
+  }
+
+ private:
+  struct Key {
+    std::uint64_t lo = 0, hi = 0;
+    bool operator==(const Key&) const = default;
+  };
+  struct Entry {
+    Key key;
+    std::size_t index;
+  };
+  /// The name's bytes (ParseCandumpLine allows at most 15) and, in the last byte, its length.
+  static Key KeyOf(std::string_view name) {
+    Key k;
+    for (std::size_t i = 0; i < name.size() && i < 15; ++i) {
+      const auto c = static_cast<std::uint64_t>(static_cast<unsigned char>(name[i]));
+      if (i < 8) {
+        k.lo |= c << (8 * i);
+      } else {
+        k.hi |= c << (8 * (i - 8));
+      }
+    }
+    k.hi |= static_cast<std::uint64_t>(std::min<std::size_t>(name.size(), 255)) << 56;
+    return k;
+  }
+  Gateway& gateway_;
+  std::vector<Entry> entries_;
+};
+
 }  // namespace
 
 std::int64_t OfflineClock::Now(std::int64_t stamp_us) {
@@ -153,9 +245,9 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
   OfflineResult r;
   LogSink sink(options, gateway);
   CsvSink csv(options.csv_dir, options.csv_time_origin_s, gateway);
-  std::string line;
-  std::string last_interface;
-  std::size_t last_index = 0;
+  LineReader reader(in);
+  std::string_view line;
+  InterfaceCache interfaces(gateway);
   std::int64_t last_time_us = -1;
   std::int64_t next_table_us = -1;
   OfflineClock clock;
@@ -169,7 +261,7 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
     std::fputs(text.c_str(), stderr);
     std::fflush(stderr);
   };
-  while (std::getline(in, line)) {
+  while (reader.Next(line)) {
     ++r.lines;
     const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
     if (p.skip) continue;
@@ -179,10 +271,15 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       }
       continue;
     }
-    if (p.record.interface != last_interface) {
-      last_interface = p.record.interface;
-      last_index = gateway.Interface(last_interface);
+    if (!p.record.has_time) {
+      if (++r.untimed_lines <= options.max_reported) {
+        Log(LogLevel::kWarning,
+            "{}:{}: no timestamp (candump's screen format without -t a): the pipeline runs on the "
+            "receive times; line skipped (record with candump -l, -L or -t a)", source, r.lines);
+      }
+      continue;
     }
+    const std::size_t iface = interfaces.Index(p.record.interface);
     const std::int64_t now = clock.Now(p.record.time_us);
     if (clock.steps_back() > r.time_steps_back) {
       r.time_steps_back = clock.steps_back();
@@ -194,9 +291,13 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       }
     }
     if (log_start_us < 0) log_start_us = now;
-    gateway.OnFrame(last_index, protocol::TimedFrame{now, p.record.frame});
-    gateway.Advance(now, sink);
-    csv.Write(gateway);
+    gateway.OnFrame(iface, protocol::TimedFrame{now, p.record.frame});
+    // Time-driven work only when some is due: a frame that brings nothing due costs nothing
+    // here. The CSV rows follow the thermal steps, which happen only in Advance.
+    if (now >= gateway.NextDueUs()) {
+      gateway.Advance(now, sink);
+      csv.Write(gateway);
+    }
     last_time_us = now;
     ++r.frames;
     if (options.pace > 0.0) {
@@ -214,6 +315,10 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
   }
   if (r.time_steps_back > options.max_reported) {
     Log(LogLevel::kWarning, "{}: time went back {} times in all", source, r.time_steps_back);
+  }
+  if (r.untimed_lines > options.max_reported) {
+    Log(LogLevel::kWarning, "{}: {} more lines without a timestamp skipped", source,
+        r.untimed_lines - options.max_reported);
   }
   if (r.bad_lines > options.max_reported) {
     Log(LogLevel::kWarning, "{}: {} more malformed lines skipped", source, r.bad_lines - options.max_reported);

@@ -29,6 +29,9 @@ struct OfflineResult {
   std::uint64_t lines = 0;
   std::uint64_t frames = 0;
   std::uint64_t bad_lines = 0;   ///< malformed lines: reported (first few) and counted, skipped
+  /// Screen-format lines without a timestamp (candump without -t a): the pipeline needs the
+  /// receive time; reported (first few), counted, skipped.
+  std::uint64_t untimed_lines = 0;
   /// Stamps more than OfflineClock::kClockStepUs behind the one before (two logs concatenated,
   /// the recording host's clock set back): warned with file:line (first few) and counted; their
   /// frames are used, time holding at the step (OfflineClock).
@@ -61,8 +64,9 @@ class OfflineClock {
   std::int64_t last_step_back_us_ = 0;
 };
 
-/// Feeds every frame of the candump log in `in` to `gateway`. `source` names the log in error
-/// messages ("FILE:LINE:COLUMN: what was expected"). Throws std::runtime_error only when an
+/// Feeds every frame of the candump recording in `in` (any format ParseCandumpLine reads; read
+/// in large blocks) to `gateway`, advancing it whenever its NextDueUs() is reached. `source`
+/// names the log in warnings ("FILE:LINE:COLUMN: what was expected"). Throws std::runtime_error only when an
 /// output file cannot be written.
 OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& gateway,
                          const OfflineOptions& options = {});

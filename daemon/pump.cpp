@@ -268,6 +268,12 @@ bool Pump::CheckNeverHeard(std::int64_t since_us, std::int64_t t_us) {
   return !(snapshot_.alarm == before);
 }
 
+std::int64_t Pump::NextDueUs() const {
+  const bool first_frame = last_frame_us_ >= 0 && !heard_;
+  if (first_frame || next_step_us_ < 0) return std::numeric_limits<std::int64_t>::min();
+  return next_step_us_;
+}
+
 bool Pump::Advance(std::int64_t t_us) {
   if (last_frame_us_ < 0) return false;
   if (next_step_us_ < 0 || !heard_) next_step_us_ = last_frame_us_ + period_us_;

@@ -131,6 +131,10 @@ class Pump {
   /// `t_us - since_us` old, so that after `stale_after_s` it raises stale telemetry like a pump
   /// that fell silent. Returns whether the alarm changed. No effect once a frame was heard.
   bool CheckNeverHeard(std::int64_t since_us, std::int64_t t_us);
+  /// The earliest time (us) at which Advance or CheckNeverHeard has work: the end of the next
+  /// thermal period; INT64_MIN when due at once (a first frame not yet advanced to, or a pump
+  /// never heard from whose silence is not yet timed). Before it, both change nothing.
+  std::int64_t NextDueUs() const;
 
   PumpSavedState Save() const;
   /// Continues from `state` saved at state.time_us, aged to `now_us` by the thermal model with

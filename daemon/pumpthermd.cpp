@@ -126,6 +126,7 @@ int main(int argc, char** argv) {
     }
     fmt::print("{}: {} frames, {} CAN IDs, {} malformed lines skipped\n", source, r.frames,
                gateway->counter().counts().size(), r.bad_lines);
+    if (r.untimed_lines > 0) fmt::print("{}: {} lines without a timestamp skipped (warned above)\n", source, r.untimed_lines);
     if (r.time_steps_back > 0) fmt::print("{}: time went back {} times (warned above)\n", source, r.time_steps_back);
     fmt::print("{}", gateway->counter().CountTable());
     if (!gateway->pumps().empty()) {

@@ -1,10 +1,19 @@
 #pragma once
-/// The candump log format (can-utils `candump -l` / `-L`, read by `canplayer` and `log2asc`):
+/// Lines of candump's output in every format it writes (can-utils `candump`, `asc2log`):
 ///
-///     (1436509052.249713) vcan0 044#2A366C2BBA
-///     (1436509052.449847) vcan0 1F334455#R          remote frame, 29-bit id
-///     (1436509052.649981) vcan0 123##1112233        CAN FD: flags nibble, then data
+///     (1436509052.249713) vcan0 044#2A366C2BBA        -l / -L log format (canplayer, log2asc)
+///     (1436509052.449847) vcan0 1F334455#R            remote frame, 29-bit id
+///     (1436509052.649981) vcan0 123##1112233          CAN FD: flags nibble, then data
+///     (1436509052.649981) vcan0 123#1122 R            -x: R received, T sent (asc2log writes it)
+///       vcan0  123   [8]  11 22 33 44 55 66 77 88     screen format, no timestamp
+///      (1436509052.249713)  vcan0  123   [2]  11 22   screen format with -t a (or -t z)
+///       vcan0  RX B -  123  [12]  11 22 ...           -x: direction, CAN FD flags BRS and ESI
 ///
+/// The screen format also carries "remote request", the ASCII column of -a and "ERRORFRAME"
+/// after the bytes. Not read: -t A's local-time date stamps (an error says so), the binary and
+/// byte-swapped views (-B, -S), and the explanation lines -e prints under an error frame. -t d
+/// prints the time since the previous frame, which reads as a time like -t z's: record with -t a
+/// or -l where the time matters.
 /// Pure parsing and formatting: the caller hands in one line of text and gets a frame or an error.
 
 #include <cstdint>
@@ -20,6 +29,10 @@ struct CandumpRecord {
   std::int64_t time_us = 0;  ///< microseconds since the Unix epoch
   std::string_view interface;
   CanFrame frame;
+  /// False for a screen-format line without a timestamp (time_us is then 0): a reader that
+  /// needs the time skips it and says why.
+  bool has_time = true;
+  char direction = 0;  ///< 'R' received, 'T' sent by the recording host (-x); 0 when not shown
 };
 
 /// Result of parsing one line. On failure `error` says what was expected and `column` (1-based)
@@ -32,7 +45,8 @@ struct CandumpParse {
   const char* error = "";
 };
 
-/// Parses one line of a candump log (without its newline). Never throws, never allocates.
+/// Parses one line (without its newline) in any of the formats above. Never throws, never
+/// allocates.
 CandumpParse ParseCandumpLine(std::string_view line) noexcept;
 
 /// Formats a frame as a candump log line (no trailing newline), as `candump -l` writes it.

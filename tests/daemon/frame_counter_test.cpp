@@ -1,5 +1,6 @@
 #include "daemon/frame_counter.hpp"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <sstream>
@@ -124,6 +125,45 @@ TEST(Offline, CountsFramesAndSkipsMalformedLines) {
   EXPECT_EQ(r.bad_lines, 2U);
   EXPECT_EQ(g.counter().counts().at({g.Interface("can0"), false, 0x181}), 2U);
   EXPECT_EQ(g.counter().counts().at({g.Interface("can1"), true, 0x18FF5001}), 1U);
+}
+
+TEST(Offline, ReadsEveryCandumpFormatAndSkipsUntimedLines) {
+  // One frame of 181 per format: -l/-L, -L -x, asc2log, screen -t a, screen -t a -x; then the
+  // screen format without a timestamp (counted apart, the pipeline needs the time) and -t A.
+  std::istringstream log(
+      "(1.000000) can0 181#0102\n"
+      "(1.010000) can0 181#0102 R\n"
+      "(1.020000) can0 181#0102 T\r\n"
+      " (1.030000)  can0  181   [2]  01 02\n"
+      " (1.040000)  can0  RX - -  181   [2]  01 02\n"
+      "  can0  181   [2]  01 02\n"
+      " (2015-07-10 06:17:32.249713)  can0  181   [2]  01 02\n"
+      "(1.050000) can0 181#0102");  // the last line has no newline
+  Gateway g(DaemonConfig{});
+  const auto r = RunOffline(log, "t.log", g);
+  EXPECT_EQ(r.lines, 8U);
+  EXPECT_EQ(r.frames, 6U);
+  EXPECT_EQ(r.untimed_lines, 1U);
+  EXPECT_EQ(r.bad_lines, 1U);
+  EXPECT_EQ(g.counter().counts().at({g.Interface("can0"), false, 0x181}), 6U);
+}
+
+TEST(Offline, ReadsLinesAcrossTheReadersBlocks) {
+  // More than one read block (1 MiB) of lines, one of them longer than a block (a bad line):
+  // every line is seen whole.
+  std::string text;
+  const int n = 60000;
+  for (int k = 0; k < n; ++k) {
+    text += fmt::format("({}.{:06d}) can0 {:03X}#0102030405060708\n", 1 + k / 1000, (k % 1000) * 1000, k % 0x7FF);
+    if (k == n / 2) text += std::string(1 << 21, 'x') + "\n";
+  }
+  std::istringstream log(text);
+  Gateway g(DaemonConfig{});
+  const auto r = RunOffline(log, "t.log", g);
+  EXPECT_EQ(r.lines, static_cast<std::uint64_t>(n) + 1);
+  EXPECT_EQ(r.frames, static_cast<std::uint64_t>(n));
+  EXPECT_EQ(r.bad_lines, 1U);
+  EXPECT_EQ(g.counter().total_rx(), static_cast<std::uint64_t>(n));
 }
 
 }  // namespace

@@ -52,6 +52,7 @@ write_seeds() {
     candump_log_fuzz)
       head -n 40 "$root/tests/data/skeleton.log" > "$dir/skeleton_head.log"
       printf '(1436509052.249713) vcan0 044#2A366C2BBA\n(1436509052.449847) vcan0 1F334455#R\n(1436509052.649981) vcan0 123##1112233\n(0.000000) can0 7FF#R3\n# comment\n\n' > "$dir/forms.log"
+      printf '  can0  123   [8]  11 22 33 44 55 66 77 88\n (1436509052.249713)  can0  RX B E  123  [12]  00 11 22 33 44 55 66 77 88 99 AA BB\n  can1       7FF   [4]  remote request\n  can0  20000004   [8]  00 04 00 00 00 00 00 00   ERRORFRAME\n(1795643917.565645) can0 044#2A366C2BBA R\n' > "$dir/screen_forms.log"
       ;;
     csv_reader_fuzz)
       if [[ -d "$shared/paderborn" ]]; then

@@ -76,6 +76,141 @@ TEST(CandumpLog, ErrorsNameTheColumn) {
   }
 }
 
+// The screen format (candump without -l/-L), as candump.c prints it: " " [timestamp] " "
+// "%*s" interface ["  RX - -" with -x] "  " and lib.c's sprint_long_canframe: the ID (3 digits,
+// or 8; 11-bit IDs indented to 8 once an extended one was seen), "[8]" (CAN FD: "[%02d]"), two
+// spaces, the bytes separated by spaces, or "remote request"; -a adds the ASCII column.
+TEST(CandumpLog, ReadsTheScreenFormat) {
+  auto p = ParseCandumpLine("  can0  123   [8]  11 22 33 44 55 66 77 88");
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_FALSE(p.record.has_time);
+  EXPECT_EQ(p.record.interface, "can0");
+  EXPECT_EQ(p.record.frame.id, 0x123U);
+  ASSERT_EQ(p.record.frame.len, 8);
+  EXPECT_EQ(p.record.frame.data[0], 0x11);
+  EXPECT_EQ(p.record.frame.data[7], 0x88);
+  EXPECT_EQ(p.record.direction, 0);
+
+  p = ParseCandumpLine(" (1436509052.249713)  vcan0  12345678   [2]  0A FF");  // -t a
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_TRUE(p.record.has_time);
+  EXPECT_EQ(p.record.time_us, 1436509052249713);
+  EXPECT_TRUE(p.record.frame.extended);
+  EXPECT_EQ(p.record.frame.id, 0x12345678U);
+  EXPECT_EQ(p.record.frame.data[1], 0xFF);
+
+  p = ParseCandumpLine(" (000.010000)  can1       7FF   [0]  ");  // -t z, indented 11-bit ID
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_EQ(p.record.time_us, 10000);
+  EXPECT_EQ(p.record.frame.id, 0x7FFU);
+  EXPECT_EQ(p.record.frame.len, 0);
+
+  p = ParseCandumpLine("  can0  123   [4]  remote request");
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_TRUE(p.record.frame.remote);
+  EXPECT_EQ(p.record.frame.len, 4);
+
+  p = ParseCandumpLine("  can0  123  [12]  00 11 22 33 44 55 66 77 88 99 AA BB");  // CAN FD
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_TRUE(p.record.frame.fd);
+  EXPECT_EQ(p.record.frame.len, 12);
+  EXPECT_EQ(p.record.frame.data[11], 0xBB);
+
+  p = ParseCandumpLine("  can0  123   [3]  41 42 43               'ABC'");  // -a
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_EQ(p.record.frame.len, 3);
+  EXPECT_EQ(p.record.frame.data[2], 0x43);
+
+  p = ParseCandumpLine("  can0  20000004   [8]  00 04 00 00 00 00 00 00   ERRORFRAME");
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_TRUE(p.record.frame.error);
+  EXPECT_EQ(p.record.frame.id, 0x4U);
+  EXPECT_EQ(p.record.frame.data[1], 0x04);
+}
+
+// candump -x: "  RX - -" / "  TX B E" after the interface (direction; CAN FD BRS and ESI) on
+// the screen, " R" / " T" after the frame in the log format.
+TEST(CandumpLog, ReadsTheDirectionAndFlagsOfExtraInfo) {
+  auto p = ParseCandumpLine(" (1436509052.249713)  can0  RX - -  123   [2]  11 22");
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_EQ(p.record.direction, 'R');
+  EXPECT_EQ(p.record.frame.len, 2);
+  EXPECT_FALSE(p.record.frame.fd);
+
+  p = ParseCandumpLine("  can0  TX B E  123  [08]  01 02 03 04 05 06 07 08");
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_EQ(p.record.direction, 'T');
+  EXPECT_TRUE(p.record.frame.fd);
+  EXPECT_EQ(p.record.frame.fd_flags, 3);
+  EXPECT_EQ(p.record.frame.len, 8);
+
+  p = ParseCandumpLine("(1436509052.249713) can0 123#1122 T");
+  ASSERT_TRUE(p.ok) << p.error << " at " << p.column;
+  EXPECT_EQ(p.record.direction, 'T');
+  EXPECT_EQ(p.record.frame.len, 2);
+  EXPECT_EQ(p.record.frame.data[1], 0x22);
+}
+
+// What can-utils 2020.11's asc2log wrote here for `log2asc -I in.log -O out.asc can0 can1`
+// of a log holding one frame of each kind, read back with `asc2log -I out.asc`: the log format
+// with " R" (the ASC direction "Rx"); the error frame has none.
+TEST(CandumpLog, ReadsAsc2logOutput) {
+  const char* lines[] = {
+      "(1795643917.565645) can0 044#2A366C2BBA R",
+      "(1795643917.765779) can1 1F334455#R R",
+      "(1795643917.965913) can0 123##1112233 R",
+      "(1795643918.015932) can0 7FF# R",
+      "(1795643918.115932) can0 20000080#0000000000000000",
+      "(1795643918.215932) can0 123#R3 R",
+  };
+  for (const char* line : lines) {
+    const auto p = ParseCandumpLine(line);
+    ASSERT_TRUE(p.ok) << line << ": " << p.error << " at " << p.column;
+  }
+  auto p = ParseCandumpLine(lines[1]);
+  EXPECT_TRUE(p.record.frame.remote);
+  EXPECT_TRUE(p.record.frame.extended);
+  EXPECT_EQ(p.record.direction, 'R');
+  p = ParseCandumpLine(lines[2]);
+  EXPECT_TRUE(p.record.frame.fd);
+  EXPECT_EQ(p.record.frame.len, 3);
+  p = ParseCandumpLine(lines[3]);
+  EXPECT_EQ(p.record.frame.len, 0);
+  EXPECT_EQ(p.record.direction, 'R');
+  p = ParseCandumpLine(lines[4]);
+  EXPECT_TRUE(p.record.frame.error);
+  EXPECT_EQ(p.record.direction, 0);
+  p = ParseCandumpLine(lines[5]);
+  EXPECT_TRUE(p.record.frame.remote);
+  EXPECT_EQ(p.record.frame.len, 3);
+}
+
+TEST(CandumpLog, ScreenFormatErrorsSayWhatIsWrong) {
+  struct Case {
+    const char* line;
+    std::size_t column;
+    const char* says;
+  };
+  const Case cases[] = {
+      {" (2015-07-10 06:17:32.249713)  can0  123   [1]  11", 7, "date stamp"},  // -t A
+      {"  can0  123   [3]  11 22", 25, "fewer payload bytes"},
+      {"  can0  123   [1]  11 22", 23, "more payload bytes"},
+      {"  can0  123   [9]  11", 17, "out of range"},
+      {"  can0  123  [13]  11", 17, "out of range"},                             // no FD length
+      {"  can0  123   8  11", 15, "expected '['"},
+      {"  can0  123   [2]  1 22", 20, "two hex digits"},
+      {"  can0  RX x -  123   [0]", 12, "candump -x flags"},
+      {"this is not a candump line", 1, "not a candump line"},
+      {"  can0", 3, "not a candump line"},
+  };
+  for (const auto& c : cases) {
+    const auto p = ParseCandumpLine(c.line);
+    EXPECT_FALSE(p.ok) << c.line;
+    EXPECT_EQ(p.column, c.column) << c.line << ": " << p.error;
+    EXPECT_NE(std::string_view(p.error).find(c.says), std::string_view::npos) << c.line << ": " << p.error;
+  }
+}
+
 TEST(CandumpLog, FormatRoundTrips) {
   const char* lines[] = {
       "(1436509052.249713) vcan0 044#2A366C2BBA",

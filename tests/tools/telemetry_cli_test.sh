@@ -2,8 +2,9 @@
 # pumptherm telemetry, and identify/estimate --log: one pump's dq telemetry straight from a
 # candump recording of the plant simulator. Checks: a row per paired current/voltage frame at
 # the drive's 100 Hz; identify --log gives exactly what identify -i gives on telemetry's CSV; the
-# frame temperature agrees with the simulator's measured CSV; a bad line is skipped with
-# file:line and counted; a node ID without frames is exit 2 naming it.
+# frame temperature agrees with the simulator's measured CSV; a bad line and a line without a
+# timestamp are skipped with file:line and counted; the screen format gives the same rows; a node
+# ID without frames is exit 2 naming it.
 #   telemetry_cli_test.sh PUMPTHERM
 set -u
 exe=$1
@@ -12,11 +13,23 @@ trap 'rm -rf "$tmp"' EXIT
 fail() { echo "FAIL: $*"; exit 1; }
 
 "$exe" plant demo --duration-s 60 --quiet --out "$tmp/d" || fail "plant demo"
-sed '100a this is not a candump line' "$tmp/d/demo.log" > "$tmp/bad.log"
+sed -e '100a this is not a candump line' -e '101a \  can0  103   [8]  FC FF 58 02 00 00 00 00' \
+  "$tmp/d/demo.log" > "$tmp/bad.log"
 "$exe" telemetry --log "$tmp/bad.log" --node-id 3 -o "$tmp/p3.csv" 2> "$tmp/err.txt" || { cat "$tmp/err.txt"; fail "telemetry"; }
 cat "$tmp/err.txt"
 grep -q "bad.log:101:1: skipped" "$tmp/err.txt" || fail "the bad line is not named with file:line"
 grep -q "1 bad" "$tmp/err.txt" || fail "the bad line is not counted"
+grep -q "bad.log:103: skipped: no timestamp" "$tmp/err.txt" || fail "the line without a timestamp is not named"
+grep -q "1 without a timestamp" "$tmp/err.txt" || fail "the line without a timestamp is not counted"
+# The same recording in candump's screen format with -t a (-x's RX/TX on every other line): the
+# same rows.
+awk '{ split($3, f, "#"); n = length(f[2]) / 2; s = ""
+       for (i = 0; i < n; i++) s = s " " substr(f[2], 2 * i + 1, 2)
+       printf " %s  %s%s  %s   [%d] %s\n", $1, $2, (NR % 2 ? "  RX - -" : ""), f[1], n, s }' \
+  "$tmp/d/demo.log" > "$tmp/screen.log"
+"$exe" telemetry --log "$tmp/d/demo.log" --node-id 3 -o "$tmp/p3log.csv" 2>/dev/null || fail "telemetry on the log"
+"$exe" telemetry --log "$tmp/screen.log" --node-id 3 -o "$tmp/p3screen.csv" 2>/dev/null || fail "telemetry on the screen format"
+cmp -s "$tmp/p3log.csv" "$tmp/p3screen.csv" || fail "the screen format gives other rows than the log format"
 rows=$(($(wc -l < "$tmp/p3.csv") - 1))
 [ "$rows" -ge 5900 ] && [ "$rows" -le 6000 ] || fail "$rows rows for 60 s at 100 Hz"
 head -n 1 "$tmp/p3.csv" | grep -qx "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm,frame_C,ambient_C" || fail "header: $(head -n 1 "$tmp/p3.csv")"

@@ -27,10 +27,10 @@ int RunTelemetry(const TelemetryOptions& o) {
     if (!(out << csv)) throw std::runtime_error(fmt::format("{}: cannot write", o.output));
   }
   fmt::print(stderr,
-             "telemetry: {} rows from {} frames of node ID {} ({} lines, {} bad, {} undecodable, {} unpaired); "
-             "time_s 0 is Unix time {:.6f}\n",
-             counts.rows, counts.frames, o.source.node_id, counts.lines, counts.bad_lines, counts.undecodable,
-             counts.unpaired, static_cast<double>(counts.first_us) * 1e-6);
+             "telemetry: {} rows from {} frames of node ID {} ({} lines, {} bad, {} without a timestamp, {} "
+             "undecodable, {} unpaired); time_s 0 is Unix time {:.6f}\n",
+             counts.rows, counts.frames, o.source.node_id, counts.lines, counts.bad_lines, counts.untimed_lines,
+             counts.undecodable, counts.unpaired, static_cast<double>(counts.first_us) * 1e-6);
   return 0;
 }
 

@@ -179,6 +179,13 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
       }
       continue;
     }
+    if (!p.record.has_time) {
+      if (++counts.untimed_lines <= kWarnedLines) {
+        fmt::print(stderr, "{}:{}: skipped: no timestamp (candump's screen format without -t a); record with "
+                   "candump -l, -L or -t a\n", where, counts.lines);
+      }
+      continue;
+    }
     const protocol::CanFrame& f = p.record.frame;
     if (f.error || f.remote || f.id < s.node_id) continue;
     if (!s.interface.empty() && p.record.interface != s.interface) continue;
@@ -204,6 +211,10 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
   }
   if (counts.bad_lines > kWarnedLines) {
     fmt::print(stderr, "{}: {} bad lines skipped in all (the first {} shown)\n", where, counts.bad_lines, kWarnedLines);
+  }
+  if (counts.untimed_lines > kWarnedLines) {
+    fmt::print(stderr, "{}: {} lines without a timestamp skipped in all (the first {} shown)\n", where,
+               counts.untimed_lines, kWarnedLines);
   }
   if (counts.rows == 0) {
     throw InputError(fmt::format("{}: no paired current and voltage frames of node ID {}{} ({} lines, {} of its frames)",

@@ -25,6 +25,7 @@ struct RecordingSource {
 struct RecordingCounts {
   std::uint64_t lines = 0;
   std::uint64_t bad_lines = 0;       ///< not candump lines: skipped, the first few warned
+  std::uint64_t untimed_lines = 0;   ///< screen-format lines without a timestamp: skipped, warned
   std::uint64_t frames = 0;          ///< frames of this pump's mapped input messages
   std::uint64_t undecodable = 0;     ///< of those, too short for their message
   std::uint64_t unpaired = 0;        ///< current or voltage frames without a partner
@@ -36,7 +37,8 @@ struct RecordingCounts {
 /// subcommand's own --motor where it has one).
 void AddRecordingOptions(CLI::App& app, RecordingSource& source);
 
-/// The rows as CSV text with a header. Warnings about bad lines go to stderr with file:line.
+/// The rows as CSV text with a header; the log in any format ParseCandumpLine reads. Warnings
+/// about bad lines and lines without a timestamp go to stderr with file:line.
 /// Throws InputError for an unreadable log, DBC, mapping or motor file, a node ID at or above the
 /// mapping's limit, or a recording with no paired row for the pump.
 std::string RecordingToCsv(const RecordingSource& source, RecordingCounts* counts);
