@@ -12,11 +12,14 @@
 #include <string>
 
 #include "estimators/motor.hpp"
+#include "tests/common/test_files.hpp"
 #include "tools/common/csv.hpp"
 #include "tools/sim/tmp_drive.hpp"
 
 namespace pumptherm {
 namespace {
+
+using pumptherm::test_files::ReadFile;
 
 std::string TempPath(const std::string& name) {
   return ::testing::TempDir() + "pumptherm_identify_" + name;
@@ -25,13 +28,6 @@ std::string TempPath(const std::string& name) {
 void WriteText(const std::string& path, const std::string& text) {
   std::ofstream out(path);
   out << text;
-}
-
-std::string ReadText(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
 }
 
 struct Result {
@@ -45,7 +41,7 @@ Result Identify(const std::string& name, const std::string& extra = "") {
                           TempPath(name + ".csv") + "' --output '" + TempPath(name + ".out.csv") +
                           "' " + extra + " 2> '" + err + "'";
   const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, ReadText(err)};
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, ReadFile(err)};
 }
 
 constexpr const char* kHeader = "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm\n";
@@ -142,7 +138,7 @@ TEST(IdentifyCli, ShortOptionsAndStandardOutputByDefault) {
   const int status = std::system(cmd.c_str());
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0);
-  const std::string csv = ReadText(out);
+  const std::string csv = ReadFile(out);
   EXPECT_EQ(csv.rfind("time_s,resistance_ohm", 0), 0u) << csv;
   EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3) << csv;
 }
