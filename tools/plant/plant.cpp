@@ -178,6 +178,294 @@ struct PumpState {
 
 std::string FormatNumber(double v) { return fmt::format("{}", v); }
 
+/// The frame layout of a scenario that writes a log: the DBC, its codecs, the mapping, the three
+/// messages the plant sends and where each mapped input sits. Filled in place (the plans point
+/// into the codecs).
+struct FrameLayout {
+  std::optional<protocol::Dbc> dbc;
+  std::optional<protocol::DbcCodec> codecs;
+  std::optional<protocol::SignalMapping> mapping;
+  MessagePlan fast_i, fast_u, status;
+  std::array<InputSlot, protocol::kMappingInputCount> slots{};
+
+  /// Puts the value `v` of input `in` into `plan` when the mapping places it in that message.
+  void Set(MessagePlan& plan, MappingInput in, double v) const {
+    const InputSlot& s = slots[static_cast<std::size_t>(in)];
+    if (s.message_index != plan.message_index) return;  // mapped to another message
+    plan.values[static_cast<std::size_t>(s.signal_index)] = (v - s.offset) / s.scale;
+  }
+};
+
+void LoadFrameLayout(const PlantResources& res, FrameLayout& layout) {
+  std::optional<protocol::Dbc>& dbc = layout.dbc;
+  std::optional<protocol::DbcCodec>& codecs = layout.codecs;
+  std::optional<protocol::SignalMapping>& mapping = layout.mapping;
+  auto& slots = layout.slots;
+  try {
+    dbc = protocol::ParseDbc(res.dbc.text, res.dbc.source);
+    mapping = protocol::ParseMapping(res.mapping.text, res.mapping.source, *dbc);
+  } catch (const std::exception& e) {
+    throw ScenarioError(e.what());
+  }
+  codecs.emplace(*dbc);
+  for (std::size_t i = 0; i < protocol::kMappingInputCount; ++i) {
+    if (const auto& ref = mapping->inputs[i]) {
+      slots[i] = InputSlot{ref->message_index, ref->signal_index, ref->scale, ref->offset};
+    }
+  }
+  auto plan_of = [&](MappingInput in, std::string_view what) {
+    const auto& ref = mapping->input(in);
+    if (!ref) {
+      throw ScenarioError(fmt::format("{}: the mapping does not bind {}, which the plant sends",
+                                      res.mapping.source, what));
+    }
+    MessagePlan p;
+    p.message_index = ref->message_index;
+    p.codec = &codecs->message(static_cast<std::size_t>(ref->message_index));
+    p.values.assign(p.codec->signal_count(), std::nan(""));
+    p.counter_signal = dbc->messages[static_cast<std::size_t>(ref->message_index)].FindSignal("RollingCounter");
+    return p;
+  };
+  layout.fast_i = plan_of(MappingInput::kIqA, "iq_A");
+  layout.fast_u = plan_of(MappingInput::kUqV, "uq_V");
+  layout.status = plan_of(MappingInput::kFrameTempDegC, "frame_temp_degC");
+}
+
+/// The pump's motor: a preset or a file the scenario names.
+estimators::MotorDescription PumpMotor(const PumpSpec& spec, const PlantResources& res, const std::string& where) {
+  try {
+    if (!estimators::MotorPresetText(spec.motor).empty()) return estimators::MotorPreset(spec.motor);
+    const LoadedText t = res.motor_file(spec.motor);
+    return estimators::ParseMotorDescription(t.text, t.source);
+  } catch (const std::exception& e) {
+    throw ScenarioError(fmt::format("{}: motor '{}': {}", where, spec.motor, e.what()));
+  }
+}
+
+/// The pump's truth model (with the scenario's hidden effects added), and the variants its
+/// cooling faults switch to.
+void LoadTruthModels(PumpState& state, const PumpSpec& spec, const PlantResources& res, const std::string& where) {
+  PumpState* ps = &state;
+  LoadedText model_text;
+  try {
+    model_text = res.model(spec.model);
+    // Tables the model names are read relative to the model file.
+    const std::size_t slash = model_text.source.rfind('/');
+    const estimators::ThermalModelFiles files{
+        slash == std::string::npos ? std::string(".") : model_text.source.substr(0, slash), res.read_file};
+    if (!spec.effects.empty()) {
+      // Hidden effects: the truth is the model with the workflow's effects added.
+      model_text.text = estimators::ApplyModelEffects(model_text.text, model_text.source, spec.effects);
+      for (const auto& e : spec.effects) {
+        model_text.source += fmt::format(" +{}", e.name);
+      }
+    }
+    ps->models.push_back(
+        std::make_unique<ThermalModel>(ThermalModel::Parse(model_text.text, model_text.source, files)));
+    for (const Fault& f : spec.faults) {
+      if (f.kind != FaultKind::kCoolingFailure) {
+        ps->model_of_fault.push_back(-1);
+        continue;
+      }
+      const std::string scaled = ScaleEdgeResistance(model_text.text, model_text.source, f.edge, f.factor);
+      ps->models.push_back(std::make_unique<ThermalModel>(ThermalModel::Parse(
+          scaled, fmt::format("{} (edge {} x {})", model_text.source, f.edge, f.factor), files)));
+      ps->model_of_fault.push_back(static_cast<int>(ps->models.size()) - 1);
+    }
+  } catch (const std::exception& e) {
+    throw ScenarioError(fmt::format("{}: model '{}': {}", where, spec.model, e.what()));
+  }
+}
+
+/// Node index of `name` in `m`; throws ScenarioError listing the nodes.
+int NodeIndex(const ThermalModel& m, const std::string& name, const PumpSpec& spec, const std::string& where) {
+  const auto& nodes = m.Nodes();
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    if (nodes[i].name == name) return static_cast<int>(i);
+  }
+  std::string list;
+  for (const auto& n : nodes) list += (list.empty() ? "" : ", ") + n.name;
+  throw ScenarioError(fmt::format("{}: model '{}' has no node '{}' (nodes: {})", where, spec.model, name, list));
+}
+
+/// Pump `pi` of the scenario at its start: motor, truth models, nodes, random streams, sensors,
+/// initial state, and its truth and measured CSV files in `out_dir`.
+std::unique_ptr<PumpState> SetUpPump(const Scenario& sc, const PlantResources& res, std::size_t pi,
+                                     const std::string& out_dir) {
+  namespace fs = std::filesystem;
+  const bool electrical = sc.can_log;
+  const PumpSpec& spec = sc.pumps[pi];
+  auto ps = std::make_unique<PumpState>();
+  ps->spec = &spec;
+  const std::string where = fmt::format("{}:{}: pump '{}'", sc.source, spec.line, spec.name);
+  ps->motor = PumpMotor(spec, res, where);
+  LoadTruthModels(*ps, spec, res, where);
+  const ThermalModel& m = *ps->models[0];
+  if (m.UsesCoolant()) {
+    throw ScenarioError(fmt::format("{}: model '{}' has a coolant boundary; the plant drives only "
+                                    "'ambient' (map the coolant to ambient in the model file)",
+                                    where, spec.model));
+  }
+
+  ps->frame_node = NodeIndex(m, spec.frame_sensor.node, spec, where);
+  if (sc.levels.node != "winding_res") ps->level_node = NodeIndex(m, sc.levels.node, spec, where);
+  ps->winding_weights = m.WindingWeights();
+  if (ps->winding_weights.sum() <= 0.0 && (electrical || sc.levels.node == "winding_res")) {
+    throw ScenarioError(fmt::format("{}: model '{}' has no temperature-dependent copper loss, so "
+                                    "it defines no winding temperature",
+                                    where, spec.model));
+  }
+  if (!spec.drive.magnet_node.empty()) {
+    ps->magnet_state = m.StateIndex(spec.drive.magnet_node);
+    if (ps->magnet_state < 0) {
+      throw ScenarioError(fmt::format("{}: drive.magnet_node '{}' is not a node with heat capacity "
+                                      "in model '{}'",
+                                      where, spec.drive.magnet_node, spec.model));
+    }
+  }
+  ps->rng_drive.seed(Mix(sc.seed, pi, 1));
+  ps->rng_thermal.seed(Mix(sc.seed, pi, 2));
+  ps->rng_bus.seed(Mix(sc.seed, pi, 3));
+  ps->rng_jitter.seed(Mix(sc.seed, pi, 4));
+  std::mt19937_64 rng_setup(Mix(sc.seed, pi, 5));
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  ps->offset_phase_rad = 2.0 * std::numbers::pi * unit(rng_setup);
+  ps->phase_us = static_cast<std::int64_t>(unit(rng_setup) * (sc.fast_period_s * 1e6 - 1000.0));
+  auto sensor_config = [&](const TemperatureSensorSpec& s) {
+    sim::SensorConfig c;
+    c.noise_sd = s.noise_sd_K;
+    c.offset = std::isnan(s.offset_K) ? s.accuracy_K * (2.0 * unit(rng_setup) - 1.0) : s.offset_K;
+    c.lsb = s.resolution_K;
+    c.min = -50.0;  // the DBC's FrameTemp_degC / AmbientTemp_degC range
+    c.max = 359.4;
+    c.lag_tau_s = s.lag_s;
+    return c;
+  };
+  ps->frame_sensor.emplace(sensor_config(spec.frame_sensor), Mix(sc.seed, pi, 6));
+  ps->ambient_sensor.emplace(sensor_config(spec.ambient_sensor), Mix(sc.seed, pi, 7));
+  ps->profile.emplace(spec);
+  const double x0 = std::isnan(spec.initial_degC) ? spec.ambient_degC : spec.initial_degC;
+  ps->x = Eigen::VectorXd::Constant(m.StateCount(), x0);
+  ps->next.resize(m.StateCount());
+  ps->disc = std::make_unique<estimators::ThermalDiscretiser>(1e-4);
+  ps->summary.name = spec.name;
+  ps->summary.interface = spec.interface;
+  ps->summary.node_id = spec.node_id;
+  ps->summary.max_level_node_degC = -1e300;
+  for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
+    const Fault& f = spec.faults[fi];
+    if (f.kind == FaultKind::kCoolingFailure && f.start_s <= 0.0) ps->active_model = ps->model_of_fault[fi];
+  }
+
+  std::vector<std::string> tcols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C"};
+  for (const auto& n : m.Nodes()) tcols.push_back(n.name + "_C");
+  tcols.insert(tcols.end(), {"winding_res_C", "resistance_ohm", "flux_Wb"});
+  for (const auto& n : m.Nodes()) tcols.push_back("loss_" + n.name + "_W");
+  tcols.insert(tcols.end(), {"loss_total_W", "cooling_model", "drive_state"});
+  ps->truth = std::make_unique<tools::CsvWriter>((fs::path(out_dir) / (spec.name + ".truth.csv")).string(), tcols);
+  ps->measured = std::make_unique<tools::CsvWriter>(
+      (fs::path(out_dir) / (spec.name + ".measured.csv")).string(),
+      std::vector<std::string>{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C", spec.frame_sensor.node + "_C"});
+  return ps;
+}
+
+/// summary.json: the scenario and, per pump, what the truth reached and the frames written.
+void WriteSummaryJson(const std::string& out_dir, const Scenario& sc, const PlantResult& result) {
+  namespace fs = std::filesystem;
+  const std::string summary_path = (fs::path(out_dir) / "summary.json").string();
+  std::string json = fmt::format(
+      "{{\n  \"scenario\": \"{}\",\n  \"seed\": {},\n  \"duration_s\": {},\n  \"log\": \"{}\",\n"
+      "  \"frames_written\": {},\n  \"levels\": {{\"node\": \"{}\", \"warning_C\": {}, \"trip_C\": {}}},\n"
+      "  \"pumps\": [\n",
+      sc.name, sc.seed, sc.duration_s, result.log_path.empty() ? "" : fs::path(result.log_path).filename().string(),
+      result.frames_written, sc.levels.node, sc.levels.warning_degC, sc.levels.trip_degC);
+  for (std::size_t i = 0; i < result.pumps.size(); ++i) {
+    const PumpSummary& s = result.pumps[i];
+    auto opt = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{}", v); };
+    std::string above;
+    for (const auto& [a, b] : s.above_warning_s) {
+      auto at = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{:.2f}", v); };
+      above += fmt::format("{}[{}, {}]", above.empty() ? "" : ", ", at(a), at(b));
+    }
+    json += fmt::format(
+        "    {{\"name\": \"{}\", \"interface\": \"{}\", \"node_id\": {}, \"truth\": \"{}.truth.csv\", "
+        "\"measured\": \"{}.measured.csv\", \"max_C\": {:.3f}, \"max_time_s\": {}, "
+        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"above_warning_s\": [{}], \"frames_written\": {}, "
+        "\"frames_suppressed\": {}}}{}\n",
+        s.name, s.interface, s.node_id, s.name, s.name, s.max_level_node_degC, s.max_level_time_s,
+        opt(s.warning_crossed_s), opt(s.trip_crossed_s), above, s.frames_written, s.frames_suppressed,
+        i + 1 < result.pumps.size() ? "," : "");
+  }
+  json += "  ]\n}\n";
+  std::FILE* f = std::fopen(summary_path.c_str(), "wb");
+  if (f == nullptr) throw std::system_error(errno, std::generic_category(), fmt::format("opening '{}'", summary_path));
+  const bool ok = std::fwrite(json.data(), 1, json.size(), f) == json.size();
+  if (std::fclose(f) != 0 || !ok) {
+    throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", summary_path));
+  }
+}
+
+/// The faults of a pump active at time `t` (cooling failures switch models at thermal steps).
+struct ActiveFaults {
+  bool dropped_window = false, stale = false, stuck = false;
+  double drop_probability = 0.0;
+};
+
+ActiveFaults FaultsAt(const PumpSpec& spec, double t) {
+  ActiveFaults a;
+  for (const Fault& f : spec.faults) {
+    if (t < f.start_s || t >= f.end_s) continue;
+    switch (f.kind) {
+      case FaultKind::kDroppedFrames:
+        a.dropped_window = true;
+        a.drop_probability = std::max(a.drop_probability, f.probability);
+        break;
+      case FaultKind::kStaleSensor: a.stale = true; break;
+      case FaultKind::kStuckSensor: a.stuck = true; break;
+      case FaultKind::kCoolingFailure: break;
+    }
+  }
+  return a;
+}
+
+/// The truth's level node at time `t` into the pump's summary: maximum, first warning and trip
+/// crossings, and the intervals above the warning level.
+void RecordLevel(PumpSummary& summary, const TruthLevels& levels, double level, double t) {
+  if (level > summary.max_level_node_degC) {
+    summary.max_level_node_degC = level;
+    summary.max_level_time_s = t;
+  }
+  if (summary.warning_crossed_s < 0.0 && level > levels.warning_degC) summary.warning_crossed_s = t;
+  auto& above = summary.above_warning_s;
+  const bool was_above = !above.empty() && above.back().second < 0.0;
+  if (!was_above && level > levels.warning_degC) above.emplace_back(t, -1.0);
+  if (was_above && !(level > levels.warning_degC)) above.back().second = t;
+  if (summary.trip_crossed_s < 0.0 && level > levels.trip_degC) summary.trip_crossed_s = t;
+}
+
+/// End of a thermal period: one exact zero-order-hold step of the truth with the latched inputs
+/// plus process noise; a cooling fault active at `t_next_s` takes effect from the next step.
+void AdvanceTruth(PumpState& p, double thermal_dt_s, double t_next_s) {
+  const PumpSpec& spec = *p.spec;
+  p.model().Linearise(p.held, p.x, p.lin);
+  p.disc->Update(p.lin, thermal_dt_s);
+  p.disc->Propagate(p.x, p.lin, p.next);
+  const double sd = spec.process_noise_K * std::sqrt(thermal_dt_s);
+  for (Eigen::Index i = 0; i < p.next.size(); ++i) p.next(i) += sd * p.normal(p.rng_thermal);
+  p.x = p.next;
+  int model_next = 0;
+  for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
+    const Fault& f = spec.faults[fi];
+    if (f.kind == FaultKind::kCoolingFailure && t_next_s >= f.start_s && t_next_s < f.end_s) {
+      model_next = p.model_of_fault[fi];
+    }
+  }
+  if (model_next != p.active_model) {
+    p.active_model = model_next;
+    p.disc = std::make_unique<estimators::ThermalDiscretiser>(1e-4);
+  }
+}
+
 }  // namespace
 
 std::string ScaleEdgeResistance(std::string_view model_text, const std::string& source,
@@ -227,41 +515,11 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   if (ec) throw std::system_error(ec, fmt::format("creating output directory '{}'", out_dir));
 
   // Frame layout, only for scenarios that write a log.
-  std::optional<protocol::Dbc> dbc;
-  std::optional<protocol::DbcCodec> codecs;
-  std::optional<protocol::SignalMapping> mapping;
-  MessagePlan fast_i, fast_u, status;
-  std::array<InputSlot, protocol::kMappingInputCount> slots{};
-  if (sc.can_log) {
-    try {
-      dbc = protocol::ParseDbc(res.dbc.text, res.dbc.source);
-      mapping = protocol::ParseMapping(res.mapping.text, res.mapping.source, *dbc);
-    } catch (const std::exception& e) {
-      throw ScenarioError(e.what());
-    }
-    codecs.emplace(*dbc);
-    for (std::size_t i = 0; i < protocol::kMappingInputCount; ++i) {
-      if (const auto& ref = mapping->inputs[i]) {
-        slots[i] = InputSlot{ref->message_index, ref->signal_index, ref->scale, ref->offset};
-      }
-    }
-    auto plan_of = [&](MappingInput in, std::string_view what) {
-      const auto& ref = mapping->input(in);
-      if (!ref) {
-        throw ScenarioError(fmt::format("{}: the mapping does not bind {}, which the plant sends",
-                                        res.mapping.source, what));
-      }
-      MessagePlan p;
-      p.message_index = ref->message_index;
-      p.codec = &codecs->message(static_cast<std::size_t>(ref->message_index));
-      p.values.assign(p.codec->signal_count(), std::nan(""));
-      p.counter_signal = dbc->messages[static_cast<std::size_t>(ref->message_index)].FindSignal("RollingCounter");
-      return p;
-    };
-    fast_i = plan_of(MappingInput::kIqA, "iq_A");
-    fast_u = plan_of(MappingInput::kUqV, "uq_V");
-    status = plan_of(MappingInput::kFrameTempDegC, "frame_temp_degC");
-  }
+  FrameLayout layout;
+  if (sc.can_log) LoadFrameLayout(res, layout);
+  MessagePlan& fast_i = layout.fast_i;
+  MessagePlan& fast_u = layout.fast_u;
+  MessagePlan& status = layout.status;
 
   // Pumps.
   const bool electrical = sc.can_log;
@@ -275,129 +533,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   const double thermal_dt_s = static_cast<double>(thermal_every) * step_s;
 
   std::vector<std::unique_ptr<PumpState>> pumps;
-  for (std::size_t pi = 0; pi < sc.pumps.size(); ++pi) {
-    const PumpSpec& spec = sc.pumps[pi];
-    auto ps = std::make_unique<PumpState>();
-    ps->spec = &spec;
-    const std::string where = fmt::format("{}:{}: pump '{}'", sc.source, spec.line, spec.name);
-    // Motor: a preset or a file.
-    try {
-      if (!estimators::MotorPresetText(spec.motor).empty()) {
-        ps->motor = estimators::MotorPreset(spec.motor);
-      } else {
-        const LoadedText t = res.motor_file(spec.motor);
-        ps->motor = estimators::ParseMotorDescription(t.text, t.source);
-      }
-    } catch (const std::exception& e) {
-      throw ScenarioError(fmt::format("{}: motor '{}': {}", where, spec.motor, e.what()));
-    }
-    // Truth model, and the variants its cooling faults switch to.
-    LoadedText model_text;
-    try {
-      model_text = res.model(spec.model);
-      // Tables the model names are read relative to the model file.
-      const std::size_t slash = model_text.source.rfind('/');
-      const estimators::ThermalModelFiles files{
-          slash == std::string::npos ? std::string(".") : model_text.source.substr(0, slash), res.read_file};
-      if (!spec.effects.empty()) {
-        // Hidden effects: the truth is the model with the workflow's effects added.
-        model_text.text = estimators::ApplyModelEffects(model_text.text, model_text.source, spec.effects);
-        for (const auto& e : spec.effects) {
-          model_text.source += fmt::format(" +{}", e.name);
-        }
-      }
-      ps->models.push_back(
-          std::make_unique<ThermalModel>(ThermalModel::Parse(model_text.text, model_text.source, files)));
-      for (const Fault& f : spec.faults) {
-        if (f.kind != FaultKind::kCoolingFailure) {
-          ps->model_of_fault.push_back(-1);
-          continue;
-        }
-        const std::string scaled = ScaleEdgeResistance(model_text.text, model_text.source, f.edge, f.factor);
-        ps->models.push_back(std::make_unique<ThermalModel>(ThermalModel::Parse(
-            scaled, fmt::format("{} (edge {} x {})", model_text.source, f.edge, f.factor), files)));
-        ps->model_of_fault.push_back(static_cast<int>(ps->models.size()) - 1);
-      }
-    } catch (const std::exception& e) {
-      throw ScenarioError(fmt::format("{}: model '{}': {}", where, spec.model, e.what()));
-    }
-    const ThermalModel& m = *ps->models[0];
-    if (m.UsesCoolant()) {
-      throw ScenarioError(fmt::format("{}: model '{}' has a coolant boundary; the plant drives only "
-                                      "'ambient' (map the coolant to ambient in the model file)",
-                                      where, spec.model));
-    }
-    auto node_index = [&](const std::string& name) {
-      const auto& nodes = m.Nodes();
-      for (std::size_t i = 0; i < nodes.size(); ++i) {
-        if (nodes[i].name == name) return static_cast<int>(i);
-      }
-      std::string list;
-      for (const auto& n : nodes) list += (list.empty() ? "" : ", ") + n.name;
-      throw ScenarioError(fmt::format("{}: model '{}' has no node '{}' (nodes: {})", where,
-                                      spec.model, name, list));
-    };
-    ps->frame_node = node_index(spec.frame_sensor.node);
-    if (sc.levels.node != "winding_res") ps->level_node = node_index(sc.levels.node);
-    ps->winding_weights = m.WindingWeights();
-    if (ps->winding_weights.sum() <= 0.0 && (electrical || sc.levels.node == "winding_res")) {
-      throw ScenarioError(fmt::format("{}: model '{}' has no temperature-dependent copper loss, so "
-                                      "it defines no winding temperature",
-                                      where, spec.model));
-    }
-    if (!spec.drive.magnet_node.empty()) {
-      ps->magnet_state = m.StateIndex(spec.drive.magnet_node);
-      if (ps->magnet_state < 0) {
-        throw ScenarioError(fmt::format("{}: drive.magnet_node '{}' is not a node with heat capacity "
-                                        "in model '{}'",
-                                        where, spec.drive.magnet_node, spec.model));
-      }
-    }
-    ps->rng_drive.seed(Mix(sc.seed, pi, 1));
-    ps->rng_thermal.seed(Mix(sc.seed, pi, 2));
-    ps->rng_bus.seed(Mix(sc.seed, pi, 3));
-    ps->rng_jitter.seed(Mix(sc.seed, pi, 4));
-    std::mt19937_64 rng_setup(Mix(sc.seed, pi, 5));
-    std::uniform_real_distribution<double> unit(0.0, 1.0);
-    ps->offset_phase_rad = 2.0 * std::numbers::pi * unit(rng_setup);
-    ps->phase_us = static_cast<std::int64_t>(unit(rng_setup) * (sc.fast_period_s * 1e6 - 1000.0));
-    auto sensor_config = [&](const TemperatureSensorSpec& s) {
-      sim::SensorConfig c;
-      c.noise_sd = s.noise_sd_K;
-      c.offset = std::isnan(s.offset_K) ? s.accuracy_K * (2.0 * unit(rng_setup) - 1.0) : s.offset_K;
-      c.lsb = s.resolution_K;
-      c.min = -50.0;  // the DBC's FrameTemp_degC / AmbientTemp_degC range
-      c.max = 359.4;
-      c.lag_tau_s = s.lag_s;
-      return c;
-    };
-    ps->frame_sensor.emplace(sensor_config(spec.frame_sensor), Mix(sc.seed, pi, 6));
-    ps->ambient_sensor.emplace(sensor_config(spec.ambient_sensor), Mix(sc.seed, pi, 7));
-    ps->profile.emplace(spec);
-    const double x0 = std::isnan(spec.initial_degC) ? spec.ambient_degC : spec.initial_degC;
-    ps->x = Eigen::VectorXd::Constant(m.StateCount(), x0);
-    ps->next.resize(m.StateCount());
-    ps->disc = std::make_unique<estimators::ThermalDiscretiser>(1e-4);
-    ps->summary.name = spec.name;
-    ps->summary.interface = spec.interface;
-    ps->summary.node_id = spec.node_id;
-    ps->summary.max_level_node_degC = -1e300;
-    for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
-      const Fault& f = spec.faults[fi];
-      if (f.kind == FaultKind::kCoolingFailure && f.start_s <= 0.0) ps->active_model = ps->model_of_fault[fi];
-    }
-
-    std::vector<std::string> tcols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C"};
-    for (const auto& n : m.Nodes()) tcols.push_back(n.name + "_C");
-    tcols.insert(tcols.end(), {"winding_res_C", "resistance_ohm", "flux_Wb"});
-    for (const auto& n : m.Nodes()) tcols.push_back("loss_" + n.name + "_W");
-    tcols.insert(tcols.end(), {"loss_total_W", "cooling_model", "drive_state"});
-    ps->truth = std::make_unique<tools::CsvWriter>((fs::path(out_dir) / (spec.name + ".truth.csv")).string(), tcols);
-    ps->measured = std::make_unique<tools::CsvWriter>(
-        (fs::path(out_dir) / (spec.name + ".measured.csv")).string(),
-        std::vector<std::string>{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C", spec.frame_sensor.node + "_C"});
-    pumps.push_back(std::move(ps));
-  }
+  for (std::size_t pi = 0; pi < sc.pumps.size(); ++pi) pumps.push_back(SetUpPump(sc, res, pi, out_dir));
 
   // Log file.
   PlantResult result;
@@ -447,11 +583,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
     }
     return false;
   };
-  auto set_value = [&](MessagePlan& plan, MappingInput in, double v) {
-    const InputSlot& s = slots[static_cast<std::size_t>(in)];
-    if (s.message_index != plan.message_index) return;  // mapped to another message
-    plan.values[static_cast<std::size_t>(s.signal_index)] = (v - s.offset) / s.scale;
-  };
+  auto set_value = [&](MessagePlan& plan, MappingInput in, double v) { layout.Set(plan, in, v); };
 
   int last_percent = -1;
   for (std::int64_t k = 0; k < steps; ++k) {
@@ -461,22 +593,9 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       const PumpSpec& spec = *p.spec;
       const SetPoint sp = p.profile->At(t);
 
-      // Faults active now.
-      bool dropped_window = false, stale = false, stuck_now = false;
-      double drop_probability = 0.0;
-      for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
-        const Fault& f = spec.faults[fi];
-        if (t < f.start_s || t >= f.end_s) continue;
-        switch (f.kind) {
-          case FaultKind::kDroppedFrames:
-            dropped_window = true;
-            drop_probability = std::max(drop_probability, f.probability);
-            break;
-          case FaultKind::kStaleSensor: stale = true; break;
-          case FaultKind::kStuckSensor: stuck_now = true; break;
-          case FaultKind::kCoolingFailure: break;  // switches models at thermal steps
-        }
-      }
+      const ActiveFaults faults = FaultsAt(spec, t);
+      const bool dropped_window = faults.dropped_window, stale = faults.stale, stuck_now = faults.stuck;
+      const double drop_probability = faults.drop_probability;
 
       // Thermal truth: one exact ZOH step at the end of each thermal period (below); at its
       // start the inputs are latched.
@@ -569,7 +688,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
           f.time_us = time_us;
           f.pump = static_cast<std::uint32_t>(pi);
           f.order = order;
-          f.frame.id = mapping->CanId(*dbc, plan.message_index, spec.node_id);
+          f.frame.id = layout.mapping->CanId(*layout.dbc, plan.message_index, spec.node_id);
           f.frame.extended = plan.codec->extended();
           f.frame.len = static_cast<std::uint8_t>(plan.codec->min_bytes());
           plan.codec->Encode(plan.values, std::span<std::uint8_t>(f.frame.data.data(), f.frame.len));
@@ -617,16 +736,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       // Truth level summary (every thermal step).
       if (k % thermal_every == 0) {
         const double level = p.level_node < 0 ? winding_degC : m.AllTemperatures_degC(in, p.x)(p.level_node);
-        if (level > p.summary.max_level_node_degC) {
-          p.summary.max_level_node_degC = level;
-          p.summary.max_level_time_s = t;
-        }
-        if (p.summary.warning_crossed_s < 0.0 && level > sc.levels.warning_degC) p.summary.warning_crossed_s = t;
-        auto& above = p.summary.above_warning_s;
-        const bool was_above = !above.empty() && above.back().second < 0.0;
-        if (!was_above && level > sc.levels.warning_degC) above.emplace_back(t, -1.0);
-        if (was_above && !(level > sc.levels.warning_degC)) above.back().second = t;
-        if (p.summary.trip_crossed_s < 0.0 && level > sc.levels.trip_degC) p.summary.trip_crossed_s = t;
+        RecordLevel(p.summary, sc.levels, level, t);
       }
       if (k % truth_every == 0) {
         const Eigen::VectorXd all = m.AllTemperatures_degC(in, p.x);
@@ -644,27 +754,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       }
 
       // End of a thermal period: advance the truth with the latched inputs.
-      if ((k + 1) % thermal_every == 0) {
-        m.Linearise(p.held, p.x, p.lin);
-        p.disc->Update(p.lin, thermal_dt_s);
-        p.disc->Propagate(p.x, p.lin, p.next);
-        const double sd = spec.process_noise_K * std::sqrt(thermal_dt_s);
-        for (Eigen::Index i = 0; i < p.next.size(); ++i) p.next(i) += sd * p.normal(p.rng_thermal);
-        p.x = p.next;
-        // A cooling fault takes effect from the next thermal step.
-        const double t_next = static_cast<double>(k + 1) * step_s;
-        int model_next = 0;
-        for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
-          const Fault& f = spec.faults[fi];
-          if (f.kind == FaultKind::kCoolingFailure && t_next >= f.start_s && t_next < f.end_s) {
-            model_next = p.model_of_fault[fi];
-          }
-        }
-        if (model_next != p.active_model) {
-          p.active_model = model_next;
-          p.disc = std::make_unique<estimators::ThermalDiscretiser>(1e-4);
-        }
-      }
+      if ((k + 1) % thermal_every == 0) AdvanceTruth(p, thermal_dt_s, static_cast<double>(k + 1) * step_s);
     }
     if (electrical && (k % 100 == 99 || k + 1 == steps)) {
       write_until(k + 1 == steps ? INT64_MAX
@@ -690,38 +780,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
     if (rc != 0) throw std::system_error(errno, std::generic_category(), fmt::format("closing '{}'", result.log_path));
   }
 
-  // summary.json
-  const std::string summary_path = (fs::path(out_dir) / "summary.json").string();
-  std::string json = fmt::format(
-      "{{\n  \"scenario\": \"{}\",\n  \"seed\": {},\n  \"duration_s\": {},\n  \"log\": \"{}\",\n"
-      "  \"frames_written\": {},\n  \"levels\": {{\"node\": \"{}\", \"warning_C\": {}, \"trip_C\": {}}},\n"
-      "  \"pumps\": [\n",
-      sc.name, sc.seed, sc.duration_s, result.log_path.empty() ? "" : fs::path(result.log_path).filename().string(),
-      result.frames_written, sc.levels.node, sc.levels.warning_degC, sc.levels.trip_degC);
-  for (std::size_t i = 0; i < result.pumps.size(); ++i) {
-    const PumpSummary& s = result.pumps[i];
-    auto opt = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{}", v); };
-    std::string above;
-    for (const auto& [a, b] : s.above_warning_s) {
-      auto at = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{:.2f}", v); };
-      above += fmt::format("{}[{}, {}]", above.empty() ? "" : ", ", at(a), at(b));
-    }
-    json += fmt::format(
-        "    {{\"name\": \"{}\", \"interface\": \"{}\", \"node_id\": {}, \"truth\": \"{}.truth.csv\", "
-        "\"measured\": \"{}.measured.csv\", \"max_C\": {:.3f}, \"max_time_s\": {}, "
-        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"above_warning_s\": [{}], \"frames_written\": {}, "
-        "\"frames_suppressed\": {}}}{}\n",
-        s.name, s.interface, s.node_id, s.name, s.name, s.max_level_node_degC, s.max_level_time_s,
-        opt(s.warning_crossed_s), opt(s.trip_crossed_s), above, s.frames_written, s.frames_suppressed,
-        i + 1 < result.pumps.size() ? "," : "");
-  }
-  json += "  ]\n}\n";
-  std::FILE* f = std::fopen(summary_path.c_str(), "wb");
-  if (f == nullptr) throw std::system_error(errno, std::generic_category(), fmt::format("opening '{}'", summary_path));
-  const bool ok = std::fwrite(json.data(), 1, json.size(), f) == json.size();
-  if (std::fclose(f) != 0 || !ok) {
-    throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", summary_path));
-  }
+  WriteSummaryJson(out_dir, sc, result);
   return result;
 }
 
