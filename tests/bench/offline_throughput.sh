@@ -1,5 +1,5 @@
 #!/bin/sh
-# Benchmark (issue 6 figures; prints figures, never passes or fails on time): pumpthermd's
+# Benchmark (prints figures, never passes or fails on time): pumpthermd's
 # offline pipeline (`pumpthermd -r`) over the plant simulator's `fleet32` recording (32 pumps on
 # can0 and can1, 1 h, 100 Hz fast telemetry + 10 Hz status: 24.2 million frames, 1.1 GB),
 # measured in the same run as can-utils' `log2asc` converting the same log (the cost of merely

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 8 item 4, live load: vcan0 carries the frame rate of a fully loaded 1 Mbit/s bus (9000
+# Live load: vcan0 carries the frame rate of a fully loaded 1 Mbit/s bus (9000
 # frames/s: 16 pumps of the plant's fleet32 recording, 3360 frames/s, plus filler frames the
 # gateway does not know; tests/vcan/full_bus_log.awk) for 40 s, replayed by canplayer with its
 # original timing, and the daemon (16 pumps) must take every frame off its socket: rx = frames on

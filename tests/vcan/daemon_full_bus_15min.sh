@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 8 item 4 in full: the live load of daemon_full_bus.sh for 15 minutes and 20 s (the 40 s
+# The live load of daemon_full_bus.sh for 15 minutes and 20 s (the 40 s
 # full-bus recording played 23 times by canplayer -l), zero receive drops, every frame received,
 # and the bus at a full 1 Mbit/s bus's rate on average. A measurement (label "measurement"), not
 # in CI: about 17 min of guest time. docs/robustness.md, "Soak".

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 2, vcan test (b): candump on vcan0 sees the daemon's heartbeat frames at the configured
+# Vcan test (b): candump on vcan0 sees the daemon's heartbeat frames at the configured
 # rate (10 Hz here), with an uptime that advances.
 set -eu
 SCENARIO_NAME=daemon_heartbeat
