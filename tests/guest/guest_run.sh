@@ -1,6 +1,6 @@
 # shellcheck shell=bash disable=SC2154 # kMarker, name, run_dir and the rest are set by the harness
-# The host side of the QEMU guest protocol, shared by tests/vcan/run_vcan_test.sh and
-# tests/system/run_system_test.sh (sourced by both; bash).
+# The host side of the QEMU guest tests, shared by tests/vcan/run_vcan_test.sh and
+# tests/system/run_system_test.sh (sourced by both; bash): the guest kernel, and the protocol.
 #
 # The guest writes its result to its second serial port (a file on the host), one line each:
 #   <MARKER>-BEGIN <text>@@         the scenario starts (text: what the guest says about itself)
@@ -11,6 +11,27 @@
 #
 # The harness defines before calling: kMarker, name, out_dir, timeout_s, verbose, keep, run_dir,
 # say and err (its message prefixes), and guest_on_begin TEXT (what the BEGIN marker means to it).
+
+# The absolute path of FILE (its directory must exist).
+abspath() { (cd "$(dirname "$1")" && printf '%s/%s\n' "$(pwd -P)" "$(basename "$1")"); }
+now_s() { date +%s.%N; }
+# Seconds since START_S (a now_s value), to 0.1 s.
+elapsed_s() { awk -v a="$1" -v b="$(now_s)" 'BEGIN { printf "%.1f", b - a }'; }
+
+# Sets kernel_root (<cache>/kernel) and kernel_version (the newest vmlinuz-<ver> that has its
+# modules), or ends the run with the harness's cannot_run.
+find_kernel() {
+  kernel_root=${PUMPTHERM_CACHE:-/var/cache/pumptherm}/kernel
+  local v
+  kernel_version=$(for v in "$kernel_root"/boot/vmlinuz-*; do
+    v=${v##*/vmlinuz-}
+    if [[ -r "$kernel_root/boot/vmlinuz-$v" && -d "$kernel_root/lib/modules/$v/kernel" ]]; then
+      echo "$v"
+    fi
+  done | sort -V | tail -n 1)
+  [[ -n "$kernel_version" ]] ||
+    cannot_run "no guest kernel with its modules under $kernel_root (run tools/setup.sh)"
+}
 
 # Seconds between two looks at the result port while the guest runs.
 readonly kGuestPoll_s=0.2

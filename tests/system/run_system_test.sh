@@ -157,15 +157,12 @@ for f in "${files[@]}"; do
   if [[ ! -r "$f" ]]; then err "--file '$f' is not readable"; exit 2; fi
 done
 
-abspath() { (cd "$(dirname "$1")" && printf '%s/%s\n' "$(pwd -P)" "$(basename "$1")"); }
 [[ -z "$scenario" ]] || scenario=$(abspath "$scenario")
 for i in "${!bins[@]}"; do bins[i]=$(abspath "${bins[i]}"); done
 for i in "${!units[@]}"; do units[i]=$(abspath "${units[i]}"); done
 for i in "${!files[@]}"; do files[i]=$(abspath "${files[i]}"); done
 [[ -z "$out_dir" ]] || { mkdir -p "$out_dir" && out_dir=$(cd "$out_dir" && pwd -P); }
 
-now_s() { date +%s.%N; }
-elapsed_s() { awk -v a="$1" -v b="$(now_s)" 'BEGIN { printf "%.1f", b - a }'; }
 
 # ---------------------------------------------------------------------------------------------
 # What goes into the guest
@@ -353,19 +350,6 @@ configure_root() {
 # Base image
 # ---------------------------------------------------------------------------------------------
 
-# Sets kernel_root and kernel_version (the newest vmlinuz-<ver> with its modules), or cannot_run.
-find_kernel() {
-  kernel_root=${PUMPTHERM_CACHE:-/var/cache/pumptherm}/kernel
-  local v
-  kernel_version=$(for v in "$kernel_root"/boot/vmlinuz-*; do
-    v=${v##*/vmlinuz-}
-    if [[ -r "$kernel_root/boot/vmlinuz-$v" && -d "$kernel_root/lib/modules/$v/kernel" ]]; then
-      echo "$v"
-    fi
-  done | sort -V | tail -n 1)
-  [[ -n "$kernel_version" ]] ||
-    cannot_run "no guest kernel with its modules under $kernel_root (run tools/setup.sh)"
-}
 
 # Chooses cache_dir when none was given: the shared cache when it is usable.
 choose_cache_dir() {

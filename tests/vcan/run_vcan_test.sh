@@ -133,14 +133,11 @@ for f in "${files[@]}"; do
 done
 if ((shell)) && [[ "$mode" == "native" || "$mode" == "host" ]]; then err "--shell needs the guest mode"; exit 2; fi
 
-abspath() { (cd "$(dirname "$1")" && printf '%s/%s\n' "$(pwd -P)" "$(basename "$1")"); }
 scenario=$(abspath "$scenario")
 for i in "${!bins[@]}"; do bins[i]=$(abspath "${bins[i]}"); done
 for i in "${!files[@]}"; do files[i]=$(abspath "${files[i]}"); done
 [[ -z "$out_dir" ]] || { mkdir -p "$out_dir" && out_dir=$(cd "$out_dir" && pwd -P); }
 
-now_s() { date +%s.%N; }
-elapsed_s() { awk -v a="$1" -v b="$(now_s)" 'BEGIN { printf "%.1f", b - a }'; }
 
 # ---------------------------------------------------------------------------------------------
 # Native mode
@@ -287,20 +284,6 @@ poweroff -f
 EOF
 }
 
-# Sets kernel_root (…/kernel) and kernel_version (the newest vmlinuz-<ver> that has its modules),
-# or ends the run with cannot_run.
-find_kernel() {
-  kernel_root=${PUMPTHERM_CACHE:-/var/cache/pumptherm}/kernel
-  local v
-  kernel_version=$(for v in "$kernel_root"/boot/vmlinuz-*; do
-    v=${v##*/vmlinuz-}
-    if [[ -r "$kernel_root/boot/vmlinuz-$v" && -d "$kernel_root/lib/modules/$v/kernel" ]]; then
-      echo "$v"
-    fi
-  done | sort -V | tail -n 1)
-  [[ -n "$kernel_version" ]] ||
-    cannot_run "no guest kernel with its modules under $kernel_root (run tools/setup.sh)"
-}
 
 # Sets guest_kernel_image: the uncompressed vmlinux (cached), which QEMU boots through its PVH
 # entry point, or the compressed vmlinuz when that cannot be had. Under TCG, decompressing the
