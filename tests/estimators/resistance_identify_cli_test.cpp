@@ -12,6 +12,7 @@
 #include <string>
 
 #include "estimators/motor.hpp"
+#include "tests/common/run_command.hpp"
 #include "tests/common/test_files.hpp"
 #include "tools/common/csv.hpp"
 #include "tools/sim/tmp_drive.hpp"
@@ -36,12 +37,11 @@ struct Result {
 };
 
 Result Identify(const std::string& name, const std::string& extra = "") {
-  const std::string err = TempPath(name + ".err");
   const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' identify --input '" +
                           TempPath(name + ".csv") + "' --output '" + TempPath(name + ".out.csv") +
-                          "' " + extra + " 2> '" + err + "'";
-  const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, ReadFile(err)};
+                          "' " + extra;
+  auto r = pumptherm::test_files::RunCommandStderr(cmd, TempPath(name + ".err"));
+  return {r.exit_code, std::move(r.out)};
 }
 
 constexpr const char* kHeader = "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm\n";

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "tests/common/run_command.hpp"
 #include "tests/common/test_files.hpp"
 #include "tools/common/csv.hpp"
 
@@ -38,10 +39,8 @@ struct Result {
 };
 
 Result RunCli(const std::string& args, const std::string& name) {
-  const std::string err = TempPath(name + ".err");
-  const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' " + args + " 2> '" + err + "'";
-  const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, ReadFile(err)};
+  auto r = pumptherm::test_files::RunCommandStderr(std::string("'") + PUMPTHERM_CLI + "' " + args, TempPath(name + ".err"));
+  return {r.exit_code, std::move(r.out)};
 }
 
 bool DataPresent(std::string& why) {

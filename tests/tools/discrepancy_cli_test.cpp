@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "estimators/thermal_model.hpp"
+#include "tests/common/run_command.hpp"
 #include "tests/common/test_files.hpp"
 #include "tests/tools/discrepancy_cases.hpp"
 
@@ -32,10 +33,9 @@ struct CliRun {
 };
 
 CliRun Discrepancy(const std::string& args) {
-  const std::string err = Dir() + "/err.txt";
-  const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' discrepancy " + args + " 2> '" + err + "'";
-  const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, ReadFile(err)};
+  auto r = pumptherm::test_files::RunCommandStderr(std::string("'") + PUMPTHERM_CLI + "' discrepancy " + args,
+                                                   Dir() + "/err.txt");
+  return {r.exit_code, std::move(r.out)};
 }
 
 }  // namespace
