@@ -30,7 +30,7 @@ pe::ThermalModelFiles Files() {
 // The Wallscheid model needs its loss map, which stays outside the project.
 bool TablesPresent(const std::string& name) {
   return name != "wallscheid2017-4node" ||
-         std::ifstream(Files().directory + "/../../../shared/reference/wallscheid-losses/total_loss_W.csv").good();
+         std::ifstream(Files().directory + "/../../../../shared/reference/wallscheid-losses/total_loss_W.csv").good();
 }
 
 pe::ThermalInputs Load() {

@@ -166,7 +166,7 @@ TEST(ThermalModel, WallscheidModelWithoutFileReaderNamesTheTable) {
 
 TEST(ThermalModel, WallscheidModelParsesWithSpeedDependentResistances) {
   const std::string models = pumptherm::test_files::ReferenceModelDir();
-  const std::string map = models + "/../../../shared/reference/wallscheid-losses/total_loss_W.csv";
+  const std::string map = models + "/../../../../shared/reference/wallscheid-losses/total_loss_W.csv";
   if (!std::ifstream(map).good()) {
     GTEST_SKIP() << "the Wallscheid loss map is not at " << map
                  << " (it stays outside the project; see docs/thermal-model.md)";

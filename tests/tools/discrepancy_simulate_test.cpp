@@ -38,7 +38,7 @@ std::string Dir() {
 /// The model written to a file of its own with the tables it names by absolute path.
 std::string ModelFile(const std::string& name) {
   std::string text = pumptherm::test_files::ReadModel(name);
-  const std::string rel = "../../../shared";
+  const std::string rel = "../../../../shared";
   const std::string shared = SharedDir();
   for (std::size_t p = text.find(rel); p != std::string::npos; p = text.find(rel, p + shared.size()))
     text.replace(p, rel.size(), shared);
