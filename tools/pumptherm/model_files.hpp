@@ -7,13 +7,8 @@
 
 #include <fmt/core.h>
 #include <fmt/format.h>
-#include <unistd.h>
-
-#include <filesystem>
-#include <fstream>
-#include <sstream>
+#include <stdexcept>
 #include <string>
-#include <vector>
 
 #include "estimators/motor.hpp"
 #include "estimators/thermal_model.hpp"
@@ -35,14 +30,16 @@ inline std::string ResolveModelPath(const std::string& model) {
 /// Reads and parses a model; model-file errors become InputError (exit code 2).
 inline estimators::ThermalModel LoadThermalModel(const std::string& model) {
   const std::string path = ResolveModelPath(model);
-  std::ifstream f(path);
-  if (!f) throw InputError(fmt::format("cannot read model file '{}'", path));
-  std::stringstream ss;
-  ss << f.rdbuf();
+  std::string text;
+  try {
+    text = shipped::ReadTextFile(path);
+  } catch (const std::runtime_error& e) {
+    throw InputError(fmt::format("cannot read model file: {}", e.what()));
+  }
   try {
     // Tables the model names (loss maps, curves) are read relative to the model file.
-    return estimators::ThermalModel::Parse(
-        ss.str(), path, estimators::ThermalModelFiles{shipped::DirectoryOf(path), &shipped::ReadTextFile});
+    const estimators::ThermalModelFiles files{shipped::DirectoryOf(path), &shipped::ReadTextFile};
+    return estimators::ThermalModel::Parse(text, path, files);
   } catch (const estimators::ThermalModelError& e) {
     throw InputError(e.what());
   }
@@ -58,7 +55,8 @@ inline estimators::MotorDescription LoadMotor(const std::string& reference) {
   } catch (const estimators::MotorDescriptionError& e) {
     throw InputError(e.what());
   } catch (const std::runtime_error& e) {
-    throw InputError(fmt::format("motor {} (presets: {})", e.what(), fmt::join(estimators::MotorPresetNames(), ", ")));
+    throw InputError(
+        fmt::format("motor {} (presets: {})", e.what(), fmt::join(estimators::MotorPresetNames(), ", ")));
   }
 }
 
