@@ -405,6 +405,109 @@ void WriteSummaryJson(const std::string& out_dir, const Scenario& sc, const Plan
   }
 }
 
+/// The drive's current loop, first order towards the set point (`follow`; else it takes the set
+/// point at once), and the thermal inputs it makes (the coolant is the ambient).
+ThermalInputs FollowSetPoint(PumpState& p, const SetPoint& sp, bool follow, double step_s) {
+  if (!follow) {
+    p.iq_A = sp.iq_A;
+    p.id_A = sp.id_A;
+  } else {
+    const double a = 1.0 - std::exp(-step_s / p.spec->drive.current_response_s);
+    p.iq_A += (sp.iq_A - p.iq_A) * a;
+    p.id_A += (sp.id_A - p.id_A) * a;
+  }
+  ThermalInputs in;
+  in.speed_rpm = sp.speed_rpm;
+  in.iq_A = p.iq_A;
+  in.id_A = p.id_A;
+  in.ambient_degC = sp.ambient_degC;
+  in.coolant_degC = sp.ambient_degC;
+  return in;
+}
+
+/// The magnet flux of the truth: the motor's, scaled by the scenario's coefficient relative to
+/// the motor's magnet reference (its copper T0 when the motor file states no magnet law).
+double TrueFlux_Wb(const PumpState& p) {
+  if (p.magnet_state < 0) return p.motor.flux_Wb;
+  const double t0_degC = p.motor.magnet.Given() ? p.motor.magnet.t0_degC : p.motor.copper.t0_degC;
+  return p.motor.flux_Wb *
+         (1.0 + p.spec->drive.flux_temperature_coefficient_per_K * (p.x(p.magnet_state) - t0_degC));
+}
+
+/// The frame and ambient sensors read `dt_s` after their last reading (0: the first); a stuck
+/// frame sensor holds the reading it had when it stuck.
+void SampleSensors(PumpState& p, const ThermalInputs& in, double ambient_degC, bool stuck_now, double dt_s) {
+  const double frame_true = p.model().AllTemperatures_degC(in, p.x)(p.frame_node);
+  const double reading = p.frame_sensor->Measure(frame_true, dt_s);
+  p.frame_lagged_degC = p.frame_sensor->lagged();
+  if (stuck_now && !p.stuck) p.stuck_degC = p.frame_reading_degC;
+  p.stuck = stuck_now;
+  if (dt_s == 0.0 && stuck_now) p.stuck_degC = reading;
+  p.frame_reading_degC = p.stuck ? p.stuck_degC : reading;
+  p.ambient_reading_degC = p.ambient_sensor->Measure(ambient_degC, dt_s);
+}
+
+/// What the drive reports besides the currents and speed (those go into PumpState::rep_*).
+struct DriveReport {
+  double ud_V = 0.0, uq_V = 0.0, dc_link_V = 0.0;
+};
+
+/// One control step of the drive: the true dq voltages (Han 2019 eq. 4, the SPMSM's voltage
+/// equations, plus the dead-time voltage), and the reported values with offset ripple, noise and
+/// 12-bit quantisation. `first`: no current derivative yet.
+DriveReport ReportDrive(PumpState& p, const SetPoint& sp, double rs_ohm, double flux_Wb, bool first,
+                        double iq_prev_A, double id_prev_A, double step_s) {
+  const auto& motor = p.motor;
+  const DriveSpec& drive = p.spec->drive;
+  const double w = estimators::ElectricalSpeed_rad_per_s(motor, sp.speed_rpm);
+  const double diq = first ? 0.0 : (p.iq_A - iq_prev_A) / step_s;
+  const double did = first ? 0.0 : (p.id_A - id_prev_A) / step_s;
+  double uq = rs_ohm * p.iq_A + motor.inductance_H * diq + w * (motor.inductance_H * p.id_A + flux_Wb);
+  double ud = rs_ohm * p.id_A + motor.inductance_H * did - motor.inductance_H * w * p.iq_A;
+  if (drive.dead_time_V > 0.0) {
+    const double mag = std::hypot(p.id_A, p.iq_A);
+    if (mag > 0.0) {
+      const double e = drive.dead_time_V * std::tanh(mag / drive.dead_time_knee_A) / mag;
+      uq += e * p.iq_A;
+      ud += e * p.id_A;
+    }
+  }
+  p.angle_rad = std::fmod(p.angle_rad + w * step_s, 2.0 * std::numbers::pi);
+  const double i_lsb = 2.0 * drive.current_range_A / 4096.0;
+  const double u_lsb = 2.0 * drive.dc_link_V / 4096.0;
+  const double ripple_q = drive.phase_offset_A * std::cos(p.angle_rad + p.offset_phase_rad);
+  const double ripple_d = drive.phase_offset_A * std::sin(p.angle_rad + p.offset_phase_rad);
+  const double range = drive.current_range_A;
+  // The noise draws keep this order: one random stream per pump.
+  p.rep_id_A = sim::Quantise(p.id_A + ripple_d + p.Noise(drive.current_noise_A), i_lsb, -range, range);
+  p.rep_iq_A = sim::Quantise(p.iq_A + ripple_q + p.Noise(drive.current_noise_A), i_lsb, -range, range);
+  DriveReport r;
+  r.ud_V = sim::Quantise(ud + p.Noise(drive.voltage_noise_V), u_lsb, -drive.dc_link_V, drive.dc_link_V);
+  r.uq_V = sim::Quantise(uq + p.Noise(drive.voltage_noise_V), u_lsb, -drive.dc_link_V, drive.dc_link_V);
+  p.rep_speed_rpm = sp.speed_rpm > 0.0 ? std::max(0.0, sp.speed_rpm + p.Noise(drive.speed_noise_rpm)) : 0.0;
+  r.dc_link_V = drive.dc_link_V + p.Noise(drive.dc_link_noise_V);
+  return r;
+}
+
+/// Winding temperature, resistance and flux of the truth at one step.
+struct TruthElectrical {
+  double winding_degC, rs_ohm, flux_Wb;
+};
+
+/// One row of the truth CSV: inputs, every node's temperature, the electrical truth, each node's
+/// loss and their sum, the cooling model in force and the drive state.
+void WriteTruthRow(PumpState& p, const ThermalInputs& in, const SetPoint& sp, double t, const TruthElectrical& e) {
+  const ThermalModel& m = p.model();
+  const Eigen::VectorXd all = m.AllTemperatures_degC(in, p.x);
+  const Eigen::VectorXd losses = m.NodeLosses_W(in, p.x);
+  std::vector<double> row{t, sp.speed_rpm, p.id_A, p.iq_A, sp.ambient_degC};
+  for (Eigen::Index i = 0; i < all.size(); ++i) row.push_back(all(i));
+  row.insert(row.end(), {e.winding_degC, e.rs_ohm, e.flux_Wb});
+  for (Eigen::Index i = 0; i < losses.size(); ++i) row.push_back(losses(i));
+  row.insert(row.end(), {losses.sum(), static_cast<double>(p.active_model), static_cast<double>(sp.drive_state)});
+  p.truth->Row(row);
+}
+
 /// The faults of a pump active at time `t` (cooling failures switch models at thermal steps).
 struct ActiveFaults {
   bool dropped_window = false, stale = false, stuck = false;
@@ -600,78 +703,23 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       // Thermal truth: one exact ZOH step at the end of each thermal period (below); at its
       // start the inputs are latched.
       const ThermalModel& m = p.model();
-      ThermalInputs in;
-      // The drive's current loop: first order towards the set point.
       const double iq_prev = p.iq_A, id_prev = p.id_A;
-      if (!electrical || k == 0) {
-        p.iq_A = sp.iq_A;
-        p.id_A = sp.id_A;
-      } else {
-        const double a = 1.0 - std::exp(-step_s / spec.drive.current_response_s);
-        p.iq_A += (sp.iq_A - p.iq_A) * a;
-        p.id_A += (sp.id_A - p.id_A) * a;
-      }
-      in.speed_rpm = sp.speed_rpm;
-      in.iq_A = p.iq_A;
-      in.id_A = p.id_A;
-      in.ambient_degC = sp.ambient_degC;
-      in.coolant_degC = sp.ambient_degC;
+      const ThermalInputs in = FollowSetPoint(p, sp, electrical && k > 0, step_s);
       if (k % thermal_every == 0) p.held = in;
 
       const double winding_degC = p.winding_weights.dot(p.x);
       const double rs_ohm = estimators::ResistanceAt(p.motor.copper, winding_degC);
-      double flux_Wb = p.motor.flux_Wb;
-      if (p.magnet_state >= 0) {
-        // Relative to the flux at the motor's magnet reference (its copper T0 when the motor
-        // file states no magnet law); the coefficient is the scenario's: the truth's magnet.
-        const double t0_degC = p.motor.magnet.Given() ? p.motor.magnet.t0_degC : p.motor.copper.t0_degC;
-        flux_Wb *= 1.0 + spec.drive.flux_temperature_coefficient_per_K * (p.x(p.magnet_state) - t0_degC);
-      }
+      const double flux_Wb = TrueFlux_Wb(p);
 
       // Sensors, sampled at the status rate (every thermal step in a thermal-only run).
-      const bool status_tick = !electrical || k % status_every == 0;
-      if (status_tick) {
-        const double dt_s = electrical ? sc.status_period_s : step_s;
-        const double frame_true = m.AllTemperatures_degC(in, p.x)(p.frame_node);
-        double reading = p.frame_sensor->Measure(frame_true, k == 0 ? 0.0 : dt_s);
-        p.frame_lagged_degC = p.frame_sensor->lagged();
-        if (stuck_now && !p.stuck) p.stuck_degC = p.frame_reading_degC;
-        p.stuck = stuck_now;
-        if (k == 0 && stuck_now) p.stuck_degC = reading;
-        p.frame_reading_degC = p.stuck ? p.stuck_degC : reading;
-        p.ambient_reading_degC = p.ambient_sensor->Measure(sp.ambient_degC, k == 0 ? 0.0 : dt_s);
+      if (!electrical || k % status_every == 0) {
+        SampleSensors(p, in, sp.ambient_degC, stuck_now, k == 0 ? 0.0 : electrical ? sc.status_period_s : step_s);
       }
 
       if (electrical) {
-        // Han 2019 eq. 4 (dq voltage equations of the SPMSM), true values.
+        const DriveReport drive = ReportDrive(p, sp, rs_ohm, flux_Wb, k == 0, iq_prev, id_prev, step_s);
         const auto& motor = p.motor;
-        const double w = estimators::ElectricalSpeed_rad_per_s(motor, sp.speed_rpm);
-        const double diq = k == 0 ? 0.0 : (p.iq_A - iq_prev) / step_s;
-        const double did = k == 0 ? 0.0 : (p.id_A - id_prev) / step_s;
-        double uq = rs_ohm * p.iq_A + motor.inductance_H * diq + w * (motor.inductance_H * p.id_A + flux_Wb);
-        double ud = rs_ohm * p.id_A + motor.inductance_H * did - motor.inductance_H * w * p.iq_A;
-        if (spec.drive.dead_time_V > 0.0) {
-          const double mag = std::hypot(p.id_A, p.iq_A);
-          if (mag > 0.0) {
-            const double e = spec.drive.dead_time_V * std::tanh(mag / spec.drive.dead_time_knee_A) / mag;
-            uq += e * p.iq_A;
-            ud += e * p.id_A;
-          }
-        }
-        p.angle_rad = std::fmod(p.angle_rad + w * step_s, 2.0 * std::numbers::pi);
-        const double i_lsb = 2.0 * spec.drive.current_range_A / 4096.0;
-        const double u_lsb = 2.0 * spec.drive.dc_link_V / 4096.0;
-        const double ripple_q = spec.drive.phase_offset_A * std::cos(p.angle_rad + p.offset_phase_rad);
-        const double ripple_d = spec.drive.phase_offset_A * std::sin(p.angle_rad + p.offset_phase_rad);
-        const double range = spec.drive.current_range_A;
-        p.rep_id_A = sim::Quantise(p.id_A + ripple_d + p.Noise(spec.drive.current_noise_A), i_lsb, -range, range);
-        p.rep_iq_A = sim::Quantise(p.iq_A + ripple_q + p.Noise(spec.drive.current_noise_A), i_lsb, -range, range);
-        const double rep_ud = sim::Quantise(ud + p.Noise(spec.drive.voltage_noise_V), u_lsb,
-                                            -spec.drive.dc_link_V, spec.drive.dc_link_V);
-        const double rep_uq = sim::Quantise(uq + p.Noise(spec.drive.voltage_noise_V), u_lsb,
-                                            -spec.drive.dc_link_V, spec.drive.dc_link_V);
-        p.rep_speed_rpm = sp.speed_rpm > 0.0 ? std::max(0.0, sp.speed_rpm + p.Noise(spec.drive.speed_noise_rpm)) : 0.0;
-        const double dc_link = spec.drive.dc_link_V + p.Noise(spec.drive.dc_link_noise_V);
+        const double rep_ud = drive.ud_V, rep_uq = drive.uq_V, dc_link = drive.dc_link_V;
 
         // Frames of this control step.
         const bool off = bus_off(spec.interface, t);
@@ -738,16 +786,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
         const double level = p.level_node < 0 ? winding_degC : m.AllTemperatures_degC(in, p.x)(p.level_node);
         RecordLevel(p.summary, sc.levels, level, t);
       }
-      if (k % truth_every == 0) {
-        const Eigen::VectorXd all = m.AllTemperatures_degC(in, p.x);
-        const Eigen::VectorXd losses = m.NodeLosses_W(in, p.x);
-        std::vector<double> row{t, sp.speed_rpm, p.id_A, p.iq_A, sp.ambient_degC};
-        for (Eigen::Index i = 0; i < all.size(); ++i) row.push_back(all(i));
-        row.insert(row.end(), {winding_degC, rs_ohm, flux_Wb});
-        for (Eigen::Index i = 0; i < losses.size(); ++i) row.push_back(losses(i));
-        row.insert(row.end(), {losses.sum(), static_cast<double>(p.active_model), static_cast<double>(sp.drive_state)});
-        p.truth->Row(row);
-      }
+      if (k % truth_every == 0) WriteTruthRow(p, in, sp, t, {winding_degC, rs_ohm, flux_Wb});
       if (k % measured_every == 0) {
         p.measured->Row({t, p.rep_speed_rpm, p.rep_id_A, p.rep_iq_A, p.ambient_reading_degC,
                          stale ? std::nan("") : p.frame_reading_degC});
