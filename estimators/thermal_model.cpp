@@ -587,10 +587,10 @@ class ThermalModel::Impl::Parser {
 
   /// [[node]]: names and heat capacities; then which nodes are states and which massless.
   void ParseNodes() {
-    const toml::array* nodes = root_["node"].as_array();
-    if (!nodes || nodes->empty()) m_.Fail(1, "no [[node]] tables");
+    const toml::array* node_list = root_["node"].as_array();
+    if (!node_list || node_list->empty()) m_.Fail(1, "no [[node]] tables");
     std::vector<double> caps;
-    for (const toml::node& nv : *nodes) caps.push_back(ParseNode(nv));
+    for (const toml::node& nv : *node_list) caps.push_back(ParseNode(nv));
     NumberStates(caps);
   }
 
@@ -600,20 +600,20 @@ class ThermalModel::Impl::Parser {
     if (!nt) m_.Fail(LineOf(nv), "[[node]] entries must be tables");
     const int line = LineOf(nv);
     CheckKeys(*nt, {"name", "capacity_J_per_K", "description"}, "[[node]]", m_.source);
-    auto name = (*nt)["name"].value<std::string>();
-    if (!name || name->empty()) m_.Fail(line, "[[node]] without a name");
-    if (*name == "ambient" || *name == "coolant") {
-      m_.Fail(line, fmt::format("node '{}': the name is reserved for a boundary", *name));
+    auto node_name = (*nt)["name"].value<std::string>();
+    if (!node_name || node_name->empty()) m_.Fail(line, "[[node]] without a name");
+    if (*node_name == "ambient" || *node_name == "coolant") {
+      m_.Fail(line, fmt::format("node '{}': the name is reserved for a boundary", *node_name));
     }
-    if (index_.count(*name)) m_.Fail(line, fmt::format("node '{}' is declared twice", *name));
+    if (index_.count(*node_name)) m_.Fail(line, fmt::format("node '{}' is declared twice", *node_name));
     const toml::node* cap = nt->get("capacity_J_per_K");
-    if (!cap) m_.Fail(line, fmt::format("node '{}': missing capacity_J_per_K (0 for massless)", *name));
+    if (!cap) m_.Fail(line, fmt::format("node '{}': missing capacity_J_per_K (0 for massless)", *node_name));
     const double c = m_.Compile(*cap, "capacity_J_per_K", false).value;
     if (c < 0.0) {
-      m_.Fail(LineOf(*cap), fmt::format("node '{}': negative capacity_J_per_K ({})", *name, c));
+      m_.Fail(LineOf(*cap), fmt::format("node '{}': negative capacity_J_per_K ({})", *node_name, c));
     }
-    index_[*name] = static_cast<int>(m_.nodes.size());
-    m_.nodes.push_back({*name, c == 0.0, line});
+    index_[*node_name] = static_cast<int>(m_.nodes.size());
+    m_.nodes.push_back({*node_name, c == 0.0, line});
     return c;
   }
 
@@ -746,11 +746,11 @@ class ThermalModel::Impl::Parser {
 
   /// [[edge]]: thermal resistances between nodes and boundaries.
   void ParseEdges() {
-    const toml::array* edges = root_["edge"].as_array();
-    if (!edges || edges->empty()) m_.Fail(1, "no [[edge]] tables");
+    const toml::array* edge_list = root_["edge"].as_array();
+    if (!edge_list || edge_list->empty()) m_.Fail(1, "no [[edge]] tables");
     adjacency_.assign(static_cast<std::size_t>(m_.N()), {});
     touches_boundary_.assign(static_cast<std::size_t>(m_.N()), false);
-    for (const toml::node& ev : *edges) m_.edges.push_back(ParseEdge(ev));
+    for (const toml::node& ev : *edge_list) m_.edges.push_back(ParseEdge(ev));
   }
 
   Edge ParseEdge(const toml::node& ev) {
