@@ -531,6 +531,90 @@ ActiveFaults FaultsAt(const PumpSpec& spec, double t) {
   return a;
 }
 
+/// Encodes a pump's frames of one control step into `pending` (written in time order later): the
+/// current and voltage frames every step, the status frame at the status rate. A frame is dropped
+/// while its bus is off or, in a dropped-frames fault, at random; a stale sensor suppresses the
+/// status frame.
+struct FrameEmitter {
+  const Scenario& sc;
+  FrameLayout& layout;
+  std::vector<PendingFrame>& pending;
+  std::int64_t period_us;
+
+  void ControlStep(PumpState& p, std::uint32_t pump, std::int64_t k, double t, const SetPoint& sp,
+                   const DriveReport& drive, const ActiveFaults& faults, bool status_tick) {
+    const bool off = IsBusOff(p.spec->interface, t);
+    const std::int64_t nominal_us = sc.start_epoch_us + k * period_us + p.phase_us;
+    const std::uint32_t counter = p.fast_counter;
+    p.fast_counter = (p.fast_counter + 1) % 16;
+    for (MessagePlan* plan : {&layout.fast_i, &layout.fast_u, &layout.status}) {
+      std::fill(plan->values.begin(), plan->values.end(), std::nan(""));
+    }
+    const double w_reported = estimators::ElectricalSpeed_rad_per_s(p.motor, p.rep_speed_rpm);
+    for (MessagePlan* plan : {&layout.fast_i, &layout.fast_u}) {
+      layout.Set(*plan, MappingInput::kIdA, p.rep_id_A);
+      layout.Set(*plan, MappingInput::kIqA, p.rep_iq_A);
+      layout.Set(*plan, MappingInput::kUdV, drive.ud_V);
+      layout.Set(*plan, MappingInput::kUqV, drive.uq_V);
+      layout.Set(*plan, MappingInput::kSpeedElecRadPerS, w_reported);
+    }
+    // Frame times: the drive sends I, then U one frame time (about 250 us at 500 kbit/s)
+    // later, then the status; jitter never reorders one pump's frames.
+    const std::int64_t t_i = nominal_us + Jitter(p);
+    const std::int64_t t_u = std::max(t_i + 1, nominal_us + 250 + Jitter(p));
+    Emit(p, pump, layout.fast_i, counter, t_i, 0, off, faults);
+    Emit(p, pump, layout.fast_u, counter, t_u, 1, off, faults);
+    if (!status_tick) return;
+    const std::uint32_t status_counter = p.status_counter;
+    p.status_counter = (p.status_counter + 1) % 16;
+    const std::int64_t t_s = std::max(t_u + 1, nominal_us + 500 + Jitter(p));
+    if (faults.stale) {
+      ++p.summary.frames_suppressed;
+      return;
+    }
+    layout.Set(layout.status, MappingInput::kSpeedMechRpm, p.rep_speed_rpm);
+    layout.Set(layout.status, MappingInput::kDriveState, sp.drive_state);
+    layout.Set(layout.status, MappingInput::kFrameTempDegC, p.frame_reading_degC);
+    layout.Set(layout.status, MappingInput::kAmbientTempDegC, p.ambient_reading_degC);
+    layout.Set(layout.status, MappingInput::kDcLinkV, drive.dc_link_V);
+    Emit(p, pump, layout.status, status_counter, t_s, 2, off, faults);
+  }
+
+ private:
+  std::int64_t Jitter(PumpState& p) const {
+    const double j = sc.jitter_sd_us * p.normal(p.rng_jitter);
+    return static_cast<std::int64_t>(std::llround(std::clamp(j, -sc.jitter_max_us, sc.jitter_max_us)));
+  }
+
+  bool IsBusOff(const std::string& iface, double t) const {
+    for (const BusOff& b : sc.bus_offs) {
+      if ((b.interface.empty() || b.interface == iface) && t >= b.start_s && t < b.end_s) return true;
+    }
+    return false;
+  }
+
+  void Emit(PumpState& p, std::uint32_t pump, MessagePlan& plan, std::uint32_t counter, std::int64_t time_us,
+            std::uint32_t order, bool off, const ActiveFaults& faults) {
+    bool drop = off;
+    if (!drop && faults.dropped_window) drop = p.uniform(p.rng_bus) < faults.drop_probability;
+    if (drop) {
+      ++p.summary.frames_suppressed;
+      return;
+    }
+    if (plan.counter_signal >= 0) plan.values[static_cast<std::size_t>(plan.counter_signal)] = counter;
+    PendingFrame f;
+    f.time_us = time_us;
+    f.pump = pump;
+    f.order = order;
+    f.frame.id = layout.mapping->CanId(*layout.dbc, plan.message_index, p.spec->node_id);
+    f.frame.extended = plan.codec->extended();
+    f.frame.len = static_cast<std::uint8_t>(plan.codec->min_bytes());
+    plan.codec->Encode(plan.values, std::span<std::uint8_t>(f.frame.data.data(), f.frame.len));
+    pending.push_back(f);
+    ++p.summary.frames_written;
+  }
+};
+
 /// The truth's level node at time `t` into the pump's summary: maximum, first warning and trip
 /// crossings, and the intervals above the warning level.
 void RecordLevel(PumpSummary& summary, const TruthLevels& levels, double level, double t) {
@@ -620,9 +704,6 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   // Frame layout, only for scenarios that write a log.
   FrameLayout layout;
   if (sc.can_log) LoadFrameLayout(res, layout);
-  MessagePlan& fast_i = layout.fast_i;
-  MessagePlan& fast_u = layout.fast_u;
-  MessagePlan& status = layout.status;
 
   // Pumps.
   const bool electrical = sc.can_log;
@@ -676,17 +757,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
 
   const std::int64_t period_us = std::llround(sc.fast_period_s * 1e6);
   const auto jitter_max_us = static_cast<std::int64_t>(sc.jitter_max_us);
-  auto jitter = [&](PumpState& p) {
-    const double j = sc.jitter_sd_us * p.normal(p.rng_jitter);
-    return static_cast<std::int64_t>(std::llround(std::clamp(j, -sc.jitter_max_us, sc.jitter_max_us)));
-  };
-  auto bus_off = [&](const std::string& iface, double t) {
-    for (const BusOff& b : sc.bus_offs) {
-      if ((b.interface.empty() || b.interface == iface) && t >= b.start_s && t < b.end_s) return true;
-    }
-    return false;
-  };
-  auto set_value = [&](MessagePlan& plan, MappingInput in, double v) { layout.Set(plan, in, v); };
+  FrameEmitter frames{sc, layout, pending, period_us};
 
   int last_percent = -1;
   for (std::int64_t k = 0; k < steps; ++k) {
@@ -697,8 +768,6 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       const SetPoint sp = p.profile->At(t);
 
       const ActiveFaults faults = FaultsAt(spec, t);
-      const bool dropped_window = faults.dropped_window, stale = faults.stale, stuck_now = faults.stuck;
-      const double drop_probability = faults.drop_probability;
 
       // Thermal truth: one exact ZOH step at the end of each thermal period (below); at its
       // start the inputs are latched.
@@ -713,68 +782,12 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
 
       // Sensors, sampled at the status rate (every thermal step in a thermal-only run).
       if (!electrical || k % status_every == 0) {
-        SampleSensors(p, in, sp.ambient_degC, stuck_now, k == 0 ? 0.0 : electrical ? sc.status_period_s : step_s);
+        SampleSensors(p, in, sp.ambient_degC, faults.stuck, k == 0 ? 0.0 : electrical ? sc.status_period_s : step_s);
       }
 
       if (electrical) {
         const DriveReport drive = ReportDrive(p, sp, rs_ohm, flux_Wb, k == 0, iq_prev, id_prev, step_s);
-        const auto& motor = p.motor;
-        const double rep_ud = drive.ud_V, rep_uq = drive.uq_V, dc_link = drive.dc_link_V;
-
-        // Frames of this control step.
-        const bool off = bus_off(spec.interface, t);
-        const std::int64_t nominal_us = sc.start_epoch_us + k * period_us + p.phase_us;
-        auto emit = [&](MessagePlan& plan, std::uint32_t counter, std::int64_t time_us, std::uint32_t order) {
-          bool drop = off;
-          if (!drop && dropped_window) drop = p.uniform(p.rng_bus) < drop_probability;
-          if (drop) {
-            ++p.summary.frames_suppressed;
-            return;
-          }
-          if (plan.counter_signal >= 0) plan.values[static_cast<std::size_t>(plan.counter_signal)] = counter;
-          PendingFrame f;
-          f.time_us = time_us;
-          f.pump = static_cast<std::uint32_t>(pi);
-          f.order = order;
-          f.frame.id = layout.mapping->CanId(*layout.dbc, plan.message_index, spec.node_id);
-          f.frame.extended = plan.codec->extended();
-          f.frame.len = static_cast<std::uint8_t>(plan.codec->min_bytes());
-          plan.codec->Encode(plan.values, std::span<std::uint8_t>(f.frame.data.data(), f.frame.len));
-          pending.push_back(f);
-          ++p.summary.frames_written;
-        };
-        const std::uint32_t counter = p.fast_counter;
-        p.fast_counter = (p.fast_counter + 1) % 16;
-        for (MessagePlan* plan : {&fast_i, &fast_u, &status}) std::fill(plan->values.begin(), plan->values.end(), std::nan(""));
-        const double w_reported = estimators::ElectricalSpeed_rad_per_s(motor, p.rep_speed_rpm);
-        for (MessagePlan* plan : {&fast_i, &fast_u}) {
-          set_value(*plan, MappingInput::kIdA, p.rep_id_A);
-          set_value(*plan, MappingInput::kIqA, p.rep_iq_A);
-          set_value(*plan, MappingInput::kUdV, rep_ud);
-          set_value(*plan, MappingInput::kUqV, rep_uq);
-          set_value(*plan, MappingInput::kSpeedElecRadPerS, w_reported);
-        }
-        // Frame times: the drive sends I, then U one frame time (about 250 us at 500 kbit/s)
-        // later, then the status; jitter never reorders one pump's frames.
-        const std::int64_t t_i = nominal_us + jitter(p);
-        const std::int64_t t_u = std::max(t_i + 1, nominal_us + 250 + jitter(p));
-        emit(fast_i, counter, t_i, 0);
-        emit(fast_u, counter, t_u, 1);
-        if (k % status_every == 0) {
-          const std::uint32_t sc_counter = p.status_counter;
-          p.status_counter = (p.status_counter + 1) % 16;
-          const std::int64_t t_s = std::max(t_u + 1, nominal_us + 500 + jitter(p));
-          if (stale) {
-            ++p.summary.frames_suppressed;
-          } else {
-            set_value(status, MappingInput::kSpeedMechRpm, p.rep_speed_rpm);
-            set_value(status, MappingInput::kDriveState, sp.drive_state);
-            set_value(status, MappingInput::kFrameTempDegC, p.frame_reading_degC);
-            set_value(status, MappingInput::kAmbientTempDegC, p.ambient_reading_degC);
-            set_value(status, MappingInput::kDcLinkV, dc_link);
-            emit(status, sc_counter, t_s, 2);
-          }
-        }
+        frames.ControlStep(p, static_cast<std::uint32_t>(pi), k, t, sp, drive, faults, k % status_every == 0);
       } else {
         p.rep_id_A = sp.id_A;
         p.rep_iq_A = sp.iq_A;
@@ -789,7 +802,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       if (k % truth_every == 0) WriteTruthRow(p, in, sp, t, {winding_degC, rs_ohm, flux_Wb});
       if (k % measured_every == 0) {
         p.measured->Row({t, p.rep_speed_rpm, p.rep_id_A, p.rep_iq_A, p.ambient_reading_degC,
-                         stale ? std::nan("") : p.frame_reading_degC});
+                         faults.stale ? std::nan("") : p.frame_reading_degC});
       }
 
       // End of a thermal period: advance the truth with the latched inputs.
