@@ -352,7 +352,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
   // A filter driven outside any physical range is no estimate. The copper loss grows with the
   // temperature (Saheba 2010 eqs. 12-16), so currents far above any rating, held while the
   // frame sensor is silent, make the linearised network unstable and the estimate runs away
-  // to Inf within minutes (found by pipeline_step_fuzz). Then nothing is published as a
+  // to Inf within minutes. Then nothing is published as a
   // temperature ("n/a", alarms see unknown nodes and an unconverged filter, a latched trip
   // stays), the state is not saved, and the next step starts the filter again.
   const bool diverged = !x.allFinite() || !s.diagonal().allFinite() ||

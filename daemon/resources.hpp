@@ -1,11 +1,7 @@
 #pragma once
-/// Finding the files pumptherm ships (thermal models, motor descriptions, the DBC and its
-/// mapping) by name, for the daemon and the tools alike.
-///
-/// A reference that contains '/' or ends in ".toml"/".dbc" is a path (relative paths are taken
-/// from `base_dir`, the directory of the file that names them). Otherwise it is the name of a
-/// shipped file, looked up in <exe>/../share/pumptherm/<kind> (an installed tree), then in the
-/// configured install directory, then in the source tree (a build tree).
+/// The daemon's names for finding shipped files (thermal models, motor descriptions, the DBC and
+/// its mapping): the search order is pumptherm::shipped's (shipped/shipped_files.hpp), shared
+/// with the tools.
 
 #include <stdexcept>
 #include <string>
@@ -14,8 +10,8 @@ namespace pumptherm::daemon {
 
 enum class ResourceKind { kModel, kMotor, kDbc };
 
-/// Resolves `reference` of `kind` to an existing file path. Throws std::runtime_error naming
-/// the reference and every place looked at when nothing is found.
+/// Resolves `reference` of `kind` to an existing file path (shipped::Resolve). Throws
+/// std::runtime_error naming the reference and every place looked at when nothing is found.
 std::string ResolveResource(ResourceKind kind, const std::string& reference,
                             const std::string& base_dir = ".");
 

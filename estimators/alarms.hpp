@@ -1,5 +1,5 @@
 #pragma once
-/// Overtemperature and health alarms of one pump (issue 6): levels with hysteresis and a hold
+/// Overtemperature and health alarms of one pump: levels with hysteresis and a hold
 /// time on estimated and measured temperatures, rate of rise, stale telemetry, implausible
 /// sensor (out of range, stuck, disagreeing with the model), estimator not converged, and the
 /// time-to-trip forecast. Pure logic: time enters as an argument, nothing is logged.

@@ -3,7 +3,7 @@
 namespace pumptherm::estimators {
 namespace {
 
-// Fixed-size versions for the state counts of the shipped models (4: wallscheid2017-4node,
+// Fixed-size versions for the state counts of the shipped models (4: tmp-generic,
 // 7: saheba2010-*): Eigen unrolls fixed-size products on the stack, where its dynamic-size
 // products spend most of their instructions dispatching (docs/virtual-sensor.md, benchmark).
 // They map the dynamic members in place (column-major, contiguous) and compute the same

@@ -1,5 +1,5 @@
 #pragma once
-/// The vocabulary of the model discrepancy workflow (issue 7, docs/discrepancy.md): small physical
+/// The vocabulary of the model discrepancy workflow (docs/discrepancy.md): small physical
 /// extensions of a thermal model, each with one or two parameters and a neutral value at which it
 /// changes nothing.
 ///

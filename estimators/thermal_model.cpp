@@ -474,6 +474,9 @@ struct ThermalModel::Impl {
       }
     }
   }
+
+  /// Reads a model file into this Impl, one step per part of the file.
+  class Parser;
 };
 
 ThermalModel::ThermalModel(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -527,234 +530,280 @@ ThermalOperatingRange ParseOperatingRange(const toml::node& n, const std::string
 
 }  // namespace
 
-ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& source,
-                                 const ThermalModelFiles& files) {
-  auto impl = std::make_unique<Impl>();
-  Impl& m = *impl;
-  m.source = source;
-  toml::table root;
-  try {
-    root = toml::parse(toml_text, source);
-  } catch (const toml::parse_error& e) {
-    throw ThermalModelError(fmt::format("{}: {}", Where(source, static_cast<int>(e.source().begin.line)),
-                                        e.description()));
-  }
-  CheckKeys(root, {"model", "parameters", "operating_range", "table", "quantity", "node", "edge", "loss"},
-            "top level", source);
+/// The steps of ThermalModel::Parse, run in the order Parse() lists them; each throws
+/// ThermalModelError naming the file and line (Impl::Fail).
+class ThermalModel::Impl::Parser {
+ public:
+  Parser(Impl& m, const toml::table& root, const ThermalModelFiles& files) : m_(m), root_(root), files_(files) {}
 
-  if (const toml::table* model = root["model"].as_table()) {
-    CheckKeys(*model, {"name", "description", "source"}, "[model]", source);
-    m.name = (*model)["name"].value_or(std::string{});
+  void Parse() {
+    CheckKeys(root_, {"model", "parameters", "operating_range", "table", "quantity", "node", "edge", "loss"},
+              "top level", m_.source);
+    ParseHeader();
+    ParseNodes();
+    ReserveBuiltInNames();
+    ParseTables();
+    ParseQuantities();
+    ParseEdges();
+    CheckConnected();
+    ParseLosses();
+    SetWindingWeights();
+    CheckMasslessGroups();
+    m_.p0.setZero(m_.N());
+    m_.d.setZero(m_.N(), m_.n());
   }
-  if (m.name.empty()) m.name = source;
 
-  if (const toml::node* params = root.get("parameters")) {
-    const toml::table* pt = params->as_table();
-    if (!pt) m.Fail(LineOf(*params), "[parameters] must be a table of numbers");
-    for (const auto& [k, v] : *pt) {
-      auto val = v.value<double>();
-      if (!val || !std::isfinite(*val)) {
-        m.Fail(LineOf(v), fmt::format("parameter '{}' must be a finite number", k.str()));
+ private:
+  Impl& m_;
+  const toml::table& root_;
+  const ThermalModelFiles& files_;
+  std::map<std::string, int> index_;     ///< node index by name
+  std::set<std::string> names_taken_;    ///< names an expression can read
+  std::vector<std::vector<int>> adjacency_;  ///< node-to-node edges
+  std::vector<bool> touches_boundary_;   ///< per node: an edge to ambient or coolant
+
+  /// [model], [parameters], [operating_range].
+  void ParseHeader() {
+    if (const toml::table* model = root_["model"].as_table()) {
+      CheckKeys(*model, {"name", "description", "source"}, "[model]", m_.source);
+      m_.name = (*model)["name"].value_or(std::string{});
+    }
+    if (m_.name.empty()) m_.name = m_.source;
+    if (const toml::node* params = root_.get("parameters")) {
+      const toml::table* pt = params->as_table();
+      if (!pt) m_.Fail(LineOf(*params), "[parameters] must be a table of numbers");
+      for (const auto& [k, v] : *pt) {
+        auto val = v.value<double>();
+        if (!val || !std::isfinite(*val)) {
+          m_.Fail(LineOf(v), fmt::format("parameter '{}' must be a finite number", k.str()));
+        }
+        m_.parameters[std::string(k.str())] = *val;
       }
-      m.parameters[std::string(k.str())] = *val;
+    }
+    if (const toml::node* range = root_.get("operating_range")) {
+      m_.operating_range = ParseOperatingRange(*range, m_.source);
     }
   }
 
-  if (const toml::node* range = root.get("operating_range")) {
-    m.operating_range = ParseOperatingRange(*range, source);
+  /// [[node]]: names and heat capacities; then which nodes are states and which massless.
+  void ParseNodes() {
+    const toml::array* node_list = root_["node"].as_array();
+    if (!node_list || node_list->empty()) m_.Fail(1, "no [[node]] tables");
+    std::vector<double> caps;
+    for (const toml::node& nv : *node_list) caps.push_back(ParseNode(nv));
+    NumberStates(caps);
   }
 
-  // Nodes.
-  const toml::array* nodes = root["node"].as_array();
-  if (!nodes || nodes->empty()) m.Fail(1, "no [[node]] tables");
-  std::map<std::string, int> index;
-  std::vector<double> caps;
-  for (const toml::node& nv : *nodes) {
+  /// One [[node]]; returns its capacity (0 for massless).
+  double ParseNode(const toml::node& nv) {
     const toml::table* nt = nv.as_table();
-    if (!nt) m.Fail(LineOf(nv), "[[node]] entries must be tables");
+    if (!nt) m_.Fail(LineOf(nv), "[[node]] entries must be tables");
     const int line = LineOf(nv);
-    CheckKeys(*nt, {"name", "capacity_J_per_K", "description"}, "[[node]]", source);
-    auto name = (*nt)["name"].value<std::string>();
-    if (!name || name->empty()) m.Fail(line, "[[node]] without a name");
-    if (*name == "ambient" || *name == "coolant") {
-      m.Fail(line, fmt::format("node '{}': the name is reserved for a boundary", *name));
+    CheckKeys(*nt, {"name", "capacity_J_per_K", "description"}, "[[node]]", m_.source);
+    auto node_name = (*nt)["name"].value<std::string>();
+    if (!node_name || node_name->empty()) m_.Fail(line, "[[node]] without a name");
+    if (*node_name == "ambient" || *node_name == "coolant") {
+      m_.Fail(line, fmt::format("node '{}': the name is reserved for a boundary", *node_name));
     }
-    if (index.count(*name)) m.Fail(line, fmt::format("node '{}' is declared twice", *name));
+    if (index_.count(*node_name)) m_.Fail(line, fmt::format("node '{}' is declared twice", *node_name));
     const toml::node* cap = nt->get("capacity_J_per_K");
-    if (!cap) m.Fail(line, fmt::format("node '{}': missing capacity_J_per_K (0 for massless)", *name));
-    const double c = m.Compile(*cap, "capacity_J_per_K", false).value;
+    if (!cap) m_.Fail(line, fmt::format("node '{}': missing capacity_J_per_K (0 for massless)", *node_name));
+    const double c = m_.Compile(*cap, "capacity_J_per_K", false).value;
     if (c < 0.0) {
-      m.Fail(LineOf(*cap), fmt::format("node '{}': negative capacity_J_per_K ({})", *name, c));
+      m_.Fail(LineOf(*cap), fmt::format("node '{}': negative capacity_J_per_K ({})", *node_name, c));
     }
-    index[*name] = static_cast<int>(m.nodes.size());
-    m.nodes.push_back({*name, c == 0.0, line});
-    caps.push_back(c);
+    index_[*node_name] = static_cast<int>(m_.nodes.size());
+    m_.nodes.push_back({*node_name, c == 0.0, line});
+    return c;
   }
-  for (int i = 0; i < m.N(); ++i) {
-    if (m.nodes[i].massless) {
-      m.massless_of_node.push_back(m.nz());
-      m.state_of_node.push_back(-1);
-      m.node_of_massless.push_back(i);
-    } else {
-      m.state_of_node.push_back(m.n());
-      m.massless_of_node.push_back(-1);
-      m.node_of_state.push_back(i);
-      m.state_names.push_back(m.nodes[i].name);
-    }
-  }
-  if (m.n() == 0) m.Fail(m.nodes.front().line, "every node is massless: the model has no state");
-  m.capacity_J_per_K.resize(m.n());
-  for (int s = 0; s < m.n(); ++s) m.capacity_J_per_K(s) = caps[m.node_of_state[s]];
-  m.inv_capacity = m.capacity_J_per_K.cwiseInverse();
-  m.vars->node_C.assign(static_cast<std::size_t>(m.n()), 25.0);
 
-  // Tables: loss maps and curves from CSV files named relative to the model file.
-  std::set<std::string> names_taken;
-  for (const auto& [k, v] : m.parameters) names_taken.insert(k);
-  for (const auto& st : m.state_names) names_taken.insert(st + "_C");
-  for (const char* v : {"speed_rpm", "speed_rad_per_s", "id_A", "iq_A", "is_A", "i2_A2", "ambient_C",
-                        "coolant_C"}) {
-    names_taken.insert(v);
+  /// State and massless numbering of the nodes, capacities of the states.
+  void NumberStates(const std::vector<double>& caps) {
+    Impl& m = m_;
+    for (int i = 0; i < m.N(); ++i) {
+      if (m.nodes[i].massless) {
+        m.massless_of_node.push_back(m.nz());
+        m.state_of_node.push_back(-1);
+        m.node_of_massless.push_back(i);
+      } else {
+        m.state_of_node.push_back(m.n());
+        m.massless_of_node.push_back(-1);
+        m.node_of_state.push_back(i);
+        m.state_names.push_back(m.nodes[i].name);
+      }
+    }
+    if (m.n() == 0) m.Fail(m.nodes.front().line, "every node is massless: the model has no state");
+    m.capacity_J_per_K.resize(m.n());
+    for (int s = 0; s < m.n(); ++s) m.capacity_J_per_K(s) = caps[m.node_of_state[s]];
+    m.inv_capacity = m.capacity_J_per_K.cwiseInverse();
+    m.vars->node_C.assign(static_cast<std::size_t>(m.n()), 25.0);
   }
-  auto check_name = [&](const std::string& what, const std::string& nm, int line) {
+
+  /// Parameters, node temperatures and inputs: names a table or quantity may not take.
+  void ReserveBuiltInNames() {
+    for (const auto& [k, v] : m_.parameters) names_taken_.insert(k);
+    for (const auto& st : m_.state_names) names_taken_.insert(st + "_C");
+    for (const char* v : {"speed_rpm", "speed_rad_per_s", "id_A", "iq_A", "is_A", "i2_A2", "ambient_C",
+                          "coolant_C"}) {
+      names_taken_.insert(v);
+    }
+  }
+
+  /// A new name for an expression to read: an identifier, not taken yet.
+  void TakeName(const std::string& what, const std::string& nm, int line) {
     static const std::string kFirst = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ_";
     static const std::string kRest = kFirst + "0123456789";
     if (nm.empty() || kFirst.find(nm[0]) == std::string::npos ||
         nm.find_first_not_of(kRest) != std::string::npos) {
-      m.Fail(line, fmt::format("{} '{}': a name is letters, digits and '_', not starting with a digit", what, nm));
+      m_.Fail(line, fmt::format("{} '{}': a name is letters, digits and '_', not starting with a digit", what, nm));
     }
-    if (!names_taken.insert(nm).second) {
-      m.Fail(line, fmt::format("{} '{}': the name is already a parameter, input, node temperature, table "
-                               "or quantity",
-                               what, nm));
-    }
-  };
-  if (const toml::node* tv = root.get("table")) {
-    const toml::array* ta = tv->as_array();
-    if (!ta) m.Fail(LineOf(*tv), "'table' must be an array of tables ([[table]])");
-    for (const toml::node& e : *ta) {
-      const toml::table* tt = e.as_table();
-      const int line = LineOf(e);
-      if (!tt) m.Fail(line, "[[table]] entries must be tables");
-      CheckKeys(*tt, {"name", "file", "kind", "lookup", "description"}, "[[table]]", source);
-      auto t = std::make_unique<Table>();
-      t->name = (*tt)["name"].value_or(std::string{});
-      check_name("table", t->name, line);
-      const std::string kind = (*tt)["kind"].value_or(std::string{});
-      if (kind != "map" && kind != "curve") {
-        m.Fail(line, fmt::format("table '{}': kind must be \"map\" (2-D over rows and columns) or "
-                                 "\"curve\" (1-D)",
-                                 t->name));
-      }
-      const std::string lookup = (*tt)["lookup"].value_or(std::string{});
-      if (lookup != "linear" && lookup != "nearest") {
-        m.Fail(line, fmt::format("table '{}': lookup must be \"linear\" (interpolation) or \"nearest\" "
-                                 "(rounding to the grid)",
-                                 t->name));
-      }
-      t->linear = lookup == "linear";
-      const std::string file = (*tt)["file"].value_or(std::string{});
-      if (file.empty()) m.Fail(line, fmt::format("table '{}': missing file = \"<path relative to the model file>\"", t->name));
-      if (!files.read) {
-        m.Fail(line, fmt::format("table '{}': this model names a file ({}) but no file reader was given "
-                                 "to the parser",
-                                 t->name, file));
-      }
-      const std::string path = JoinPath(files.directory, file);
-      try {
-        ParseTableCsv(files.read(path), path, kind == "map", *t);
-      } catch (const std::exception& err) {
-        m.Fail(line, fmt::format("table '{}': {}", t->name, err.what()));
-      }
-      m.tables.push_back(std::move(t));
+    if (!names_taken_.insert(nm).second) {
+      m_.Fail(line, fmt::format("{} '{}': the name is already a parameter, input, node temperature, table "
+                                "or quantity",
+                                what, nm));
     }
   }
-  // Quantities: named expressions of the operating point, evaluated in file order.
-  if (const toml::node* qv = root.get("quantity")) {
+
+  /// [[table]]: loss maps and curves from CSV files named relative to the model file.
+  void ParseTables() {
+    const toml::node* tv = root_.get("table");
+    if (!tv) return;
+    const toml::array* ta = tv->as_array();
+    if (!ta) m_.Fail(LineOf(*tv), "'table' must be an array of tables ([[table]])");
+    for (const toml::node& e : *ta) m_.tables.push_back(ParseTable(e));
+  }
+
+  std::unique_ptr<Table> ParseTable(const toml::node& e) {
+    const toml::table* tt = e.as_table();
+    const int line = LineOf(e);
+    if (!tt) m_.Fail(line, "[[table]] entries must be tables");
+    CheckKeys(*tt, {"name", "file", "kind", "lookup", "description"}, "[[table]]", m_.source);
+    auto t = std::make_unique<Table>();
+    t->name = (*tt)["name"].value_or(std::string{});
+    TakeName("table", t->name, line);
+    const std::string kind = (*tt)["kind"].value_or(std::string{});
+    if (kind != "map" && kind != "curve") {
+      m_.Fail(line, fmt::format("table '{}': kind must be \"map\" (2-D over rows and columns) or "
+                                "\"curve\" (1-D)",
+                                t->name));
+    }
+    const std::string lookup = (*tt)["lookup"].value_or(std::string{});
+    if (lookup != "linear" && lookup != "nearest") {
+      m_.Fail(line, fmt::format("table '{}': lookup must be \"linear\" (interpolation) or \"nearest\" "
+                                "(rounding to the grid)",
+                                t->name));
+    }
+    t->linear = lookup == "linear";
+    const std::string file = (*tt)["file"].value_or(std::string{});
+    if (file.empty()) m_.Fail(line, fmt::format("table '{}': missing file = \"<path relative to the model file>\"", t->name));
+    if (!files_.read) {
+      m_.Fail(line, fmt::format("table '{}': this model names a file ({}) but no file reader was given "
+                                "to the parser",
+                                t->name, file));
+    }
+    const std::string path = JoinPath(files_.directory, file);
+    try {
+      ParseTableCsv(files_.read(path), path, kind == "map", *t);
+    } catch (const std::exception& err) {
+      m_.Fail(line, fmt::format("table '{}': {}", t->name, err.what()));
+    }
+    return t;
+  }
+
+  /// [[quantity]]: named expressions of the operating point, evaluated in file order.
+  void ParseQuantities() {
+    const toml::node* qv = root_.get("quantity");
+    if (!qv) return;
     const toml::array* qa = qv->as_array();
-    if (!qa) m.Fail(LineOf(*qv), "'quantity' must be an array of tables ([[quantity]])");
+    if (!qa) m_.Fail(LineOf(*qv), "'quantity' must be an array of tables ([[quantity]])");
     for (const toml::node& e : *qa) {
       const toml::table* qt = e.as_table();
       const int line = LineOf(e);
-      if (!qt) m.Fail(line, "[[quantity]] entries must be tables");
-      CheckKeys(*qt, {"name", "value", "description"}, "[[quantity]]", source);
+      if (!qt) m_.Fail(line, "[[quantity]] entries must be tables");
+      CheckKeys(*qt, {"name", "value", "description"}, "[[quantity]]", m_.source);
       Impl::Quantity q;
       q.name = (*qt)["name"].value_or(std::string{});
-      check_name("quantity", q.name, line);
+      TakeName("quantity", q.name, line);
       const toml::node* val = qt->get("value");
-      if (!val) m.Fail(line, fmt::format("quantity '{}': missing value", q.name));
-      q.value = m.Compile(*val, fmt::format("quantity {}.value", q.name), true);
+      if (!val) m_.Fail(line, fmt::format("quantity '{}': missing value", q.name));
+      q.value = m_.Compile(*val, fmt::format("quantity {}.value", q.name), true);
       if (q.value.Varies()) {
-        m.vars->quantity.push_back(q.value.value);
-        q.slot = &m.vars->quantity.back();
+        m_.vars->quantity.push_back(q.value.value);
+        q.slot = &m_.vars->quantity.back();
       }
-      m.quantities.push_back(std::move(q));
+      m_.quantities.push_back(std::move(q));
     }
   }
 
-  auto end_of = [&](const std::string& nm, int line, const std::string& label) {
+  /// An edge's end: a node index, kAmbient or kCoolant.
+  int EndOf(const std::string& nm, int line, const std::string& label) const {
     if (nm == "ambient") return kAmbient;
     if (nm == "coolant") return kCoolant;
-    auto it = index.find(nm);
-    if (it == index.end()) m.Fail(line, fmt::format("edge {}: unknown node '{}'", label, nm));
+    auto it = index_.find(nm);
+    if (it == index_.end()) m_.Fail(line, fmt::format("edge {}: unknown node '{}'", label, nm));
     return it->second;
-  };
+  }
 
-  // Edges.
-  const toml::array* edges = root["edge"].as_array();
-  if (!edges || edges->empty()) m.Fail(1, "no [[edge]] tables");
-  std::vector<std::vector<int>> adjacency(static_cast<std::size_t>(m.N()));
-  std::vector<bool> touches_boundary(static_cast<std::size_t>(m.N()), false);
-  for (const toml::node& ev : *edges) {
+  /// [[edge]]: thermal resistances between nodes and boundaries.
+  void ParseEdges() {
+    const toml::array* edge_list = root_["edge"].as_array();
+    if (!edge_list || edge_list->empty()) m_.Fail(1, "no [[edge]] tables");
+    adjacency_.assign(static_cast<std::size_t>(m_.N()), {});
+    touches_boundary_.assign(static_cast<std::size_t>(m_.N()), false);
+    for (const toml::node& ev : *edge_list) m_.edges.push_back(ParseEdge(ev));
+  }
+
+  Edge ParseEdge(const toml::node& ev) {
     const toml::table* et = ev.as_table();
     const int line = LineOf(ev);
-    if (!et) m.Fail(line, "[[edge]] entries must be tables");
-    CheckKeys(*et, {"between", "resistance_K_per_W", "name", "description"}, "[[edge]]", source);
+    if (!et) m_.Fail(line, "[[edge]] entries must be tables");
+    CheckKeys(*et, {"between", "resistance_K_per_W", "name", "description"}, "[[edge]]", m_.source);
     const toml::array* between = (*et)["between"].as_array();
     if (!between || between->size() != 2 || !(*between)[0].is_string() ||
         !(*between)[1].is_string()) {
-      m.Fail(line, "[[edge]]: 'between' must name two nodes, e.g. between = [\"frame\", \"ambient\"]");
+      m_.Fail(line, "[[edge]]: 'between' must name two nodes, e.g. between = [\"frame\", \"ambient\"]");
     }
     const std::string na = *(*between)[0].value<std::string>();
     const std::string nb = *(*between)[1].value<std::string>();
     const std::string label = (*et)["name"].value_or(fmt::format("{}-{}", na, nb));
     Edge e;
-    e.a = end_of(na, line, label);
-    e.b = end_of(nb, line, label);
+    e.a = EndOf(na, line, label);
+    e.b = EndOf(nb, line, label);
     e.line = line;
     e.label = label;
-    if (e.a < 0 && e.b < 0) m.Fail(line, fmt::format("edge {} joins two boundaries", label));
-    if (e.a == e.b) m.Fail(line, fmt::format("edge {} joins node '{}' to itself", label, na));
+    if (e.a < 0 && e.b < 0) m_.Fail(line, fmt::format("edge {} joins two boundaries", label));
+    if (e.a == e.b) m_.Fail(line, fmt::format("edge {} joins node '{}' to itself", label, na));
     if (e.a < 0) std::swap(e.a, e.b);
     const toml::node* r = et->get("resistance_K_per_W");
-    if (!r) m.Fail(line, fmt::format("edge {}: missing resistance_K_per_W", label));
-    e.resistance_K_per_W = m.Compile(*r, "resistance_K_per_W", true);
+    if (!r) m_.Fail(line, fmt::format("edge {}: missing resistance_K_per_W", label));
+    e.resistance_K_per_W = m_.Compile(*r, "resistance_K_per_W", true);
     if (e.resistance_K_per_W.value == 0.0) {
-      m.Fail(LineOf(*r), fmt::format("edge {}: zero resistance (merge the two nodes instead)", label));
+      m_.Fail(LineOf(*r), fmt::format("edge {}: zero resistance (merge the two nodes instead)", label));
     }
-    m.resistances_vary = m.resistances_vary || e.resistance_K_per_W.Varies();
-    m.uses_node_temperatures = m.uses_node_temperatures || e.resistance_K_per_W.reads_nodes;
+    m_.resistances_vary = m_.resistances_vary || e.resistance_K_per_W.Varies();
+    m_.uses_node_temperatures = m_.uses_node_temperatures || e.resistance_K_per_W.reads_nodes;
     if (e.b < 0) {
-      touches_boundary[e.a] = true;
-      m.uses_coolant = m.uses_coolant || e.b == kCoolant;
+      touches_boundary_[e.a] = true;
+      m_.uses_coolant = m_.uses_coolant || e.b == kCoolant;
     } else {
-      adjacency[e.a].push_back(e.b);
-      adjacency[e.b].push_back(e.a);
+      adjacency_[e.a].push_back(e.b);
+      adjacency_[e.b].push_back(e.a);
     }
-    m.edges.push_back(std::move(e));
+    return e;
   }
 
-  // Connectivity: every node has an edge and a path to a boundary.
-  for (int i = 0; i < m.N(); ++i) {
-    if (adjacency[i].empty() && !touches_boundary[i]) {
-      m.Fail(m.nodes[i].line, fmt::format("node '{}' is not connected to any edge", m.nodes[i].name));
+  /// Every node has an edge and a path to a boundary.
+  void CheckConnected() const {
+    const Impl& m = m_;
+    for (int i = 0; i < m.N(); ++i) {
+      if (adjacency_[i].empty() && !touches_boundary_[i]) {
+        m.Fail(m.nodes[i].line, fmt::format("node '{}' is not connected to any edge", m.nodes[i].name));
+      }
     }
-  }
-  {
     std::vector<bool> reached(static_cast<std::size_t>(m.N()), false);
     std::vector<int> stack;
     for (int i = 0; i < m.N(); ++i) {
-      if (touches_boundary[i]) {
+      if (touches_boundary_[i]) {
         reached[i] = true;
         stack.push_back(i);
       }
@@ -762,7 +811,7 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
     while (!stack.empty()) {
       const int i = stack.back();
       stack.pop_back();
-      for (int j : adjacency[i]) {
+      for (int j : adjacency_[i]) {
         if (!reached[j]) {
           reached[j] = true;
           stack.push_back(j);
@@ -779,109 +828,121 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
     }
   }
 
-  // Losses.
-  if (const toml::node* lv = root.get("loss")) {
+  /// [[loss]]: heat sources, their shares over the nodes and their temperature dependence.
+  void ParseLosses() {
+    const toml::node* lv = root_.get("loss");
+    if (!lv) return;
     const toml::array* la = lv->as_array();
-    if (!la) m.Fail(LineOf(*lv), "'loss' must be an array of tables ([[loss]])");
-    for (const toml::node& tv : *la) {
-      const toml::table* tt = tv.as_table();
-      const int line = LineOf(tv);
-      if (!tt) m.Fail(line, "[[loss]] entries must be tables");
-      CheckKeys(*tt,
-                {"name", "description", "power_W", "shares", "temperature_coefficient_per_K",
-                 "temperature_nodes", "reference", "reference_C"},
-                "[[loss]]", source);
-      LossTerm t;
-      t.line = line;
-      t.name = (*tt)["name"].value_or(fmt::format("loss at line {}", line));
-      const toml::node* p = tt->get("power_W");
-      if (!p) m.Fail(line, fmt::format("loss '{}': missing power_W", t.name));
-      t.power_W = m.Compile(*p, "power_W", true);
-      m.uses_node_temperatures = m.uses_node_temperatures || t.power_W.reads_nodes;
-      const toml::table* shares = (*tt)["shares"].as_table();
-      if (!shares || shares->empty()) {
-        m.Fail(line, fmt::format("loss '{}': missing shares = {{ node = fraction, ... }}", t.name));
+    if (!la) m_.Fail(LineOf(*lv), "'loss' must be an array of tables ([[loss]])");
+    for (const toml::node& tv : *la) m_.losses.push_back(ParseLoss(tv));
+  }
+
+  LossTerm ParseLoss(const toml::node& tv) {
+    const toml::table* tt = tv.as_table();
+    const int line = LineOf(tv);
+    if (!tt) m_.Fail(line, "[[loss]] entries must be tables");
+    CheckKeys(*tt,
+              {"name", "description", "power_W", "shares", "temperature_coefficient_per_K",
+               "temperature_nodes", "reference", "reference_C"},
+              "[[loss]]", m_.source);
+    LossTerm t;
+    t.line = line;
+    t.name = (*tt)["name"].value_or(fmt::format("loss at line {}", line));
+    const toml::node* p = tt->get("power_W");
+    if (!p) m_.Fail(line, fmt::format("loss '{}': missing power_W", t.name));
+    t.power_W = m_.Compile(*p, "power_W", true);
+    m_.uses_node_temperatures = m_.uses_node_temperatures || t.power_W.reads_nodes;
+    ParseShares(*tt, t);
+    if (const toml::node* a = tt->get("temperature_coefficient_per_K")) {
+      t.alpha_per_K = m_.Compile(*a, "temperature_coefficient_per_K", false).value;
+    }
+    if (t.alpha_per_K != 0.0) ParseLossTemperature(*tt, t);
+    return t;
+  }
+
+  /// shares = { node = fraction, ... } of a loss.
+  void ParseShares(const toml::table& tt, LossTerm& t) {
+    const toml::table* shares = tt["shares"].as_table();
+    if (!shares || shares->empty()) {
+      m_.Fail(t.line, fmt::format("loss '{}': missing shares = {{ node = fraction, ... }}", t.name));
+    }
+    for (const auto& [k, v] : *shares) {
+      auto it = index_.find(std::string(k.str()));
+      if (it == index_.end()) {
+        m_.Fail(LineOf(v), fmt::format("loss '{}': share for unknown node '{}'", t.name, k.str()));
       }
-      for (const auto& [k, v] : *shares) {
-        auto it = index.find(std::string(k.str()));
-        if (it == index.end()) {
-          m.Fail(LineOf(v), fmt::format("loss '{}': share for unknown node '{}'", t.name, k.str()));
-        }
-        const double s = m.Compile(v, fmt::format("shares.{}", k.str()), false).value;
-        if (s < 0.0) {
-          m.Fail(LineOf(v), fmt::format("loss '{}': negative share for node '{}'", t.name, k.str()));
-        }
-        t.shares.emplace_back(it->second, s);
+      const double s = m_.Compile(v, fmt::format("shares.{}", k.str()), false).value;
+      if (s < 0.0) {
+        m_.Fail(LineOf(v), fmt::format("loss '{}': negative share for node '{}'", t.name, k.str()));
       }
-      if (const toml::node* a = tt->get("temperature_coefficient_per_K")) {
-        t.alpha_per_K = m.Compile(*a, "temperature_coefficient_per_K", false).value;
-      }
-      if (t.alpha_per_K != 0.0) {
-        const toml::array* tn = (*tt)["temperature_nodes"].as_array();
-        if (!tn || tn->empty()) {
-          m.Fail(line, fmt::format("loss '{}': temperature_coefficient_per_K needs "
-                                   "temperature_nodes",
-                                   t.name));
-        }
-        for (const toml::node& x : *tn) {
-          auto s = x.value<std::string>();
-          auto it = s ? index.find(*s) : index.end();
-          if (it == index.end() || m.state_of_node[it->second] < 0) {
-            m.Fail(LineOf(x), fmt::format("loss '{}': temperature node '{}' is not a node with "
-                                          "heat capacity",
-                                          t.name, s.value_or("?")));
-          }
-          t.temperature_states.push_back(m.state_of_node[it->second]);
-        }
-        const bool has_ref = tt->contains("reference");
-        const bool has_ref_c = tt->contains("reference_C");
-        if (has_ref == has_ref_c) {
-          m.Fail(line, fmt::format("loss '{}': give exactly one of reference = \"ambient\"|"
-                                   "\"coolant\" or reference_C = <degC>",
-                                   t.name));
-        }
-        if (has_ref) {
-          const std::string r = (*tt)["reference"].value_or(std::string{});
-          if (r == "ambient") {
-            t.reference = kAmbient;
-          } else if (r == "coolant") {
-            t.reference = kCoolant;
-            m.uses_coolant = true;
-          } else {
-            m.Fail(LineOf(*tt->get("reference")),
-                   fmt::format("loss '{}': reference must be \"ambient\" or \"coolant\"", t.name));
-          }
-        } else {
-          t.reference_degC = m.Compile(*tt->get("reference_C"), "reference_C", false).value;
-        }
-      }
-      m.losses.push_back(std::move(t));
+      t.shares.emplace_back(it->second, s);
     }
   }
 
-  // Winding weights: the temperature nodes of the temperature-dependent losses.
-  m.winding_weights = Eigen::VectorXd::Zero(m.n());
-  {
+  /// The temperature dependence of a loss: its nodes and its reference temperature.
+  void ParseLossTemperature(const toml::table& tt, LossTerm& t) {
+    const toml::array* tn = tt["temperature_nodes"].as_array();
+    if (!tn || tn->empty()) {
+      m_.Fail(t.line, fmt::format("loss '{}': temperature_coefficient_per_K needs "
+                                  "temperature_nodes",
+                                  t.name));
+    }
+    for (const toml::node& x : *tn) {
+      auto s = x.value<std::string>();
+      auto it = s ? index_.find(*s) : index_.end();
+      if (it == index_.end() || m_.state_of_node[it->second] < 0) {
+        m_.Fail(LineOf(x), fmt::format("loss '{}': temperature node '{}' is not a node with "
+                                       "heat capacity",
+                                       t.name, s.value_or("?")));
+      }
+      t.temperature_states.push_back(m_.state_of_node[it->second]);
+    }
+    const bool has_ref = tt.contains("reference");
+    const bool has_ref_c = tt.contains("reference_C");
+    if (has_ref == has_ref_c) {
+      m_.Fail(t.line, fmt::format("loss '{}': give exactly one of reference = \"ambient\"|"
+                                  "\"coolant\" or reference_C = <degC>",
+                                  t.name));
+    }
+    if (!has_ref) {
+      t.reference_degC = m_.Compile(*tt.get("reference_C"), "reference_C", false).value;
+      return;
+    }
+    const std::string r = tt["reference"].value_or(std::string{});
+    if (r == "ambient") {
+      t.reference = kAmbient;
+    } else if (r == "coolant") {
+      t.reference = kCoolant;
+      m_.uses_coolant = true;
+    } else {
+      m_.Fail(LineOf(*tt.get("reference")),
+              fmt::format("loss '{}': reference must be \"ambient\" or \"coolant\"", t.name));
+    }
+  }
+
+  /// Winding weights: the temperature nodes of the temperature-dependent losses, equally.
+  void SetWindingWeights() {
+    m_.winding_weights = Eigen::VectorXd::Zero(m_.n());
     std::set<int> states;
-    for (const LossTerm& t : m.losses) {
+    for (const LossTerm& t : m_.losses) {
       if (t.alpha_per_K > 0.0) states.insert(t.temperature_states.begin(), t.temperature_states.end());
     }
-    for (int s : states) m.winding_weights(s) = 1.0 / static_cast<double>(states.size());
+    for (int s : states) m_.winding_weights(s) = 1.0 / static_cast<double>(states.size());
   }
 
-  // Singular massless sub-networks: check each connected group of massless nodes.
-  {
-    std::vector<int> group(static_cast<std::size_t>(m.N()), -1);
-    int groups = 0;
-    for (int start : m.node_of_massless) {
+  /// The connected groups of massless nodes, as group index per node (-1: not massless).
+  std::vector<int> MasslessGroups(int& groups) const {
+    std::vector<int> group(static_cast<std::size_t>(m_.N()), -1);
+    groups = 0;
+    for (int start : m_.node_of_massless) {
       if (group[start] >= 0) continue;
       std::vector<int> stack{start};
       group[start] = groups;
       while (!stack.empty()) {
         const int i = stack.back();
         stack.pop_back();
-        for (int j : adjacency[i]) {
-          if (m.nodes[j].massless && group[j] < 0) {
+        for (int j : adjacency_[i]) {
+          if (m_.nodes[j].massless && group[j] < 0) {
             group[j] = groups;
             stack.push_back(j);
           }
@@ -889,44 +950,65 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
       }
       ++groups;
     }
-    m.SetInputs(ThermalInputs{});
+    return group;
+  }
+
+  /// Each connected group of massless nodes must have an invertible Y22 (eq. S25), at the
+  /// operating point of zero inputs; then the reduction of the whole network must succeed.
+  void CheckMasslessGroups() {
+    int groups = 0;
+    const std::vector<int> group = MasslessGroups(groups);
+    m_.SetInputs(ThermalInputs{});
     for (int gidx = 0; gidx < groups; ++gidx) {
       std::vector<int> members;
-      for (int i = 0; i < m.N(); ++i) {
+      for (int i = 0; i < m_.N(); ++i) {
         if (group[i] == gidx) members.push_back(i);
       }
-      const int k = static_cast<int>(members.size());
-      Eigen::MatrixXd y = Eigen::MatrixXd::Zero(k, k);
-      double scale = 0.0;
-      for (const Edge& e : m.edges) {
-        const double g = 1.0 / e.resistance_K_per_W.Eval();
-        scale = std::max(scale, std::abs(g));
-        for (int r = 0; r < k; ++r) {
-          const int i = members[r];
-          if (e.a != i && e.b != i) continue;
-          y(r, r) -= g;
-          const int other = e.a == i ? e.b : e.a;
-          for (int c = 0; c < k; ++c) {
-            if (members[c] == other) y(r, c) += g;
-          }
+      CheckMasslessGroup(members);
+    }
+    if (!m_.Reduce(m_.cached)) m_.Fail(1, "the massless sub-network is singular");
+  }
+
+  void CheckMasslessGroup(const std::vector<int>& members) const {
+    const int k = static_cast<int>(members.size());
+    Eigen::MatrixXd y = Eigen::MatrixXd::Zero(k, k);
+    for (const Edge& e : m_.edges) {
+      const double g = 1.0 / e.resistance_K_per_W.Eval();
+      for (int r = 0; r < k; ++r) {
+        const int i = members[r];
+        if (e.a != i && e.b != i) continue;
+        y(r, r) -= g;
+        const int other = e.a == i ? e.b : e.a;
+        for (int c = 0; c < k; ++c) {
+          if (members[c] == other) y(r, c) += g;
         }
       }
-      Eigen::FullPivLU<Eigen::MatrixXd> lu(y);
-      lu.setThreshold(1e-10);
-      if (!lu.isInvertible()) {
-        std::string names;
-        for (int i : members) names += fmt::format("{}'{}' (line {})", names.empty() ? "" : ", ",
-                                                  m.nodes[i].name, m.nodes[i].line);
-        m.Fail(m.nodes[members.front()].line,
-               fmt::format("massless nodes {} form a singular sub-network: Y22 of eq. S25 "
-                           "cannot be inverted",
-                           names));
-      }
     }
-    if (!m.Reduce(m.cached)) m.Fail(1, "the massless sub-network is singular");
+    Eigen::FullPivLU<Eigen::MatrixXd> lu(y);
+    lu.setThreshold(1e-10);
+    if (lu.isInvertible()) return;
+    std::string names;
+    for (int i : members) names += fmt::format("{}'{}' (line {})", names.empty() ? "" : ", ",
+                                              m_.nodes[i].name, m_.nodes[i].line);
+    m_.Fail(m_.nodes[members.front()].line,
+            fmt::format("massless nodes {} form a singular sub-network: Y22 of eq. S25 "
+                        "cannot be inverted",
+                        names));
   }
-  m.p0.setZero(m.N());
-  m.d.setZero(m.N(), m.n());
+};
+
+ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& source,
+                                 const ThermalModelFiles& files) {
+  auto impl = std::make_unique<Impl>();
+  impl->source = source;
+  toml::table root;
+  try {
+    root = toml::parse(toml_text, source);
+  } catch (const toml::parse_error& e) {
+    throw ThermalModelError(fmt::format("{}: {}", Where(source, static_cast<int>(e.source().begin.line)),
+                                        e.description()));
+  }
+  Impl::Parser(*impl, root, files).Parse();
   return ThermalModel(std::move(impl));
 }
 

@@ -593,7 +593,7 @@ class Parser {
       auto [p, ec] = std::from_chars(sv.data(), sv.data() + sv.size(), v);
       if (ec != std::errc() || p != sv.data() + sv.size()) Fail(num, "a raw value");
       // A raw value is a 64-bit integer at most; converting a double outside that range to one
-      // is undefined behaviour (found by dbc_reader_fuzz: 4.4e101).
+      // is undefined behaviour.
       if (!(v >= -9223372036854775808.0 && v < 9223372036854775808.0)) {
         Fail(num, "a raw value within the 64-bit integer range");
       }

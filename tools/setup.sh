@@ -63,7 +63,7 @@ if ((want_guest)); then
   echo "setup: guest kernel $(ls "$cache/kernel/boot" | grep vmlinuz)"
 fi
 
-# --- candied for the DBC cross-check (issue 3) ---
+# --- candied for the DBC cross-check ---
 # tests/protocol/codec_candied_test.cpp decodes frames with npm's candied as an independent
 # decoder. `npm ci` installs exactly what tests/protocol/candied/package-lock.json pins; it runs
 # as the invoking user (not through sudo) and only when the installed version differs.
@@ -76,4 +76,4 @@ if [[ "$candied_have" != "$candied_want" ]]; then
 else
   echo "setup: candied $candied_have present"
 fi
-# --- end candied (issue 3) ---
+# --- end candied ---

@@ -1,4 +1,4 @@
-// Benchmark of the discrepancy workflow (issue 7, "Figures"): 24 hours of data at 1 Hz with five
+// Benchmark of the discrepancy workflow ("Figures"): 24 hours of data at 1 Hz with five
 // measured nodes, train and validate each, the whole run timed from reading the CSV files to
 // writing report.json, model.toml and report.html. Prints the figure as JSON; never fails on time.
 //
@@ -14,6 +14,7 @@
 #include <string>
 
 #include "estimators/thermal_model.hpp"
+#include "tests/common/test_files.hpp"
 #include "tools/discrepancy/data.hpp"
 #include "tools/discrepancy/hidden_data.hpp"
 #include "tools/discrepancy/report.hpp"
@@ -21,14 +22,6 @@
 
 namespace pd = pumptherm::tools::discrepancy;
 
-namespace {
-std::string Read(const std::string& path) {
-  std::ifstream f(path);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-}  // namespace
 
 int main(int argc, char** argv) {
   double hours = 24.0, step_s = 1.0;
@@ -39,12 +32,11 @@ int main(int argc, char** argv) {
     if (a == "--step-s") step_s = std::atof(argv[i + 1]);
     if (a == "--max-exact-rows") options.max_exact_rows = std::atol(argv[i + 1]);
   }
-  const std::string src = PUMPTHERM_SOURCE_DIR;
-  const std::string model_path = src + "/estimators/models/saheba2010-baseline.toml";
-  const std::string text = Read(model_path);
+  const std::string model_path = pumptherm::test_files::ModelPath("saheba2010-baseline");
+  const std::string text = pumptherm::test_files::ReadFile(model_path);
   // The paper's case: data from saheba2010-improved, the baseline model to correct.
   pd::HiddenDataConfig c;
-  c.model_text = Read(src + "/estimators/models/saheba2010-improved.toml");
+  c.model_text = pumptherm::test_files::ReadModel("saheba2010-improved");
   c.model_source = "saheba2010-improved";
   c.duration_s = hours * 3600.0;
   c.step_s = step_s;

@@ -1,4 +1,4 @@
-// Protocol figures (issue 3): decode rate of 8-byte frames with 4 to 8 signals, and the time to
+// Protocol figures: decode rate of 8-byte frames with 4 to 8 signals, and the time to
 // load Model3CAN.dbc. Prints figures; never fails on time.
 //
 //   build-rel/tests/bench/protocol_bench --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
@@ -16,6 +16,7 @@
 
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
+#include "tests/common/test_files.hpp"
 
 namespace {
 
@@ -26,12 +27,7 @@ std::filesystem::path SourceDir() {
   return dir != nullptr ? dir : PUMPTHERM_SOURCE_DIR_DEFAULT;
 }
 
-std::string ReadFile(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using pumptherm::test_files::ReadFile;
 
 /// 256 random 8-byte payloads, so the decoder cannot be folded into a constant.
 std::vector<std::array<std::uint8_t, 8>> Frames() {

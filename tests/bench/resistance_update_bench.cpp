@@ -1,4 +1,4 @@
-// Cost of one update of each resistance identifier (issue 4 target: a DFRLS update <= 50 ns on
+// Cost of one update of each resistance identifier (target: a DFRLS update <= 50 ns on
 // one core). Prints figures; never fails on time.
 //   build-*/tests/bench/resistance_update_bench
 #include <benchmark/benchmark.h>

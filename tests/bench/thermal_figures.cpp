@@ -1,4 +1,4 @@
-// thermal_figures: the figures of issue 5 (docs/virtual-sensor.md).
+// thermal_figures: the figures of the virtual thermal sensor (docs/virtual-sensor.md).
 //  - Kalman experiments of Saheba et al. 2010 (IEEE CSM 30(1)) Figs. 7 and 8 at 800 r/min:
 //    truth = the improved model with the paper's process noise, frame sensor with the paper's
 //    noise, filter started 10 degC off; filter model improved (model right) or baseline (model
@@ -20,6 +20,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <random>
 #include <sstream>
 #include <stdexcept>
@@ -27,7 +28,9 @@
 #include <vector>
 
 #include "estimators/kalman_virtual_sensor.hpp"
+#include "tests/common/test_files.hpp"
 #include "tools/common/csv.hpp"
+#include "tools/common/thermal_input_series.hpp"
 #include "tools/sim/sensor.hpp"
 #include "tools/sim/thermal_plant.hpp"
 
@@ -37,19 +40,13 @@ namespace {
 
 const std::string kSource = PUMPTHERM_SOURCE_DIR;
 
-std::string ReadFile(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw std::runtime_error("cannot read " + path);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+using pumptherm::test_files::ReadFile;
 
-/// A shipped model; tables it names are read relative to estimators/models/.
+/// A model by name (shipped, or kept with the tests); tables it names are read relative to it.
 pe::ThermalModel Load(const std::string& name) {
-  const std::string dir = kSource + "/estimators/models";
-  return pe::ThermalModel::Parse(ReadFile(dir + "/" + name + ".toml"), name,
-                                 pe::ThermalModelFiles{dir, &ReadFile});
+  const std::string path = pumptherm::test_files::ModelPath(name);
+  return pe::ThermalModel::Parse(ReadFile(path), name,
+                                 pe::ThermalModelFiles{pumptherm::test_files::DirectoryOf(path), &ReadFile});
 }
 
 struct Segment {
@@ -421,23 +418,17 @@ int main(int argc, char** argv) {
   } else {
     const auto wall = Load("wallscheid2017-4node");
     const auto csv = pumptherm::tools::CsvTable::Read(data);
-    const auto t = csv.Time();
-    const auto speed = csv.Column("motor_speed"), id = csv.Column("i_d"), iq = csv.Column("i_q"),
-               amb = csv.Column("ambient"), cool = csv.Column("coolant"), pm = csv.Column("pm"),
-               sy = csv.Column("stator_yoke"), st = csv.Column("stator_tooth"), sw = csv.Column("stator_winding");
-    auto inputs = [&](std::size_t k) {
-      pe::ThermalInputs in;
-      in.speed_rpm = speed[k];
-      in.id_A = id[k];
-      in.iq_A = iq[k];
-      in.ambient_degC = amb[k];
-      in.coolant_degC = cool[k];
-      return in;
-    };
+    // The data set's own column names (time_s was added to it).
+    const std::map<std::string, std::string> kNames{{"time_s", "time_s"},  {"speed_rpm", "motor_speed"},
+                                                    {"id_A", "i_d"},       {"iq_A", "i_q"},
+                                                    {"ambient_C", "ambient"}, {"coolant_C", "coolant"}};
+    const pumptherm::tools::ThermalInputSeries series =
+        pumptherm::tools::ReadThermalInputs(csv, {[&](const std::string& c) { return kNames.at(c); }, true});
+    const std::vector<double>& t = series.time_s;
+    const auto pm = csv.Column("pm"), sy = csv.Column("stator_yoke"), st = csv.Column("stator_tooth"),
+               sw = csv.Column("stator_winding");
     // Inputs a fraction w of the way from row k-1 to row k (the reference interpolates linearly).
-    auto between = [&](std::size_t k, double w) {
-      return pe::InterpolateInputs(inputs(k - 1), inputs(k), w);
-    };
+    auto between = [&](std::size_t k, double w) { return series.Between(k, w, true); };
     constexpr int kSub = 10;  // 0.5 s steps between the 5 s rows, as the reference
     const Eigen::Vector4d measured0(pm[0], sy[0], st[0], sw[0]);
     auto score = [&](const std::vector<Eigen::VectorXd>& est) {

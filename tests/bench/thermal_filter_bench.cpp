@@ -1,6 +1,6 @@
-// One step of the virtual thermal sensor on the 7-state Saheba network (issue 5 goal: <= 2 us,
-// no allocation), and on the 4-state Wallscheid network with its loss map and expressions
-// (issue 11). Counts heap allocations by interposing malloc in this executable and reports them
+// One step of the virtual thermal sensor on the 7-state Saheba network (goal: <= 2 us,
+// no allocation), and on the 4-state Wallscheid network with its loss map and expressions.
+// Counts heap allocations by interposing malloc in this executable and reports them
 // per step as the counter `allocs_per_step`.
 #include <benchmark/benchmark.h>
 
@@ -18,6 +18,7 @@
 #include "estimators/kalman_virtual_sensor.hpp"
 #include "estimators/disturbance_sensor.hpp"
 #include "estimators/mismatch_detector.hpp"
+#include "tests/common/test_files.hpp"
 
 namespace {
 std::atomic<long> g_allocations{0};
@@ -36,18 +37,13 @@ namespace pe = pumptherm::estimators;
 
 namespace {
 
-std::string ReadFile(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw std::runtime_error("cannot read " + path);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+using pumptherm::test_files::ReadFile;
 
-/// A shipped model; the tables it names are read relative to estimators/models/.
+/// A model by name (shipped, or kept with the tests); the tables it names are read relative to it.
 pe::ThermalModel Load(const std::string& name) {
-  const std::string dir = std::string(PUMPTHERM_SOURCE_DIR) + "/estimators/models";
-  return pe::ThermalModel::Parse(ReadFile(dir + "/" + name + ".toml"), name, pe::ThermalModelFiles{dir, &ReadFile});
+  const std::string path = pumptherm::test_files::ModelPath(name);
+  return pe::ThermalModel::Parse(ReadFile(path), name,
+                                 pe::ThermalModelFiles{pumptherm::test_files::DirectoryOf(path), &ReadFile});
 }
 
 /// Linearise (losses with the copper law), discretisation check, time and measurement update:
@@ -165,7 +161,7 @@ void BM_MismatchFit(benchmark::State& state) {
 }
 BENCHMARK(BM_MismatchFit)->Unit(benchmark::kMillisecond);
 
-/// One step of the virtual sensor on `wallscheid2017-4node` with its loss map (issue 11): 7
+/// One step of the virtual sensor on `wallscheid2017-4node` with its loss map: 7
 /// quantities, 2 table lookups, 4 input-dependent resistances (so the network is re-assembled
 /// every step), a loss that reads the winding temperature. range(0) = 0: a steady operating point
 /// (the discretisation is kept); 1: the operating point moves every step through the rows of the

@@ -1,4 +1,4 @@
-// Issue 6 figure "heap allocations per frame in steady state: zero", as a test: this executable
+// "Heap allocations per frame in steady state: zero", as a test: this executable
 // replaces the global operator new/delete with counting ones, runs a multi-pump recording (the
 // plant simulator's demo: three pumps, 100 Hz fast telemetry and 10 Hz status, generated at
 // build time) through the offline pipeline's per-frame path (daemon/offline.cpp RunOffline:

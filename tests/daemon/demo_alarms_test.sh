@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 9's done criterion: the `demo` recording replayed through the daemon gives alarms that
+# The `demo` recording replayed through the daemon gives alarms that
 # agree with the truth. Stated delays (docs/daemon.md, "Alarms on the demo"): each alarm level
 # comes no later than 30 s after the true winding temperature crosses it, and no earlier than
 # 120 s before (a trip fires on the estimate plus 2 sd, and a filter that does not model the lost

@@ -83,7 +83,7 @@ TEST(FrameCounter, DisabledHeartbeatNeverComes) {
   EXPECT_FALSE(g.HeartbeatDue(100'000'000));
 }
 
-// The status line (systemd STATUS=) counts what issue 8's fault injection looks at: error
+// The status line (systemd STATUS=) counts what the fault injection test looks at: error
 // frames, and with LCM configured the messages sent and those that failed.
 TEST(Gateway, StatusLineCountsErrorFramesAndLcmFailures) {
   struct FailingSink : OutputSink {

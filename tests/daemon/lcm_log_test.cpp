@@ -1,4 +1,4 @@
-// Issue 6 item 8: `pumpthermd -r LOG --lcm-log FILE` writes the LCM messages as an LCM log file
+// `pumpthermd -r LOG --lcm-log FILE` writes the LCM messages as an LCM log file
 // that lcm-logplayer plays. This reads the file back with LCM's own log reader (lcm::LogFile,
 // the reader lcm-logplayer uses) and decodes every event with the type its channel names
 // (docs/lcm.md): the file is a well-formed LCM log, every message decodes to exactly its

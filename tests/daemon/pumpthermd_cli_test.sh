@@ -7,20 +7,8 @@ data=$2
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 fail=0
-expect() {  # expect CODE PATTERN -- command...
-  local code=$1 pattern=$2
-  shift 3
-  local out rc
-  out=$("$@" 2>&1)
-  rc=$?
-  if [[ $rc -ne $code ]] || ! grep -qE -- "$pattern" <<<"$out"; then
-    echo "FAIL: $* -> exit $rc (want $code), output:"; echo "$out" | sed 's/^/    /'
-    echo "    wanted a line matching: $pattern"
-    fail=1
-  else
-    echo "ok: $* -> exit $rc: $(head -n1 <<<"$out")"
-  fi
-}
+# shellcheck source=../common/expect.sh
+source "$(dirname "${BASH_SOURCE[0]}")/../common/expect.sh"
 
 printf '[gateway]\nheartbeat_period_s = "fast"\n' > "$tmp/bad.toml"
 expect 2 "bad.toml:2: key 'gateway.heartbeat_period_s': expected a number" -- "$bin" --config "$tmp/bad.toml"

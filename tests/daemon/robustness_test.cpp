@@ -1,4 +1,4 @@
-// Robustness of the daemon's pipeline (issue 8, docs/robustness.md): inputs far outside any
+// Robustness of the daemon's pipeline (docs/robustness.md): inputs far outside any
 // rating must not make the daemon publish a garbage temperature.
 #include <gtest/gtest.h>
 
@@ -168,7 +168,7 @@ TEST(PumpRobustness, ARestartIsATelemetrySilence) {
   EXPECT_NE(at_once.level, estimators::AlarmLevel::kTrip) << "value " << at_once.value;
 }
 
-// Security (issue 8): a configuration anyone may write decides the alarm levels and who may
+// Security: a configuration anyone may write decides the alarm levels and who may
 // clear trips, so the daemon warns about it; the saved state is the service's alone (0600).
 TEST(FilePermissions, ConfigWritableByOthersIsWarnedAbout) {
   char dir_template[] = "/tmp/pumptherm-perm-XXXXXX";

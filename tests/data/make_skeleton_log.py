@@ -4,7 +4,7 @@
 Two pump drives (node IDs 1 and 2) on can0 for 10 s: fast telemetry at 100 Hz (CAN ID
 0x180 + node), slow status at 10 Hz (0x280 + node), and a 29-bit diagnostic frame at 1 Hz,
 with up to 300 us of timing jitter. Payloads are arbitrary but fixed (seeded). The plant
-simulator of issue 9 replaces this with physically meaningful recordings.
+simulator (`pumptherm plant`) writes physically meaningful recordings.
 """
 import random
 

@@ -8,17 +8,14 @@
 #include <random>
 #include <sstream>
 
+#include "tests/common/test_files.hpp"
 #include "tools/sim/thermal_plant.hpp"
 
 namespace pe = pumptherm::estimators;
 
 namespace {
 pe::ThermalModel Load(const std::string& name) {
-  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
-  std::ifstream f(std::string(src ? src : ".") + "/estimators/models/" + name + ".toml");
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return pe::ThermalModel::Parse(ss.str(), name);
+  return pe::ThermalModel::Parse(pumptherm::test_files::ReadModel(name), name);
 }
 
 struct RunResult {
@@ -90,7 +87,7 @@ TEST(VirtualThermalSensor, ConvergesOnSimulatedDataWithTheFrameSensor) {
   EXPECT_LT(r.mean_nis, 2.0);
 }
 
-// Issue 5's goal on the Fig. 7 set-up (800 r/min, 40-60-40 A, shortened to 600 + 600 + 600 s):
+// The virtual sensor's goal on the Fig. 7 set-up (800 r/min, 40-60-40 A, shortened to 600 + 600 + 600 s):
 // with the model right (truth = the same model, no process noise), the frame sensor alone and the
 // filter started 10 K above a machine at rest, every state is within 3 K by 60 s and within 1.0 K
 // after. The prior says what a machine at rest is: one unknown temperature, parts within 1 K.

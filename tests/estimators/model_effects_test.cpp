@@ -13,37 +13,24 @@
 #include <string>
 
 #include "estimators/thermal_model.hpp"
+#include "tests/common/test_files.hpp"
 
 namespace pe = pumptherm::estimators;
 
 namespace {
 
-std::string ReadModel(const std::string& name) {
-  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
-  const std::string path = std::string(src ? src : ".") + "/estimators/models/" + name + ".toml";
-  std::ifstream f(path);
-  EXPECT_TRUE(f.good()) << path;
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+using pumptherm::test_files::ReadModel;
 
-// Tables that models name (the Wallscheid loss map) are read relative to estimators/models/.
+// Tables that models name are read relative to the reference models' directory: only the
+// Wallscheid model (kept there) names any.
 pe::ThermalModelFiles Files() {
-  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
-  return {std::string(src ? src : ".") + "/estimators/models", [](const std::string& path) {
-            std::ifstream f(path);
-            if (!f) throw std::runtime_error("cannot read " + path);
-            std::stringstream ss;
-            ss << f.rdbuf();
-            return ss.str();
-          }};
+  return {pumptherm::test_files::ReferenceModelDir(), &pumptherm::test_files::ReadFile};
 }
 
 // The Wallscheid model needs its loss map, which stays outside the project.
 bool TablesPresent(const std::string& name) {
   return name != "wallscheid2017-4node" ||
-         std::ifstream(Files().directory + "/../../../shared/reference/wallscheid-losses/total_loss_W.csv").good();
+         std::ifstream(Files().directory + "/../../../../shared/reference/wallscheid-losses/total_loss_W.csv").good();
 }
 
 pe::ThermalInputs Load() {

@@ -9,6 +9,7 @@
 
 #include "estimators/magnet.hpp"
 #include "estimators/motor.hpp"
+#include "tests/common/test_files.hpp"
 
 namespace pumptherm::estimators {
 namespace {
@@ -49,13 +50,9 @@ TEST(MotorDescription, PresetHasTable1Values) {
 }
 
 TEST(MotorDescription, ShippedPresetFileMatchesBuiltInPreset) {
-  const char* root = std::getenv("PUMPTHERM_SOURCE_DIR");
-  ASSERT_NE(root, nullptr) << "CTest sets PUMPTHERM_SOURCE_DIR";
-  std::ifstream in(std::string(root) + "/estimators/motors/han2019-tmp.toml");
-  ASSERT_TRUE(in) << "estimators/motors/han2019-tmp.toml not found";
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  EXPECT_EQ(buffer.str(), std::string(MotorPresetText("han2019-tmp")));
+  const std::string text =
+      pumptherm::test_files::ReadFile(pumptherm::test_files::SourceDir() + "/estimators/motors/han2019-tmp.toml");
+  EXPECT_EQ(text, std::string(MotorPresetText("han2019-tmp")));
 }
 
 TEST(MotorDescription, ParsesAValidFileWithIntegersForFloats) {

@@ -1,5 +1,6 @@
 // Sensor placement (Saheba 2010 eqs. 35-37).
 #include "estimators/placement.hpp"
+#include "tests/common/test_files.hpp"
 
 #include <gtest/gtest.h>
 
@@ -23,11 +24,7 @@ TEST(Placement, RiccatiMeanMatchesLocalLevelClosedForm) {
 }
 
 TEST(Placement, SahebaImprovedRanksTheWindingSensorsBestForTheWindings) {
-  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
-  std::ifstream f(std::string(src ? src : ".") + "/estimators/models/saheba2010-improved.toml");
-  std::stringstream ss;
-  ss << f.rdbuf();
-  const auto m = pe::ThermalModel::Parse(ss.str(), "improved");
+  const auto m = pe::ThermalModel::Parse(pumptherm::test_files::ReadModel("saheba2010-improved"), "improved");
   pe::PlacementConfig cfg;
   for (double i : {40.0, 52.5, 65.0}) {
     pe::ThermalInputs in;

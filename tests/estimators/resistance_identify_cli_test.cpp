@@ -12,11 +12,15 @@
 #include <string>
 
 #include "estimators/motor.hpp"
+#include "tests/common/run_command.hpp"
+#include "tests/common/test_files.hpp"
 #include "tools/common/csv.hpp"
 #include "tools/sim/tmp_drive.hpp"
 
 namespace pumptherm {
 namespace {
+
+using pumptherm::test_files::ReadFile;
 
 std::string TempPath(const std::string& name) {
   return ::testing::TempDir() + "pumptherm_identify_" + name;
@@ -27,25 +31,17 @@ void WriteText(const std::string& path, const std::string& text) {
   out << text;
 }
 
-std::string ReadText(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 struct Result {
   int exit_code;
   std::string err;
 };
 
 Result Identify(const std::string& name, const std::string& extra = "") {
-  const std::string err = TempPath(name + ".err");
   const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' identify --input '" +
                           TempPath(name + ".csv") + "' --output '" + TempPath(name + ".out.csv") +
-                          "' " + extra + " 2> '" + err + "'";
-  const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, ReadText(err)};
+                          "' " + extra;
+  auto r = pumptherm::test_files::RunCommandStderr(cmd, TempPath(name + ".err"));
+  return {r.exit_code, std::move(r.out)};
 }
 
 constexpr const char* kHeader = "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm\n";
@@ -142,7 +138,7 @@ TEST(IdentifyCli, ShortOptionsAndStandardOutputByDefault) {
   const int status = std::system(cmd.c_str());
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0);
-  const std::string csv = ReadText(out);
+  const std::string csv = ReadFile(out);
   EXPECT_EQ(csv.rfind("time_s,resistance_ohm", 0), 0u) << csv;
   EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3) << csv;
 }

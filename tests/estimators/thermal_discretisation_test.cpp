@@ -1,5 +1,6 @@
 // Exact ZOH discretisation (Saheba 2010 eqs. 20-21) against fine-step integration.
 #include "estimators/thermal_discretisation.hpp"
+#include "tests/common/test_files.hpp"
 
 #include <gtest/gtest.h>
 
@@ -11,11 +12,7 @@ namespace pe = pumptherm::estimators;
 
 namespace {
 pe::ThermalModel Improved() {
-  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
-  std::ifstream f(std::string(src ? src : ".") + "/estimators/models/saheba2010-improved.toml");
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return pe::ThermalModel::Parse(ss.str(), "improved");
+  return pe::ThermalModel::Parse(pumptherm::test_files::ReadModel("saheba2010-improved"), "improved");
 }
 }  // namespace
 

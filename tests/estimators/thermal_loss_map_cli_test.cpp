@@ -1,5 +1,5 @@
 // `pumptherm simulate` and `pumptherm estimate` with the published Paderborn 4-node model and its
-// loss map (issue 11): the model alone reproduces the reference figures of
+// loss map: the model alone reproduces the reference figures of
 // ../shared/reference/wallscheid-losses/README.md (an independent re-implementation: explicit
 // Euler at 0.5 s, inputs linearly interpolated, started from the first measured temperatures) per
 // node within 10 %. Skips, saying why, where the data or the loss map are absent (they stay
@@ -14,9 +14,13 @@
 #include <string>
 #include <vector>
 
+#include "tests/common/run_command.hpp"
+#include "tests/common/test_files.hpp"
 #include "tools/common/csv.hpp"
 
 namespace {
+
+using pumptherm::test_files::ReadFile;
 
 const std::string kSource = [] {
   const char* s = std::getenv("PUMPTHERM_SOURCE_DIR");
@@ -24,15 +28,10 @@ const std::string kSource = [] {
 }();
 const std::string kData = kSource + "/../shared/data/paderborn/profile46_every10th_dt5s.csv";
 const std::string kMap = kSource + "/../shared/reference/wallscheid-losses/total_loss_W.csv";
+// Not a shipped model (its loss map may not be redistributed): named by path.
+const std::string kModel = pumptherm::test_files::ModelPath("wallscheid2017-4node");
 
 std::string TempPath(const std::string& name) { return ::testing::TempDir() + "pumptherm_lossmap_" + name; }
-
-std::string ReadText(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 struct Result {
   int exit_code;
@@ -40,10 +39,8 @@ struct Result {
 };
 
 Result RunCli(const std::string& args, const std::string& name) {
-  const std::string err = TempPath(name + ".err");
-  const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' " + args + " 2> '" + err + "'";
-  const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, ReadText(err)};
+  auto r = pumptherm::test_files::RunCommandStderr(std::string("'") + PUMPTHERM_CLI + "' " + args, TempPath(name + ".err"));
+  return {r.exit_code, std::move(r.out)};
 }
 
 bool DataPresent(std::string& why) {
@@ -72,7 +69,7 @@ TEST(LossMapCli, SimulateReproducesTheReferenceFiguresWithin10Percent) {
   std::string why;
   if (!DataPresent(why)) GTEST_SKIP() << why;
   const std::string out = TempPath("sim.csv");
-  const Result r = RunCli("simulate --model wallscheid2017-4node --columns paderborn --initial first-row "
+  const Result r = RunCli("simulate --model '" + kModel + "' --columns paderborn --initial first-row "
                        "--max-step-s 0.5 --inputs linear --input '" + kData + "' --output '" + out + "'",
                        "sim");
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -91,7 +88,7 @@ TEST(LossMapCli, EstimateWithTheYokeMeasuredRuns) {
   std::string why;
   if (!DataPresent(why)) GTEST_SKIP() << why;
   const std::string out = TempPath("est.csv");
-  const Result r = RunCli("estimate --model wallscheid2017-4node --columns paderborn --initial first-row "
+  const Result r = RunCli("estimate --model '" + kModel + "' --columns paderborn --initial first-row "
                        "--measure stator_yoke --input '" + kData + "' --output '" + out + "'",
                        "est");
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -108,7 +105,7 @@ TEST(LossMapCli, FirstRowWithoutTheNodeColumnIsExit2NamingIt) {
   std::string why;
   if (!DataPresent(why)) GTEST_SKIP() << why;
   // Without the Paderborn preset the node columns are looked up as <node>_C, which the data lack.
-  const Result r = RunCli("simulate --model wallscheid2017-4node --initial first-row --input '" + kData +
+  const Result r = RunCli("simulate --model '" + kModel + "' --initial first-row --input '" + kData +
                            "' --output '" + TempPath("bad.csv") + "'",
                        "bad");
   EXPECT_EQ(r.exit_code, 2) << r.err;

@@ -11,20 +11,13 @@
 #include <stdexcept>
 #include <string>
 #include <vector>
+#include "tests/common/test_files.hpp"
 
 namespace pe = pumptherm::estimators;
 
 namespace {
 
-std::string ReadModel(const std::string& name) {
-  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
-  const std::string path = std::string(src ? src : ".") + "/estimators/models/" + name + ".toml";
-  std::ifstream f(path);
-  EXPECT_TRUE(f.good()) << path;
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+using pumptherm::test_files::ReadModel;
 
 // Two capacitive nodes a, b joined through a massless star node m, which leads to ambient:
 //   a --R1-- m --R3-- ambient,  b --R2-- m.  Loss pa on a, pb on b.
@@ -172,20 +165,13 @@ TEST(ThermalModel, WallscheidModelWithoutFileReaderNamesTheTable) {
 }
 
 TEST(ThermalModel, WallscheidModelParsesWithSpeedDependentResistances) {
-  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
-  const std::string models = std::string(src ? src : ".") + "/estimators/models";
-  const std::string map = models + "/../../../shared/reference/wallscheid-losses/total_loss_W.csv";
+  const std::string models = pumptherm::test_files::ReferenceModelDir();
+  const std::string map = models + "/../../../../shared/reference/wallscheid-losses/total_loss_W.csv";
   if (!std::ifstream(map).good()) {
     GTEST_SKIP() << "the Wallscheid loss map is not at " << map
                  << " (it stays outside the project; see docs/thermal-model.md)";
   }
-  pe::ThermalModelFiles files{models, [](const std::string& path) {
-                                std::ifstream f(path);
-                                if (!f) throw std::runtime_error("cannot read " + path);
-                                std::stringstream ss;
-                                ss << f.rdbuf();
-                                return ss.str();
-                              }};
+  const pe::ThermalModelFiles files{models, &pumptherm::test_files::ReadFile};
   const auto m = pe::ThermalModel::Parse(ReadModel("wallscheid2017-4node"), "w", files);
   const std::vector<std::string> states{"pm", "stator_yoke", "stator_tooth", "stator_winding"};
   EXPECT_EQ(m.StateNames(), states);

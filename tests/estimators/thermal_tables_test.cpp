@@ -1,5 +1,5 @@
 // Thermal model files with loss maps and curves ([[table]]), named quantities ([[quantity]]) and
-// expressions that read node temperatures (issue 11). Expected values are worked out by hand
+// expressions that read node temperatures. Expected values are worked out by hand
 // from the small tables below.
 #include <gtest/gtest.h>
 

@@ -37,7 +37,7 @@ rc=$?
 grep -q "bad.toml:6: pump\[0\].speed: unknown key" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "error does not name line and key"; }
 "$exe" plant no-such-scenario > "$tmp/out.txt" 2>&1
 [ $? -eq 2 ] || fail "unknown scenario name: expected exit 2"
-grep -q "no bundled scenario 'no-such-scenario.toml'" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "unknown scenario message"; }
+grep -q "'no-such-scenario': no such scenarios file; looked for:" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "unknown scenario message"; }
 "$exe" plant --list | grep -q "^demo " || fail "--list does not list demo"
 
 # Plot: PNG and SVG with an alarm timeline from an events CSV.

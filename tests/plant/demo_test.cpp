@@ -7,20 +7,16 @@
 #include <fstream>
 #include <sstream>
 
+#include "tests/common/test_files.hpp"
 #include "tools/common/csv.hpp"
 #include "tools/plant/plant.hpp"
 
 namespace pumptherm::plant {
 namespace {
 
-namespace fs = std::filesystem;
+using pumptherm::test_files::ReadFile;
 
-std::string ReadFile(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+namespace fs = std::filesystem;
 
 TEST(PlantDemo, Pump3WarnsThenTripsPumps1And2StayBelowWarning) {
   const char* env = std::getenv("PUMPTHERM_SOURCE_DIR");

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Hidden-effect data from `pumptherm plant` (issue 9 item 2): the bundled scenario
+# Hidden-effect data from `pumptherm plant`: the bundled scenario
 # hidden-frame-mass hides 3 kJ/K on the frame of saheba2010-baseline; the discrepancy workflow,
 # not told about it, must name frame_thermal_mass with an interval holding 3000 J/K and shrink the
 # validation gap. The same for guide-pump3 (the operator's guide: a cooling path 1.8 times the

@@ -11,20 +11,16 @@
 #include "protocol/candump_log.hpp"
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
+#include "tests/common/test_files.hpp"
 #include "tools/common/csv.hpp"
 #include "tools/plant/plant.hpp"
 
 namespace pumptherm::plant {
 namespace {
 
-namespace fs = std::filesystem;
+using pumptherm::test_files::ReadFile;
 
-std::string ReadFile(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+namespace fs = std::filesystem;
 
 std::string SourceDir() {
   const char* d = std::getenv("PUMPTHERM_SOURCE_DIR");

@@ -5,6 +5,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "tests/common/test_files.hpp"
 #include "tools/plant/scenario.hpp"
 
 namespace pumptherm::plant {
@@ -152,22 +153,13 @@ TEST(PlantScenario, BundledScenariosParse) {
   for (const char* name : {"demo", "fleet32", "saheba2010-fig4", "saheba2010-fig5", "saheba2010-fig7",
                            "saheba2010-fig8"}) {
     const std::string path = std::string(dir) + "/tools/plant/scenarios/" + name + ".toml";
-    std::ifstream f(path);
-    ASSERT_TRUE(f) << path;
-    std::stringstream ss;
-    ss << f.rdbuf();
-    EXPECT_NO_THROW(ParseScenario(ss.str(), path)) << path;
+    EXPECT_NO_THROW(ParseScenario(test_files::ReadFile(path), path)) << path;
   }
-  std::ifstream f(std::string(dir) + "/tools/plant/scenarios/fleet32.toml");
-  std::stringstream ss;
-  ss << f.rdbuf();
-  const Scenario fleet = ParseScenario(ss.str(), "fleet32");
+  const Scenario fleet = ParseScenario(test_files::ReadFile(std::string(dir) + "/tools/plant/scenarios/fleet32.toml"), "fleet32");
   EXPECT_EQ(fleet.pumps.size(), 32u);
   EXPECT_DOUBLE_EQ(fleet.duration_s, 3600.0);
-  std::ifstream fw(std::string(dir) + "/tools/plant/scenarios/fleet32-week.toml");
-  std::stringstream sw;
-  sw << fw.rdbuf();
-  const Scenario week = ParseScenario(sw.str(), "fleet32-week");
+  const Scenario week =
+      ParseScenario(test_files::ReadFile(std::string(dir) + "/tools/plant/scenarios/fleet32-week.toml"), "fleet32-week");
   ASSERT_EQ(week.pumps.size(), 32u);
   EXPECT_DOUBLE_EQ(week.duration_s, 7 * 86400.0);
   for (const PumpSpec& p : week.pumps) {  // the daily cycle, seven times, after the group's stagger

@@ -1,11 +1,14 @@
 package pumptherm.spy;
 
+import lcm.lcm.LCMDataInputStream;
+import lcm.lcm.LCMDataOutputStream;
 import lcm.spy.ChannelData;
 
 /**
  * The pumptherm view without a display (java.awt.headless): statuses and reasons by name, codes
- * the types do not name as numbers, NaN as "-", a field the type lacks read as absent, and which
- * fingerprints the plugin takes. Exit status 1 and a FAIL line per failed check.
+ * the types do not name as numbers, NaN as "-", a field the type lacks read as absent, the
+ * pump's alarm state in its temperatures view (from the ALARM channel of the same pump only), and
+ * which fingerprints the plugin takes. Exit status 1 and a FAIL line per failed check.
  */
 public final class SpyPluginCheck {
   private static int failures = 0;
@@ -17,14 +20,17 @@ public final class SpyPluginCheck {
     }
   }
 
+  /** Alarm messages the views read, filled by the checks instead of an LCM subscription. */
+  private static final PumpthermSpyPlugin.AlarmFeed alarms = new PumpthermSpyPlugin.AlarmFeed();
+
   private static PumpthermSpyPlugin.View view(String channel, Object message) {
     ChannelData cd = new ChannelData();
     cd.name = channel;
     cd.last = message;
-    return new PumpthermSpyPlugin.View(cd);
+    return new PumpthermSpyPlugin.View(cd, alarms);
   }
 
-  public static void main(String[] args) {
+  public static void main(String[] args) throws java.io.IOException {
     pumptherm.temperatures_t t = new pumptherm.temperatures_t();
     t.pump = "p1";
     t.ident_status = pumptherm.temperatures_t.IDENT_CONVERGED;
@@ -44,6 +50,7 @@ public final class SpyPluginCheck {
                && "0.50".equals(tv.model.getValueAt(0, 2)),
            "row frame 41.2 0.50: " + tv.model.getValueAt(0, 0) + " " + tv.model.getValueAt(0, 1));
     expect("-".equals(tv.model.getValueAt(1, 1)), "NaN node temperature as '-'");
+    expect(h.contains("alarm: <b>no ALARM message yet</b>"), "no alarm_t yet: " + h);
 
     pumptherm.alarm_t a = new pumptherm.alarm_t();
     a.pump = "p2";
@@ -64,6 +71,34 @@ public final class SpyPluginCheck {
     expect(av.model.getRowCount() == 2, "two condition rows");
     expect("measured over temperature".equals(av.model.getValueAt(0, 1)), "reason by name: " + av.model.getValueAt(0, 1));
     expect("code 42".equals(av.model.getValueAt(1, 1)), "unknown reason as its number: " + av.model.getValueAt(1, 1));
+
+    // The pump's alarm state in its temperatures view: the level and every reason by name in the
+    // header, each node's conditions in its row; an alarm of another pump changes nothing.
+    alarms.put("PUMPTHERM/p2/ALARM", a);
+    tv.refresh();
+    expect(tv.header.getText().contains("alarm: <b>no ALARM message yet</b>"),
+           "another pump's alarm shown: " + tv.header.getText());
+    a.pump = "p1";
+    // Through the subscriber's decoding, as an LCM message of PUMPTHERM/p1/ALARM arrives.
+    LCMDataOutputStream out = new LCMDataOutputStream();
+    a.encode(out);
+    alarms.messageReceived(null, "PUMPTHERM/p1/ALARM", new LCMDataInputStream(out.toByteArray()));
+    tv.refresh();
+    h = tv.header.getText();
+    expect(h.contains("alarm: <b>trip (measured over temperature, code 42)</b>"), "alarm level and reasons: " + h);
+    expect("trip: measured over temperature".equals(tv.model.getValueAt(0, 3)),
+           "frame's condition in its row: " + tv.model.getValueAt(0, 3));
+    expect("warning: code 42".equals(tv.model.getValueAt(1, 3)), "rotor's condition in its row: " + tv.model.getValueAt(1, 3));
+    pumptherm.alarm_t normal = new pumptherm.alarm_t();
+    normal.pump = "p1";
+    normal.level = pumptherm.alarm_t.LEVEL_NORMAL;
+    normal.conditions = new pumptherm.alarm_condition_t[0];
+    normal.forecast_node = "";
+    alarms.put("PUMPTHERM/p1/ALARM", normal);
+    tv.refresh();
+    expect(tv.header.getText().contains("alarm: <b>normal</b>"), "normal: " + tv.header.getText());
+    expect("-".equals(tv.model.getValueAt(0, 3)), "no condition on frame: " + tv.model.getValueAt(0, 3));
+    expect(PumpthermSpyPlugin.alarmChannelOf("PUMPTHERM/GATEWAY/HEALTH") == null, "ALARM channel of a non-TEMPS channel");
 
     expect(PumpthermSpyPlugin.get(t, "no_such_field_degC") == null, "a field the type lacks reads as absent");
     PumpthermSpyPlugin plugin = new PumpthermSpyPlugin();

@@ -40,6 +40,7 @@
 
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
+#include "tests/common/run_command.hpp"
 #include "tests/protocol/dbc_files.hpp"
 
 namespace pumptherm::protocol {
@@ -49,19 +50,11 @@ namespace fs = std::filesystem;
 
 fs::path CandiedDir() { return test::SourceDir() / "tests" / "protocol" / "candied"; }
 
-/// Runs a shell command and returns its stdout; `status` gets the exit status.
+/// Runs a shell command and returns its stdout; `status` gets its exit code (-1: did not exit).
 std::string Run(const std::string& command, int& status) {
-  std::string out;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (pipe == nullptr) {
-    status = -1;
-    return out;
-  }
-  char buf[65536];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) out.append(buf, n);
-  status = pclose(pipe);
-  return out;
+  test_files::CommandResult r = test_files::RunCommand(command);
+  status = r.exit_code;
+  return std::move(r.out);
 }
 
 /// Why candied cannot run here, or empty if it can.

@@ -16,6 +16,7 @@
 #include "protocol/candump_log.hpp"
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
+#include "tests/common/run_command.hpp"
 #include "tests/protocol/dbc_files.hpp"
 
 namespace pumptherm::protocol {
@@ -31,15 +32,8 @@ struct RunResult {
 RunResult RunPumptherm(const std::string& args, const std::string& stdin_file = "") {
   std::string command = std::string("'") + PUMPTHERM_BIN + "' " + args + " 2>&1";
   if (!stdin_file.empty()) command += " < '" + stdin_file + "'";
-  RunResult r;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (pipe == nullptr) return r;
-  char buf[4096];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) r.out.append(buf, n);
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  test_files::CommandResult c = test_files::RunCommand(command);
+  return {c.exit_code, std::move(c.out)};
 }
 
 fs::path TempFile(const std::string& name) {

@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "tests/common/test_files.hpp"
+
 namespace pumptherm::protocol::test {
 
 /// The repository root (CTest sets PUMPTHERM_SOURCE_DIR; tests also run from the root).
@@ -40,12 +42,6 @@ inline std::vector<std::filesystem::path> RealDbcFiles() {
 /// The project's own frame set.
 inline std::filesystem::path PumpthermDbc() { return SourceDir() / "protocol" / "pumptherm.dbc"; }
 
-inline std::string ReadFile(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error("cannot open " + path.string());
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using pumptherm::test_files::ReadFile;
 
 }  // namespace pumptherm::protocol::test

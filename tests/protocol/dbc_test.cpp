@@ -1,4 +1,4 @@
-// DBC reader: every construct of issue 3 item 1 on a hand-written file, errors with line and
+// DBC reader: every construct the reader supports on a hand-written file, errors with line and
 // column, and every real DBC under ../shared/data/dbc/ loading.
 #include "protocol/dbc.hpp"
 #include "protocol/codec.hpp"

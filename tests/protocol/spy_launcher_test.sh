@@ -45,6 +45,11 @@ tail -n 3 "$work/args" > "$work/tail"
 printf '%s\n' lcm.spy.Spy '--lcm-url=udpm://239.255.76.67:7667?ttl=0' 'two words' | cmp -s - "$work/tail" ||
   fail "arguments not passed through: $(cat "$work/tail")"
 grep -q -x -- -Xincgc "$work/args" && fail "-Xincgc passed to java"
+# The plugin's own subscription gets lcm-spy's URL, in each of lcm-spy's spellings.
+grep -q -x -- '-Dpumptherm.spy.lcm_url=udpm://239.255.76.67:7667?ttl=0' "$work/args" ||
+  fail "URL not handed to the plugin: $(cat "$work/args")"
+"$build_dir/tools/pumptherm-spy" -l 'udpm://239.255.76.67:7668?ttl=0'
+grep -q -x -- '-Dpumptherm.spy.lcm_url=udpm://239.255.76.67:7668?ttl=0' "$work/args" || fail "-l URL not handed to the plugin"
 
 # 2. Installed layout: <prefix>/bin/pumptherm-spy and <prefix>/share/pumptherm/java/<jar>.
 mkdir -p "$work/prefix/bin" "$work/prefix/share/pumptherm/java"

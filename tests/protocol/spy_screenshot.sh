@@ -229,7 +229,7 @@ open_plugin() {
   xdo windowmove "$view" 1300 700
 }
 if [ "$mode" = check ]; then
-  open_plugin PUMPTHERM/tmp1/TEMPS 'pump tmp1, [0-9]+ nodes, filter (not started|converging|tracking|rejecting|fault)'
+  open_plugin PUMPTHERM/tmp1/TEMPS 'pump tmp1, [0-9]+ nodes, filter (not started|converging|tracking|rejecting|fault), alarm (normal|warning|trip)( \(.*\))?'
   open_plugin PUMPTHERM/tmp2/ALARM 'pump tmp2, alarm warning, conditions: rate of rise'
   sleep 1
 fi

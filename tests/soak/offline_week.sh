@@ -1,5 +1,5 @@
 #!/bin/sh
-# Soak of the offline pipeline (issue 8): the plant's `fleet32-week` scenario (32 pumps on can0
+# Soak of the offline pipeline: the plant's `fleet32-week` scenario (32 pumps on can0
 # and can1, 7 days, five pumps with cooling trouble at known times) streamed through
 # `pumpthermd -r`, nothing stored but the truth: plant -> FIFO -> daemon -> FIFO -> awk. Checks
 # and prints, then says PASS or FAIL (exit 0 or 1; 2 for a usage or setup error):
@@ -20,9 +20,8 @@
 #   HOURS: simulated hours (default 168, the week; the CTest short form `soak.offline_short`
 #   uses 2). SCENARIO: a plant scenario with fleet32's pump names (default fleet32-week).
 #   SOAK_WORK_DIR=DIR keeps the run's files there (default: a temporary directory, removed).
-# Needs /usr/bin/time (package time) and awk. Cost: about 30 s of CPU per simulated hour on this
-# machine (plant 11, daemon 15, awk 4; measured over 24 h), plant and daemon in parallel, so the
-# week is about 84 min of CPU: docs/robustness.md, "Soak".
+# Needs /usr/bin/time (package time) and awk. Plant and daemon run in parallel; what a simulated
+# hour costs is in docs/robustness.md, "Soak".
 set -eu
 build=${1:?usage: $0 BUILD_DIR [HOURS] [SCENARIO]}
 hours=${2:-168}

@@ -16,6 +16,7 @@
 # system.base_image that every system test requires, so that its few minutes do not count against
 # a test's TIMEOUT. See docs/testing-system.md.
 include_guard(GLOBAL)
+include(${CMAKE_CURRENT_LIST_DIR}/../guest/PumpthermGuest.cmake)
 
 # A cache variable, so that pumptherm_system_test() works from any directory (include_guard).
 set(PUMPTHERM_SYSTEM_HARNESS "${CMAKE_CURRENT_LIST_DIR}/run_system_test.sh" CACHE INTERNAL "system test harness")
@@ -36,34 +37,11 @@ function(pumptherm_system_test)
   if(ARG_UNPARSED_ARGUMENTS)
     message(FATAL_ERROR "pumptherm_system_test: unknown arguments '${ARG_UNPARSED_ARGUMENTS}'")
   endif()
-  if(NOT ARG_NAME OR NOT ARG_SCENARIO)
-    message(FATAL_ERROR "pumptherm_system_test: NAME and SCENARIO are required")
-  endif()
-  if(NOT ARG_TIMEOUT)
-    set(ARG_TIMEOUT 600)
-  endif()
-  if(NOT ARG_TIMEOUT MATCHES "^[1-9][0-9]*$")
-    message(FATAL_ERROR "pumptherm_system_test(${ARG_NAME}): TIMEOUT '${ARG_TIMEOUT}' is not whole seconds")
-  endif()
-
-  get_filename_component(scenario "${ARG_SCENARIO}" ABSOLUTE BASE_DIR "${CMAKE_CURRENT_SOURCE_DIR}")
-  if(NOT EXISTS "${scenario}")
-    message(FATAL_ERROR "pumptherm_system_test(${ARG_NAME}): SCENARIO '${scenario}' does not exist")
-  endif()
-
-  set(args --name "${ARG_NAME}" --timeout "${ARG_TIMEOUT}"
-           --out-dir "${PROJECT_BINARY_DIR}/tests/system-out/${ARG_NAME}")
+  pumptherm_guest_test_args(pumptherm_system_test 600 args scenario timeout ${ARGN})
+  list(APPEND args --out-dir "${PROJECT_BINARY_DIR}/tests/system-out/${ARG_NAME}")
   if(ARG_NO_VCAN)
     list(APPEND args --no-vcan)
   endif()
-  foreach(bin IN LISTS ARG_BINARIES)
-    if(TARGET "${bin}")
-      list(APPEND args --bin "$<TARGET_FILE:${bin}>")
-    else()
-      get_filename_component(path "${bin}" ABSOLUTE BASE_DIR "${CMAKE_CURRENT_SOURCE_DIR}")
-      list(APPEND args --bin "${path}")
-    endif()
-  endforeach()
   foreach(unit IN LISTS ARG_UNITS)
     get_filename_component(path "${unit}" ABSOLUTE BASE_DIR "${CMAKE_CURRENT_SOURCE_DIR}")
     if(NOT EXISTS "${path}")
@@ -71,15 +49,11 @@ function(pumptherm_system_test)
     endif()
     list(APPEND args --unit "${path}")
   endforeach()
-  foreach(file IN LISTS ARG_FILES)
-    get_filename_component(path "${file}" ABSOLUTE BASE_DIR "${CMAKE_CURRENT_SOURCE_DIR}")
-    list(APPEND args --file "${path}")
-  endforeach()
 
   add_test(NAME system.${ARG_NAME}
            COMMAND "${PUMPTHERM_SYSTEM_HARNESS}" ${args} "${scenario}"
            WORKING_DIRECTORY "${PROJECT_BINARY_DIR}")
-  math(EXPR ctest_timeout "${ARG_TIMEOUT} + 60")
+  math(EXPR ctest_timeout "${timeout} + 60")
   set_tests_properties(system.${ARG_NAME} PROPERTIES
     LABELS system
     SKIP_RETURN_CODE 77

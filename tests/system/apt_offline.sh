@@ -1,5 +1,5 @@
 #!/bin/sh
-# Harness check (for issue 10, item 4: the system test installs the project's .deb with apt): the
+# Harness check (the system test installs the project's .deb with apt): the
 # guest has no network, yet `apt-get install ./x.deb` works for a package whose dependencies are
 # the run-time libraries of our binaries, because the base image has them installed; a package
 # that needs anything else fails with apt's message rather than hanging on a download.

@@ -1,5 +1,5 @@
 #!/bin/sh
-# System test (issue 6, Tests/System), one guest boot for four checks on the installed unit
+# System test, one guest boot for four checks on the installed unit
 # (systemd/pumpthermd.service, /usr/sbin/pumpthermd, three pumps of the plant's demo recording
 # replayed on vcan0 with canplayer):
 #   1. kill -9: systemd restarts the daemon (Restart=on-failure) and it restores its saved

@@ -1,5 +1,5 @@
 #!/bin/sh
-# System test (issue 8, item 5): fault injection in the guest, one boot. The installed, hardened
+# System test: fault injection in the guest, one boot. The installed, hardened
 # unit (systemd/pumpthermd.service, /usr/sbin/pumpthermd) runs three pumps of the plant's demo
 # recording, replayed on vcan0 by a feeder (canplayer) for 80 s while faults are injected; after
 # each fault the test checks what the daemon did:

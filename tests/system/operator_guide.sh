@@ -1,5 +1,5 @@
 #!/bin/sh
-# System test (issue 10, item 3): docs/operator-guide.md, run as written. Every ```sh block of
+# System test: docs/operator-guide.md, run as written. Every ```sh block of
 # the guide is extracted (in order; ```sh norun blocks are counted and skipped) and run as root
 # with `sh -e` in one working directory that holds the built .deb, in a fresh Debian 12 guest
 # whose CAN interface is a vcan named can0 (as the guide's bench note says). A block that fails

@@ -1,5 +1,5 @@
 #!/bin/sh
-# System test (issue 10, item 4): the project's .deb installed with apt in a fresh Debian 12
+# System test: the project's .deb installed with apt in a fresh Debian 12
 # guest (no network), then the service from the package, as docs/operator-guide.md tells an
 # operator: nothing runs until /etc/pumptherm/pumpthermd.toml exists; with the demo
 # configuration on vcan0 it starts, a recording made by the packaged `pumptherm plant` is

@@ -25,6 +25,9 @@ set -euo pipefail
 
 readonly kHarnessVersion=1
 readonly kMarker="@@PUMPTHERM-SYSTEM"
+# The host side of the guest protocol (markers, streaming, verdict), shared with the other harness.
+# shellcheck source-path=SCRIPTDIR source=../guest/guest_run.sh
+source "$(dirname "${BASH_SOURCE[0]}")/../guest/guest_run.sh"
 readonly kSuite=bookworm
 # The guest's packages. The libraries are those of pumpthermd, pumptherm and the LCM tools (found
 # with ldd + dpkg -S on the host), so that the binaries under test, and later the project's .deb,
@@ -154,15 +157,12 @@ for f in "${files[@]}"; do
   if [[ ! -r "$f" ]]; then err "--file '$f' is not readable"; exit 2; fi
 done
 
-abspath() { (cd "$(dirname "$1")" && printf '%s/%s\n' "$(pwd -P)" "$(basename "$1")"); }
 [[ -z "$scenario" ]] || scenario=$(abspath "$scenario")
 for i in "${!bins[@]}"; do bins[i]=$(abspath "${bins[i]}"); done
 for i in "${!units[@]}"; do units[i]=$(abspath "${units[i]}"); done
 for i in "${!files[@]}"; do files[i]=$(abspath "${files[i]}"); done
 [[ -z "$out_dir" ]] || { mkdir -p "$out_dir" && out_dir=$(cd "$out_dir" && pwd -P); }
 
-now_s() { date +%s.%N; }
-elapsed_s() { awk -v a="$1" -v b="$(now_s)" 'BEGIN { printf "%.1f", b - a }'; }
 
 # ---------------------------------------------------------------------------------------------
 # What goes into the guest
@@ -350,19 +350,6 @@ configure_root() {
 # Base image
 # ---------------------------------------------------------------------------------------------
 
-# Sets kernel_root and kernel_version (the newest vmlinuz-<ver> with its modules), or cannot_run.
-find_kernel() {
-  kernel_root=${PUMPTHERM_CACHE:-/var/cache/pumptherm}/kernel
-  local v
-  kernel_version=$(for v in "$kernel_root"/boot/vmlinuz-*; do
-    v=${v##*/vmlinuz-}
-    if [[ -r "$kernel_root/boot/vmlinuz-$v" && -d "$kernel_root/lib/modules/$v/kernel" ]]; then
-      echo "$v"
-    fi
-  done | sort -V | tail -n 1)
-  [[ -n "$kernel_version" ]] ||
-    cannot_run "no guest kernel with its modules under $kernel_root (run tools/setup.sh)"
-}
 
 # Chooses cache_dir when none was given: the shared cache when it is usable.
 choose_cache_dir() {
@@ -640,17 +627,6 @@ build_test_disk() {
   rm -rf "$stage"
 }
 
-print_console() {
-  local console=$1
-  if [[ -s "$console" ]]; then
-    echo "---- guest console (last 60 lines of $console) ----" >&2
-    tail -n 60 "$console" | tr -d '\r' | sed 's/\x1b\[[0-9;]*[A-Za-z]//g' >&2
-    echo "---- end of guest console ----" >&2
-  else
-    echo "(the guest console is empty: $console)" >&2
-  fi
-}
-
 run_guest() {
   run_dir=$(mktemp -d "${TMPDIR:-/tmp}/pumptherm-system-${name//[^A-Za-z0-9_.-]/_}.XXXXXX")
   local start
@@ -679,107 +655,10 @@ run_guest() {
   # shellcheck disable=SC2064
   trap "kill $qemu_pid 2>/dev/null || true" EXIT INT TERM
 
-  local printed=0 console_printed=0 state=pre exit_code="" setup_failure="" timed_out=0
-  local out_b64=$run_dir/out.b64 begin_s=""
-  # The scenario's own "NAME: FAIL: why" lines, repeated at the very end of a failed run so that
-  # a log cut to its tail (CI summaries) still says why.
-  local -a fail_lines=()
-  local deadline
-  deadline=$(awk -v s="$start" -v t="$timeout_s" 'BEGIN { printf "%d", s + t }')
-  stream() {
-    local total line
-    total=$(wc -l <"$result")
-    if ((total > printed)); then
-      while IFS= read -r line; do
-        line=${line%$'\r'}
-        case "$state:$line" in
-          *"$kMarker-BEGIN "*)
-            begin_s=$(elapsed_s "$start")
-            local what=${line#*BEGIN }
-            say "guest ready after ${begin_s} s: ${what%@@}"
-            state=run ;;
-          *"$kMarker-SETUP-FAILED "*)
-            setup_failure=${line#*FAILED }
-            setup_failure=${setup_failure%@@} ;;
-          *"$kMarker-OUT-BEGIN@@"*) state=out; : >"$out_b64" ;;
-          *"$kMarker-OUT-END@@"*) state=run ;;
-          *"$kMarker-EXIT "*)
-            exit_code=${line#*EXIT }
-            exit_code=${exit_code%@@} ;;
-          out:*) printf '%s\n' "$line" >>"$out_b64" ;;
-          run:*)
-            printf '%s\n' "$line"
-            [[ "$line" != *": FAIL: "* ]] || fail_lines+=("$line") ;;
-          *) printf 'guest: %s\n' "$line" ;;
-        esac
-      done < <(sed -n "$((printed + 1)),${total}p" "$result")
-      printed=$total
-    fi
-    if ((verbose)); then
-      total=$(wc -l <"$console")
-      if ((total > console_printed)); then
-        sed -n "$((console_printed + 1)),${total}p" "$console" | tr -d '\r' | sed 's/^/console| /'
-        console_printed=$total
-      fi
-    fi
-  }
-  while :; do
-    stream
-    [[ -n "$exit_code" || -n "$setup_failure" ]] && break
-    if ! kill -0 "$qemu_pid" 2>/dev/null; then
-      stream
-      break
-    fi
-    if (($(date +%s) >= deadline)); then
-      timed_out=1
-      break
-    fi
-    sleep 0.5
-  done
-  local run_took
-  run_took=$(elapsed_s "$start")
-  # The guest powers off (forced) right after the marker; the overlay is thrown away, so there is
-  # nothing to wait for beyond a moment.
-  local i
-  for ((i = 0; i < 50 && !timed_out; i++)); do kill -0 "$qemu_pid" 2>/dev/null || break; sleep 0.1; done
-  kill "$qemu_pid" 2>/dev/null || true
-  wait "$qemu_pid" 2>/dev/null || true
+  guest_on_begin() { say "guest ready after ${guest_begin_s} s: $1"; }
+  guest_watch "$qemu_pid" "$start" "$console" "$result"
   trap - EXIT INT TERM
-
-  local rc
-  if [[ -n "$exit_code" ]]; then
-    rc=$exit_code
-    if [[ -n "$out_dir" && -s "$out_b64" ]]; then
-      base64 -d "$out_b64" | tar -xzf - -C "$out_dir" ||
-        { err "${name}: could not unpack the guest's OUT_DIR into $out_dir"; rc=1; }
-    fi
-    say "guest run took ${run_took} s (staging + boot ${begin_s:-?} s, then the scenario), power-off $(elapsed_s "$start") s; scenario exit code ${rc}"
-  elif [[ -n "$setup_failure" ]]; then
-    err "${name}: guest setup failed: ${setup_failure}"
-    rc=1
-  elif ((timed_out)); then
-    if [[ -z "$begin_s" ]]; then
-      err "${name}: the guest did not finish booting within ${timeout_s} s; killed QEMU"
-    else
-      err "${name}: the scenario did not finish within ${timeout_s} s of the run; killed QEMU"
-    fi
-    rc=1
-  else
-    err "${name}: the guest stopped without reporting a result (boot failure or crash) after ${run_took} s"
-    [[ -s "$run_dir/qemu.log" ]] && { echo "QEMU said:" >&2; cat "$run_dir/qemu.log" >&2; }
-    rc=1
-  fi
-  if ((rc != 0 && rc != 77 && !verbose)); then print_console "$console"; fi
-  if ((keep || (rc != 0 && rc != 77))); then
-    say "run directory kept: $run_dir"
-  else
-    rm -rf "$run_dir"
-  fi
-  if ((rc != 0 && rc != 77)); then
-    local l
-    for l in "${fail_lines[@]}"; do say "${name} failed: ${l}"; done
-  fi
-  exit "$rc"
+  guest_verdict "$console"
 }
 
 # ---------------------------------------------------------------------------------------------

@@ -1,10 +1,10 @@
 #!/bin/sh
-# System test (issue 6, Tests/System): the pumpthermd unit from systemd/pumpthermd.service,
+# System test: the pumpthermd unit from systemd/pumpthermd.service,
 # installed in a Debian 12 guest with /usr/sbin/pumpthermd. Nothing starts without a
 # configuration; with one, `systemctl start` returns once the daemon has sent READY=1; it runs
 # as a dynamic user, counts frames sent with cansend in its STATUS line, sends its heartbeat
 # through the sandbox, keeps the watchdog fed, logs to the journal and stops cleanly.
-# `systemd-analyze security` is printed and its exposure must be at most 1.5 (issue 8). The
+# `systemd-analyze security` is printed and its exposure must be at most 1.5. The
 # clear key reaches the sandboxed daemon (LoadCredential=) and a world-readable one is refused.
 # Runs as root in the guest (tests/system/run_system_test.sh); vcan0 is up.
 set -eu
@@ -119,13 +119,13 @@ state="$(show ActiveState)/$(show SubState)"
 [ "$(show MainPID)" = "$pid" ] || fail "MainPID changed from $pid to $(show MainPID)"
 echo "$T: still running after WatchdogSec=${wd_s}s, no restart"
 
-# 7. systemd-analyze security: printed, exposure reported and at most 1.5 (issue 8).
+# 7. systemd-analyze security: printed, exposure reported and at most 1.5.
 systemd-analyze security --no-pager "$unit" >"$WORK_DIR/security.txt" 2>&1 || true
 sed 's/^/  /' "$WORK_DIR/security.txt"
 exposure=$(sed -n 's/.*Overall exposure level for [^:]*: *\([0-9.]*\).*/\1/p' "$WORK_DIR/security.txt")
 [ -n "$exposure" ] || fail "no exposure level in the output of systemd-analyze security"
 echo "$T: systemd-analyze security exposure: $exposure"
-# Issue 8: at most 1.5 (every remaining item is explained in docs/robustness.md).
+# At most 1.5 (every remaining item is explained in docs/robustness.md).
 awk -v e="$exposure" 'BEGIN { exit !(e <= 1.5) }' || fail "exposure $exposure above 1.5"
 cp "$WORK_DIR/security.txt" "$OUT_DIR/security.txt"
 

@@ -1,5 +1,5 @@
 #!/bin/sh
-# System test (issue 6, item 7): the example vcan setup for test benches, systemd/vcan0.netdev
+# System test: the example vcan setup for test benches, systemd/vcan0.netdev
 # and vcan0.network, makes vcan0 with systemd-networkd and brings it up; a frame sent on it is
 # received. Runs as root in the guest (tests/system/run_system_test.sh), started without vcan0.
 set -eu

@@ -8,20 +8,8 @@ daemon=$2
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 fail=0
-expect() {  # expect CODE PATTERN -- command...
-  local code=$1 pattern=$2
-  shift 3
-  local out rc
-  out=$("$@" 2>&1)
-  rc=$?
-  if [[ $rc -ne $code ]] || ! grep -qE -- "$pattern" <<<"$out"; then
-    echo "FAIL: $* -> exit $rc (want $code), output:"; echo "$out" | sed 's/^/    /'
-    echo "    wanted a line matching: $pattern"
-    fail=1
-  else
-    echo "ok: $* -> exit $rc: $(head -n1 <<<"$out")"
-  fi
-}
+# shellcheck source=../common/expect.sh
+source "$(dirname "${BASH_SOURCE[0]}")/../common/expect.sh"
 
 expect 0 '^pumptherm [0-9]+\.[0-9]+\.[0-9]+$' -- "$tool" --version
 expect 0 '^pumpthermd [0-9]+\.[0-9]+\.[0-9]+$' -- "$daemon" --version

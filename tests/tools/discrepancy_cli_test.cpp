@@ -11,23 +11,20 @@
 #include <sstream>
 
 #include "estimators/thermal_model.hpp"
+#include "tests/common/run_command.hpp"
+#include "tests/common/test_files.hpp"
 #include "tests/tools/discrepancy_cases.hpp"
 
 namespace pd = pumptherm::tools::discrepancy;
 
 namespace {
 
+using pumptherm::test_files::ReadFile;
+
 std::string Dir() {
   const auto d = std::filesystem::temp_directory_path() / "pumptherm_discrepancy_cli_test";
   std::filesystem::create_directories(d);
   return d.string();
-}
-
-std::string Slurp(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
 }
 
 struct CliRun {
@@ -36,10 +33,9 @@ struct CliRun {
 };
 
 CliRun Discrepancy(const std::string& args) {
-  const std::string err = Dir() + "/err.txt";
-  const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' discrepancy " + args + " 2> '" + err + "'";
-  const int status = std::system(cmd.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, Slurp(err)};
+  auto r = pumptherm::test_files::RunCommandStderr(std::string("'") + PUMPTHERM_CLI + "' discrepancy " + args,
+                                                   Dir() + "/err.txt");
+  return {r.exit_code, std::move(r.out)};
 }
 
 }  // namespace
@@ -53,15 +49,15 @@ TEST(DiscrepancyCli, WritesReportModelAndHtml) {
                             Dir() + "/validate.csv --out " + Dir() + "/out --max-effects 1 " +
                             "--effects iron_loss_scale,rotor_loss,frame_thermal_mass");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  const std::string json = Slurp(Dir() + "/out/report.json");
+  const std::string json = ReadFile(Dir() + "/out/report.json");
   for (const char* key : {"\"verdict\": \"named\"", "\"effect\": \"iron_loss_scale\"", "\"effects\"",
                           "\"candidates\"", "\"gap\"", "\"rmse_K\"", "\"max_abs_K\"", "\"ci95\"",
                           "\"reading\"", "\"validate\"", "\"train\""})
     EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
-  const std::string model = Slurp(Dir() + "/out/model.toml");
+  const std::string model = ReadFile(Dir() + "/out/model.toml");
   EXPECT_NO_THROW(pumptherm::estimators::ThermalModel::Parse(model, "model.toml")) << model;
   EXPECT_NE(model.find("iron_loss_scale = "), std::string::npos);
-  EXPECT_NE(Slurp(Dir() + "/out/report.html").find("<svg"), std::string::npos);
+  EXPECT_NE(ReadFile(Dir() + "/out/report.html").find("<svg"), std::string::npos);
 }
 
 TEST(DiscrepancyCli, BadCellIsExit2NamingRowAndColumn) {
@@ -132,15 +128,15 @@ TEST(DiscrepancyCli, ReportRendersInChromium) {
                                "/validate.csv --out " + dir + "/out --max-effects 2 " +
                                "--effects iron_loss_scale,rotor_loss,frame_thermal_mass --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  std::string html = Slurp(dir + "/out/report.html");
+  std::string html = ReadFile(dir + "/out/report.html");
   html.insert(html.rfind("</body>"), kFactsScript);
   std::ofstream(dir + "/out/check.html") << html;
   const std::string cmd = "timeout 120 chromium --headless --no-sandbox --disable-gpu --disable-background-networking "
                           "--no-first-run --disable-component-update --disable-sync --user-data-dir='" + dir +
                           "/profile' --window-size=1200,900 --dump-dom 'file://" + dir + "/out/check.html' > '" +
                           dir + "/dom.html' 2> '" + dir + "/chromium.log'";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << Slurp(dir + "/chromium.log");
-  const std::string dom = Slurp(dir + "/dom.html");
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << ReadFile(dir + "/chromium.log");
+  const std::string dom = ReadFile(dir + "/dom.html");
   const std::size_t b = dom.find("FACTS\n"), e = dom.find("\nEND_FACTS");
   ASSERT_TRUE(b != std::string::npos && e != std::string::npos) << "the page's script did not run:\n" << dom.substr(0, 2000);
   const std::string facts = dom.substr(b, e - b + 1);

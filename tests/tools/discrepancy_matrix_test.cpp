@@ -1,4 +1,4 @@
-// The discrepancy workflow's acceptance matrix (issue 7; label `slow`): every effect of the
+// The discrepancy workflow's acceptance matrix (label `slow`): every effect of the
 // vocabulary hidden at two magnitudes, null cases, and the paper's case. Required: every effect
 // named correctly (first) in its cases, no name in the null cases, the median validation RMSE
 // cut by at least half over the effect cases, and in the paper's case (model
@@ -19,7 +19,7 @@
 namespace pd = pumptherm::tools::discrepancy;
 namespace pe = pumptherm::estimators;
 using pumptherm::tests::HiddenCase;
-using pumptherm::tests::ReadShippedModel;
+using pumptherm::test_files::ReadModel;
 
 namespace {
 
@@ -69,7 +69,7 @@ TEST(DiscrepancyMatrix, EveryEffectNullAndPapersCase) {
     if (only != nullptr && c.expected.find(only) == std::string::npos) continue;
     auto [train, validate] = HiddenCase(c.truth, c.hidden, 6.0, 10.0, c.seed);
     const auto t0 = std::chrono::steady_clock::now();
-    const pd::Result r = pd::Run(ReadShippedModel(base), base, train, validate, pd::Options{});
+    const pd::Result r = pd::Run(ReadModel(base), base, train, validate, pd::Options{});
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::string named;
     for (const auto& e : r.effects)

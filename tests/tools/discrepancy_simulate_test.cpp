@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "estimators/thermal_model.hpp"
+#include "tests/common/test_files.hpp"
 #include "tests/tools/discrepancy_cases.hpp"
 #include "tools/discrepancy/workflow.hpp"
 
@@ -24,34 +25,20 @@ namespace pe = pumptherm::estimators;
 
 namespace {
 
+using pumptherm::test_files::ReadFile;
+using pumptherm::test_files::SharedDir;
+
 std::string Dir() {
   const auto d = std::filesystem::temp_directory_path() / "pumptherm_discrepancy_simulate_test";
   std::filesystem::create_directories(d);
   return d.string();
 }
 
-std::string Slurp(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
 
-std::string SourceDir() {
-  const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
-  return src ? src : ".";
-}
-
-/// ../shared beside the checkout, or PUMPTHERM_SHARED_DIR.
-std::string SharedDir() {
-  const char* dir = std::getenv("PUMPTHERM_SHARED_DIR");
-  return dir ? dir : SourceDir() + "/../shared";
-}
-
-/// The shipped model written to a file of its own with the tables it names by absolute path.
+/// The model written to a file of its own with the tables it names by absolute path.
 std::string ModelFile(const std::string& name) {
-  std::string text = pumptherm::tests::ReadShippedModel(name);
-  const std::string rel = "../../../shared";
+  std::string text = pumptherm::test_files::ReadModel(name);
+  const std::string rel = "../../../../shared";
   const std::string shared = SharedDir();
   for (std::size_t p = text.find(rel); p != std::string::npos; p = text.find(rel, p + shared.size()))
     text.replace(p, rel.size(), shared);
@@ -63,7 +50,7 @@ std::string ModelFile(const std::string& name) {
 /// How the tables a model file names are read (relative to the file).
 pe::ThermalModelFiles FilesOf(const std::string& model_path) {
   return {std::filesystem::path(model_path).parent_path().string(),
-          [](const std::string& p) { return Slurp(p); }};
+          [](const std::string& p) { return ReadFile(p); }};
 }
 
 /// Paderborn profile 46 with its columns renamed to the workflow's.
@@ -117,7 +104,7 @@ std::map<std::string, std::vector<double>> Simulate(const std::string& model, co
 /// RMSE of the workflow's simulation against `simulate` at the grid points after the start.
 double Compare(const std::string& model_path, const std::string& csv, const std::string& initial,
                const pd::Options& o = {}) {
-  const pe::ThermalModel model = pe::ThermalModel::Parse(Slurp(model_path), model_path, FilesOf(model_path));
+  const pe::ThermalModel model = pe::ThermalModel::Parse(ReadFile(model_path), model_path, FilesOf(model_path));
   const pd::Data data = pd::ReadData(csv, model);
   const pd::Simulated w = pd::SimulateModel(model, data, o);
   const auto s = Simulate(model_path, csv, initial);
@@ -143,9 +130,9 @@ double Compare(const std::string& model_path, const std::string& csv, const std:
 
 /// Two hours at 10 s generated from the model itself; measured: every state of the model.
 std::string GeneratedCsv(const std::string& name) {
-  const pe::ThermalModel model = pe::ThermalModel::Parse(pumptherm::tests::ReadShippedModel(name), name);
+  const pe::ThermalModel model = pe::ThermalModel::Parse(pumptherm::test_files::ReadModel(name), name);
   pd::HiddenDataConfig c;
-  c.model_text = pumptherm::tests::ReadShippedModel(name);
+  c.model_text = pumptherm::test_files::ReadModel(name);
   c.model_source = name;
   c.duration_s = 2.0 * 3600.0;
   c.step_s = 10.0;
@@ -187,9 +174,9 @@ TEST(DiscrepancySimulate, AveragedInputsReportTheirCost) {
   o.max_effects = 1;
   const double vs_simulate_K = Compare(ModelFile("wallscheid2017-4node"), csv, "first-row", o);
   const std::string path = ModelFile("wallscheid2017-4node");
-  const pe::ThermalModel model = pe::ThermalModel::Parse(Slurp(path), path, FilesOf(path));
+  const pe::ThermalModel model = pe::ThermalModel::Parse(ReadFile(path), path, FilesOf(path));
   const pd::Data data = pd::ReadData(csv, model);
-  const pd::Result r = pd::Run(Slurp(path), path, data, data, o, FilesOf(path));
+  const pd::Result r = pd::Run(ReadFile(path), path, data, data, o, FilesOf(path));
   EXPECT_EQ(r.simulation, "averaged");
   EXPECT_GT(vs_simulate_K, 0.01);  // the loss map is nonlinear in the current: not exact
   EXPECT_NEAR(r.averaging_cost_train_K, vs_simulate_K, 1e-9);
@@ -237,13 +224,13 @@ TEST(DiscrepancyRealData, StrippedSpeedDependenceIsTheBestCandidateBothWays) {
     GTEST_SKIP() << "Paderborn data or the Wallscheid loss map absent";
   const std::string a = Rows(csv, 0, 109, "a.csv"), b = Rows(csv, 109, 1000, "b.csv");
   const std::string path = StrippedModelFile();
-  const pe::ThermalModel model = pe::ThermalModel::Parse(Slurp(path), path, FilesOf(path));
+  const pe::ThermalModel model = pe::ThermalModel::Parse(ReadFile(path), path, FilesOf(path));
   const pd::Data da = pd::ReadData(a, model), db = pd::ReadData(b, model);
   pd::Options o;
   o.max_effects = 1;
   std::vector<double> gains;
   for (const auto& [train, validate] : {std::pair{&da, &db}, std::pair{&db, &da}}) {
-    const pd::Result r = pd::Run(Slurp(path), path, *train, *validate, o, FilesOf(path));
+    const pd::Result r = pd::Run(ReadFile(path), path, *train, *validate, o, FilesOf(path));
     ASSERT_FALSE(r.rounds.empty());
     const pd::Candidate& best = r.rounds.front().candidates.front();
     std::printf("fit on %s: %s, best %s validate %.3f -> %.3f K, dIC %.1f, g %.3f (%.3f to %.3f)\n",

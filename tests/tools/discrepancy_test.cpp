@@ -1,4 +1,4 @@
-// The discrepancy workflow (issue 7) on data in which an effect is hidden: the paper's case, the
+// The discrepancy workflow on data in which an effect is hidden: the paper's case, the
 // null case and one effect; hidden-effect data are reproducible; the report has the issue's fields.
 #include <gtest/gtest.h>
 
@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "tests/common/test_files.hpp"
 #include "tests/tools/discrepancy_cases.hpp"
 #include "tools/discrepancy/report.hpp"
 #include "tools/discrepancy/workflow.hpp"
@@ -14,16 +15,11 @@
 namespace pd = pumptherm::tools::discrepancy;
 namespace pe = pumptherm::estimators;
 using pumptherm::tests::HiddenCase;
-using pumptherm::tests::ReadShippedModel;
+using pumptherm::test_files::ReadModel;
 
 namespace {
 
-std::string Slurp(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+using pumptherm::test_files::ReadFile;
 
 std::string Summary(const pd::Result& r) {
   std::string s = "verdict " + r.verdict + "; effects:";
@@ -54,8 +50,8 @@ TEST(HiddenEffectData, SameSeedSameBytesOtherSeedOtherProfile) {
   pd::WriteData((dir / "a.csv").string(), a, false);
   pd::WriteData((dir / "b.csv").string(), b, false);
   pd::WriteData((dir / "va.csv").string(), va, false);
-  EXPECT_EQ(Slurp((dir / "a.csv").string()), Slurp((dir / "b.csv").string()));
-  EXPECT_NE(Slurp((dir / "a.csv").string()), Slurp((dir / "va.csv").string()));
+  EXPECT_EQ(ReadFile((dir / "a.csv").string()), ReadFile((dir / "b.csv").string()));
+  EXPECT_NE(ReadFile((dir / "a.csv").string()), ReadFile((dir / "va.csv").string()));
   // Speed and current both vary, and the measured series are quantised to 0.1 K.
   double smin = 1e9, smax = -1e9, imin = 1e9, imax = -1e9;
   for (std::size_t k = 0; k < a.size(); ++k) {
@@ -78,7 +74,7 @@ TEST(Discrepancy, PapersCaseNamesFrameThermalMassFirst) {
   auto [train, validate] = HiddenCase("saheba2010-improved", {}, 6.0, 30.0);
   pd::Options o;
   o.max_effects = 1;  // the first effect only here; the slow matrix test runs every round
-  const pd::Result r = pd::Run(ReadShippedModel("saheba2010-baseline"), "saheba2010-baseline", train,
+  const pd::Result r = pd::Run(ReadModel("saheba2010-baseline"), "saheba2010-baseline", train,
                                validate, o);
   const std::string s = Summary(r);
   ASSERT_FALSE(r.effects.empty()) << s;
@@ -91,7 +87,7 @@ TEST(Discrepancy, PapersCaseNamesFrameThermalMassFirst) {
 
 TEST(Discrepancy, NullCaseNamesNothing) {
   auto [train, validate] = HiddenCase("saheba2010-baseline", {}, 6.0, 30.0, 3);
-  const pd::Result r = pd::Run(ReadShippedModel("saheba2010-baseline"), "saheba2010-baseline", train,
+  const pd::Result r = pd::Run(ReadModel("saheba2010-baseline"), "saheba2010-baseline", train,
                                validate, pd::Options{});
   EXPECT_EQ(r.verdict, "none") << Summary(r);
   EXPECT_TRUE(r.effects.empty()) << Summary(r);

@@ -1,14 +1,14 @@
 #!/bin/sh
-# Issue 8 item 4, live load: vcan0 carries the frame rate of a fully loaded 1 Mbit/s bus (9000
+# Live load: vcan0 carries the frame rate of a fully loaded 1 Mbit/s bus (9000
 # frames/s: 16 pumps of the plant's fleet32 recording, 3360 frames/s, plus filler frames the
 # gateway does not know; tests/vcan/full_bus_log.awk) for 40 s, replayed by canplayer with its
 # original timing, and the daemon (16 pumps) must take every frame off its socket: rx = frames on
 # the bus, 0 receive-queue drops. Also checks that the bus really carried a full bus's rate (at
 # least 7407 frames/s on average, an 8-byte frame with worst-case stuffing: 135 bit) and that the
 # daemon logged the receive buffer it got.
-# A measurement, not in CI (label "measurement"; docs/robustness.md, "Soak"): in the QEMU TCG
-# guest the daemon spends about 24 s of CPU on these frames (offline on the host: 0.14 s) and
-# needs a deep queue: rx_buffer_bytes = 8 MiB here (with the default 1 MiB: 752 drops of
+# A measurement, not in CI (label "measurement"; docs/robustness.md, "Soak", has what the
+# daemon's CPU costs in the QEMU TCG guest and offline on the host). In the guest it needs a deep
+# queue: rx_buffer_bytes = 8 MiB here (with the default 1 MiB: 752 drops of
 # 359,986). CTest gives the guest two CPUs (PUMPTHERM_VCAN_SMP=2): sharing one with the daemon,
 # canplayer only just reached the full rate in 40 s (7038 and 7442 frames/s) and fell below it
 # over 15 min (6716 and 6793); with two it keeps the recording's 9000. This is 40 s of traffic;

@@ -1,8 +1,8 @@
 #!/bin/sh
-# Issue 8 item 4 in full: the live load of daemon_full_bus.sh for 15 minutes and 20 s (the 40 s
+# The live load of daemon_full_bus.sh for 15 minutes and 20 s (the 40 s
 # full-bus recording played 23 times by canplayer -l), zero receive drops, every frame received,
 # and the bus at a full 1 Mbit/s bus's rate on average. A measurement (label "measurement"), not
-# in CI: about 17 min of guest time. docs/robustness.md, "Soak".
+# in CI; its cost is in docs/robustness.md, "Soak".
 #   ctest --test-dir build -R vcan.daemon_full_bus_15min -V
 SCENARIO_NAME=daemon_full_bus_15min
 FULL_BUS_LOOPS=23

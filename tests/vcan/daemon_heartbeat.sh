@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 2, vcan test (b): candump on vcan0 sees the daemon's heartbeat frames at the configured
+# Vcan test (b): candump on vcan0 sees the daemon's heartbeat frames at the configured
 # rate (10 Hz here), with an uptime that advances. Then (guest only: natively the host's clock is
 # not ours to set) the wall clock stepped back 200 s and forward again while one pump's recording
 # is replayed (docs/daemon.md, "Time"): heartbeat, temperature and alarm frames keep coming in

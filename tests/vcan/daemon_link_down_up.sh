@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 2, vcan test (c): the daemon survives `ip link set vcan0 down` and `up` and counts again
+# Vcan test (c): the daemon survives `ip link set vcan0 down` and `up` and counts again
 # afterwards; it also survives vcan0 being deleted and re-created (it reopens the socket).
 set -eu
 SCENARIO_NAME=daemon_link_down_up

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 9 item 3, vcan: the README demo's live flag. tools/demo-live.sh (what `tools/demo.sh
+# Vcan: the README demo's live flag. tools/demo-live.sh (what `tools/demo.sh
 # --live` runs after simulating) is run unchanged from a source-tree layout staged in the guest
 # (tools/, build/daemon/pumpthermd, the shipped files under build/share/pumptherm where the
 # daemon's resolver finds them next to its binary), on the first 30 s of the plant's demo
@@ -7,7 +7,7 @@
 # receive-queue drop); it printed its pump table while running; the gateway's frames for the
 # three pumps were captured; an LCM subscriber (lcm-logger) on the guest's loopback received
 # every pump's TELEMETRY, TEMPS and ALARM and the gateway's HEALTH.
-# Then issue 6 item 8: the offline LCM log of the same recording (pumpthermd -r --lcm-log)
+# Then the offline LCM log of the same recording (pumpthermd -r --lcm-log)
 # played by lcm-logplayer reaches an lcm-logger with every message of the file.
 set -eu
 SCENARIO_NAME=daemon_live_demo

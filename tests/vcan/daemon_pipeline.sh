@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 6, vcan: canplayer replays a simulated three-pump recording (`pumptherm plant demo`, its
+# Vcan: canplayer replays a simulated three-pump recording (`pumptherm plant demo`, its
 # first 100 s) onto vcan0; pumpthermd runs live on it with LCM on the guest's loopback;
 # candump captures the gateway's frames; lcm-logger records its LCM messages. Checks: the
 # gateway's temperatures and alarm moments equal those of the offline run of the same recording

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 6, vcan: vcan0 goes down and up in the MIDDLE of a pipeline replay (the plant's demo
+# Vcan: vcan0 goes down and up in the MIDDLE of a pipeline replay (the plant's demo
 # recording, three pumps, its first 40 s). The recording is cut at 15 s and 18 s: canplayer
 # replays 0-15 s, vcan0 goes down for the 3 s whose frames (15-18 s) are therefore never sent
 # (lost: counted), comes up, and canplayer replays 18-40 s. Checks:

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 2, vcan test (a): canplayer replays the bundled candump log onto vcan0 and the daemon's
+# Vcan test (a): canplayer replays the bundled candump log onto vcan0 and the daemon's
 # per-ID counts match the log exactly, and match the daemon's own offline run of the same log.
 set -eu
 SCENARIO_NAME=daemon_replay

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Issue 2: the daemon's side of the systemd notify protocol, seen by a listener on
+# The daemon's side of the systemd notify protocol, seen by a listener on
 # NOTIFY_SOCKET: READY=1 once the socket is bound, STATUS= with the counts, WATCHDOG=1 at
 # least every half WatchdogSec, STOPPING=1 on SIGTERM.
 set -eu

@@ -21,6 +21,9 @@ set -euo pipefail
 
 readonly kHarnessVersion=1
 readonly kMarker="@@PUMPTHERM-VCAN"
+# The host side of the guest protocol (markers, streaming, verdict), shared with the other harness.
+# shellcheck source-path=SCRIPTDIR source=../guest/guest_run.sh
+source "$(dirname "${BASH_SOURCE[0]}")/../guest/guest_run.sh"
 readonly kCanUtils=(candump cansend canplayer cangen cansequence canbusload cansniffer canfdtest
   cangw log2asc log2long asc2log)
 # Host programs the guest gets in place of busybox applets. Debian's busybox-static prefers its own
@@ -130,14 +133,11 @@ for f in "${files[@]}"; do
 done
 if ((shell)) && [[ "$mode" == "native" || "$mode" == "host" ]]; then err "--shell needs the guest mode"; exit 2; fi
 
-abspath() { (cd "$(dirname "$1")" && printf '%s/%s\n' "$(pwd -P)" "$(basename "$1")"); }
 scenario=$(abspath "$scenario")
 for i in "${!bins[@]}"; do bins[i]=$(abspath "${bins[i]}"); done
 for i in "${!files[@]}"; do files[i]=$(abspath "${files[i]}"); done
 [[ -z "$out_dir" ]] || { mkdir -p "$out_dir" && out_dir=$(cd "$out_dir" && pwd -P); }
 
-now_s() { date +%s.%N; }
-elapsed_s() { awk -v a="$1" -v b="$(now_s)" 'BEGIN { printf "%.1f", b - a }'; }
 
 # ---------------------------------------------------------------------------------------------
 # Native mode
@@ -284,20 +284,6 @@ poweroff -f
 EOF
 }
 
-# Sets kernel_root (…/kernel) and kernel_version (the newest vmlinuz-<ver> that has its modules),
-# or ends the run with cannot_run.
-find_kernel() {
-  kernel_root=${PUMPTHERM_CACHE:-/var/cache/pumptherm}/kernel
-  local v
-  kernel_version=$(for v in "$kernel_root"/boot/vmlinuz-*; do
-    v=${v##*/vmlinuz-}
-    if [[ -r "$kernel_root/boot/vmlinuz-$v" && -d "$kernel_root/lib/modules/$v/kernel" ]]; then
-      echo "$v"
-    fi
-  done | sort -V | tail -n 1)
-  [[ -n "$kernel_version" ]] ||
-    cannot_run "no guest kernel with its modules under $kernel_root (run tools/setup.sh)"
-}
 
 # Sets guest_kernel_image: the uncompressed vmlinux (cached), which QEMU boots through its PVH
 # entry point, or the compressed vmlinuz when that cannot be had. Under TCG, decompressing the
@@ -478,17 +464,6 @@ build_run_part() {
   rm -rf "$stage"
 }
 
-print_console() {
-  local console=$1
-  if [[ -s "$console" ]]; then
-    echo "---- guest console (last 200 lines of $console) ----" >&2
-    tail -n 200 "$console" | tr -d '\r' >&2
-    echo "---- end of guest console ----" >&2
-  else
-    echo "(the guest console is empty: $console)" >&2
-  fi
-}
-
 run_guest() {
   command -v qemu-system-x86_64 >/dev/null 2>&1 ||
     cannot_run "qemu-system-x86_64 is not installed (qemu-system-x86) and the host has no vcan"
@@ -532,111 +507,11 @@ run_guest() {
   # shellcheck disable=SC2064
   trap "kill $qemu_pid 2>/dev/null || true" EXIT INT TERM
 
-  local printed=0 console_printed=0 state=pre exit_code="" setup_failure="" timed_out=0
-  local guest_kernel="" out_b64=$run_dir/out.b64
-  # The scenario's own "NAME: FAIL: why" lines, repeated at the very end of a failed run so that
-  # a log cut to its tail (CI summaries) still says why.
-  local -a fail_lines=()
-  local deadline
-  deadline=$(awk -v s="$start" -v t="$timeout_s" 'BEGIN { printf "%d", s + t }')
-  # Streams the complete lines the guest has written to the result port since the last call.
-  stream() {
-    local total line
-    total=$(wc -l <"$result")
-    if ((total > printed)); then
-      while IFS= read -r line; do
-        line=${line%$'\r'}
-        case "$state:$line" in
-          *"$kMarker-BEGIN kernel="*)
-            guest_kernel=${line#*kernel=}
-            guest_kernel=${guest_kernel%@@}
-            say "mode=guest kernel=${guest_kernel} test=${name} (QEMU TCG, ${smp} CPU)"
-            state=run ;;
-          *"$kMarker-SETUP-FAILED "*)
-            setup_failure=${line#*FAILED }
-            setup_failure=${setup_failure%@@} ;;
-          *"$kMarker-OUT-BEGIN@@"*)
-            # A last scenario line without its newline shares the line with the marker.
-            [[ "$line" == "$kMarker"* ]] || printf '%s\n' "${line%%"$kMarker"*}"
-            state=out
-            : >"$out_b64" ;;
-          *"$kMarker-OUT-END@@"*) state=run ;;
-          *"$kMarker-EXIT "*)
-            [[ "$state" != run || "$line" == "$kMarker"* ]] || printf '%s\n' "${line%%"$kMarker"*}"
-            exit_code=${line#*EXIT }
-            exit_code=${exit_code%@@}
-            [[ "$exit_code" =~ ^[0-9]+$ ]] || { err "garbled exit marker: $line"; exit_code=1; } ;;
-          out:*) printf '%s\n' "$line" >>"$out_b64" ;;
-          run:*)
-            printf '%s\n' "$line"
-            [[ "$line" != *": FAIL: "* ]] || fail_lines+=("$line") ;;
-          *) printf 'guest: %s\n' "$line" ;;
-        esac
-      done < <(sed -n "$((printed + 1)),${total}p" "$result")
-      printed=$total
-    fi
-    if ((verbose)); then
-      total=$(wc -l <"$console")
-      if ((total > console_printed)); then
-        sed -n "$((console_printed + 1)),${total}p" "$console" | tr -d '\r' | sed 's/^/console| /'
-        console_printed=$total
-      fi
-    fi
-  }
-  while :; do
-    stream
-    [[ -n "$exit_code" || -n "$setup_failure" ]] && break
-    if ! kill -0 "$qemu_pid" 2>/dev/null; then
-      stream
-      break
-    fi
-    if (($(date +%s) >= deadline)); then
-      timed_out=1
-      break
-    fi
-    sleep 0.2
-  done
-  # The guest powers off right after the marker; give it a moment, then make sure.
-  local i
-  for ((i = 0; i < 50 && !timed_out; i++)); do kill -0 "$qemu_pid" 2>/dev/null || break; sleep 0.1; done
-  kill "$qemu_pid" 2>/dev/null || true
-  wait "$qemu_pid" 2>/dev/null || true
+  # The guest's BEGIN marker carries "kernel=VERSION".
+  guest_on_begin() { say "mode=guest kernel=${1#kernel=} test=${name} (QEMU TCG, ${smp} CPU)"; }
+  guest_watch "$qemu_pid" "$start" "$console" "$result"
   trap - EXIT INT TERM
-  local took
-  took=$(elapsed_s "$start")
-
-  local rc
-  if [[ -n "$exit_code" ]]; then
-    rc=$exit_code
-    if [[ -n "$out_dir" && -s "$out_b64" ]]; then
-      base64 -d "$out_b64" | tar -xzf - -C "$out_dir" ||
-        { err "${name}: could not unpack the guest's OUT_DIR into $out_dir"; rc=1; }
-    fi
-    say "guest run took ${took} s (boot, scenario, power-off), scenario exit code ${rc}"
-  elif [[ -n "$setup_failure" ]]; then
-    err "${name}: guest setup failed: ${setup_failure}"
-    rc=1
-  elif ((timed_out)); then
-    err "${name}: no result from the guest within ${timeout_s} s (hung boot or scenario); killed QEMU"
-    rc=1
-  else
-    err "${name}: the guest stopped without reporting a result (boot failure or crash) after ${took} s"
-    [[ -s "$run_dir/qemu.log" ]] && { echo "QEMU said:" >&2; cat "$run_dir/qemu.log" >&2; }
-    rc=1
-  fi
-  if ((rc != 0 && rc != 77)); then
-    print_console "$console"
-  fi
-  if ((keep || rc != 0)) && ((rc != 77)); then
-    say "run directory kept: $run_dir"
-  else
-    rm -rf "$run_dir"
-  fi
-  if ((rc != 0 && rc != 77)); then
-    local l
-    for l in "${fail_lines[@]}"; do say "${name} failed: ${l}"; done
-  fi
-  exit "$rc"
+  guest_verdict "$console"
 }
 
 # ---------------------------------------------------------------------------------------------

@@ -8,34 +8,16 @@
 
 namespace pumptherm::tools::discrepancy {
 
-estimators::ThermalInputs Data::Inputs(std::size_t k) const {
-  estimators::ThermalInputs in;
-  in.speed_rpm = speed_rpm[k];
-  in.id_A = id_A[k];
-  in.iq_A = iq_A[k];
-  in.ambient_degC = ambient_degC[k];
-  in.coolant_degC = coolant_degC[k];
-  return in;
-}
-
 Data ReadData(const std::string& path, const estimators::ThermalModel& model) {
   const CsvTable csv = CsvTable::Read(path);
+  if (const std::size_t rows = csv.Time().size(); rows < 3)
+    throw CsvError(fmt::format("{}: {} data rows, need at least 3", path, rows));
   Data d;
+  ThermalInputColumns columns;
+  columns.coolant = model.UsesCoolant();
+  columns.rms_current = true;
+  static_cast<ThermalInputSeries&>(d) = ReadThermalInputs(csv, columns);
   d.source = path;
-  d.time_s = csv.Time();
-  if (d.time_s.size() < 3)
-    throw CsvError(fmt::format("{}: {} data rows, need at least 3", path, d.time_s.size()));
-  d.speed_rpm = csv.Column("speed_rpm");
-  if (csv.Has("id_A") || csv.Has("iq_A") || !csv.Has("phase_current_rms_A")) {
-    d.id_A = csv.Column("id_A");
-    d.iq_A = csv.Column("iq_A");
-  } else {
-    const std::vector<double> rms = csv.Column("phase_current_rms_A");
-    d.id_A.assign(rms.size(), 0.0);
-    for (double r : rms) d.iq_A.push_back(std::sqrt(2.0) * r);
-  }
-  d.ambient_degC = csv.Column("ambient_C");
-  d.coolant_degC = model.UsesCoolant() ? csv.Column("coolant_C") : d.ambient_degC;
   for (const auto& node : model.Nodes())
     if (csv.Has(node.name + "_C")) d.measured.push_back({node.name, csv.Column(node.name + "_C")});
   if (d.measured.empty()) {

@@ -1,5 +1,5 @@
 #pragma once
-/// The discrepancy workflow's data (issue 7): inputs and measured node temperatures over time,
+/// The discrepancy workflow's data: inputs and measured node temperatures over time,
 /// read from and written to its CSV format (time_s, speed_rpm, id_A + iq_A or
 /// phase_current_rms_A, ambient_C, coolant_C where the model has a coolant, <node>_C per
 /// measured node; other columns ignored).
@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "estimators/thermal_model.hpp"
+#include "tools/common/thermal_input_series.hpp"
 
 namespace pumptherm::tools::discrepancy {
 
@@ -17,14 +18,10 @@ struct MeasuredNode {
   std::vector<double> value_degC;
 };
 
-/// A data set: every vector has one value per row.
-struct Data {
+/// A data set: the inputs and the measured series, every vector with one value per row.
+struct Data : ThermalInputSeries {
   std::string source;  ///< file name for messages
-  std::vector<double> time_s, speed_rpm, id_A, iq_A, ambient_degC, coolant_degC;
   std::vector<MeasuredNode> measured;  ///< in the model's node order
-
-  std::size_t size() const { return time_s.size(); }
-  estimators::ThermalInputs Inputs(std::size_t k) const;
 };
 
 /// Reads a CSV for `model`. Throws CsvError (file, row, column) for bad cells or a missing

@@ -1,5 +1,5 @@
 #pragma once
-/// Data in which an effect is hidden (issue 7's tests, issue 9 item 2): a thermal model with
+/// Data in which an effect is hidden (for the discrepancy tests): a thermal model with
 /// effects of the discrepancy vocabulary switched on (estimators/model_effects.hpp) is the truth;
 /// a load profile with speed and current both varying drives it; the measured series carry
 /// sensor noise and quantisation (../shared/reference/realistic-signals.md). The result is in the

@@ -1,5 +1,5 @@
 #pragma once
-/// The discrepancy workflow's outputs (issue 7): report.json (fields as the issue lists them),
+/// The discrepancy workflow's outputs: report.json (fields as the issue lists them),
 /// model.toml, report.html with inline SVG plots drawn by this code.
 
 #include <string>

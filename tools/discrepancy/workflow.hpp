@@ -1,5 +1,5 @@
 #pragma once
-/// The model discrepancy workflow (issue 7; statistics and decision rule in docs/discrepancy.md):
+/// The model discrepancy workflow (statistics and decision rule in docs/discrepancy.md):
 /// simulate a thermal model on measured inputs, measure the gap, fit every candidate effect of
 /// the vocabulary (estimators/model_effects.hpp) on TRAIN with Ceres, score it on VALIDATE and
 /// by an information criterion that allows for the autocorrelation of thermal residuals, name

@@ -178,6 +178,481 @@ struct PumpState {
 
 std::string FormatNumber(double v) { return fmt::format("{}", v); }
 
+/// The frame layout of a scenario that writes a log: the DBC, its codecs, the mapping, the three
+/// messages the plant sends and where each mapped input sits. Filled in place (the plans point
+/// into the codecs).
+struct FrameLayout {
+  std::optional<protocol::Dbc> dbc;
+  std::optional<protocol::DbcCodec> codecs;
+  std::optional<protocol::SignalMapping> mapping;
+  MessagePlan fast_i, fast_u, status;
+  std::array<InputSlot, protocol::kMappingInputCount> slots{};
+
+  /// Puts the value `v` of input `in` into `plan` when the mapping places it in that message.
+  void Set(MessagePlan& plan, MappingInput in, double v) const {
+    const InputSlot& s = slots[static_cast<std::size_t>(in)];
+    if (s.message_index != plan.message_index) return;  // mapped to another message
+    plan.values[static_cast<std::size_t>(s.signal_index)] = (v - s.offset) / s.scale;
+  }
+};
+
+void LoadFrameLayout(const PlantResources& res, FrameLayout& layout) {
+  std::optional<protocol::Dbc>& dbc = layout.dbc;
+  std::optional<protocol::DbcCodec>& codecs = layout.codecs;
+  std::optional<protocol::SignalMapping>& mapping = layout.mapping;
+  auto& slots = layout.slots;
+  try {
+    dbc = protocol::ParseDbc(res.dbc.text, res.dbc.source);
+    mapping = protocol::ParseMapping(res.mapping.text, res.mapping.source, *dbc);
+  } catch (const std::exception& e) {
+    throw ScenarioError(e.what());
+  }
+  codecs.emplace(*dbc);
+  for (std::size_t i = 0; i < protocol::kMappingInputCount; ++i) {
+    if (const auto& ref = mapping->inputs[i]) {
+      slots[i] = InputSlot{ref->message_index, ref->signal_index, ref->scale, ref->offset};
+    }
+  }
+  auto plan_of = [&](MappingInput in, std::string_view what) {
+    const auto& ref = mapping->input(in);
+    if (!ref) {
+      throw ScenarioError(fmt::format("{}: the mapping does not bind {}, which the plant sends",
+                                      res.mapping.source, what));
+    }
+    MessagePlan p;
+    p.message_index = ref->message_index;
+    p.codec = &codecs->message(static_cast<std::size_t>(ref->message_index));
+    p.values.assign(p.codec->signal_count(), std::nan(""));
+    p.counter_signal = dbc->messages[static_cast<std::size_t>(ref->message_index)].FindSignal("RollingCounter");
+    return p;
+  };
+  layout.fast_i = plan_of(MappingInput::kIqA, "iq_A");
+  layout.fast_u = plan_of(MappingInput::kUqV, "uq_V");
+  layout.status = plan_of(MappingInput::kFrameTempDegC, "frame_temp_degC");
+}
+
+/// The pump's motor: a preset or a file the scenario names.
+estimators::MotorDescription PumpMotor(const PumpSpec& spec, const PlantResources& res, const std::string& where) {
+  try {
+    if (!estimators::MotorPresetText(spec.motor).empty()) return estimators::MotorPreset(spec.motor);
+    const LoadedText t = res.motor_file(spec.motor);
+    return estimators::ParseMotorDescription(t.text, t.source);
+  } catch (const std::exception& e) {
+    throw ScenarioError(fmt::format("{}: motor '{}': {}", where, spec.motor, e.what()));
+  }
+}
+
+/// The pump's truth model (with the scenario's hidden effects added), and the variants its
+/// cooling faults switch to.
+void LoadTruthModels(PumpState& state, const PumpSpec& spec, const PlantResources& res, const std::string& where) {
+  PumpState* ps = &state;
+  LoadedText model_text;
+  try {
+    model_text = res.model(spec.model);
+    // Tables the model names are read relative to the model file.
+    const std::size_t slash = model_text.source.rfind('/');
+    const estimators::ThermalModelFiles files{
+        slash == std::string::npos ? std::string(".") : model_text.source.substr(0, slash), res.read_file};
+    if (!spec.effects.empty()) {
+      // Hidden effects: the truth is the model with the workflow's effects added.
+      model_text.text = estimators::ApplyModelEffects(model_text.text, model_text.source, spec.effects);
+      for (const auto& e : spec.effects) {
+        model_text.source += fmt::format(" +{}", e.name);
+      }
+    }
+    ps->models.push_back(
+        std::make_unique<ThermalModel>(ThermalModel::Parse(model_text.text, model_text.source, files)));
+    for (const Fault& f : spec.faults) {
+      if (f.kind != FaultKind::kCoolingFailure) {
+        ps->model_of_fault.push_back(-1);
+        continue;
+      }
+      const std::string scaled = ScaleEdgeResistance(model_text.text, model_text.source, f.edge, f.factor);
+      ps->models.push_back(std::make_unique<ThermalModel>(ThermalModel::Parse(
+          scaled, fmt::format("{} (edge {} x {})", model_text.source, f.edge, f.factor), files)));
+      ps->model_of_fault.push_back(static_cast<int>(ps->models.size()) - 1);
+    }
+  } catch (const std::exception& e) {
+    throw ScenarioError(fmt::format("{}: model '{}': {}", where, spec.model, e.what()));
+  }
+}
+
+/// Node index of `name` in `m`; throws ScenarioError listing the nodes.
+int NodeIndex(const ThermalModel& m, const std::string& name, const PumpSpec& spec, const std::string& where) {
+  const auto& nodes = m.Nodes();
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    if (nodes[i].name == name) return static_cast<int>(i);
+  }
+  std::string list;
+  for (const auto& n : nodes) list += (list.empty() ? "" : ", ") + n.name;
+  throw ScenarioError(fmt::format("{}: model '{}' has no node '{}' (nodes: {})", where, spec.model, name, list));
+}
+
+/// Pump `pi` of the scenario at its start: motor, truth models, nodes, random streams, sensors,
+/// initial state, and its truth and measured CSV files in `out_dir`.
+std::unique_ptr<PumpState> SetUpPump(const Scenario& sc, const PlantResources& res, std::size_t pi,
+                                     const std::string& out_dir) {
+  namespace fs = std::filesystem;
+  const bool electrical = sc.can_log;
+  const PumpSpec& spec = sc.pumps[pi];
+  auto ps = std::make_unique<PumpState>();
+  ps->spec = &spec;
+  const std::string where = fmt::format("{}:{}: pump '{}'", sc.source, spec.line, spec.name);
+  ps->motor = PumpMotor(spec, res, where);
+  LoadTruthModels(*ps, spec, res, where);
+  const ThermalModel& m = *ps->models[0];
+  if (m.UsesCoolant()) {
+    throw ScenarioError(fmt::format("{}: model '{}' has a coolant boundary; the plant drives only "
+                                    "'ambient' (map the coolant to ambient in the model file)",
+                                    where, spec.model));
+  }
+
+  ps->frame_node = NodeIndex(m, spec.frame_sensor.node, spec, where);
+  if (sc.levels.node != kWindingResistanceLevel) ps->level_node = NodeIndex(m, sc.levels.node, spec, where);
+  ps->winding_weights = m.WindingWeights();
+  if (ps->winding_weights.sum() <= 0.0 && (electrical || sc.levels.node == kWindingResistanceLevel)) {
+    throw ScenarioError(fmt::format("{}: model '{}' has no temperature-dependent copper loss, so "
+                                    "it defines no winding temperature",
+                                    where, spec.model));
+  }
+  if (!spec.drive.magnet_node.empty()) {
+    ps->magnet_state = m.StateIndex(spec.drive.magnet_node);
+    if (ps->magnet_state < 0) {
+      throw ScenarioError(fmt::format("{}: drive.magnet_node '{}' is not a node with heat capacity "
+                                      "in model '{}'",
+                                      where, spec.drive.magnet_node, spec.model));
+    }
+  }
+  ps->rng_drive.seed(Mix(sc.seed, pi, 1));
+  ps->rng_thermal.seed(Mix(sc.seed, pi, 2));
+  ps->rng_bus.seed(Mix(sc.seed, pi, 3));
+  ps->rng_jitter.seed(Mix(sc.seed, pi, 4));
+  std::mt19937_64 rng_setup(Mix(sc.seed, pi, 5));
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  ps->offset_phase_rad = 2.0 * std::numbers::pi * unit(rng_setup);
+  ps->phase_us = static_cast<std::int64_t>(unit(rng_setup) * (sc.fast_period_s * 1e6 - 1000.0));
+  auto sensor_config = [&](const TemperatureSensorSpec& s) {
+    sim::SensorConfig c;
+    c.noise_sd = s.noise_sd_K;
+    c.offset = std::isnan(s.offset_K) ? s.accuracy_K * (2.0 * unit(rng_setup) - 1.0) : s.offset_K;
+    c.lsb = s.resolution_K;
+    c.min = -50.0;  // the DBC's FrameTemp_degC / AmbientTemp_degC range
+    c.max = 359.4;
+    c.lag_tau_s = s.lag_s;
+    return c;
+  };
+  ps->frame_sensor.emplace(sensor_config(spec.frame_sensor), Mix(sc.seed, pi, 6));
+  ps->ambient_sensor.emplace(sensor_config(spec.ambient_sensor), Mix(sc.seed, pi, 7));
+  ps->profile.emplace(spec);
+  const double x0 = std::isnan(spec.initial_degC) ? spec.ambient_degC : spec.initial_degC;
+  ps->x = Eigen::VectorXd::Constant(m.StateCount(), x0);
+  ps->next.resize(m.StateCount());
+  ps->disc = std::make_unique<estimators::ThermalDiscretiser>(1e-4);
+  ps->summary.name = spec.name;
+  ps->summary.interface = spec.interface;
+  ps->summary.node_id = spec.node_id;
+  ps->summary.max_level_node_degC = -1e300;
+  for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
+    const Fault& f = spec.faults[fi];
+    if (f.kind == FaultKind::kCoolingFailure && f.start_s <= 0.0) ps->active_model = ps->model_of_fault[fi];
+  }
+
+  std::vector<std::string> tcols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C"};
+  for (const auto& n : m.Nodes()) tcols.push_back(n.name + "_C");
+  tcols.insert(tcols.end(), {"winding_resistance_C", "resistance_ohm", "flux_Wb"});
+  for (const auto& n : m.Nodes()) tcols.push_back("loss_" + n.name + "_W");
+  tcols.insert(tcols.end(), {"loss_total_W", "cooling_model", "drive_state"});
+  ps->truth = std::make_unique<tools::CsvWriter>((fs::path(out_dir) / (spec.name + ".truth.csv")).string(), tcols);
+  ps->measured = std::make_unique<tools::CsvWriter>(
+      (fs::path(out_dir) / (spec.name + ".measured.csv")).string(),
+      std::vector<std::string>{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C", spec.frame_sensor.node + "_C"});
+  return ps;
+}
+
+/// summary.json: the scenario and, per pump, what the truth reached and the frames written.
+void WriteSummaryJson(const std::string& out_dir, const Scenario& sc, const PlantResult& result) {
+  namespace fs = std::filesystem;
+  const std::string summary_path = (fs::path(out_dir) / "summary.json").string();
+  std::string json = fmt::format(
+      "{{\n  \"scenario\": \"{}\",\n  \"seed\": {},\n  \"duration_s\": {},\n  \"log\": \"{}\",\n"
+      "  \"frames_written\": {},\n  \"levels\": {{\"node\": \"{}\", \"warning_C\": {}, \"trip_C\": {}}},\n"
+      "  \"pumps\": [\n",
+      sc.name, sc.seed, sc.duration_s, result.log_path.empty() ? "" : fs::path(result.log_path).filename().string(),
+      result.frames_written, sc.levels.node, sc.levels.warning_degC, sc.levels.trip_degC);
+  for (std::size_t i = 0; i < result.pumps.size(); ++i) {
+    const PumpSummary& s = result.pumps[i];
+    auto opt = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{}", v); };
+    std::string above;
+    for (const auto& [a, b] : s.above_warning_s) {
+      auto at = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{:.2f}", v); };
+      above += fmt::format("{}[{}, {}]", above.empty() ? "" : ", ", at(a), at(b));
+    }
+    json += fmt::format(
+        "    {{\"name\": \"{}\", \"interface\": \"{}\", \"node_id\": {}, \"truth\": \"{}.truth.csv\", "
+        "\"measured\": \"{}.measured.csv\", \"max_C\": {:.3f}, \"max_time_s\": {}, "
+        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"above_warning_s\": [{}], \"frames_written\": {}, "
+        "\"frames_suppressed\": {}}}{}\n",
+        s.name, s.interface, s.node_id, s.name, s.name, s.max_level_node_degC, s.max_level_time_s,
+        opt(s.warning_crossed_s), opt(s.trip_crossed_s), above, s.frames_written, s.frames_suppressed,
+        i + 1 < result.pumps.size() ? "," : "");
+  }
+  json += "  ]\n}\n";
+  std::FILE* f = std::fopen(summary_path.c_str(), "wb");
+  if (f == nullptr) throw std::system_error(errno, std::generic_category(), fmt::format("opening '{}'", summary_path));
+  const bool ok = std::fwrite(json.data(), 1, json.size(), f) == json.size();
+  if (std::fclose(f) != 0 || !ok) {
+    throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", summary_path));
+  }
+}
+
+/// The drive's current loop, first order towards the set point (`follow`; else it takes the set
+/// point at once), and the thermal inputs it makes (the coolant is the ambient).
+ThermalInputs FollowSetPoint(PumpState& p, const SetPoint& sp, bool follow, double step_s) {
+  if (!follow) {
+    p.iq_A = sp.iq_A;
+    p.id_A = sp.id_A;
+  } else {
+    const double a = 1.0 - std::exp(-step_s / p.spec->drive.current_response_s);
+    p.iq_A += (sp.iq_A - p.iq_A) * a;
+    p.id_A += (sp.id_A - p.id_A) * a;
+  }
+  ThermalInputs in;
+  in.speed_rpm = sp.speed_rpm;
+  in.iq_A = p.iq_A;
+  in.id_A = p.id_A;
+  in.ambient_degC = sp.ambient_degC;
+  in.coolant_degC = sp.ambient_degC;
+  return in;
+}
+
+/// The magnet flux of the truth: the motor's, scaled by the scenario's coefficient relative to
+/// the motor's magnet reference (its copper T0 when the motor file states no magnet law).
+double TrueFlux_Wb(const PumpState& p) {
+  if (p.magnet_state < 0) return p.motor.flux_Wb;
+  const double t0_degC = p.motor.magnet.Given() ? p.motor.magnet.t0_degC : p.motor.copper.t0_degC;
+  return p.motor.flux_Wb *
+         (1.0 + p.spec->drive.flux_temperature_coefficient_per_K * (p.x(p.magnet_state) - t0_degC));
+}
+
+/// The frame and ambient sensors read `dt_s` after their last reading (0: the first); a stuck
+/// frame sensor holds the reading it had when it stuck.
+void SampleSensors(PumpState& p, const ThermalInputs& in, double ambient_degC, bool stuck_now, double dt_s) {
+  const double frame_true = p.model().AllTemperatures_degC(in, p.x)(p.frame_node);
+  const double reading = p.frame_sensor->Measure(frame_true, dt_s);
+  p.frame_lagged_degC = p.frame_sensor->lagged();
+  if (stuck_now && !p.stuck) p.stuck_degC = p.frame_reading_degC;
+  p.stuck = stuck_now;
+  if (dt_s == 0.0 && stuck_now) p.stuck_degC = reading;
+  p.frame_reading_degC = p.stuck ? p.stuck_degC : reading;
+  p.ambient_reading_degC = p.ambient_sensor->Measure(ambient_degC, dt_s);
+}
+
+/// What the drive reports besides the currents and speed (those go into PumpState::rep_*).
+struct DriveReport {
+  double ud_V = 0.0, uq_V = 0.0, dc_link_V = 0.0;
+};
+
+/// One control step of the drive: the true dq voltages (Han 2019 eq. 4, the SPMSM's voltage
+/// equations, plus the dead-time voltage), and the reported values with offset ripple, noise and
+/// 12-bit quantisation. `first`: no current derivative yet.
+DriveReport ReportDrive(PumpState& p, const SetPoint& sp, double rs_ohm, double flux_Wb, bool first,
+                        double iq_prev_A, double id_prev_A, double step_s) {
+  const auto& motor = p.motor;
+  const DriveSpec& drive = p.spec->drive;
+  const double w = estimators::ElectricalSpeed_rad_per_s(motor, sp.speed_rpm);
+  const double diq = first ? 0.0 : (p.iq_A - iq_prev_A) / step_s;
+  const double did = first ? 0.0 : (p.id_A - id_prev_A) / step_s;
+  double uq = rs_ohm * p.iq_A + motor.inductance_H * diq + w * (motor.inductance_H * p.id_A + flux_Wb);
+  double ud = rs_ohm * p.id_A + motor.inductance_H * did - motor.inductance_H * w * p.iq_A;
+  if (drive.dead_time_V > 0.0) {
+    const double mag = std::hypot(p.id_A, p.iq_A);
+    if (mag > 0.0) {
+      const double e = drive.dead_time_V * std::tanh(mag / drive.dead_time_knee_A) / mag;
+      uq += e * p.iq_A;
+      ud += e * p.id_A;
+    }
+  }
+  p.angle_rad = std::fmod(p.angle_rad + w * step_s, 2.0 * std::numbers::pi);
+  const double i_lsb = 2.0 * drive.current_range_A / 4096.0;
+  const double u_lsb = 2.0 * drive.dc_link_V / 4096.0;
+  const double ripple_q = drive.phase_offset_A * std::cos(p.angle_rad + p.offset_phase_rad);
+  const double ripple_d = drive.phase_offset_A * std::sin(p.angle_rad + p.offset_phase_rad);
+  const double range = drive.current_range_A;
+  // The noise draws keep this order: one random stream per pump.
+  p.rep_id_A = sim::Quantise(p.id_A + ripple_d + p.Noise(drive.current_noise_A), i_lsb, -range, range);
+  p.rep_iq_A = sim::Quantise(p.iq_A + ripple_q + p.Noise(drive.current_noise_A), i_lsb, -range, range);
+  DriveReport r;
+  r.ud_V = sim::Quantise(ud + p.Noise(drive.voltage_noise_V), u_lsb, -drive.dc_link_V, drive.dc_link_V);
+  r.uq_V = sim::Quantise(uq + p.Noise(drive.voltage_noise_V), u_lsb, -drive.dc_link_V, drive.dc_link_V);
+  p.rep_speed_rpm = sp.speed_rpm > 0.0 ? std::max(0.0, sp.speed_rpm + p.Noise(drive.speed_noise_rpm)) : 0.0;
+  r.dc_link_V = drive.dc_link_V + p.Noise(drive.dc_link_noise_V);
+  return r;
+}
+
+/// Winding temperature, resistance and flux of the truth at one step.
+struct TruthElectrical {
+  double winding_degC, rs_ohm, flux_Wb;
+};
+
+/// One row of the truth CSV: inputs, every node's temperature, the electrical truth, each node's
+/// loss and their sum, the cooling model in force and the drive state.
+void WriteTruthRow(PumpState& p, const ThermalInputs& in, const SetPoint& sp, double t, const TruthElectrical& e) {
+  const ThermalModel& m = p.model();
+  const Eigen::VectorXd all = m.AllTemperatures_degC(in, p.x);
+  const Eigen::VectorXd losses = m.NodeLosses_W(in, p.x);
+  std::vector<double> row{t, sp.speed_rpm, p.id_A, p.iq_A, sp.ambient_degC};
+  for (Eigen::Index i = 0; i < all.size(); ++i) row.push_back(all(i));
+  row.insert(row.end(), {e.winding_degC, e.rs_ohm, e.flux_Wb});
+  for (Eigen::Index i = 0; i < losses.size(); ++i) row.push_back(losses(i));
+  row.insert(row.end(), {losses.sum(), static_cast<double>(p.active_model), static_cast<double>(sp.drive_state)});
+  p.truth->Row(row);
+}
+
+/// The faults of a pump active at time `t` (cooling failures switch models at thermal steps).
+struct ActiveFaults {
+  bool dropped_window = false, stale = false, stuck = false;
+  double drop_probability = 0.0;
+};
+
+ActiveFaults FaultsAt(const PumpSpec& spec, double t) {
+  ActiveFaults a;
+  for (const Fault& f : spec.faults) {
+    if (t < f.start_s || t >= f.end_s) continue;
+    switch (f.kind) {
+      case FaultKind::kDroppedFrames:
+        a.dropped_window = true;
+        a.drop_probability = std::max(a.drop_probability, f.probability);
+        break;
+      case FaultKind::kStaleSensor: a.stale = true; break;
+      case FaultKind::kStuckSensor: a.stuck = true; break;
+      case FaultKind::kCoolingFailure: break;
+    }
+  }
+  return a;
+}
+
+/// Encodes a pump's frames of one control step into `pending` (written in time order later): the
+/// current and voltage frames every step, the status frame at the status rate. A frame is dropped
+/// while its bus is off or, in a dropped-frames fault, at random; a stale sensor suppresses the
+/// status frame.
+struct FrameEmitter {
+  const Scenario& sc;
+  FrameLayout& layout;
+  std::vector<PendingFrame>& pending;
+  std::int64_t period_us;
+
+  void ControlStep(PumpState& p, std::uint32_t pump, std::int64_t k, double t, const SetPoint& sp,
+                   const DriveReport& drive, const ActiveFaults& faults, bool status_tick) {
+    const bool off = IsBusOff(p.spec->interface, t);
+    const std::int64_t nominal_us = sc.start_epoch_us + k * period_us + p.phase_us;
+    const std::uint32_t counter = p.fast_counter;
+    p.fast_counter = (p.fast_counter + 1) % 16;
+    for (MessagePlan* plan : {&layout.fast_i, &layout.fast_u, &layout.status}) {
+      std::fill(plan->values.begin(), plan->values.end(), std::nan(""));
+    }
+    const double w_reported = estimators::ElectricalSpeed_rad_per_s(p.motor, p.rep_speed_rpm);
+    for (MessagePlan* plan : {&layout.fast_i, &layout.fast_u}) {
+      layout.Set(*plan, MappingInput::kIdA, p.rep_id_A);
+      layout.Set(*plan, MappingInput::kIqA, p.rep_iq_A);
+      layout.Set(*plan, MappingInput::kUdV, drive.ud_V);
+      layout.Set(*plan, MappingInput::kUqV, drive.uq_V);
+      layout.Set(*plan, MappingInput::kSpeedElecRadPerS, w_reported);
+    }
+    // Frame times: the drive sends I, then U one frame time (about 250 us at 500 kbit/s)
+    // later, then the status; jitter never reorders one pump's frames.
+    const std::int64_t t_i = nominal_us + Jitter(p);
+    const std::int64_t t_u = std::max(t_i + 1, nominal_us + 250 + Jitter(p));
+    Emit(p, pump, layout.fast_i, counter, t_i, 0, off, faults);
+    Emit(p, pump, layout.fast_u, counter, t_u, 1, off, faults);
+    if (!status_tick) return;
+    const std::uint32_t status_counter = p.status_counter;
+    p.status_counter = (p.status_counter + 1) % 16;
+    const std::int64_t t_s = std::max(t_u + 1, nominal_us + 500 + Jitter(p));
+    if (faults.stale) {
+      ++p.summary.frames_suppressed;
+      return;
+    }
+    layout.Set(layout.status, MappingInput::kSpeedMechRpm, p.rep_speed_rpm);
+    layout.Set(layout.status, MappingInput::kDriveState, sp.drive_state);
+    layout.Set(layout.status, MappingInput::kFrameTempDegC, p.frame_reading_degC);
+    layout.Set(layout.status, MappingInput::kAmbientTempDegC, p.ambient_reading_degC);
+    layout.Set(layout.status, MappingInput::kDcLinkV, drive.dc_link_V);
+    Emit(p, pump, layout.status, status_counter, t_s, 2, off, faults);
+  }
+
+ private:
+  std::int64_t Jitter(PumpState& p) const {
+    const double j = sc.jitter_sd_us * p.normal(p.rng_jitter);
+    return static_cast<std::int64_t>(std::llround(std::clamp(j, -sc.jitter_max_us, sc.jitter_max_us)));
+  }
+
+  bool IsBusOff(const std::string& iface, double t) const {
+    for (const BusOff& b : sc.bus_offs) {
+      if ((b.interface.empty() || b.interface == iface) && t >= b.start_s && t < b.end_s) return true;
+    }
+    return false;
+  }
+
+  void Emit(PumpState& p, std::uint32_t pump, MessagePlan& plan, std::uint32_t counter, std::int64_t time_us,
+            std::uint32_t order, bool off, const ActiveFaults& faults) {
+    bool drop = off;
+    if (!drop && faults.dropped_window) drop = p.uniform(p.rng_bus) < faults.drop_probability;
+    if (drop) {
+      ++p.summary.frames_suppressed;
+      return;
+    }
+    if (plan.counter_signal >= 0) plan.values[static_cast<std::size_t>(plan.counter_signal)] = counter;
+    PendingFrame f;
+    f.time_us = time_us;
+    f.pump = pump;
+    f.order = order;
+    f.frame.id = layout.mapping->CanId(*layout.dbc, plan.message_index, p.spec->node_id);
+    f.frame.extended = plan.codec->extended();
+    f.frame.len = static_cast<std::uint8_t>(plan.codec->min_bytes());
+    plan.codec->Encode(plan.values, std::span<std::uint8_t>(f.frame.data.data(), f.frame.len));
+    pending.push_back(f);
+    ++p.summary.frames_written;
+  }
+};
+
+/// The truth's level node at time `t` into the pump's summary: maximum, first warning and trip
+/// crossings, and the intervals above the warning level.
+void RecordLevel(PumpSummary& summary, const TruthLevels& levels, double level, double t) {
+  if (level > summary.max_level_node_degC) {
+    summary.max_level_node_degC = level;
+    summary.max_level_time_s = t;
+  }
+  if (summary.warning_crossed_s < 0.0 && level > levels.warning_degC) summary.warning_crossed_s = t;
+  auto& above = summary.above_warning_s;
+  const bool was_above = !above.empty() && above.back().second < 0.0;
+  if (!was_above && level > levels.warning_degC) above.emplace_back(t, -1.0);
+  if (was_above && !(level > levels.warning_degC)) above.back().second = t;
+  if (summary.trip_crossed_s < 0.0 && level > levels.trip_degC) summary.trip_crossed_s = t;
+}
+
+/// End of a thermal period: one exact zero-order-hold step of the truth with the latched inputs
+/// plus process noise; a cooling fault active at `t_next_s` takes effect from the next step.
+void AdvanceTruth(PumpState& p, double thermal_dt_s, double t_next_s) {
+  const PumpSpec& spec = *p.spec;
+  p.model().Linearise(p.held, p.x, p.lin);
+  p.disc->Update(p.lin, thermal_dt_s);
+  p.disc->Propagate(p.x, p.lin, p.next);
+  const double sd = spec.process_noise_K * std::sqrt(thermal_dt_s);
+  for (Eigen::Index i = 0; i < p.next.size(); ++i) p.next(i) += sd * p.normal(p.rng_thermal);
+  p.x = p.next;
+  int model_next = 0;
+  for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
+    const Fault& f = spec.faults[fi];
+    if (f.kind == FaultKind::kCoolingFailure && t_next_s >= f.start_s && t_next_s < f.end_s) {
+      model_next = p.model_of_fault[fi];
+    }
+  }
+  if (model_next != p.active_model) {
+    p.active_model = model_next;
+    p.disc = std::make_unique<estimators::ThermalDiscretiser>(1e-4);
+  }
+}
+
 }  // namespace
 
 std::string ScaleEdgeResistance(std::string_view model_text, const std::string& source,
@@ -227,41 +702,8 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   if (ec) throw std::system_error(ec, fmt::format("creating output directory '{}'", out_dir));
 
   // Frame layout, only for scenarios that write a log.
-  std::optional<protocol::Dbc> dbc;
-  std::optional<protocol::DbcCodec> codecs;
-  std::optional<protocol::SignalMapping> mapping;
-  MessagePlan fast_i, fast_u, status;
-  std::array<InputSlot, protocol::kMappingInputCount> slots{};
-  if (sc.can_log) {
-    try {
-      dbc = protocol::ParseDbc(res.dbc.text, res.dbc.source);
-      mapping = protocol::ParseMapping(res.mapping.text, res.mapping.source, *dbc);
-    } catch (const std::exception& e) {
-      throw ScenarioError(e.what());
-    }
-    codecs.emplace(*dbc);
-    for (std::size_t i = 0; i < protocol::kMappingInputCount; ++i) {
-      if (const auto& ref = mapping->inputs[i]) {
-        slots[i] = InputSlot{ref->message_index, ref->signal_index, ref->scale, ref->offset};
-      }
-    }
-    auto plan_of = [&](MappingInput in, std::string_view what) {
-      const auto& ref = mapping->input(in);
-      if (!ref) {
-        throw ScenarioError(fmt::format("{}: the mapping does not bind {}, which the plant sends",
-                                        res.mapping.source, what));
-      }
-      MessagePlan p;
-      p.message_index = ref->message_index;
-      p.codec = &codecs->message(static_cast<std::size_t>(ref->message_index));
-      p.values.assign(p.codec->signal_count(), std::nan(""));
-      p.counter_signal = dbc->messages[static_cast<std::size_t>(ref->message_index)].FindSignal("RollingCounter");
-      return p;
-    };
-    fast_i = plan_of(MappingInput::kIqA, "iq_A");
-    fast_u = plan_of(MappingInput::kUqV, "uq_V");
-    status = plan_of(MappingInput::kFrameTempDegC, "frame_temp_degC");
-  }
+  FrameLayout layout;
+  if (sc.can_log) LoadFrameLayout(res, layout);
 
   // Pumps.
   const bool electrical = sc.can_log;
@@ -275,129 +717,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   const double thermal_dt_s = static_cast<double>(thermal_every) * step_s;
 
   std::vector<std::unique_ptr<PumpState>> pumps;
-  for (std::size_t pi = 0; pi < sc.pumps.size(); ++pi) {
-    const PumpSpec& spec = sc.pumps[pi];
-    auto ps = std::make_unique<PumpState>();
-    ps->spec = &spec;
-    const std::string where = fmt::format("{}:{}: pump '{}'", sc.source, spec.line, spec.name);
-    // Motor: a preset or a file.
-    try {
-      if (!estimators::MotorPresetText(spec.motor).empty()) {
-        ps->motor = estimators::MotorPreset(spec.motor);
-      } else {
-        const LoadedText t = res.motor_file(spec.motor);
-        ps->motor = estimators::ParseMotorDescription(t.text, t.source);
-      }
-    } catch (const std::exception& e) {
-      throw ScenarioError(fmt::format("{}: motor '{}': {}", where, spec.motor, e.what()));
-    }
-    // Truth model, and the variants its cooling faults switch to.
-    LoadedText model_text;
-    try {
-      model_text = res.model(spec.model);
-      // Tables the model names are read relative to the model file.
-      const std::size_t slash = model_text.source.rfind('/');
-      const estimators::ThermalModelFiles files{
-          slash == std::string::npos ? std::string(".") : model_text.source.substr(0, slash), res.read_file};
-      if (!spec.effects.empty()) {
-        // Hidden effects: the truth is the model with the workflow's effects added.
-        model_text.text = estimators::ApplyModelEffects(model_text.text, model_text.source, spec.effects);
-        for (const auto& e : spec.effects) {
-          model_text.source += fmt::format(" +{}", e.name);
-        }
-      }
-      ps->models.push_back(
-          std::make_unique<ThermalModel>(ThermalModel::Parse(model_text.text, model_text.source, files)));
-      for (const Fault& f : spec.faults) {
-        if (f.kind != FaultKind::kCoolingFailure) {
-          ps->model_of_fault.push_back(-1);
-          continue;
-        }
-        const std::string scaled = ScaleEdgeResistance(model_text.text, model_text.source, f.edge, f.factor);
-        ps->models.push_back(std::make_unique<ThermalModel>(ThermalModel::Parse(
-            scaled, fmt::format("{} (edge {} x {})", model_text.source, f.edge, f.factor), files)));
-        ps->model_of_fault.push_back(static_cast<int>(ps->models.size()) - 1);
-      }
-    } catch (const std::exception& e) {
-      throw ScenarioError(fmt::format("{}: model '{}': {}", where, spec.model, e.what()));
-    }
-    const ThermalModel& m = *ps->models[0];
-    if (m.UsesCoolant()) {
-      throw ScenarioError(fmt::format("{}: model '{}' has a coolant boundary; the plant drives only "
-                                      "'ambient' (map the coolant to ambient in the model file)",
-                                      where, spec.model));
-    }
-    auto node_index = [&](const std::string& name) {
-      const auto& nodes = m.Nodes();
-      for (std::size_t i = 0; i < nodes.size(); ++i) {
-        if (nodes[i].name == name) return static_cast<int>(i);
-      }
-      std::string list;
-      for (const auto& n : nodes) list += (list.empty() ? "" : ", ") + n.name;
-      throw ScenarioError(fmt::format("{}: model '{}' has no node '{}' (nodes: {})", where,
-                                      spec.model, name, list));
-    };
-    ps->frame_node = node_index(spec.frame_sensor.node);
-    if (sc.levels.node != kWindingResistanceLevel) ps->level_node = node_index(sc.levels.node);
-    ps->winding_weights = m.WindingWeights();
-    if (ps->winding_weights.sum() <= 0.0 && (electrical || sc.levels.node == kWindingResistanceLevel)) {
-      throw ScenarioError(fmt::format("{}: model '{}' has no temperature-dependent copper loss, so "
-                                      "it defines no winding temperature",
-                                      where, spec.model));
-    }
-    if (!spec.drive.magnet_node.empty()) {
-      ps->magnet_state = m.StateIndex(spec.drive.magnet_node);
-      if (ps->magnet_state < 0) {
-        throw ScenarioError(fmt::format("{}: drive.magnet_node '{}' is not a node with heat capacity "
-                                        "in model '{}'",
-                                        where, spec.drive.magnet_node, spec.model));
-      }
-    }
-    ps->rng_drive.seed(Mix(sc.seed, pi, 1));
-    ps->rng_thermal.seed(Mix(sc.seed, pi, 2));
-    ps->rng_bus.seed(Mix(sc.seed, pi, 3));
-    ps->rng_jitter.seed(Mix(sc.seed, pi, 4));
-    std::mt19937_64 rng_setup(Mix(sc.seed, pi, 5));
-    std::uniform_real_distribution<double> unit(0.0, 1.0);
-    ps->offset_phase_rad = 2.0 * std::numbers::pi * unit(rng_setup);
-    ps->phase_us = static_cast<std::int64_t>(unit(rng_setup) * (sc.fast_period_s * 1e6 - 1000.0));
-    auto sensor_config = [&](const TemperatureSensorSpec& s) {
-      sim::SensorConfig c;
-      c.noise_sd = s.noise_sd_K;
-      c.offset = std::isnan(s.offset_K) ? s.accuracy_K * (2.0 * unit(rng_setup) - 1.0) : s.offset_K;
-      c.lsb = s.resolution_K;
-      c.min = -50.0;  // the DBC's FrameTemp_degC / AmbientTemp_degC range
-      c.max = 359.4;
-      c.lag_tau_s = s.lag_s;
-      return c;
-    };
-    ps->frame_sensor.emplace(sensor_config(spec.frame_sensor), Mix(sc.seed, pi, 6));
-    ps->ambient_sensor.emplace(sensor_config(spec.ambient_sensor), Mix(sc.seed, pi, 7));
-    ps->profile.emplace(spec);
-    const double x0 = std::isnan(spec.initial_degC) ? spec.ambient_degC : spec.initial_degC;
-    ps->x = Eigen::VectorXd::Constant(m.StateCount(), x0);
-    ps->next.resize(m.StateCount());
-    ps->disc = std::make_unique<estimators::ThermalDiscretiser>(1e-4);
-    ps->summary.name = spec.name;
-    ps->summary.interface = spec.interface;
-    ps->summary.node_id = spec.node_id;
-    ps->summary.max_level_node_degC = -1e300;
-    for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
-      const Fault& f = spec.faults[fi];
-      if (f.kind == FaultKind::kCoolingFailure && f.start_s <= 0.0) ps->active_model = ps->model_of_fault[fi];
-    }
-
-    std::vector<std::string> tcols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C"};
-    for (const auto& n : m.Nodes()) tcols.push_back(n.name + "_C");
-    tcols.insert(tcols.end(), {"winding_resistance_C", "resistance_ohm", "flux_Wb"});
-    for (const auto& n : m.Nodes()) tcols.push_back("loss_" + n.name + "_W");
-    tcols.insert(tcols.end(), {"loss_total_W", "cooling_model", "drive_state"});
-    ps->truth = std::make_unique<tools::CsvWriter>((fs::path(out_dir) / (spec.name + ".truth.csv")).string(), tcols);
-    ps->measured = std::make_unique<tools::CsvWriter>(
-        (fs::path(out_dir) / (spec.name + ".measured.csv")).string(),
-        std::vector<std::string>{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C", spec.frame_sensor.node + "_C"});
-    pumps.push_back(std::move(ps));
-  }
+  for (std::size_t pi = 0; pi < sc.pumps.size(); ++pi) pumps.push_back(SetUpPump(sc, res, pi, out_dir));
 
   // Log file.
   PlantResult result;
@@ -437,21 +757,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
 
   const std::int64_t period_us = std::llround(sc.fast_period_s * 1e6);
   const auto jitter_max_us = static_cast<std::int64_t>(sc.jitter_max_us);
-  auto jitter = [&](PumpState& p) {
-    const double j = sc.jitter_sd_us * p.normal(p.rng_jitter);
-    return static_cast<std::int64_t>(std::llround(std::clamp(j, -sc.jitter_max_us, sc.jitter_max_us)));
-  };
-  auto bus_off = [&](const std::string& iface, double t) {
-    for (const BusOff& b : sc.bus_offs) {
-      if ((b.interface.empty() || b.interface == iface) && t >= b.start_s && t < b.end_s) return true;
-    }
-    return false;
-  };
-  auto set_value = [&](MessagePlan& plan, MappingInput in, double v) {
-    const InputSlot& s = slots[static_cast<std::size_t>(in)];
-    if (s.message_index != plan.message_index) return;  // mapped to another message
-    plan.values[static_cast<std::size_t>(s.signal_index)] = (v - s.offset) / s.scale;
-  };
+  FrameEmitter frames{sc, layout, pending, period_us};
 
   int last_percent = -1;
   for (std::int64_t k = 0; k < steps; ++k) {
@@ -461,153 +767,27 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       const PumpSpec& spec = *p.spec;
       const SetPoint sp = p.profile->At(t);
 
-      // Faults active now.
-      bool dropped_window = false, stale = false, stuck_now = false;
-      double drop_probability = 0.0;
-      for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
-        const Fault& f = spec.faults[fi];
-        if (t < f.start_s || t >= f.end_s) continue;
-        switch (f.kind) {
-          case FaultKind::kDroppedFrames:
-            dropped_window = true;
-            drop_probability = std::max(drop_probability, f.probability);
-            break;
-          case FaultKind::kStaleSensor: stale = true; break;
-          case FaultKind::kStuckSensor: stuck_now = true; break;
-          case FaultKind::kCoolingFailure: break;  // switches models at thermal steps
-        }
-      }
+      const ActiveFaults faults = FaultsAt(spec, t);
 
       // Thermal truth: one exact ZOH step at the end of each thermal period (below); at its
       // start the inputs are latched.
       const ThermalModel& m = p.model();
-      ThermalInputs in;
-      // The drive's current loop: first order towards the set point.
       const double iq_prev = p.iq_A, id_prev = p.id_A;
-      if (!electrical || k == 0) {
-        p.iq_A = sp.iq_A;
-        p.id_A = sp.id_A;
-      } else {
-        const double a = 1.0 - std::exp(-step_s / spec.drive.current_response_s);
-        p.iq_A += (sp.iq_A - p.iq_A) * a;
-        p.id_A += (sp.id_A - p.id_A) * a;
-      }
-      in.speed_rpm = sp.speed_rpm;
-      in.iq_A = p.iq_A;
-      in.id_A = p.id_A;
-      in.ambient_degC = sp.ambient_degC;
-      in.coolant_degC = sp.ambient_degC;
+      const ThermalInputs in = FollowSetPoint(p, sp, electrical && k > 0, step_s);
       if (k % thermal_every == 0) p.held = in;
 
       const double winding_degC = p.winding_weights.dot(p.x);
       const double rs_ohm = estimators::ResistanceAt(p.motor.copper, winding_degC);
-      double flux_Wb = p.motor.flux_Wb;
-      if (p.magnet_state >= 0) {
-        // Relative to the flux at the motor's magnet reference (its copper T0 when the motor
-        // file states no magnet law); the coefficient is the scenario's: the truth's magnet.
-        const double t0_degC = p.motor.magnet.Given() ? p.motor.magnet.t0_degC : p.motor.copper.t0_degC;
-        flux_Wb *= 1.0 + spec.drive.flux_temperature_coefficient_per_K * (p.x(p.magnet_state) - t0_degC);
-      }
+      const double flux_Wb = TrueFlux_Wb(p);
 
       // Sensors, sampled at the status rate (every thermal step in a thermal-only run).
-      const bool status_tick = !electrical || k % status_every == 0;
-      if (status_tick) {
-        const double dt_s = electrical ? sc.status_period_s : step_s;
-        const double frame_true = m.AllTemperatures_degC(in, p.x)(p.frame_node);
-        double reading = p.frame_sensor->Measure(frame_true, k == 0 ? 0.0 : dt_s);
-        p.frame_lagged_degC = p.frame_sensor->lagged();
-        if (stuck_now && !p.stuck) p.stuck_degC = p.frame_reading_degC;
-        p.stuck = stuck_now;
-        if (k == 0 && stuck_now) p.stuck_degC = reading;
-        p.frame_reading_degC = p.stuck ? p.stuck_degC : reading;
-        p.ambient_reading_degC = p.ambient_sensor->Measure(sp.ambient_degC, k == 0 ? 0.0 : dt_s);
+      if (!electrical || k % status_every == 0) {
+        SampleSensors(p, in, sp.ambient_degC, faults.stuck, k == 0 ? 0.0 : electrical ? sc.status_period_s : step_s);
       }
 
       if (electrical) {
-        // Han 2019 eq. 4 (dq voltage equations of the SPMSM), true values.
-        const auto& motor = p.motor;
-        const double w = estimators::ElectricalSpeed_rad_per_s(motor, sp.speed_rpm);
-        const double diq = k == 0 ? 0.0 : (p.iq_A - iq_prev) / step_s;
-        const double did = k == 0 ? 0.0 : (p.id_A - id_prev) / step_s;
-        double uq = rs_ohm * p.iq_A + motor.inductance_H * diq + w * (motor.inductance_H * p.id_A + flux_Wb);
-        double ud = rs_ohm * p.id_A + motor.inductance_H * did - motor.inductance_H * w * p.iq_A;
-        if (spec.drive.dead_time_V > 0.0) {
-          const double mag = std::hypot(p.id_A, p.iq_A);
-          if (mag > 0.0) {
-            const double e = spec.drive.dead_time_V * std::tanh(mag / spec.drive.dead_time_knee_A) / mag;
-            uq += e * p.iq_A;
-            ud += e * p.id_A;
-          }
-        }
-        p.angle_rad = std::fmod(p.angle_rad + w * step_s, 2.0 * std::numbers::pi);
-        const double i_lsb = 2.0 * spec.drive.current_range_A / 4096.0;
-        const double u_lsb = 2.0 * spec.drive.dc_link_V / 4096.0;
-        const double ripple_q = spec.drive.phase_offset_A * std::cos(p.angle_rad + p.offset_phase_rad);
-        const double ripple_d = spec.drive.phase_offset_A * std::sin(p.angle_rad + p.offset_phase_rad);
-        const double range = spec.drive.current_range_A;
-        p.rep_id_A = sim::Quantise(p.id_A + ripple_d + p.Noise(spec.drive.current_noise_A), i_lsb, -range, range);
-        p.rep_iq_A = sim::Quantise(p.iq_A + ripple_q + p.Noise(spec.drive.current_noise_A), i_lsb, -range, range);
-        const double rep_ud = sim::Quantise(ud + p.Noise(spec.drive.voltage_noise_V), u_lsb,
-                                            -spec.drive.dc_link_V, spec.drive.dc_link_V);
-        const double rep_uq = sim::Quantise(uq + p.Noise(spec.drive.voltage_noise_V), u_lsb,
-                                            -spec.drive.dc_link_V, spec.drive.dc_link_V);
-        p.rep_speed_rpm = sp.speed_rpm > 0.0 ? std::max(0.0, sp.speed_rpm + p.Noise(spec.drive.speed_noise_rpm)) : 0.0;
-        const double dc_link = spec.drive.dc_link_V + p.Noise(spec.drive.dc_link_noise_V);
-
-        // Frames of this control step.
-        const bool off = bus_off(spec.interface, t);
-        const std::int64_t nominal_us = sc.start_epoch_us + k * period_us + p.phase_us;
-        auto emit = [&](MessagePlan& plan, std::uint32_t counter, std::int64_t time_us, std::uint32_t order) {
-          bool drop = off;
-          if (!drop && dropped_window) drop = p.uniform(p.rng_bus) < drop_probability;
-          if (drop) {
-            ++p.summary.frames_suppressed;
-            return;
-          }
-          if (plan.counter_signal >= 0) plan.values[static_cast<std::size_t>(plan.counter_signal)] = counter;
-          PendingFrame f;
-          f.time_us = time_us;
-          f.pump = static_cast<std::uint32_t>(pi);
-          f.order = order;
-          f.frame.id = mapping->CanId(*dbc, plan.message_index, spec.node_id);
-          f.frame.extended = plan.codec->extended();
-          f.frame.len = static_cast<std::uint8_t>(plan.codec->min_bytes());
-          plan.codec->Encode(plan.values, std::span<std::uint8_t>(f.frame.data.data(), f.frame.len));
-          pending.push_back(f);
-          ++p.summary.frames_written;
-        };
-        const std::uint32_t counter = p.fast_counter;
-        p.fast_counter = (p.fast_counter + 1) % 16;
-        for (MessagePlan* plan : {&fast_i, &fast_u, &status}) std::fill(plan->values.begin(), plan->values.end(), std::nan(""));
-        const double w_reported = estimators::ElectricalSpeed_rad_per_s(motor, p.rep_speed_rpm);
-        for (MessagePlan* plan : {&fast_i, &fast_u}) {
-          set_value(*plan, MappingInput::kIdA, p.rep_id_A);
-          set_value(*plan, MappingInput::kIqA, p.rep_iq_A);
-          set_value(*plan, MappingInput::kUdV, rep_ud);
-          set_value(*plan, MappingInput::kUqV, rep_uq);
-          set_value(*plan, MappingInput::kSpeedElecRadPerS, w_reported);
-        }
-        // Frame times: the drive sends I, then U one frame time (about 250 us at 500 kbit/s)
-        // later, then the status; jitter never reorders one pump's frames.
-        const std::int64_t t_i = nominal_us + jitter(p);
-        const std::int64_t t_u = std::max(t_i + 1, nominal_us + 250 + jitter(p));
-        emit(fast_i, counter, t_i, 0);
-        emit(fast_u, counter, t_u, 1);
-        if (k % status_every == 0) {
-          const std::uint32_t sc_counter = p.status_counter;
-          p.status_counter = (p.status_counter + 1) % 16;
-          const std::int64_t t_s = std::max(t_u + 1, nominal_us + 500 + jitter(p));
-          if (stale) {
-            ++p.summary.frames_suppressed;
-          } else {
-            set_value(status, MappingInput::kSpeedMechRpm, p.rep_speed_rpm);
-            set_value(status, MappingInput::kDriveState, sp.drive_state);
-            set_value(status, MappingInput::kFrameTempDegC, p.frame_reading_degC);
-            set_value(status, MappingInput::kAmbientTempDegC, p.ambient_reading_degC);
-            set_value(status, MappingInput::kDcLinkV, dc_link);
-            emit(status, sc_counter, t_s, 2);
-          }
-        }
+        const DriveReport drive = ReportDrive(p, sp, rs_ohm, flux_Wb, k == 0, iq_prev, id_prev, step_s);
+        frames.ControlStep(p, static_cast<std::uint32_t>(pi), k, t, sp, drive, faults, k % status_every == 0);
       } else {
         p.rep_id_A = sp.id_A;
         p.rep_iq_A = sp.iq_A;
@@ -617,54 +797,16 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       // Truth level summary (every thermal step).
       if (k % thermal_every == 0) {
         const double level = p.level_node < 0 ? winding_degC : m.AllTemperatures_degC(in, p.x)(p.level_node);
-        if (level > p.summary.max_level_node_degC) {
-          p.summary.max_level_node_degC = level;
-          p.summary.max_level_time_s = t;
-        }
-        if (p.summary.warning_crossed_s < 0.0 && level > sc.levels.warning_degC) p.summary.warning_crossed_s = t;
-        auto& above = p.summary.above_warning_s;
-        const bool was_above = !above.empty() && above.back().second < 0.0;
-        if (!was_above && level > sc.levels.warning_degC) above.emplace_back(t, -1.0);
-        if (was_above && !(level > sc.levels.warning_degC)) above.back().second = t;
-        if (p.summary.trip_crossed_s < 0.0 && level > sc.levels.trip_degC) p.summary.trip_crossed_s = t;
+        RecordLevel(p.summary, sc.levels, level, t);
       }
-      if (k % truth_every == 0) {
-        const Eigen::VectorXd all = m.AllTemperatures_degC(in, p.x);
-        const Eigen::VectorXd losses = m.NodeLosses_W(in, p.x);
-        std::vector<double> row{t, sp.speed_rpm, p.id_A, p.iq_A, sp.ambient_degC};
-        for (Eigen::Index i = 0; i < all.size(); ++i) row.push_back(all(i));
-        row.insert(row.end(), {winding_degC, rs_ohm, flux_Wb});
-        for (Eigen::Index i = 0; i < losses.size(); ++i) row.push_back(losses(i));
-        row.insert(row.end(), {losses.sum(), static_cast<double>(p.active_model), static_cast<double>(sp.drive_state)});
-        p.truth->Row(row);
-      }
+      if (k % truth_every == 0) WriteTruthRow(p, in, sp, t, {winding_degC, rs_ohm, flux_Wb});
       if (k % measured_every == 0) {
         p.measured->Row({t, p.rep_speed_rpm, p.rep_id_A, p.rep_iq_A, p.ambient_reading_degC,
-                         stale ? std::nan("") : p.frame_reading_degC});
+                         faults.stale ? std::nan("") : p.frame_reading_degC});
       }
 
       // End of a thermal period: advance the truth with the latched inputs.
-      if ((k + 1) % thermal_every == 0) {
-        m.Linearise(p.held, p.x, p.lin);
-        p.disc->Update(p.lin, thermal_dt_s);
-        p.disc->Propagate(p.x, p.lin, p.next);
-        const double sd = spec.process_noise_K * std::sqrt(thermal_dt_s);
-        for (Eigen::Index i = 0; i < p.next.size(); ++i) p.next(i) += sd * p.normal(p.rng_thermal);
-        p.x = p.next;
-        // A cooling fault takes effect from the next thermal step.
-        const double t_next = static_cast<double>(k + 1) * step_s;
-        int model_next = 0;
-        for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
-          const Fault& f = spec.faults[fi];
-          if (f.kind == FaultKind::kCoolingFailure && t_next >= f.start_s && t_next < f.end_s) {
-            model_next = p.model_of_fault[fi];
-          }
-        }
-        if (model_next != p.active_model) {
-          p.active_model = model_next;
-          p.disc = std::make_unique<estimators::ThermalDiscretiser>(1e-4);
-        }
-      }
+      if ((k + 1) % thermal_every == 0) AdvanceTruth(p, thermal_dt_s, static_cast<double>(k + 1) * step_s);
     }
     if (electrical && (k % 100 == 99 || k + 1 == steps)) {
       write_until(k + 1 == steps ? INT64_MAX
@@ -690,38 +832,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
     if (rc != 0) throw std::system_error(errno, std::generic_category(), fmt::format("closing '{}'", result.log_path));
   }
 
-  // summary.json
-  const std::string summary_path = (fs::path(out_dir) / "summary.json").string();
-  std::string json = fmt::format(
-      "{{\n  \"scenario\": \"{}\",\n  \"seed\": {},\n  \"duration_s\": {},\n  \"log\": \"{}\",\n"
-      "  \"frames_written\": {},\n  \"levels\": {{\"node\": \"{}\", \"warning_C\": {}, \"trip_C\": {}}},\n"
-      "  \"pumps\": [\n",
-      sc.name, sc.seed, sc.duration_s, result.log_path.empty() ? "" : fs::path(result.log_path).filename().string(),
-      result.frames_written, sc.levels.node, sc.levels.warning_degC, sc.levels.trip_degC);
-  for (std::size_t i = 0; i < result.pumps.size(); ++i) {
-    const PumpSummary& s = result.pumps[i];
-    auto opt = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{}", v); };
-    std::string above;
-    for (const auto& [a, b] : s.above_warning_s) {
-      auto at = [](double v) { return v < 0.0 ? std::string("null") : fmt::format("{:.2f}", v); };
-      above += fmt::format("{}[{}, {}]", above.empty() ? "" : ", ", at(a), at(b));
-    }
-    json += fmt::format(
-        "    {{\"name\": \"{}\", \"interface\": \"{}\", \"node_id\": {}, \"truth\": \"{}.truth.csv\", "
-        "\"measured\": \"{}.measured.csv\", \"max_C\": {:.3f}, \"max_time_s\": {}, "
-        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"above_warning_s\": [{}], \"frames_written\": {}, "
-        "\"frames_suppressed\": {}}}{}\n",
-        s.name, s.interface, s.node_id, s.name, s.name, s.max_level_node_degC, s.max_level_time_s,
-        opt(s.warning_crossed_s), opt(s.trip_crossed_s), above, s.frames_written, s.frames_suppressed,
-        i + 1 < result.pumps.size() ? "," : "");
-  }
-  json += "  ]\n}\n";
-  std::FILE* f = std::fopen(summary_path.c_str(), "wb");
-  if (f == nullptr) throw std::system_error(errno, std::generic_category(), fmt::format("opening '{}'", summary_path));
-  const bool ok = std::fwrite(json.data(), 1, json.size(), f) == json.size();
-  if (std::fclose(f) != 0 || !ok) {
-    throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", summary_path));
-  }
+  WriteSummaryJson(out_dir, sc, result);
   return result;
 }
 

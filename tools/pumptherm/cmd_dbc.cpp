@@ -16,8 +16,8 @@
 
 #include "protocol/candump_log.hpp"
 #include "protocol/codec.hpp"
-#include "daemon/resources.hpp"
 #include "protocol/dbc.hpp"
+#include "shipped/shipped_files.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
 namespace pumptherm::tools {
@@ -40,7 +40,7 @@ std::string ReadWholeFile(const std::string& path) {
 Dbc LoadDbc(const std::string& reference) {
   std::string path;
   try {
-    path = daemon::ResolveResource(daemon::ResourceKind::kDbc, reference);
+    path = shipped::Resolve(shipped::FileKind::kDbc, reference);
   } catch (const std::runtime_error& e) {
     throw InputError(e.what());
   }

@@ -1,6 +1,6 @@
 // pumptherm discrepancy: find where a thermal model's simulation disagrees with measured data,
-// name the missing effect, add it, show the gap shrink on data it did not fit (issue 7;
-// docs/discrepancy.md).
+// name the missing effect, add it, show the gap shrink on data it did not fit
+// (docs/discrepancy.md).
 #include <fmt/core.h>
 #include <unistd.h>
 
@@ -55,14 +55,14 @@ int RunDiscrepancy(const DiscrepancyOptions& o) {
   discrepancy::Result r;
   try {
     r = discrepancy::Run(text, path, train, validate, opt,
-                         estimators::ThermalModelFiles{daemon::DirectoryOf(path), &daemon::ReadTextFile});
+                         estimators::ThermalModelFiles{shipped::DirectoryOf(path), &shipped::ReadTextFile});
   } catch (const estimators::ThermalModelError& e) {
     throw InputError(e.what());
   } catch (const std::invalid_argument& e) {
     throw InputError(e.what());
   }
   discrepancy::ReportContext context;
-  context.input_model_toml = estimators::ApplyModelEffects(text, path, {}, daemon::DirectoryOf(path));
+  context.input_model_toml = estimators::ApplyModelEffects(text, path, {}, shipped::DirectoryOf(path));
   context.options = opt;
   context.validate = &validate;
   discrepancy::WriteReport(o.out, r, o.model, o.train, o.validate, context);

@@ -8,6 +8,7 @@
 
 #include "estimators/kalman_virtual_sensor.hpp"
 #include "tools/common/csv.hpp"
+#include "tools/common/thermal_input_series.hpp"
 #include "tools/pumptherm/model_files.hpp"
 #include "tools/pumptherm/recording.hpp"
 #include "tools/pumptherm/thermal_columns.hpp"
@@ -49,7 +50,8 @@ int RunEstimate(EstimateOptions& o) {
       o.config.measured_nodes.push_back(node);
     }
   }
-  std::vector<double> t, speed, id, iq, amb, cool, winding, magnet;
+  ThermalInputSeries series;
+  std::vector<double> winding, magnet;
   std::vector<std::vector<double>> measured;
   Eigen::VectorXd x_first;
   if (o.interpolation != "hold" && o.interpolation != "linear") {
@@ -65,24 +67,20 @@ int RunEstimate(EstimateOptions& o) {
     if (o.input.empty() == o.recording.log.empty()) throw InputError("give --input CSV or --log RECORDING");
     const CsvTable csv = o.input.empty() ? CsvTable::Parse(RecordingToCsv(o.recording, nullptr), o.recording.log)
                                          : CsvTable::Read(o.input);
-    auto col = [&](const std::string& standard) { return csv.Column(InputColumn(o.columns, standard)); };
-    t = csv.Time();
-    speed = col("speed_rpm");
-    id = col("id_A");
-    iq = col("iq_A");
-    amb = col("ambient_C");
-    cool = model.UsesCoolant() ? col("coolant_C") : amb;
+    series = ReadThermalInputs(
+        csv, {[&](const std::string& standard) { return InputColumn(o.columns, standard); }, model.UsesCoolant()});
     for (const auto& node : o.config.measured_nodes) {
       measured.push_back(csv.ColumnAllowingNaN(InputColumn(o.columns, node + "_C")));
     }
-    if (!t.empty() && o.initial == "first-row" && std::isnan(o.initial_degC)) {
-      x_first = InitialTemperatures_degC(model, csv, o.columns, o.initial, o.initial_degC, amb[0]);
+    if (series.size() > 0 && o.initial == "first-row" && std::isnan(o.initial_degC)) {
+      x_first = InitialTemperatures_degC(model, csv, o.columns, o.initial, o.initial_degC, series.ambient_degC[0]);
     }
     if (!o.winding_column.empty()) winding = csv.ColumnAllowingNaN(o.winding_column);
     if (!o.magnet_column.empty()) magnet = csv.ColumnAllowingNaN(o.magnet_column);
   } catch (const CsvError& e) {
     throw InputError(e.what());
   }
+  const std::vector<double>& t = series.time_s;
   if (t.empty()) throw InputError(fmt::format("{}: no data rows", o.input.empty() ? o.recording.log : o.input));
   const int magnet_state = magnet.empty() ? -1 : model.StateIndex(o.magnet_node);
   if (!magnet.empty() && magnet_state < 0) {
@@ -92,21 +90,8 @@ int RunEstimate(EstimateOptions& o) {
   if (!(o.magnet_sd_K > 0.0) || !std::isfinite(o.magnet_sd_K)) {
     throw InputError("--magnet-sd-K: must be a positive finite number");
   }
-  auto inputs = [&](std::size_t k) {
-    estimators::ThermalInputs in;
-    in.speed_rpm = speed[k];
-    in.id_A = id[k];
-    in.iq_A = iq[k];
-    in.ambient_degC = amb[k];
-    in.coolant_degC = cool[k];
-    return in;
-  };
-  // Inputs a fraction w of the way from row k-1 to row k (held at row k-1 unless linear).
-  auto between = [&](std::size_t k, double w) {
-    const estimators::ThermalInputs a = inputs(k - 1);
-    if (o.interpolation == "hold") return a;
-    return estimators::InterpolateInputs(a, inputs(k), w);
-  };
+  // Between rows: the earlier row's inputs held, or interpolated linearly.
+  const bool linear = o.interpolation == "linear";
   estimators::VirtualThermalSensor vts(model, o.config);
   const int n = model.StateCount();
   const std::size_t m = measured.size();
@@ -122,7 +107,7 @@ int RunEstimate(EstimateOptions& o) {
         ++count;
       }
     }
-    x0 = count > 0 ? sum / count : amb[0];
+    x0 = count > 0 ? sum / count : series.ambient_degC[0];
   }
   vts.Initialise(x_first.size() == n ? x_first : Eigen::VectorXd::Constant(n, x0));
 
@@ -153,11 +138,11 @@ int RunEstimate(EstimateOptions& o) {
       const int steps =
           o.max_step_s > 0.0 ? std::max(1, static_cast<int>(std::ceil(dt_s / o.max_step_s - 1e-9))) : 1;
       for (int j = 0; j + 1 < steps; ++j) {
-        vts.Step(between(k, static_cast<double>(j) / steps), dt_s / steps, no_measurement, none);
+        vts.Step(series.Between(k, static_cast<double>(j) / steps, linear), dt_s / steps, no_measurement, none);
       }
-      rep = vts.Step(between(k, static_cast<double>(steps - 1) / steps), dt_s / steps, y, extra);
+      rep = vts.Step(series.Between(k, static_cast<double>(steps - 1) / steps, linear), dt_s / steps, y, extra);
     }
-    const estimators::ThermalInputs in = inputs(k);
+    const estimators::ThermalInputs in = series.Inputs(k);
     const Eigen::VectorXd all = model.AllTemperatures_degC(in, vts.Estimate_degC());
     const Eigen::MatrixXd jac = model.AllTemperatureJacobian(in);
     const Eigen::VectorXd var = (jac * vts.Covariance_K2() * jac.transpose()).diagonal();
@@ -241,7 +226,7 @@ const SubcommandRegistrar kRegistrar{
       app.footer(
           "Example:\n  pumptherm estimate --model saheba2010-improved --input measured.csv "
           "--measure frame --output est.csv\n"
-          "  pumptherm estimate --model wallscheid2017-4node --columns paderborn --measure "
+          "  pumptherm estimate --model tests/data/models/wallscheid2017-4node.toml --columns paderborn --measure "
           "stator_yoke --input profile46.csv");
       return [o] { return RunEstimate(*o); };
     }};

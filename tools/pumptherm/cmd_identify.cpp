@@ -14,6 +14,7 @@
 #include "estimators/motor.hpp"
 #include "estimators/resistance_identifier.hpp"
 #include "tools/common/csv.hpp"
+#include "tools/pumptherm/model_files.hpp"
 #include "tools/pumptherm/recording.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
@@ -21,24 +22,6 @@ namespace pumptherm::tools {
 namespace {
 
 namespace est = pumptherm::estimators;
-
-// A preset name, or the path of a motor description file (TOML).
-est::MotorDescription LoadMotor(const std::string& file_or_preset) {
-  try {
-    if (!est::MotorPresetText(file_or_preset).empty()) return est::MotorPreset(file_or_preset);
-    std::ifstream in(file_or_preset);
-    if (!in) {
-      throw InputError(fmt::format("{}: cannot open motor description: {} (presets: {})",
-                                   file_or_preset, std::strerror(errno),
-                                   fmt::join(est::MotorPresetNames(), ", ")));
-    }
-    std::stringstream text;
-    text << in.rdbuf();
-    return est::ParseMotorDescription(text.str(), file_or_preset);
-  } catch (const est::MotorDescriptionError& e) {
-    throw InputError(e.what());
-  }
-}
 
 int Run(const std::string& input, const RecordingSource& recording, const std::string& output,
         const std::string& motor_arg, int block_samples, double min_current_A) {

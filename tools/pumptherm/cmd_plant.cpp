@@ -31,45 +31,25 @@ struct PlantOptions {
 };
 
 std::string ReadText(const fs::path& path) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw InputError(fmt::format("cannot read '{}'", path.string()));
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-/// Directories searched for bundled files of kind `sub` ("scenarios"): the installed
-/// share directory beside the executable, then the source tree.
-std::vector<fs::path> SearchDirs(std::string_view sub, const char* source_dir) {
-  std::vector<fs::path> dirs;
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec) dirs.push_back(exe.parent_path() / ".." / "share" / "pumptherm" / sub);
-  dirs.emplace_back(source_dir);
-  return dirs;
-}
-
-fs::path FindBundled(const std::string& name, std::string_view sub, const char* source_dir,
-                     std::string_view what) {
-  std::string tried;
-  for (const fs::path& d : SearchDirs(sub, source_dir)) {
-    const fs::path p = (d / name).lexically_normal();
-    if (fs::exists(p)) return p;
-    tried += "\n  " + p.string();
+  try {
+    return shipped::ReadTextFile(path);
+  } catch (const std::runtime_error& e) {
+    throw InputError(e.what());
   }
-  throw InputError(fmt::format("no bundled {} '{}'; looked for:{}", what, name, tried));
 }
 
+/// A scenario named by path, or a shipped one by name (shipped/shipped_files.hpp).
 fs::path ResolveScenario(const std::string& arg) {
-  if (arg.find('/') != std::string::npos || arg.ends_with(".toml")) {
-    if (!fs::exists(arg)) throw InputError(fmt::format("scenario file '{}' does not exist", arg));
-    return arg;
+  try {
+    return shipped::Resolve(shipped::FileKind::kScenario, arg);
+  } catch (const shipped::FileNotFound& e) {
+    throw InputError(e.what());
   }
-  return FindBundled(arg + ".toml", "scenarios", PUMPTHERM_SCENARIOS_SOURCE_DIR, "scenario");
 }
 
+/// Lists the scenarios of the first shipped scenario directory that exists.
 void ListScenarios() {
-  for (const fs::path& d : SearchDirs("scenarios", PUMPTHERM_SCENARIOS_SOURCE_DIR)) {
+  for (const fs::path d : shipped::SearchDirs(shipped::FileKind::kScenario)) {
     std::error_code ec;
     if (!fs::is_directory(d, ec)) continue;
     std::vector<fs::path> files;
@@ -137,16 +117,16 @@ int RunPlantCommand(const PlantOptions& o) {
     return plant::LoadedText{ReadText(p), p.string()};
   };
   if (sc.can_log) {
-    // The shipped frame layout, found as the daemon finds it (daemon/resources.hpp).
-    auto shipped = [](const char* name) {
+    // The shipped frame layout, found as the daemon finds it (shipped/shipped_files.hpp).
+    auto shipped_dbc = [](const char* name) {
       try {
-        return fs::path(daemon::ResolveResource(daemon::ResourceKind::kDbc, name));
-      } catch (const std::runtime_error& e) {
+        return fs::path(shipped::Resolve(shipped::FileKind::kDbc, name));
+      } catch (const shipped::FileNotFound& e) {
         throw InputError(e.what());
       }
     };
-    const fs::path dbc = o.dbc.empty() ? shipped("pumptherm.dbc") : fs::path(o.dbc);
-    const fs::path map = o.mapping.empty() ? shipped("mapping_pumptherm.toml") : fs::path(o.mapping);
+    const fs::path dbc = o.dbc.empty() ? shipped_dbc("pumptherm.dbc") : fs::path(o.dbc);
+    const fs::path map = o.mapping.empty() ? shipped_dbc("mapping_pumptherm.toml") : fs::path(o.mapping);
     res.dbc = {ReadText(dbc), dbc.string()};
     res.mapping = {ReadText(map), map.string()};
   }

@@ -6,6 +6,7 @@
 
 #include "estimators/thermal_discretisation.hpp"
 #include "tools/common/csv.hpp"
+#include "tools/common/thermal_input_series.hpp"
 #include "tools/pumptherm/model_files.hpp"
 #include "tools/pumptherm/thermal_columns.hpp"
 #include "tools/pumptherm/subcommand.hpp"
@@ -32,37 +33,22 @@ int RunSimulate(const SimulateOptions& o) {
   if (!(o.max_step_s >= 0.0) || !std::isfinite(o.max_step_s)) {
     throw InputError("--max-step-s: must be a finite number >= 0");
   }
-  std::vector<double> t, speed, id, iq, amb, cool;
+  ThermalInputSeries series;
   Eigen::VectorXd x;
   try {
     const CsvTable csv = CsvTable::Read(o.input);
-    auto col = [&](const std::string& standard) { return csv.Column(InputColumn(o.columns, standard)); };
-    t = csv.Time();
-    speed = col("speed_rpm");
-    id = col("id_A");
-    iq = col("iq_A");
-    amb = col("ambient_C");
-    cool = model.UsesCoolant() ? col("coolant_C") : amb;
-    if (!t.empty()) x = InitialTemperatures_degC(model, csv, o.columns, o.initial, o.initial_degC, amb[0]);
+    series = ReadThermalInputs(
+        csv, {[&](const std::string& standard) { return InputColumn(o.columns, standard); }, model.UsesCoolant()});
+    if (series.size() > 0) {
+      x = InitialTemperatures_degC(model, csv, o.columns, o.initial, o.initial_degC, series.ambient_degC[0]);
+    }
   } catch (const CsvError& e) {
     throw InputError(e.what());
   }
+  const std::vector<double>& t = series.time_s;
   if (t.empty()) throw InputError(fmt::format("{}: no data rows", o.input));
-  auto inputs = [&](std::size_t k) {
-    estimators::ThermalInputs in;
-    in.speed_rpm = speed[k];
-    in.id_A = id[k];
-    in.iq_A = iq[k];
-    in.ambient_degC = amb[k];
-    in.coolant_degC = cool[k];
-    return in;
-  };
-  // Inputs a fraction w of the way from row k-1 to row k (held at row k-1 unless linear).
-  auto between = [&](std::size_t k, double w) {
-    const estimators::ThermalInputs a = inputs(k - 1);
-    if (o.interpolation == "hold") return a;
-    return estimators::InterpolateInputs(a, inputs(k), w);
-  };
+  // Between rows: the earlier row's inputs held, or interpolated linearly.
+  const bool linear = o.interpolation == "linear";
   const int n = model.StateCount();
   std::vector<std::string> columns{"time_s"};
   for (const auto& node : model.Nodes()) columns.push_back(node.name + "_C");
@@ -76,13 +62,13 @@ int RunSimulate(const SimulateOptions& o) {
       const double dt_s = t[k] - t[k - 1];
       const int steps = o.max_step_s > 0.0 ? std::max(1, static_cast<int>(std::ceil(dt_s / o.max_step_s - 1e-9))) : 1;
       for (int j = 0; j < steps; ++j) {
-        model.Linearise(between(k, static_cast<double>(j) / steps), x, lin);
+        model.Linearise(series.Between(k, static_cast<double>(j) / steps, linear), x, lin);
         disc.Update(lin, dt_s / steps);
         disc.Propagate(x, lin, next);
         x = next;
       }
     }
-    const Eigen::VectorXd all = model.AllTemperatures_degC(inputs(k), x);
+    const Eigen::VectorXd all = model.AllTemperatures_degC(series.Inputs(k), x);
     row[0] = t[k];
     for (Eigen::Index i = 0; i < all.size(); ++i) row[static_cast<std::size_t>(i) + 1] = all(i);
     out.Row(row);
@@ -121,7 +107,7 @@ const SubcommandRegistrar kRegistrar{
           "Each step is discretised exactly (zero-order hold) with its inputs held over it.\n"
           "Examples:\n  pumptherm simulate --model saheba2010-improved --input profile.csv "
           "--output temps.csv\n"
-          "  pumptherm simulate --model wallscheid2017-4node --columns paderborn --initial first-row "
+          "  pumptherm simulate --model tests/data/models/wallscheid2017-4node.toml --columns paderborn --initial first-row "
           "--input profile46.csv");
       return [o] { return RunSimulate(*o); };
     }};

@@ -9,12 +9,13 @@
 #include <sstream>
 #include <vector>
 
-#include "daemon/resources.hpp"
 #include "estimators/motor.hpp"
 #include "protocol/candump_log.hpp"
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
 #include "protocol/mapping.hpp"
+#include "shipped/shipped_files.hpp"
+#include "tools/pumptherm/model_files.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
 namespace pumptherm::tools {
@@ -33,20 +34,11 @@ struct Half {
   double a = kNaN, b = kNaN, counter = kNaN;
 };
 
-std::string Load(daemon::ResourceKind kind, const std::string& reference, const char* what) {
+std::string Load(shipped::FileKind kind, const std::string& reference, const char* what) {
   try {
-    return daemon::ReadTextFile(daemon::ResolveResource(kind, reference));
+    return shipped::ReadTextFile(shipped::Resolve(kind, reference));
   } catch (const std::exception& e) {
     throw InputError(fmt::format("--{}: {}", what, e.what()));
-  }
-}
-
-estimators::MotorDescription LoadMotor(const std::string& reference) {
-  try {
-    if (!estimators::MotorPresetText(reference).empty()) return estimators::MotorPreset(reference);
-    return estimators::ParseMotorDescription(Load(daemon::ResourceKind::kMotor, reference, "motor"), reference);
-  } catch (const estimators::MotorDescriptionError& e) {
-    throw InputError(e.what());
   }
 }
 
@@ -130,8 +122,8 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
   protocol::Dbc dbc;
   protocol::SignalMapping mapping;
   try {
-    dbc = protocol::ParseDbc(Load(daemon::ResourceKind::kDbc, s.dbc, "dbc"), s.dbc);
-    mapping = protocol::ParseMapping(Load(daemon::ResourceKind::kDbc, s.mapping, "mapping"), s.mapping, dbc);
+    dbc = protocol::ParseDbc(Load(shipped::FileKind::kDbc, s.dbc, "dbc"), s.dbc);
+    mapping = protocol::ParseMapping(Load(shipped::FileKind::kDbc, s.mapping, "mapping"), s.mapping, dbc);
   } catch (const std::exception& e) {
     throw InputError(e.what());
   }

@@ -1,0 +1,88 @@
+#include "shipped/shipped_files.hpp"
+
+#include <fmt/format.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace pumptherm::shipped {
+namespace fs = std::filesystem;
+
+namespace {
+
+struct KindInfo {
+  const char* share_dir;   // under share/pumptherm
+  const char* source_dir;  // under the source tree
+  const char* extension;   // added to a bare name; "" keeps the name as given
+};
+
+KindInfo Info(FileKind kind) {
+  switch (kind) {
+    case FileKind::kModel: return {"models", "estimators/models", ".toml"};
+    case FileKind::kMotor: return {"motors", "estimators/motors", ".toml"};
+    case FileKind::kDbc: return {"dbc", "protocol", ""};
+    case FileKind::kScenario: return {"scenarios", "tools/plant/scenarios", ".toml"};
+  }
+  return {"", "", ""};
+}
+
+bool IsPath(const std::string& reference) {
+  return reference.find('/') != std::string::npos || reference.ends_with(".toml") ||
+         reference.ends_with(".dbc");
+}
+
+std::string WithExtension(const std::string& name, const char* extension) {
+  return !*extension || name.ends_with(extension) ? name : name + extension;
+}
+
+}  // namespace
+
+std::vector<std::string> SearchDirs(FileKind kind) {
+  const KindInfo info = Info(kind);
+  std::vector<std::string> dirs;
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) dirs.push_back((exe.parent_path() / ".." / "share" / "pumptherm" / info.share_dir).lexically_normal());
+  dirs.push_back((fs::path(PUMPTHERM_INSTALL_DATADIR) / "pumptherm" / info.share_dir).lexically_normal());
+  dirs.push_back((fs::path(PUMPTHERM_SOURCE_DIR) / info.source_dir).lexically_normal());
+  return dirs;
+}
+
+std::string Resolve(FileKind kind, const std::string& reference, const std::string& base_dir) {
+  const KindInfo info = Info(kind);
+  std::vector<fs::path> candidates;
+  if (IsPath(reference)) {
+    const fs::path p(reference);
+    candidates.push_back(p.is_absolute() ? p : fs::path(base_dir) / p);
+  }
+  if (reference.find('/') == std::string::npos) {
+    const std::string file = WithExtension(reference, info.extension);
+    for (const std::string& dir : SearchDirs(kind)) candidates.push_back(fs::path(dir) / file);
+  }
+  std::string tried;
+  for (const fs::path& c : candidates) {
+    std::error_code ec;
+    if (fs::is_regular_file(c, ec)) return c.lexically_normal().string();
+    tried += "\n  " + c.lexically_normal().string();
+  }
+  throw FileNotFound(fmt::format("'{}': no such {} file; looked for:{}", reference, info.share_dir, tried));
+}
+
+std::string ReadTextFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error(fmt::format("{}: cannot open: {}", path, std::strerror(errno)));
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) throw std::runtime_error(fmt::format("{}: cannot read: {}", path, std::strerror(errno)));
+  return ss.str();
+}
+
+std::string DirectoryOf(const std::string& path) {
+  const fs::path p(path);
+  return p.has_parent_path() ? p.parent_path().string() : ".";
+}
+
+}  // namespace pumptherm::shipped
