@@ -145,6 +145,22 @@ TEST(DbcCliTest, DecodeSkipsAndCountsBadLogLines) {
             std::string::npos) << r.out;
 }
 
+// pumptherm.dbc's IDs are per pump (DBC ID + node ID): without --node-id-limit a pump's frames
+// are unknown, and the summary says which option decodes them.
+TEST(DbcCliTest, UnknownPerPumpFramesNameTheNodeIdOption) {
+  const fs::path log = TempFile("perpump.log");
+  std::ofstream(log) << "(1.000000) can0 203#0622784000000207\n(2.000000) can0 7FF#00\n";
+  const RunResult plain = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + log.string() + "'");
+  const RunResult offset = RunPumptherm("dbc decode --dbc pumptherm.dbc --node-id-limit 16 '" + log.string() + "'");
+  fs::remove(log);
+  EXPECT_EQ(plain.exit_code, 0) << plain.out;
+  EXPECT_NE(plain.out.find("0 frames decoded, 2 with IDs not in pumptherm.dbc"), std::string::npos) << plain.out;
+  EXPECT_NE(plain.out.find("1 of the unknown frames are a message at CAN ID = DBC ID + node ID (node below 16)"),
+            std::string::npos) << plain.out;
+  EXPECT_NE(offset.out.find("1 frames decoded, 1 with IDs not in pumptherm.dbc"), std::string::npos) << offset.out;
+  EXPECT_EQ(offset.out.find("of the unknown frames are a message"), std::string::npos) << offset.out;
+}
+
 /// PUMP_FAST_I of pump 3 as our encoder writes it (Id 12.345 A, Iq -0.5 A, 2199.11 rad/s, counter 7).
 CanFrame FastFrameOfPump3() {
   const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "pumptherm.dbc");

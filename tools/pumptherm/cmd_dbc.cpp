@@ -204,7 +204,11 @@ std::string CanIdText(const protocol::CanFrame& f) {
 /// Counts of one decode run, reported on stderr at the end.
 struct DecodeCounts {
   std::size_t decoded = 0, unknown = 0, too_short = 0, bad_lines = 0;
+  std::size_t unknown_per_pump = 0;  ///< of `unknown`: a message at CAN ID - n, 0 < n < 16
 };
+
+/// Node IDs the hint tries when frames are unknown without --node-id-limit (pumptherm.dbc's).
+constexpr unsigned kHintNodeIdLimit = 16;
 
 /// Writes decoded frames as JSON lines, CSV rows, or the input annotated as cantools decode does.
 class DecodeWriter {
@@ -334,6 +338,9 @@ int Decode(const DecodeOptions& o) {
                  annotate ? "line passed through undecoded" : "line skipped");
     }
     n.unknown += result == LineResult::kUnknownId;
+    if (result == LineResult::kUnknownId && o.node_id_limit == 1) {
+      n.unknown_per_pump += MatchFrame(codec, p.record.frame, kHintNodeIdLimit).index >= 0;
+    }
     n.too_short += result == LineResult::kTooShort;
     n.decoded += result == LineResult::kDecoded;
     if (annotate) {
@@ -350,6 +357,12 @@ int Decode(const DecodeOptions& o) {
              "lines {}\n",
              log_name, n.decoded, n.unknown, o.dbc_path, n.too_short, n.bad_lines,
              annotate ? "passed through undecoded" : "skipped");
+  if (n.unknown_per_pump > 0) {
+    fmt::print(stderr,
+               "{}: {} of the unknown frames are a message at CAN ID = DBC ID + node ID (node below {}): "
+               "the DBC's IDs are per pump; decode them with --node-id-limit {}\n",
+               log_name, n.unknown_per_pump, kHintNodeIdLimit, kHintNodeIdLimit);
+  }
   return 0;
 }
 
