@@ -1,5 +1,5 @@
-// The gateway's authenticated LCM clears (docs/threat-model.md): Gateway::ClearFromLcm and
-// Gateway::LoadClearKey, kept apart from the frame and estimation paths of gateway.cpp.
+// Clearing latched trips (docs/threat-model.md): the authenticated LCM clear (Gateway::ClearFromLcm,
+// Gateway::LoadClearKey), the CAN clear and its rate limit, and the refused clears' journal lines.
 #include <algorithm>
 
 #include "daemon/gateway.hpp"
@@ -74,6 +74,74 @@ void Gateway::PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std
     ++counters_.lcm_published;
   } else {
     ++counters_.lcm_failed;
+  }
+}
+
+void Gateway::RateLimitedClear(PumpIo& io, const std::string& pump, const std::string& iface) {
+  ++counters_.clears_rate_limited;
+  if (io.clear_repeat_logged) return;  // a held button: one line per burst, every repeat counted
+  io.clear_repeat_logged = true;
+  Log(LogLevel::kNotice,
+      "pump {}: PUMP_CLEAR from can:{} within 2 s of the last one ignored (rate limit; further "
+      "repeats are counted, not logged)", pump, iface);
+}
+
+bool Gateway::Clear(const std::string& pump_name, const std::string& source, const std::string& comment) {
+  for (auto& pump : pumps_) {
+    if (pump->config().name != pump_name) continue;
+    const auto& a = pump->config().alarms;
+    bool allowed = false;
+    if (source.rfind("can:", 0) == 0) {
+      const std::string iface = source.substr(4);
+      allowed = std::find(a.clear_can_interfaces.begin(), a.clear_can_interfaces.end(), iface) !=
+                a.clear_can_interfaces.end();
+    } else {
+      // A source name alone proves nothing: LCM clears go through ClearFromLcm.
+      ++counters_.clears_refused;
+      ++counters_.clears_unauthenticated;
+      if (std::string note; AllowRefusedClearLog(&note)) {
+        Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' refused (no authentication code){}{}",
+            pump_name, source, comment.empty() ? "" : ": " + comment, note);
+      }
+      return false;
+    }
+    if (!allowed) {
+      ++counters_.clears_refused;
+      if (std::string note; AllowRefusedClearLog(&note)) {
+        Log(LogLevel::kWarning, "pump {}: alarm clear from '{}' refused (not a configured source){}{}",
+            pump_name, source, comment.empty() ? "" : ": " + comment, note);
+      }
+      return false;
+    }
+    ++counters_.clears_accepted;
+    MarkAllDue();
+    const bool was = pump->ClearTrips();
+    Log(LogLevel::kNotice, "pump {}: alarm clear from '{}' accepted ({}){}", pump_name, source,
+        was ? "latched trip cleared" : "nothing was latched", comment.empty() ? "" : ": " + comment);
+    return true;
+  }
+  ++counters_.clears_refused;
+  if (std::string note; AllowRefusedClearLog(&note)) {
+    Log(LogLevel::kWarning, "alarm clear for unknown pump '{}' from '{}' ignored{}", pump_name, source, note);
+  }
+  return false;
+}
+
+bool Gateway::AllowRefusedClearLog(std::string* note) {
+  // On the pipeline's clock (the last Advance): monotonic live, the log's time offline.
+  std::uint64_t held_back = 0;
+  if (!refused_clear_log_.Allow(last_now_us_, &held_back)) return false;
+  if (held_back > 0) {
+    *note = fmt::format(" ({} refused clear(s) before this one not logged: at most {} lines per {} s)", held_back,
+                        kRefusedClearLogBurst, kRefusedClearLogWindow_s);
+  }
+  return true;
+}
+
+void Gateway::ReportRefusedClearsHeldBack(std::int64_t now_us) {
+  if (const std::uint64_t n = refused_clear_log_.TakeHeldBack(now_us); n > 0) {
+    Log(LogLevel::kWarning, "{} refused alarm clear(s) not logged (at most {} lines per {} s; all counted in "
+        "clears_refused)", n, kRefusedClearLogBurst, kRefusedClearLogWindow_s);
   }
 }
 

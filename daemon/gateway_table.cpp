@@ -1,0 +1,81 @@
+// The gateway's terminal output: the systemd status line and the per-pump table.
+#include "daemon/gateway.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <ctime>
+#include <limits>
+
+namespace pumptherm::daemon {
+
+std::string Gateway::StatusLine() const {
+  int warnings = 0;
+  int trips = 0;
+  int never_heard = 0;
+  for (const auto& p : pumps_) {
+    warnings += p->snapshot().alarm.level == estimators::AlarmLevel::kWarning;
+    trips += p->snapshot().alarm.level == estimators::AlarmLevel::kTrip;
+    never_heard += p->last_frame_us() < 0;
+  }
+  std::uint64_t error_frames = 0;
+  for (const auto& c : counter_.interfaces()) error_frames += c.rx_error_frames;
+  std::string line = fmt::format("{} pumps, {} warning, {} trip", pumps_.size(), warnings, trips);
+  if (never_heard > 0) line += fmt::format(", {} never heard", never_heard);
+  line += fmt::format("; {}; {} unknown, {} bad length, {} error frames", counter_.StatusLine(),
+                      counters_.rx_unknown_id, counters_.rx_bad_length, error_frames);
+  if (!config_.lcm.url.empty()) {
+    line += fmt::format("; lcm {} sent, {} failed", counters_.lcm_published, counters_.lcm_failed);
+  }
+  return line;
+}
+
+namespace {
+
+/// The table's Rs: "-" before identification and while the estimate is outside the motor's
+/// plausible band (its number then says nothing of the winding).
+template <typename Num>
+std::string RsCell(const estimators::ResistanceEstimate& r, Num num) {
+  using S = estimators::ResistanceStatus;
+  if (r.status == S::kInitialising) return "-";
+  if (r.status == S::kImplausible) return "implaus.";
+  return num(r.resistance_ohm, 4);
+}
+
+/// The table's alarm column; a pump never heard from says so with its alarm.
+std::string TableAlarmCell(const Pump& p, const std::string& alarm) {
+  if (p.last_frame_us() < 0) return "never heard; " + alarm;
+  return p.snapshot().initialised || p.snapshot().alarm.trip_latched ? alarm : "no estimate yet";
+}
+
+}  // namespace
+
+std::string Gateway::PumpTable() const {
+  std::string out = fmt::format("{:<12} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8}  {}\n", "pump", "speed",
+                                "frame_C", "hottest", "at_C", "wind_R_C", "Rs_ohm", "alarm");
+  for (const auto& p : pumps_) {
+    const PumpSnapshot& s = p->snapshot();
+    int hottest = -1;
+    for (std::size_t i = 0; i < s.node_degC.size(); ++i) {
+      if (std::isfinite(s.node_degC[i]) && (hottest < 0 || s.node_degC[i] > s.node_degC[static_cast<std::size_t>(hottest)])) {
+        hottest = static_cast<int>(i);
+      }
+    }
+    auto num = [](double v, int prec) { return std::isfinite(v) ? fmt::format("{:.{}f}", v, prec) : std::string("-"); };
+    std::string alarm = estimators::AlarmLevelName(s.alarm.level);
+    if (s.alarm.level != estimators::AlarmLevel::kNone) {
+      alarm += fmt::format(" ({})", estimators::AlarmReasonName(s.alarm.reason));
+    }
+    if (s.alarm.trip_latched) alarm += " LATCHED";
+    out += fmt::format("{:<12} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8}  {}\n", p->config().name,
+                       num(s.speed_rpm, 0), num(s.frame_measured_degC, 1),
+                       hottest >= 0 ? p->model().StateNames()[static_cast<std::size_t>(hottest)] : "-",
+                       hottest >= 0 ? num(s.node_degC[static_cast<std::size_t>(hottest)], 1) : "-",
+                       num(s.winding_resistance_degC, 1),
+                       RsCell(s.resistance, num), TableAlarmCell(*p, alarm));
+  }
+  return out;
+}
+
+}  // namespace pumptherm::daemon
