@@ -226,6 +226,21 @@ class Gateway {
   void PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us, OutputSink& sink);
   /// One frame of `plan`; `node` is the model node of a node-indexed message, else -1.
   void EmitFrame(std::size_t pump, OutputPlan& plan, int node, std::int64_t time_us, OutputSink& sink);
+  // Construction, step by step (gateway_setup.cpp); each throws ConfigError naming the key.
+  using ModelCache = std::map<std::string, std::shared_ptr<const estimators::ThermalModel>>;
+  /// The DBC and the mapping, with the DBC's warnings logged.
+  void LoadFrameLayout();
+  /// inputs_: the input messages and the inputs each carries.
+  void IndexInputMessages();
+  /// Pump `p` of the configuration: its motor, model (shared through `models`), outputs, routes.
+  void AddPump(std::size_t p, ModelCache& models);
+  estimators::MotorDescription LoadPumpMotor(const PumpConfig& pc, const std::string& key) const;
+  std::shared_ptr<const estimators::ThermalModel> LoadPumpModel(const PumpConfig& pc, const std::string& key,
+                                                                ModelCache& models) const;
+  /// One output plan per output message of the mapping, for a pump with `model`.
+  void BuildOutputPlans(PumpIo& io, const estimators::ThermalModel& model) const;
+  /// routes_ and standard_routes_ for pump `p`'s input frames.
+  void AddRoutes(const PumpIo& io, std::size_t p, const std::string& key);
   /// Throws ConfigError naming the pump and node if a node of `model` has no CAN output, or
   /// cannot be named by alarm_node.
   void CheckNodeOutputs(const PumpConfig& pc, const std::string& key,

@@ -38,20 +38,33 @@ constexpr std::size_t kMaxReportedDbcProblems = 20;
 
 }  // namespace
 
+namespace {
+
+/// A configuration error at `line` of the configuration, naming its key.
+ConfigError KeyError(const DaemonConfig& config, int line, const std::string& key, const std::string& what) {
+  return ConfigError(fmt::format("{}:{}: key '{}': {}", config.source, line, key, what));
+}
+
+}  // namespace
+
 Gateway::Gateway(const DaemonConfig& config)
     : config_(config), counter_(config.gateway), clear_auth_(config.clear_auth.window_s) {
-  auto fail = [&](int line, const std::string& key, const std::string& what) -> ConfigError {
-    return ConfigError(fmt::format("{}:{}: key '{}': {}", config_.source, line, key, what));
-  };
   // Without pumps the gateway only counts frames: no frame layout is needed.
   if (config_.pumps.empty()) return;
-  // The frame layout: DBC and mapping.
+  LoadFrameLayout();
+  IndexInputMessages();
+  std::map<std::string, std::shared_ptr<const estimators::ThermalModel>> models;
+  for (std::size_t p = 0; p < config_.pumps.size(); ++p) AddPump(p, models);
+  channel_health_ = lcm_channels::GatewayHealthChannelName(config_.lcm.channel_prefix);
+}
+
+void Gateway::LoadFrameLayout() {
   std::string dbc_path;
   try {
     dbc_path = ResolveResource(ResourceKind::kDbc, config_.dbc.file, config_.dbc.base_dir);
     dbc_ = protocol::ParseDbc(ReadTextFile(dbc_path), dbc_path);
   } catch (const std::exception& e) {
-    throw fail(0, "dbc.file", e.what());
+    throw KeyError(config_, 0, "dbc.file", e.what());
   }
   // Statements the reader skipped and other oddities: the rest of the DBC is in use.
   for (std::size_t i = 0; i < dbc_.problems.size() && i < kMaxReportedDbcProblems; ++i) {
@@ -66,15 +79,16 @@ Gateway::Gateway(const DaemonConfig& config)
     const std::string path = ResolveResource(ResourceKind::kDbc, config_.dbc.mapping, config_.dbc.base_dir);
     mapping_ = protocol::ParseMapping(ReadTextFile(path), path, dbc_);
   } catch (const std::exception& e) {
-    throw fail(0, "dbc.mapping", e.what());
+    throw KeyError(config_, 0, "dbc.mapping", e.what());
   }
   for (const std::string& d : mapping_.deprecations) Log(LogLevel::kWarning, "{}", d);
   codec_ = std::make_unique<protocol::DbcCodec>(dbc_);
   std::size_t max_signals = 1;
   for (const auto& m : dbc_.messages) max_signals = std::max(max_signals, m.signals.size());
   values_.assign(max_signals, kNaN);
+}
 
-  // Input messages and the inputs each carries.
+void Gateway::IndexInputMessages() {
   for (std::size_t i = 0; i < protocol::kMappingInputCount; ++i) {
     const auto& ref = mapping_.inputs[i];
     if (!ref) continue;
@@ -91,122 +105,133 @@ Gateway::Gateway(const DaemonConfig& config)
     it->status = it->status || IsStatusInput(input);
     it->clear = it->clear || input == MappingInput::kAlarmClear;
   }
+}
 
-  // Pumps.
-  std::map<std::string, std::shared_ptr<const estimators::ThermalModel>> models;
-  for (std::size_t p = 0; p < config_.pumps.size(); ++p) {
-    const PumpConfig& pc = config_.pumps[p];
-    const std::string key = fmt::format("pump[{}]", p);
-    if (pc.node_id >= mapping_.node_id_limit) {
-      throw fail(pc.line, key + ".node_id",
-                 fmt::format("{} is not below the mapping's node_id_limit {}", pc.node_id, mapping_.node_id_limit));
-    }
-    bool known_interface = config_.interfaces.empty();
-    for (const auto& i : config_.interfaces) known_interface = known_interface || i.name == pc.interface;
-    if (!known_interface || pc.interface.empty()) {
-      throw fail(pc.line, key + ".interface", fmt::format("'{}' is not a configured [[can]] interface", pc.interface));
-    }
-    estimators::MotorDescription motor;
-    try {
-      if (!estimators::MotorPresetText(pc.motor).empty()) {
-        motor = estimators::MotorPreset(pc.motor);
-      } else {
-        const std::string path = ResolveResource(ResourceKind::kMotor, pc.motor, config_.dbc.base_dir);
-        motor = estimators::ParseMotorDescription(ReadTextFile(path), path);
-      }
-    } catch (const std::exception& e) {
-      throw fail(pc.line, key + ".motor", e.what());
-    }
-    std::shared_ptr<const estimators::ThermalModel> model;
-    try {
-      const std::string path = ResolveResource(ResourceKind::kModel, pc.thermal_model, config_.dbc.base_dir);
-      auto it = models.find(path);
-      if (it == models.end()) {
-        it = models.emplace(path, std::make_shared<const estimators::ThermalModel>(
-                                      estimators::ThermalModel::Parse(
-                                      ReadTextFile(path), path,
-                                      estimators::ThermalModelFiles{DirectoryOf(path), &ReadTextFile})))
-                 .first;
-      }
-      model = it->second;
-    } catch (const std::exception& e) {
-      throw fail(pc.line, key + ".thermal_model", e.what());
-    }
-    try {
-      pumps_.push_back(std::make_unique<Pump>(pc, motor, model, config_.gateway.thermal_period_s));
-    } catch (const std::exception& e) {
-      throw fail(pc.line, key, e.what());
-    }
-    CheckNodeOutputs(pc, key, *model);
-    PumpIo io;
-    io.iface = counter_.Interface(pc.interface);
-    for (double& v : io.inputs) v = kNaN;
-    // Output plans, one per output message.
-    auto plan_for = [&](int message_index) -> OutputPlan& {
-      for (auto& plan : io.outputs) {
-        if (plan.message_index == message_index) return plan;
-      }
-      const auto& msg = dbc_.messages[static_cast<std::size_t>(message_index)];
-      OutputPlan plan;
-      plan.message_index = message_index;
-      auto over = config_.output_periods_s.find(msg.name);
-      const double period_s = over != config_.output_periods_s.end() ? over->second
-                              : msg.cycle_time_ms && *msg.cycle_time_ms > 0 ? *msg.cycle_time_ms / 1000.0
-                                                                             : 1.0;
-      plan.period_us = std::max<std::int64_t>(1000, std::llround(period_s * 1e6));
-      io.outputs.push_back(std::move(plan));
-      return io.outputs.back();
-    };
-    for (std::size_t o = 0; o < protocol::kMappingOutputCount; ++o) {
-      const auto& ref = mapping_.outputs[o];
-      if (!ref) continue;
-      OutputPlan& plan = plan_for(ref->message_index);
-      plan.signals.push_back({ref->signal_index, OutputSource::kMapped, static_cast<MappingOutput>(o), -1,
-                              ref->scale, ref->offset});
-      plan.alarm = plan.alarm || static_cast<MappingOutput>(o) == MappingOutput::kAlarmLevel;
-      plan.node_table = plan.node_table || static_cast<MappingOutput>(o) == MappingOutput::kNodeIndex;
-    }
-    for (const auto& [node, ref] : mapping_.node_temperatures) {
-      OutputPlan& plan = plan_for(ref.message_index);
-      // A node this pump's model does not have stays "not available" in the frame.
-      plan.signals.push_back({ref.signal_index, OutputSource::kNode, MappingOutput::kWindingResTempDegC,
-                              model->StateIndex(node), ref.scale, ref.offset});
-    }
-    for (auto& plan : io.outputs) {
-      // A node-indexed message sends its nodes one after another, spread over the period: each
-      // node once per period, and no burst of frames on one ID.
-      const auto nodes = static_cast<std::int64_t>(model->StateNames().size());
-      if (plan.node_table && nodes > 0) plan.period_us = std::max<std::int64_t>(1000, plan.period_us / nodes);
-      const auto& msg = dbc_.messages[static_cast<std::size_t>(plan.message_index)];
-      const int rc = msg.FindSignal("RollingCounter");
-      const bool mapped = std::any_of(plan.signals.begin(), plan.signals.end(),
-                                      [&](const OutputSignal& s) { return s.signal_index == rc; });
-      if (rc >= 0 && !mapped) plan.signals.push_back({rc, OutputSource::kRollingCounter, MappingOutput::kUptimeS, -1, 1.0, 0.0});
-    }
-    // Routes of this pump's input frames.
-    for (std::size_t m = 0; m < inputs_.size(); ++m) {
-      const auto& msg = dbc_.messages[static_cast<std::size_t>(inputs_[m].message_index)];
-      const std::uint32_t id = mapping_.CanId(dbc_, inputs_[m].message_index, pc.node_id);
-      const auto route_key = RouteKey(io.iface, msg.extended, id);
-      if (routes_.count(route_key)) {
-        throw fail(pc.line, key + ".node_id", fmt::format("CAN ID {:X} on '{}' is already used", id, pc.interface));
-      }
-      const Route route{static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(m)};
-      routes_[route_key] = route;
-      if (!msg.extended && id < kStandardIds) {
-        if (standard_routes_.size() < (io.iface + 1) * kStandardIds) {
-          standard_routes_.resize((io.iface + 1) * kStandardIds, Route{kNoPump, 0});
-        }
-        standard_routes_[io.iface * kStandardIds + id] = route;
-      }
-    }
-    const std::string& prefix = config_.lcm.channel_prefix;
-    io.channel_telemetry = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTelemetry);
-    io.channel_temperatures = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTemperatures);
-    io.channel_alarm = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kAlarm);
-    io_.push_back(std::move(io));
+void Gateway::AddPump(std::size_t p, ModelCache& models) {
+  const PumpConfig& pc = config_.pumps[p];
+  const std::string key = fmt::format("pump[{}]", p);
+  if (pc.node_id >= mapping_.node_id_limit) {
+    throw KeyError(config_, pc.line, key + ".node_id",
+                   fmt::format("{} is not below the mapping's node_id_limit {}", pc.node_id, mapping_.node_id_limit));
   }
-  channel_health_ = lcm_channels::GatewayHealthChannelName(config_.lcm.channel_prefix);
+  bool known_interface = config_.interfaces.empty();
+  for (const auto& i : config_.interfaces) known_interface = known_interface || i.name == pc.interface;
+  if (!known_interface || pc.interface.empty()) {
+    throw KeyError(config_, pc.line, key + ".interface",
+                   fmt::format("'{}' is not a configured [[can]] interface", pc.interface));
+  }
+  const estimators::MotorDescription motor = LoadPumpMotor(pc, key);
+  const std::shared_ptr<const estimators::ThermalModel> model = LoadPumpModel(pc, key, models);
+  try {
+    pumps_.push_back(std::make_unique<Pump>(pc, motor, model, config_.gateway.thermal_period_s));
+  } catch (const std::exception& e) {
+    throw KeyError(config_, pc.line, key, e.what());
+  }
+  CheckNodeOutputs(pc, key, *model);
+  PumpIo io;
+  io.iface = counter_.Interface(pc.interface);
+  for (double& v : io.inputs) v = kNaN;
+  BuildOutputPlans(io, *model);
+  AddRoutes(io, p, key);
+  const std::string& prefix = config_.lcm.channel_prefix;
+  io.channel_telemetry = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTelemetry);
+  io.channel_temperatures = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTemperatures);
+  io.channel_alarm = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kAlarm);
+  io_.push_back(std::move(io));
+}
+
+estimators::MotorDescription Gateway::LoadPumpMotor(const PumpConfig& pc, const std::string& key) const {
+  try {
+    if (!estimators::MotorPresetText(pc.motor).empty()) return estimators::MotorPreset(pc.motor);
+    const std::string path = ResolveResource(ResourceKind::kMotor, pc.motor, config_.dbc.base_dir);
+    return estimators::ParseMotorDescription(ReadTextFile(path), path);
+  } catch (const std::exception& e) {
+    throw KeyError(config_, pc.line, key + ".motor", e.what());
+  }
+}
+
+std::shared_ptr<const estimators::ThermalModel> Gateway::LoadPumpModel(const PumpConfig& pc, const std::string& key,
+                                                                       ModelCache& models) const {
+  try {
+    const std::string path = ResolveResource(ResourceKind::kModel, pc.thermal_model, config_.dbc.base_dir);
+    auto it = models.find(path);
+    if (it == models.end()) {
+      it = models.emplace(path, std::make_shared<const estimators::ThermalModel>(
+                                    estimators::ThermalModel::Parse(
+                                    ReadTextFile(path), path,
+                                    estimators::ThermalModelFiles{DirectoryOf(path), &ReadTextFile})))
+               .first;
+    }
+    return it->second;
+  } catch (const std::exception& e) {
+    throw KeyError(config_, pc.line, key + ".thermal_model", e.what());
+  }
+}
+
+void Gateway::BuildOutputPlans(PumpIo& io, const estimators::ThermalModel& model) const {
+  // One plan per output message.
+  auto plan_for = [&](int message_index) -> OutputPlan& {
+    for (auto& plan : io.outputs) {
+      if (plan.message_index == message_index) return plan;
+    }
+    const auto& msg = dbc_.messages[static_cast<std::size_t>(message_index)];
+    OutputPlan plan;
+    plan.message_index = message_index;
+    auto over = config_.output_periods_s.find(msg.name);
+    const double period_s = over != config_.output_periods_s.end() ? over->second
+                            : msg.cycle_time_ms && *msg.cycle_time_ms > 0 ? *msg.cycle_time_ms / 1000.0
+                                                                           : 1.0;
+    plan.period_us = std::max<std::int64_t>(1000, std::llround(period_s * 1e6));
+    io.outputs.push_back(std::move(plan));
+    return io.outputs.back();
+  };
+  for (std::size_t o = 0; o < protocol::kMappingOutputCount; ++o) {
+    const auto& ref = mapping_.outputs[o];
+    if (!ref) continue;
+    OutputPlan& plan = plan_for(ref->message_index);
+    plan.signals.push_back({ref->signal_index, OutputSource::kMapped, static_cast<MappingOutput>(o), -1,
+                            ref->scale, ref->offset});
+    plan.alarm = plan.alarm || static_cast<MappingOutput>(o) == MappingOutput::kAlarmLevel;
+    plan.node_table = plan.node_table || static_cast<MappingOutput>(o) == MappingOutput::kNodeIndex;
+  }
+  for (const auto& [node, ref] : mapping_.node_temperatures) {
+    OutputPlan& plan = plan_for(ref.message_index);
+    // A node this pump's model does not have stays "not available" in the frame.
+    plan.signals.push_back({ref.signal_index, OutputSource::kNode, MappingOutput::kWindingResTempDegC,
+                            model.StateIndex(node), ref.scale, ref.offset});
+  }
+  for (auto& plan : io.outputs) {
+    // A node-indexed message sends its nodes one after another, spread over the period: each
+    // node once per period, and no burst of frames on one ID.
+    const auto nodes = static_cast<std::int64_t>(model.StateNames().size());
+    if (plan.node_table && nodes > 0) plan.period_us = std::max<std::int64_t>(1000, plan.period_us / nodes);
+    const auto& msg = dbc_.messages[static_cast<std::size_t>(plan.message_index)];
+    const int rc = msg.FindSignal("RollingCounter");
+    const bool mapped = std::any_of(plan.signals.begin(), plan.signals.end(),
+                                    [&](const OutputSignal& s) { return s.signal_index == rc; });
+    if (rc >= 0 && !mapped) plan.signals.push_back({rc, OutputSource::kRollingCounter, MappingOutput::kUptimeS, -1, 1.0, 0.0});
+  }
+}
+
+void Gateway::AddRoutes(const PumpIo& io, std::size_t p, const std::string& key) {
+  const PumpConfig& pc = config_.pumps[p];
+  for (std::size_t m = 0; m < inputs_.size(); ++m) {
+    const auto& msg = dbc_.messages[static_cast<std::size_t>(inputs_[m].message_index)];
+    const std::uint32_t id = mapping_.CanId(dbc_, inputs_[m].message_index, pc.node_id);
+    const auto route_key = RouteKey(io.iface, msg.extended, id);
+    if (routes_.count(route_key)) {
+      throw KeyError(config_, pc.line, key + ".node_id",
+                     fmt::format("CAN ID {:X} on '{}' is already used", id, pc.interface));
+    }
+    const Route route{static_cast<std::uint32_t>(p), static_cast<std::uint32_t>(m)};
+    routes_[route_key] = route;
+    if (!msg.extended && id < kStandardIds) {
+      if (standard_routes_.size() < (io.iface + 1) * kStandardIds) {
+        standard_routes_.resize((io.iface + 1) * kStandardIds, Route{kNoPump, 0});
+      }
+      standard_routes_[io.iface * kStandardIds + id] = route;
+    }
+  }
 }
 
 void Gateway::CheckNodeOutputs(const PumpConfig& pc, const std::string& key,
