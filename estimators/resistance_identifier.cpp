@@ -16,6 +16,8 @@ constexpr double kSecondsPerHour = 3600.0;
 constexpr double kFreshExcitationShare = 0.01;
 // Normalised innovation at which a block is rejected; also the cap of its evidence.
 constexpr double kMaxEvidenceZ = 6.0;
+// Smoothing of the unexplained drift of uq, s (a few blocks: noise down, little lag).
+constexpr double kDriftSmoothing_s = 20.0;
 
 // Four confidence levels in the spirit of Han 2019 eq. 23, on the normalised innovation
 // z = |eps| / sqrt(S) (S = phi^T P phi + r, the innovation variance) instead of |eps| / |y|.
@@ -176,7 +178,7 @@ void ResistanceIdentifier::Reset() noexcept {
 
 bool ResistanceIdentifier::Restore(const ResistanceIdentifierState& state) noexcept {
   if (!state.moments.allFinite() || !state.anchor.allFinite() || !(state.drift_ohm >= 0.0) ||
-      !std::isfinite(state.drift_ohm)) {
+      !std::isfinite(state.drift_ohm) || !std::isfinite(state.drift_V)) {
     return false;
   }
   double total = 0.0;
@@ -461,12 +463,14 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   const int best = state_.hypotheses[kSteadyMagnet].probability >= state_.hypotheses[kDriftingMagnet].probability
                        ? kSteadyMagnet
                        : kDriftingMagnet;
-  if (fresh_change || anchor_pending_) {
+  const bool anchored = fresh_change || anchor_pending_;
+  if (anchored) {
     state_.anchor = x_;
     state_.anchor_valid = true;
+    state_.drift_V = 0.0;
     anchor_pending_ = false;
   }
-  if (state_.anchor_valid && !idle) state_.drift_ohm = DriftOhm(iq, w);
+  if (state_.anchor_valid && !idle && !anchored) UpdateDrift(y, hrow, dt);
   last_block_w_rad_per_s_ = w;
   if (measure) {
     // Residual consistency of the hypothesis reported: the EW mean of z^2 (1 when the model and
@@ -511,11 +515,13 @@ void ResistanceIdentifier::RefuteInconsistent(double keep) noexcept {
   hypothesis_nis_[refuted] = hypothesis_nis_[1 - refuted];
 }
 
-double ResistanceIdentifier::DriftOhm(double iq, double w) const noexcept {
-  // The q-axis equation's prediction (Han 2019 eq. 6) now against the one the anchor makes:
-  // at constant iq and w_r only this combination of Rs and psi_f is seen.
-  const Eigen::Vector4d hrow(iq, 0.0, w, 0.0);
-  return std::abs(hrow.dot(x_ - state_.anchor)) / std::max(std::abs(iq), 1e-3);
+void ResistanceIdentifier::UpdateDrift(double y, const Eigen::Vector4d& hrow, double dt) noexcept {
+  // uq itself against the anchor's prediction (Han 2019 eq. 6 at this block's iq and w_r), not
+  // the filters' estimate, which lags or rejects the data when neither model fits. Smoothed
+  // over kDriftSmoothing_s: a block mean carries ~2 mV of noise, 0.6 mV after smoothing.
+  const double keep = std::exp(-dt / kDriftSmoothing_s);
+  state_.drift_V = keep * state_.drift_V + (1.0 - keep) * (y - hrow.dot(state_.anchor));
+  state_.drift_ohm = std::abs(state_.drift_V) / std::max(std::abs(hrow(0)), 1e-3);
 }
 
 void ResistanceIdentifier::ReopenAlongLine(double iq, double w, double var_ohm2) noexcept {

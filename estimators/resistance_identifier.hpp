@@ -206,7 +206,8 @@ struct ResistanceIdentifierState {
   /// the drift is measured from the first block after Restore.
   Eigen::Vector4d anchor = Eigen::Vector4d::Zero();
   bool anchor_valid = false;
-  double drift_ohm = 0.0;  ///< unexplained drift over iq at the last block, ohm (>= 0)
+  double drift_V = 0.0;    ///< unexplained drift of uq against the anchor, smoothed, V
+  double drift_ohm = 0.0;  ///< |drift_V| over |iq| at the last block, ohm (>= 0)
 };
 
 /// Moments saved by an identifier without the constant regressor ([iq, w_r] only, 2x2) as
@@ -272,7 +273,7 @@ class ResistanceIdentifier {
   void Publish(ResistanceStatus status, double eps_V, double weight) noexcept;
   void ClearDriftAndOffset() noexcept;
   void RefuteInconsistent(double keep) noexcept;
-  double DriftOhm(double iq, double w) const noexcept;
+  void UpdateDrift(double y, const Eigen::Vector4d& hrow, double dt) noexcept;
   double EffectiveDriftOhm() const noexcept;
   void ReopenAlongLine(double iq, double w, double var_ohm2) noexcept;
   void UpdateOffset(double iq, double w, double y, double decay, double r) noexcept;
