@@ -401,6 +401,12 @@ TEST(ResistanceIdentifier, ConfigOutOfRangeThrows) {
     p.steady_magnet_prior = prior;
     EXPECT_THROW(ResistanceIdentifier(MotorPreset("han2019-tmp"), p), std::invalid_argument) << prior;
   }
+  ResistanceIdentifierConfig d;
+  d.drift_hold_K = 0.0;
+  EXPECT_THROW(ResistanceIdentifier(MotorPreset("han2019-tmp"), d), std::invalid_argument);
+  ResistanceIdentifierConfig o;
+  o.offset_identifiable_sd_V = -1.0;
+  EXPECT_THROW(ResistanceIdentifier(MotorPreset("han2019-tmp"), o), std::invalid_argument);
   ResistanceIdentifierConfig l;
   l.load_change_A = 0.0;
   EXPECT_THROW(ResistanceIdentifier(MotorPreset("han2019-tmp"), l), std::invalid_argument);
@@ -608,6 +614,29 @@ TEST(ResistanceIdentifier, OffsetEstimatedWhereIdentifiable) {
     e = id.Update(WithOffset(rs, psi, SteppedCurrent_A(k), kRated_rad_per_s, u_err), kDt_s);
   }
   EXPECT_TRUE(std::isnan(e.voltage_offset_V)) << "constant speed, one sign: not separable";
+}
+
+}  // namespace
+}  // namespace pumptherm::estimators
+
+namespace pumptherm::estimators {
+namespace {
+
+// The drift's anchor is part of the saved state: non-finite values or a negative drift are
+// refused like any other damage.
+TEST(ResistanceIdentifier, RestoreRejectsBrokenDriftAnchor) {
+  ResistanceIdentifier id(MotorPreset("han2019-tmp"), {});
+  for (long k = 0; k < 600L * 100; ++k) id.Update(Exact(0.30, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  const ResistanceIdentifierState good = id.Save();
+  ASSERT_TRUE(good.anchor_valid);
+  ResistanceIdentifierState nan_anchor = good;
+  nan_anchor.anchor(kStateFlux) = std::numeric_limits<double>::quiet_NaN();
+  ResistanceIdentifierState negative_drift = good;
+  negative_drift.drift_ohm = -1e-3;
+  ResistanceIdentifierState inf_drift = good;
+  inf_drift.drift_V = std::numeric_limits<double>::infinity();
+  for (const auto* bad : {&nan_anchor, &negative_drift, &inf_drift}) EXPECT_FALSE(id.Restore(*bad));
+  EXPECT_TRUE(id.Restore(good));
 }
 
 }  // namespace
