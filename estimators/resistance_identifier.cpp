@@ -147,6 +147,7 @@ void ResistanceIdentifier::ClearBlock() noexcept {
 
 void ResistanceIdentifier::ClearDriftAndOffset() noexcept {
   anchor_pending_ = false;
+  flux_freed_ = false;
   last_block_w_rad_per_s_ = 0.0;
   offset_moments_.setZero();
   offset_rhs_.setZero();
@@ -347,7 +348,7 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   // Under the drifting magnet the winding may still have done part of the drift unseen:
   // re-open its Rs by the drift along the line the previous current fixed (y = iq Rs + w_r psi_f
   // at that iq), so that this load change, not the priors, decides how much was resistance.
-  if (fresh_change && state_.anchor_valid && state_.drift_ohm > 0.0) {
+  if (fresh_change && flux_freed_ && state_.anchor_valid && state_.drift_ohm > 0.0) {
     ReopenAlongLine(previous_iq, last_block_w_rad_per_s_, state_.drift_ohm * state_.drift_ohm);
   }
 
@@ -370,13 +371,11 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     add_pair(kStateResistance, kStateResistanceRate, q_resistance_ohm2_per_s_[j],
              q_resistance_rate_ohm2_per_s3_[j]);
     add_pair(kStateFlux, kStateFluxRate, q_flux_Wb2_per_s_[j], q_flux_rate_Wb2_per_s3_[j]);
-    // Held by the drift (drifting magnet only): Rs is not extrapolated either.
-    const bool drift_held = drifted && j == kDriftingMagnet;
-    const bool hold_rs = !identifiable || drift_held;
-    Eigen::Matrix4d fj = f;
-    if (drift_held) fj(kStateResistance, kStateResistanceRate) = 0.0;
-    x = fj * x;
-    p = fj * p * fj.transpose() + q;
+    // Beyond drift_hold_K the drifting magnet's flux may move as fast as the data say.
+    const bool free_flux = drifted && j == kDriftingMagnet;
+    const bool hold_rs = !identifiable;
+    x = f * x;
+    p = f * p * f.transpose() + q;
     if (idle) p(kStateResistanceRate, kStateResistanceRate) = p0_[j](kStateResistanceRate, kStateResistanceRate);
     // Bound the growth while nothing is learnt: scale row and column i together (a congruence
     // with a diagonal matrix), which keeps P symmetric positive definite.
@@ -392,12 +391,13 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     if (!measure) continue;
     Eigen::Vector4d p_h = p * hrow;
     double s = hrow.dot(p_h) + r;
-    if (drift_held && std::abs(w) > 0.0 && eps_V[j] * eps_V[j] > s) {
+    if (free_flux && std::abs(w) > 0.0 && eps_V[j] * eps_V[j] > s) {
       // The flux alone explains the drift here, at whatever rate the magnet heats: the
       // innovation's excess over its predicted variance becomes flux process noise (covariance
       // matching, Mehra, IEEE Trans. Autom. Control 17 (1972) 693, sec. IV), so the filter stays
       // consistent instead of rejecting the data.
       p(kStateFlux, kStateFlux) += (eps_V[j] * eps_V[j] - s) / (w * w);
+      flux_freed_ = true;
       p_h = p * hrow;
       s = hrow.dot(p_h) + r;
     }
@@ -469,6 +469,7 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     state_.anchor_valid = true;
     state_.drift_V = 0.0;
     anchor_pending_ = false;
+    flux_freed_ = false;
   }
   if (state_.anchor_valid && !idle && !anchored) UpdateDrift(y, hrow, dt);
   last_block_w_rad_per_s_ = w;

@@ -300,6 +300,7 @@ class ResistanceIdentifier {
                                   // identified (held with Rs)
   // Unexplained drift (anchor and drift in state_).
   bool anchor_pending_ = false;  // after a restore without an anchor: anchor on the next block
+  bool flux_freed_ = false;      // the drifting filter's flux took excess drift since the anchor
   double last_block_w_rad_per_s_ = 0.0;
   // Offset least squares: EW moments of v = [iq, w_r / w_scale, sign(iq)] (3x3) and of v y.
   Eigen::Matrix3d offset_moments_ = Eigen::Matrix3d::Zero();
