@@ -338,16 +338,16 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   // A load change that identifies Rs ends the stretch in which a drift of uq could be either
   // resistance or flux. Until then the two hypotheses read a drift not predicted at the last
   // one differently: the steady magnet as resistance (its filter follows it), the drifting
-  // magnet, once the drift exceeds drift_hold_K, as flux alone: its Rs is held where it is (not
-  // extrapolated) and its flux may move as fast as the data say. The next load change shows
-  // which reading was right (Bayes' rule below).
+  // magnet, once the drift exceeds drift_hold_K, mostly as flux, which may then move as fast as
+  // the data say. The next load change shows which reading was right (Bayes' rule below).
   const bool fresh_change = load_change && identifiable && measure;
   const double hold_ohm = config_.drift_hold_K * motor_.copper.r0_ohm * motor_.copper.alpha_per_K;
   const bool drifted = state_.anchor_valid && !fresh_change && state_.drift_ohm > hold_ohm;
   if (state_.anchor_valid) state_.anchor = f * state_.anchor;
-  // Under the drifting magnet the winding may still have done part of the drift unseen:
-  // re-open its Rs by the drift along the line the previous current fixed (y = iq Rs + w_r psi_f
-  // at that iq), so that this load change, not the priors, decides how much was resistance.
+  // Where the drifting magnet's flux was freed, the winding may still have done part of the
+  // drift unseen: re-open its Rs by the drift along the line the previous current fixed
+  // (y = iq Rs + w_r psi_f at that iq), so that this load change, not the priors, decides how
+  // much was resistance.
   if (fresh_change && flux_freed_ && state_.anchor_valid && state_.drift_ohm > 0.0) {
     ReopenAlongLine(previous_iq, last_block_w_rad_per_s_, state_.drift_ohm * state_.drift_ohm);
   }

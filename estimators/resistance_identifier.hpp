@@ -33,9 +33,12 @@
 ///   - between load changes a drift of uq at constant current and speed is resistance or flux
 ///     and no data tell which (a magnet warming 1 K moves uq 40 mV at rated speed, a winding
 ///     warming 1 K about 1 mV/A): the drift not predicted by the trend known at the last load
-///     change, over iq, bounds what the winding may have done unseen. It enters the winding
-///     temperature's 1-sigma; above drift_hold_K Rs is held (status `held`) and the flux takes
-///     the drift, and the next load change re-opens Rs along the line the old current fixed;
+///     change, over iq, bounds what the winding may have done unseen. Weighted by the drifting
+///     magnet's probability it enters the winding temperature's 1-sigma, and above drift_hold_K
+///     the status is `held`; there the drifting-magnet filter's flux is freed to take the drift
+///     (covariance matching), and the next load change re-opens its Rs along the line the old
+///     current fixed. A hypothesis whose filter cannot explain the blocks between load changes
+///     while the other can is refuted there and then;
 ///   - where the data make it identifiable (iq varying independently of w_r and of a constant,
 ///     e.g. a run-up then load changes at speed, or iq changing sign), an inverter voltage
 ///     offset u0 sign(iq) is estimated by windowed least squares beside the filters;
@@ -134,7 +137,8 @@ struct ResistanceIdentifierConfig {
   /// Consecutive rejected or down-weighted blocks (z >= 3) before P is re-opened.
   int reacquire_after_rejections = 30;
   /// Unexplained drift of uq since the last load change (against the trend then known), over
-  /// iq, in K of winding, above which Rs is held (status `held`) and the flux takes the drift.
+  /// iq, in K of winding, above which the status is `held` (weighted by the drifting magnet's
+  /// probability) and the drifting-magnet filter's flux is freed to take the drift.
   double drift_hold_K = 1.0;
   /// Rms of the voltage offset the window must support before it is reported, V.
   double offset_identifiable_sd_V = 0.01;
