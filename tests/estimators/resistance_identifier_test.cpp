@@ -574,7 +574,7 @@ FastHeatingFigures RunFastHeating(bool magnet_heats) {
 
 // With the magnet heating too, the uq drift at constant current is mostly flux, and no data
 // tell how much is resistance: the identifier holds Rs (`held`) instead of reading the falling
-// flux as a falling resistance (on main before the drift hold: Rs ran below zero), and never
+// flux as a falling resistance (that reading takes Rs below zero within minutes), and never
 // says `tracking` more than 2 K off.
 TEST(ResistanceIdentifier, HeatingMagnetAtConstantCurrentIsHeldNotDrifted) {
   const FastHeatingFigures f = RunFastHeating(true);
