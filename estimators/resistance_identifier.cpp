@@ -16,6 +16,8 @@ constexpr double kSecondsPerHour = 3600.0;
 constexpr double kFreshExcitationShare = 0.01;
 // Normalised innovation at which a block is rejected; also the cap of its evidence.
 constexpr double kMaxEvidenceZ = 6.0;
+// Smoothing of the unexplained drift of uq, s (a few blocks: noise down, little lag).
+constexpr double kDriftSmoothing_s = 20.0;
 
 // Four confidence levels in the spirit of Han 2019 eq. 23, on the normalised innovation
 // z = |eps| / sqrt(S) (S = phi^T P phi + r, the innovation variance) instead of |eps| / |y|.
@@ -67,6 +69,7 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
       !(config.hypothesis_probability_floor >= 0.0 && config.hypothesis_probability_floor < 0.5) ||
       !(config.load_change_A > 0.0) || !(config.rate_time_constant_s > 0.0) ||
       !(config.min_current_A >= 0.0) || !(config.idle_current_A >= 0.0) ||
+      !(config.drift_hold_K > 0.0) || !(config.offset_identifiable_sd_V > 0.0) ||
       config.reacquire_after_rejections < 1) {
     throw std::invalid_argument("ResistanceIdentifierConfig: a value is out of range");
   }
@@ -142,6 +145,16 @@ void ResistanceIdentifier::ClearBlock() noexcept {
   uq_first_V_ = sum_duq_V_ = sum_duq2_V2_ = 0.0;
 }
 
+void ResistanceIdentifier::ClearDriftAndOffset() noexcept {
+  anchor_pending_ = false;
+  flux_freed_ = false;
+  last_block_w_rad_per_s_ = 0.0;
+  offset_moments_.setZero();
+  offset_rhs_.setZero();
+  offset_V_ = std::numeric_limits<double>::quiet_NaN();
+  offset_sd_V_ = std::numeric_limits<double>::quiet_NaN();
+}
+
 void ResistanceIdentifier::Reset() noexcept {
   state_ = ResistanceIdentifierState{};
   for (int j = 0; j < kMagnetHypotheses; ++j) {
@@ -156,14 +169,19 @@ void ResistanceIdentifier::Reset() noexcept {
   ClearBlock();
   last_block_iq_A_ = std::numeric_limits<double>::quiet_NaN();
   mean_nis_ = 1.0;
+  hypothesis_nis_ = {1.0, 1.0};
   allowance_ohm_ = 0.0;
+  ClearDriftAndOffset();
   estimate_ = ResistanceEstimate{};
   Mix();
   Publish(ResistanceStatus::kInitialising, 0.0, 0.0);
 }
 
 bool ResistanceIdentifier::Restore(const ResistanceIdentifierState& state) noexcept {
-  if (!state.moments.allFinite()) return false;
+  if (!state.moments.allFinite() || !state.anchor.allFinite() || !(state.drift_ohm >= 0.0) ||
+      !std::isfinite(state.drift_ohm) || !std::isfinite(state.drift_V)) {
+    return false;
+  }
   double total = 0.0;
   for (const ResistanceHypothesisState& h : state.hypotheses) {
     if (!h.x.allFinite() || !h.p.allFinite() || h.consecutive_rejections < 0 ||
@@ -185,6 +203,10 @@ bool ResistanceIdentifier::Restore(const ResistanceIdentifierState& state) noexc
   ClearBlock();
   last_block_iq_A_ = std::numeric_limits<double>::quiet_NaN();
   mean_nis_ = 1.0;
+  hypothesis_nis_ = {1.0, 1.0};
+  // Without a saved anchor the drift is measured from the restored state on.
+  ClearDriftAndOffset();
+  anchor_pending_ = !state_.anchor_valid;
   // The allowance at the restored excitation (only the window's spread of iq is used here).
   allowance_ohm_ = 0.0;
   const Excitation ex = AssessExcitation(0.0, 0.0);
@@ -216,6 +238,10 @@ void ResistanceIdentifier::Publish(ResistanceStatus status, double eps_V, double
   estimate_.weight = weight;
   estimate_.mean_nis = mean_nis_;
   estimate_.steady_magnet_probability = state_.hypotheses[kSteadyMagnet].probability;
+  estimate_.unexplained_drift_K = state_.anchor_valid ? EffectiveDriftOhm() / (motor_.copper.r0_ohm * motor_.copper.alpha_per_K)
+                                                : std::numeric_limits<double>::quiet_NaN();
+  estimate_.voltage_offset_V = offset_V_;
+  estimate_.voltage_offset_sd_V = offset_sd_V_;
   estimate_.status = status;
 }
 
@@ -293,6 +319,7 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   const Eigen::Vector3d v(iq, w, 1.0);
   const double decay = std::exp(-dt / config_.excitation_window_s);
   state_.moments = decay * state_.moments + v * v.transpose();
+  if (!idle) UpdateOffset(iq, w, y, decay, r);
   const Excitation ex = AssessExcitation(iq, w);
   const double sigma_target = config_.identifiable_sigma_rel * motor_.copper.r0_ohm;
   const double info_needed = r / (sigma_target * sigma_target);
@@ -308,6 +335,22 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   if (identifiable && ex.spread_A > 0.0) allowance_ohm_ = config_.voltage_error_allowance_V / ex.spread_A;
   // Too little current for the voltage model (dead-time knee): no measurement update.
   const bool measure = !(std::abs(iq) < config_.min_current_A);
+  // A load change that identifies Rs ends the stretch in which a drift of uq could be either
+  // resistance or flux. Until then the two hypotheses read a drift not predicted at the last
+  // one differently: the steady magnet as resistance (its filter follows it), the drifting
+  // magnet, once the drift exceeds drift_hold_K, mostly as flux, which may then move as fast as
+  // the data say. The next load change shows which reading was right (Bayes' rule below).
+  const bool fresh_change = load_change && identifiable && measure;
+  const double hold_ohm = config_.drift_hold_K * motor_.copper.r0_ohm * motor_.copper.alpha_per_K;
+  const bool drifted = state_.anchor_valid && !fresh_change && state_.drift_ohm > hold_ohm;
+  if (state_.anchor_valid) state_.anchor = f * state_.anchor;
+  // Where the drifting magnet's flux was freed, the winding may still have done part of the
+  // drift unseen: re-open its Rs by the drift along the line the previous current fixed
+  // (y = iq Rs + w_r psi_f at that iq), so that this load change, not the priors, decides how
+  // much was resistance.
+  if (fresh_change && flux_freed_ && state_.anchor_valid && state_.drift_ohm > 0.0) {
+    ReopenAlongLine(previous_iq, last_block_w_rad_per_s_, state_.drift_ohm * state_.drift_ohm);
+  }
 
   // Measurement row: y = iq Rs + w_r psi_f (Han 2019 eq. 6), h = [iq, 0, w_r, 0].
   const Eigen::Vector4d hrow(iq, 0.0, w, 0.0);
@@ -328,6 +371,9 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     add_pair(kStateResistance, kStateResistanceRate, q_resistance_ohm2_per_s_[j],
              q_resistance_rate_ohm2_per_s3_[j]);
     add_pair(kStateFlux, kStateFluxRate, q_flux_Wb2_per_s_[j], q_flux_rate_Wb2_per_s3_[j]);
+    // Beyond drift_hold_K the drifting magnet's flux may move as fast as the data say.
+    const bool free_flux = drifted && j == kDriftingMagnet;
+    const bool hold_rs = !identifiable;
     x = f * x;
     p = f * p * f.transpose() + q;
     if (idle) p(kStateResistanceRate, kStateResistanceRate) = p0_[j](kStateResistanceRate, kStateResistanceRate);
@@ -343,8 +389,18 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     }
     eps_V[j] = y - hrow.dot(x);
     if (!measure) continue;
-    const Eigen::Vector4d p_h = p * hrow;
-    const double s = hrow.dot(p_h) + r;
+    Eigen::Vector4d p_h = p * hrow;
+    double s = hrow.dot(p_h) + r;
+    if (free_flux && std::abs(w) > 0.0 && eps_V[j] * eps_V[j] > s) {
+      // The flux alone explains the drift here, at whatever rate the magnet heats: the
+      // innovation's excess over its predicted variance becomes flux process noise (covariance
+      // matching, Mehra, IEEE Trans. Autom. Control 17 (1972) 693, sec. IV), so the filter stays
+      // consistent instead of rejecting the data.
+      p(kStateFlux, kStateFlux) += (eps_V[j] * eps_V[j] - s) / (w * w);
+      flux_freed_ = true;
+      p_h = p * hrow;
+      s = hrow.dot(p_h) + r;
+    }
     const double z = std::abs(eps_V[j]) / std::sqrt(s);
     z_of[j] = z;
     // Gaussian likelihood of the innovation; z capped at the rejection level so that one
@@ -356,7 +412,7 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     if (weight > 0.0) {
       const double r_eff = r / weight;  // Lambda divides the measurement variance (eq. 21)
       Eigen::Vector4d gain = p_h / (hrow.dot(p_h) + r_eff);
-      if (!identifiable) {
+      if (hold_rs) {
         // Rs and psi_f cannot be told apart: hold Rs and its rate (Schmidt "consider" update:
         // their gain rows are zero, but their covariance and correlations are updated, so the
         // next load change still corrects Rs through the correlation with psi_f).
@@ -400,18 +456,111 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     const double sum = state_.hypotheses[kSteadyMagnet].probability + state_.hypotheses[kDriftingMagnet].probability;
     for (int j = 0; j < kMagnetHypotheses; ++j) state_.hypotheses[j].probability /= sum;
   }
+  last_z_ = z_of;
+  const double keep = std::exp(-dt / config_.consistency_window_s);
+  if (measure) RefuteInconsistent(keep);
   Mix();
   const int best = state_.hypotheses[kSteadyMagnet].probability >= state_.hypotheses[kDriftingMagnet].probability
                        ? kSteadyMagnet
                        : kDriftingMagnet;
+  const bool anchored = fresh_change || anchor_pending_;
+  if (anchored) {
+    state_.anchor = x_;
+    state_.anchor_valid = true;
+    state_.drift_V = 0.0;
+    anchor_pending_ = false;
+    flux_freed_ = false;
+  }
+  if (state_.anchor_valid && !idle && !anchored) UpdateDrift(y, hrow, dt);
+  last_block_w_rad_per_s_ = w;
   if (measure) {
     // Residual consistency of the hypothesis reported: the EW mean of z^2 (1 when the model and
     // its variances explain the data; capped so that one outlier is not a minute of doubt).
     const double z_capped = std::min(z_of[best], kMaxEvidenceZ);
-    const double keep = std::exp(-dt / config_.consistency_window_s);
     mean_nis_ = keep * mean_nis_ + (1.0 - keep) * z_capped * z_capped;
   }
   Publish(Classify(measure && separable, measure && identifiable), eps_V[best], weight_of[best]);
+}
+
+void ResistanceIdentifier::RefuteInconsistent(double keep) noexcept {
+  // A hypothesis whose filter cannot explain the blocks between load changes within its own
+  // variances (EW mean NIS above max_consistency_nis) while the other's can is refuted by those
+  // blocks: a magnet heating several K/min moves uq by 0.1-0.2 V/min, which the steady magnet
+  // could only read as a winding changing by tens of K/min. Its probability goes to the floor.
+  // (Where both fit, only load changes decide, as above.)
+  if (!SteadyOn()) return;
+  for (int j = 0; j < kMagnetHypotheses; ++j) {
+    const double z = std::min(last_z_[j], kMaxEvidenceZ);
+    hypothesis_nis_[j] = keep * hypothesis_nis_[j] + (1.0 - keep) * z * z;
+  }
+  // Refuted: above the limit while the other is within half of it (a margin, so that two
+  // filters that both struggle, e.g. with a flux step both reject, do not take turns).
+  const double limit = config_.max_consistency_nis;
+  const auto refutes = [&](int a, int b) { return hypothesis_nis_[a] > limit && hypothesis_nis_[b] <= 0.5 * limit; };
+  int refuted = -1;
+  if (refutes(kSteadyMagnet, kDriftingMagnet)) refuted = kSteadyMagnet;
+  if (refutes(kDriftingMagnet, kSteadyMagnet)) refuted = kDriftingMagnet;
+  if (refuted < 0) return;
+  const double floor = config_.hypothesis_probability_floor;
+  if (state_.hypotheses[refuted].probability <= floor) return;
+  // The refuted filter continues from the other's state (as the mixing step of the interacting
+  // multiple-model filter does, Bar-Shalom, Li, Kirubarajan 2001, sec. 11.6.6), so that it is
+  // judged afresh at the next load changes instead of from a state its model could not follow.
+  ResistanceHypothesisState& lost = state_.hypotheses[refuted];
+  const ResistanceHypothesisState& won = state_.hypotheses[1 - refuted];
+  lost.x = won.x;
+  lost.p = won.p;
+  lost.consecutive_rejections = won.consecutive_rejections;
+  lost.probability = floor;
+  state_.hypotheses[1 - refuted].probability = 1.0 - floor;
+  hypothesis_nis_[refuted] = hypothesis_nis_[1 - refuted];
+}
+
+void ResistanceIdentifier::UpdateDrift(double y, const Eigen::Vector4d& hrow, double dt) noexcept {
+  // uq itself against the anchor's prediction (Han 2019 eq. 6 at this block's iq and w_r), not
+  // the filters' estimate, which lags or rejects the data when neither model fits. Smoothed
+  // over kDriftSmoothing_s: a block mean carries ~2 mV of noise, 0.6 mV after smoothing.
+  const double keep = std::exp(-dt / kDriftSmoothing_s);
+  state_.drift_V = keep * state_.drift_V + (1.0 - keep) * (y - hrow.dot(state_.anchor));
+  state_.drift_ohm = std::abs(state_.drift_V) / std::max(std::abs(hrow(0)), 1e-3);
+}
+
+void ResistanceIdentifier::ReopenAlongLine(double iq, double w, double var_ohm2) noexcept {
+  // Direction that moves Rs by 1 ohm and psi_f by -iq/w_r, leaving iq Rs + w_r psi_f at the old
+  // operating point unchanged; adding var n n^T keeps P symmetric positive definite. Only the
+  // drifting magnet's filter: the steady one read the drift as resistance, and the load change
+  // is to test that reading, not to absorb its error.
+  // At most 3x the nameplate variance: the bound on P's growth (4x) scales Rs' row and column
+  // alone, which would break the line's correlation and leave the flux free to take the step.
+  Eigen::Vector4d n(1.0, 0.0, 0.0, 0.0);
+  if (std::abs(w) > 0.0 && std::isfinite(iq)) n(kStateFlux) = -iq / w;
+  const double var = std::min(var_ohm2, 3.0 * p0_[kDriftingMagnet](kStateResistance, kStateResistance));
+  state_.hypotheses[kDriftingMagnet].p += var * n * n.transpose();
+}
+
+void ResistanceIdentifier::UpdateOffset(double iq, double w, double y, double decay, double r) noexcept {
+  // Least squares of y = Rs iq + psi_f w_r + u0 sign(iq) over the window's blocks (the static
+  // form of Han 2019 eq. 6 with the dead-time term): u0 is separable where iq varies
+  // independently of w_r and of sign(iq), i.e. where the Schur complement of the sign's moment
+  // is positive. w_r is scaled to the rated speed to keep the moments conditioned.
+  const Eigen::Vector3d v(iq, w / w_scale_rad_per_s_, iq >= 0.0 ? 1.0 : -1.0);
+  offset_moments_ = decay * offset_moments_ + v * v.transpose();
+  offset_rhs_ = decay * offset_rhs_ + v * y;
+  offset_V_ = offset_sd_V_ = std::numeric_limits<double>::quiet_NaN();
+  const Eigen::Matrix3d& m = offset_moments_;
+  const double det = m(0, 0) * m(1, 1) - m(0, 1) * m(0, 1);
+  const double trace = m(0, 0) + m(1, 1);
+  if (!(det > 1e-12 * trace * trace)) return;
+  // Schur complement m22 - c^T A^-1 c with A the [iq, w_r] block and c its column to the sign.
+  const double c0 = m(0, 2), c1 = m(1, 2);
+  const double info = m(2, 2) - (m(1, 1) * c0 * c0 - 2.0 * m(0, 1) * c0 * c1 + m(0, 0) * c1 * c1) / det;
+  if (!(info > 0.0)) return;
+  const double sd = std::sqrt(r / info);
+  if (!(sd <= config_.offset_identifiable_sd_V)) return;
+  const Eigen::Vector3d theta = offset_moments_.ldlt().solve(offset_rhs_);
+  if (!theta.allFinite()) return;
+  offset_V_ = theta(2);
+  offset_sd_V_ = sd;
 }
 
 ResistanceIdentifier::Excitation ResistanceIdentifier::AssessExcitation(double iq, double w) const noexcept {
@@ -444,8 +593,19 @@ ResistanceIdentifier::Excitation ResistanceIdentifier::AssessExcitation(double i
   return ex;
 }
 
+double ResistanceIdentifier::EffectiveDriftOhm() const noexcept {
+  // Under the steady magnet the drift is resistance, which its filter followed; under the
+  // drifting magnet it may be any split of resistance and flux: the drift counts by the
+  // probability of the drifting magnet.
+  if (!state_.anchor_valid) return 0.0;
+  const double steady = SteadyOn() ? state_.hypotheses[kSteadyMagnet].probability : 0.0;
+  return std::sqrt(std::max(1.0 - steady, 0.0)) * state_.drift_ohm;
+}
+
 double ResistanceIdentifier::WindingSd_K() const noexcept {
-  const double var = std::max(p_(kStateResistance, kStateResistance), 0.0) + allowance_ohm_ * allowance_ohm_;
+  const double drift = EffectiveDriftOhm();
+  const double var = std::max(p_(kStateResistance, kStateResistance), 0.0) + allowance_ohm_ * allowance_ohm_ +
+                     drift * drift;
   return std::sqrt(var) / (motor_.copper.r0_ohm * motor_.copper.alpha_per_K);
 }
 
@@ -454,6 +614,9 @@ ResistanceStatus ResistanceIdentifier::Classify(bool separable, bool identifiabl
   if (!(rs >= r_min_ohm_ && rs <= r_max_ohm_)) return ResistanceStatus::kImplausible;
   if (!separable) return ResistanceStatus::kNotIdentifiable;
   if (!identifiable) return ResistanceStatus::kHeld;
+  // uq drifted at constant current by more than the bound allows since the last load change.
+  const double hold_ohm = config_.drift_hold_K * motor_.copper.r0_ohm * motor_.copper.alpha_per_K;
+  if (EffectiveDriftOhm() > hold_ohm) return ResistanceStatus::kHeld;
   // Evidence, not a small covariance alone: the 2-sigma of the winding temperature within the
   // bound, and residuals consistent with the variances that gave it.
   if (2.0 * WindingSd_K() > config_.tracking_bound_K || mean_nis_ > config_.max_consistency_nis) {

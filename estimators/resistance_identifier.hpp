@@ -30,9 +30,22 @@
 ///     blocks only (multiple-model estimation, Magill 1965; Bar-Shalom, Li, Kirubarajan 2001,
 ///     sec. 11.6), and the output is their probability-weighted mixture;
 ///   - the estimate is checked against a plausible band from the motor description;
+///   - between load changes a drift of uq at constant current and speed is resistance or flux
+///     and no data tell which (a magnet warming 1 K moves uq 40 mV at rated speed, a winding
+///     warming 1 K about 1 mV/A): the drift not predicted by the trend known at the last load
+///     change, over iq, bounds what the winding may have done unseen. Weighted by the drifting
+///     magnet's probability it enters the winding temperature's 1-sigma, and above drift_hold_K
+///     the status is `held`; there the drifting-magnet filter's flux is freed to take the drift
+///     (covariance matching), and the next load change re-opens its Rs along the line the old
+///     current fixed. A hypothesis whose filter cannot explain the blocks between load changes
+///     while the other can is refuted there and then;
+///   - where the data make it identifiable (iq varying independently of w_r and of a constant,
+///     e.g. a run-up then load changes at speed, or iq changing sign), an inverter voltage
+///     offset u0 sign(iq) is estimated by windowed least squares beside the filters;
 ///   - `tracking` needs evidence: identifiable now, a 1-sigma of the winding temperature
-///     (covariance plus an allowance for unmodelled voltage error over the current excitation)
-///     within half of tracking_bound_K, and innovations consistent with their variance.
+///     (covariance plus an allowance for unmodelled voltage error over the current excitation
+///     plus the unexplained drift) within half of tracking_bound_K, and innovations consistent
+///     with their variance.
 /// Every output carries one ResistanceStatus and the winding temperature's 1-sigma.
 ///
 /// Pure: no I/O, no clock (time enters as dt_s), no allocation after construction.
@@ -69,7 +82,9 @@ enum class ResistanceStatus : std::uint8_t {
   kInvalidInput = 5,     ///< this sample had a NaN or infinite value and was ignored
   kHeld = 6,             ///< the regressors vary, but iq does not vary independently of a
                          ///< constant (constant current during a run-up): Rs cannot be told
-                         ///< from an inverter voltage offset, so Rs is held (psi_f tracked)
+                         ///< from an inverter voltage offset; or uq drifted at constant current
+                         ///< by more than drift_hold_K of winding since the last load change
+                         ///< (resistance or flux, no data tell): Rs is held (psi_f tracked)
 };
 
 /// Lower-case name of a status ("tracking", "not_identifiable", ...).
@@ -121,6 +136,12 @@ struct ResistanceIdentifierConfig {
   double max_consistency_nis = 4.0;
   /// Consecutive rejected or down-weighted blocks (z >= 3) before P is re-opened.
   int reacquire_after_rejections = 30;
+  /// Unexplained drift of uq since the last load change (against the trend then known), over
+  /// iq, in K of winding, above which the status is `held` (weighted by the drifting magnet's
+  /// probability) and the drifting-magnet filter's flux is freed to take the drift.
+  double drift_hold_K = 1.0;
+  /// Rms of the voltage offset the window must support before it is reported, V.
+  double offset_identifiable_sd_V = 0.01;
   /// Blocks whose mean |iq| is below this are not used at all (0 = use all). The inverter's
   /// dead-time voltage error is nearly constant (absorbed into psi_f) only well above its
   /// knee; below it, its slope against iq looks like resistance. About 3x the drive's knee.
@@ -156,6 +177,15 @@ struct ResistanceEstimate {
   /// residuals match their variance; above max_consistency_nis: no "tracking").
   double mean_nis = 1.0;
   double steady_magnet_probability = 0.0;  ///< probability of the steady-magnet hypothesis
+  /// Drift of uq at constant current since the last load change that the trend then known does
+  /// not predict, over |iq|, in K of winding (Han 2019 eq. 3): what the winding may have done
+  /// unseen (0 right after a load change; NaN before the first one).
+  double unexplained_drift_K = 0.0;
+  /// Inverter voltage offset u0 in uq = Rs iq + w_r psi_f + u0 sign(iq), V, by least squares
+  /// over excitation_window_s, and its 1-sigma; NaN while the window cannot separate it from
+  /// Rs and psi_f (offset_identifiable_sd_V). After the motor file's voltage error is removed.
+  double voltage_offset_V = 0.0;
+  double voltage_offset_sd_V = 0.0;
   ResistanceStatus status = ResistanceStatus::kInitialising;
 };
 
@@ -175,6 +205,13 @@ struct ResistanceIdentifierState {
   /// block count).
   Eigen::Matrix3d moments = Eigen::Matrix3d::Zero();
   std::uint64_t blocks = 0;                         ///< block updates since start or reset
+  /// The mixture's x after the last load change, propagated since with its rates: what the
+  /// unexplained drift is measured against. anchor_valid false (e.g. a state file without it):
+  /// the drift is measured from the first block after Restore.
+  Eigen::Vector4d anchor = Eigen::Vector4d::Zero();
+  bool anchor_valid = false;
+  double drift_V = 0.0;    ///< unexplained drift of uq against the anchor, smoothed, V
+  double drift_ohm = 0.0;  ///< |drift_V| over |iq| at the last block, ohm (>= 0)
 };
 
 /// Moments saved by an identifier without the constant regressor ([iq, w_r] only, 2x2) as
@@ -238,6 +275,12 @@ class ResistanceIdentifier {
   ResistanceStatus Classify(bool separable, bool identifiable) const noexcept;
   double WindingSd_K() const noexcept;
   void Publish(ResistanceStatus status, double eps_V, double weight) noexcept;
+  void ClearDriftAndOffset() noexcept;
+  void RefuteInconsistent(double keep) noexcept;
+  void UpdateDrift(double y, const Eigen::Vector4d& hrow, double dt) noexcept;
+  double EffectiveDriftOhm() const noexcept;
+  void ReopenAlongLine(double iq, double w, double var_ohm2) noexcept;
+  void UpdateOffset(double iq, double w, double y, double decay, double r) noexcept;
 
   MotorDescription motor_;
   ResistanceIdentifierConfig config_;
@@ -255,8 +298,19 @@ class ResistanceIdentifier {
   double sum_duq2_V2_ = 0.0;
   double last_block_iq_A_ = 0.0;  // NaN after start, reset or restore: no load change seen
   double mean_nis_ = 1.0;         // EW mean of the squared normalised innovation (expected 1)
+  std::array<double, kMagnetHypotheses> hypothesis_nis_{1.0, 1.0};  // the same per hypothesis
+  std::array<double, kMagnetHypotheses> last_z_{};  // normalised innovations of the last block
   double allowance_ohm_ = 0.0;    // voltage_error_allowance_V over the iq spread when last
                                   // identified (held with Rs)
+  // Unexplained drift (anchor and drift in state_).
+  bool anchor_pending_ = false;  // after a restore without an anchor: anchor on the next block
+  bool flux_freed_ = false;      // the drifting filter's flux took excess drift since the anchor
+  double last_block_w_rad_per_s_ = 0.0;
+  // Offset least squares: EW moments of v = [iq, w_r / w_scale, sign(iq)] (3x3) and of v y.
+  Eigen::Matrix3d offset_moments_ = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d offset_rhs_ = Eigen::Vector3d::Zero();
+  double offset_V_ = 0.0;
+  double offset_sd_V_ = 0.0;
   // Mixture of the hypotheses (what is published).
   Eigen::Vector4d x_ = Eigen::Vector4d::Zero();
   Eigen::Matrix4d p_ = Eigen::Matrix4d::Zero();

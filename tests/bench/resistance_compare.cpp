@@ -57,6 +57,7 @@ struct Scenario {
   double plant_flux_scale = 1.0;   // the plant's psi_f against the nameplate
   double dead_time_V = 0.0;        // inverter voltage error (0: the `dead_time` switch's 0.2 V)
   bool fast_heating = false;       // the demo's pump 3: the heavy profile, winding ~6 K/min
+  bool fast_magnet = false;        // with fast_heating: the demo's rotor, flux -0.1 %/K
 };
 
 // Figures of one method on one run (definitions in docs/resistance-identification.md).
@@ -115,6 +116,17 @@ double FastHeatingWinding_degC(double t_s) {
   return kDegC[i] + (t_min - i) * (kDegC[i + 1] - kDegC[i]);
 }
 
+// The demo's pump 3 rotor (the magnet), once a minute, 0 to 20 min (`pumptherm plant demo`,
+// pump3.truth.csv, column rotor_C): about 5.6 K/min from 9 min on.
+double FastHeatingMagnet_degC(double t_s) {
+  static constexpr double kDegC[] = {22.00, 22.81, 25.50, 28.84, 32.12, 36.37, 40.74, 45.17,
+                                     49.71, 55.24, 60.81, 66.37, 71.93, 77.52, 83.18, 88.75,
+                                     94.37, 99.94, 105.54, 111.16, 116.60};
+  const double t_min = std::clamp(t_s / 60.0, 0.0, 20.0);
+  const int i = std::min(static_cast<int>(t_min), 19);
+  return kDegC[i] + (t_min - i) * (kDegC[i + 1] - kDegC[i]);
+}
+
 // Measurement-chain overrides for the diagnosis of what limits the figures (0 = simulator default).
 struct Chain {
   int adc_bits = 0;
@@ -155,6 +167,10 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
     cfg.load_profile_A = [ramp](double t) { return FastHeatingLoad_A(t - ramp + 120.0); };
   }
   cfg.magnet_degC = MagnetTrajectory_degC;
+  if (sc.fast_magnet) {
+    const double ramp = cfg.ramp_s;
+    cfg.magnet_degC = [ramp](double t) { return FastHeatingMagnet_degC(t - ramp + 120.0); };
+  }
   cfg.seed = seed;
   if (chain.adc_bits > 0) cfg.adc_bits = chain.adc_bits;
   if (chain.voltage_noise_V >= 0.0) cfg.voltage_noise_V = chain.voltage_noise_V;
@@ -313,8 +329,12 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
       for (const auto& mt : m) {
         std::fprintf(trace, ",%.4f", est::TemperatureAt(nameplate.copper, mt.last_r));
       }
-      std::fprintf(trace, ",%d,%.6f,%.4f,%.4f,%.3f\n", static_cast<int>(e.status),
-                   e.steady_magnet_probability, e.winding_sd_K, s.true_iq_A, e.mean_nis);
+      const est::ResistanceIdentifierState st = ours.Save();
+      std::fprintf(trace, ",%d,%.6f,%.4f,%.4f,%.3f,%.4f,%.5f,%.5f,%.4f,%.4f\n", static_cast<int>(e.status),
+                   e.steady_magnet_probability, e.winding_sd_K, s.true_iq_A, e.mean_nis,
+                   e.unexplained_drift_K, e.voltage_offset_V, e.voltage_offset_sd_V,
+                   est::TemperatureAt(nameplate.copper, st.hypotheses[est::kSteadyMagnet].x(est::kStateResistance)),
+                   est::TemperatureAt(nameplate.copper, st.hypotheses[est::kDriftingMagnet].x(est::kStateResistance)));
     }
     if (t < ramp_end) continue;
     if (at_second) {
@@ -446,6 +466,8 @@ int main(int argc, char** argv) {
        600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.20},
       {"pump3_heating", "the demo's pump 3: 2 min run-up at 3 A, 2.5/3.5/4.5 A, winding up to 6 K/min",
        false, false, false, false, false, 600.0, 0.3, 120.0, 3.0, 0.0, 1.0, 0.0, true},
+      {"pump3_heating_magnet", "pump3_heating with the demo's rotor: flux -0.1 %/K, magnet up to 5.6 K/min",
+       true, false, false, false, false, 600.0, 0.3, 120.0, 3.0, 0.0, 1.0, 0.0, true, true},
   };
   std::string json = "{\n  \"hours\": " + fmt::format("{}", hours) + ",\n  \"seed\": " +
                      fmt::format("{}", seed) + ",\n  \"seeds\": " + fmt::format("{}", seeds) +
@@ -462,7 +484,7 @@ int main(int argc, char** argv) {
       }
       std::fprintf(trace, "time_h,true_degC");
       for (const char* name : kMethodNames) std::fprintf(trace, ",%s", name);
-      std::fprintf(trace, ",ours_status,ours_steady_magnet_probability,ours_winding_sd_K,true_iq_A,ours_mean_nis\n");
+      std::fprintf(trace, ",ours_status,ours_steady_magnet_probability,ours_winding_sd_K,true_iq_A,ours_mean_nis,ours_unexplained_drift_K,ours_voltage_offset_V,ours_voltage_offset_sd_V,ours_steady_degC,ours_drifting_degC\n");
     }
     const auto figs = Run(sc, hours, seed, oc, chain, trace);
     if (trace != nullptr) std::fclose(trace);
