@@ -156,6 +156,7 @@ int RunEstimate(EstimateOptions& o) {
     mc.measured_node = node;
     mc.measurement_sd_K = o.config.measurement_sd_K;
     mc.sensor_lag_s = o.sensor_lag_s;
+    mc.rotor_node = o.magnet_node;
     if (!magnet.empty()) mc.magnet_node = o.magnet_node;
     detector.emplace(model, mc);
     detector->Initialise(std::isfinite(measured[0][0]) ? measured[0][0] : x0, t[0]);
@@ -165,6 +166,7 @@ int RunEstimate(EstimateOptions& o) {
     dc.measured_node = o.config.measured_nodes[0];
     dc.measurement_sd_K = o.config.measurement_sd_K;
     dc.sensor_lag_s = o.sensor_lag_s;
+    dc.rotor_node = o.magnet_node;
     dc.initial_sd_K = o.config.initial_sd_K;
     dc.initial_spread_sd_K = o.config.initial_spread_sd_K;
     if (!magnet.empty()) dc.magnet_node = o.magnet_node;
@@ -286,7 +288,9 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--magnet-column", o->magnet_column,
                      "Column with the magnet temperature from the identified flux, degC (the daemon's "
                      "magnet_flux_C), fused as a measurement of --magnet-node");
-      app.add_option("--magnet-node", o->magnet_node, "Node the magnet temperature measures")
+      app.add_option("--magnet-node", o->magnet_node,
+                     "Node the magnet temperature measures; also the rotor of the disturbance "
+                     "filter's rotor heat and of the detector's rotor-loss hypothesis")
           ->capture_default_str();
       app.add_option("--magnet-sd-K", o->magnet_sd_K, "Noise of the flux-based magnet temperature")
           ->capture_default_str();
