@@ -319,6 +319,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.magnet_min_sd_K = r.Number("magnet_min_sd_K", pc.magnet_min_sd_K, 0.01, 100.0);
       pc.frame_sensor_lag_s = r.Number("frame_sensor_lag_s", pc.frame_sensor_lag_s, 0.0, 3600.0);
       pc.disturbance_states = r.Bool("disturbance_states", pc.disturbance_states);
+      pc.disturbance_states_explicit = t->get("disturbance_states") != nullptr;
       pc.alarms = config.alarms;
       if (const toml::table* at = r.Table("alarms")) {
         TableReader ar(*at, r.Join("alarms"), source);

@@ -106,7 +106,11 @@ struct PumpConfig {
   /// the inverter's voltage error.
   double magnet_min_sd_K = 3.0;
   double frame_sensor_lag_s = 0.0;        ///< first-order lag of the frame sensor (mismatch test)
-  bool disturbance_states = false;        ///< publish the disturbance-state filter's estimates
+  /// Publish the disturbance-state filter's estimates. Unless `disturbance_states_explicit`, the
+  /// pump turns it off for a model whose boundary reaches the network through other nodes than
+  /// `measured_node` (estimators::BoundaryOnlyThrough).
+  bool disturbance_states = true;
+  bool disturbance_states_explicit = false;  ///< the config file set `disturbance_states`
   AlarmsConfig alarms;                    ///< the gateway's [alarms] with this pump's overrides
   int line = 0;                           ///< line of the [[pump]] table
 };

@@ -127,6 +127,12 @@ void Gateway::AddPump(std::size_t p, ModelCache& models) {
   } catch (const std::exception& e) {
     throw KeyError(config_, pc.line, key, e.what());
   }
+  if (!pc.disturbance_states_explicit && !pumps_.back()->config().disturbance_states) {
+    Log(LogLevel::kNotice,
+        "pump {}: standard filter published: the boundary of model {} reaches other nodes than '{}' "
+        "(disturbance_states = true overrides)",
+        pc.name, model->Name(), pc.measured_node);
+  }
   CheckNodeOutputs(pc, key, *model);
   PumpIo io;
   io.iface = counter_.Interface(pc.interface);

@@ -131,6 +131,11 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
       mismatch_(*model_, MismatchConfig(config, *model_)),
       robust_(*model_, RobustConfig(config, *model_)),
       lag_bias_(config.frame_sensor_lag_s, thermal_period_s) {
+  // The disturbance-state filter by default only where its frame-path heat can stand for every
+  // change on the cooling path (docs/virtual-sensor.md, "Disturbance states", per model).
+  if (!config_.disturbance_states_explicit && !estimators::BoundaryOnlyThrough(*model_, config_.measured_node)) {
+    config_.disturbance_states = false;
+  }
   measured_state_ = model_->StateIndex(config_.measured_node);
   if (!config_.magnet_node.empty()) {
     magnet_state_ = model_->StateIndex(config_.magnet_node);
@@ -658,8 +663,13 @@ PumpSavedState Pump::Save() const {
   PumpSavedState s;
   s.model_name = model_->Name();
   s.time_us = snapshot_.time_us;
-  s.x_degC = sensor_.Estimate_degC();
-  s.s_K2 = sensor_.Covariance_K2();
+  // The published filter's nodes: a restart goes on from what was published (both filters are
+  // restored from them).
+  const int n = model_->StateCount();
+  const bool robust = config_.disturbance_states && initialised_;
+  s.x_degC = robust ? Eigen::VectorXd(robust_.Filter().State().head(n)) : sensor_.Estimate_degC();
+  s.s_K2 = robust ? Eigen::MatrixXd(robust_.Filter().Covariance().topLeftCorner(n, n))
+                                      : sensor_.Covariance_K2();
   s.inputs = held_inputs_;
   s.resistance = identifier_.Save();
   s.trip_latched = snapshot_.alarm.trip_latched;
@@ -722,13 +732,17 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   silence_.Begin(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6);
   // The mismatch test starts afresh (learning) from the restored level.
   mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0, static_cast<double>(now_us) * 1e-6);
-  robust_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0);
+  // The disturbance-state filter is not saved: it goes on from the restored nodes, its
+  // disturbances back at their priors, so that the published values do not jump at a restart.
+  robust_.Initialise(x, s);
+  robust_.Nodes(robust_x_, robust_sd_);
   held_inputs_ = state.inputs;
   have_inputs_ = true;
   initialised_ = true;
   for (int i = 0; i < n; ++i) {
     snapshot_.node_degC[static_cast<std::size_t>(i)] = x(i);
-    snapshot_.node_sd_K[static_cast<std::size_t>(i)] = std::sqrt(std::max(s(i, i), 0.0));
+    snapshot_.node_sd_K[static_cast<std::size_t>(i)] =
+        config_.disturbance_states ? robust_sd_(i) : std::sqrt(std::max(s(i, i), 0.0));
   }
   snapshot_.initialised = true;
   snapshot_.time_us = now_us;

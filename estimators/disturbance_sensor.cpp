@@ -125,6 +125,25 @@ void DisturbanceThermalSensor::Initialise(double x0_degC) {
   filter_.Reset(x, s);
 }
 
+void DisturbanceThermalSensor::Initialise(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) {
+  if (x_degC.size() != n_ || s_K2.rows() != n_ || s_K2.cols() != n_ || !x_degC.allFinite() ||
+      !s_K2.allFinite()) {
+    throw std::invalid_argument("DisturbanceThermalSensor::Initialise: need n finite temperatures and an n x n covariance");
+  }
+  Initialise(x_degC(frame_));  // the disturbances' and biases' priors
+  Eigen::VectorXd x = filter_.State();
+  Eigen::MatrixXd s = filter_.Covariance();
+  x.head(n_) = x_degC;
+  s.topLeftCorner(n_, n_) = s_K2;
+  if (lag_ >= 0) {
+    x(lag_) = x_degC(frame_);
+    s.block(lag_, 0, 1, n_) = s_K2.row(frame_);
+    s.block(0, lag_, n_, 1) = s_K2.col(frame_);
+    s(lag_, lag_) = s_K2(frame_, frame_);
+  }
+  filter_.Reset(x, s);
+}
+
 double DisturbanceThermalSensor::NodeSd_K(int i) const {
   const double v = std::max(filter_.Covariance()(i, i), 0.0);
   return std::sqrt(v + config_.sd_floor_K * config_.sd_floor_K);
@@ -230,6 +249,26 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
     }
   }
   return filter_.Update(c_all_, y_all_, sm_all_);
+}
+
+bool BoundaryOnlyThrough(const ThermalModel& model, const std::string& measured_node) {
+  const int measured = model.StateIndex(measured_node);
+  if (measured < 0) return false;
+  ThermalInputs in;
+  in.ambient_degC = in.coolant_degC = 20.0;
+  const Eigen::VectorXd x = Eigen::VectorXd::Constant(model.StateCount(), 20.0);
+  ThermalLinearModel cold, warm;
+  model.Linearise(in, x, cold);
+  in.ambient_degC = in.coolant_degC = 21.0;
+  model.Linearise(in, x, warm);
+  // The losses are the same in both (same speed, currents and temperatures), so the difference
+  // is C^-1 B_b per kelvin of boundary.
+  const Eigen::VectorXd d = (warm.f_K_per_s - cold.f_K_per_s).cwiseAbs();
+  const double scale = d.maxCoeff();
+  for (int i = 0; i < d.size(); ++i) {
+    if (i != measured && d(i) > 1e-9 * scale) return false;
+  }
+  return d(measured) > 0.0;
 }
 
 }  // namespace pumptherm::estimators

@@ -74,12 +74,27 @@ struct DisturbanceReadings {
   double magnet_winding_gain = 0.0;
 };
 
+/// Whether the boundary (ambient and coolant) reaches the network through `measured_node` alone:
+/// after the massless nodes are reduced, a change of the boundary temperature moves no other
+/// node's derivative directly (f of ThermalLinearModel, at standstill, every node at the
+/// boundary's temperature). Only then can the frame-path disturbance heat stand for every change
+/// on the cooling path (lost cooling, an unmeasured ambient); a model whose rotor has its own path
+/// to the ambient (wallscheid2017-4node) leaves such a change to the rotor heat state, which
+/// takes it for heat inside. False for a node the model lacks. Throws std::domain_error when the
+/// model cannot be linearised at standstill.
+bool BoundaryOnlyThrough(const ThermalModel& model, const std::string& measured_node);
+
 class DisturbanceThermalSensor {
  public:
   /// Throws std::invalid_argument naming an unknown measured node or a bad setting.
   DisturbanceThermalSensor(const ThermalModel& model, DisturbanceSensorConfig config);
 
   void Initialise(double x0_degC);
+  /// Starts from node temperatures `x_degC` (n) with their covariance `s_K2` (n x n, K^2), as a
+  /// restored standard filter gives them: the sensor's lag state at the measured node (its row
+  /// of `s_K2`), every disturbance and bias at zero with its prior sd as Initialise(double).
+  /// Throws std::invalid_argument for wrong sizes or non-finite values.
+  void Initialise(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2);
   /// One period; `measured_degC` NaN = no reading; `winding_degC` (the resistance-based winding
   /// temperature, Han et al. 2019 eq. 3) fused when finite and `winding_reading` is set. Throws std::domain_error for dt_s <= 0.
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,

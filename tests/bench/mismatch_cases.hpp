@@ -17,6 +17,7 @@
 #include "estimators/disturbance_sensor.hpp"
 #include "estimators/kalman_virtual_sensor.hpp"
 #include "estimators/mismatch_detector.hpp"
+#include "estimators/model_effects.hpp"
 #include "estimators/thermal_model.hpp"
 #include "tools/sim/sensor.hpp"
 #include "tools/sim/thermal_plant.hpp"
@@ -87,6 +88,18 @@ inline std::string FaultedModelText(const std::string& nominal, Fault f) {
 }
 
 struct CaseSpec {
+  /// The model (truth and filters), a file `<model>.toml` in the model directory. tmp-generic's
+  /// faults are edits of its text (the figures of docs/virtual-sensor.md); any other model's are
+  /// effects of the discrepancy vocabulary (FaultedModelTextByEffects), its measured node and
+  /// rotor are the effects' targets, and "losses +40 %" does not apply (no copper loss scale).
+  std::string model = "tmp-generic";
+  /// Where relative [[table]] paths of the model resolve from; empty = the model directory.
+  std::string tables_dir;
+  /// Load for any other model: the speed and the largest q current (the steps of LoadCurrent_A
+  /// scaled to it); 0 = the model's [operating_range] (its speed, its largest iq).
+  double speed_rpm = 0.0;
+  double iq_max_A = 0.0;
+  double rotor_loss_W = 6.0;  ///< the extra rotor loss at that speed (other models)
   Fault fault = Fault::kNone;
   double fault_s = 3600.0;
   double duration_s = 10800.0;
@@ -137,13 +150,59 @@ inline pe::MismatchDetectorConfig DetectorConfig(double sensor_lag_s) {
   return c;
 }
 
-/// Runs one case. `model_dir` holds tmp-generic.toml.
+/// Whether a fault can be made on a model other than tmp-generic.
+inline bool FaultAppliesToAnyModel(Fault f) { return f != Fault::kLosses40; }
+
+/// A fault of the network as effects of the discrepancy vocabulary (docs/discrepancy.md), for
+/// any model: cooling lost = every frame-boundary resistance x4, extra rotor loss = `rotor_loss_W`
+/// at `speed_rpm` (k (n/1000)^2 on the rotor); the faults outside the network leave the model as
+/// it is (relative table paths made absolute from `tables_dir` either way). Throws
+/// std::invalid_argument for losses +40 %.
+inline std::string FaultedModelTextByEffects(const std::string& nominal, const std::string& source,
+                                             Fault f, double rotor_loss_W, double speed_rpm,
+                                             const std::string& tables_dir) {
+  std::vector<pe::Effect> effects;
+  if (f == Fault::kCoolingLost) effects.push_back({"frame_ambient_resistance", {4.0}, {}});
+  if (f == Fault::kRotorLoss) {
+    const double krpm = speed_rpm / 1000.0;
+    effects.push_back({"rotor_loss", {rotor_loss_W / (krpm * krpm)}, {}});
+  }
+  if (f == Fault::kLosses40) throw std::invalid_argument("losses +40 % is made for tmp-generic only");
+  return pe::ApplyModelEffects(nominal, source, effects, tables_dir);
+}
+
+/// Runs one case. `model_dir` holds `<spec.model>.toml`.
 inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
-                          const pe::VirtualSensorConfig& vts_config = {},
+                          pe::VirtualSensorConfig vts_config = {},
                           pe::DisturbanceSensorConfig dc = {}) {
-  const std::string nominal_text = ReadFile(model_dir + "/tmp-generic.toml");
-  const auto nominal = pe::ThermalModel::Parse(nominal_text, "tmp-generic");
-  const auto faulted = pe::ThermalModel::Parse(FaultedModelText(nominal_text, spec.fault), "tmp-generic+fault");
+  const bool tmp = spec.model == "tmp-generic";
+  const std::string source = model_dir + "/" + spec.model + ".toml";
+  const std::string tables_dir = spec.tables_dir.empty() ? model_dir : spec.tables_dir;
+  const std::string raw_text = ReadFile(source);
+  // Relative table paths made absolute, so that the nominal and the faulted text load alike.
+  const std::string nominal_text = tmp ? raw_text : pe::ApplyModelEffects(raw_text, source, {}, tables_dir);
+  const pe::ThermalModelFiles files{tables_dir, ReadFile};
+  const auto nominal = pe::ThermalModel::Parse(nominal_text, spec.model, files);
+  double speed_rpm = 21000.0, iq_scale = 1.0;  // tmp-generic: the load of the published figures
+  std::string frame_node = "frame", rotor_node = "rotor";
+  if (!tmp) {
+    const pe::ThermalOperatingRange* range = nominal.OperatingRange();
+    speed_rpm = spec.speed_rpm > 0.0 ? spec.speed_rpm : range ? range->speed_rpm : 0.0;
+    const double iq_max_A = spec.iq_max_A > 0.0 ? spec.iq_max_A
+                            : range && !range->iq_A.empty() ? range->iq_A.back() : 0.0;
+    if (!(speed_rpm > 0.0) || !(iq_max_A > 0.0)) {
+      throw std::invalid_argument(spec.model + " has no [operating_range]: give its speed and largest iq");
+    }
+    iq_scale = iq_max_A / 4.0;
+    const pe::EffectTargets targets = pe::FindEffectTargets(nominal_text, source);
+    frame_node = targets.frame;
+    rotor_node = targets.rotor;
+  }
+  const auto faulted = pe::ThermalModel::Parse(
+      tmp ? FaultedModelText(nominal_text, spec.fault)
+          : FaultedModelTextByEffects(nominal_text, source, spec.fault, spec.rotor_loss_W, speed_rpm, tables_dir),
+      spec.model + "+fault", files);
+  vts_config.measured_nodes = {frame_node};
   const int n = nominal.StateCount();
   const double ambient = 22.0;
   pumptherm::sim::ThermalPlantConfig pc;
@@ -160,15 +219,19 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
 
   pe::VirtualThermalSensor vts(nominal, vts_config);
   pe::MismatchDetectorConfig detector_config = DetectorConfig(spec.sensor_lag_s);
-  if (spec.magnet_noise_sd_K > 0.0 && spec.magnet_to_detector) detector_config.magnet_node = "rotor";
+  detector_config.measured_node = frame_node;
+  if (spec.magnet_noise_sd_K > 0.0 && spec.magnet_to_detector) detector_config.magnet_node = rotor_node;
   pe::MismatchDetector det(nominal, detector_config);
   dc.sensor_lag_s = spec.sensor_lag_s;
+  dc.measured_node = frame_node;
+  dc.rotor_node = rotor_node;
   if (spec.winding_noise_sd_K > 0.0) {
     dc.winding_reading = true;
     dc.winding_measurement_sd_K = spec.winding_noise_sd_K;
   }
-  if (spec.magnet_noise_sd_K > 0.0) dc.magnet_node = "rotor";
-  const int rotor = nominal.StateIndex("rotor");
+  if (spec.magnet_noise_sd_K > 0.0) dc.magnet_node = rotor_node;
+  const int rotor = nominal.StateIndex(rotor_node);
+  const int frame = nominal.StateIndex(frame_node);
   std::mt19937_64 magnet_rng(spec.seed * 104729 + 3);  // its own: the other cases' draws stay as they were
   std::normal_distribution<double> magnet_normal(0.0, 1.0);
   double magnet_bias_K = spec.magnet_bias_sd_K * magnet_normal(magnet_rng);
@@ -192,8 +255,8 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
       plant = std::make_unique<pumptherm::sim::ThermalPlant>(faulted, plant->State_degC(), pc, spec.seed + 99);
     }
     pe::ThermalInputs in;
-    in.speed_rpm = std::min(t / 120.0, 1.0) * 21000.0;
-    in.iq_A = LoadCurrent_A(t);
+    in.speed_rpm = std::min(t / 120.0, 1.0) * speed_rpm;
+    in.iq_A = iq_scale * LoadCurrent_A(t);
     in.ambient_degC = in.coolant_degC = ambient;
     pe::ThermalInputs truth_in = in;
     if (faulted_now && spec.fault == Fault::kAmbientRise) {
@@ -201,7 +264,7 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
       truth_in.ambient_degC = truth_in.coolant_degC = ambient + 8.0 * ramp;
     }
     const Eigen::VectorXd& x = plant->Step(truth_in, spec.dt_s);
-    double y = sensor.Measure(x(nominal.StateIndex("frame")), spec.dt_s);
+    double y = sensor.Measure(x(frame), spec.dt_s);
     if (faulted_now && spec.fault == Fault::kSensorOffset) y += 3.0;
     if (faulted_now && spec.fault == Fault::kSensorStuck) {
       if (std::isnan(stuck_value)) stuck_value = y;

@@ -1,11 +1,12 @@
 // The fault matrix of the mismatch detector and the published virtual sensor (figures tool, not a
-// test): tmp-generic truth, frame RTD only, each fault from `--fault-s` on. Prints a table and,
+// test): tmp-generic (or `--model NAME`) truth, frame RTD only, each fault from `--fault-s` on. Prints a table and,
 // with --json, one JSON object per case. docs/virtual-sensor.md, "Model mismatch".
 #include <fmt/core.h>
 
 #include <cmath>
 #include <cstdlib>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tests/bench/mismatch_cases.hpp"
@@ -31,12 +32,20 @@ int main(int argc, char** argv) {
   bool json = false;
   double winding_sd_K = 0.0, magnet_sd_K = 0.0, magnet_bias_K = 2.0;
   pe::DisturbanceSensorConfig dc;
+  mc::CaseSpec base;
+  std::string cases = "none,cooling,rotor,losses,ambient,offset,stuck";
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--duration-s" && i + 1 < argc) duration_s = std::atof(argv[++i]);
     else if (a == "--fault-s" && i + 1 < argc) fault_s = std::atof(argv[++i]);
     else if (a == "--seeds" && i + 1 < argc) seeds = std::atoi(argv[++i]);
     else if (a == "--json") json = true;
+    else if (a == "--model" && i + 1 < argc) base.model = argv[++i];
+    else if (a == "--tables-dir" && i + 1 < argc) base.tables_dir = argv[++i];
+    else if (a == "--speed-rpm" && i + 1 < argc) base.speed_rpm = std::atof(argv[++i]);
+    else if (a == "--iq-max-A" && i + 1 < argc) base.iq_max_A = std::atof(argv[++i]);
+    else if (a == "--rotor-loss-W" && i + 1 < argc) base.rotor_loss_W = std::atof(argv[++i]);
+    else if (a == "--cases" && i + 1 < argc) cases = "," + std::string(argv[++i]) + ",";
     else if (a == "--frame-heat-sd-W" && i + 1 < argc) dc.frame_heat_sd_W = std::atof(argv[++i]);
     else if (a == "--rotor-heat-sd-W" && i + 1 < argc) dc.rotor_heat_sd_W = std::atof(argv[++i]);
     else if (a == "--winding-sd-K" && i + 1 < argc) winding_sd_K = std::atof(argv[++i]);
@@ -49,6 +58,9 @@ int main(int argc, char** argv) {
     else if (a == "--node-process-sd-K" && i + 1 < argc) dc.node_process_sd_K = std::atof(argv[++i]);
     else {
       fmt::print(stderr, "usage: mismatch_matrix [--duration-s S] [--fault-s S] [--seeds N] [--json]\n"
+                          "  [--model NAME (a file NAME.toml of estimators/models)] [--tables-dir DIR (its tables' relative paths from)]\n"
+                          "  [--speed-rpm R] [--iq-max-A A] [--rotor-loss-W W (models other than tmp-generic)]\n"
+                          "  [--cases none,cooling,rotor,losses,ambient,offset,stuck]\n"
                           "  [--frame-heat-sd-W W] [--rotor-heat-sd-W W] [--loss-scale-sd S] [--winding-sd-K K] [--sd-floor-K K] [--node-process-sd-K K]\n"
                           "  [--magnet-sd-K K (emulated rotor reading: white sd)] [--magnet-bias-K K (its slow bias, sd)]\n"
                           "  [--magnet-bias-sd-K K (the filter's bias state)] [--rotor-heat-tau-s S]\n");
@@ -56,16 +68,23 @@ int main(int argc, char** argv) {
     }
   }
   const std::string dir = std::string(PUMPTHERM_SOURCE_DIR) + "/estimators/models";
-  const mc::Fault faults[] = {mc::Fault::kNone, mc::Fault::kCoolingLost, mc::Fault::kRotorLoss,
-                              mc::Fault::kLosses40, mc::Fault::kAmbientRise, mc::Fault::kSensorOffset,
-                              mc::Fault::kSensorStuck};
+  cases = "," + cases + ",";
+  const std::pair<mc::Fault, const char*> faults[] = {
+      {mc::Fault::kNone, "none"},           {mc::Fault::kCoolingLost, "cooling"}, {mc::Fault::kRotorLoss, "rotor"},
+      {mc::Fault::kLosses40, "losses"},     {mc::Fault::kAmbientRise, "ambient"}, {mc::Fault::kSensorOffset, "offset"},
+      {mc::Fault::kSensorStuck, "stuck"}};
   if (!json) {
     fmt::print("{:<36} {:>4} {:>9} {:>8} {:<60} {:<60} {}\n", "case", "seed", "detect_s", "named_s", "named first",
                "named at end", "false | max err K / coverage per node (published filter)");
   }
-  for (mc::Fault f : faults) {
+  for (const auto& [f, key] : faults) {
+    if (cases.find("," + std::string(key) + ",") == std::string::npos) continue;
+    if (base.model != "tmp-generic" && !mc::FaultAppliesToAnyModel(f)) {
+      if (!json) fmt::print("{:<36} not made for {} (no effect scales every loss)\n", mc::FaultName(f), base.model);
+      continue;
+    }
     for (int seed = 1; seed <= seeds; ++seed) {
-      mc::CaseSpec spec;
+      mc::CaseSpec spec = base;
       spec.fault = f;
       spec.fault_s = f == mc::Fault::kNone ? duration_s + 1.0 : fault_s;
       spec.duration_s = duration_s;

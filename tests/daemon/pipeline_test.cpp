@@ -9,6 +9,7 @@
 #include <lcm/lcm-cpp.hpp>
 #include <map>
 #include <numbers>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <toml++/toml.h>
@@ -333,6 +334,18 @@ TEST(Pipeline, DisturbanceStatesPublishAndTheModelIsFoundConsistent) {
   EXPECT_EQ(m.mismatch_state, pumptherm::alarm_t::MISMATCH_CONSISTENT);
   EXPECT_EQ(m.mismatch_effect, pumptherm::alarm_t::EFFECT_NONE);
   EXPECT_EQ(LastMismatchOnCan(b).first, 0.0);
+}
+
+// Unset, disturbance_states follows the model (estimators::BoundaryOnlyThrough): the Saheba
+// machine's boundary reaches it through the frame alone, so it is on; a written value stands.
+TEST(Pipeline, DisturbanceStatesDefaultFollowsTheModel) {
+  EXPECT_TRUE(Bench(Config()).gateway_.pumps()[0]->config().disturbance_states);
+  EXPECT_FALSE(Bench(Config("disturbance_states = false\n")).gateway_.pumps()[0]->config().disturbance_states);
+  // Measured on the rotor, the boundary (at the frame) reaches another node: off unless written.
+  const std::string rotor = std::regex_replace(Config(), std::regex("measured_node = \"frame\""),
+                                               "measured_node = \"rotor\"");
+  EXPECT_FALSE(Bench(rotor).gateway_.pumps()[0]->config().disturbance_states);
+  EXPECT_TRUE(Bench(rotor + "disturbance_states = true\n").gateway_.pumps()[0]->config().disturbance_states);
 }
 
 TEST(Pipeline, AnUnmeasuredAmbientRiseIsAPlantChangeNotAnImplausibleSensor) {

@@ -110,4 +110,41 @@ TEST(DisturbanceSensor, RejectsAnUnknownNode) {
   EXPECT_THROW(pe::DisturbanceThermalSensor(model, m), std::invalid_argument);
 }
 
+// The rule of the daemon's default: the frame-path heat stands for a change of the cooling path
+// only when the boundary reaches the network through the measured node alone.
+TEST(DisturbanceSensor, BoundaryOnlyThroughTheMeasuredNode) {
+  for (const char* name : {"tmp-generic", "saheba2010-baseline", "saheba2010-improved"}) {
+    const auto model = pe::ThermalModel::Parse(mc::ReadFile(ModelDir() + "/" + name + ".toml"), name);
+    EXPECT_TRUE(pe::BoundaryOnlyThrough(model, "frame")) << name;
+    EXPECT_FALSE(pe::BoundaryOnlyThrough(model, "rotor")) << name;
+    EXPECT_FALSE(pe::BoundaryOnlyThrough(model, "lid")) << name;
+  }
+  const std::string two_nodes =
+      "[model]\nname = \"two\"\n"
+      "[[node]]\nname = \"frame\"\ncapacity_J_per_K = 1000\n"
+      "[[node]]\nname = \"rotor\"\ncapacity_J_per_K = 100\n"
+      "[[edge]]\nbetween = [\"frame\", \"ambient\"]\nresistance_K_per_W = 0.5\n"
+      "[[edge]]\nbetween = [\"frame\", \"rotor\"]\nresistance_K_per_W = 1.0\n";
+  EXPECT_TRUE(pe::BoundaryOnlyThrough(pe::ThermalModel::Parse(two_nodes, "two"), "frame"));
+  // The rotor with its own path to the ambient, as the magnet of wallscheid2017-4node.
+  const std::string rotor_cooled =
+      two_nodes + "[[edge]]\nbetween = [\"rotor\", \"ambient\"]\nresistance_K_per_W = 2.0\n";
+  EXPECT_FALSE(pe::BoundaryOnlyThrough(pe::ThermalModel::Parse(rotor_cooled, "rotor-cooled"), "frame"));
+}
+
+// Another shipped model the daemon may run (its faults as effects of the discrepancy vocabulary).
+TEST(DisturbanceSensor, LostCoolingOnTheSahebaMachineStaysCovered) {
+  mc::CaseSpec spec;
+  spec.model = "saheba2010-improved";
+  spec.fault = mc::Fault::kCoolingLost;
+  spec.duration_s = 3600.0 + 2400.0;
+  spec.fault_s = 3600.0;
+  spec.seed = 23;
+  const mc::CaseResult r = mc::RunCase(spec, ModelDir());
+  for (std::size_t i = 0; i < r.nodes.size(); ++i) {
+    EXPECT_GE(r.dist_coverage[i], 0.9) << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
+    EXPECT_LE(r.dist_max_error_K[i], 3.0) << r.nodes[i];
+  }
+}
+
 }  // namespace

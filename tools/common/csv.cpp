@@ -196,10 +196,12 @@ CsvWriter::~CsvWriter() {
   if (owned_ && file_ != nullptr) std::fclose(file_);
 }
 
-void CsvWriter::Row(const std::vector<double>& values) {
-  if (values.size() != columns_) {
-    throw std::logic_error(fmt::format("CsvWriter {}: row of {} values for {} columns", path_,
-                                       values.size(), columns_));
+void CsvWriter::Row(const std::vector<double>& values) { Row(values, {}); }
+
+void CsvWriter::Row(const std::vector<double>& values, const std::vector<std::string>& text) {
+  if (values.size() + text.size() != columns_) {
+    throw std::logic_error(fmt::format("CsvWriter {}: row of {} values and {} text cells for {} columns",
+                                       path_, values.size(), text.size(), columns_));
   }
   line_.clear();
   for (std::size_t i = 0; i < values.size(); ++i) {
@@ -209,6 +211,13 @@ void CsvWriter::Row(const std::vector<double>& values) {
     } else {
       fmt::format_to(std::back_inserter(line_), "{}", values[i]);
     }
+  }
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    if (i || !values.empty()) line_ += ',';
+    if (text[i].find_first_of(",\"\n\r") != std::string::npos) {
+      throw std::logic_error(fmt::format("CsvWriter {}: text cell '{}' needs quoting", path_, text[i]));
+    }
+    line_ += text[i];
   }
   line_ += '\n';
   std::fwrite(line_.data(), 1, line_.size(), file_);

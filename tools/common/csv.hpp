@@ -80,6 +80,9 @@ class CsvWriter {
 
   /// Appends one row; `values.size()` must equal the number of columns (else std::logic_error).
   void Row(const std::vector<double>& values);
+  /// Appends one row of `values` followed by the text cells `text` (written as given: no comma,
+  /// quote or newline in them); together they must fill the columns (else std::logic_error).
+  void Row(const std::vector<double>& values, const std::vector<std::string>& text);
   /// Flushes and closes; throws std::system_error when the data could not be written.
   void Close();
 

@@ -1,12 +1,16 @@
 // pumptherm estimate: the virtual thermal sensor (Kalman filter on the thermal network) over
-// recorded inputs and measured node temperatures.
+// recorded inputs and measured node temperatures; as in the daemon, optionally the
+// disturbance-state filter, and the mismatch detector's verdict per row.
 #include <fmt/core.h>
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <sstream>
 
+#include "estimators/disturbance_sensor.hpp"
 #include "estimators/kalman_virtual_sensor.hpp"
+#include "estimators/mismatch_detector.hpp"
 #include "tools/common/csv.hpp"
 #include "tools/common/thermal_input_series.hpp"
 #include "tools/pumptherm/model_files.hpp"
@@ -32,6 +36,8 @@ struct EstimateOptions {
   double max_step_s = 0.0;        ///< 0: one step per row
   std::string interpolation = "hold";
   RecordingSource recording;  ///< --log: the inputs from a candump recording instead of --input
+  bool disturbance_states = false;  ///< write the disturbance-state filter's nodes and sds
+  double sensor_lag_s = 0.0;        ///< the measured sensor's first-order lag (detector, disturbance filter)
   estimators::VirtualSensorConfig config;
 };
 
@@ -90,8 +96,21 @@ int RunEstimate(EstimateOptions& o) {
   if (!(o.magnet_sd_K > 0.0) || !std::isfinite(o.magnet_sd_K)) {
     throw InputError("--magnet-sd-K: must be a positive finite number");
   }
-  // Between rows: the earlier row's inputs held, or interpolated linearly.
+  if (!(o.sensor_lag_s >= 0.0) || !std::isfinite(o.sensor_lag_s)) {
+    throw InputError("--sensor-lag-s: must be a finite number >= 0");
+  }
+  // The detector and the disturbance-state filter read one sensor, as the daemon's frame sensor.
+  const bool one_sensor = o.config.measured_nodes.size() == 1;
+  if (o.disturbance_states && !one_sensor) {
+    throw InputError("--disturbance-states: give exactly one node to --measure");
+  }
+  if (o.disturbance_states && !winding.empty()) {
+    throw InputError("--disturbance-states: the winding from resistance is not fused into it (as in the "
+                     "daemon); leave out --winding-column");
+  }
+  // Inputs a fraction w of the way from row k-1 to row k (held at row k-1 unless linear).
   const bool linear = o.interpolation == "linear";
+  auto between = [&](std::size_t k, double w) { return series.Between(k, w, linear); };
   estimators::VirtualThermalSensor vts(model, o.config);
   const int n = model.StateCount();
   const std::size_t m = measured.size();
@@ -111,6 +130,38 @@ int RunEstimate(EstimateOptions& o) {
   }
   vts.Initialise(x_first.size() == n ? x_first : Eigen::VectorXd::Constant(n, x0));
 
+  // The daemon's disturbance-state filter (pump[].disturbance_states) and mismatch detector, on
+  // the one measured node; the magnet column as the daemon's magnet from the flux: white sd at
+  // its least, --magnet-sd-K the sd of its slow bias (the daemon's magnet_min_sd_K).
+  std::optional<estimators::DisturbanceThermalSensor> dist;
+  std::optional<estimators::MismatchDetector> detector;
+  double dist_floor_K = 0.0;
+  if (one_sensor) {
+    const std::string& node = o.config.measured_nodes[0];
+    estimators::MismatchDetectorConfig mc;
+    mc.measured_node = node;
+    mc.measurement_sd_K = o.config.measurement_sd_K;
+    mc.sensor_lag_s = o.sensor_lag_s;
+    mc.rotor_node = o.magnet_node;
+    if (!magnet.empty()) mc.magnet_node = o.magnet_node;
+    detector.emplace(model, mc);
+    detector->Initialise(std::isfinite(measured[0][0]) ? measured[0][0] : x0, t[0]);
+  }
+  if (o.disturbance_states) {
+    estimators::DisturbanceSensorConfig dc;
+    dc.measured_node = o.config.measured_nodes[0];
+    dc.measurement_sd_K = o.config.measurement_sd_K;
+    dc.sensor_lag_s = o.sensor_lag_s;
+    dc.rotor_node = o.magnet_node;
+    dc.initial_sd_K = o.config.initial_sd_K;
+    dc.initial_spread_sd_K = o.config.initial_spread_sd_K;
+    if (!magnet.empty()) dc.magnet_node = o.magnet_node;
+    dc.magnet_bias_sd_K = o.magnet_sd_K;
+    dist.emplace(model, dc);
+    dist_floor_K = dc.sd_floor_K;
+    dist->Initialise(std::isfinite(measured[0][0]) ? measured[0][0] : x0);
+  }
+
   std::vector<std::string> columns{"time_s"};
   for (const auto& node : model.Nodes()) columns.push_back(node.name + "_C");
   for (const auto& node : model.Nodes()) columns.push_back(node.name + "_sd_K");
@@ -118,8 +169,13 @@ int RunEstimate(EstimateOptions& o) {
   if (!winding.empty()) columns.push_back("winding_innovation_K");
   if (!magnet.empty()) columns.push_back("magnet_innovation_K");
   columns.push_back("nis");
+  const std::size_t numeric_columns = columns.size();
+  if (detector) {
+    for (const char* c : {"mismatch_state", "mismatch_effect", "mismatch_value"}) columns.push_back(c);
+  }
   CsvWriter out(o.output, columns);
-  std::vector<double> row(columns.size());
+  std::vector<double> row(numeric_columns);
+  std::vector<std::string> text(columns.size() - numeric_columns);
   Eigen::VectorXd y(static_cast<Eigen::Index>(m));
   const Eigen::VectorXd no_measurement = Eigen::VectorXd::Constant(static_cast<Eigen::Index>(m), std::nan(""));
   const estimators::NodeMeasurements none;
@@ -137,15 +193,34 @@ int RunEstimate(EstimateOptions& o) {
       const double dt_s = t[k] - t[k - 1];
       const int steps =
           o.max_step_s > 0.0 ? std::max(1, static_cast<int>(std::ceil(dt_s / o.max_step_s - 1e-9))) : 1;
+      estimators::DisturbanceReadings readings;
       for (int j = 0; j + 1 < steps; ++j) {
-        vts.Step(series.Between(k, static_cast<double>(j) / steps, linear), dt_s / steps, no_measurement, none);
+        const estimators::ThermalInputs held = between(k, static_cast<double>(j) / steps);
+        vts.Step(held, dt_s / steps, no_measurement, none);
+        if (dist) dist->Step(held, dt_s / steps, readings);
+        if (detector) detector->Step(held, dt_s / steps, std::nan(""), t[k - 1] + dt_s * (j + 1) / steps);
       }
-      rep = vts.Step(series.Between(k, static_cast<double>(steps - 1) / steps, linear), dt_s / steps, y, extra);
+      const estimators::ThermalInputs held = between(k, static_cast<double>(steps - 1) / steps);
+      rep = vts.Step(held, dt_s / steps, y, extra);
+      if (dist) {
+        readings.frame_degC = measured[0][k];
+        readings.magnet_degC = mag;  // no sd of its own: the filter's least white sd
+        dist->Step(held, dt_s / steps, readings);
+      }
+      if (detector) detector->Step(held, dt_s / steps, measured[0][k], t[k], mag);
     }
     const estimators::ThermalInputs in = series.Inputs(k);
-    const Eigen::VectorXd all = model.AllTemperatures_degC(in, vts.Estimate_degC());
+    Eigen::VectorXd x_est = vts.Estimate_degC();
+    Eigen::MatrixXd cov = vts.Covariance_K2();
+    if (dist) {
+      // The node block of its covariance with the floor on every node's variance, as it reports.
+      x_est = dist->Filter().State().head(n);
+      cov = dist->Filter().Covariance().topLeftCorner(n, n);
+      cov.diagonal().array() += dist_floor_K * dist_floor_K;
+    }
+    const Eigen::VectorXd all = model.AllTemperatures_degC(in, x_est);
     const Eigen::MatrixXd jac = model.AllTemperatureJacobian(in);
-    const Eigen::VectorXd var = (jac * vts.Covariance_K2() * jac.transpose()).diagonal();
+    const Eigen::VectorXd var = (jac * cov * jac.transpose()).diagonal();
     std::size_t c = 0;
     row[c++] = t[k];
     for (Eigen::Index i = 0; i < all.size(); ++i) row[c++] = all(i);
@@ -166,7 +241,13 @@ int RunEstimate(EstimateOptions& o) {
       row[c++] = valid ? rep.innovation(r++) : std::nan("");
     }
     row[c++] = k > 0 && rep.measurements > 0 ? rep.nis : std::nan("");
-    out.Row(row);
+    if (detector) {
+      const estimators::MismatchFinding& f = detector->Finding();
+      text[0] = estimators::MismatchStateName(f.state);
+      text[1] = estimators::MismatchEffectName(f.effect);
+      text[2] = std::isnan(f.value) ? "nan" : fmt::format("{}", f.value);
+    }
+    out.Row(row, text);
   }
   out.Close();
   return 0;
@@ -184,14 +265,18 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--motor", o->recording.motor, "with --log: motor preset or file (pole pairs for the speed)")
           ->capture_default_str();
       app.add_option("--output,-o", o->output,
-                     "CSV to write: <node>_C and <node>_sd_K per node, innovations, nis");
+                     "CSV to write: <node>_C and <node>_sd_K per node, innovations (of the standard "
+                     "filter), nis and, with one --measure node, the mismatch detector's "
+                     "mismatch_state, mismatch_effect, mismatch_value (as the daemon's CSV)");
       app.add_option("--measure", o->measure, "Measured nodes, comma-separated")->capture_default_str();
       app.add_option("--winding-column", o->winding_column,
                      "Column with the winding temperature from resistance identification, degC");
       app.add_option("--magnet-column", o->magnet_column,
                      "Column with the magnet temperature from the identified flux, degC (the daemon's "
                      "magnet_flux_C), fused as a measurement of --magnet-node");
-      app.add_option("--magnet-node", o->magnet_node, "Node the magnet temperature measures")
+      app.add_option("--magnet-node", o->magnet_node,
+                     "Node the magnet temperature measures; also the rotor of the disturbance "
+                     "filter's rotor heat and of the detector's rotor-loss hypothesis")
           ->capture_default_str();
       app.add_option("--magnet-sd-K", o->magnet_sd_K, "Noise of the flux-based magnet temperature")
           ->capture_default_str();
@@ -211,6 +296,15 @@ const SubcommandRegistrar kRegistrar{
                      "Initial estimate: 'measured' (every node at the mean of the first measured "
                      "values) or 'first-row' (each node at its <node>_C of the first row, measured "
                      "or not: a known start); the initial covariance is the configured one either way")
+          ->capture_default_str();
+      app.add_flag("--disturbance-states", o->disturbance_states,
+                   "Write the disturbance-state filter's nodes and sds (the daemon's "
+                   "pump[].disturbance_states: frame-path and rotor heat, loss scale, sensor lag and "
+                   "offset; the magnet column with a slow-bias state of sd --magnet-sd-K) instead of "
+                   "the standard filter's; one --measure node, no --winding-column");
+      app.add_option("--sensor-lag-s", o->sensor_lag_s,
+                     "First-order lag of the measured sensor, s (the daemon's frame_sensor_lag_s): a "
+                     "state of the disturbance filter and of the mismatch detector")
           ->capture_default_str();
       app.add_option("--columns", o->columns,
                      "Column names of a known data set: 'paderborn' (motor_speed, i_d, i_q, ambient, "
