@@ -17,8 +17,6 @@ constexpr std::int64_t kPairWindowUs = 50'000;
 /// Name of the pseudo-node for the resistance-based winding temperature in alarm levels.
 constexpr const char* kWindingResistanceNode = "winding_resistance";
 /// Forecast integration step and limit.
-constexpr double kForecastStep_s = 10.0;
-constexpr double kForecastLimit_s = 6.0 * 3600.0;
 /// Largest node standard deviation of a converged virtual sensor.
 constexpr double kConvergedSd_K = 5.0;
 
@@ -43,18 +41,6 @@ estimators::VirtualSensorConfig SensorConfig(const PumpConfig& c) {
   v.measured_nodes = {c.measured_node};
   v.winding_measurement_sd_K = c.winding_sd_K;
   return v;
-}
-
-/// The network of `lin` with its heat paths to the boundary (ambient or coolant at
-/// `boundary_degC`) removed: a row of A summing to less than zero leaks heat out of the network
-/// (interior conduction sums to zero in each row; a copper temperature coefficient adds to it),
-/// so that leak leaves the diagonal and its boundary term leaves f.
-void WithoutBoundaryPaths(estimators::ThermalLinearModel& lin, double boundary_degC) {
-  for (Eigen::Index i = 0; i < lin.a_per_s.rows(); ++i) {
-    const double leak_per_s = std::min(lin.a_per_s.row(i).sum(), 0.0);
-    lin.a_per_s(i, i) -= leak_per_s;
-    lin.f_K_per_s(i) += leak_per_s * boundary_degC;
-  }
 }
 
 estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c, const estimators::ThermalModel& model) {
@@ -156,10 +142,13 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
   snapshot_.node_sd_K.assign(static_cast<std::size_t>(n), kNaN);
   alarm_values_.assign(static_cast<std::size_t>(n) + 1, kNaN);
   alarm_sd_.assign(static_cast<std::size_t>(n) + 1, kNaN);
-  forecast_x_.resize(n);
   robust_x_.resize(n);
   robust_sd_.resize(n);
-  forecast_next_.resize(n);
+  // Trip levels per node for the forecast (infinity: none).
+  for (const auto& name : model_->StateNames()) {
+    auto it = config_.alarms.levels.find(name);
+    trip_degC_.push_back(it == config_.alarms.levels.end() ? kInf : it->second.limits.trip_degC);
+  }
   if (period_us_ <= 0) throw std::invalid_argument("thermal period must be positive");
 }
 
@@ -403,7 +392,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const estimators::SensorFault fault_alarm = SensorFaultAlarm(fault, end_us);
   const bool measured_again = fault == estimators::SensorFault::kNone || !std::isnan(winding_res);
   const bool blind = !diverged && !measured_again &&
-                     (fault_alarm != estimators::SensorFault::kNone || blind_x_.size() > 0);
+                     (fault_alarm != estimators::SensorFault::kNone || blind_.bound_degC().size() > 0);
   StepBlindBound(blind, in);
   StepAlarmBounds(diverged, fresh_inputs, robust ? kNaN : measured, in, x);
   for (int i = 0; i < x.size(); ++i) {
@@ -518,23 +507,10 @@ const estimators::NodeMeasurements& Pump::ExtraMeasurements(double winding_res_d
 
 void Pump::StepBlindBound(bool blind, const estimators::ThermalInputs& in) {
   if (!blind) {
-    blind_x_.resize(0);
+    blind_.Reset();
     return;
   }
-  // No temperature is measured (the frame sensor failed, no fresh resistance temperature): the
-  // levels are checked against the worst case, the model with every heat path to the boundary
-  // lost (a cooling failure nothing could see), from the estimate when the measurements stopped.
-  if (blind_x_.size() != model_->StateCount()) blind_x_ = sensor_.Estimate_degC();
-  try {
-    estimators::ThermalLinearModel lin;
-    model_->Linearise(in, blind_x_, lin);
-    WithoutBoundaryPaths(lin, in.ambient_degC);
-    estimators::ThermalDiscreteModel d;
-    estimators::DiscretiseZoh(lin.a_per_s, period_s_, d);
-    blind_x_ = d.ad * blind_x_ + d.phi_s * lin.f_K_per_s;
-  } catch (const std::exception&) {
-    blind_x_.setConstant(kNaN);  // no bound at these inputs: the levels see the estimate alone
-  }
+  blind_.Step(*model_, in, period_s_, sensor_.Estimate_degC());
 }
 
 void Pump::StepAlarmBounds(bool diverged, bool fresh_inputs, double lagging_degC,
@@ -556,7 +532,7 @@ double Pump::AlarmValue_degC(int i, double estimate_degC) const {
   // worst case while running blind, the worst case of a telemetry silence (docs/daemon.md,
   // "Alarm rule").
   double v = estimate_degC + lag_bias_.bias_K();
-  for (const Eigen::VectorXd* b : {&blind_x_, &silence_.bound_degC()}) {
+  for (const Eigen::VectorXd* b : {&blind_.bound_degC(), &silence_.bound_degC()}) {
     if (b->size() > i && !std::isnan((*b)(i))) v = std::max(v, (*b)(i));
   }
   return v;
@@ -605,58 +581,9 @@ void Pump::CheckModel(const estimators::ThermalInputs& in, double measured_degC,
 }
 
 double Pump::TimeToTrip_s(const estimators::ThermalInputs& in, int* node) {
-  *node = -1;
-  const auto& names = model_->StateNames();
-  bool any = false;
-  for (const auto& n : names) {
-    auto it = config_.alarms.levels.find(n);
-    any = any || (it != config_.alarms.levels.end() && std::isfinite(it->second.limits.trip_degC));
-  }
-  if (!any) return std::numeric_limits<double>::infinity();
-  auto trip_of = [&](std::size_t i) {
-    auto it = config_.alarms.levels.find(names[i]);
-    return it == config_.alarms.levels.end() ? std::numeric_limits<double>::infinity()
-                                             : it->second.limits.trip_degC;
-  };
-  forecast_x_ = config_.disturbance_states ? robust_x_ : sensor_.Estimate_degC();
-  for (std::size_t i = 0; i < names.size(); ++i) {
-    if (forecast_x_(static_cast<Eigen::Index>(i)) >= trip_of(i)) {
-      *node = static_cast<int>(i);
-      return 0.0;
-    }
-  }
-  try {
-    // The steady state at these inputs, A x + f = 0 (ThermalModel::SteadyState_degC), into
-    // members: no allocation per step. A singular A gives non-finite values: no forecast.
-    model_->Linearise(in, forecast_lin_);
-    if (config_.disturbance_states) robust_.AddDisturbanceForcing(forecast_lin_);
-    forecast_lu_.compute(forecast_lin_.a_per_s);
-    forecast_ss_.noalias() = forecast_lu_.solve(forecast_lin_.f_K_per_s);
-    forecast_ss_ = -forecast_ss_;
-    if (!forecast_ss_.allFinite()) return std::numeric_limits<double>::infinity();
-    bool reaches = false;
-    for (std::size_t i = 0; i < names.size(); ++i) reaches = reaches || forecast_ss_(static_cast<Eigen::Index>(i)) >= trip_of(i);
-    if (!reaches) return std::numeric_limits<double>::infinity();
-    model_->Linearise(in, forecast_x_, forecast_lin_);
-    if (config_.disturbance_states) robust_.AddDisturbanceForcing(forecast_lin_);
-    forecast_disc_.Update(forecast_lin_, kForecastStep_s);
-  } catch (const std::exception&) {
-    return std::numeric_limits<double>::infinity();
-  }
-  for (double t = 0.0; t < kForecastLimit_s; t += kForecastStep_s) {
-    forecast_disc_.Propagate(forecast_x_, forecast_lin_, forecast_next_);
-    for (std::size_t i = 0; i < names.size(); ++i) {
-      const auto k = static_cast<Eigen::Index>(i);
-      const double trip = trip_of(i);
-      if (forecast_next_(k) >= trip) {
-        *node = static_cast<int>(i);
-        const double frac = (trip - forecast_x_(k)) / (forecast_next_(k) - forecast_x_(k));
-        return t + kForecastStep_s * std::clamp(frac, 0.0, 1.0);
-      }
-    }
-    forecast_x_.swap(forecast_next_);
-  }
-  return std::numeric_limits<double>::infinity();
+  const bool robust = config_.disturbance_states;
+  return forecast_.TimeToTrip_s(*model_, in, robust ? robust_x_ : sensor_.Estimate_degC(), trip_degC_,
+                                robust ? &robust_ : nullptr, node);
 }
 
 PumpSavedState Pump::Save() const {
@@ -704,20 +631,10 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   Eigen::VectorXd x = state.x_degC;
   Eigen::MatrixXd s = state.s_K2;
   const double gap_s = static_cast<double>(now_us - state.time_us) * 1e-6;
-  if (gap_s > 0.0) {
-    try {
-      estimators::ThermalLinearModel lin;
-      model_->Linearise(state.inputs, x, lin);
-      estimators::ThermalDiscreteModel d;
-      estimators::DiscretiseZoh(lin.a_per_s, gap_s, d);
-      x = d.ad * x + d.phi_s * lin.f_K_per_s;
-      // Process noise of the filter's defaults (0.0894 K per second as a random walk).
-      const estimators::VirtualSensorConfig defaults;
-      const double q = defaults.process_sd_K * defaults.process_sd_K * gap_s / defaults.process_period_s;
-      s = d.ad * s * d.ad.transpose() + q * Eigen::MatrixXd::Identity(n, n);
-    } catch (const std::exception&) {
-      return false;
-    }
+  // The time the daemon was down, the inputs then held, with the process noise of the filter's
+  // defaults over it.
+  if (gap_s > 0.0 && !estimators::PredictOverGap(*model_, state.inputs, gap_s, estimators::VirtualSensorConfig{}, x, s)) {
+    return false;
   }
   if (!x.allFinite() || !s.allFinite() ||
       (n > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC))) {

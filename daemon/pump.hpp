@@ -22,6 +22,7 @@
 #include "estimators/resistance_identifier.hpp"
 #include "estimators/thermal_discretisation.hpp"
 #include "estimators/thermal_model.hpp"
+#include "estimators/trip_forecast.hpp"
 
 namespace pumptherm::daemon {
 
@@ -244,13 +245,10 @@ class Pump {
   Eigen::VectorXd measurement_ = Eigen::VectorXd::Constant(1, kNaN);  // the frame sensor, per step
 
   // Forecast.
-  estimators::ThermalLinearModel forecast_lin_;
-  estimators::ThermalDiscretiser forecast_disc_{1e-3};
-  Eigen::VectorXd forecast_x_, forecast_next_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> forecast_lu_;
-  Eigen::VectorXd forecast_ss_;
+  estimators::TripForecast forecast_{model_->StateCount()};
+  std::vector<double> trip_degC_;  // per node, for the forecast (infinity: no trip level)
   std::vector<double> alarm_values_;
-  Eigen::VectorXd blind_x_;  // worst-case bound while blind (size 0: not blind), degC
+  estimators::BlindBound blind_;  // worst-case bound while blind
   std::vector<double> alarm_sd_;         // their standard deviations (the winding's: none, NaN)
   estimators::LagBias lag_bias_;          // the frame reading's lag, added to the levels' values
   estimators::SilenceBound silence_;      // the load that may have risen in a telemetry silence

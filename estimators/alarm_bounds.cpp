@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <limits>
 #include <stdexcept>
 
@@ -91,6 +92,28 @@ void SilenceBound::Step(const ThermalModel& model, const ThermalInputs& in, bool
   start_degC_ = x_degC;
   start_inputs_ = in;
   start_s_ = end_s;
+}
+
+void WithoutBoundaryPaths(ThermalLinearModel& lin, double boundary_degC) {
+  for (Eigen::Index i = 0; i < lin.a_per_s.rows(); ++i) {
+    const double leak_per_s = std::min(lin.a_per_s.row(i).sum(), 0.0);
+    lin.a_per_s(i, i) -= leak_per_s;
+    lin.f_K_per_s(i) += leak_per_s * boundary_degC;
+  }
+}
+
+void BlindBound::Step(const ThermalModel& model, const ThermalInputs& in, double period_s,
+                      const Eigen::VectorXd& estimate_degC) {
+  if (bound_degC_.size() != model.StateCount()) bound_degC_ = estimate_degC;
+  try {
+    model.Linearise(in, bound_degC_, lin_);
+    WithoutBoundaryPaths(lin_, in.ambient_degC);
+    ThermalDiscreteModel d;
+    DiscretiseZoh(lin_.a_per_s, period_s, d);
+    bound_degC_ = d.ad * bound_degC_ + d.phi_s * lin_.f_K_per_s;
+  } catch (const std::exception&) {
+    bound_degC_.setConstant(std::numeric_limits<double>::quiet_NaN());
+  }
 }
 
 }  // namespace pumptherm::estimators

@@ -72,6 +72,32 @@ class SilenceBound {
   Eigen::VectorXd bound_degC_;
 };
 
+/// While no temperature is measured (the frame sensor failed and no fresh resistance temperature
+/// stands in), the levels are checked against the worst case: the model with every heat path to
+/// the boundary lost (a cooling failure nothing could see), run from the estimate at the moment
+/// the measurements stopped.
+class BlindBound {
+ public:
+  /// One blind step of `period_s` at `in`; the first step after Reset starts from `estimate_degC`.
+  /// A model that cannot be linearised at these inputs makes the bound NaN (the levels then see
+  /// the estimate alone); never throws.
+  void Step(const ThermalModel& model, const ThermalInputs& in, double period_s, const Eigen::VectorXd& estimate_degC);
+  /// Not blind (any more): no bound.
+  void Reset() { bound_degC_.resize(0); }
+  /// The bound, degC per state; size 0 while not blind.
+  const Eigen::VectorXd& bound_degC() const { return bound_degC_; }
+
+ private:
+  ThermalLinearModel lin_;
+  Eigen::VectorXd bound_degC_;
+};
+
+/// `lin` with its heat paths to the boundary (ambient or coolant at `boundary_degC`) removed: a
+/// row of A summing to less than zero leaks heat out of the network (interior conduction sums to
+/// zero in each row; a copper temperature coefficient adds to it), so that leak leaves the
+/// diagonal and its boundary term leaves f.
+void WithoutBoundaryPaths(ThermalLinearModel& lin, double boundary_degC);
+
 /// Inputs at least as heating as both `a` and `b`: each current, the speed and the ambient at
 /// the larger magnitude (every loss of the thermal models grows with them).
 ThermalInputs WorseInputs(const ThermalInputs& a, const ThermalInputs& b);

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <stdexcept>
 
 namespace pumptherm::estimators {
@@ -124,6 +125,22 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
     ++row;
   }
   return filter_.Update(c_, y_, sm_, config_.covariance_update);
+}
+
+bool PredictOverGap(const ThermalModel& model, const ThermalInputs& in, double gap_s, const VirtualSensorConfig& config,
+                    Eigen::VectorXd& x, Eigen::MatrixXd& s) {
+  try {
+    ThermalLinearModel lin;
+    model.Linearise(in, x, lin);
+    ThermalDiscreteModel d;
+    DiscretiseZoh(lin.a_per_s, gap_s, d);
+    const double q = config.process_sd_K * config.process_sd_K * gap_s / config.process_period_s;
+    x = d.ad * x + d.phi_s * lin.f_K_per_s;
+    s = d.ad * s * d.ad.transpose() + q * Eigen::MatrixXd::Identity(s.rows(), s.cols());
+  } catch (const std::exception&) {
+    return false;
+  }
+  return true;
 }
 
 }  // namespace pumptherm::estimators

@@ -138,4 +138,11 @@ class VirtualThermalSensor {
   double sp_dt_s_ = -1.0;
 };
 
+/// The estimate `x` (degC) and its covariance `s` (K^2) carried over `gap_s` with the inputs `in`
+/// held: the exact zero-order-hold time update (Saheba 2010 eqs. 30-31) over the whole gap, with
+/// the process noise of `config` as a random walk over it. For a restart after the daemon was
+/// down. False (x and s unchanged) when the model cannot be linearised at these inputs.
+bool PredictOverGap(const ThermalModel& model, const ThermalInputs& in, double gap_s, const VirtualSensorConfig& config,
+                    Eigen::VectorXd& x, Eigen::MatrixXd& s);
+
 }  // namespace pumptherm::estimators

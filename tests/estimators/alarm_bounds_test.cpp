@@ -149,5 +149,18 @@ TEST(WorseInputs, TakesTheLargerMagnitudes) {
   EXPECT_EQ(w.ambient_degC, 25.0);
 }
 
+// Blind, the one node loses its path to ambient: C dT/dt = P, 50 W into 100 J/K is 0.5 K/s from
+// the estimate when the measurements stopped; Reset ends the bound.
+TEST(BlindBound, TheNetworkWithoutItsBoundaryPathsFromTheLastEstimate) {
+  const ThermalModel model = ThermalModel::Parse(kOneNode, "one.toml");
+  BlindBound blind;
+  EXPECT_EQ(blind.bound_degC().size(), 0);
+  for (int k = 0; k < 10; ++k) blind.Step(model, Load(5.0), 1.0, Eigen::VectorXd::Constant(1, 50.0 + k));
+  ASSERT_EQ(blind.bound_degC().size(), 1);
+  EXPECT_NEAR(blind.bound_degC()(0), 55.0, 1e-9);  // from 50 (the first step's estimate), 10 s
+  blind.Reset();
+  EXPECT_EQ(blind.bound_degC().size(), 0);
+}
+
 }  // namespace
 }  // namespace pumptherm::estimators

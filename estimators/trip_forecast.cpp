@@ -1,0 +1,64 @@
+#include "estimators/trip_forecast.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <exception>
+#include <limits>
+
+namespace pumptherm::estimators {
+
+namespace {
+constexpr double kInf = std::numeric_limits<double>::infinity();
+}  // namespace
+
+TripForecast::TripForecast(int states) : x_(states), next_(states), steady_(states) {}
+
+double TripForecast::TimeToTrip_s(const ThermalModel& model, const ThermalInputs& in, const Eigen::VectorXd& x_degC,
+                                  const std::vector<double>& trip_degC, const DisturbanceThermalSensor* disturbances,
+                                  int* node) {
+  *node = -1;
+  const auto n = static_cast<std::size_t>(x_degC.size());
+  if (trip_degC.size() < n || std::none_of(trip_degC.begin(), trip_degC.end(), [](double t) { return std::isfinite(t); })) {
+    return kInf;
+  }
+  x_ = x_degC;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (x_(static_cast<Eigen::Index>(i)) >= trip_degC[i]) {
+      *node = static_cast<int>(i);
+      return 0.0;
+    }
+  }
+  try {
+    // The steady state at these inputs, A x + f = 0 (ThermalModel::SteadyState_degC), into
+    // members: no allocation per call. A singular A gives non-finite values: no forecast.
+    model.Linearise(in, lin_);
+    if (disturbances) disturbances->AddDisturbanceForcing(lin_);
+    lu_.compute(lin_.a_per_s);
+    steady_.noalias() = lu_.solve(lin_.f_K_per_s);
+    steady_ = -steady_;
+    if (!steady_.allFinite()) return kInf;
+    bool reaches = false;
+    for (std::size_t i = 0; i < n; ++i) reaches = reaches || steady_(static_cast<Eigen::Index>(i)) >= trip_degC[i];
+    if (!reaches) return kInf;
+    model.Linearise(in, x_, lin_);
+    if (disturbances) disturbances->AddDisturbanceForcing(lin_);
+    disc_.Update(lin_, kStep_s);
+  } catch (const std::exception&) {
+    return kInf;
+  }
+  for (double t = 0.0; t < kLimit_s; t += kStep_s) {
+    disc_.Propagate(x_, lin_, next_);
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto k = static_cast<Eigen::Index>(i);
+      if (next_(k) >= trip_degC[i]) {
+        *node = static_cast<int>(i);
+        const double frac = (trip_degC[i] - x_(k)) / (next_(k) - x_(k));
+        return t + kStep_s * std::clamp(frac, 0.0, 1.0);
+      }
+    }
+    x_.swap(next_);
+  }
+  return kInf;
+}
+
+}  // namespace pumptherm::estimators
