@@ -324,18 +324,19 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const double winding_res = FreshWindingResistance_degC(end_us);
   measurement_(0) = measured;  // a member: a temporary VectorXd would allocate every step
   BackEmfMeasurement(end_us, mean_iq_A, in.speed_rpm * motor_.pole_pairs * kRadPerSPerRpm);
-  const estimators::KalmanUpdateReport* report = nullptr;
-  try {
-    report = &sensor_.Step(in, period_s_, measurement_, ExtraMeasurements(winding_res));
-    if (config_.disturbance_states) {
-      // The frame and the magnet from the flux; not the identified winding, whose errors on the
-      // demo (7-9 K while tracking) are beyond its bias state (docs/virtual-sensor.md).
-      robust_.Step(in, period_s_, RobustReadings(measured));
-      robust_.Nodes(robust_x_, robust_sd_);
-    }
-  } catch (const std::exception&) {
+  // Health is data: inputs the model cannot take refuse the step, an invalid extra measurement
+  // is left out; both are counted.
+  const estimators::KalmanUpdateReport* report = &sensor_.Step(in, period_s_, measurement_, ExtraMeasurements(winding_res));
+  counters_.rejected_values += static_cast<std::uint64_t>(report->rejected_measurements);
+  if (report->refused) {
     ++counters_.rejected_values;
     return;
+  }
+  if (config_.disturbance_states) {
+    // The frame and the magnet from the flux; not the identified winding, whose errors on the
+    // demo (7-9 K while tracking) are beyond its bias state (docs/virtual-sensor.md).
+    robust_.Step(in, period_s_, RobustReadings(measured));
+    robust_.Nodes(robust_x_, robust_sd_);
   }
   ++counters_.thermal_steps;
   CheckModel(in, measured, end_us);

@@ -172,8 +172,12 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
 
 const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
                                                          const DisturbanceReadings& r) {
-  if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
-    throw std::domain_error("disturbance sensor: the period must be positive and finite");
+  // Health is data: a period or inputs the model cannot take refuse the step (nothing changes).
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s) || !model_.AcceptsInputs(in)) {
+    refused_.measurements = 0;
+    refused_.ok = false;
+    refused_.refused = true;
+    return refused_;
   }
   const auto& c = config_;
   const int nb = static_cast<int>(lin_block_.f_K_per_s.size());

@@ -96,12 +96,14 @@ class DisturbanceThermalSensor {
   /// Throws std::invalid_argument for wrong sizes or non-finite values.
   void Initialise(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2);
   /// One period; `measured_degC` NaN = no reading; `winding_degC` (the resistance-based winding
-  /// temperature, Han et al. 2019 eq. 3) fused when finite and `winding_reading` is set. Throws std::domain_error for dt_s <= 0.
+  /// temperature, Han et al. 2019 eq. 3) fused when finite and `winding_reading` is set. A period
+  /// that is not positive and finite, or non-finite inputs, refuse the step (report.refused).
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,
                                  double winding_degC = std::numeric_limits<double>::quiet_NaN());
   /// One period with every reading. The update has one row per reading the filter has a state
   /// for (frame, winding, magnet, in this order) whenever any is finite; a missing reading's row
-  /// is zero (no effect). Throws std::domain_error for dt_s <= 0.
+  /// is zero (no effect). A period that is not positive and finite, or non-finite inputs, refuse
+  /// the step (report.refused; nothing changes).
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, const DisturbanceReadings& readings);
 
   /// Node temperature estimate i (state order of the model) and its reported sd (with the floor).
@@ -132,6 +134,7 @@ class DisturbanceThermalSensor {
   ThermalLinearModel lin_, lin_block_, lin_idle_;
   ThermalDiscretiser discretiser_;
   KalmanFilter filter_;
+  KalmanUpdateReport refused_;  // the report of a refused step
   Eigen::MatrixXd ad_, sp_, c_, sm_;
   Eigen::VectorXd bu_, y_, x_nodes_;
   Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows

@@ -51,17 +51,14 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
   return Step(inputs, dt_s, measured_degC, winding_only_);
 }
 
-bool VirtualThermalSensor::Uses(const NodeMeasurement& e) const {
+bool VirtualThermalSensor::Uses(const NodeMeasurement& e, bool* rejected) const {
+  if (rejected) *rejected = false;
   if (!std::isfinite(e.value_degC)) return false;
-  if (e.state != kWindingWeightsRow && (e.state < 0 || e.state >= model_.StateCount())) {
-    throw std::invalid_argument(fmt::format(
-        "virtual sensor: extra measurement of state {}, which model '{}' (with {} states) lacks",
-        e.state, model_.Name(), model_.StateCount()));
-  }
-  if (!(e.sd_K > 0.0) || !std::isfinite(e.sd_K) || !std::isfinite(e.winding_gain)) {
-    throw std::invalid_argument(fmt::format(
-        "virtual sensor: extra measurement of state {} with sd {} K (must be positive) and winding "
-        "gain {} (must be finite)", e.state, e.sd_K, e.winding_gain));
+  const bool valid = (e.state == kWindingWeightsRow || (e.state >= 0 && e.state < model_.StateCount())) &&
+                     e.sd_K > 0.0 && std::isfinite(e.sd_K) && std::isfinite(e.winding_gain);
+  if (!valid) {
+    if (rejected) *rejected = true;
+    return false;
   }
   const bool reads_winding = e.state == kWindingWeightsRow || e.winding_gain != 0.0;
   return !reads_winding || model_.WindingWeights().sum() > 0.0;
@@ -70,19 +67,27 @@ bool VirtualThermalSensor::Uses(const NodeMeasurement& e) const {
 const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs, double dt_s,
                                                      const Eigen::VectorXd& measured_degC,
                                                      const NodeMeasurements& extra) {
-  if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
-    throw std::domain_error("virtual sensor: the period must be positive and finite");
+  // Checked before the time update: a refused step changes nothing.
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s) || !model_.AcceptsInputs(inputs)) {
+    report_.measurements = 0;
+    report_.nis = 0.0;
+    report_.ok = false;
+    report_.refused = true;
+    report_.rejected_measurements = 0;
+    return report_;
   }
-  // Counted (and checked) before the time update: a refused step changes nothing.
   const int n = model_.StateCount();
   const Eigen::Index sensors =
       std::min(measured_degC.size(), static_cast<Eigen::Index>(measured_states_.size()));
   int m = 0;
+  int rejected_count = 0;
   for (Eigen::Index i = 0; i < sensors; ++i) {
     if (std::isfinite(measured_degC(i))) ++m;
   }
   for (int j = 0; j < extra.size(); ++j) {
-    if (Uses(extra[j])) ++m;
+    bool rejected = false;
+    if (Uses(extra[j], &rejected)) ++m;
+    rejected_count += rejected;
   }
   // Terms that read node temperatures are evaluated at the current estimate.
   model_.Linearise(inputs, filter_.State(), lin_);
@@ -124,7 +129,10 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
     sm_(row, row) = e.sd_K * e.sd_K;
     ++row;
   }
-  return filter_.Update(c_, y_, sm_, config_.covariance_update);
+  report_ = filter_.Update(c_, y_, sm_, config_.covariance_update);
+  report_.refused = false;
+  report_.rejected_measurements = rejected_count;
+  return report_;
 }
 
 bool PredictOverGap(const ThermalModel& model, const ThermalInputs& in, double gap_s, const VirtualSensorConfig& config,

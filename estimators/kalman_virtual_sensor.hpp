@@ -95,12 +95,13 @@ class VirtualThermalSensor {
   /// Advances one period of `dt_s` with `inputs` held over it, then corrects with
   /// `measured_degC` (one per configured measured node, NaN = not measured; these rows come
   /// first in the report) and every entry of `extra` whose value is finite (in list order).
-  /// Returns the update's report. No allocation once the operating point and the count of
-  /// valid measurements are steady. Throws std::domain_error for non-finite inputs (from the
-  /// model) or dt_s <= 0; std::invalid_argument for an extra measurement of a state that does
-  /// not exist or with a finite value and an sd that is not positive and finite or a
-  /// non-finite winding gain. An extra measurement that reads the winding weights (its row, or
-  /// a non-zero winding gain) is skipped when the model has no winding.
+  /// Returns the update's report; health is data, nothing is thrown: non-finite inputs or a
+  /// period that is not positive and finite refuse the step (report.refused, nothing changes);
+  /// an extra measurement of a state that does not exist, or with a finite value and an sd that
+  /// is not positive and finite or a non-finite winding gain, is left out and counted
+  /// (report.rejected_measurements). An extra measurement that reads the winding weights (its
+  /// row, or a non-zero winding gain) is skipped when the model has no winding. No allocation
+  /// once the operating point and the count of valid measurements are steady.
   const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s,
                                  const Eigen::VectorXd& measured_degC,
                                  const NodeMeasurements& extra);
@@ -121,7 +122,8 @@ class VirtualThermalSensor {
  private:
   /// Whether `e` enters this step's update (finite value, a winding row only when the model has
   /// a winding); throws std::invalid_argument for a state out of range or a bad sd.
-  bool Uses(const NodeMeasurement& e) const;
+  /// Whether extra measurement `e` enters the update; `rejected` is set when it is invalid.
+  bool Uses(const NodeMeasurement& e, bool* rejected = nullptr) const;
 
   const ThermalModel& model_;
   VirtualSensorConfig config_;
@@ -129,6 +131,7 @@ class VirtualThermalSensor {
   ThermalLinearModel lin_;
   ThermalDiscretiser discretiser_;
   KalmanFilter filter_;
+  KalmanUpdateReport report_;  // the last step's (the filter's update plus the step's own health)
   Eigen::VectorXd bu_;
   Eigen::MatrixXd sp_;
   Eigen::MatrixXd c_;

@@ -1032,6 +1032,11 @@ const Eigen::VectorXd& ThermalModel::WindingWeights() const { return impl_->wind
 
 bool ThermalModel::UsesNodeTemperatures() const { return impl_->uses_node_temperatures; }
 
+bool ThermalModel::AcceptsInputs(const ThermalInputs& in) const {
+  return std::isfinite(in.speed_rpm) && std::isfinite(in.id_A) && std::isfinite(in.iq_A) &&
+         std::isfinite(in.ambient_degC) && (!UsesCoolant() || std::isfinite(in.coolant_degC));
+}
+
 void ThermalModel::Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_degC,
                              ThermalLinearModel& out) const {
   impl_->SetTemperatures(x_degC);

@@ -130,6 +130,8 @@ class ThermalModel {
   const Eigen::VectorXd& Capacities_J_per_K() const;
   /// Whether any edge touches the coolant boundary (then inputs need `coolant_C`).
   bool UsesCoolant() const;
+  /// Whether Linearise accepts `in`: every input finite (the coolant only when the model has one).
+  bool AcceptsInputs(const ThermalInputs& in) const;
   /// Whether resistances depend on the inputs (then the reduction is redone per evaluation).
   bool ResistancesVary() const;
   /// State weights of the temperature that the winding resistance reflects (the mean of the

@@ -150,15 +150,29 @@ TEST(VirtualThermalSensor, ExtraNodeMeasurementsEnterWithTheirOwnVariance) {
   EXPECT_EQ(vague.Step(in, 1.0, frame, v).measurements, 3);
   EXPECT_GT(precise.Estimate_degC()(rotor), vague.Estimate_degC()(rotor) + 1.0);
   EXPECT_GT(vague.Estimate_degC()(rotor), 30.0);
-  // NaN = not measured; a state out of range or a zero sd is refused.
+  // NaN = not measured; a state out of range or a zero sd is left out and counted (health is
+  // data: nothing is thrown).
   pe::NodeMeasurements nan_rotor;
   nan_rotor.Add(rotor, std::nan(""), 1.0);
   EXPECT_EQ(precise.Step(in, 1.0, frame, nan_rotor).measurements, 1);
   pe::NodeMeasurements bad_state, bad_sd;
   bad_state.Add(7, 40.0, 1.0);
   bad_sd.Add(rotor, 40.0, 0.0);
-  EXPECT_THROW(precise.Step(in, 1.0, frame, bad_state), std::invalid_argument);
-  EXPECT_THROW(precise.Step(in, 1.0, frame, bad_sd), std::invalid_argument);
+  for (const pe::NodeMeasurements* bad : {&bad_state, &bad_sd}) {
+    const pe::KalmanUpdateReport& r = precise.Step(in, 1.0, frame, *bad);
+    EXPECT_EQ(r.measurements, 1);  // the frame only
+    EXPECT_EQ(r.rejected_measurements, 1);
+    EXPECT_FALSE(r.refused);
+  }
+  // Non-finite inputs or a period that is not positive refuse the step: nothing changes.
+  const Eigen::VectorXd before = precise.Estimate_degC();
+  pe::ThermalInputs nan_speed = in;
+  nan_speed.speed_rpm = std::nan("");
+  EXPECT_TRUE(precise.Step(nan_speed, 1.0, frame, p).refused);
+  EXPECT_TRUE(precise.Step(in, 0.0, frame, p).refused);
+  EXPECT_EQ(precise.Step(nan_speed, 1.0, frame, p).measurements, 0);
+  EXPECT_EQ((precise.Estimate_degC() - before).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_FALSE(precise.Step(in, 1.0, frame, p).refused);
   // A row with a winding gain g reads rotor + g winding: its innovation is
   // y - (x_rotor + g W.x) of the prediction, which a filter without measurements shows.
   pe::VirtualThermalSensor coupled_vts(improved, {}), predicted(improved, {});
@@ -173,7 +187,7 @@ TEST(VirtualThermalSensor, ExtraNodeMeasurementsEnterWithTheirOwnVariance) {
   EXPECT_NEAR(nu, 50.0 - (xp(rotor) + 0.5 * improved.WindingWeights().dot(xp)), 1e-9);
   pe::NodeMeasurements bad_gain;
   bad_gain.Add(rotor, 40.0, 1.0, std::nan(""));
-  EXPECT_THROW(precise.Step(in, 1.0, frame, bad_gain), std::invalid_argument);
+  EXPECT_EQ(precise.Step(in, 1.0, frame, bad_gain).rejected_measurements, 1);
   // The list holds kCapacity entries and refuses more.
   pe::NodeMeasurements full;
   for (int i = 0; i < pe::NodeMeasurements::kCapacity; ++i) EXPECT_TRUE(full.Add(rotor, 40.0, 1.0));

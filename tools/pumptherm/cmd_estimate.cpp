@@ -202,6 +202,12 @@ int RunEstimate(EstimateOptions& o) {
       }
       const estimators::ThermalInputs held = between(k, static_cast<double>(steps - 1) / steps);
       rep = vts.Step(held, dt_s / steps, y, extra);
+      if (rep.refused) {
+        throw InputError(fmt::format("{}: data row {} (time_s {}): the inputs are not finite", o.input.empty() ? o.recording.log : o.input, k + 1, t[k]));
+      }
+      if (rep.rejected_measurements > 0) {
+        throw InputError(fmt::format("data row {} (time_s {}): a winding or magnet reading with an sd that is not positive and finite", k + 1, t[k]));
+      }
       if (dist) {
         readings.frame_degC = measured[0][k];
         readings.magnet_degC = mag;  // no sd of its own: the filter's least white sd
