@@ -2,9 +2,9 @@
 
 #include <fmt/format.h>
 #include <grp.h>
-#include <lcm/lcm-cpp.hpp>
 #include <sodium.h>
 #include <sys/stat.h>
+#include <toml++/toml.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -12,9 +12,9 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
 #include <system_error>
-#include <toml++/toml.h>
 #include <vector>
 
 #include "daemon/config.hpp"
@@ -41,12 +41,14 @@ class MacInput {
   }
   MacInput& Int(std::int64_t v) {
     const auto u = static_cast<std::uint64_t>(v);
-    for (int shift = 56; shift >= 0; shift -= 8) bytes_.push_back(static_cast<std::uint8_t>(u >> shift));
+    for (int shift = 56; shift >= 0; shift -= 8)
+      bytes_.push_back(static_cast<std::uint8_t>(u >> shift));
     return *this;
   }
   MacInput& Text(const std::string& s) {
     const auto n = static_cast<std::uint32_t>(s.size());
-    for (int shift = 24; shift >= 0; shift -= 8) bytes_.push_back(static_cast<std::uint8_t>(n >> shift));
+    for (int shift = 24; shift >= 0; shift -= 8)
+      bytes_.push_back(static_cast<std::uint8_t>(n >> shift));
     bytes_.insert(bytes_.end(), s.begin(), s.end());
     return *this;
   }
@@ -71,7 +73,13 @@ MacInput RequestInput(const pumptherm::alarm_clear_t& m) {
 
 MacInput ReplyInput(const pumptherm::alarm_clear_reply_t& m) {
   MacInput in("pumptherm.alarm_clear_reply_t.1");
-  in.Int(m.utime).Text(m.pump).Int(m.counter).Int(m.result).Text(m.reason).Int(m.last_counter).Int(m.trip_latched ? 1 : 0);
+  in.Int(m.utime)
+      .Text(m.pump)
+      .Int(m.counter)
+      .Int(m.result)
+      .Text(m.reason)
+      .Int(m.last_counter)
+      .Int(m.trip_latched ? 1 : 0);
   return in;
 }
 
@@ -82,7 +90,8 @@ std::optional<gid_t> GidHere(gid_t gid) {
   if (!map) return gid;
   std::uint64_t inside = 0, outside = 0, count = 0;
   while (map >> inside >> outside >> count) {
-    if (gid >= outside && gid - outside < count) return static_cast<gid_t>(inside + (gid - outside));
+    if (gid >= outside && gid - outside < count)
+      return static_cast<gid_t>(inside + (gid - outside));
   }
   return std::nullopt;
 }
@@ -109,23 +118,26 @@ std::string ModeText(mode_t mode) { return fmt::format("{:04o}", mode & 07777); 
 
 std::string ClearKeyFileProblem(const std::string& path, const std::string& group) {
   struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return fmt::format("cannot stat {}: {}", path, std::strerror(errno));
+  if (::stat(path.c_str(), &st) != 0)
+    return fmt::format("cannot stat {}: {}", path, std::strerror(errno));
   if (!S_ISREG(st.st_mode)) return fmt::format("{} is not a regular file", path);
   if ((st.st_mode & S_IRWXO) != 0) {
-    return fmt::format("{} is open to others (mode {}): anyone on this host could clear trips; "
-                       "make it 0640 (chmod 0640, chgrp {})", path, ModeText(st.st_mode),
-                       group.empty() ? "<operators>" : group);
+    return fmt::format(
+        "{} is open to others (mode {}): anyone on this host could clear trips; "
+        "make it 0640 (chmod 0640, chgrp {})",
+        path, ModeText(st.st_mode), group.empty() ? "<operators>" : group);
   }
   if ((st.st_mode & S_IWGRP) != 0) {
-    return fmt::format("{} is writable by its group (mode {}): make it 0640", path, ModeText(st.st_mode));
+    return fmt::format("{} is writable by its group (mode {}): make it 0640", path,
+                       ModeText(st.st_mode));
   }
   if (group.empty()) return "";
   const std::optional<gid_t> gid = GroupId(group);
   if (!gid) return fmt::format("group '{}' (alarms.clear_key_group) does not exist", group);
   const std::optional<gid_t> here = GidHere(*gid);
   if (here && st.st_gid != *here) {
-    return fmt::format("{} belongs to group {}, not to '{}' (gid {}): chgrp {} {}", path, st.st_gid, group,
-                       *gid, group, path);
+    return fmt::format("{} belongs to group {}, not to '{}' (gid {}): chgrp {} {}", path, st.st_gid,
+                       group, *gid, group, path);
   }
   return "";
 }
@@ -139,8 +151,10 @@ ClearKey ReadClearKeyFile(const std::string& path) {
   }
   if (!text) throw std::runtime_error(fmt::format("cannot open {}: it does not exist", path));
   if (text->size() != kClearKeyBytes) {
-    throw std::runtime_error(fmt::format("{} holds {} bytes; a clear key is {} random bytes "
-                                         "(head -c 32 /dev/urandom > FILE)", path, text->size(), kClearKeyBytes));
+    throw std::runtime_error(
+        fmt::format("{} holds {} bytes; a clear key is {} random bytes "
+                    "(head -c 32 /dev/urandom > FILE)",
+                    path, text->size(), kClearKeyBytes));
   }
   ClearKey key{};
   std::memcpy(key.data(), text->data(), key.size());
@@ -152,13 +166,16 @@ std::string CredentialsDirectory() {
   return dir ? dir : "";
 }
 
-std::optional<ClearKey> LoadConfiguredClearKey(const DaemonConfig& config, const std::string& credentials_dir) {
+std::optional<ClearKey> LoadConfiguredClearKey(const DaemonConfig& config,
+                                               const std::string& credentials_dir) {
   const ClearAuthConfig& c = config.clear_auth;
   if (c.key_file.empty()) return std::nullopt;
   auto fail = [&](const std::string& what) {
-    throw ConfigError(fmt::format("{}:{}: key 'alarms.clear_key_file': {}", config.source, c.line, what));
+    throw ConfigError(
+        fmt::format("{}:{}: key 'alarms.clear_key_file': {}", config.source, c.line, what));
   };
-  if (const std::string problem = ClearKeyFileProblem(c.key_file, c.key_group); !problem.empty()) fail(problem);
+  if (const std::string problem = ClearKeyFileProblem(c.key_file, c.key_group); !problem.empty())
+    fail(problem);
   // Under the shipped unit, systemd (as root) hands the file over as a credential: the
   // service's dynamic user is not in the operators' group. kNoClearKeyCredential means systemd
   // found no file when the service started; the file itself is read then.
@@ -185,7 +202,8 @@ std::array<std::uint8_t, 32> ClearMac(const ClearKey& key, const pumptherm::alar
   return RequestInput(m).Mac(key);
 }
 
-std::array<std::uint8_t, 32> ClearReplyMac(const ClearKey& key, const pumptherm::alarm_clear_reply_t& m) {
+std::array<std::uint8_t, 32> ClearReplyMac(const ClearKey& key,
+                                           const pumptherm::alarm_clear_reply_t& m) {
   return ReplyInput(m).Mac(key);
 }
 
@@ -199,9 +217,13 @@ void Sign(const ClearKey& key, pumptherm::alarm_clear_reply_t& m) {
   std::memcpy(m.mac, mac.data(), mac.size());
 }
 
-bool Verify(const ClearKey& key, const pumptherm::alarm_clear_t& m) { return RequestInput(m).Verify(key, m.mac); }
+bool Verify(const ClearKey& key, const pumptherm::alarm_clear_t& m) {
+  return RequestInput(m).Verify(key, m.mac);
+}
 
-bool Verify(const ClearKey& key, const pumptherm::alarm_clear_reply_t& m) { return ReplyInput(m).Verify(key, m.mac); }
+bool Verify(const ClearKey& key, const pumptherm::alarm_clear_reply_t& m) {
+  return ReplyInput(m).Verify(key, m.mac);
+}
 
 ClearExchange SendClear(lcm::LCM& lcm, const std::string& prefix, const ClearKey& key,
                         pumptherm::alarm_clear_t m, double timeout_s) {
@@ -225,15 +247,17 @@ ClearExchange SendClear(lcm::LCM& lcm, const std::string& prefix, const ClearKey
       }
     }
   } listener{key, m.counter, {}};
-  lcm::Subscription* sub =
-      lcm.subscribe(PumpChannelName(prefix, m.pump, PumpChannel::kAlarmClearReply), &Listener::On, &listener);
+  lcm::Subscription* sub = lcm.subscribe(
+      PumpChannelName(prefix, m.pump, PumpChannel::kAlarmClearReply), &Listener::On, &listener);
   if (lcm.publish(PumpChannelName(prefix, m.pump, PumpChannel::kAlarmClear), &m) != 0) {
     lcm.unsubscribe(sub);
-    throw std::runtime_error(fmt::format("LCM: cannot publish the clear command: {}", std::strerror(errno)));
+    throw std::runtime_error(
+        fmt::format("LCM: cannot publish the clear command: {}", std::strerror(errno)));
   }
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   while (!listener.out.reply) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0) break;
     lcm.handleTimeout(static_cast<int>(std::min<std::int64_t>(left.count(), 100)));
   }
@@ -241,8 +265,8 @@ ClearExchange SendClear(lcm::LCM& lcm, const std::string& prefix, const ClearKey
   return listener.out;
 }
 
-std::int8_t ClearAuthenticator::Check(const pumptherm::alarm_clear_t& m, bool source_allowed, std::int64_t now_us,
-                                      std::string* reason) {
+std::int8_t ClearAuthenticator::Check(const pumptherm::alarm_clear_t& m, bool source_allowed,
+                                      std::int64_t now_us, std::string* reason) {
   using R = pumptherm::alarm_clear_reply_t;
   if (!key_) {
     *reason = "no clear key is configured (alarms.clear_key_file): LCM clears are off";
@@ -261,12 +285,14 @@ std::int8_t ClearAuthenticator::Check(const pumptherm::alarm_clear_t& m, bool so
   const bool too_new = m.utime > now_us && m.utime - window_us_ > now_us;
   if (too_old || too_new) {
     *reason = fmt::format("its time is {:.1f} s from the gateway's clock (window {:.0f} s)",
-                          (static_cast<double>(m.utime) - static_cast<double>(now_us)) * 1e-6, window_us_ * 1e-6);
+                          (static_cast<double>(m.utime) - static_cast<double>(now_us)) * 1e-6,
+                          window_us_ * 1e-6);
     return R::RESULT_OUTSIDE_WINDOW;
   }
   const std::int64_t last = last_counter(m.pump);
   if (m.counter <= last) {
-    *reason = fmt::format("counter {} is not above the last accepted {} (a replay?)", m.counter, last);
+    *reason =
+        fmt::format("counter {} is not above the last accepted {} (a replay?)", m.counter, last);
     return R::RESULT_REPLAYED;
   }
   last_counter_[m.pump] = m.counter;
@@ -279,8 +305,10 @@ std::int64_t ClearAuthenticator::last_counter(const std::string& pump) const {
   return it == last_counter_.end() ? 0 : it->second;
 }
 
-pumptherm::alarm_clear_reply_t ClearAuthenticator::Reply(const pumptherm::alarm_clear_t& m, std::int8_t result,
-                                                         const std::string& reason, bool trip_latched,
+pumptherm::alarm_clear_reply_t ClearAuthenticator::Reply(const pumptherm::alarm_clear_t& m,
+                                                         std::int8_t result,
+                                                         const std::string& reason,
+                                                         bool trip_latched,
                                                          std::int64_t now_us) const {
   pumptherm::alarm_clear_reply_t r;
   r.utime = now_us;

@@ -57,14 +57,16 @@ ClearKey ReadClearKeyFile(const std::string& path);
 /// credential kClearKeyCredential in `credentials_dir` (non-empty, and the credential not
 /// kNoClearKeyCredential), reads that copy. Throws
 /// ConfigError "FILE:LINE: key 'alarms.clear_key_file': PROBLEM" for any problem.
-std::optional<ClearKey> LoadConfiguredClearKey(const DaemonConfig& config, const std::string& credentials_dir);
+std::optional<ClearKey> LoadConfiguredClearKey(const DaemonConfig& config,
+                                               const std::string& credentials_dir);
 
 /// $CREDENTIALS_DIRECTORY, or "" outside systemd.
 std::string CredentialsDirectory();
 
 /// The authentication code of `m` (every field but `mac`, laid out as docs/lcm.md says).
 std::array<std::uint8_t, 32> ClearMac(const ClearKey& key, const pumptherm::alarm_clear_t& m);
-std::array<std::uint8_t, 32> ClearReplyMac(const ClearKey& key, const pumptherm::alarm_clear_reply_t& m);
+std::array<std::uint8_t, 32> ClearReplyMac(const ClearKey& key,
+                                           const pumptherm::alarm_clear_reply_t& m);
 /// Fills `m.mac`.
 void Sign(const ClearKey& key, pumptherm::alarm_clear_t& m);
 void Sign(const ClearKey& key, pumptherm::alarm_clear_reply_t& m);
@@ -90,7 +92,8 @@ ClearExchange SendClear(lcm::LCM& lcm, const std::string& prefix, const ClearKey
 class ClearAuthenticator {
  public:
   /// `window_s`: how far a command's utime may lie from the gateway's clock, either way.
-  explicit ClearAuthenticator(double window_s) : window_us_(static_cast<std::int64_t>(window_s * 1e6)) {}
+  explicit ClearAuthenticator(double window_s)
+      : window_us_(static_cast<std::int64_t>(window_s * 1e6)) {}
 
   void SetKey(const ClearKey& key) { key_ = key; }
   bool has_key() const { return key_.has_value(); }

@@ -1,5 +1,6 @@
 #include "daemon/can_socket.hpp"
 
+#include <fmt/format.h>
 #include <linux/can.h>
 #include <linux/can/error.h>
 #include <linux/can/raw.h>
@@ -7,8 +8,6 @@
 #include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/time.h>
-
-#include <fmt/format.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -33,7 +32,8 @@ std::int64_t ReadRmemMax() {
   return v;
 }
 
-CanSocket CanSocket::Open(const std::string& name, bool error_frames, std::int64_t rx_buffer_bytes) {
+CanSocket CanSocket::Open(const std::string& name, bool error_frames,
+                          std::int64_t rx_buffer_bytes) {
   CanSocket s;
   s.name_ = name;
   s.fd_ = UniqueFd(::socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW));
@@ -76,8 +76,10 @@ CanSocket CanSocket::Open(const std::string& name, bool error_frames, std::int64
     }
     int granted = 0;
     socklen_t len = sizeof granted;
-    if (::getsockopt(s.fd_.get(), SOL_SOCKET, SO_RCVBUF, &granted, &len) == 0 && granted < 2 * asked) {
-      (void)::setsockopt(s.fd_.get(), SOL_SOCKET, SO_RCVBUFFORCE, &asked, sizeof asked);  // EPERM: capped
+    if (::getsockopt(s.fd_.get(), SOL_SOCKET, SO_RCVBUF, &granted, &len) == 0 &&
+        granted < 2 * asked) {
+      (void)::setsockopt(s.fd_.get(), SOL_SOCKET, SO_RCVBUFFORCE, &asked,
+                         sizeof asked);  // EPERM: capped
     }
   }
   int granted = 0;
@@ -117,10 +119,15 @@ RxStatus CanSocket::Receive(protocol::TimedFrame* out, std::uint32_t* rx_queue_d
   if (n < 0) {
     last_errno_ = errno;
     switch (errno) {
-      case EAGAIN: return RxStatus::kEmpty;
-      case ENETDOWN: return RxStatus::kDown;
-      case ENODEV: case ENXIO: return RxStatus::kGone;
-      default: return RxStatus::kError;
+      case EAGAIN:
+        return RxStatus::kEmpty;
+      case ENETDOWN:
+        return RxStatus::kDown;
+      case ENODEV:
+      case ENXIO:
+        return RxStatus::kGone;
+      default:
+        return RxStatus::kError;
     }
   }
   if (n != CAN_MTU && n != CANFD_MTU) {
@@ -147,7 +154,7 @@ RxStatus CanSocket::Receive(protocol::TimedFrame* out, std::uint32_t* rx_queue_d
   f.fd = n == CANFD_MTU;
   f.fd_flags = f.fd ? raw.flags : 0;
   f.len = raw.len > (f.fd ? CANFD_MAX_DLEN : CAN_MAX_DLEN) ? (f.fd ? CANFD_MAX_DLEN : CAN_MAX_DLEN)
-                                                          : raw.len;
+                                                           : raw.len;
   std::memcpy(f.data.data(), raw.data, f.len);
   return RxStatus::kFrame;
 }
@@ -166,29 +173,38 @@ TxStatus CanSocket::Send(const protocol::CanFrame& f) {
   if (n == static_cast<ssize_t>(size)) return TxStatus::kSent;
   last_errno_ = n < 0 ? errno : EIO;
   switch (last_errno_) {
-    case ENOBUFS: case EAGAIN: return TxStatus::kBusy;
-    case ENETDOWN: return TxStatus::kDown;
-    case ENODEV: case ENXIO: return TxStatus::kGone;
-    default: return TxStatus::kError;
+    case ENOBUFS:
+    case EAGAIN:
+      return TxStatus::kBusy;
+    case ENETDOWN:
+      return TxStatus::kDown;
+    case ENODEV:
+    case ENXIO:
+      return TxStatus::kGone;
+    default:
+      return TxStatus::kError;
   }
 }
 
 std::string CanSocket::RxBufferReport() const {
   if (rx_buffer_asked_bytes_ <= 0) {
-    return fmt::format("{}: receive buffer {} bytes (the kernel's default; rx_buffer_bytes = 0)", name_,
-                       rx_buffer_granted_bytes_);
+    return fmt::format("{}: receive buffer {} bytes (the kernel's default; rx_buffer_bytes = 0)",
+                       name_, rx_buffer_granted_bytes_);
   }
   if (!rx_buffer_capped()) {
-    return fmt::format("{}: receive buffer {} bytes (rx_buffer_bytes = {}, doubled by the kernel)", name_,
-                       rx_buffer_granted_bytes_, rx_buffer_asked_bytes_);
+    return fmt::format("{}: receive buffer {} bytes (rx_buffer_bytes = {}, doubled by the kernel)",
+                       name_, rx_buffer_granted_bytes_, rx_buffer_asked_bytes_);
   }
   const std::int64_t rmem_max = ReadRmemMax();
   return fmt::format(
-      "{}: receive buffer capped at {} bytes (rx_buffer_bytes = {} asks for {}): an unprivileged socket "
+      "{}: receive buffer capped at {} bytes (rx_buffer_bytes = {} asks for {}): an unprivileged "
+      "socket "
       "gets at most net.core.rmem_max ({}) x 2; raise the cap with a sysctl.d drop-in, e.g. "
-      "/etc/sysctl.d/60-pumptherm.conf: net.core.rmem_max = {} (docs/daemon.md, \"Receive buffer\")",
+      "/etc/sysctl.d/60-pumptherm.conf: net.core.rmem_max = {} (docs/daemon.md, \"Receive "
+      "buffer\")",
       name_, rx_buffer_granted_bytes_, rx_buffer_asked_bytes_, 2 * rx_buffer_asked_bytes_,
-      rmem_max >= 0 ? fmt::format("{}", rmem_max) : std::string("unreadable"), rx_buffer_asked_bytes_);
+      rmem_max >= 0 ? fmt::format("{}", rmem_max) : std::string("unreadable"),
+      rx_buffer_asked_bytes_);
 }
 
 bool CanSocket::InterfaceUp() const {

@@ -16,18 +16,18 @@
 namespace pumptherm::daemon {
 
 enum class RxStatus {
-  kFrame,   ///< a frame was stored
-  kEmpty,   ///< nothing to read now (EAGAIN)
-  kDown,    ///< the interface is down (ENETDOWN); the socket stays usable when it comes back up
-  kGone,    ///< the interface was removed (ENODEV); the socket must be reopened
-  kError,   ///< any other error; errno is in `last_errno()`
+  kFrame,  ///< a frame was stored
+  kEmpty,  ///< nothing to read now (EAGAIN)
+  kDown,   ///< the interface is down (ENETDOWN); the socket stays usable when it comes back up
+  kGone,   ///< the interface was removed (ENODEV); the socket must be reopened
+  kError,  ///< any other error; errno is in `last_errno()`
 };
 
 enum class TxStatus {
   kSent,
-  kBusy,    ///< transmit queue full (ENOBUFS/EAGAIN): frame dropped, counted
-  kDown,    ///< interface down (ENETDOWN): frame dropped
-  kGone,    ///< interface removed (ENODEV/ENXIO)
+  kBusy,  ///< transmit queue full (ENOBUFS/EAGAIN): frame dropped, counted
+  kDown,  ///< interface down (ENETDOWN): frame dropped
+  kGone,  ///< interface removed (ENODEV/ENXIO)
   kError,
 };
 
@@ -39,7 +39,8 @@ class CanSocket {
   /// SO_RCVBUFFORCE is tried, which needs CAP_NET_ADMIN); 0 keeps the kernel's default. What was
   /// granted is in rx_buffer_granted_bytes(). Throws std::system_error when the kernel has no
   /// SocketCAN, the interface does not exist, or a socket option cannot be set.
-  static CanSocket Open(const std::string& name, bool error_frames, std::int64_t rx_buffer_bytes = 0);
+  static CanSocket Open(const std::string& name, bool error_frames,
+                        std::int64_t rx_buffer_bytes = 0);
 
   CanSocket() = default;
   CanSocket(CanSocket&&) noexcept = default;

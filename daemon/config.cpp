@@ -1,6 +1,8 @@
 #include "daemon/config.hpp"
 
 #include <fmt/format.h>
+#include <sys/stat.h>
+#include <toml++/toml.h>
 
 #include <cerrno>
 #include <cmath>
@@ -8,8 +10,6 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
-#include <sys/stat.h>
-#include <toml++/toml.h>
 
 #include "daemon/resources.hpp"
 
@@ -24,7 +24,8 @@ class TableReader {
   TableReader(const toml::table& table, std::string path, const std::string& source)
       : table_(table), path_(std::move(path)), source_(source) {}
 
-  [[noreturn]] void Fail(const toml::node* node, std::string_view key, std::string_view what) const {
+  [[noreturn]] void Fail(const toml::node* node, std::string_view key,
+                         std::string_view what) const {
     const auto line = node ? node->source().begin.line : table_.source().begin.line;
     throw ConfigError(fmt::format("{}:{}: key '{}': {}", source_, line, Join(key), what));
   }
@@ -131,7 +132,8 @@ void ReadClearAuth(TableReader& r, const std::string& base_dir, ClearAuthConfig&
   c.key_file = r.String("clear_key_file", &empty);
   c.key_group = r.String("clear_key_group", &empty);
   c.window_s = r.Number("clear_window_s", c.window_s, 1.0, 3600.0);
-  if (const toml::node* n = r.table().get("clear_key_file")) c.line = static_cast<int>(n->source().begin.line);
+  if (const toml::node* n = r.table().get("clear_key_file"))
+    c.line = static_cast<int>(n->source().begin.line);
   if (!c.key_file.empty() && c.key_file[0] != '/') c.key_file = base_dir + "/" + c.key_file;
   if (!c.key_file.empty() && c.key_group.empty()) {
     r.Fail(r.table().get("clear_key_file"), "clear_key_group",
@@ -167,7 +169,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       lc.limits.warning_degC = nr.Number("warning_degC", lc.limits.warning_degC, -273.0, kInf);
       lc.limits.trip_degC = nr.Number("trip_degC", lc.limits.trip_degC, -273.0, kInf);
       // A trip level alone warns at the same level.
-      if (!t->get("warning_degC") && t->get("trip_degC") && !(lc.limits.warning_degC <= lc.limits.trip_degC)) {
+      if (!t->get("warning_degC") && t->get("trip_degC") &&
+          !(lc.limits.warning_degC <= lc.limits.trip_degC)) {
         lc.limits.warning_degC = lc.limits.trip_degC;
       }
       if (lc.limits.trip_degC < lc.limits.warning_degC) {
@@ -184,7 +187,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     GatewayConfig& g = config.gateway;
     const std::string default_name = g.name;
     g.name = r.String("name", &default_name);
-    g.heartbeat_id = static_cast<std::uint32_t>(r.Integer("heartbeat_id", g.heartbeat_id, 0, 0x7FF));
+    g.heartbeat_id =
+        static_cast<std::uint32_t>(r.Integer("heartbeat_id", g.heartbeat_id, 0, 0x7FF));
     g.heartbeat_period_s = r.Number("heartbeat_period_s", g.heartbeat_period_s, 0.0, 3600.0);
     if (g.heartbeat_period_s > 0.0 && g.heartbeat_period_s < 0.01) {
       r.Fail(t->get("heartbeat_period_s"), "heartbeat_period_s", "below 0.01 s (100 Hz)");
@@ -213,10 +217,12 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     config.lcm.channel_prefix = r.String("channel_prefix", &config.lcm.channel_prefix);
     if (config.lcm.channel_prefix.empty() ||
         config.lcm.channel_prefix.find_first_of(" \t/") != std::string::npos) {
-      r.Fail(t->get("channel_prefix"), "channel_prefix", "must be non-empty, without spaces or '/'");
+      r.Fail(t->get("channel_prefix"), "channel_prefix",
+             "must be non-empty, without spaces or '/'");
     }
     config.lcm.period_s = r.Number("period_s", config.lcm.period_s, 0.01, 3600.0);
-    config.lcm.health_period_s = r.Number("health_period_s", config.lcm.health_period_s, 0.1, 3600.0);
+    config.lcm.health_period_s =
+        r.Number("health_period_s", config.lcm.health_period_s, 0.1, 3600.0);
     r.RejectUnknown();
   }
 
@@ -249,7 +255,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     m.jump_recover_s = r.Number("jump_recover_s", m.jump_recover_s, 0.0, 86400.0);
     m.nis_limit = r.Number("nis_limit", m.nis_limit, 0.0, kInf);
     m.disagree_hold_s = r.Number("disagree_hold_s", m.disagree_hold_s, 0.0, 86400.0);
-    m.not_converged_grace_s = r.Number("not_converged_grace_s", m.not_converged_grace_s, 0.0, 86400.0);
+    m.not_converged_grace_s =
+        r.Number("not_converged_grace_s", m.not_converged_grace_s, 0.0, 86400.0);
     m.forecast_horizon_s = r.Number("forecast_horizon_s", m.forecast_horizon_s, 0.0, 86400.0);
     m.trip_sd_factor = r.Number("trip_sd_factor", m.trip_sd_factor, 0.0, 10.0);
     m.warning_sd_factor = r.Number("warning_sd_factor", m.warning_sd_factor, 0.0, 10.0);
@@ -282,7 +289,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
         }
       }
       iface.error_frames = r.Bool("error_frames", false);
-      iface.rx_buffer_bytes = r.Integer("rx_buffer_bytes", iface.rx_buffer_bytes, 0, kMaxRxBufferBytes);
+      iface.rx_buffer_bytes =
+          r.Integer("rx_buffer_bytes", iface.rx_buffer_bytes, 0, kMaxRxBufferBytes);
       if (iface.rx_buffer_bytes != 0 && iface.rx_buffer_bytes < kMinRxBufferBytes) {
         r.Fail(t->get("rx_buffer_bytes"), "rx_buffer_bytes",
                fmt::format("{} is below {} (0 keeps the kernel's default)", iface.rx_buffer_bytes,
@@ -304,11 +312,13 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.line = static_cast<int>(t->source().begin.line);
       pc.name = r.String("name", nullptr);
       if (pc.name.empty() || pc.name.find_first_of(" \t/") != std::string::npos) {
-        r.Fail(t->get("name"), "name", "must be non-empty, without spaces or '/' (it names LCM channels)");
+        r.Fail(t->get("name"), "name",
+               "must be non-empty, without spaces or '/' (it names LCM channels)");
       }
       pc.node_id = static_cast<std::uint32_t>(r.Integer("node_id", 0, 0, 65535));
       if (!t->get("node_id")) r.Fail(nullptr, "node_id", "missing (required)");
-      const std::string first_interface = config.interfaces.empty() ? "" : config.interfaces[0].name;
+      const std::string first_interface =
+          config.interfaces.empty() ? "" : config.interfaces[0].name;
       pc.interface = r.String("interface", &first_interface);
       pc.motor = r.String("motor", &pc.motor);
       pc.thermal_model = r.String("thermal_model", &pc.thermal_model);
@@ -327,10 +337,12 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
         ar.RejectUnknown();
       }
       for (const auto& other : config.pumps) {
-        if (other.name == pc.name) r.Fail(t->get("name"), "name", fmt::format("pump '{}' is listed twice", pc.name));
+        if (other.name == pc.name)
+          r.Fail(t->get("name"), "name", fmt::format("pump '{}' is listed twice", pc.name));
         if (other.node_id == pc.node_id && other.interface == pc.interface) {
           r.Fail(t->get("node_id"), "node_id",
-                 fmt::format("node {} on '{}' is already pump '{}'", pc.node_id, pc.interface, other.name));
+                 fmt::format("node {} on '{}' is already pump '{}'", pc.node_id, pc.interface,
+                             other.name));
         }
       }
       r.RejectUnknown();
@@ -354,10 +366,14 @@ std::string ConfigPermissionWarning(const std::string& path) {
   if (::stat(path.c_str(), &st) != 0) return "";
   const bool group = (st.st_mode & S_IWGRP) != 0, others = (st.st_mode & S_IWOTH) != 0;
   if (!group && !others) return "";
-  return fmt::format("{} is writable by {} (mode {:04o}): whoever can write it sets the alarm "
-                     "levels and who may clear trips; make it 0644 or tighter",
-                     path, group && others ? "group and others" : group ? "its group" : "others",
-                     st.st_mode & 07777);
+  return fmt::format(
+      "{} is writable by {} (mode {:04o}): whoever can write it sets the alarm "
+      "levels and who may clear trips; make it 0644 or tighter",
+      path,
+      group && others ? "group and others"
+      : group         ? "its group"
+                      : "others",
+      st.st_mode & 07777);
 }
 
 }  // namespace pumptherm::daemon

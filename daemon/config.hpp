@@ -32,19 +32,19 @@ class ConfigError : public std::runtime_error {
 /// 2000 frames, a quarter of a second of a fully loaded 1 Mbit/s bus (docs/daemon.md, "Receive
 /// buffer"). Unprivileged sockets get at most net.core.rmem_max (x 2).
 inline constexpr std::int64_t kDefaultRxBufferBytes = 1 << 20;
-inline constexpr std::int64_t kMinRxBufferBytes = 4096;        ///< below it the kernel's own floor rules
-inline constexpr std::int64_t kMaxRxBufferBytes = 256LL << 20; ///< 256 MiB
+inline constexpr std::int64_t kMinRxBufferBytes = 4096;  ///< below it the kernel's own floor rules
+inline constexpr std::int64_t kMaxRxBufferBytes = 256LL << 20;  ///< 256 MiB
 
 /// One SocketCAN interface the daemon listens and sends on.
 struct InterfaceConfig {
-  std::string name;                 ///< e.g. "can0" or "vcan0"
-  bool error_frames = false;        ///< subscribe to error frames (bus state)
+  std::string name;           ///< e.g. "can0" or "vcan0"
+  bool error_frames = false;  ///< subscribe to error frames (bus state)
   /// SO_RCVBUF asked for the socket, bytes; 0 leaves the kernel's default (net.core.rmem_default).
   std::int64_t rx_buffer_bytes = kDefaultRxBufferBytes;
 };
 
 struct GatewayConfig {
-  std::string name = "pumptherm";   ///< shown in the status line and logs
+  std::string name = "pumptherm";         ///< shown in the status line and logs
   std::uint32_t heartbeat_id = 0x7F0;     ///< 11-bit CAN ID of the heartbeat frame
   double heartbeat_period_s = 1.0;        ///< 0 disables the heartbeat
   double status_period_s = 2.0;           ///< systemd STATUS= and journal summary period
@@ -57,15 +57,15 @@ struct GatewayConfig {
 
 /// Where the frame layout comes from.
 struct DbcConfig {
-  std::string file = "pumptherm.dbc";           ///< path or shipped name
+  std::string file = "pumptherm.dbc";              ///< path or shipped name
   std::string mapping = "mapping_pumptherm.toml";  ///< path or shipped name of the mapping
-  std::string base_dir = ".";                   ///< directory of the config file
+  std::string base_dir = ".";                      ///< directory of the config file
 };
 
 struct LcmConfig {
-  std::string url;                        ///< empty: LCM off
+  std::string url;  ///< empty: LCM off
   std::string channel_prefix = "PUMPTHERM";
-  double period_s = 1.0;                  ///< temperatures/identification publishing period
+  double period_s = 1.0;  ///< temperatures/identification publishing period
   double health_period_s = 5.0;
 };
 
@@ -76,52 +76,52 @@ struct LevelsConfig {
 };
 
 struct AlarmsConfig {
-  estimators::AlarmConfig monitor;        ///< timing and plausibility (sensor_node set per pump)
-  std::map<std::string, LevelsConfig> levels;  ///< node name (or "sensor") -> levels
+  estimators::AlarmConfig monitor;  ///< timing and plausibility (sensor_node set per pump)
+  std::map<std::string, LevelsConfig> levels;     ///< node name (or "sensor") -> levels
   std::vector<std::string> clear_can_interfaces;  ///< clear command frames accepted from these
   std::vector<std::string> clear_lcm_sources;     ///< alarm_clear_t.source values accepted
 };
 
 /// Authenticated LCM clears (docs/threat-model.md): the key file and the replay window.
 struct ClearAuthConfig {
-  std::string key_file;             ///< empty: no key, every LCM clear is refused
-  std::string key_group;            ///< group that owns the key file (the operators)
-  double window_s = 30.0;           ///< a command's time may be this far from the gateway's clock
-  int line = 0;                     ///< line of alarms.clear_key_file, for messages
+  std::string key_file;    ///< empty: no key, every LCM clear is refused
+  std::string key_group;   ///< group that owns the key file (the operators)
+  double window_s = 30.0;  ///< a command's time may be this far from the gateway's clock
+  int line = 0;            ///< line of alarms.clear_key_file, for messages
 };
 
 struct PumpConfig {
   std::string name;
   std::uint32_t node_id = 0;
-  std::string interface;                  ///< which [[can]] interface (or log interface)
-  std::string motor = "han2019-tmp";      ///< motor description: path or preset name
+  std::string interface;                      ///< which [[can]] interface (or log interface)
+  std::string motor = "han2019-tmp";          ///< motor description: path or preset name
   std::string thermal_model = "tmp-generic";  ///< thermal model: path or shipped name
-  std::string measured_node = "frame";    ///< the node the frame sensor measures
-  bool fuse_winding = true;               ///< feed the resistance-based winding temperature
-  double winding_sd_K = 3.0;              ///< its standard deviation in the filter
+  std::string measured_node = "frame";        ///< the node the frame sensor measures
+  bool fuse_winding = true;                   ///< feed the resistance-based winding temperature
+  double winding_sd_K = 3.0;                  ///< its standard deviation in the filter
   /// Node the magnet temperature from the flux is fused into (empty: published, not fused).
   std::string magnet_node;
   /// Least standard deviation of the magnet temperature from the flux, K, in the filter and as
   /// published: the identifier's covariance sees its noise, not the nameplate flux's error or
   /// the inverter's voltage error.
   double magnet_min_sd_K = 3.0;
-  double frame_sensor_lag_s = 0.0;        ///< first-order lag of the frame sensor (mismatch test)
+  double frame_sensor_lag_s = 0.0;  ///< first-order lag of the frame sensor (mismatch test)
   /// Publish the disturbance-state filter's estimates. Unless `disturbance_states_explicit`, the
   /// pump turns it off for a model whose boundary reaches the network through other nodes than
   /// `measured_node` (estimators::BoundaryOnlyThrough).
   bool disturbance_states = true;
   bool disturbance_states_explicit = false;  ///< the config file set `disturbance_states`
-  AlarmsConfig alarms;                    ///< the gateway's [alarms] with this pump's overrides
-  int line = 0;                           ///< line of the [[pump]] table
+  AlarmsConfig alarms;                       ///< the gateway's [alarms] with this pump's overrides
+  int line = 0;                              ///< line of the [[pump]] table
 };
 
 struct DaemonConfig {
-  std::string source;               ///< file it came from, for messages
+  std::string source;  ///< file it came from, for messages
   GatewayConfig gateway;
   DbcConfig dbc;
   LcmConfig lcm;
-  AlarmsConfig alarms;              ///< defaults for every pump
-  ClearAuthConfig clear_auth;       ///< from [alarms]: clear_key_file, clear_key_group, clear_window_s
+  AlarmsConfig alarms;         ///< defaults for every pump
+  ClearAuthConfig clear_auth;  ///< from [alarms]: clear_key_file, clear_key_group, clear_window_s
   std::map<std::string, double> output_periods_s;  ///< DBC message name -> period override
   std::vector<InterfaceConfig> interfaces;
   std::vector<PumpConfig> pumps;

@@ -27,7 +27,8 @@ class FailureReport {
     double run_s = 0.0;                       ///< from the run's first failure to now
   };
 
-  explicit FailureReport(std::int64_t reminder_period_us) : reminder_period_us_(reminder_period_us) {}
+  explicit FailureReport(std::int64_t reminder_period_us)
+      : reminder_period_us_(reminder_period_us) {}
 
   /// One failure at `now_us`, for reason `what` (compared with the last reported reason).
   Report Failure(std::int64_t now_us, std::string_view what);

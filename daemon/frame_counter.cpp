@@ -11,7 +11,8 @@ namespace {
 
 /// The count key as one integer: interface index, extended flag, CAN ID.
 std::uint64_t PackedKey(std::size_t iface, bool extended, std::uint32_t id) {
-  return (static_cast<std::uint64_t>(iface) << 33) | (static_cast<std::uint64_t>(extended) << 32) | id;
+  return (static_cast<std::uint64_t>(iface) << 33) | (static_cast<std::uint64_t>(extended) << 32) |
+         id;
 }
 
 }  // namespace
@@ -23,8 +24,10 @@ BusState NextBusState(BusState state, const protocol::CanFrame& frame) {
   if ((cls & CAN_ERR_RESTARTED) != 0U) state = BusState::kErrorActive;
   if ((cls & CAN_ERR_CRTL) != 0U && frame.len >= 2) {
     const std::uint8_t crtl = frame.data[1];
-    if ((crtl & (CAN_ERR_CRTL_RX_PASSIVE | CAN_ERR_CRTL_TX_PASSIVE)) != 0U) return BusState::kErrorPassive;
-    if ((crtl & (CAN_ERR_CRTL_RX_WARNING | CAN_ERR_CRTL_TX_WARNING)) != 0U) return BusState::kErrorWarning;
+    if ((crtl & (CAN_ERR_CRTL_RX_PASSIVE | CAN_ERR_CRTL_TX_PASSIVE)) != 0U)
+      return BusState::kErrorPassive;
+    if ((crtl & (CAN_ERR_CRTL_RX_WARNING | CAN_ERR_CRTL_TX_WARNING)) != 0U)
+      return BusState::kErrorWarning;
     if ((crtl & CAN_ERR_CRTL_ACTIVE) != 0U) return BusState::kErrorActive;
   }
   if (state == BusState::kUnknown) return BusState::kErrorActive;  // it talks: not bus-off
@@ -114,8 +117,8 @@ std::string FrameCounter::StatusLine() const {
     tx_dropped += c.tx_dropped;
     states += fmt::format(" {}:{}", c.name, c.up ? "up" : "DOWN");
   }
-  return fmt::format("rx {} frames, {} IDs, {} rx drops; tx {} frames, {} tx dropped;{}",
-                     total_rx_, distinct_ids_, drops, tx, tx_dropped, states);
+  return fmt::format("rx {} frames, {} IDs, {} rx drops; tx {} frames, {} tx dropped;{}", total_rx_,
+                     distinct_ids_, drops, tx, tx_dropped, states);
 }
 
 std::string FrameCounter::CountTable() const {

@@ -19,7 +19,13 @@ namespace pumptherm::daemon {
 
 /// Controller state of a CAN interface as its error frames tell it (linux/can/error.h); only
 /// known when the interface's error frames are requested (config `error_frames = true`).
-enum class BusState : std::uint8_t { kUnknown, kErrorActive, kErrorWarning, kErrorPassive, kBusOff };
+enum class BusState : std::uint8_t {
+  kUnknown,
+  kErrorActive,
+  kErrorWarning,
+  kErrorPassive,
+  kBusOff
+};
 
 /// The bus state after error frame `frame` (id: the error class bits, data: the details of
 /// linux/can/error.h), starting from `state`: bus-off (CAN_ERR_BUSOFF), passive or warning
@@ -32,11 +38,11 @@ BusState NextBusState(BusState state, const protocol::CanFrame& frame);
 struct InterfaceCounters {
   std::string name;
   std::uint64_t rx_frames = 0;
-  std::uint64_t rx_queue_drops = 0;   ///< frames the kernel dropped (SO_RXQ_OVFL)
+  std::uint64_t rx_queue_drops = 0;  ///< frames the kernel dropped (SO_RXQ_OVFL)
   std::uint64_t rx_error_frames = 0;
   std::uint64_t tx_frames = 0;
-  std::uint64_t tx_dropped = 0;       ///< ENOBUFS/EAGAIN/ENETDOWN on send: counted, not fatal
-  std::uint64_t reopens = 0;          ///< times the socket was reopened after the interface vanished
+  std::uint64_t tx_dropped = 0;  ///< ENOBUFS/EAGAIN/ENETDOWN on send: counted, not fatal
+  std::uint64_t reopens = 0;     ///< times the socket was reopened after the interface vanished
   BusState bus_state = BusState::kUnknown;  ///< from error frames; see NextBusState
   bool up = true;
 };

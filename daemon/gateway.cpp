@@ -40,7 +40,8 @@ std::string AlarmChangeText(const estimators::AlarmState& a, std::uint16_t logge
     std::string s;
     for (std::size_t r = 1; r < estimators::kAlarmReasonCount; ++r) {
       if (bits & (1u << r)) {
-        s += (s.empty() ? "" : ", ") + std::string(estimators::AlarmReasonName(static_cast<estimators::AlarmReason>(r)));
+        s += (s.empty() ? "" : ", ") +
+             std::string(estimators::AlarmReasonName(static_cast<estimators::AlarmReason>(r)));
       }
     }
     return s;
@@ -140,12 +141,12 @@ void Gateway::WarnUnconfiguredNode(std::size_t iface, const protocol::TimedFrame
     std::string silent;
     for (std::size_t p = 0; p < pumps_.size(); ++p) {
       if (io_[p].iface != iface || io_[p].inputs_us >= 0 || io_[p].status_us >= 0) continue;
-      silent += fmt::format("{}{} (node_id {})", silent.empty() ? "" : ", ", pumps_[p]->config().name,
-                            pumps_[p]->config().node_id);
+      silent += fmt::format("{}{} (node_id {})", silent.empty() ? "" : ", ",
+                            pumps_[p]->config().name, pumps_[p]->config().node_id);
     }
     const std::string& name = counter_.interfaces()[iface].name;
-    Log(LogLevel::kWarning, "{}: {} frames (ID {:X}) from node ID {}, which no pump on {} has; {}", name,
-        msg.name, tf.frame.id, node, name,
+    Log(LogLevel::kWarning, "{}: {} frames (ID {:X}) from node ID {}, which no pump on {} has; {}",
+        name, msg.name, tf.frame.id, node, name,
         silent.empty() ? "every pump configured there is heard from"
                        : "not heard from yet there: " + silent + " - is its node_id wrong?");
     return;
@@ -240,8 +241,9 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
     io.alarm_changes_sent = pump.snapshot().alarm_changes;
     publish_alarm();
     const auto& a = pump.snapshot().alarm;
-    Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning, "pump {}: {}",
-        name, AlarmChangeText(a, io.logged_active_reasons, pump.model().StateNames()));
+    Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning,
+        "pump {}: {}", name,
+        AlarmChangeText(a, io.logged_active_reasons, pump.model().StateNames()));
     io.logged_active_reasons = a.active_reasons;
   }
   if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
@@ -283,7 +285,8 @@ void Gateway::AdvanceHealth(std::int64_t now_us, OutputSink& sink) {
   } else {
     ++counters_.lcm_failed;
   }
-  next_health_us_ = now_us + static_cast<std::int64_t>(std::llround(config_.lcm.health_period_s * 1e6));
+  next_health_us_ =
+      now_us + static_cast<std::int64_t>(std::llround(config_.lcm.health_period_s * 1e6));
 }
 
 }  // namespace pumptherm::daemon

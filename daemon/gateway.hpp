@@ -32,7 +32,8 @@ class OutputSink {
  public:
   virtual ~OutputSink() = default;
   /// A frame for interface `iface` (FrameCounter index) at time `time_us`.
-  virtual void SendFrame(std::size_t iface, std::int64_t time_us, const protocol::CanFrame& frame) = 0;
+  virtual void SendFrame(std::size_t iface, std::int64_t time_us,
+                         const protocol::CanFrame& frame) = 0;
   /// An encoded LCM message for `channel`. Returns false when it could not be sent (counted).
   virtual bool PublishLcm(const std::string& channel, std::int64_t time_us,
                           const std::vector<std::uint8_t>& bytes) = 0;
@@ -40,17 +41,18 @@ class OutputSink {
 
 /// Gateway-wide counters beyond the per-interface ones.
 struct GatewayCounters {
-  std::uint64_t rx_unknown_id = 0;     ///< frames whose ID no configured pump uses
+  std::uint64_t rx_unknown_id = 0;  ///< frames whose ID no configured pump uses
   /// Of those, frames of a mapped input message for a node ID no pump on that interface has
   /// (a pump configured with the wrong node_id, or an unconfigured pump); warned about.
   std::uint64_t rx_unconfigured_node = 0;
-  std::uint64_t rx_bad_length = 0;     ///< frames shorter than their message: rejected
-  std::uint64_t tx_saturated = 0;      ///< output values clamped to a signal's range
+  std::uint64_t rx_bad_length = 0;  ///< frames shorter than their message: rejected
+  std::uint64_t tx_saturated = 0;   ///< output values clamped to a signal's range
   std::uint64_t lcm_published = 0;
   std::uint64_t lcm_failed = 0;
   std::uint64_t clears_accepted = 0;
-  std::uint64_t clears_refused = 0;        ///< every refused clear, whatever the reason
-  std::uint64_t clears_unauthenticated = 0;  ///< of those: LCM clears without a valid code (or undecodable)
+  std::uint64_t clears_refused = 0;  ///< every refused clear, whatever the reason
+  std::uint64_t clears_unauthenticated =
+      0;  ///< of those: LCM clears without a valid code (or undecodable)
   std::uint64_t clears_rate_limited = 0;  ///< PUMP_CLEAR repeats within 2 s: ignored
   std::uint64_t trip_latches = 0;         ///< trips latched (the live loop saves the state at once)
 };
@@ -111,7 +113,9 @@ class Gateway {
   /// measures elapsed time: the log's stamps offline (offset 0), CLOCK_MONOTONIC live, where the
   /// loop sets this before each Advance. Wall time only labels: LCM utime fields and the saved
   /// state's times, which outlive a boot.
-  void SetWallClockOffset(std::int64_t wall_minus_pipeline_us) { wall_offset_us_ = wall_minus_pipeline_us; }
+  void SetWallClockOffset(std::int64_t wall_minus_pipeline_us) {
+    wall_offset_us_ = wall_minus_pipeline_us;
+  }
 
   /// Saved state of every pump as text (TOML; docs/daemon.md "State").
   std::string SaveState() const;
@@ -160,16 +164,16 @@ class Gateway {
     std::int64_t next_due_us = -1;
     std::uint8_t counter = 0;
     std::vector<OutputSignal> signals;
-    bool alarm = false;              // sent at once when the alarm changes
-    bool node_table = false;         // node-indexed: each model node once per period, in turn
-    int next_node = 0;               // node_table: the node the next frame carries
+    bool alarm = false;       // sent at once when the alarm changes
+    bool node_table = false;  // node-indexed: each model node once per period, in turn
+    int next_node = 0;        // node_table: the node the next frame carries
   };
   std::map<std::uint64_t, std::int64_t> unconfigured_warned_us_;  ///< (iface, node) -> last warning
   /// A due time that every time has reached: work at the next Advance.
   static constexpr std::int64_t kDueNow = std::numeric_limits<std::int64_t>::min();
   struct PumpIo {
-    std::size_t iface = 0;           // FrameCounter index
-    std::int64_t due_us = kDueNow;   // earliest time AdvancePump has work (PumpDueUs)
+    std::size_t iface = 0;          // FrameCounter index
+    std::int64_t due_us = kDueNow;  // earliest time AdvancePump has work (PumpDueUs)
     std::vector<OutputPlan> outputs;
     std::int64_t next_lcm_us = -1;
     std::uint64_t alarm_changes_sent = 0;
@@ -181,10 +185,10 @@ class Gateway {
     std::uint64_t frames_at_last_health = 0;
     std::int64_t last_health_us = -1;
     double frame_rate_Hz = 0.0;
-    std::int64_t last_clear_us = -1;  // last clear command frame acted on
+    std::int64_t last_clear_us = -1;          // last clear command frame acted on
     std::uint16_t logged_active_reasons = 0;  // the active reasons the last alarm line showed
-    bool clear_repeat_logged = false;  // a rate-limited repeat of it was logged
-    bool trip_latched = false;         // the pump's trip latch at the last Advance
+    bool clear_repeat_logged = false;         // a rate-limited repeat of it was logged
+    bool trip_latched = false;                // the pump's trip latch at the last Advance
     // LCM publishing without allocation in steady state: channel names made once, messages
     // filled in place (their strings and vectors keep their capacity).
     std::string channel_telemetry, channel_temperatures, channel_alarm;
@@ -223,9 +227,11 @@ class Gateway {
   /// A summary line for refusals not logged, once their window has ended.
   void ReportRefusedClearsHeldBack(std::int64_t now_us);
   void Emit(std::size_t pump, OutputPlan& plan, std::int64_t time_us, OutputSink& sink);
-  void PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us, OutputSink& sink);
+  void PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us,
+                         OutputSink& sink);
   /// One frame of `plan`; `node` is the model node of a node-indexed message, else -1.
-  void EmitFrame(std::size_t pump, OutputPlan& plan, int node, std::int64_t time_us, OutputSink& sink);
+  void EmitFrame(std::size_t pump, OutputPlan& plan, int node, std::int64_t time_us,
+                 OutputSink& sink);
   // Construction, step by step (gateway_setup.cpp); each throws ConfigError naming the key.
   using ModelCache = std::map<std::string, std::shared_ptr<const estimators::ThermalModel>>;
   /// The DBC and the mapping, with the DBC's warnings logged.
@@ -235,7 +241,8 @@ class Gateway {
   /// Pump `p` of the configuration: its motor, model (shared through `models`), outputs, routes.
   void AddPump(std::size_t p, ModelCache& models);
   estimators::MotorDescription LoadPumpMotor(const PumpConfig& pc, const std::string& key) const;
-  std::shared_ptr<const estimators::ThermalModel> LoadPumpModel(const PumpConfig& pc, const std::string& key,
+  std::shared_ptr<const estimators::ThermalModel> LoadPumpModel(const PumpConfig& pc,
+                                                                const std::string& key,
                                                                 ModelCache& models) const;
   /// One output plan per output message of the mapping, for a pump with `model`.
   void BuildOutputPlans(PumpIo& io, const estimators::ThermalModel& model) const;
@@ -270,10 +277,10 @@ class Gateway {
   static constexpr std::size_t kStandardIds = 2048;
   static constexpr std::uint32_t kNoPump = std::numeric_limits<std::uint32_t>::max();
   std::vector<Route> standard_routes_;
-  std::vector<double> values_;   // decode/encode buffer (largest message)
+  std::vector<double> values_;  // decode/encode buffer (largest message)
   std::string channel_health_;
   pumptherm::gateway_health_t health_msg_;
-  std::vector<std::uint8_t> lcm_bytes_;        // LCM encoding buffer (largest message)
+  std::vector<std::uint8_t> lcm_bytes_;  // LCM encoding buffer (largest message)
   mutable std::vector<estimators::AlarmCondition> conditions_;  // FillAlarm's buffer
   ClearAuthenticator clear_auth_;
   /// Refused clears can come as fast as anyone sends them: at most kRefusedClearLogBurst lines

@@ -1,13 +1,12 @@
 // The gateway's CAN output: each output signal's value from the pump's snapshot, and the frames
 // of an output plan encoded and handed to the sink.
-#include "daemon/gateway.hpp"
-
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
+#include "daemon/gateway.hpp"
 #include "daemon/gateway_detail.hpp"
 
 namespace pumptherm::daemon {
@@ -21,16 +20,24 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const
   const bool ident = s.resistance.status != estimators::ResistanceStatus::kInitialising &&
                      s.resistance.status != estimators::ResistanceStatus::kInvalidInput;
   switch (output) {
-    case MappingOutput::kWindingResTempDegC: return s.winding_resistance_degC;
-    case MappingOutput::kMagnetFluxTempDegC: return s.magnet_flux_degC;
-    case MappingOutput::kRsOhm: return ident ? s.resistance.resistance_ohm : kNaN;
-    case MappingOutput::kFluxWb: return ident ? s.resistance.flux_Wb : kNaN;
-    case MappingOutput::kWindingResSdK: return ident ? s.resistance.winding_sd_K : kNaN;
-    case MappingOutput::kMagnetFluxSdK: return s.magnet_flux_sd_K;
-    case MappingOutput::kRsStatus: return static_cast<double>(s.resistance.status);
+    case MappingOutput::kWindingResTempDegC:
+      return s.winding_resistance_degC;
+    case MappingOutput::kMagnetFluxTempDegC:
+      return s.magnet_flux_degC;
+    case MappingOutput::kRsOhm:
+      return ident ? s.resistance.resistance_ohm : kNaN;
+    case MappingOutput::kFluxWb:
+      return ident ? s.resistance.flux_Wb : kNaN;
+    case MappingOutput::kWindingResSdK:
+      return ident ? s.resistance.winding_sd_K : kNaN;
+    case MappingOutput::kMagnetFluxSdK:
+      return s.magnet_flux_sd_K;
+    case MappingOutput::kRsStatus:
+      return static_cast<double>(s.resistance.status);
     case MappingOutput::kFluxStatus:
       // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
-      return static_cast<double>(s.resistance.status == estimators::ResistanceStatus::kNotIdentifiable
+      return static_cast<double>(s.resistance.status ==
+                                         estimators::ResistanceStatus::kNotIdentifiable
                                      ? estimators::ResistanceStatus::kTracking
                                      : s.resistance.status);
     // A latched trip goes out as a trip even while the filter has no estimate (just reset, or
@@ -41,7 +48,9 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const
       return AlarmKnown(s) ? static_cast<double>(s.alarm.reason) : kNaN;
     case MappingOutput::kAlarmNode: {
       // The model's node index (as node_index), or the winding temperature from resistance.
-      if (!s.initialised || (s.alarm.node < 0 && s.alarm.reason != estimators::AlarmReason::kEstimatedOverTemperature)) return kNaN;
+      if (!s.initialised || (s.alarm.node < 0 &&
+                             s.alarm.reason != estimators::AlarmReason::kEstimatedOverTemperature))
+        return kNaN;
       const auto count = static_cast<int>(pump.model().StateNames().size());
       return s.alarm.node >= 0 && s.alarm.node < count ? static_cast<double>(s.alarm.node)
                                                        : static_cast<double>(kAlarmNodeWindingRes);
@@ -60,10 +69,14 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const
       return s.initialised ? static_cast<double>(s.mismatch.effect) : kNaN;
     case MappingOutput::kUptimeS:
       return last_now_us_ >= start_us_ ? static_cast<double>(last_now_us_ - start_us_) * 1e-6 : 0.0;
-    case MappingOutput::kFrameRateHz: return io_[p].frame_rate_Hz;
-    case MappingOutput::kDrops: return static_cast<double>(pump.counters().lost_frames);
-    case MappingOutput::kNodeIndex: return node >= 0 ? static_cast<double>(node) : kNaN;
-    case MappingOutput::kNodeCount: return static_cast<double>(s.node_degC.size());
+    case MappingOutput::kFrameRateHz:
+      return io_[p].frame_rate_Hz;
+    case MappingOutput::kDrops:
+      return static_cast<double>(pump.counters().lost_frames);
+    case MappingOutput::kNodeIndex:
+      return node >= 0 ? static_cast<double>(node) : kNaN;
+    case MappingOutput::kNodeCount:
+      return static_cast<double>(s.node_degC.size());
     case MappingOutput::kNodeTempDegC:
       return s.initialised && node >= 0 && static_cast<std::size_t>(node) < s.node_degC.size()
                  ? s.node_degC[static_cast<std::size_t>(node)]
@@ -73,7 +86,8 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const
                  ? s.node_sd_K[static_cast<std::size_t>(node)]
                  : kNaN;
     case MappingOutput::kBusState: {
-      // The DBC's VAL_ table: 0 error active (also warning and unknown), 1 passive, 2 bus off, 3 down.
+      // The DBC's VAL_ table: 0 error active (also warning and unknown), 1 passive, 2 bus off, 3
+      // down.
       const InterfaceCounters& c = counter_.interfaces()[io_[p].iface];
       if (!c.up) return 3.0;
       if (c.bus_state == BusState::kBusOff) return 2.0;
@@ -94,21 +108,28 @@ void Gateway::Emit(std::size_t p, OutputPlan& plan, std::int64_t time_us, Output
   EmitFrame(p, plan, plan.next_node++, time_us, sink);
 }
 
-void Gateway::EmitFrame(std::size_t p, OutputPlan& plan, int node, std::int64_t time_us, OutputSink& sink) {
+void Gateway::EmitFrame(std::size_t p, OutputPlan& plan, int node, std::int64_t time_us,
+                        OutputSink& sink) {
   const auto& msg = dbc_.messages[static_cast<std::size_t>(plan.message_index)];
   const auto& codec = codec_->message(static_cast<std::size_t>(plan.message_index));
-  std::fill(values_.begin(), values_.begin() + static_cast<std::ptrdiff_t>(codec.signal_count()), kNaN);
+  std::fill(values_.begin(), values_.begin() + static_cast<std::ptrdiff_t>(codec.signal_count()),
+            kNaN);
   const PumpSnapshot& s = pumps_[p]->snapshot();
   for (const OutputSignal& o : plan.signals) {
     double v = kNaN;
     switch (o.source) {
-      case OutputSource::kMapped: v = OutputValue(p, o.output, node); break;
+      case OutputSource::kMapped:
+        v = OutputValue(p, o.output, node);
+        break;
       case OutputSource::kNode:
         v = s.initialised && o.state >= 0 ? s.node_degC[static_cast<std::size_t>(o.state)] : kNaN;
         break;
-      case OutputSource::kRollingCounter: v = plan.counter; break;
+      case OutputSource::kRollingCounter:
+        v = plan.counter;
+        break;
     }
-    values_[static_cast<std::size_t>(o.signal_index)] = std::isnan(v) ? v : (v - o.offset) / o.scale;
+    values_[static_cast<std::size_t>(o.signal_index)] =
+        std::isnan(v) ? v : (v - o.offset) / o.scale;
   }
   plan.counter = static_cast<std::uint8_t>((plan.counter + 1) & 0x0F);
   protocol::CanFrame f;

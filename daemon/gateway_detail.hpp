@@ -16,7 +16,8 @@ inline bool AlarmKnown(const PumpSnapshot& s) {
 
 /// The key of a route: interface, frame format and CAN ID.
 constexpr std::uint64_t RouteKey(std::size_t iface, bool extended, std::uint32_t id) {
-  return (static_cast<std::uint64_t>(iface) << 33) | (static_cast<std::uint64_t>(extended) << 32) | id;
+  return (static_cast<std::uint64_t>(iface) << 33) | (static_cast<std::uint64_t>(extended) << 32) |
+         id;
 }
 
 /// An LCM message's bytes.

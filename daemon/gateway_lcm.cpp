@@ -1,7 +1,5 @@
 // The gateway's LCM messages (docs/lcm.md): a pump's temperatures, telemetry and alarm, and the
 // gateway's health; and the journal line of a model-mismatch verdict.
-#include "daemon/gateway.hpp"
-
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -9,6 +7,7 @@
 #include <ctime>
 #include <limits>
 
+#include "daemon/gateway.hpp"
 #include "daemon/gateway_detail.hpp"
 #include "daemon/log.hpp"
 #include "pumptherm/alarm_t.hpp"
@@ -88,7 +87,8 @@ void Gateway::FillTelemetry(std::size_t p, pumptherm::telemetry_t& m) const {
   m.ambient_degC = at(MappingInput::kAmbientTempDegC);
   m.coolant_degC = kNaN;
   m.dc_link_V = at(MappingInput::kDcLinkV);
-  m.status_age_s = io.status_us >= 0 ? static_cast<double>(io.inputs_us - io.status_us) * 1e-6 : kNaN;
+  m.status_age_s =
+      io.status_us >= 0 ? static_cast<double>(io.inputs_us - io.status_us) * 1e-6 : kNaN;
 }
 
 void Gateway::LogMismatch(const Pump& pump) const {
@@ -103,9 +103,10 @@ void Gateway::LogMismatch(const Pump& pump) const {
     gmtime_r(&t, &tm);
     since = fmt::format(" since {:02}:{:02}:{:02} UTC", tm.tm_hour, tm.tm_min, tm.tm_sec);
   }
-  Log(fault ? LogLevel::kWarning : LogLevel::kNotice, "pump {}: model {}: {}{} (window NIS {:.0f}, limit {:.0f})",
-      pump.config().name, estimators::MismatchStateName(f.state), estimators::DescribeFinding(f), since,
-      f.window_nis, f.threshold);
+  Log(fault ? LogLevel::kWarning : LogLevel::kNotice,
+      "pump {}: model {}: {}{} (window NIS {:.0f}, limit {:.0f})", pump.config().name,
+      estimators::MismatchStateName(f.state), estimators::DescribeFinding(f), since, f.window_nis,
+      f.threshold);
 }
 
 std::vector<std::uint8_t> Gateway::EncodeAlarm(const Pump& pump) const {
@@ -164,7 +165,8 @@ void Gateway::FillAlarm(const Pump& pump, pumptherm::alarm_t& m) const {
   m.mismatch_state = static_cast<std::int8_t>(s.mismatch.state);
   m.mismatch_effect = static_cast<std::int8_t>(s.mismatch.effect);
   m.mismatch_value = s.mismatch.value;
-  m.mismatch_since_utime = std::isfinite(s.mismatch.onset_s) ? static_cast<std::int64_t>(s.mismatch.onset_s * 1e6) : 0;
+  m.mismatch_since_utime =
+      std::isfinite(s.mismatch.onset_s) ? static_cast<std::int64_t>(s.mismatch.onset_s * 1e6) : 0;
 }
 
 std::vector<std::uint8_t> Gateway::EncodeHealth(std::int64_t now_us) const {
@@ -177,11 +179,16 @@ namespace {
 std::int8_t LcmBusState(BusState state) {
   using H = pumptherm::interface_health_t;
   switch (state) {
-    case BusState::kErrorActive: return H::BUS_STATE_ERROR_ACTIVE;
-    case BusState::kErrorWarning: return H::BUS_STATE_ERROR_WARNING;
-    case BusState::kErrorPassive: return H::BUS_STATE_ERROR_PASSIVE;
-    case BusState::kBusOff: return H::BUS_STATE_BUS_OFF;
-    case BusState::kUnknown: break;
+    case BusState::kErrorActive:
+      return H::BUS_STATE_ERROR_ACTIVE;
+    case BusState::kErrorWarning:
+      return H::BUS_STATE_ERROR_WARNING;
+    case BusState::kErrorPassive:
+      return H::BUS_STATE_ERROR_PASSIVE;
+    case BusState::kBusOff:
+      return H::BUS_STATE_BUS_OFF;
+    case BusState::kUnknown:
+      break;
   }
   return H::BUS_STATE_UNKNOWN;
 }

@@ -1,7 +1,5 @@
 // Building the gateway from its configuration: the DBC and mapping, the input messages, and per
 // pump its motor, thermal model, output plans and input routes.
-#include "daemon/gateway.hpp"
-
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -9,6 +7,7 @@
 #include <limits>
 #include <map>
 
+#include "daemon/gateway.hpp"
 #include "daemon/gateway_detail.hpp"
 #include "daemon/log.hpp"
 #include "daemon/resources.hpp"
@@ -21,12 +20,8 @@ using gateway_detail::RouteKey;
 using protocol::MappingInput;
 using protocol::MappingOutput;
 
-bool IsCurrentInput(MappingInput i) {
-  return i == MappingInput::kIdA || i == MappingInput::kIqA;
-}
-bool IsVoltageInput(MappingInput i) {
-  return i == MappingInput::kUdV || i == MappingInput::kUqV;
-}
+bool IsCurrentInput(MappingInput i) { return i == MappingInput::kIdA || i == MappingInput::kIqA; }
+bool IsVoltageInput(MappingInput i) { return i == MappingInput::kUdV || i == MappingInput::kUqV; }
 bool IsStatusInput(MappingInput i) {
   return i == MappingInput::kSpeedMechRpm || i == MappingInput::kDriveState ||
          i == MappingInput::kFrameTempDegC || i == MappingInput::kAmbientTempDegC ||
@@ -41,7 +36,8 @@ constexpr std::size_t kMaxReportedDbcProblems = 20;
 namespace {
 
 /// A configuration error at `line` of the configuration, naming its key.
-ConfigError KeyError(const DaemonConfig& config, int line, const std::string& key, const std::string& what) {
+ConfigError KeyError(const DaemonConfig& config, int line, const std::string& key,
+                     const std::string& what) {
   return ConfigError(fmt::format("{}:{}: key '{}': {}", config.source, line, key, what));
 }
 
@@ -76,7 +72,8 @@ void Gateway::LoadFrameLayout() {
         dbc_.problems.size() - kMaxReportedDbcProblems);
   }
   try {
-    const std::string path = ResolveResource(ResourceKind::kDbc, config_.dbc.mapping, config_.dbc.base_dir);
+    const std::string path =
+        ResolveResource(ResourceKind::kDbc, config_.dbc.mapping, config_.dbc.base_dir);
     mapping_ = protocol::ParseMapping(ReadTextFile(path), path, dbc_);
   } catch (const std::exception& e) {
     throw KeyError(config_, 0, "dbc.mapping", e.what());
@@ -93,8 +90,9 @@ void Gateway::IndexInputMessages() {
     const auto& ref = mapping_.inputs[i];
     if (!ref) continue;
     const auto input = static_cast<MappingInput>(i);
-    auto it = std::find_if(inputs_.begin(), inputs_.end(),
-                           [&](const InputMessage& m) { return m.message_index == ref->message_index; });
+    auto it = std::find_if(inputs_.begin(), inputs_.end(), [&](const InputMessage& m) {
+      return m.message_index == ref->message_index;
+    });
     if (it == inputs_.end()) {
       inputs_.push_back(InputMessage{ref->message_index, {}});
       it = inputs_.end() - 1;
@@ -112,10 +110,12 @@ void Gateway::AddPump(std::size_t p, ModelCache& models) {
   const std::string key = fmt::format("pump[{}]", p);
   if (pc.node_id >= mapping_.node_id_limit) {
     throw KeyError(config_, pc.line, key + ".node_id",
-                   fmt::format("{} is not below the mapping's node_id_limit {}", pc.node_id, mapping_.node_id_limit));
+                   fmt::format("{} is not below the mapping's node_id_limit {}", pc.node_id,
+                               mapping_.node_id_limit));
   }
   bool known_interface = config_.interfaces.empty();
-  for (const auto& i : config_.interfaces) known_interface = known_interface || i.name == pc.interface;
+  for (const auto& i : config_.interfaces)
+    known_interface = known_interface || i.name == pc.interface;
   if (!known_interface || pc.interface.empty()) {
     throw KeyError(config_, pc.line, key + ".interface",
                    fmt::format("'{}' is not a configured [[can]] interface", pc.interface));
@@ -129,7 +129,8 @@ void Gateway::AddPump(std::size_t p, ModelCache& models) {
   }
   if (!pc.disturbance_states_explicit && !pumps_.back()->config().disturbance_states) {
     Log(LogLevel::kNotice,
-        "pump {}: standard filter published: the boundary of model {} reaches other nodes than '{}' "
+        "pump {}: standard filter published: the boundary of model {} reaches other nodes than "
+        "'{}' "
         "(disturbance_states = true overrides)",
         pc.name, model->Name(), pc.measured_node);
   }
@@ -140,13 +141,17 @@ void Gateway::AddPump(std::size_t p, ModelCache& models) {
   BuildOutputPlans(io, *model);
   AddRoutes(io, p, key);
   const std::string& prefix = config_.lcm.channel_prefix;
-  io.channel_telemetry = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTelemetry);
-  io.channel_temperatures = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTemperatures);
-  io.channel_alarm = lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kAlarm);
+  io.channel_telemetry =
+      lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTelemetry);
+  io.channel_temperatures =
+      lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTemperatures);
+  io.channel_alarm =
+      lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kAlarm);
   io_.push_back(std::move(io));
 }
 
-estimators::MotorDescription Gateway::LoadPumpMotor(const PumpConfig& pc, const std::string& key) const {
+estimators::MotorDescription Gateway::LoadPumpMotor(const PumpConfig& pc,
+                                                    const std::string& key) const {
   try {
     if (!estimators::MotorPresetText(pc.motor).empty()) return estimators::MotorPreset(pc.motor);
     const std::string path = ResolveResource(ResourceKind::kMotor, pc.motor, config_.dbc.base_dir);
@@ -156,16 +161,20 @@ estimators::MotorDescription Gateway::LoadPumpMotor(const PumpConfig& pc, const 
   }
 }
 
-std::shared_ptr<const estimators::ThermalModel> Gateway::LoadPumpModel(const PumpConfig& pc, const std::string& key,
+std::shared_ptr<const estimators::ThermalModel> Gateway::LoadPumpModel(const PumpConfig& pc,
+                                                                       const std::string& key,
                                                                        ModelCache& models) const {
   try {
-    const std::string path = ResolveResource(ResourceKind::kModel, pc.thermal_model, config_.dbc.base_dir);
+    const std::string path =
+        ResolveResource(ResourceKind::kModel, pc.thermal_model, config_.dbc.base_dir);
     auto it = models.find(path);
     if (it == models.end()) {
-      it = models.emplace(path, std::make_shared<const estimators::ThermalModel>(
-                                    estimators::ThermalModel::Parse(
-                                    ReadTextFile(path), path,
-                                    estimators::ThermalModelFiles{DirectoryOf(path), &ReadTextFile})))
+      it = models
+               .emplace(
+                   path,
+                   std::make_shared<const estimators::ThermalModel>(estimators::ThermalModel::Parse(
+                       ReadTextFile(path), path,
+                       estimators::ThermalModelFiles{DirectoryOf(path), &ReadTextFile})))
                .first;
     }
     return it->second;
@@ -185,8 +194,9 @@ void Gateway::BuildOutputPlans(PumpIo& io, const estimators::ThermalModel& model
     plan.message_index = message_index;
     auto over = config_.output_periods_s.find(msg.name);
     const double period_s = over != config_.output_periods_s.end() ? over->second
-                            : msg.cycle_time_ms && *msg.cycle_time_ms > 0 ? *msg.cycle_time_ms / 1000.0
-                                                                           : 1.0;
+                            : msg.cycle_time_ms && *msg.cycle_time_ms > 0
+                                ? *msg.cycle_time_ms / 1000.0
+                                : 1.0;
     plan.period_us = std::max<std::int64_t>(1000, std::llround(period_s * 1e6));
     io.outputs.push_back(std::move(plan));
     return io.outputs.back();
@@ -195,27 +205,31 @@ void Gateway::BuildOutputPlans(PumpIo& io, const estimators::ThermalModel& model
     const auto& ref = mapping_.outputs[o];
     if (!ref) continue;
     OutputPlan& plan = plan_for(ref->message_index);
-    plan.signals.push_back({ref->signal_index, OutputSource::kMapped, static_cast<MappingOutput>(o), -1,
-                            ref->scale, ref->offset});
+    plan.signals.push_back({ref->signal_index, OutputSource::kMapped, static_cast<MappingOutput>(o),
+                            -1, ref->scale, ref->offset});
     plan.alarm = plan.alarm || static_cast<MappingOutput>(o) == MappingOutput::kAlarmLevel;
     plan.node_table = plan.node_table || static_cast<MappingOutput>(o) == MappingOutput::kNodeIndex;
   }
   for (const auto& [node, ref] : mapping_.node_temperatures) {
     OutputPlan& plan = plan_for(ref.message_index);
     // A node this pump's model does not have stays "not available" in the frame.
-    plan.signals.push_back({ref.signal_index, OutputSource::kNode, MappingOutput::kWindingResTempDegC,
-                            model.StateIndex(node), ref.scale, ref.offset});
+    plan.signals.push_back({ref.signal_index, OutputSource::kNode,
+                            MappingOutput::kWindingResTempDegC, model.StateIndex(node), ref.scale,
+                            ref.offset});
   }
   for (auto& plan : io.outputs) {
     // A node-indexed message sends its nodes one after another, spread over the period: each
     // node once per period, and no burst of frames on one ID.
     const auto nodes = static_cast<std::int64_t>(model.StateNames().size());
-    if (plan.node_table && nodes > 0) plan.period_us = std::max<std::int64_t>(1000, plan.period_us / nodes);
+    if (plan.node_table && nodes > 0)
+      plan.period_us = std::max<std::int64_t>(1000, plan.period_us / nodes);
     const auto& msg = dbc_.messages[static_cast<std::size_t>(plan.message_index)];
     const int rc = msg.FindSignal("RollingCounter");
     const bool mapped = std::any_of(plan.signals.begin(), plan.signals.end(),
                                     [&](const OutputSignal& s) { return s.signal_index == rc; });
-    if (rc >= 0 && !mapped) plan.signals.push_back({rc, OutputSource::kRollingCounter, MappingOutput::kUptimeS, -1, 1.0, 0.0});
+    if (rc >= 0 && !mapped)
+      plan.signals.push_back(
+          {rc, OutputSource::kRollingCounter, MappingOutput::kUptimeS, -1, 1.0, 0.0});
   }
 }
 
@@ -247,7 +261,8 @@ void Gateway::CheckNodeOutputs(const PumpConfig& pc, const std::string& key,
   for (std::size_t i = 0; i < names.size(); ++i) {
     if (!node_table && !mapping_.node_temperatures.contains(names[i])) {
       throw ConfigError(fmt::format(
-          "{}:{}: key '{}.thermal_model': node '{}' of {} has no CAN output: map outputs.node_index "
+          "{}:{}: key '{}.thermal_model': node '{}' of {} has no CAN output: map "
+          "outputs.node_index "
           "and node_temp_degC (a node-indexed message such as GW_NODE_TEMP) or outputs.nodes.{}",
           config_.source, pc.line, key, names[i], pc.thermal_model, names[i]));
     }

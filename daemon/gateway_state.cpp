@@ -1,15 +1,14 @@
 // The gateway's saved state (docs/daemon.md, "Saved state"): every pump's estimate, identifier
 // state and latched trips in TOML, written and restored, with the older version still read.
-#include "daemon/gateway.hpp"
-
 #include <fmt/format.h>
+#include <toml++/toml.h>
 
 #include <algorithm>
 #include <cmath>
 #include <ctime>
 #include <limits>
-#include <toml++/toml.h>
 
+#include "daemon/gateway.hpp"
 #include "daemon/log.hpp"
 
 namespace pumptherm::daemon {
@@ -36,20 +35,24 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
   }
   t.insert("x_degC", x);
   t.insert("s_K2", cov);
-  t.insert("inputs", toml::table{{"speed_rpm", s.inputs.speed_rpm}, {"id_A", s.inputs.id_A},
-                                 {"iq_A", s.inputs.iq_A}, {"ambient_degC", s.inputs.ambient_degC},
+  t.insert("inputs", toml::table{{"speed_rpm", s.inputs.speed_rpm},
+                                 {"id_A", s.inputs.id_A},
+                                 {"iq_A", s.inputs.iq_A},
+                                 {"ambient_degC", s.inputs.ambient_degC},
                                  {"coolant_degC", s.inputs.coolant_degC}});
   // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
   // consecutive rejections.
   toml::array rx, rp, rprob, rrej, rm;
   for (const auto& h : s.resistance.hypotheses) {
     for (int i = 0; i < kIdentStates; ++i) rx.push_back(h.x(i));
-    for (int i = 0; i < kIdentCovariance; ++i) rp.push_back(h.p(i / kIdentStates, i % kIdentStates));
+    for (int i = 0; i < kIdentCovariance; ++i)
+      rp.push_back(h.p(i / kIdentStates, i % kIdentStates));
     rprob.push_back(h.probability);
     rrej.push_back(h.consecutive_rejections);
   }
   // Excitation moments of [iq, w_r, 1] (9, row-major); files with 4 ([iq, w_r]) still load.
-  for (int i = 0; i < kMoments; ++i) rm.push_back(s.resistance.moments(i / kMomentsSide, i % kMomentsSide));
+  for (int i = 0; i < kMoments; ++i)
+    rm.push_back(s.resistance.moments(i / kMomentsSide, i % kMomentsSide));
   t.insert("resistance_x", rx);
   t.insert("resistance_p", rp);
   t.insert("resistance_probability", rprob);
@@ -162,15 +165,18 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
               numbers("s_K2", static_cast<std::size_t>(n * n), cov) &&
               numbers("resistance_x", kIdentStates * hypotheses, rx) &&
               numbers("resistance_p", kIdentCovariance * hypotheses, rp) &&
-              (numbers("resistance_moments", kMoments, rm) || numbers("resistance_moments", kOldMoments, rm)) && saved_wall_us > 0 &&
-              s.time_us <= now_us + 60'000'000;
+              (numbers("resistance_moments", kMoments, rm) ||
+               numbers("resistance_moments", kOldMoments, rm)) &&
+              saved_wall_us > 0 && s.time_us <= now_us + 60'000'000;
     if (ok && version == 2) {
       ok = numbers("resistance_probability", hypotheses, rprob) &&
            numbers("resistance_rejections", hypotheses, rrej);
     }
     if (ok) {
       s.x_degC = Eigen::Map<const Eigen::VectorXd>(x.data(), n);
-      s.s_K2 = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(cov.data(), n, n);
+      s.s_K2 =
+          Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+              cov.data(), n, n);
       s.inputs.speed_rpm = (*t)["inputs"]["speed_rpm"].value_or(0.0);
       s.inputs.id_A = (*t)["inputs"]["id_A"].value_or(0.0);
       s.inputs.iq_A = (*t)["inputs"]["iq_A"].value_or(0.0);
@@ -178,30 +184,34 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
       s.inputs.coolant_degC = (*t)["inputs"]["coolant_degC"].value_or(25.0);
       Eigen::Matrix3d moments;
       if (rm.size() == kMoments) {
-        for (int i = 0; i < kMoments; ++i) moments(i / kMomentsSide, i % kMomentsSide) = rm[static_cast<std::size_t>(i)];
+        for (int i = 0; i < kMoments; ++i)
+          moments(i / kMomentsSide, i % kMomentsSide) = rm[static_cast<std::size_t>(i)];
       } else {
         Eigen::Matrix2d two;
-        for (int i = 0; i < kOldMoments; ++i) two(i / kOldMomentsSide, i % kOldMomentsSide) = rm[static_cast<std::size_t>(i)];
+        for (int i = 0; i < kOldMoments; ++i)
+          two(i / kOldMomentsSide, i % kOldMomentsSide) = rm[static_cast<std::size_t>(i)];
         moments = estimators::MomentsFromTwoRegressors(two);
       }
-      const auto blocks = static_cast<std::uint64_t>((*t)["resistance_blocks"].value_or<std::int64_t>(0));
+      const auto blocks =
+          static_cast<std::uint64_t>((*t)["resistance_blocks"].value_or<std::int64_t>(0));
       const auto hx = [&](std::size_t j) {
         Eigen::Vector4d v;
-        for (std::size_t i = 0; i < kIdentStates; ++i) v(static_cast<Eigen::Index>(i)) = rx[kIdentStates * j + i];
+        for (std::size_t i = 0; i < kIdentStates; ++i)
+          v(static_cast<Eigen::Index>(i)) = rx[kIdentStates * j + i];
         return v;
       };
       const auto hp = [&](std::size_t j) {
         Eigen::Matrix4d m;
         for (std::size_t i = 0; i < kIdentCovariance; ++i) {
-          m(static_cast<Eigen::Index>(i / kIdentStates), static_cast<Eigen::Index>(i % kIdentStates)) =
-              rp[kIdentCovariance * j + i];
+          m(static_cast<Eigen::Index>(i / kIdentStates),
+            static_cast<Eigen::Index>(i % kIdentStates)) = rp[kIdentCovariance * j + i];
         }
         return m;
       };
       if (version == 1) {
-        s.resistance = estimators::StateFromSingleFilter(
-            hx(0), hp(0), moments, blocks, (*t)["resistance_rejections"].value_or(0),
-            pump->identifier().config());
+        s.resistance = estimators::StateFromSingleFilter(hx(0), hp(0), moments, blocks,
+                                                         (*t)["resistance_rejections"].value_or(0),
+                                                         pump->identifier().config());
       } else {
         for (std::size_t j = 0; j < hypotheses; ++j) {
           auto& h = s.resistance.hypotheses[j];
@@ -226,13 +236,15 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
     // The filter starts cold, but a latched trip must survive every restart path (a clock far
     // behind the saved time, a damaged filter state, a pump saved while its filter was reset).
     if (!s.latched_trips.empty() && pump->RestoreLatchedTrips(s, now_us)) {
-      relatched += fmt::format("{}{} ({} trip(s))", relatched.empty() ? "" : ", ", pump->config().name,
-                               s.latched_trips.size());
+      relatched += fmt::format("{}{} ({} trip(s))", relatched.empty() ? "" : ", ",
+                               pump->config().name, s.latched_trips.size());
     }
   }
   if (!ignored.empty()) {
-    *warning = fmt::format("saved state of pump(s) {} does not fit the configuration or is damaged; "
-                           "they start cold", ignored);
+    *warning = fmt::format(
+        "saved state of pump(s) {} does not fit the configuration or is damaged; "
+        "they start cold",
+        ignored);
     if (!relatched.empty()) *warning += fmt::format("; latched again: {}", relatched);
   }
   if (!clear_warning.empty()) *warning += (warning->empty() ? "" : "; ") + clear_warning;

@@ -1,12 +1,12 @@
 // The gateway's terminal output: the systemd status line and the per-pump table.
-#include "daemon/gateway.hpp"
-
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 #include <ctime>
 #include <limits>
+
+#include "daemon/gateway.hpp"
 
 namespace pumptherm::daemon {
 
@@ -58,22 +58,25 @@ std::string Gateway::PumpTable() const {
     const PumpSnapshot& s = p->snapshot();
     int hottest = -1;
     for (std::size_t i = 0; i < s.node_degC.size(); ++i) {
-      if (std::isfinite(s.node_degC[i]) && (hottest < 0 || s.node_degC[i] > s.node_degC[static_cast<std::size_t>(hottest)])) {
+      if (std::isfinite(s.node_degC[i]) &&
+          (hottest < 0 || s.node_degC[i] > s.node_degC[static_cast<std::size_t>(hottest)])) {
         hottest = static_cast<int>(i);
       }
     }
-    auto num = [](double v, int prec) { return std::isfinite(v) ? fmt::format("{:.{}f}", v, prec) : std::string("-"); };
+    auto num = [](double v, int prec) {
+      return std::isfinite(v) ? fmt::format("{:.{}f}", v, prec) : std::string("-");
+    };
     std::string alarm = estimators::AlarmLevelName(s.alarm.level);
     if (s.alarm.level != estimators::AlarmLevel::kNone) {
       alarm += fmt::format(" ({})", estimators::AlarmReasonName(s.alarm.reason));
     }
     if (s.alarm.trip_latched) alarm += " LATCHED";
-    out += fmt::format("{:<12} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8}  {}\n", p->config().name,
-                       num(s.speed_rpm, 0), num(s.frame_measured_degC, 1),
-                       hottest >= 0 ? p->model().StateNames()[static_cast<std::size_t>(hottest)] : "-",
-                       hottest >= 0 ? num(s.node_degC[static_cast<std::size_t>(hottest)], 1) : "-",
-                       num(s.winding_resistance_degC, 1),
-                       RsCell(s.resistance, num), TableAlarmCell(*p, alarm));
+    out += fmt::format(
+        "{:<12} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8}  {}\n", p->config().name, num(s.speed_rpm, 0),
+        num(s.frame_measured_degC, 1),
+        hottest >= 0 ? p->model().StateNames()[static_cast<std::size_t>(hottest)] : "-",
+        hottest >= 0 ? num(s.node_degC[static_cast<std::size_t>(hottest)], 1) : "-",
+        num(s.winding_resistance_degC, 1), RsCell(s.resistance, num), TableAlarmCell(*p, alarm));
   }
   return out;
 }

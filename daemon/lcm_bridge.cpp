@@ -1,8 +1,7 @@
 #include "daemon/lcm_bridge.hpp"
 
-#include <lcm/lcm-cpp.hpp>
-
 #include <cerrno>
+#include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
 
 #include "protocol/lcm/channels.hpp"
@@ -29,8 +28,9 @@ LcmBridge::LcmBridge(const std::string& url, const std::string& prefix, ClearHan
     : impl_(std::make_unique<Impl>(url)) {
   if (!impl_->lcm.good()) throw std::runtime_error("LCM: cannot start with URL '" + url + "'");
   impl_->on_clear = std::move(on_clear);
-  impl_->lcm.subscribe(lcm_channels::AllPumpsPattern(prefix, lcm_channels::PumpChannel::kAlarmClear),
-                       &Impl::OnClear, impl_.get());
+  impl_->lcm.subscribe(
+      lcm_channels::AllPumpsPattern(prefix, lcm_channels::PumpChannel::kAlarmClear), &Impl::OnClear,
+      impl_.get());
 }
 
 LcmBridge::~LcmBridge() = default;
@@ -45,7 +45,8 @@ void LcmBridge::Handle() {
 
 bool LcmBridge::Publish(const std::string& channel, const std::vector<std::uint8_t>& bytes) {
   errno = 0;
-  if (impl_->lcm.publish(channel, bytes.data(), static_cast<unsigned int>(bytes.size())) == 0) return true;
+  if (impl_->lcm.publish(channel, bytes.data(), static_cast<unsigned int>(bytes.size())) == 0)
+    return true;
   last_errno_ = errno;  // sendmsg's, when that is what failed
   return false;
 }

@@ -23,7 +23,8 @@ class LcmBridge {
  public:
   /// Called with each message on <prefix>/<pump>/ALARM_CLEAR; `m` is nullptr when its bytes
   /// do not decode as alarm_clear_t (another type, an older layout), so that those are counted.
-  using ClearHandler = std::function<void(const std::string& channel, const pumptherm::alarm_clear_t* m)>;
+  using ClearHandler =
+      std::function<void(const std::string& channel, const pumptherm::alarm_clear_t* m)>;
 
   /// Connects to `url` (e.g. "udpm://239.255.76.67:7667?ttl=0", or "memq://" in tests) and
   /// subscribes to <prefix>/<pump>/ALARM_CLEAR. Throws std::runtime_error when LCM cannot start.

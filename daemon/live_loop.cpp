@@ -4,8 +4,8 @@
 #include <linux/sock_diag.h>
 #include <signal.h>
 #include <sys/epoll.h>
-#include <sys/socket.h>
 #include <sys/signalfd.h>
+#include <sys/socket.h>
 #include <sys/timerfd.h>
 #include <time.h>
 #include <unistd.h>
@@ -37,11 +37,11 @@ constexpr std::uint64_t kSignalTag = 0;
 constexpr std::uint64_t kTimerTag = 1;
 constexpr std::uint64_t kLcmTag = 2;
 constexpr std::uint64_t kFirstSocketTag = 3;
-constexpr std::int64_t kReopenPeriodUs = 1000000;   // check and reopen interfaces every second
+constexpr std::int64_t kReopenPeriodUs = 1000000;  // check and reopen interfaces every second
 // The timer is armed for the gateway's next due time (Gateway::NextDueUs) and the loop's own
 // periods; this only bounds the sleep.
 constexpr std::int64_t kMaxTickUs = 1000000;
-constexpr int kRxBudget = 256;                      // frames per socket per wake-up (fairness)
+constexpr int kRxBudget = 256;  // frames per socket per wake-up (fairness)
 // A failure that repeats (LCM sends, state writes) is logged at once, then at most this often.
 constexpr std::int64_t kFailureReminderUs = 600'000'000;
 
@@ -59,8 +59,8 @@ std::int64_t WallMinusMonotonicUs() { return ClockUs(CLOCK_REALTIME) - ClockUs(C
 
 }  // namespace
 
-std::int64_t MonotonicStampUs(std::int64_t stamp_wall_us, std::int64_t wall_now_us, std::int64_t mono_now_us,
-                              std::int64_t last_mono_us) {
+std::int64_t MonotonicStampUs(std::int64_t stamp_wall_us, std::int64_t wall_now_us,
+                              std::int64_t mono_now_us, std::int64_t last_mono_us) {
   if (stamp_wall_us <= 0) return std::max(mono_now_us, last_mono_us);  // no kernel stamp
   const std::int64_t mono = stamp_wall_us - (wall_now_us - mono_now_us);
   // A wall clock stepped between the frame's arrival and now moves `mono` by the step: the
@@ -102,18 +102,27 @@ struct LiveLoop::Impl : OutputSink {
     if (!sockets[i].is_open()) return;
     InterfaceCounters& c = gateway->counter().counters(iface);
     switch (sockets[i].Send(frame)) {
-      case TxStatus::kSent: ++c.tx_frames; break;
-      case TxStatus::kDown: ++c.tx_dropped; MarkUp(i, false); break;
-      default: ++c.tx_dropped; break;
+      case TxStatus::kSent:
+        ++c.tx_frames;
+        break;
+      case TxStatus::kDown:
+        ++c.tx_dropped;
+        MarkUp(i, false);
+        break;
+      default:
+        ++c.tx_dropped;
+        break;
     }
   }
-  bool PublishLcm(const std::string& channel, std::int64_t, const std::vector<std::uint8_t>& bytes) override {
+  bool PublishLcm(const std::string& channel, std::int64_t,
+                  const std::vector<std::uint8_t>& bytes) override {
     if (!lcm) return true;
     const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
     if (lcm->Publish(channel, bytes)) {
       const FailureReport::Report r = lcm_report.Success(mono);
       if (r.kind == FailureReport::Kind::kRecovered) {
-        Log(LogLevel::kNotice, "LCM: sending works again, after {} failed messages in {:.1f} s", r.run_failures, r.run_s);
+        Log(LogLevel::kNotice, "LCM: sending works again, after {} failed messages in {:.1f} s",
+            r.run_failures, r.run_s);
       }
       return true;
     }
@@ -123,12 +132,15 @@ struct LiveLoop::Impl : OutputSink {
     const FailureReport::Report r = lcm_report.Failure(mono, what);
     switch (r.kind) {
       case FailureReport::Kind::kFirst:
-        Log(LogLevel::kWarning, "LCM: cannot send {}: {}; counting failed messages, next report in {} min or when sending works again",
+        Log(LogLevel::kWarning,
+            "LCM: cannot send {}: {}; counting failed messages, next report in {} min or when "
+            "sending works again",
             channel, what, kFailureReminderUs / 60'000'000);
         break;
       case FailureReport::Kind::kChanged:
       case FailureReport::Kind::kReminder:
-        Log(LogLevel::kWarning, "LCM: still cannot send: {} ({} failed messages since the last report, {} in {:.0f} s)",
+        Log(LogLevel::kWarning,
+            "LCM: still cannot send: {} ({} failed messages since the last report, {} in {:.0f} s)",
             what, r.failures_since_report, r.run_failures, r.run_s);
         break;
       default:
@@ -191,12 +203,14 @@ struct LiveLoop::Impl : OutputSink {
   void StartLcm() {
     lcm.reset();
     if (config.lcm.url.empty()) return;
-    lcm = std::make_unique<LcmBridge>(config.lcm.url, config.lcm.channel_prefix,
-                                      [this](const std::string&, const pumptherm::alarm_clear_t* m) {
-                                        // An accepted counter is saved at once: after a crash,
-                                        // the same command must not clear again.
-                                        if (gateway->ClearFromLcm(m, ClockUs(CLOCK_REALTIME), *this)) SaveState();
-                                      });
+    lcm =
+        std::make_unique<LcmBridge>(config.lcm.url, config.lcm.channel_prefix,
+                                    [this](const std::string&, const pumptherm::alarm_clear_t* m) {
+                                      // An accepted counter is saved at once: after a crash,
+                                      // the same command must not clear again.
+                                      if (gateway->ClearFromLcm(m, ClockUs(CLOCK_REALTIME), *this))
+                                        SaveState();
+                                    });
     Watch(lcm->fd(), kLcmTag);
   }
 
@@ -206,7 +220,8 @@ struct LiveLoop::Impl : OutputSink {
     // changes nothing.
     const auto delta = static_cast<std::int32_t>(drops_total - last_drop_total[i]);
     if (delta <= 0) return;
-    gateway->counter().counters(gateway_index[i]).rx_queue_drops += static_cast<std::uint32_t>(delta);
+    gateway->counter().counters(gateway_index[i]).rx_queue_drops +=
+        static_cast<std::uint32_t>(delta);
     last_drop_total[i] = drops_total;
   }
 
@@ -242,7 +257,8 @@ struct LiveLoop::Impl : OutputSink {
       std::uint32_t drops_total = last_drop_total[i];
       switch (s.Receive(&tf, &drops_total)) {
         case RxStatus::kFrame:
-          tf.time_us = last_frame_mono_us = MonotonicStampUs(tf.time_us, wall_now, mono_now, last_frame_mono_us);
+          tf.time_us = last_frame_mono_us =
+              MonotonicStampUs(tf.time_us, wall_now, mono_now, last_frame_mono_us);
           Take(i, tf, drops_total);
           break;
         case RxStatus::kEmpty:
@@ -257,12 +273,15 @@ struct LiveLoop::Impl : OutputSink {
           for (;;) {
             drops_total = last_drop_total[i];
             if (s.Receive(&tf, &drops_total) != RxStatus::kFrame) break;
-            tf.time_us = last_frame_mono_us = MonotonicStampUs(tf.time_us, wall_now, mono_now, last_frame_mono_us);
+            tf.time_us = last_frame_mono_us =
+                MonotonicStampUs(tf.time_us, wall_now, mono_now, last_frame_mono_us);
             Take(i, tf, drops_total);
             ++late;
           }
           SyncDrops(i);
-          Log(LogLevel::kWarning, "{}: interface was removed ({} frames still queued were taken); will reopen it when it returns",
+          Log(LogLevel::kWarning,
+              "{}: interface was removed ({} frames still queued were taken); will reopen it when "
+              "it returns",
               s.name(), late);
           gateway->counter().counters(gateway_index[i]).up = false;
           s.Close();  // closing also removes it from the epoll set
@@ -301,9 +320,16 @@ struct LiveLoop::Impl : OutputSink {
         if (!sockets[i].is_open()) continue;
         InterfaceCounters& c = gateway->counter().counters(gateway_index[i]);
         switch (sockets[i].Send(*frame)) {
-          case TxStatus::kSent: ++c.tx_frames; break;
-          case TxStatus::kDown: ++c.tx_dropped; MarkUp(i, false); break;
-          default: ++c.tx_dropped; break;
+          case TxStatus::kSent:
+            ++c.tx_frames;
+            break;
+          case TxStatus::kDown:
+            ++c.tx_dropped;
+            MarkUp(i, false);
+            break;
+          default:
+            ++c.tx_dropped;
+            break;
         }
       }
     }
@@ -330,18 +356,24 @@ struct LiveLoop::Impl : OutputSink {
     if (state_path.empty()) return;
     const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
     try {
-      WriteFileAtomically(state_path, gateway->SaveState(), 0600, config.gateway.test_state_write_pause_s);
+      WriteFileAtomically(state_path, gateway->SaveState(), 0600,
+                          config.gateway.test_state_write_pause_s);
     } catch (const std::exception& e) {
       // Counted (status line 'state ... failed'); the previous file stays as it was.
       const FailureReport::Report r = save_report.Failure(mono, e.what());
       switch (r.kind) {
         case FailureReport::Kind::kFirst:
-          Log(LogLevel::kWarning, "state not saved: {}; {} keeps the previous state; retrying every {} s, next report in {} min or when it works again",
-              e.what(), state_path, config.gateway.state_save_period_s, kFailureReminderUs / 60'000'000);
+          Log(LogLevel::kWarning,
+              "state not saved: {}; {} keeps the previous state; retrying every {} s, next report "
+              "in {} min or when it works again",
+              e.what(), state_path, config.gateway.state_save_period_s,
+              kFailureReminderUs / 60'000'000);
           break;
         case FailureReport::Kind::kChanged:
         case FailureReport::Kind::kReminder:
-          Log(LogLevel::kWarning, "state still not saved: {} ({} failed attempts since the last report, {} in {:.0f} s)",
+          Log(LogLevel::kWarning,
+              "state still not saved: {} ({} failed attempts since the last report, {} in {:.0f} "
+              "s)",
               e.what(), r.failures_since_report, r.run_failures, r.run_s);
           break;
         default:
@@ -351,14 +383,17 @@ struct LiveLoop::Impl : OutputSink {
     }
     const FailureReport::Report r = save_report.Success(mono);
     if (r.kind == FailureReport::Kind::kRecovered) {
-      Log(LogLevel::kNotice, "state saved again to {}, after {} failed attempts in {:.0f} s", state_path, r.run_failures, r.run_s);
+      Log(LogLevel::kNotice, "state saved again to {}, after {} failed attempts in {:.0f} s",
+          state_path, r.run_failures, r.run_s);
     }
   }
 
   /// systemd's STATUS=: the gateway's line and the state saving counts.
   std::string Status() const {
     std::string s = gateway->StatusLine();
-    if (!state_path.empty()) s += fmt::format("; state {} saved, {} failed", save_report.successes(), save_report.failures());
+    if (!state_path.empty())
+      s += fmt::format("; state {} saved, {} failed", save_report.successes(),
+                       save_report.failures());
     return s;
   }
 
@@ -378,7 +413,9 @@ struct LiveLoop::Impl : OutputSink {
     // A temporary left by a write that was cut short (kill -9, power loss): never read, removed.
     const std::string tmp = TemporaryPathOf(state_path);
     if (::unlink(tmp.c_str()) == 0) {
-      Log(LogLevel::kNotice, "removed {}, the unfinished state write of an earlier run (the saved state is {})", tmp, state_path);
+      Log(LogLevel::kNotice,
+          "removed {}, the unfinished state write of an earlier run (the saved state is {})", tmp,
+          state_path);
     }
     try {
       const auto text = ReadFileIfExists(state_path);
@@ -412,14 +449,16 @@ struct LiveLoop::Impl : OutputSink {
       for (std::size_t i = 0; i < next.interfaces.size(); ++i) {
         if (next.interfaces[i].name != config.interfaces[i].name ||
             next.interfaces[i].error_frames != config.interfaces[i].error_frames ||
-            next.interfaces[i].rx_buffer_bytes != config.interfaces[i].rx_buffer_bytes) return false;
+            next.interfaces[i].rx_buffer_bytes != config.interfaces[i].rx_buffer_bytes)
+          return false;
       }
       return true;
     }();
     std::vector<CanSocket> new_sockets;
     if (!same_interfaces) {
       try {
-        for (const InterfaceConfig& iface : next.interfaces) new_sockets.push_back(OpenSocket(iface));
+        for (const InterfaceConfig& iface : next.interfaces)
+          new_sockets.push_back(OpenSocket(iface));
       } catch (const std::exception& e) {
         Log(LogLevel::kError, "reload refused, the running configuration stays: {}", e.what());
         return;
@@ -428,8 +467,10 @@ struct LiveLoop::Impl : OutputSink {
     // Carry every pump's estimate over (pumps of the same name and model).
     std::string warning;
     next_gateway->SetWallClockOffset(WallMinusMonotonicUs());
-    const int carried = next_gateway->RestoreState(gateway->SaveState(), ClockUs(CLOCK_MONOTONIC), &warning);
-    const bool lcm_changed = next.lcm.url != config.lcm.url || next.lcm.channel_prefix != config.lcm.channel_prefix;
+    const int carried =
+        next_gateway->RestoreState(gateway->SaveState(), ClockUs(CLOCK_MONOTONIC), &warning);
+    const bool lcm_changed =
+        next.lcm.url != config.lcm.url || next.lcm.channel_prefix != config.lcm.channel_prefix;
     config = std::move(next);
     gateway = std::move(next_gateway);
     saved_trip_latches = 0;  // the new gateway counts from zero
@@ -446,20 +487,23 @@ struct LiveLoop::Impl : OutputSink {
         Log(LogLevel::kError, "LCM after reload: {}; LCM is off until the next reload", e.what());
       }
     }
-    Log(LogLevel::kNotice, "configuration reloaded from {}: {} pumps ({} carried their estimates over)",
-        config_path, gateway->pumps().size(), carried);
+    Log(LogLevel::kNotice,
+        "configuration reloaded from {}: {} pumps ({} carried their estimates over)", config_path,
+        gateway->pumps().size(), carried);
   }
 
   void ArmTimer(std::int64_t mono_now) {
-    std::int64_t next = std::min({gateway->NextDueUs(), gateway->counter().NextHeartbeatUs(), next_status_us,
-                                  next_reopen_us, next_save_us, next_table_us, mono_now + kMaxTickUs});
+    std::int64_t next =
+        std::min({gateway->NextDueUs(), gateway->counter().NextHeartbeatUs(), next_status_us,
+                  next_reopen_us, next_save_us, next_table_us, mono_now + kMaxTickUs});
     const std::int64_t wd = notifier.watchdog_half_period_us();
     if (wd > 0) next = std::min(next, mono_now + wd);
     next = std::max(next, mono_now + 1000);  // at least 1 ms ahead
     itimerspec its{};
     its.it_value.tv_sec = next / 1000000;
     its.it_value.tv_nsec = (next % 1000000) * 1000;
-    if (timerfd_settime(timer_fd.get(), TFD_TIMER_ABSTIME, &its, nullptr) < 0) ThrowErrno("timerfd_settime");
+    if (timerfd_settime(timer_fd.get(), TFD_TIMER_ABSTIME, &its, nullptr) < 0)
+      ThrowErrno("timerfd_settime");
     armed_us = next;
   }
 
@@ -505,7 +549,8 @@ struct LiveLoop::Impl : OutputSink {
       switch (si.ssi_signo) {
         case SIGTERM:
         case SIGINT:
-          Log(LogLevel::kNotice, "{} received; stopping", si.ssi_signo == SIGTERM ? "SIGTERM" : "SIGINT");
+          Log(LogLevel::kNotice, "{} received; stopping",
+              si.ssi_signo == SIGTERM ? "SIGTERM" : "SIGINT");
           stop = true;
           break;
         case SIGHUP:
@@ -532,8 +577,9 @@ LiveLoop::LiveLoop(const DaemonConfig& config, std::string config_path, LiveOpti
   m.config_path = std::move(config_path);
   m.options = options;
   if (config.interfaces.empty()) {
-    throw std::system_error(EINVAL, std::generic_category(),
-                            config.source + ": no [[can]] interface configured (use -r LOG for a log)");
+    throw std::system_error(
+        EINVAL, std::generic_category(),
+        config.source + ": no [[can]] interface configured (use -r LOG for a log)");
   }
   m.gateway = std::make_unique<Gateway>(m.config);
   m.gateway->LoadClearKey(CredentialsDirectory());
@@ -570,7 +616,8 @@ int LiveLoop::Run() {
   m.next_status_us = start;
   m.next_reopen_us = start + kReopenPeriodUs;
   m.next_save_us = start + static_cast<std::int64_t>(m.config.gateway.state_save_period_s * 1e6);
-  if (m.options.table) m.next_table_us = start + static_cast<std::int64_t>(m.options.table_period_s * 1e6);
+  if (m.options.table)
+    m.next_table_us = start + static_cast<std::int64_t>(m.options.table_period_s * 1e6);
   std::string names;
   for (const auto& s : m.sockets) names += (names.empty() ? "" : ", ") + s.name();
   Log(LogLevel::kNotice, "listening on {} for {} pump(s){}", names, m.gateway->pumps().size(),

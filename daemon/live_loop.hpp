@@ -22,8 +22,8 @@ struct LiveOptions {
 /// clocks read at about the same moment (`wall_now_us`, `mono_now_us`) and the previous frame's
 /// result `last_mono_us` (-1: none). The result lies in [last_mono_us, mono_now_us]: elapsed
 /// time never runs backward when the wall clock is set. A stamp of 0 (none) is `mono_now_us`.
-std::int64_t MonotonicStampUs(std::int64_t stamp_wall_us, std::int64_t wall_now_us, std::int64_t mono_now_us,
-                              std::int64_t last_mono_us);
+std::int64_t MonotonicStampUs(std::int64_t stamp_wall_us, std::int64_t wall_now_us,
+                              std::int64_t mono_now_us, std::int64_t last_mono_us);
 
 class LiveLoop {
  public:

@@ -1,7 +1,7 @@
 #include "daemon/log.hpp"
 
-#include <cstdio>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <stdexcept>
 
@@ -15,16 +15,22 @@ void LogLine(LogLevel level, std::string_view message) {
   }
   const char* tag = "";
   switch (level) {
-    case LogLevel::kError: tag = "error: "; break;
-    case LogLevel::kWarning: tag = "warning: "; break;
-    default: break;
+    case LogLevel::kError:
+      tag = "error: ";
+      break;
+    case LogLevel::kWarning:
+      tag = "warning: ";
+      break;
+    default:
+      break;
   }
   fmt::print(stderr, "pumpthermd: {}{}\n", tag, message);
 }
 
 LogRateLimiter::LogRateLimiter(int burst, double window_s)
     : burst_(burst), window_us_(static_cast<std::int64_t>(std::llround(window_s * 1e6))) {
-  if (burst < 1 || !(window_s > 0.0)) throw std::invalid_argument("LogRateLimiter: burst >= 1, window > 0 s");
+  if (burst < 1 || !(window_s > 0.0))
+    throw std::invalid_argument("LogRateLimiter: burst >= 1, window > 0 s");
 }
 
 bool LogRateLimiter::Allow(std::int64_t now_us, std::uint64_t* held_back) {
@@ -47,7 +53,8 @@ bool LogRateLimiter::Allow(std::int64_t now_us, std::uint64_t* held_back) {
 }
 
 std::uint64_t LogRateLimiter::TakeHeldBack(std::int64_t now_us) {
-  if (held_back_ == 0 || (now_us - window_start_us_ < window_us_ && now_us >= window_start_us_)) return 0;
+  if (held_back_ == 0 || (now_us - window_start_us_ < window_us_ && now_us >= window_start_us_))
+    return 0;
   const std::uint64_t n = held_back_;
   held_back_ = 0;
   return n;

@@ -41,7 +41,7 @@ class LogRateLimiter {
   int burst_;
   std::int64_t window_us_;
   std::int64_t window_start_us_ = 0;
-  int in_window_ = 0;           // lines written in the present window
+  int in_window_ = 0;  // lines written in the present window
   bool started_ = false;
   std::uint64_t held_back_ = 0;  // since the last line written or reported
   std::uint64_t held_back_total_ = 0;

@@ -7,13 +7,13 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <filesystem>
-#include <system_error>
 #include <cstring>
+#include <filesystem>
 #include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
-#include <thread>
 #include <string_view>
+#include <system_error>
+#include <thread>
 #include <vector>
 
 #include "daemon/log.hpp"
@@ -50,10 +50,12 @@ class LogSink : public OutputSink {
   LogSink(const OfflineOptions& o, const Gateway& g) : frames_(o.output_log, "w"), gateway_(g) {
     if (!o.lcm_log.empty()) {
       lcm_ = std::make_unique<lcm::LogFile>(o.lcm_log, "w");
-      if (!lcm_->good()) throw std::runtime_error(fmt::format("{}: cannot create the LCM log", o.lcm_log));
+      if (!lcm_->good())
+        throw std::runtime_error(fmt::format("{}: cannot create the LCM log", o.lcm_log));
     }
   }
-  void SendFrame(std::size_t iface, std::int64_t time_us, const protocol::CanFrame& frame) override {
+  void SendFrame(std::size_t iface, std::int64_t time_us,
+                 const protocol::CanFrame& frame) override {
     ++frames_out;
     if (!frames_.f) return;
     line_.clear();  // keeps its capacity: no allocation per frame
@@ -61,7 +63,8 @@ class LogSink : public OutputSink {
     line_ += '\n';
     std::fwrite(line_.data(), 1, line_.size(), frames_.f);  // errors show at Close (ferror)
   }
-  bool PublishLcm(const std::string& channel, std::int64_t time_us, const std::vector<std::uint8_t>& bytes) override {
+  bool PublishLcm(const std::string& channel, std::int64_t time_us,
+                  const std::vector<std::uint8_t>& bytes) override {
     ++lcm_out;
     if (!lcm_) return true;
     lcm::LogEvent ev;
@@ -95,13 +98,17 @@ class CsvSink {
     std::filesystem::create_directories(dir, ec);  // like the tools' --out
     if (ec) throw std::system_error(ec, "--csv-dir: cannot create '" + dir + "'");
     for (const auto& p : g.pumps()) {
-      files_.push_back(std::make_unique<File>(fmt::format("{}/{}.csv", dir, p->config().name), "w"));
+      files_.push_back(
+          std::make_unique<File>(fmt::format("{}/{}.csv", dir, p->config().name), "w"));
       std::string header = "time_s";
       for (const auto& n : p->model().StateNames()) header += fmt::format(",{}_C,{}_sd_K", n, n);
-      header += ",winding_resistance_C,magnet_flux_C,magnet_flux_sd_K,resistance_ohm,flux_Wb,ident_status,"
-                "frame_measured_C,ambient_C,"
-                "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s,alarm_active_reasons,"
-                "sensor_fault,winding_resistance_sd_K,flux_sd_Wb,mismatch_state,mismatch_effect,mismatch_value\n";
+      header +=
+          ",winding_resistance_C,magnet_flux_C,magnet_flux_sd_K,resistance_ohm,flux_Wb,ident_"
+          "status,"
+          "frame_measured_C,ambient_C,"
+          "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s,alarm_active_reasons,"
+          "sensor_fault,winding_resistance_sd_K,flux_sd_Wb,mismatch_state,mismatch_effect,mismatch_"
+          "value\n";
       std::fputs(header.c_str(), files_.back()->f);
       last_.push_back(-1);
     }
@@ -112,17 +119,20 @@ class CsvSink {
       if (!s.initialised || s.time_us == last_[i]) continue;
       last_[i] = s.time_us;
       std::string row = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6 - origin_s_);
-      for (std::size_t k = 0; k < s.node_degC.size(); ++k) row += fmt::format(",{:.4f},{:.4f}", s.node_degC[k], s.node_sd_K[k]);
+      for (std::size_t k = 0; k < s.node_degC.size(); ++k)
+        row += fmt::format(",{:.4f},{:.4f}", s.node_degC[k], s.node_sd_K[k]);
       const auto& r = s.resistance;
-      row += fmt::format(",{:.4f},{:.4f},{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f},{},{},{:.4f},{:.3g},{},{},{:.3f}\n",
-                         s.winding_resistance_degC, s.magnet_flux_degC, s.magnet_flux_sd_K, r.resistance_ohm, r.flux_Wb, static_cast<int>(r.status),
-                         s.frame_measured_degC, s.ambient_degC, s.speed_rpm, s.nis,
-                         static_cast<int>(s.alarm.level), static_cast<int>(s.alarm.reason), s.alarm.node,
-                         std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : -1.0,
-                         s.alarm.active_reasons, static_cast<int>(s.sensor_fault),
-                         std::isfinite(s.winding_resistance_degC) ? r.winding_sd_K : std::nan(""), r.flux_sd_Wb,
-                         estimators::MismatchStateName(s.mismatch.state),
-                         estimators::MismatchEffectName(s.mismatch.effect), s.mismatch.value);
+      row += fmt::format(
+          ",{:.4f},{:.4f},{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f},{},{}"
+          ",{:.4f},{:.3g},{},{},{:.3f}\n",
+          s.winding_resistance_degC, s.magnet_flux_degC, s.magnet_flux_sd_K, r.resistance_ohm,
+          r.flux_Wb, static_cast<int>(r.status), s.frame_measured_degC, s.ambient_degC, s.speed_rpm,
+          s.nis, static_cast<int>(s.alarm.level), static_cast<int>(s.alarm.reason), s.alarm.node,
+          std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : -1.0,
+          s.alarm.active_reasons, static_cast<int>(s.sensor_fault),
+          std::isfinite(s.winding_resistance_degC) ? r.winding_sd_K : std::nan(""), r.flux_sd_Wb,
+          estimators::MismatchStateName(s.mismatch.state),
+          estimators::MismatchEffectName(s.mismatch.effect), s.mismatch.value);
       std::fputs(row.c_str(), files_[i]->f);
     }
   }
@@ -169,8 +179,8 @@ class LineReader {
     end_ -= pos_;
     pos_ = 0;
     if (end_ == buffer_.size()) buffer_.resize(2 * buffer_.size());
-    const std::streamsize n = in_.rdbuf()->sgetn(buffer_.data() + end_,
-                                                 static_cast<std::streamsize>(buffer_.size() - end_));
+    const std::streamsize n = in_.rdbuf()->sgetn(
+        buffer_.data() + end_, static_cast<std::streamsize>(buffer_.size() - end_));
     if (n <= 0) {
       eof_ = true;
     } else {
@@ -275,7 +285,8 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       if (++r.untimed_lines <= options.max_reported) {
         Log(LogLevel::kWarning,
             "{}:{}: no timestamp (candump's screen format without -t a): the pipeline runs on the "
-            "receive times; line skipped (record with candump -l, -L or -t a)", source, r.lines);
+            "receive times; line skipped (record with candump -l, -L or -t a)",
+            source, r.lines);
       }
       continue;
     }
@@ -285,7 +296,8 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       r.time_steps_back = clock.steps_back();
       if (r.time_steps_back <= options.max_reported) {
         Log(LogLevel::kWarning,
-            "{}:{}: time goes back {:.3f} s (logs concatenated, or the recording host's clock set back): "
+            "{}:{}: time goes back {:.3f} s (logs concatenated, or the recording host's clock set "
+            "back): "
             "the pipeline's time holds here and runs on from the new stamps",
             source, r.lines, static_cast<double>(clock.last_step_back_us()) * 1e-6);
       }
@@ -321,7 +333,8 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
         r.untimed_lines - options.max_reported);
   }
   if (r.bad_lines > options.max_reported) {
-    Log(LogLevel::kWarning, "{}: {} more malformed lines skipped", source, r.bad_lines - options.max_reported);
+    Log(LogLevel::kWarning, "{}: {} more malformed lines skipped", source,
+        r.bad_lines - options.max_reported);
   }
   if (options.table && last_time_us >= 0) show_table(last_time_us);
   sink.Close();

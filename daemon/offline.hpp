@@ -15,20 +15,20 @@
 namespace pumptherm::daemon {
 
 struct OfflineOptions {
-  std::string output_log;   ///< candump log of the frames the gateway sends ("" = none)
-  std::string lcm_log;      ///< LCM log file of the messages it publishes ("" = none)
-  std::string csv_dir;      ///< per-pump CSV of every thermal step ("" = none)
-  double csv_time_origin_s = 0.0;  ///< subtracted from the Unix time in the CSV's time_s
-  bool table = false;       ///< print the pump table while running
-  double table_period_s = 60.0;  ///< of log time between tables
-  double pace = 0.0;        ///< log seconds per wall second (0 = as fast as possible)
+  std::string output_log;           ///< candump log of the frames the gateway sends ("" = none)
+  std::string lcm_log;              ///< LCM log file of the messages it publishes ("" = none)
+  std::string csv_dir;              ///< per-pump CSV of every thermal step ("" = none)
+  double csv_time_origin_s = 0.0;   ///< subtracted from the Unix time in the CSV's time_s
+  bool table = false;               ///< print the pump table while running
+  double table_period_s = 60.0;     ///< of log time between tables
+  double pace = 0.0;                ///< log seconds per wall second (0 = as fast as possible)
   std::uint64_t max_reported = 20;  ///< malformed lines reported on stderr (all are counted)
 };
 
 struct OfflineResult {
   std::uint64_t lines = 0;
   std::uint64_t frames = 0;
-  std::uint64_t bad_lines = 0;   ///< malformed lines: reported (first few) and counted, skipped
+  std::uint64_t bad_lines = 0;  ///< malformed lines: reported (first few) and counted, skipped
   /// Screen-format lines without a timestamp (candump without -t a): the pipeline needs the
   /// receive time; reported (first few), counted, skipped.
   std::uint64_t untimed_lines = 0;
@@ -66,8 +66,8 @@ class OfflineClock {
 
 /// Feeds every frame of the candump recording in `in` (any format ParseCandumpLine reads; read
 /// in large blocks) to `gateway`, advancing it whenever its NextDueUs() is reached. `source`
-/// names the log in warnings ("FILE:LINE:COLUMN: what was expected"). Throws std::runtime_error only when an
-/// output file cannot be written.
+/// names the log in warnings ("FILE:LINE:COLUMN: what was expected"). Throws std::runtime_error
+/// only when an output file cannot be written.
 OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& gateway,
                          const OfflineOptions& options = {});
 

@@ -2,11 +2,11 @@
 
 #include <fmt/format.h>
 
-#include "estimators/magnet.hpp"
-
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
+
+#include "estimators/magnet.hpp"
 
 namespace pumptherm::daemon {
 namespace {
@@ -24,7 +24,8 @@ constexpr double kConvergedSd_K = 5.0;
 /// states one, scales the flux's drift (the identifier's magnet hypotheses).
 estimators::ResistanceIdentifierConfig IdentifierConfig(const estimators::MotorDescription& motor) {
   estimators::ResistanceIdentifierConfig c;
-  if (motor.magnet.Given()) c.flux_temperature_coefficient_per_K = motor.magnet.flux_temperature_coefficient_per_K;
+  if (motor.magnet.Given())
+    c.flux_temperature_coefficient_per_K = motor.magnet.flux_temperature_coefficient_per_K;
   return c;
 }
 
@@ -33,7 +34,8 @@ estimators::ResistanceIdentifierConfig IdentifierConfig(const estimators::MotorD
 /// its two terms: at constant current a falling flux (a heating magnet) can move Rs out of its
 /// plausible band (implausible) or be held (held, not identifiable) while E still follows uq/w.
 bool FluxUsable(estimators::ResistanceStatus s) {
-  return s != estimators::ResistanceStatus::kInitialising && s != estimators::ResistanceStatus::kInvalidInput;
+  return s != estimators::ResistanceStatus::kInitialising &&
+         s != estimators::ResistanceStatus::kInvalidInput;
 }
 
 estimators::VirtualSensorConfig SensorConfig(const PumpConfig& c) {
@@ -43,7 +45,8 @@ estimators::VirtualSensorConfig SensorConfig(const PumpConfig& c) {
   return v;
 }
 
-estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c, const estimators::ThermalModel& model) {
+estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c,
+                                                  const estimators::ThermalModel& model) {
   estimators::MismatchDetectorConfig m;
   m.measured_node = c.measured_node;
   m.sensor_lag_s = c.frame_sensor_lag_s;
@@ -53,7 +56,8 @@ estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c, const est
   return m;
 }
 
-estimators::DisturbanceSensorConfig RobustConfig(const PumpConfig& c, const estimators::ThermalModel& model) {
+estimators::DisturbanceSensorConfig RobustConfig(const PumpConfig& c,
+                                                 const estimators::ThermalModel& model) {
   estimators::DisturbanceSensorConfig d;
   d.measured_node = c.measured_node;
   d.sensor_lag_s = c.frame_sensor_lag_s;
@@ -110,7 +114,8 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
                                                          : w->second.limits);
         auto s = config.alarms.levels.find("sensor");
         return estimators::AlarmMonitor(
-            ac, limits, s == config.alarms.levels.end() ? estimators::TemperatureLimits{} : s->second.limits);
+            ac, limits,
+            s == config.alarms.levels.end() ? estimators::TemperatureLimits{} : s->second.limits);
       }()),
       sensor_health_(config.alarms.monitor),
 
@@ -119,7 +124,8 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
       lag_bias_(config.frame_sensor_lag_s, thermal_period_s) {
   // The disturbance-state filter by default only where its frame-path heat can stand for every
   // change on the cooling path (docs/virtual-sensor.md, "Disturbance states", per model).
-  if (!config_.disturbance_states_explicit && !estimators::BoundaryOnlyThrough(*model_, config_.measured_node)) {
+  if (!config_.disturbance_states_explicit &&
+      !estimators::BoundaryOnlyThrough(*model_, config_.measured_node)) {
     config_.disturbance_states = false;
   }
   measured_state_ = model_->StateIndex(config_.measured_node);
@@ -207,7 +213,8 @@ void Pump::NoteFastFrame(std::int64_t t_us) {
   last_frame_us_ = last_fast_us_ = t_us;
 }
 
-std::int64_t Pump::LastAtOrBefore(std::int64_t last_us, std::int64_t previous_us, std::int64_t t_us) {
+std::int64_t Pump::LastAtOrBefore(std::int64_t last_us, std::int64_t previous_us,
+                                  std::int64_t t_us) {
   // A step that runs after a later frame came in (offline, the first frame after a silence
   // brings the steps of the silence) must see the frame before it.
   return last_us <= t_us ? last_us : previous_us;
@@ -238,8 +245,8 @@ void Pump::Identify(std::int64_t t_us) {
   }
 }
 
-void Pump::OnStatus(std::int64_t t_us, double speed_rpm, double /*drive_state*/,
-                    double frame_degC, double ambient_degC) {
+void Pump::OnStatus(std::int64_t t_us, double speed_rpm, double /*drive_state*/, double frame_degC,
+                    double ambient_degC) {
   ++counters_.status_frames;
   if (t_us != last_status_us_) previous_status_us_ = last_status_us_;
   last_frame_us_ = last_status_us_ = t_us;
@@ -326,7 +333,8 @@ void Pump::ThermalStep(std::int64_t end_us) {
   BackEmfMeasurement(end_us, mean_iq_A, in.speed_rpm * motor_.pole_pairs * kRadPerSPerRpm);
   // Health is data: inputs the model cannot take refuse the step, an invalid extra measurement
   // is left out; both are counted.
-  const estimators::KalmanUpdateReport* report = &sensor_.Step(in, period_s_, measurement_, ExtraMeasurements(winding_res));
+  const estimators::KalmanUpdateReport* report =
+      &sensor_.Step(in, period_s_, measurement_, ExtraMeasurements(winding_res));
   counters_.rejected_values += static_cast<std::uint64_t>(report->rejected_measurements);
   if (report->refused) {
     ++counters_.rejected_values;
@@ -350,8 +358,9 @@ void Pump::ThermalStep(std::int64_t end_us) {
   // to Inf within minutes. Then nothing is published as a
   // temperature ("n/a", alarms see unknown nodes and an unconverged filter, a latched trip
   // stays), the state is not saved, and the next step starts the filter again.
-  const bool diverged = !x.allFinite() || !s.diagonal().allFinite() ||
-                        (x.size() > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC));
+  const bool diverged =
+      !x.allFinite() || !s.diagonal().allFinite() ||
+      (x.size() > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC));
   if (diverged) {
     ++counters_.filter_resets;
     initialised_ = false;
@@ -359,8 +368,9 @@ void Pump::ThermalStep(std::int64_t end_us) {
   double max_sd = diverged ? kInf : 0.0;
   for (int i = 0; i < x.size(); ++i) {
     snapshot_.node_degC[static_cast<std::size_t>(i)] = diverged ? kNaN : x(i);
-    snapshot_.node_sd_K[static_cast<std::size_t>(i)] =
-        diverged ? kNaN : robust ? robust_sd_(i) : std::sqrt(std::max(s(i, i), 0.0));
+    snapshot_.node_sd_K[static_cast<std::size_t>(i)] = diverged ? kNaN
+                                                       : robust ? robust_sd_(i)
+                                                                : std::sqrt(std::max(s(i, i), 0.0));
     // Convergence is judged on the standard filter: the disturbance-state filter's rotor sd
     // stays large by design (heat inside is barely seen), which is not a filter still settling.
     if (!diverged) max_sd = std::max(max_sd, std::sqrt(std::max(s(i, i), 0.0)));
@@ -392,8 +402,9 @@ void Pump::ThermalStep(std::int64_t end_us) {
   // blind stretch that began before it.
   const estimators::SensorFault fault_alarm = SensorFaultAlarm(fault, end_us);
   const bool measured_again = fault == estimators::SensorFault::kNone || !std::isnan(winding_res);
-  const bool blind = !diverged && !measured_again &&
-                     (fault_alarm != estimators::SensorFault::kNone || blind_.bound_degC().size() > 0);
+  const bool blind =
+      !diverged && !measured_again &&
+      (fault_alarm != estimators::SensorFault::kNone || blind_.bound_degC().size() > 0);
   StepBlindBound(blind, in);
   StepAlarmBounds(diverged, fresh_inputs, robust ? kNaN : measured, in, x);
   for (int i = 0; i < x.size(); ++i) {
@@ -439,14 +450,16 @@ void Pump::ThermalStep(std::int64_t end_us) {
 // magnet temperature). Their sum at the present iq, E = psi_f + Rs iq/w, is what it sees well.
 // With the copper law R = R0 (1 + alpha (Tw - T0)) (Han 2019 eq. 2) and the magnet law
 // psi = psi0 (1 + beta (Tm - T0m)) (estimators/magnet.hpp), E is linear in both temperatures:
-//   z = T0m + (E - psi0 - R0 iq/w) / (psi0 beta) + g T0 = Tm + g Tw,  g = R0 alpha iq / (w psi0 beta),
+//   z = T0m + (E - psi0 - R0 iq/w) / (psi0 beta) + g T0 = Tm + g Tw,  g = R0 alpha iq / (w psi0
+//   beta),
 // a measurement of the magnet node plus g times the winding that the filter takes as one row.
 // Its sd is E's (from the identifier's covariance of [Rs, psi_f]) over psi0 |beta|.
 void Pump::BackEmfMeasurement(std::int64_t end_us, double iq_A, double w) {
   magnet_z_degC_ = kNaN;
   const estimators::ResistanceEstimate& r = identifier_.estimate();
   const double age_s = static_cast<double>(end_us - flux_block_us_) * 1e-6;
-  const bool fresh = flux_block_us_ >= 0 && age_s <= config_.alarms.monitor.stale_after_s + period_s_;
+  const bool fresh =
+      flux_block_us_ >= 0 && age_s <= config_.alarms.monitor.stale_after_s + period_s_;
   // Below a tenth of rated speed the back-EMF is too small to tell the magnet's 0.1 %/K.
   const double w_min = 0.1 * estimators::ElectricalSpeed_rad_per_s(motor_, motor_.rated_speed_rpm);
   if (!motor_.magnet.Given() || !fresh || !FluxUsable(r.status) || !std::isfinite(iq_A) ||
@@ -465,7 +478,8 @@ void Pump::BackEmfMeasurement(std::int64_t end_us, double iq_A, double w) {
   const bool winding = model_->WindingWeights().sum() > 0.0;
   magnet_gain_ = winding ? cu.r0_ohm * cu.alpha_per_K * u / psi0_beta : 0.0;
   const double drop = winding ? cu.r0_ohm * u : r.resistance_ohm * u;
-  magnet_z_degC_ = motor_.magnet.t0_degC + (e - drop - motor_.flux_Wb) / psi0_beta + magnet_gain_ * cu.t0_degC;
+  magnet_z_degC_ =
+      motor_.magnet.t0_degC + (e - drop - motor_.flux_Wb) / psi0_beta + magnet_gain_ * cu.t0_degC;
   magnet_z_sd_K_ = std::sqrt(std::max(var_e, 0.0)) / std::abs(psi0_beta);
 }
 
@@ -499,9 +513,11 @@ const estimators::NodeMeasurements& Pump::ExtraMeasurements(double winding_res_d
   extra_.Clear();
   // The identifier's 1-sigma and the model's own (config) add in quadrature: independent.
   const double winding_sd_K = std::hypot(identifier_.estimate().winding_sd_K, config_.winding_sd_K);
-  if (config_.fuse_winding) extra_.Add(estimators::kWindingWeightsRow, winding_res_degC, winding_sd_K);
+  if (config_.fuse_winding)
+    extra_.Add(estimators::kWindingWeightsRow, winding_res_degC, winding_sd_K);
   if (magnet_state_ >= 0 && std::isfinite(magnet_z_degC_)) {
-    extra_.Add(magnet_state_, magnet_z_degC_, std::max(magnet_z_sd_K_, config_.magnet_min_sd_K), magnet_gain_);
+    extra_.Add(magnet_state_, magnet_z_degC_, std::max(magnet_z_sd_K_, config_.magnet_min_sd_K),
+               magnet_gain_);
   }
   return extra_;
 }
@@ -523,9 +539,10 @@ void Pump::StepAlarmBounds(bool diverged, bool fresh_inputs, double lagging_degC
     return;
   }
   const auto n = static_cast<Eigen::Index>(snapshot_.node_sd_K.size());
-  silence_.Step(*model_, in, fresh_inputs, x, Eigen::Map<const Eigen::VectorXd>(snapshot_.node_sd_K.data(), n),
-                static_cast<double>(snapshot_.time_us) * 1e-6, period_s_, config_.alarms.monitor.stale_after_s,
-                config_.alarms.monitor.trip_sd_factor);
+  silence_.Step(*model_, in, fresh_inputs, x,
+                Eigen::Map<const Eigen::VectorXd>(snapshot_.node_sd_K.data(), n),
+                static_cast<double>(snapshot_.time_us) * 1e-6, period_s_,
+                config_.alarms.monitor.stale_after_s, config_.alarms.monitor.trip_sd_factor);
 }
 
 double Pump::AlarmValue_degC(int i, double estimate_degC) const {
@@ -546,25 +563,28 @@ double Pump::FreshWindingResistance_degC(std::int64_t t_us) const {
   return age_s <= config_.alarms.monitor.stale_after_s ? r.winding_degC : kNaN;
 }
 
-estimators::SensorFault Pump::SensorFaultAlarm(estimators::SensorFault fault, std::int64_t t_us) const {
+estimators::SensorFault Pump::SensorFaultAlarm(estimators::SensorFault fault,
+                                               std::int64_t t_us) const {
   // A sensor missing because every frame of the pump stopped is a link outage (stale
   // telemetry), not a failed sensor.
   const std::int64_t fast_us = LastAtOrBefore(last_fast_us_, previous_fast_us_, t_us);
-  const bool link_silent =
-      fast_us < 0 || static_cast<double>(t_us - fast_us) * 1e-6 > config_.alarms.monitor.stale_after_s;
-  return fault == estimators::SensorFault::kMissing && link_silent ? estimators::SensorFault::kNone : fault;
+  const bool link_silent = fast_us < 0 || static_cast<double>(t_us - fast_us) * 1e-6 >
+                                              config_.alarms.monitor.stale_after_s;
+  return fault == estimators::SensorFault::kMissing && link_silent ? estimators::SensorFault::kNone
+                                                                   : fault;
 }
 
 double Pump::TelemetryAge_s(std::int64_t t_us) const {
   double age_s = 0.0;
   for (const std::int64_t last_us : {LastAtOrBefore(last_fast_us_, previous_fast_us_, t_us),
-                                    LastAtOrBefore(last_status_us_, previous_status_us_, t_us)}) {
+                                     LastAtOrBefore(last_status_us_, previous_status_us_, t_us)}) {
     if (last_us >= 0) age_s = std::max(age_s, static_cast<double>(t_us - last_us) * 1e-6);
   }
   return age_s;
 }
 
-void Pump::CheckModel(const estimators::ThermalInputs& in, double measured_degC, std::int64_t end_us) {
+void Pump::CheckModel(const estimators::ThermalInputs& in, double measured_degC,
+                      std::int64_t end_us) {
   try {
     // The magnet temperature of this step's back-EMF row at the published winding estimate.
     double magnet_degC = kNaN;
@@ -572,8 +592,8 @@ void Pump::CheckModel(const estimators::ThermalInputs& in, double measured_degC,
       const Eigen::VectorXd& x = config_.disturbance_states ? robust_x_ : sensor_.Estimate_degC();
       magnet_degC = magnet_z_degC_ - magnet_gain_ * model_->WindingWeights().dot(x);
     }
-    const estimators::MismatchFinding& f =
-        mismatch_.Step(in, period_s_, measured_degC, static_cast<double>(end_us) * 1e-6, magnet_degC);
+    const estimators::MismatchFinding& f = mismatch_.Step(
+        in, period_s_, measured_degC, static_cast<double>(end_us) * 1e-6, magnet_degC);
     if (NewVerdict(f, snapshot_.mismatch)) ++snapshot_.mismatch_changes;
     snapshot_.mismatch = f;
   } catch (const std::exception&) {
@@ -583,8 +603,8 @@ void Pump::CheckModel(const estimators::ThermalInputs& in, double measured_degC,
 
 double Pump::TimeToTrip_s(const estimators::ThermalInputs& in, int* node) {
   const bool robust = config_.disturbance_states;
-  return forecast_.TimeToTrip_s(*model_, in, robust ? robust_x_ : sensor_.Estimate_degC(), trip_degC_,
-                                robust ? &robust_ : nullptr, node);
+  return forecast_.TimeToTrip_s(*model_, in, robust ? robust_x_ : sensor_.Estimate_degC(),
+                                trip_degC_, robust ? &robust_ : nullptr, node);
 }
 
 PumpSavedState Pump::Save() const {
@@ -597,7 +617,7 @@ PumpSavedState Pump::Save() const {
   const bool robust = config_.disturbance_states && initialised_;
   s.x_degC = robust ? Eigen::VectorXd(robust_.Filter().State().head(n)) : sensor_.Estimate_degC();
   s.s_K2 = robust ? Eigen::MatrixXd(robust_.Filter().Covariance().topLeftCorner(n, n))
-                                      : sensor_.Covariance_K2();
+                  : sensor_.Covariance_K2();
   s.inputs = held_inputs_;
   s.resistance = identifier_.Save();
   s.trip_latched = snapshot_.alarm.trip_latched;
@@ -621,7 +641,8 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   // A damaged or forged file must not become a published estimate: temperatures in the
   // believable range, variances not negative, inputs finite (they are held while down).
   const auto& in = state.inputs;
-  if ((n > 0 && (state.x_degC.maxCoeff() > kMaxEstimate_degC || state.x_degC.minCoeff() < kMinEstimate_degC)) ||
+  if ((n > 0 && (state.x_degC.maxCoeff() > kMaxEstimate_degC ||
+                 state.x_degC.minCoeff() < kMinEstimate_degC)) ||
       (n > 0 && state.s_K2.diagonal().minCoeff() < 0.0) || !std::isfinite(in.speed_rpm) ||
       !std::isfinite(in.id_A) || !std::isfinite(in.iq_A) || !std::isfinite(in.ambient_degC) ||
       !std::isfinite(in.coolant_degC)) {
@@ -634,7 +655,8 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   const double gap_s = static_cast<double>(now_us - state.time_us) * 1e-6;
   // The time the daemon was down, the inputs then held, with the process noise of the filter's
   // defaults over it.
-  if (gap_s > 0.0 && !estimators::PredictOverGap(*model_, state.inputs, gap_s, estimators::VirtualSensorConfig{}, x, s)) {
+  if (gap_s > 0.0 && !estimators::PredictOverGap(*model_, state.inputs, gap_s,
+                                                 estimators::VirtualSensorConfig{}, x, s)) {
     return false;
   }
   if (!x.allFinite() || !s.allFinite() ||
@@ -649,7 +671,8 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   // The time the daemon was down is a telemetry silence: the load may have risen in it.
   silence_.Begin(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6);
   // The mismatch test starts afresh (learning) from the restored level.
-  mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0, static_cast<double>(now_us) * 1e-6);
+  mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0,
+                       static_cast<double>(now_us) * 1e-6);
   // The disturbance-state filter is not saved: it goes on from the restored nodes, its
   // disturbances back at their priors, so that the published values do not jump at a restart.
   robust_.Initialise(x, s);
@@ -686,7 +709,8 @@ bool Pump::TripIndices(const PumpSavedState& state,
   return true;
 }
 
-void Pump::Relatch(const std::vector<estimators::AlarmMonitor::LatchedTrip>& trips, std::int64_t now_us) {
+void Pump::Relatch(const std::vector<estimators::AlarmMonitor::LatchedTrip>& trips,
+                   std::int64_t now_us) {
   for (const auto& t : trips) alarms_.RestoreLatchedTrip(t, static_cast<double>(now_us) * 1e-6);
   if (!trips.empty()) {
     snapshot_.alarm = alarms_.state();

@@ -37,20 +37,20 @@ inline constexpr double kMaxEstimate_degC = 1000.0;
 struct PumpCounters {
   std::uint64_t fast_frames = 0;
   std::uint64_t status_frames = 0;
-  std::uint64_t samples = 0;             ///< paired current+voltage samples identified
-  std::uint64_t unpaired = 0;            ///< half-samples whose partner never came
-  std::uint64_t lost_frames = 0;         ///< gaps in the rolling counter
-  std::uint64_t rejected_values = 0;     ///< NaN/Inf or out-of-range decoded values
+  std::uint64_t samples = 0;          ///< paired current+voltage samples identified
+  std::uint64_t unpaired = 0;         ///< half-samples whose partner never came
+  std::uint64_t lost_frames = 0;      ///< gaps in the rolling counter
+  std::uint64_t rejected_values = 0;  ///< NaN/Inf or out-of-range decoded values
   std::uint64_t thermal_steps = 0;
-  std::uint64_t filter_resets = 0;       ///< estimate left [kMinEstimate_degC, kMaxEstimate_degC]
+  std::uint64_t filter_resets = 0;  ///< estimate left [kMinEstimate_degC, kMaxEstimate_degC]
 };
 
 /// Everything published about one pump at one moment.
 struct PumpSnapshot {
   std::int64_t time_us = 0;
-  bool initialised = false;               ///< false until the first thermal step and after a
-                                          ///< filter reset: publish "n/a"
-  std::vector<double> node_degC;          ///< per thermal state (model order); NaN before init
+  bool initialised = false;       ///< false until the first thermal step and after a
+                                  ///< filter reset: publish "n/a"
+  std::vector<double> node_degC;  ///< per thermal state (model order); NaN before init
   std::vector<double> node_sd_K;
   estimators::ResistanceEstimate resistance;
   double winding_resistance_degC = kNaN;  ///< NaN unless the identifier is tracking
@@ -59,17 +59,17 @@ struct PumpSnapshot {
   /// the identification is fresh, usable and at speed.
   double magnet_flux_degC = kNaN;
   double magnet_flux_sd_K = kNaN;
-  double frame_measured_degC = kNaN;      ///< the frame sensor as fused (NaN: not fused)
+  double frame_measured_degC = kNaN;  ///< the frame sensor as fused (NaN: not fused)
   estimators::SensorFault sensor_fault = estimators::SensorFault::kNone;
   double ambient_degC = kNaN;
   double speed_rpm = kNaN;
   double innovation_K = kNaN;
   double nis = kNaN;
   estimators::AlarmState alarm;
-  int time_to_trip_node = -1;             ///< state index the forecast is about (-1: none)
-  std::uint64_t alarm_changes = 0;        ///< increments whenever `alarm` changes
-  estimators::MismatchFinding mismatch;   ///< is the model right? (docs/daemon.md, "Model mismatch")
-  std::uint64_t mismatch_changes = 0;     ///< increments when its state or effect changes
+  int time_to_trip_node = -1;            ///< state index the forecast is about (-1: none)
+  std::uint64_t alarm_changes = 0;       ///< increments whenever `alarm` changes
+  estimators::MismatchFinding mismatch;  ///< is the model right? (docs/daemon.md, "Model mismatch")
+  std::uint64_t mismatch_changes = 0;    ///< increments when its state or effect changes
 };
 
 /// Saved state of one pump (the state store writes it; docs/daemon.md "State").
@@ -78,7 +78,7 @@ struct PumpSavedState {
   std::int64_t time_us = 0;
   Eigen::VectorXd x_degC;
   Eigen::MatrixXd s_K2;
-  estimators::ThermalInputs inputs;       ///< the last inputs (held while the daemon is down)
+  estimators::ThermalInputs inputs;  ///< the last inputs (held while the daemon is down)
   estimators::ResistanceIdentifierState resistance;
   bool trip_latched = false;
   /// Latched trips, restored latched: the alarm node's name (a model node,
@@ -102,14 +102,19 @@ class Pump {
   const estimators::ThermalModel& model() const { return *model_; }
   const estimators::MotorDescription& motor() const { return motor_; }
   /// Every active alarm condition, most severe first.
-  std::vector<estimators::AlarmCondition> ActiveConditions() const { return alarms_.ActiveConditions(); }
+  std::vector<estimators::AlarmCondition> ActiveConditions() const {
+    return alarms_.ActiveConditions();
+  }
   /// The same into `out`: no allocation once `out` has held as many (the gateway's LCM path).
-  void ActiveConditions(std::vector<estimators::AlarmCondition>& out) const { alarms_.ActiveConditions(out); }
+  void ActiveConditions(std::vector<estimators::AlarmCondition>& out) const {
+    alarms_.ActiveConditions(out);
+  }
 
   /// Fast telemetry halves (NaN for what the mapping does not carry), paired into one
   /// identifier sample when they arrive within 50 ms of each other with equal rolling counters
   /// (or when either half carries no counter).
-  void OnCurrents(std::int64_t t_us, double id_A, double iq_A, double w_e_rad_per_s, double counter);
+  void OnCurrents(std::int64_t t_us, double id_A, double iq_A, double w_e_rad_per_s,
+                  double counter);
   void OnVoltages(std::int64_t t_us, double ud_V, double uq_V, double counter);
   /// Slow status (NaN for what is not mapped or not available).
   void OnStatus(std::int64_t t_us, double speed_rpm, double drive_state, double frame_degC,
@@ -166,10 +171,12 @@ class Pump {
   void Identify(std::int64_t t_us);
   void NoteFastFrame(std::int64_t t_us);
   /// The latest of two frame times (`last_us`, the one before it `previous_us`) not after `t_us`.
-  static std::int64_t LastAtOrBefore(std::int64_t last_us, std::int64_t previous_us, std::int64_t t_us);
+  static std::int64_t LastAtOrBefore(std::int64_t last_us, std::int64_t previous_us,
+                                     std::int64_t t_us);
   bool TripIndices(const PumpSavedState& state,
                    std::vector<estimators::AlarmMonitor::LatchedTrip>& out) const;
-  void Relatch(const std::vector<estimators::AlarmMonitor::LatchedTrip>& trips, std::int64_t now_us);
+  void Relatch(const std::vector<estimators::AlarmMonitor::LatchedTrip>& trips,
+               std::int64_t now_us);
   /// The resistance-based winding temperature if the identifier tracks and its last sample is
   /// at most `stale_after_s` old at `t_us`, else NaN.
   double FreshWindingResistance_degC(std::int64_t t_us) const;
@@ -208,8 +215,8 @@ class Pump {
   estimators::NodeMeasurements extra_;
   // This step's back-EMF measurement: z = T_magnet + gain T_winding, sd_K (NaN z: none).
   double magnet_z_degC_ = kNaN, magnet_gain_ = 0.0, magnet_z_sd_K_ = kNaN;
-  Eigen::VectorXd winding_cov_;          // S w, for the winding estimate's variance
-  std::vector<int> level_states_;        // state index of each alarm node (n states + winding)
+  Eigen::VectorXd winding_cov_;    // S w, for the winding estimate's variance
+  std::vector<int> level_states_;  // state index of each alarm node (n states + winding)
   PumpCounters counters_;
   PumpSnapshot snapshot_;
 
@@ -222,14 +229,14 @@ class Pump {
   Half currents_, voltages_;
   double last_counter_ = kNaN;
   std::int64_t last_sample_us_ = -1;
-  double w_e_rad_per_s_ = kNaN;          // latest electrical speed (fast frame or status)
+  double w_e_rad_per_s_ = kNaN;  // latest electrical speed (fast frame or status)
 
   // Status values.
   double ambient_degC_ = kNaN;
   double speed_rpm_ = kNaN;
   std::int64_t last_frame_us_ = -1;
   std::int64_t last_fast_us_ = -1;
-  std::int64_t previous_fast_us_ = -1;   // the fast frame time before last_fast_us_
+  std::int64_t previous_fast_us_ = -1;  // the fast frame time before last_fast_us_
   std::int64_t last_status_us_ = -1;
   std::int64_t previous_status_us_ = -1;
 
@@ -248,10 +255,10 @@ class Pump {
   estimators::TripForecast forecast_{model_->StateCount()};
   std::vector<double> trip_degC_;  // per node, for the forecast (infinity: no trip level)
   std::vector<double> alarm_values_;
-  estimators::BlindBound blind_;  // worst-case bound while blind
-  std::vector<double> alarm_sd_;         // their standard deviations (the winding's: none, NaN)
-  estimators::LagBias lag_bias_;          // the frame reading's lag, added to the levels' values
-  estimators::SilenceBound silence_;      // the load that may have risen in a telemetry silence
+  estimators::BlindBound blind_;      // worst-case bound while blind
+  std::vector<double> alarm_sd_;      // their standard deviations (the winding's: none, NaN)
+  estimators::LagBias lag_bias_;      // the frame reading's lag, added to the levels' values
+  estimators::SilenceBound silence_;  // the load that may have risen in a telemetry silence
 };
 
 }  // namespace pumptherm::daemon

@@ -23,8 +23,9 @@ constexpr int kExitBadInput = 2;
 
 int main(int argc, char** argv) {
   using namespace pumptherm::daemon;
-  CLI::App app{"pumpthermd: pump thermal gateway (SocketCAN telemetry in; temperatures and alarms "
-               "out on CAN and LCM)"};
+  CLI::App app{
+      "pumpthermd: pump thermal gateway (SocketCAN telemetry in; temperatures and alarms "
+      "out on CAN and LCM)"};
   std::string config_path;
   std::string log_path;
   std::string check_path;
@@ -33,18 +34,25 @@ int main(int argc, char** argv) {
   app.add_option("-r,--read", log_path,
                  "process a candump log (FILE, or - for stdin) instead of live interfaces, as fast "
                  "as possible, with the log's timestamps as the clock");
-  app.add_option("--check-config", check_path, "validate a configuration file (and the files it names) and exit");
-  app.add_option("--output-log", offline.output_log, "with -r: write the frames the gateway sends as a candump log");
-  app.add_option("--lcm-log", offline.lcm_log, "with -r: write the LCM messages as an LCM log file (lcm-logplayer plays it)");
-  app.add_option("--csv-dir", offline.csv_dir, "with -r: write <pump>.csv per pump, a row per thermal step");
+  app.add_option("--check-config", check_path,
+                 "validate a configuration file (and the files it names) and exit");
+  app.add_option("--output-log", offline.output_log,
+                 "with -r: write the frames the gateway sends as a candump log");
+  app.add_option("--lcm-log", offline.lcm_log,
+                 "with -r: write the LCM messages as an LCM log file (lcm-logplayer plays it)");
+  app.add_option("--csv-dir", offline.csv_dir,
+                 "with -r: write <pump>.csv per pump, a row per thermal step");
   app.add_option("--csv-time-origin", offline.csv_time_origin_s,
                  "with --csv-dir: Unix time (s) that becomes time_s = 0 in the CSV files");
-  app.add_flag("--table", offline.table, "print a table of the pumps on stderr while running (live or with -r)");
-  auto* table_period = app.add_option("--table-period", offline.table_period_s,
-                                      "with --table: seconds between tables (of log time with -r, wall-clock live; "
-                                      "default 60 with -r, 5 live)")
-                           ->check(CLI::PositiveNumber);
-  app.add_option("--pace", offline.pace, "with -r: log seconds per wall-clock second (0 = as fast as possible)")
+  app.add_flag("--table", offline.table,
+               "print a table of the pumps on stderr while running (live or with -r)");
+  auto* table_period =
+      app.add_option("--table-period", offline.table_period_s,
+                     "with --table: seconds between tables (of log time with -r, wall-clock live; "
+                     "default 60 with -r, 5 live)")
+          ->check(CLI::PositiveNumber);
+  app.add_option("--pace", offline.pace,
+                 "with -r: log seconds per wall-clock second (0 = as fast as possible)")
       ->check(CLI::NonNegativeNumber);
   app.set_version_flag("--version", "pumpthermd " PUMPTHERM_VERSION);
   app.footer(
@@ -65,11 +73,13 @@ int main(int argc, char** argv) {
   if (!check_path.empty()) {
     try {
       const DaemonConfig c = LoadConfig(check_path);
-      if (const std::string w = ConfigPermissionWarning(check_path); !w.empty()) Log(LogLevel::kWarning, "{}", w);
+      if (const std::string w = ConfigPermissionWarning(check_path); !w.empty())
+        Log(LogLevel::kWarning, "{}", w);
       Gateway g(c);  // also checks the DBC, mapping, motors and models it names
       g.LoadClearKey(CredentialsDirectory());  // and the clear key file's permissions
       fmt::print("{}: OK ({} interface{}, {} pump{})\n", check_path, c.interfaces.size(),
-                 c.interfaces.size() == 1 ? "" : "s", c.pumps.size(), c.pumps.size() == 1 ? "" : "s");
+                 c.interfaces.size() == 1 ? "" : "s", c.pumps.size(),
+                 c.pumps.size() == 1 ? "" : "s");
       return 0;
     } catch (const ConfigError& e) {
       Log(LogLevel::kError, "{}", e.what());
@@ -81,7 +91,8 @@ int main(int argc, char** argv) {
   try {
     if (!config_path.empty()) {
       config = LoadConfig(config_path);
-      if (const std::string w = ConfigPermissionWarning(config_path); !w.empty()) Log(LogLevel::kWarning, "{}", w);
+      if (const std::string w = ConfigPermissionWarning(config_path); !w.empty())
+        Log(LogLevel::kWarning, "{}", w);
     }
   } catch (const ConfigError& e) {
     Log(LogLevel::kError, "{}", e.what());
@@ -109,7 +120,8 @@ int main(int argc, char** argv) {
     }
     // Offline runs publish LCM only to the log file: say so, a configured lcm.url stays silent.
     if (!gateway->pumps().empty())
-      Log(LogLevel::kNotice, "offline: LCM is written only to --lcm-log ({}), not to lcm.url ({}); "
+      Log(LogLevel::kNotice,
+          "offline: LCM is written only to --lcm-log ({}), not to lcm.url ({}); "
           "replay it with lcm-logplayer --lcm-url=URL FILE",
           offline.lcm_log.empty() ? "none given" : offline.lcm_log,
           config.lcm.url.empty() ? "unset" : config.lcm.url);
@@ -126,28 +138,34 @@ int main(int argc, char** argv) {
     }
     fmt::print("{}: {} frames, {} CAN IDs, {} malformed lines skipped\n", source, r.frames,
                gateway->counter().counts().size(), r.bad_lines);
-    if (r.untimed_lines > 0) fmt::print("{}: {} lines without a timestamp skipped (warned above)\n", source, r.untimed_lines);
-    if (r.time_steps_back > 0) fmt::print("{}: time went back {} times (warned above)\n", source, r.time_steps_back);
+    if (r.untimed_lines > 0)
+      fmt::print("{}: {} lines without a timestamp skipped (warned above)\n", source,
+                 r.untimed_lines);
+    if (r.time_steps_back > 0)
+      fmt::print("{}: time went back {} times (warned above)\n", source, r.time_steps_back);
     fmt::print("{}", gateway->counter().CountTable());
     if (!gateway->pumps().empty()) {
       fmt::print("sent {} frames and {} LCM messages; {} unknown-ID and {} short frames ignored\n",
-                 r.frames_out, r.lcm_out, gateway->counters().rx_unknown_id, gateway->counters().rx_bad_length);
+                 r.frames_out, r.lcm_out, gateway->counters().rx_unknown_id,
+                 gateway->counters().rx_bad_length);
       fmt::print("{}", gateway->PumpTable());
       // What each pump's pipeline did: the soak checks thermal_steps against elapsed / period.
-      fmt::print("{:<12} {:>12} {:>12} {:>12} {:>9} {:>9} {:>9} {:>13} {:>7}\n", "pump", "fast_frames",
-                 "status", "samples", "unpaired", "lost", "rejected", "thermal_steps", "resets");
+      fmt::print("{:<12} {:>12} {:>12} {:>12} {:>9} {:>9} {:>9} {:>13} {:>7}\n", "pump",
+                 "fast_frames", "status", "samples", "unpaired", "lost", "rejected",
+                 "thermal_steps", "resets");
       for (const auto& p : gateway->pumps()) {
         const PumpCounters& c = p->counters();
         fmt::print("{:<12} {:>12} {:>12} {:>12} {:>9} {:>9} {:>9} {:>13} {:>7}\n", p->config().name,
-                   c.fast_frames, c.status_frames, c.samples, c.unpaired, c.lost_frames, c.rejected_values,
-                   c.thermal_steps, c.filter_resets);
+                   c.fast_frames, c.status_frames, c.samples, c.unpaired, c.lost_frames,
+                   c.rejected_values, c.thermal_steps, c.filter_resets);
       }
     }
     return 0;
   }
 
   if (config_path.empty()) {
-    Log(LogLevel::kError, "nothing to do: give --config FILE for live interfaces or -r LOG for a log");
+    Log(LogLevel::kError,
+        "nothing to do: give --config FILE for live interfaces or -r LOG for a log");
     return kExitBadInput;
   }
   try {

@@ -8,16 +8,20 @@ namespace {
 
 shipped::FileKind Kind(ResourceKind kind) {
   switch (kind) {
-    case ResourceKind::kModel: return shipped::FileKind::kModel;
-    case ResourceKind::kMotor: return shipped::FileKind::kMotor;
-    case ResourceKind::kDbc: return shipped::FileKind::kDbc;
+    case ResourceKind::kModel:
+      return shipped::FileKind::kModel;
+    case ResourceKind::kMotor:
+      return shipped::FileKind::kMotor;
+    case ResourceKind::kDbc:
+      return shipped::FileKind::kDbc;
   }
   return shipped::FileKind::kModel;
 }
 
 }  // namespace
 
-std::string ResolveResource(ResourceKind kind, const std::string& reference, const std::string& base_dir) {
+std::string ResolveResource(ResourceKind kind, const std::string& reference,
+                            const std::string& base_dir) {
   return shipped::Resolve(Kind(kind), reference, base_dir);
 }
 

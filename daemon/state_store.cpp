@@ -29,7 +29,8 @@ std::string DirectoryOf(const std::string& path) {
 
 std::string TemporaryPathOf(const std::string& path) { return path + ".tmp"; }
 
-void WriteFileAtomically(const std::string& path, const std::string& contents, int mode, double test_pause_s) {
+void WriteFileAtomically(const std::string& path, const std::string& contents, int mode,
+                         double test_pause_s) {
   const std::string tmp = TemporaryPathOf(path);
   UniqueFd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, mode));
   if (!fd.valid()) Throw(errno, "cannot create " + tmp);

@@ -40,7 +40,8 @@ ThermalInputs WorseInputs(const ThermalInputs& a, const ThermalInputs& b) {
   return w;
 }
 
-bool SilenceBound::Propagate(const ThermalModel& model, const ThermalInputs& in, double dt_s, Eigen::VectorXd& x) {
+bool SilenceBound::Propagate(const ThermalModel& model, const ThermalInputs& in, double dt_s,
+                             Eigen::VectorXd& x) {
   try {
     // One zero-order-hold step over dt_s: exact for a network linear in the temperatures
     // (copper's temperature coefficient is part of a), as the state restore after a gap.
@@ -68,10 +69,12 @@ void SilenceBound::Reset() {
 }
 
 void SilenceBound::Step(const ThermalModel& model, const ThermalInputs& in, bool fresh,
-                        const Eigen::VectorXd& x_degC, const Eigen::Ref<const Eigen::VectorXd>& sd_K, double end_s,
+                        const Eigen::VectorXd& x_degC,
+                        const Eigen::Ref<const Eigen::VectorXd>& sd_K, double end_s,
                         double period_s, double min_silence_s, double k) {
   if (!fresh) {
-    if (bound_degC_.size() > 0 && !Propagate(model, in, period_s, bound_degC_)) bound_degC_.resize(0);
+    if (bound_degC_.size() > 0 && !Propagate(model, in, period_s, bound_degC_))
+      bound_degC_.resize(0);
     return;
   }
   // The silence: the steps between the last one with inputs and this one.
@@ -80,13 +83,16 @@ void SilenceBound::Step(const ThermalModel& model, const ThermalInputs& in, bool
     // The frames are back: the silence and this step again, at the worse of the two loads.
     Eigen::VectorXd b = start_degC_;
     const bool ok = Propagate(model, WorseInputs(start_inputs_, in), since_s, b);
-    if (ok && (bound_degC_.size() != b.size())) bound_degC_ = b;
-    else if (ok) bound_degC_ = bound_degC_.cwiseMax(b);
+    if (ok && (bound_degC_.size() != b.size()))
+      bound_degC_ = b;
+    else if (ok)
+      bound_degC_ = bound_degC_.cwiseMax(b);
   } else if (bound_degC_.size() > 0 && !Propagate(model, in, period_s, bound_degC_)) {
     bound_degC_.resize(0);
   }
   if (bound_degC_.size() == x_degC.size()) {
-    const Eigen::VectorXd upper = x_degC + k * sd_K.unaryExpr([](double s) { return std::isfinite(s) ? s : 0.0; });
+    const Eigen::VectorXd upper =
+        x_degC + k * sd_K.unaryExpr([](double s) { return std::isfinite(s) ? s : 0.0; });
     if ((bound_degC_.array() <= upper.array()).all()) bound_degC_.resize(0);
   }
   start_degC_ = x_degC;

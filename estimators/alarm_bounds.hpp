@@ -5,7 +5,6 @@
 /// as the step count and period, nothing is logged (docs/daemon.md, "Alarm rule").
 
 #include <Eigen/Dense>
-
 #include <cstddef>
 #include <vector>
 
@@ -50,9 +49,9 @@ class SilenceBound {
   /// estimate after the step (n states); `min_silence_s` a silence shorter than this is not one
   /// (stale_after_s); `k` the factor of the upper bound that ends the bound. A model that cannot
   /// be linearised at these inputs drops the bound (never throws).
-  void Step(const ThermalModel& model, const ThermalInputs& in, bool fresh, const Eigen::VectorXd& x_degC,
-            const Eigen::Ref<const Eigen::VectorXd>& sd_K, double end_s, double period_s, double min_silence_s,
-            double k);
+  void Step(const ThermalModel& model, const ThermalInputs& in, bool fresh,
+            const Eigen::VectorXd& x_degC, const Eigen::Ref<const Eigen::VectorXd>& sd_K,
+            double end_s, double period_s, double min_silence_s, double k);
   /// Starts a silence at `start_s` from the estimate `x_degC` with the inputs `in` then held (a
   /// restart: the state saved before it; while the daemon was down the load may have risen
   /// too). The next step with inputs ends it as any silence.
@@ -64,7 +63,8 @@ class SilenceBound {
 
  private:
   /// `x` run for `dt_s` at `in`; false when the model cannot be linearised there.
-  static bool Propagate(const ThermalModel& model, const ThermalInputs& in, double dt_s, Eigen::VectorXd& x);
+  static bool Propagate(const ThermalModel& model, const ThermalInputs& in, double dt_s,
+                        Eigen::VectorXd& x);
 
   Eigen::VectorXd start_degC_;  // the estimate after the last step with inputs
   ThermalInputs start_inputs_;  // that step's inputs (held through the silence)
@@ -81,7 +81,8 @@ class BlindBound {
   /// One blind step of `period_s` at `in`; the first step after Reset starts from `estimate_degC`.
   /// A model that cannot be linearised at these inputs makes the bound NaN (the levels then see
   /// the estimate alone); never throws.
-  void Step(const ThermalModel& model, const ThermalInputs& in, double period_s, const Eigen::VectorXd& estimate_degC);
+  void Step(const ThermalModel& model, const ThermalInputs& in, double period_s,
+            const Eigen::VectorXd& estimate_degC);
   /// Not blind (any more): no bound.
   void Reset() { bound_degC_.resize(0); }
   /// The bound, degC per state; size 0 while not blind.

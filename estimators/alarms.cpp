@@ -13,35 +13,52 @@ bool Known(double v) { return !std::isnan(v); }
 
 const char* AlarmReasonName(AlarmReason reason) {
   switch (reason) {
-    case AlarmReason::kNone: return "none";
-    case AlarmReason::kEstimatedOverTemperature: return "estimated_over_temperature";
-    case AlarmReason::kMeasuredOverTemperature: return "measured_over_temperature";
-    case AlarmReason::kRateOfRise: return "rate_of_rise";
-    case AlarmReason::kStaleTelemetry: return "stale_telemetry";
-    case AlarmReason::kImplausibleSensor: return "implausible_sensor";
-    case AlarmReason::kEstimatorNotConverged: return "estimator_not_converged";
-    case AlarmReason::kForecast: return "forecast";
-    case AlarmReason::kSensorFault: return "sensor_fault";
+    case AlarmReason::kNone:
+      return "none";
+    case AlarmReason::kEstimatedOverTemperature:
+      return "estimated_over_temperature";
+    case AlarmReason::kMeasuredOverTemperature:
+      return "measured_over_temperature";
+    case AlarmReason::kRateOfRise:
+      return "rate_of_rise";
+    case AlarmReason::kStaleTelemetry:
+      return "stale_telemetry";
+    case AlarmReason::kImplausibleSensor:
+      return "implausible_sensor";
+    case AlarmReason::kEstimatorNotConverged:
+      return "estimator_not_converged";
+    case AlarmReason::kForecast:
+      return "forecast";
+    case AlarmReason::kSensorFault:
+      return "sensor_fault";
   }
   return "unknown";
 }
 
 const char* SensorFaultName(SensorFault fault) {
   switch (fault) {
-    case SensorFault::kNone: return "none";
-    case SensorFault::kMissing: return "missing";
-    case SensorFault::kStuck: return "stuck";
-    case SensorFault::kOutOfRange: return "out of range";
-    case SensorFault::kJumping: return "jumping";
+    case SensorFault::kNone:
+      return "none";
+    case SensorFault::kMissing:
+      return "missing";
+    case SensorFault::kStuck:
+      return "stuck";
+    case SensorFault::kOutOfRange:
+      return "out of range";
+    case SensorFault::kJumping:
+      return "jumping";
   }
   return "unknown";
 }
 
 const char* AlarmLevelName(AlarmLevel level) {
   switch (level) {
-    case AlarmLevel::kNone: return "none";
-    case AlarmLevel::kWarning: return "warning";
-    case AlarmLevel::kTrip: return "trip";
+    case AlarmLevel::kNone:
+      return "none";
+    case AlarmLevel::kWarning:
+      return "warning";
+    case AlarmLevel::kTrip:
+      return "trip";
   }
   return "unknown";
 }
@@ -67,8 +84,7 @@ AlarmMonitor::AlarmMonitor(AlarmConfig config, std::vector<TemperatureLimits> li
   rise_K_per_min_.assign(limits_.size(), std::nan(""));
 }
 
-void AlarmMonitor::Update(Channel& ch, AlarmLevel want, double value, double now_s,
-                          double hold_s) {
+void AlarmMonitor::Update(Channel& ch, AlarmLevel want, double value, double now_s, double hold_s) {
   if (ch.latched && want < AlarmLevel::kTrip) want = AlarmLevel::kTrip;
   // A trip cleared while its condition is still there latches again at once.
   if (want == AlarmLevel::kTrip && ch.level == AlarmLevel::kTrip) ch.latched = true;
@@ -153,16 +169,18 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
     const double r = rise_K_per_min_[i];
     if (Known(r)) {
       const bool over = r > config_.max_rise_K_per_min;
-      const bool still = rise_[i].level != AlarmLevel::kNone && r > 0.8 * config_.max_rise_K_per_min;
+      const bool still =
+          rise_[i].level != AlarmLevel::kNone && r > 0.8 * config_.max_rise_K_per_min;
       Update(rise_[i], (over || still) ? AlarmLevel::kWarning : AlarmLevel::kNone, r, now_s, 0.0);
     }
   }
 
   if (Known(in.sensor_degC)) {
-    Update(sensor_over_, OverLevel(sensor_over_, in.sensor_degC, in.sensor_degC, sensor_limits_), in.sensor_degC,
-           now_s, hold);
+    Update(sensor_over_, OverLevel(sensor_over_, in.sensor_degC, in.sensor_degC, sensor_limits_),
+           in.sensor_degC, now_s, hold);
   }
-  Update(stale_, in.telemetry_age_s > config_.stale_after_s ? AlarmLevel::kWarning : AlarmLevel::kNone,
+  Update(stale_,
+         in.telemetry_age_s > config_.stale_after_s ? AlarmLevel::kWarning : AlarmLevel::kNone,
          in.telemetry_age_s, now_s, hold);
   StepSensor(now_s, in);
   const bool not_converged =
@@ -177,7 +195,8 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
       want = AlarmLevel::kWarning;
     }
     if (Known(ttt)) Update(forecast_, want, ttt, now_s, hold);
-    if (forecast_.level != AlarmLevel::kNone && in.time_to_trip_node >= 0) forecast_node_ = in.time_to_trip_node;
+    if (forecast_.level != AlarmLevel::kNone && in.time_to_trip_node >= 0)
+      forecast_node_ = in.time_to_trip_node;
   }
 
   Compose(in.time_to_trip_s);
@@ -189,7 +208,8 @@ void AlarmMonitor::StepSensor(double now_s, const AlarmInputs& in) {
   if (in.sensor_fault != SensorFault::kNone && sensor_fault_.level == AlarmLevel::kNone) {
     sensor_fault_kind_ = in.sensor_fault;
   }
-  Update(sensor_fault_, in.sensor_fault != SensorFault::kNone ? AlarmLevel::kWarning : AlarmLevel::kNone,
+  Update(sensor_fault_,
+         in.sensor_fault != SensorFault::kNone ? AlarmLevel::kWarning : AlarmLevel::kNone,
          in.sensor_raw_degC, now_s, config_.hold_s);
   // Stuck while the model moves: the same raw reading while the estimate of that node (free of
   // the sensor once SensorHealth has left it out) moves.
@@ -249,7 +269,8 @@ bool AlarmMonitor::RestoreLatchedTrip(const LatchedTrip& trip, double now_s) {
       trip.node >= static_cast<int>(over_.size())) {
     return false;
   }
-  Channel& ch = trip.node == kSensorTrip ? sensor_over_ : over_[static_cast<std::size_t>(trip.node)];
+  Channel& ch =
+      trip.node == kSensorTrip ? sensor_over_ : over_[static_cast<std::size_t>(trip.node)];
   ch.level = AlarmLevel::kTrip;
   ch.band_since_s.fill(std::nan(""));
   ch.below_since_s = std::nan("");
@@ -262,7 +283,8 @@ bool AlarmMonitor::RestoreLatchedTrip(const LatchedTrip& trip, double now_s) {
 
 template <typename F>
 void AlarmMonitor::ForEachActive(F&& f) const {
-  auto add = [&](const Channel& ch, AlarmReason reason, const char* detail, int node, double threshold) {
+  auto add = [&](const Channel& ch, AlarmReason reason, const char* detail, int node,
+                 double threshold) {
     if (ch.level != AlarmLevel::kNone) f(ch, reason, detail, node, threshold);
   };
   for (std::size_t i = 0; i < over_.size(); ++i) {
@@ -271,15 +293,17 @@ void AlarmMonitor::ForEachActive(F&& f) const {
         over_[i].level == AlarmLevel::kTrip ? l.trip_degC : l.warning_degC);
   }
   add(sensor_over_, AlarmReason::kMeasuredOverTemperature, "", config_.sensor_node,
-      sensor_over_.level == AlarmLevel::kTrip ? sensor_limits_.trip_degC : sensor_limits_.warning_degC);
+      sensor_over_.level == AlarmLevel::kTrip ? sensor_limits_.trip_degC
+                                              : sensor_limits_.warning_degC);
   for (std::size_t i = 0; i < rise_.size(); ++i) {
     add(rise_[i], AlarmReason::kRateOfRise, "", static_cast<int>(i), std::nan(""));
   }
   add(stale_, AlarmReason::kStaleTelemetry, "", -1, std::nan(""));
-  add(sensor_fault_, AlarmReason::kSensorFault, SensorFaultName(sensor_fault_kind_), config_.sensor_node,
-      std::nan(""));
+  add(sensor_fault_, AlarmReason::kSensorFault, SensorFaultName(sensor_fault_kind_),
+      config_.sensor_node, std::nan(""));
   add(stuck_, AlarmReason::kImplausibleSensor, "stuck", config_.sensor_node, std::nan(""));
-  add(disagree_, AlarmReason::kImplausibleSensor, "disagrees with the model", config_.sensor_node, std::nan(""));
+  add(disagree_, AlarmReason::kImplausibleSensor, "disagrees with the model", config_.sensor_node,
+      std::nan(""));
   add(converged_, AlarmReason::kEstimatorNotConverged, "", -1, std::nan(""));
   add(forecast_, AlarmReason::kForecast, "", forecast_node_, std::nan(""));
 }
@@ -292,9 +316,11 @@ std::vector<AlarmCondition> AlarmMonitor::ActiveConditions() const {
 
 void AlarmMonitor::ActiveConditions(std::vector<AlarmCondition>& out) const {
   out.clear();
-  ForEachActive([&](const Channel& ch, AlarmReason reason, const char* detail, int node, double threshold) {
-    out.push_back({ch.level, reason, detail, node, ch.value, threshold, ch.raised_at_s, ch.latched});
-  });
+  ForEachActive(
+      [&](const Channel& ch, AlarmReason reason, const char* detail, int node, double threshold) {
+        out.push_back(
+            {ch.level, reason, detail, node, ch.value, threshold, ch.raised_at_s, ch.latched});
+      });
   // Most severe first; among equals the one raised first. Insertion sort: stable, and unlike
   // std::stable_sort it needs no temporary buffer (a handful of conditions at most).
   auto before = [](const AlarmCondition& a, const AlarmCondition& b) {
@@ -341,7 +367,8 @@ SensorFault SensorHealth::Fault(double now_s) const {
     return SensorFault::kOutOfRange;
   }
   if (now_s < jump_until_s_) return SensorFault::kJumping;
-  if (config_.flat_after_s > 0.0 && now_s - changed_s_ >= config_.flat_after_s) return SensorFault::kStuck;
+  if (config_.flat_after_s > 0.0 && now_s - changed_s_ >= config_.flat_after_s)
+    return SensorFault::kStuck;
   return SensorFault::kNone;
 }
 

@@ -65,8 +65,8 @@ struct TemperatureLimits {
 };
 
 struct AlarmConfig {
-  double hysteresis_K = 2.0;       ///< a warning clears below level - hysteresis
-  double hold_s = 2.0;             ///< a condition must persist this long to (de)assert
+  double hysteresis_K = 2.0;  ///< a warning clears below level - hysteresis
+  double hold_s = 2.0;        ///< a condition must persist this long to (de)assert
   /// Rate of rise: warning above this many K per minute, measured over `rate_window_s`.
   double max_rise_K_per_min = std::numeric_limits<double>::infinity();
   double rate_window_s = 60.0;
@@ -106,12 +106,13 @@ struct AlarmInputs {
   const double* node_degC = nullptr;
   /// Standard deviations of those temperatures, K (nullptr or NaN entries: taken as 0).
   const double* node_sd_K = nullptr;
-  double sensor_degC = std::numeric_limits<double>::quiet_NaN();   ///< the measured node
+  double sensor_degC = std::numeric_limits<double>::quiet_NaN();        ///< the measured node
   double sensor_model_degC = std::numeric_limits<double>::quiet_NaN();  ///< model estimate there
-  double sensor_nis = std::numeric_limits<double>::quiet_NaN();    ///< last innovation test
-  double telemetry_age_s = 0.0;          ///< time since the last telemetry frame
+  double sensor_nis = std::numeric_limits<double>::quiet_NaN();         ///< last innovation test
+  double telemetry_age_s = 0.0;                   ///< time since the last telemetry frame
   SensorFault sensor_fault = SensorFault::kNone;  ///< from SensorHealth
-  double sensor_raw_degC = std::numeric_limits<double>::quiet_NaN();  ///< last reading, even if faulty
+  double sensor_raw_degC =
+      std::numeric_limits<double>::quiet_NaN();  ///< last reading, even if faulty
   bool estimators_converged = true;
   double time_to_trip_s = std::numeric_limits<double>::infinity();  ///< from the forecast
   int time_to_trip_node = -1;
@@ -121,9 +122,10 @@ struct AlarmInputs {
 struct AlarmState {
   AlarmLevel level = AlarmLevel::kNone;
   AlarmReason reason = AlarmReason::kNone;
-  int node = -1;                         ///< node index (-1: the pump as a whole)
-  double value = std::numeric_limits<double>::quiet_NaN();  ///< value that raised it (unit per reason)
-  std::uint16_t active_reasons = 0;      ///< bit (1 << reason) for every active alarm
+  int node = -1;  ///< node index (-1: the pump as a whole)
+  double value =
+      std::numeric_limits<double>::quiet_NaN();  ///< value that raised it (unit per reason)
+  std::uint16_t active_reasons = 0;              ///< bit (1 << reason) for every active alarm
   bool trip_latched = false;
   double time_to_trip_s = std::numeric_limits<double>::infinity();
   bool operator==(const AlarmState&) const = default;
@@ -133,9 +135,9 @@ struct AlarmState {
 struct AlarmCondition {
   AlarmLevel level = AlarmLevel::kNone;
   AlarmReason reason = AlarmReason::kNone;
-  const char* detail = "";   ///< e.g. "stuck" for an implausible sensor
-  int node = -1;             ///< node index (-1: the pump as a whole)
-  double value = std::numeric_limits<double>::quiet_NaN();  ///< value when it was raised
+  const char* detail = "";  ///< e.g. "stuck" for an implausible sensor
+  int node = -1;            ///< node index (-1: the pump as a whole)
+  double value = std::numeric_limits<double>::quiet_NaN();      ///< value when it was raised
   double threshold = std::numeric_limits<double>::quiet_NaN();  ///< level it crossed (degC)
   double raised_at_s = 0.0;
   bool latched = false;
@@ -208,8 +210,8 @@ class AlarmMonitor {
   AlarmConfig config_;
   std::vector<TemperatureLimits> limits_;
   TemperatureLimits sensor_limits_;
-  std::vector<Channel> over_;        // per node
-  std::vector<Channel> rise_;        // per node
+  std::vector<Channel> over_;  // per node
+  std::vector<Channel> rise_;  // per node
   Channel sensor_over_;
   Channel stale_;
   Channel sensor_fault_;

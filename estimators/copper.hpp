@@ -14,9 +14,9 @@ inline constexpr double kAlphaCuSaheba2010_per_K = 3.93e-3;
 
 /// Reference point of the linear copper law.
 struct CopperLaw {
-  double r0_ohm = 0.28;                         ///< resistance at t0_degC
-  double t0_degC = 20.0;                        ///< reference temperature
-  double alpha_per_K = kAlphaCuHan2019_per_K;   ///< temperature coefficient
+  double r0_ohm = 0.28;                        ///< resistance at t0_degC
+  double t0_degC = 20.0;                       ///< reference temperature
+  double alpha_per_K = kAlphaCuHan2019_per_K;  ///< temperature coefficient
 };
 
 /// Resistance at temperature `t_degC` (Han 2019 eq. 2).

@@ -6,7 +6,8 @@
 #include <stdexcept>
 
 namespace pumptherm::estimators {
-DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, DisturbanceSensorConfig config)
+DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
+                                                   DisturbanceSensorConfig config)
     : model_(model), config_(std::move(config)), discretiser_(1e-3), filter_(0) {
   const auto& c = config_;
   frame_ = model_.StateIndex(c.measured_node);
@@ -17,11 +18,13 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model, Di
   }
   if (!(c.measurement_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) || !(c.sensor_offset_sd_K > 0.0) ||
       !(c.node_process_sd_K > 0.0) || !(c.frame_heat_sd_W > 0.0) || !(c.rotor_heat_sd_W > 0.0) ||
-      !(c.rotor_heat_tau_s > 0.0) || !(c.winding_measurement_sd_K > 0.0) || !(c.loss_scale_sd >= 0.0) ||
-      !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) || !(c.winding_bias_sd_K >= 0.0) ||
-      !(c.winding_bias_tau_s > 0.0) || !(c.magnet_bias_sd_K >= 0.0) || !(c.magnet_bias_tau_s > 0.0) ||
+      !(c.rotor_heat_tau_s > 0.0) || !(c.winding_measurement_sd_K > 0.0) ||
+      !(c.loss_scale_sd >= 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
+      !(c.winding_bias_sd_K >= 0.0) || !(c.winding_bias_tau_s > 0.0) ||
+      !(c.magnet_bias_sd_K >= 0.0) || !(c.magnet_bias_tau_s > 0.0) ||
       !(c.magnet_min_white_sd_K > 0.0)) {
-    throw std::invalid_argument("disturbance sensor: standard deviations and times must be positive");
+    throw std::invalid_argument(
+        "disturbance sensor: standard deviations and times must be positive");
   }
   rotor_ = c.rotor_node.empty() ? -1 : model_.StateIndex(c.rotor_node);
   if (!c.magnet_node.empty()) {
@@ -98,7 +101,8 @@ void DisturbanceThermalSensor::BuildRows() {
 }
 
 void DisturbanceThermalSensor::GaussMarkov(int state, double sd, double tau_s, double dt_s) {
-  // Exact discretisation of db/dt = -b/tau + w with stationary sd: a = e^(-dt/tau), q = sd^2 (1 - a^2).
+  // Exact discretisation of db/dt = -b/tau + w with stationary sd: a = e^(-dt/tau), q = sd^2 (1 -
+  // a^2).
   const double a = std::exp(-dt_s / tau_s);
   ad_(state, state) = a;
   sp_(state, state) = sd * sd * (1.0 - a * a);
@@ -125,10 +129,12 @@ void DisturbanceThermalSensor::Initialise(double x0_degC) {
   filter_.Reset(x, s);
 }
 
-void DisturbanceThermalSensor::Initialise(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) {
+void DisturbanceThermalSensor::Initialise(const Eigen::VectorXd& x_degC,
+                                          const Eigen::MatrixXd& s_K2) {
   if (x_degC.size() != n_ || s_K2.rows() != n_ || s_K2.cols() != n_ || !x_degC.allFinite() ||
       !s_K2.allFinite()) {
-    throw std::invalid_argument("DisturbanceThermalSensor::Initialise: need n finite temperatures and an n x n covariance");
+    throw std::invalid_argument(
+        "DisturbanceThermalSensor::Initialise: need n finite temperatures and an n x n covariance");
   }
   Initialise(x_degC(frame_));  // the disturbances' and biases' priors
   Eigen::VectorXd x = filter_.State();
@@ -163,7 +169,8 @@ void DisturbanceThermalSensor::AddDisturbanceForcing(ThermalLinearModel& lin) co
 }
 
 const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
-                                                         double measured_degC, double winding_degC) {
+                                                         double measured_degC,
+                                                         double winding_degC) {
   DisturbanceReadings r;
   r.frame_degC = measured_degC;
   r.winding_degC = winding_degC;
@@ -220,7 +227,8 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
   filter_.Predict(ad_, bu_, sp_);
   const bool frame = std::isfinite(r.frame_degC);
   const bool winding = row_w_ >= 0 && std::isfinite(r.winding_degC);
-  const bool magnet = row_m_ >= 0 && std::isfinite(r.magnet_degC) && std::isfinite(r.magnet_winding_gain);
+  const bool magnet =
+      row_m_ >= 0 && std::isfinite(r.magnet_degC) && std::isfinite(r.magnet_winding_gain);
   if (!frame && !winding && !magnet) return filter_.Update(c0_, y0_, sm0_);
   // A missing reading: a zero row, zero innovation, unit variance (no gain, no effect).
   c_all_.setZero();
@@ -246,8 +254,9 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
       // z = T_magnet + g T_winding + bias + white noise.
       c_all_.row(row_m_) = cm_row_.row(0);
       c_all_.row(row_m_).head(n_) += r.magnet_winding_gain * model_.WindingWeights().transpose();
-      const double sd = std::isfinite(r.magnet_sd_K) ? std::max(r.magnet_sd_K, c.magnet_min_white_sd_K)
-                                                     : c.magnet_min_white_sd_K;
+      const double sd = std::isfinite(r.magnet_sd_K)
+                            ? std::max(r.magnet_sd_K, c.magnet_min_white_sd_K)
+                            : c.magnet_min_white_sd_K;
       sm_all_(row_m_, row_m_) = sd * sd;
       y_all_(row_m_) = r.magnet_degC;
     }

@@ -31,17 +31,17 @@ namespace pumptherm::estimators {
 
 struct DisturbanceSensorConfig {
   std::string measured_node = "frame";
-  std::string rotor_node = "rotor";       ///< absent from the model: no rotor heat state
-  double measurement_sd_K = 0.058;        ///< noise and 0.1 K quantisation
-  double sensor_lag_s = 0.0;              ///< 0: no lag state
-  double sensor_offset_sd_K = 0.5;        ///< a priori calibration offset
-  double node_process_sd_K = 0.005;       ///< per sqrt(s), every node
-  double frame_heat_sd_W = 1.0;           ///< random walk of d_f, W per sqrt(s)
-  double rotor_heat_sd_W = 5.0;           ///< stationary sd of d_r, W
-  double rotor_heat_tau_s = 1800.0;       ///< its correlation time
+  std::string rotor_node = "rotor";  ///< absent from the model: no rotor heat state
+  double measurement_sd_K = 0.058;   ///< noise and 0.1 K quantisation
+  double sensor_lag_s = 0.0;         ///< 0: no lag state
+  double sensor_offset_sd_K = 0.5;   ///< a priori calibration offset
+  double node_process_sd_K = 0.005;  ///< per sqrt(s), every node
+  double frame_heat_sd_W = 1.0;      ///< random walk of d_f, W per sqrt(s)
+  double rotor_heat_sd_W = 5.0;      ///< stationary sd of d_r, W
+  double rotor_heat_tau_s = 1800.0;  ///< its correlation time
   /// Random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s); 0 = no state.
   double loss_scale_sd = 0.002;
-  double sd_floor_K = 1.0;                ///< added in quadrature to every reported node sd
+  double sd_floor_K = 1.0;  ///< added in quadrature to every reported node sd
   /// Whether the resistance-based winding temperature is fused: the update then has a winding
   /// row (and a bias state); without it a winding reading given to Step() is not used.
   bool winding_reading = false;
@@ -58,13 +58,13 @@ struct DisturbanceSensorConfig {
   double magnet_bias_tau_s = 3600.0;
   /// Least white sd of the magnet reading (its own sd, from the identifier, may be smaller).
   double magnet_min_white_sd_K = 0.3;
-  double initial_sd_K = 20.0;             ///< as VirtualSensorConfig
+  double initial_sd_K = 20.0;  ///< as VirtualSensorConfig
   double initial_spread_sd_K = 5.0;
 };
 
 /// The readings of one period; NaN = not read this period.
 struct DisturbanceReadings {
-  double frame_degC = std::numeric_limits<double>::quiet_NaN();    ///< the frame sensor
+  double frame_degC = std::numeric_limits<double>::quiet_NaN();  ///< the frame sensor
   /// The resistance-based winding temperature (Han et al. 2019 eq. 3).
   double winding_degC = std::numeric_limits<double>::quiet_NaN();
   /// The magnet reading z = T_magnet + g T_winding (the back-EMF row, docs/virtual-sensor.md,
@@ -104,7 +104,8 @@ class DisturbanceThermalSensor {
   /// for (frame, winding, magnet, in this order) whenever any is finite; a missing reading's row
   /// is zero (no effect). A period that is not positive and finite, or non-finite inputs, refuse
   /// the step (report.refused; nothing changes).
-  const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, const DisturbanceReadings& readings);
+  const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s,
+                                 const DisturbanceReadings& readings);
 
   /// Node temperature estimate i (state order of the model) and its reported sd (with the floor).
   double Node_degC(int i) const { return filter_.State()(i); }
@@ -128,7 +129,8 @@ class DisturbanceThermalSensor {
   void BuildRows();
   void GaussMarkov(int state, double sd, double tau_s, double dt_s);
 
-  int n_ = 0, lag_ = -1, df_ = 0, dr_ = -1, ls_ = -1, bias_ = 0, n_aug_ = 0, frame_ = 0, rotor_ = -1;
+  int n_ = 0, lag_ = -1, df_ = 0, dr_ = -1, ls_ = -1, bias_ = 0, n_aug_ = 0, frame_ = 0,
+      rotor_ = -1;
   int wb_ = -1, mb_ = -1, magnet_ = -1;  ///< winding and magnet reading biases, the magnet node
   int row_w_ = -1, row_m_ = -1;          ///< their rows in the update (-1: none)
   ThermalLinearModel lin_, lin_block_, lin_idle_;
@@ -140,7 +142,7 @@ class DisturbanceThermalSensor {
   Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows
   Eigen::VectorXd y0_;
   Eigen::MatrixXd heat_in_, phi_heat_;  ///< d_f, d_r, s into the nodes (K/s per unit); Phi times it
-  Eigen::MatrixXd c_all_, sm_all_;  ///< every reading's row (m x n_aug, m x m)
+  Eigen::MatrixXd c_all_, sm_all_;      ///< every reading's row (m x n_aug, m x m)
   Eigen::MatrixXd cw_row_, cm_row_;  ///< the winding and magnet rows (1 x n_aug), magnet without g
   Eigen::VectorXd y_all_;
 };

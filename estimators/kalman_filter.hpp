@@ -30,7 +30,7 @@ struct KalmanUpdateReport {
   Eigen::VectorXd innovation_var;  ///< diagonal of C S- C^T + Sm (m)
   double nis = 0.0;                ///< nu^T (C S- C^T + Sm)^-1 nu
   int measurements = 0;            ///< m; 0 when nothing was measured (no update done)
-  bool ok = true;                  ///< false when the innovation covariance was not positive definite
+  bool ok = true;  ///< false when the innovation covariance was not positive definite
   /// The step was refused (non-finite inputs or period): nothing changed, nothing was measured.
   bool refused = false;
   /// Extra measurements left out as invalid (a state the model lacks, an sd that is not positive

@@ -17,14 +17,15 @@ VirtualThermalSensor::VirtualThermalSensor(const ThermalModel& model, VirtualSen
   for (const std::string& node : config_.measured_nodes) {
     const int s = model_.StateIndex(node);
     if (s < 0) {
-      throw std::invalid_argument(fmt::format(
-          "measured node '{}' is not a node with heat capacity of model '{}'", node, model_.Name()));
+      throw std::invalid_argument(
+          fmt::format("measured node '{}' is not a node with heat capacity of model '{}'", node,
+                      model_.Name()));
     }
     measured_states_.push_back(s);
   }
   if (!(config_.measurement_sd_K > 0.0) || !(config_.process_sd_K > 0.0) ||
-      !(config_.initial_sd_K >= 0.0) || !(config_.initial_spread_sd_K > 0.0) || !(config_.winding_measurement_sd_K > 0.0) ||
-      !(config_.process_period_s > 0.0)) {
+      !(config_.initial_sd_K >= 0.0) || !(config_.initial_spread_sd_K > 0.0) ||
+      !(config_.winding_measurement_sd_K > 0.0) || !(config_.process_period_s > 0.0)) {
     throw std::invalid_argument("virtual sensor: standard deviations and periods must be positive");
   }
   const int n = model_.StateCount();
@@ -37,8 +38,8 @@ void VirtualThermalSensor::Initialise(const Eigen::VectorXd& x0_degC) {
   const int n = model_.StateCount();
   const double common = config_.initial_sd_K * config_.initial_sd_K;
   const double spread = config_.initial_spread_sd_K * config_.initial_spread_sd_K;
-  filter_.Reset(x0_degC, Eigen::MatrixXd::Constant(n, n, common) +
-                             Eigen::MatrixXd::Identity(n, n) * spread);
+  filter_.Reset(x0_degC,
+                Eigen::MatrixXd::Constant(n, n, common) + Eigen::MatrixXd::Identity(n, n) * spread);
 }
 
 const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs, double dt_s,
@@ -54,8 +55,9 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
 bool VirtualThermalSensor::Uses(const NodeMeasurement& e, bool* rejected) const {
   if (rejected) *rejected = false;
   if (!std::isfinite(e.value_degC)) return false;
-  const bool valid = (e.state == kWindingWeightsRow || (e.state >= 0 && e.state < model_.StateCount())) &&
-                     e.sd_K > 0.0 && std::isfinite(e.sd_K) && std::isfinite(e.winding_gain);
+  const bool valid =
+      (e.state == kWindingWeightsRow || (e.state >= 0 && e.state < model_.StateCount())) &&
+      e.sd_K > 0.0 && std::isfinite(e.sd_K) && std::isfinite(e.winding_gain);
   if (!valid) {
     if (rejected) *rejected = true;
     return false;
@@ -95,7 +97,8 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
   const ThermalDiscreteModel& d = discretiser_.Current();
   bu_.noalias() = d.phi_s * lin_.f_K_per_s;
   if (dt_s != sp_dt_s_) {
-    const double var = config_.process_sd_K * config_.process_sd_K * dt_s / config_.process_period_s;
+    const double var =
+        config_.process_sd_K * config_.process_sd_K * dt_s / config_.process_period_s;
     sp_.setIdentity();
     sp_ *= var;
     sp_dt_s_ = dt_s;
@@ -135,8 +138,8 @@ const KalmanUpdateReport& VirtualThermalSensor::Step(const ThermalInputs& inputs
   return report_;
 }
 
-bool PredictOverGap(const ThermalModel& model, const ThermalInputs& in, double gap_s, const VirtualSensorConfig& config,
-                    Eigen::VectorXd& x, Eigen::MatrixXd& s) {
+bool PredictOverGap(const ThermalModel& model, const ThermalInputs& in, double gap_s,
+                    const VirtualSensorConfig& config, Eigen::VectorXd& x, Eigen::MatrixXd& s) {
   try {
     ThermalLinearModel lin;
     model.Linearise(in, x, lin);

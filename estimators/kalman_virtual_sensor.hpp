@@ -34,7 +34,7 @@ struct NodeMeasurement {
   int state = kWindingWeightsRow;  ///< state index, or kWindingWeightsRow
   double value_degC = std::numeric_limits<double>::quiet_NaN();  ///< NaN = not measured
   double sd_K = std::numeric_limits<double>::quiet_NaN();        ///< > 0 when value is finite
-  double winding_gain = 0.0;       ///< g above (a node row only), dimensionless
+  double winding_gain = 0.0;  ///< g above (a node row only), dimensionless
 };
 
 /// A small fixed-capacity list of extra measurements: no allocation when filled every step.
@@ -44,7 +44,8 @@ class NodeMeasurements {
   /// Appends one measurement. Returns false (and drops it) when the list is full.
   bool Add(int state, double value_degC, double sd_K, double winding_gain = 0.0) noexcept {
     if (size_ >= kCapacity) return false;
-    items_[static_cast<std::size_t>(size_++)] = NodeMeasurement{state, value_degC, sd_K, winding_gain};
+    items_[static_cast<std::size_t>(size_++)] =
+        NodeMeasurement{state, value_degC, sd_K, winding_gain};
     return true;
   }
   void Clear() noexcept { size_ = 0; }
@@ -90,7 +91,9 @@ class VirtualThermalSensor {
   void Initialise(const Eigen::VectorXd& x0_degC);
   /// Continues from a saved estimate `x_degC` (n) and covariance `s_K2` (n x n), e.g. restored
   /// by the daemon after a restart.
-  void Restore(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) { filter_.Reset(x_degC, s_K2); }
+  void Restore(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) {
+    filter_.Reset(x_degC, s_K2);
+  }
 
   /// Advances one period of `dt_s` with `inputs` held over it, then corrects with
   /// `measured_degC` (one per configured measured node, NaN = not measured; these rows come
@@ -145,7 +148,7 @@ class VirtualThermalSensor {
 /// held: the exact zero-order-hold time update (Saheba 2010 eqs. 30-31) over the whole gap, with
 /// the process noise of `config` as a random walk over it. For a restart after the daemon was
 /// down. False (x and s unchanged) when the model cannot be linearised at these inputs.
-bool PredictOverGap(const ThermalModel& model, const ThermalInputs& in, double gap_s, const VirtualSensorConfig& config,
-                    Eigen::VectorXd& x, Eigen::MatrixXd& s);
+bool PredictOverGap(const ThermalModel& model, const ThermalInputs& in, double gap_s,
+                    const VirtualSensorConfig& config, Eigen::VectorXd& x, Eigen::MatrixXd& s);
 
 }  // namespace pumptherm::estimators

@@ -20,7 +20,8 @@ MagnetTemperature MagnetTemperatureFromFlux(const MotorDescription& motor, doubl
 double FluxAt_Wb(const MotorDescription& motor, double magnet_degC) noexcept {
   const MagnetLaw& law = motor.magnet;
   if (!law.Given()) return std::numeric_limits<double>::quiet_NaN();
-  return motor.flux_Wb * (1.0 + law.flux_temperature_coefficient_per_K * (magnet_degC - law.t0_degC));
+  return motor.flux_Wb *
+         (1.0 + law.flux_temperature_coefficient_per_K * (magnet_degC - law.t0_degC));
 }
 
 }  // namespace pumptherm::estimators

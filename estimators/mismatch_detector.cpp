@@ -14,11 +14,16 @@ enum Hypothesis : int { kCooling = 0, kRotor, kLoss, kAmbient, kOffset, kHypothe
 
 MismatchEffect EffectOf(int h) {
   switch (h) {
-    case kCooling: return MismatchEffect::kFrameAmbientResistance;
-    case kRotor: return MismatchEffect::kRotorLoss;
-    case kLoss: return MismatchEffect::kLossScale;
-    case kAmbient: return MismatchEffect::kUnmeasuredAmbient;
-    default: return MismatchEffect::kSensorOffset;
+    case kCooling:
+      return MismatchEffect::kFrameAmbientResistance;
+    case kRotor:
+      return MismatchEffect::kRotorLoss;
+    case kLoss:
+      return MismatchEffect::kLossScale;
+    case kAmbient:
+      return MismatchEffect::kUnmeasuredAmbient;
+    default:
+      return MismatchEffect::kSensorOffset;
   }
 }
 
@@ -27,7 +32,10 @@ double NormalUpperQuantile(double p) {
   double lo = 0.0, hi = 40.0;
   for (int i = 0; i < 200; ++i) {
     const double mid = 0.5 * (lo + hi);
-    if (0.5 * std::erfc(mid / std::sqrt(2.0)) > p) lo = mid; else hi = mid;
+    if (0.5 * std::erfc(mid / std::sqrt(2.0)) > p)
+      lo = mid;
+    else
+      hi = mid;
   }
   return 0.5 * (lo + hi);
 }
@@ -36,24 +44,36 @@ double NormalUpperQuantile(double p) {
 
 const char* MismatchStateName(MismatchState state) {
   switch (state) {
-    case MismatchState::kConsistent: return "consistent";
-    case MismatchState::kLearning: return "learning";
-    case MismatchState::kPlantChange: return "plant_change";
-    case MismatchState::kSensorFaultSuspected: return "sensor_fault_suspected";
-    case MismatchState::kUnexplained: return "unexplained";
+    case MismatchState::kConsistent:
+      return "consistent";
+    case MismatchState::kLearning:
+      return "learning";
+    case MismatchState::kPlantChange:
+      return "plant_change";
+    case MismatchState::kSensorFaultSuspected:
+      return "sensor_fault_suspected";
+    case MismatchState::kUnexplained:
+      return "unexplained";
   }
   return "unknown";
 }
 
 const char* MismatchEffectName(MismatchEffect effect) {
   switch (effect) {
-    case MismatchEffect::kNone: return "none";
-    case MismatchEffect::kFrameAmbientResistance: return "frame_ambient_resistance";
-    case MismatchEffect::kRotorLoss: return "rotor_loss";
-    case MismatchEffect::kLossScale: return "loss_scale";
-    case MismatchEffect::kUnmeasuredAmbient: return "unmeasured_ambient";
-    case MismatchEffect::kSensorOffset: return "sensor_offset";
-    case MismatchEffect::kSensorStuck: return "sensor_stuck";
+    case MismatchEffect::kNone:
+      return "none";
+    case MismatchEffect::kFrameAmbientResistance:
+      return "frame_ambient_resistance";
+    case MismatchEffect::kRotorLoss:
+      return "rotor_loss";
+    case MismatchEffect::kLossScale:
+      return "loss_scale";
+    case MismatchEffect::kUnmeasuredAmbient:
+      return "unmeasured_ambient";
+    case MismatchEffect::kSensorOffset:
+      return "sensor_offset";
+    case MismatchEffect::kSensorStuck:
+      return "sensor_stuck";
   }
   return "unknown";
 }
@@ -66,18 +86,22 @@ std::string DescribeFinding(const MismatchFinding& f) {
   switch (f.effect) {
     case MismatchEffect::kFrameAmbientResistance:
       return fmt::format("frame-to-ambient resistance x{:.1f} ({})", v,
-                         v >= 2.0 ? "cooling lost" : v > 1.0 ? "cooling reduced" : "cooling improved");
+                         v >= 2.0  ? "cooling lost"
+                         : v > 1.0 ? "cooling reduced"
+                                   : "cooling improved");
     case MismatchEffect::kRotorLoss:
       return fmt::format("rotor loss {:+.1f} W (heat inside the rotor: bearing, gas friction)", v);
     case MismatchEffect::kLossScale:
       return fmt::format("losses x{:.2f} ({:+.0f} %)", v, (v - 1.0) * 100.0);
     case MismatchEffect::kUnmeasuredAmbient:
-      return fmt::format("boundary {:+.1f} K not seen by the ambient sensor (unmeasured ambient change)", v);
+      return fmt::format(
+          "boundary {:+.1f} K not seen by the ambient sensor (unmeasured ambient change)", v);
     case MismatchEffect::kSensorOffset:
       return fmt::format("sensor offset {:+.1f} K (sensor fault suspected: offset or jump)", v);
     case MismatchEffect::kSensorStuck:
       return fmt::format("sensor stuck at {:.1f} degC (sensor fault suspected)", v);
-    case MismatchEffect::kNone: break;
+    case MismatchEffect::kNone:
+      break;
   }
   return "model mismatch, effect not named";
 }
@@ -101,14 +125,17 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
   rotor_ = c.rotor_node.empty() ? -1 : model_.StateIndex(c.rotor_node);
   magnet_ = c.magnet_node.empty() ? -1 : model_.StateIndex(c.magnet_node);
   if (!(c.magnet_sd_K > 0.0) || !(c.magnet_period_s > 0.0)) {
-    throw std::invalid_argument("mismatch detector: magnet_sd_K and magnet_period_s must be positive");
+    throw std::invalid_argument(
+        "mismatch detector: magnet_sd_K and magnet_period_s must be positive");
   }
   if (!(c.measurement_sd_K > 0.0) || !(c.process_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) ||
       !(c.sensor_offset_sd_K > 0.0) || !(c.initial_sd_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
-      !(c.window_s > 0.0) || !(c.false_alarm_probability > 0.0 && c.false_alarm_probability < 0.5) ||
+      !(c.window_s > 0.0) ||
+      !(c.false_alarm_probability > 0.0 && c.false_alarm_probability < 0.5) ||
       !(c.fit_window_s > c.window_s) || !(c.fit_onset_step_s > 0.0) || !(c.refit_period_s > 0.0) ||
       c.stuck_samples < 2) {
-    throw std::invalid_argument("mismatch detector: settings must be positive (window < fit window)");
+    throw std::invalid_argument(
+        "mismatch detector: settings must be positive (window < fit window)");
   }
   n_ = model_.StateCount();
   lag_ = c.sensor_lag_s > 0.0 ? n_ : -1;
@@ -173,7 +200,8 @@ void MismatchDetector::Linearise(const ThermalInputs& in, const Eigen::VectorXd&
 }
 
 const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt_s,
-                                              double measured_degC, double now_s, double magnet_degC) {
+                                              double measured_degC, double now_s,
+                                              double magnet_degC) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
     throw std::domain_error("mismatch detector: the period must be positive and finite");
   }
@@ -190,7 +218,8 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
     h_y_ = h_nu_ = h_s_ = h_t_ = h_m_ = h_xm_ = h_dt_;
     h_xpre_.setZero(n_aug_, cap_);
     h_k_.setZero(n_aug_, cap_);
-    const int onset_step = std::max(1, static_cast<int>(std::lround(config_.fit_onset_step_s / dt_s)));
+    const int onset_step =
+        std::max(1, static_cast<int>(std::lround(config_.fit_onset_step_s / dt_s)));
     const int onsets = cap_ / onset_step + window + 1;
     fit_onsets_.reserve(static_cast<std::size_t>(onsets));
     fit_e_.setZero(n_aug_, onsets * kHypotheses);
@@ -242,7 +271,8 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
   h_nu_[static_cast<std::size_t>(slot)] = nu;
   h_s_[static_cast<std::size_t>(slot)] = s_nu;
   h_t_[static_cast<std::size_t>(slot)] = now_s;
-  h_m_[static_cast<std::size_t>(slot)] = magnet_ >= 0 ? magnet_degC : std::numeric_limits<double>::quiet_NaN();
+  h_m_[static_cast<std::size_t>(slot)] =
+      magnet_ >= 0 ? magnet_degC : std::numeric_limits<double>::quiet_NaN();
   h_xm_[static_cast<std::size_t>(slot)] = magnet_ >= 0 ? filter_.State()(magnet_) : 0.0;
   head_ = (head_ + 1) % cap_;
   size_ = std::min(size_ + 1, cap_);
@@ -269,7 +299,8 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
       if (Stuck(&first)) Fit(now_s);
     }
     const bool named = finding_.state != MismatchState::kUnexplained;
-    const bool onset_in_window = !(now_s - finding_.onset_s > config_.fit_window_s - config_.window_s);
+    const bool onset_in_window =
+        !(now_s - finding_.onset_s > config_.fit_window_s - config_.window_s);
     const bool due = named ? now_s - last_fit_s_ >= config_.refit_period_s && onset_in_window
                            : now_s - finding_.detected_s >= config_.name_after_s;
     if (due) Fit(now_s);
@@ -331,8 +362,9 @@ void MismatchDetector::FitOnsets(int window) {
   // Every step over the last NIS window (a fault found fast started recently), every
   // fit_onset_step_s before it.
   fit_onsets_.clear();
-  const int onset_step = std::max(1, static_cast<int>(std::lround(
-      config_.fit_onset_step_s / h_dt_[static_cast<std::size_t>((head_ - 1 + cap_) % cap_)])));
+  const int onset_step = std::max(
+      1, static_cast<int>(std::lround(config_.fit_onset_step_s /
+                                      h_dt_[static_cast<std::size_t>((head_ - 1 + cap_) % cap_)])));
   const int fine_from = std::max(0, size_ - window);
   for (int i = 0; i < fine_from; i += onset_step) fit_onsets_.push_back(i);
   for (int i = fine_from; i < size_; ++i) fit_onsets_.push_back(i);
@@ -351,7 +383,8 @@ void MismatchDetector::Fit(double now_s) {
   }
   const int nb = n_aug_ - 1;
   FitOnsets(static_cast<int>(nis_.size()));
-  const int onsets = std::min(static_cast<int>(fit_onsets_.size()), static_cast<int>(fit_e_.cols()) / kHypotheses);
+  const int onsets =
+      std::min(static_cast<int>(fit_onsets_.size()), static_cast<int>(fit_e_.cols()) / kHypotheses);
   fit_e_.setZero();
   fit_a_.setZero();
   fit_b_.setZero();
@@ -361,8 +394,9 @@ void MismatchDetector::Fit(double now_s) {
   const int oldest = (head_ - size_ + cap_) % cap_;
   int active = 0;
   // The magnet channel: one sample per magnet_period_s, r = reading - the filter's estimate.
-  const int magnet_every = std::max(1, static_cast<int>(std::lround(
-      config_.magnet_period_s / h_dt_[static_cast<std::size_t>((head_ - 1 + cap_) % cap_)])));
+  const int magnet_every = std::max(
+      1, static_cast<int>(std::lround(config_.magnet_period_s /
+                                      h_dt_[static_cast<std::size_t>((head_ - 1 + cap_) % cap_)])));
   double magnet_sum_r = 0.0, magnet_sum_rr = 0.0;
   int magnet_samples = 0;
   std::fill(fit_veto_.begin(), fit_veto_.end(), 0);
@@ -473,16 +507,23 @@ void MismatchDetector::Choose(int onsets, int oldest) {
   const int best = col_per_h[h];
   const double theta = fit_a_(best) / fit_b_(best);
   finding_.effect = EffectOf(h);
-  finding_.state = h == kOffset ? MismatchState::kSensorFaultSuspected : MismatchState::kPlantChange;
+  finding_.state =
+      h == kOffset ? MismatchState::kSensorFaultSuspected : MismatchState::kPlantChange;
   finding_.likelihood_ratio = best_per_h[h];
   finding_.runner_up = second >= 0 ? EffectOf(second) : MismatchEffect::kNone;
   finding_.runner_up_ratio = second >= 0 ? best_per_h[second] : 0.0;
   const int onset = fit_onsets_[static_cast<std::size_t>(best / kHypotheses)];
   finding_.onset_s = h_t_[static_cast<std::size_t>((oldest + onset) % cap_)];
   switch (h) {
-    case kCooling: finding_.value = 1.0 / std::max(1.0 + theta, 0.05); break;  // R'/R = G/G'
-    case kLoss: finding_.value = 1.0 + theta; break;
-    default: finding_.value = theta; break;
+    case kCooling:
+      finding_.value = 1.0 / std::max(1.0 + theta, 0.05);
+      break;  // R'/R = G/G'
+    case kLoss:
+      finding_.value = 1.0 + theta;
+      break;
+    default:
+      finding_.value = theta;
+      break;
   }
 }
 

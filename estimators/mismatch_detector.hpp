@@ -80,29 +80,29 @@ const char* MismatchEffectName(MismatchEffect effect);
 
 struct MismatchDetectorConfig {
   std::string measured_node = "frame";
-  std::string rotor_node = "rotor";   ///< node of the rotor-loss hypothesis (absent: not tried)
-  double measurement_sd_K = 0.06;     ///< white noise and quantisation of the reading
-  double sensor_lag_s = 0.0;          ///< first-order lag of the sensor (0 = none)
-  double sensor_offset_sd_K = 0.5;    ///< a priori calibration offset of the sensor
+  std::string rotor_node = "rotor";  ///< node of the rotor-loss hypothesis (absent: not tried)
+  double measurement_sd_K = 0.06;    ///< white noise and quantisation of the reading
+  double sensor_lag_s = 0.0;         ///< first-order lag of the sensor (0 = none)
+  double sensor_offset_sd_K = 0.5;   ///< a priori calibration offset of the sensor
   /// Process noise of the nominal filter, K per sqrt(s): small, the model is believed.
   double process_sd_K = 0.005;
-  double initial_sd_K = 20.0;         ///< as VirtualSensorConfig
+  double initial_sd_K = 20.0;  ///< as VirtualSensorConfig
   double initial_spread_sd_K = 5.0;
-  double window_s = 60.0;             ///< NIS window
+  double window_s = 60.0;                 ///< NIS window
   double false_alarm_probability = 1e-7;  ///< per window test: sets the chi-square threshold
-  double settle_s = 300.0;            ///< no verdict before this long after Initialise
-  double clear_after_s = 600.0;       ///< the test passing this long clears a finding
-  double fit_window_s = 1200.0;       ///< history kept for naming
-  double fit_onset_step_s = 20.0;     ///< onset grid of the naming fit
-  double refit_period_s = 60.0;       ///< refit while the test fails
-  double name_after_s = 60.0;         ///< data after the detection before the first naming fit
-  int stuck_samples = 60;             ///< identical readings that make a stuck sensor
+  double settle_s = 300.0;                ///< no verdict before this long after Initialise
+  double clear_after_s = 600.0;           ///< the test passing this long clears a finding
+  double fit_window_s = 1200.0;           ///< history kept for naming
+  double fit_onset_step_s = 20.0;         ///< onset grid of the naming fit
+  double refit_period_s = 60.0;           ///< refit while the test fails
+  double name_after_s = 60.0;             ///< data after the detection before the first naming fit
+  int stuck_samples = 60;                 ///< identical readings that make a stuck sensor
   /// Node the magnet reading measures (empty or absent: no magnet channel in the naming fit).
   std::string magnet_node;
   /// Sd of one magnet sample about its window mean: the slow error of the flux (the demo's
   /// magnet temperature was 1.3-1.7 K off; the fault matrix emulates a 2 K bias).
   double magnet_sd_K = 2.0;
-  double magnet_period_s = 10.0;      ///< one magnet sample per this period enters the fit
+  double magnet_period_s = 10.0;          ///< one magnet sample per this period enters the fit
   double magnet_veto_probability = 1e-3;  ///< of a right effect being vetoed, per fit
 };
 
@@ -110,12 +110,12 @@ struct MismatchDetectorConfig {
 struct MismatchFinding {
   MismatchState state = MismatchState::kLearning;
   MismatchEffect effect = MismatchEffect::kNone;
-  double value = std::numeric_limits<double>::quiet_NaN();  ///< size, unit per effect
-  double onset_s = std::numeric_limits<double>::quiet_NaN();  ///< fitted start of the effect
+  double value = std::numeric_limits<double>::quiet_NaN();       ///< size, unit per effect
+  double onset_s = std::numeric_limits<double>::quiet_NaN();     ///< fitted start of the effect
   double detected_s = std::numeric_limits<double>::quiet_NaN();  ///< when the test failed
-  double window_nis = 0.0;       ///< sum of the last W NIS
-  double threshold = 0.0;        ///< its chi-square quantile
-  double likelihood_ratio = 0.0; ///< l of the named effect
+  double window_nis = 0.0;                                       ///< sum of the last W NIS
+  double threshold = 0.0;                                        ///< its chi-square quantile
+  double likelihood_ratio = 0.0;                                 ///< l of the named effect
   double runner_up_ratio = 0.0;  ///< l of the best other effect (close to l: hard to tell apart)
   MismatchEffect runner_up = MismatchEffect::kNone;
   bool operator==(const MismatchFinding&) const = default;
@@ -162,8 +162,8 @@ class MismatchDetector {
   /// fit_veto_ the columns whose fitted size the magnet samples contradict.
   void AddMagnetChannel(int columns, double sum_r, double sum_rr, int samples);
   /// Heat per unit effect size of hypothesis h at `in`, with the pre-step state `x_aug`.
-  void EffectForcing(int h, const ThermalInputs& in, const Eigen::VectorXd& x_aug, double frame_degC,
-                     Eigen::VectorXd& u);
+  void EffectForcing(int h, const ThermalInputs& in, const Eigen::VectorXd& x_aug,
+                     double frame_degC, Eigen::VectorXd& u);
 
   const ThermalModel& model_;
   MismatchDetectorConfig config_;
@@ -185,7 +185,8 @@ class MismatchDetector {
   int cap_ = 0, head_ = 0, size_ = 0;
   std::vector<ThermalInputs> h_in_;
   std::vector<double> h_dt_, h_y_, h_nu_, h_s_, h_t_;
-  std::vector<double> h_m_, h_xm_;  ///< magnet reading, the filter's estimate of its node after the step
+  std::vector<double> h_m_,
+      h_xm_;  ///< magnet reading, the filter's estimate of its node after the step
   Eigen::MatrixXd h_xpre_, h_k_;  ///< state before the step, gain (n_aug x cap)
   // Fit workspace.
   ThermalDiscretiser fit_disc_;
@@ -194,7 +195,7 @@ class MismatchDetector {
   Eigen::MatrixXd fit_e_, fit_phiu_;
   Eigen::VectorXd fit_a_, fit_b_, fit_x_, fit_tmp_, fit_u_col_;
   Eigen::VectorXd fit_me_, fit_mee_, fit_mre_;  ///< magnet channel: sums of e, e^2, r e per column
-  std::vector<char> fit_veto_;                    ///< per column: contradicted by the magnet
+  std::vector<char> fit_veto_;                  ///< per column: contradicted by the magnet
   MismatchFinding finding_;
 };
 

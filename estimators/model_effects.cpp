@@ -1,13 +1,13 @@
 #include "estimators/model_effects.hpp"
 
 #include <fmt/core.h>
+#include <toml++/toml.h>
 
 #include <algorithm>
 #include <cmath>
 #include <functional>
 #include <sstream>
 #include <stdexcept>
-#include <toml++/toml.h>
 
 #include "estimators/thermal_model.hpp"
 
@@ -20,7 +20,8 @@ toml::table ParseOrThrow(std::string_view text, const std::string& source) {
   try {
     return toml::parse(text, source);
   } catch (const toml::parse_error& e) {
-    throw ThermalModelError(fmt::format("{}:{}: {}", source, e.source().begin.line, e.description()));
+    throw ThermalModelError(
+        fmt::format("{}:{}: {}", source, e.source().begin.line, e.description()));
   }
 }
 
@@ -49,25 +50,41 @@ double NumberOr(const toml::node* n, double fallback) {
 
 const std::vector<EffectSpec>& EffectVocabulary() {
   static const std::vector<EffectSpec> kVocabulary{
-      {"frame_thermal_mass", false,
+      {"frame_thermal_mass",
+       false,
        "heat capacity coupled to the frame that the model lacks (a mounting plate, a flange)",
        {{"frame_extra_capacity_J_per_K", 0.0, -0.9e6, 1e6, 1000.0}}},
-      {"frame_ambient_resistance", false, "the frame's cooling to its boundary mis-estimated",
+      {"frame_ambient_resistance",
+       false,
+       "the frame's cooling to its boundary mis-estimated",
        {{"frame_resistance_scale", 1.0, 0.05, 20.0, 0.2}}},
-      {"speed_dependent_cooling", false, "frame cooling that grows with speed (forced convection)",
+      {"speed_dependent_cooling",
+       false,
+       "frame cooling that grows with speed (forced convection)",
        {{"cooling_speed_gain_per_krpm", 0.0, -0.9, 50.0, 0.2}}},
-      {"winding_conductance", false,
+      {"winding_conductance",
+       false,
        "the slot to end-winding conduction path wrong (Saheba 2010's k_c)",
        {{"winding_resistance_scale", 1.0, 0.01, 100.0, 1.0}}},
-      {"copper_temperature_coefficient", false,
+      {"copper_temperature_coefficient",
+       false,
        "the copper resistance's temperature dependence missing or wrong",
        {{"copper_alpha_delta_per_K", 0.0, -0.01, 0.01, 0.001}}},
-      {"iron_loss_scale", false, "iron loss mis-scaled", {{"iron_loss_scale", 1.0, 0.0, 20.0, 0.3}}},
-      {"rotor_loss", false,
+      {"iron_loss_scale",
+       false,
+       "iron loss mis-scaled",
+       {{"iron_loss_scale", 1.0, 0.0, 20.0, 0.3}}},
+      {"rotor_loss",
+       false,
        "an extra rotor loss growing with the square of speed (eddy currents in magnets, sleeve)",
        {{"rotor_loss_W_per_krpm2", 0.0, -1e6, 1e6, 1.0}}},
-      {"sensor_lag", true, "the sensor's own thermal lag", {{"sensor_lag_s", 0.0, 0.0, 3600.0, 30.0}}},
-      {"sensor_offset", true, "a constant offset of the sensor",
+      {"sensor_lag",
+       true,
+       "the sensor's own thermal lag",
+       {{"sensor_lag_s", 0.0, 0.0, 3600.0, 30.0}}},
+      {"sensor_offset",
+       true,
+       "a constant offset of the sensor",
        {{"sensor_offset_K", 0.0, -50.0, 50.0, 1.0}}},
   };
   return kVocabulary;
@@ -126,8 +143,10 @@ EffectTargets FindEffectTargets(std::string_view toml_text, const std::string& s
         double alpha = NumberOr(lt->get("temperature_coefficient_per_K"), 0.0);
         // An expression that is a parameter's name takes that parameter's value; any other
         // expression counts as copper unless it starts with a minus sign.
-        const std::string alpha_text = (*lt)["temperature_coefficient_per_K"].value_or(std::string{});
-        if (std::isnan(alpha)) alpha = NumberOr(root["parameters"][alpha_text].node(), std::nan(""));
+        const std::string alpha_text =
+            (*lt)["temperature_coefficient_per_K"].value_or(std::string{});
+        if (std::isnan(alpha))
+          alpha = NumberOr(root["parameters"][alpha_text].node(), std::nan(""));
         const bool positive = std::isnan(alpha) ? alpha_text.rfind("-", 0) != 0 : alpha > 0.0;
         if (tn != nullptr && !tn->empty() && positive && name.rfind("iron", 0) != 0) {
           t.copper_losses.push_back(i);
@@ -177,12 +196,14 @@ std::string ApplyModelEffects(std::string_view toml_text, const std::string& sou
                               const std::vector<Effect>& effects,
                               const std::string& table_directory) {
   toml::table root = ParseOrThrow(toml_text, source);
-  if (toml::array* tables = root["table"].as_array(); tables != nullptr && !table_directory.empty()) {
+  if (toml::array* tables = root["table"].as_array();
+      tables != nullptr && !table_directory.empty()) {
     for (toml::node& tv : *tables) {
       toml::table* tt = tv.as_table();
       if (tt == nullptr) continue;
       const std::string file = (*tt)["file"].value_or(std::string{});
-      if (!file.empty() && file.front() != '/') tt->insert_or_assign("file", table_directory + "/" + file);
+      if (!file.empty() && file.front() != '/')
+        tt->insert_or_assign("file", table_directory + "/" + file);
     }
   }
   const EffectTargets t = FindEffectTargets(toml_text, source);
@@ -194,8 +215,8 @@ std::string ApplyModelEffects(std::string_view toml_text, const std::string& sou
 
   auto add_param = [&](const std::string& name, double v) {
     if (params.contains(name))
-      throw ThermalModelError(fmt::format("{}: parameter {} already exists (effect added twice?)",
-                                          source, name));
+      throw ThermalModelError(
+          fmt::format("{}: parameter {} already exists (effect added twice?)", source, name));
     params.insert(name, v);
   };
   auto edit = [&](toml::table& tbl, const char* key, const std::string& what,
@@ -270,8 +291,7 @@ std::string ApplyModelEffects(std::string_view toml_text, const std::string& sou
     const std::string name = (*model)["name"].value_or(std::string{"model"});
     if (!names.empty()) model->insert_or_assign("name", name + "+effects");
     const std::string desc = (*model)["description"].value_or(std::string{});
-    if (!names.empty())
-      model->insert_or_assign("description", desc + " | effects added: " + added);
+    if (!names.empty()) model->insert_or_assign("description", desc + " | effects added: " + added);
   }
   std::ostringstream out;
   out << "# Written by the pumptherm discrepancy workflow (docs/discrepancy.md).\n"
@@ -306,16 +326,19 @@ void ApplySensorEffect(const Effect& effect, const std::vector<double>& time_s,
 std::string PhysicalReading(const Effect& e, const EffectTargets& t) {
   const double v = e.values.empty() ? 0.0 : e.values[0];
   if (e.name == "frame_thermal_mass")
-    return fmt::format("{:.2g} kJ/K {} heat capacity on the {}, about {:.1f} kg of steel "
-                       "(460 J/(kg K))",
-                       std::abs(v) / 1000.0, v >= 0 ? "more" : "less", t.frame, std::abs(v) / 460.0);
+    return fmt::format(
+        "{:.2g} kJ/K {} heat capacity on the {}, about {:.1f} kg of steel "
+        "(460 J/(kg K))",
+        std::abs(v) / 1000.0, v >= 0 ? "more" : "less", t.frame, std::abs(v) / 460.0);
   if (e.name == "frame_ambient_resistance")
-    return fmt::format("the {}'s thermal resistance to its boundary is {:.3g} times the model's "
-                       "({} cooling)",
-                       t.frame, v, v < 1.0 ? "better" : "worse");
+    return fmt::format(
+        "the {}'s thermal resistance to its boundary is {:.3g} times the model's "
+        "({} cooling)",
+        t.frame, v, v < 1.0 ? "better" : "worse");
   if (e.name == "speed_dependent_cooling")
-    return fmt::format("the cooling conductance to the boundary ({}) grows by {:.3g} % per 1000 r/min",
-                       t.cooled, 100.0 * v);
+    return fmt::format(
+        "the cooling conductance to the boundary ({}) grows by {:.3g} % per 1000 r/min", t.cooled,
+        100.0 * v);
   if (e.name == "winding_conductance")
     return fmt::format("the slot to end-winding resistance is {:.3g} times the model's", v);
   if (e.name == "copper_temperature_coefficient")
@@ -326,8 +349,7 @@ std::string PhysicalReading(const Effect& e, const EffectTargets& t) {
     return fmt::format("{:.3g} W more loss in the {} at 1000 r/min (x (n/1000)^2)", v, t.rotor);
   if (e.name == "sensor_lag")
     return fmt::format("the {} sensor lags with a time constant of {:.3g} s", e.node, v);
-  if (e.name == "sensor_offset")
-    return fmt::format("the {} sensor reads {:+.3g} K off", e.node, v);
+  if (e.name == "sensor_offset") return fmt::format("the {} sensor reads {:+.3g} K off", e.node, v);
   return {};
 }
 

@@ -13,14 +13,15 @@
 /// | effect | parameters (neutral) | equation |
 /// | --- | --- | --- |
 /// | frame_thermal_mass | frame_extra_capacity_J_per_K (0) | C_frame' = C_frame + dC |
-/// | frame_ambient_resistance | frame_resistance_scale (1) | R_fb' = s R_fb, every frame-boundary edge |
-/// | speed_dependent_cooling | cooling_speed_gain_per_krpm (0) | R_c' = R_c / max(1 + g abs(n)/1000, 0.05), every edge to a boundary |
-/// | winding_conductance | winding_resistance_scale (1) | R_w' = s R_w, the edge between two winding nodes |
-/// | copper_temperature_coefficient | copper_alpha_delta_per_K (0) | alpha' = alpha + d_alpha (copper loss terms) |
-/// | iron_loss_scale | iron_loss_scale (1) | P_Fe' = s P_Fe (loss terms named iron*) |
-/// | rotor_loss | rotor_loss_W_per_krpm2 (0) | P_rotor = k (n/1000)^2 on the rotor node |
-/// | sensor_lag | sensor_lag_s (0) | tau dy/dt = T - y (exact for inputs held over a step) |
-/// | sensor_offset | sensor_offset_K (0) | y = T + b |
+/// | frame_ambient_resistance | frame_resistance_scale (1) | R_fb' = s R_fb, every frame-boundary
+/// edge | | speed_dependent_cooling | cooling_speed_gain_per_krpm (0) | R_c' = R_c / max(1 + g
+/// abs(n)/1000, 0.05), every edge to a boundary | | winding_conductance | winding_resistance_scale
+/// (1) | R_w' = s R_w, the edge between two winding nodes | | copper_temperature_coefficient |
+/// copper_alpha_delta_per_K (0) | alpha' = alpha + d_alpha (copper loss terms) | | iron_loss_scale
+/// | iron_loss_scale (1) | P_Fe' = s P_Fe (loss terms named iron*) | | rotor_loss |
+/// rotor_loss_W_per_krpm2 (0) | P_rotor = k (n/1000)^2 on the rotor node | | sensor_lag |
+/// sensor_lag_s (0) | tau dy/dt = T - y (exact for inputs held over a step) | | sensor_offset |
+/// sensor_offset_K (0) | y = T + b |
 ///
 /// Pure library: parses and writes text handed to it, no I/O.
 
@@ -33,11 +34,11 @@ namespace pumptherm::estimators {
 
 /// One parameter of an effect.
 struct EffectParameterSpec {
-  std::string name;        ///< name in the model's [parameters] (units in the name)
-  double neutral = 0.0;    ///< value at which the effect changes nothing
-  double lower = 0.0;      ///< physical bounds for fitting
+  std::string name;      ///< name in the model's [parameters] (units in the name)
+  double neutral = 0.0;  ///< value at which the effect changes nothing
+  double lower = 0.0;    ///< physical bounds for fitting
   double upper = 0.0;
-  double typical = 1.0;    ///< magnitude of a noticeable effect (fit scaling)
+  double typical = 1.0;  ///< magnitude of a noticeable effect (fit scaling)
 };
 
 /// One effect of the vocabulary.
@@ -64,13 +65,13 @@ struct Effect {
 
 /// Where a model's effects attach, resolved from its file (names are the file's node names).
 struct EffectTargets {
-  std::string frame;             ///< node `frame`, else the first capacitive node with an edge
-                                 ///< to a boundary that is not the rotor
-  std::string rotor;             ///< node `rotor`, `pm` or `magnet`, else one containing `rotor`
-  std::vector<int> frame_edges;  ///< indices of the [[edge]]s between frame and a boundary
+  std::string frame;               ///< node `frame`, else the first capacitive node with an edge
+                                   ///< to a boundary that is not the rotor
+  std::string rotor;               ///< node `rotor`, `pm` or `magnet`, else one containing `rotor`
+  std::vector<int> frame_edges;    ///< indices of the [[edge]]s between frame and a boundary
   std::vector<int> cooling_edges;  ///< the cooling path: every [[edge]] to ambient or coolant
   std::string cooled;              ///< the nodes on the cooling path, "a, b" (for readings)
-  int winding_edge = -1;         ///< [[edge]] joining two temperature nodes of the copper loss
+  int winding_edge = -1;           ///< [[edge]] joining two temperature nodes of the copper loss
   std::vector<int> copper_losses;  ///< [[loss]]es with temperature nodes and a positive coefficient
   std::vector<int> iron_losses;    ///< [[loss]]es whose name starts with "iron"
 };

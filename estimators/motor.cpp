@@ -1,17 +1,18 @@
 #include "estimators/motor.hpp"
 
 #include <fmt/core.h>
+#include <toml++/toml.h>
 
 #include <cmath>
 #include <numbers>
 #include <optional>
-#include <toml++/toml.h>
 
 namespace pumptherm::estimators {
 namespace {
 
 // Kept identical to estimators/motors/han2019-tmp.toml (motor_description_test checks it).
-constexpr std::string_view kHan2019Tmp = R"(# Motor of the self-built maglev turbo-molecular pump of Han, Xiong, Mao, "Estimation of
+constexpr std::string_view kHan2019Tmp =
+    R"(# Motor of the self-built maglev turbo-molecular pump of Han, Xiong, Mao, "Estimation of
 # temperature in turbo-molecular pump based on motor resistance online identification",
 # Vacuum 169 (2019) 108935, Table 1. Format: docs/resistance-identification.md.
 name = "han2019-tmp"
@@ -80,8 +81,8 @@ void RejectUnknownKeys(const toml::table& table, std::initializer_list<std::stri
     bool ok = false;
     for (auto k : known) ok = ok || key.str() == k;
     if (!ok) {
-      throw MotorDescriptionError(fmt::format("{}: unknown key '{}{}'",
-                                              Where(source, node.source()), prefix, key.str()));
+      throw MotorDescriptionError(
+          fmt::format("{}: unknown key '{}{}'", Where(source, node.source()), prefix, key.str()));
     }
   }
 }
@@ -108,7 +109,8 @@ void ParseMagnetLaw(const toml::node& node, std::string_view source, MotorDescri
   // temperature or barely moves is no magnet law (the temperature would be noise / beta).
   if (!(beta >= -5e-3 && beta <= -1e-5)) {
     throw MotorDescriptionError(fmt::format(
-        "{}: key 'magnet.flux_temperature_coefficient_per_K' must be within [-0.005, -0.00001] per K "
+        "{}: key 'magnet.flux_temperature_coefficient_per_K' must be within [-0.005, -0.00001] per "
+        "K "
         "(NdFeB about -1e-3, SmCo about -3e-4), got {}",
         Where(source, magnet.get("flux_temperature_coefficient_per_K")->source()), beta));
   }
@@ -123,25 +125,26 @@ namespace {
 // u_err tanh(|i| / knee) i / |i|, the sign(i) term when the knee is 0. Both keys or neither.
 void ParseVoltageError(const toml::table& drive, std::string_view source, MotorDescription& m) {
   const auto u = Number(drive, "voltage_error_V", "drive.voltage_error_V", source, false);
-  const auto knee = Number(drive, "voltage_error_knee_A", "drive.voltage_error_knee_A", source, false);
+  const auto knee =
+      Number(drive, "voltage_error_knee_A", "drive.voltage_error_knee_A", source, false);
   if (knee && !u) {
-    throw MotorDescriptionError(fmt::format(
-        "{}: key 'drive.voltage_error_knee_A' needs 'drive.voltage_error_V'",
-        Where(source, drive.get("voltage_error_knee_A")->source())));
+    throw MotorDescriptionError(
+        fmt::format("{}: key 'drive.voltage_error_knee_A' needs 'drive.voltage_error_V'",
+                    Where(source, drive.get("voltage_error_knee_A")->source())));
   }
   if (!u) return;
   // A few volts is a broken drive, not a dead-time error; the sign is fixed by the model.
   if (!(*u >= 0.0 && *u <= 5.0)) {
-    throw MotorDescriptionError(fmt::format(
-        "{}: key 'drive.voltage_error_V' must be within [0, 5] V, got {}",
-        Where(source, drive.get("voltage_error_V")->source()), *u));
+    throw MotorDescriptionError(
+        fmt::format("{}: key 'drive.voltage_error_V' must be within [0, 5] V, got {}",
+                    Where(source, drive.get("voltage_error_V")->source()), *u));
   }
   m.voltage_error_V = *u;
   if (knee) {
     if (!(*knee >= 0.0 && *knee <= 100.0)) {
-      throw MotorDescriptionError(fmt::format(
-          "{}: key 'drive.voltage_error_knee_A' must be within [0, 100] A, got {}",
-          Where(source, drive.get("voltage_error_knee_A")->source()), *knee));
+      throw MotorDescriptionError(
+          fmt::format("{}: key 'drive.voltage_error_knee_A' must be within [0, 100] A, got {}",
+                      Where(source, drive.get("voltage_error_knee_A")->source()), *knee));
     }
     m.voltage_error_knee_A = *knee;
   }
@@ -174,8 +177,8 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
     throw MotorDescriptionError(fmt::format("{}:1: missing key 'pole_pairs'", source));
   }
   if (!pp->is_integer() || *pp->value<std::int64_t>() < 1 || *pp->value<std::int64_t>() > 1000) {
-    throw MotorDescriptionError(fmt::format("{}: key 'pole_pairs' must be an integer >= 1",
-                                            Where(source, pp->source())));
+    throw MotorDescriptionError(
+        fmt::format("{}: key 'pole_pairs' must be an integer >= 1", Where(source, pp->source())));
   }
   m.pole_pairs = static_cast<int>(*pp->value<std::int64_t>());
   m.rated_speed_rpm = *Number(root, "rated_speed_rpm", "rated_speed_rpm", source, true);
@@ -187,15 +190,14 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
 
   const toml::node* res_node = root.get("resistance");
   if (res_node == nullptr || !res_node->is_table()) {
-    throw MotorDescriptionError(fmt::format(
-        "{}: missing table [resistance]",
-        res_node ? Where(source, res_node->source()) : std::string(source) + ":1"));
+    throw MotorDescriptionError(
+        fmt::format("{}: missing table [resistance]",
+                    res_node ? Where(source, res_node->source()) : std::string(source) + ":1"));
   }
   const toml::table& res = *res_node->as_table();
-  RejectUnknownKeys(res,
-                    {"r0_ohm", "t0_degC", "alpha_per_K", "plausible_min_degC",
-                     "plausible_max_degC"},
-                    "resistance.", source);
+  RejectUnknownKeys(
+      res, {"r0_ohm", "t0_degC", "alpha_per_K", "plausible_min_degC", "plausible_max_degC"},
+      "resistance.", source);
   m.copper.r0_ohm = *Number(res, "r0_ohm", "resistance.r0_ohm", source, true);
   RequirePositive(m.copper.r0_ohm, res, "r0_ohm", "resistance.r0_ohm", source);
   m.copper.t0_degC = *Number(res, "t0_degC", "resistance.t0_degC", source, true);
@@ -204,9 +206,10 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
   // Winding conductors have 3.8e-3..6e-3 per K (copper 3.93e-3); a coefficient near zero would
   // turn eq. 3's division by alpha into a huge, noise-driven winding temperature.
   if (m.copper.alpha_per_K < 1e-4 || m.copper.alpha_per_K > 2e-2) {
-    throw MotorDescriptionError(fmt::format(
-        "{}: key 'resistance.alpha_per_K' must be within [0.0001, 0.02] per K (copper 3.93e-3), got {}",
-        Where(source, res.get("alpha_per_K")->source()), m.copper.alpha_per_K));
+    throw MotorDescriptionError(
+        fmt::format("{}: key 'resistance.alpha_per_K' must be within [0.0001, 0.02] per K (copper "
+                    "3.93e-3), got {}",
+                    Where(source, res.get("alpha_per_K")->source()), m.copper.alpha_per_K));
   }
   if (auto v = Number(res, "plausible_min_degC", "resistance.plausible_min_degC", source, false)) {
     m.plausible_min_degC = *v;
@@ -232,9 +235,9 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
     if (auto v = Number(drive, "uq_resolution_V", "drive.uq_resolution_V", source, false)) {
       // 12 bits over a 48 V link is 23 mV; a step of volts would be no voltage measurement.
       if (!(*v > 0.0 && *v <= 10.0)) {
-        throw MotorDescriptionError(fmt::format(
-            "{}: key 'drive.uq_resolution_V' must be within (0, 10] V, got {}",
-            Where(source, drive.get("uq_resolution_V")->source()), *v));
+        throw MotorDescriptionError(
+            fmt::format("{}: key 'drive.uq_resolution_V' must be within (0, 10] V, got {}",
+                        Where(source, drive.get("uq_resolution_V")->source()), *v));
       }
       m.uq_resolution_V = *v;
     }
@@ -254,7 +257,8 @@ std::vector<std::string> MotorPresetNames() { return {"han2019-tmp"}; }
 MotorDescription MotorPreset(std::string_view name) {
   const std::string_view text = MotorPresetText(name);
   if (text.empty()) {
-    throw MotorDescriptionError(fmt::format("unknown motor preset '{}' (known: han2019-tmp)", name));
+    throw MotorDescriptionError(
+        fmt::format("unknown motor preset '{}' (known: han2019-tmp)", name));
   }
   return ParseMotorDescription(text, fmt::format("preset {}", name));
 }
@@ -266,7 +270,8 @@ double ElectricalSpeed_rad_per_s(const MotorDescription& motor, double speed_rpm
 double VoltageErrorQ_V(const MotorDescription& motor, double id_A, double iq_A) noexcept {
   const double mag = std::hypot(id_A, iq_A);
   if (!(motor.voltage_error_V > 0.0) || !(mag > 0.0)) return 0.0;
-  const double shape = motor.voltage_error_knee_A > 0.0 ? std::tanh(mag / motor.voltage_error_knee_A) : 1.0;
+  const double shape =
+      motor.voltage_error_knee_A > 0.0 ? std::tanh(mag / motor.voltage_error_knee_A) : 1.0;
   return motor.voltage_error_V * shape * iq_A / mag;
 }
 

@@ -45,19 +45,19 @@ class MotorDescriptionError : public std::runtime_error {
 /// How the magnet flux linkage depends on the magnet temperature (estimators/magnet.hpp):
 /// psi_f(T) = flux_Wb (1 + flux_temperature_coefficient_per_K (T - t0_degC)).
 struct MagnetLaw {
-  double t0_degC = 0.0;                            ///< where the motor's flux_Wb holds
-  double flux_temperature_coefficient_per_K = 0.0; ///< < 0; 0 = no law given
+  double t0_degC = 0.0;                             ///< where the motor's flux_Wb holds
+  double flux_temperature_coefficient_per_K = 0.0;  ///< < 0; 0 = no law given
   bool Given() const noexcept { return flux_temperature_coefficient_per_K != 0.0; }
 };
 
 /// Electrical description of a surface permanent-magnet synchronous motor.
 struct MotorDescription {
-  std::string name;                 ///< free text, e.g. "han2019-tmp"
-  int pole_pairs = 1;               ///< electrical speed = pole_pairs * mechanical speed
-  double rated_speed_rpm = 0.0;     ///< mechanical, r/min
-  double flux_Wb = 0.0;             ///< PM flux linkage psi_f (amplitude-invariant dq)
-  double inductance_H = 0.0;        ///< Ls, equal on d and q axes
-  CopperLaw copper;                 ///< R0, T0, alpha of Han 2019 eq. 2
+  std::string name;                   ///< free text, e.g. "han2019-tmp"
+  int pole_pairs = 1;                 ///< electrical speed = pole_pairs * mechanical speed
+  double rated_speed_rpm = 0.0;       ///< mechanical, r/min
+  double flux_Wb = 0.0;               ///< PM flux linkage psi_f (amplitude-invariant dq)
+  double inductance_H = 0.0;          ///< Ls, equal on d and q axes
+  CopperLaw copper;                   ///< R0, T0, alpha of Han 2019 eq. 2
   double plausible_min_degC = -20.0;  ///< lower end of the plausible winding temperature
   double plausible_max_degC = 180.0;  ///< upper end of the plausible winding temperature
   /// Step of the reported q-axis voltage, V: the drive's command or ADC resolution (codes at

@@ -7,9 +7,10 @@
 
 namespace pumptherm::estimators {
 
-double MeanPosteriorTrace(const std::vector<Eigen::MatrixXd>& ads, int steps, const Eigen::MatrixXd& c,
-                          const Eigen::MatrixXd& sp, const Eigen::MatrixXd& sm,
-                          const Eigen::MatrixXd& s0, const Eigen::MatrixXd& w) {
+double MeanPosteriorTrace(const std::vector<Eigen::MatrixXd>& ads, int steps,
+                          const Eigen::MatrixXd& c, const Eigen::MatrixXd& sp,
+                          const Eigen::MatrixXd& sm, const Eigen::MatrixXd& s0,
+                          const Eigen::MatrixXd& w) {
   if (ads.empty() || steps <= 0) throw std::invalid_argument("MeanPosteriorTrace: empty window");
   const Eigen::Index n = s0.rows();
   KalmanFilter kf(static_cast<int>(n));
@@ -29,7 +30,8 @@ double MeanPosteriorTrace(const std::vector<Eigen::MatrixXd>& ads, int steps, co
   return sum / steps;
 }
 
-std::vector<PlacementRow> SensorPlacement(const ThermalModel& model, const PlacementConfig& config) {
+std::vector<PlacementRow> SensorPlacement(const ThermalModel& model,
+                                          const PlacementConfig& config) {
   const int n = model.StateCount();
   if (config.operating_points.empty()) {
     throw std::invalid_argument("SensorPlacement: no operating point");
@@ -48,9 +50,12 @@ std::vector<PlacementRow> SensorPlacement(const ThermalModel& model, const Place
     // Nondimensional states x' = T x: A_D' = T A_D T^-1.
     ads.push_back(inv.asDiagonal() * d.ad * scale.asDiagonal());
   }
-  const Eigen::MatrixXd sp = (config.process_sd_K * config.process_sd_K) * inv.cwiseAbs2().asDiagonal().toDenseMatrix();
-  const Eigen::MatrixXd s0 = (config.initial_sd_K * config.initial_sd_K) * inv.cwiseAbs2().asDiagonal().toDenseMatrix();
-  const Eigen::MatrixXd sm = Eigen::MatrixXd::Constant(1, 1, config.measurement_sd_K * config.measurement_sd_K);
+  const Eigen::MatrixXd sp =
+      (config.process_sd_K * config.process_sd_K) * inv.cwiseAbs2().asDiagonal().toDenseMatrix();
+  const Eigen::MatrixXd s0 =
+      (config.initial_sd_K * config.initial_sd_K) * inv.cwiseAbs2().asDiagonal().toDenseMatrix();
+  const Eigen::MatrixXd sm =
+      Eigen::MatrixXd::Constant(1, 1, config.measurement_sd_K * config.measurement_sd_K);
   const Eigen::MatrixXd w_all = Eigen::MatrixXd::Identity(n, n);
   Eigen::MatrixXd w_wind = Eigen::MatrixXd::Zero(n, n);
   for (int s = 0; s < n; ++s) {

@@ -19,12 +19,12 @@ namespace pumptherm::estimators {
 struct PlacementConfig {
   /// Operating points whose A_D each hold for one third of the window (paper: min, mid, max).
   std::vector<ThermalInputs> operating_points;
-  double dt_s = 1.0;             ///< sampling time tau
-  int steps = 5400;              ///< window length N (all segments together)
+  double dt_s = 1.0;                 ///< sampling time tau
+  int steps = 5400;                  ///< window length N (all segments together)
   double measurement_sd_K = 0.0557;  ///< Sigma_m^(1/2), eq. 38
   double process_sd_K = 0.0894;      ///< Sigma_p^(1/2) per step, eq. 39
   double initial_sd_K = 10.0;        ///< S(0)^(1/2): the paper's ~10 degC initial errors
-  Eigen::VectorXd scale_K;       ///< nondimensionalisation per state (n); empty = 1
+  Eigen::VectorXd scale_K;           ///< nondimensionalisation per state (n); empty = 1
 };
 
 /// MSE of one candidate.
@@ -41,8 +41,9 @@ std::vector<PlacementRow> SensorPlacement(const ThermalModel& model, const Place
 /// The Riccati recursion of eq. 37 for a fixed `c` (m x n), returning the mean of
 /// trace(W S^(n)) over the window: the building block of SensorPlacement, public for tests.
 /// `ads` holds one A_D per segment.
-double MeanPosteriorTrace(const std::vector<Eigen::MatrixXd>& ads, int steps, const Eigen::MatrixXd& c,
-                          const Eigen::MatrixXd& sp, const Eigen::MatrixXd& sm,
-                          const Eigen::MatrixXd& s0, const Eigen::MatrixXd& w);
+double MeanPosteriorTrace(const std::vector<Eigen::MatrixXd>& ads, int steps,
+                          const Eigen::MatrixXd& c, const Eigen::MatrixXd& sp,
+                          const Eigen::MatrixXd& sm, const Eigen::MatrixXd& s0,
+                          const Eigen::MatrixXd& w);
 
 }  // namespace pumptherm::estimators

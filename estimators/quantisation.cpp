@@ -35,7 +35,8 @@ double QuantisedMeanBias(double mean, double noise_variance, double step) noexce
   return -step / kPi * Series(mean, step, [&](int k) { return std::exp(-c1 * k * k * var); });
 }
 
-double CorrectQuantisedMean(double sample_mean, double sample_variance, int n, double step) noexcept {
+double CorrectQuantisedMean(double sample_mean, double sample_variance, int n,
+                            double step) noexcept {
   if (!(step > 0.0) || n < 2 || !std::isfinite(sample_mean) || !std::isfinite(sample_variance) ||
       !std::isfinite(step)) {
     return sample_mean;
@@ -63,7 +64,8 @@ double CorrectQuantisedMean(double sample_mean, double sample_variance, int n, d
     // ln J = c sigma_q^2 - (n-1)/2 ln(1 + 2 c sigma_q^2/(n-1)); dividing by J removes it.
     bias = -step / kPi * Series(mean, step, [&](int k) {
       const double c = c1 * k * k;
-      const double ln_j = c * sample_variance - 0.5 * dof * std::log1p(2.0 * c * sample_variance / dof);
+      const double ln_j =
+          c * sample_variance - 0.5 * dof * std::log1p(2.0 * c * sample_variance / dof);
       return std::exp(-c * noise_variance - ln_j);
     });
     mean = sample_mean - bias;

@@ -6,15 +6,15 @@
 /// sigma ahead of it (non-subtractive dither), the rounding error Q(x) - x is the sawtooth
 ///     Q(x) - x = -(step/pi) sum_k (-1)^(k+1) sin(2 pi k x / step) / k,   k = 1, 2, ...
 /// and E[sin(a (mu + n))] = sin(a mu) exp(-a^2 sigma^2 / 2) for n ~ N(0, sigma^2), so
-///     E[Q(mu + n)] - mu = -(step/pi) sum_k (-1)^(k+1)/k exp(-2 pi^2 k^2 sigma^2/step^2) sin(2 pi k mu/step)
+///     E[Q(mu + n)] - mu = -(step/pi) sum_k (-1)^(k+1)/k exp(-2 pi^2 k^2 sigma^2/step^2) sin(2 pi k
+///     mu/step)
 /// (the characteristic-function treatment of quantisation: B. Widrow, I. Kollar, "Quantization
 /// Noise", Cambridge University Press 2008, chapters 4-5 and the Gaussian case of appendix G).
-/// The bias is periodic in the true mean mu, with amplitude about step/pi exp(-2 pi^2 sigma^2/step^2):
-/// 0.2 mV for a 23 mV step and 10 mV of noise. Averaging does not remove it; two operating
-/// points carry two different biases. The variance of the quantised samples is
-/// sigma^2 + step^2/12 up to terms of the same small order (Sheppard's correction, W. F.
-/// Sheppard, Proc. London Math. Soc. 29 (1898) 353-380), so sigma^2 can be estimated from the
-/// samples themselves.
+/// The bias is periodic in the true mean mu, with amplitude about step/pi exp(-2 pi^2
+/// sigma^2/step^2): 0.2 mV for a 23 mV step and 10 mV of noise. Averaging does not remove it; two
+/// operating points carry two different biases. The variance of the quantised samples is sigma^2 +
+/// step^2/12 up to terms of the same small order (Sheppard's correction, W. F. Sheppard, Proc.
+/// London Math. Soc. 29 (1898) 353-380), so sigma^2 can be estimated from the samples themselves.
 ///
 /// Pure functions: no state, no allocation.
 
@@ -41,6 +41,7 @@ inline constexpr double kMinCorrectableNoise_steps = 0.3;
 /// (quantisation_test): the mean over many blocks keeps at most 20 % of the bias at sigma =
 /// 0.43 step, 40-70 % at 0.36 and 40-100 % at 0.3 step. Returns `sample_mean` unchanged when
 /// step <= 0, n < 2, a value is not finite, or sigma < kMinCorrectableNoise_steps * step.
-double CorrectQuantisedMean(double sample_mean, double sample_variance, int n, double step) noexcept;
+double CorrectQuantisedMean(double sample_mean, double sample_variance, int n,
+                            double step) noexcept;
 
 }  // namespace pumptherm::estimators

@@ -11,9 +11,9 @@ namespace pumptherm::estimators {
 
 /// One steady operating point of the q-axis voltage equation.
 struct QAxisPoint {
-  double iq_A = 0.0;            ///< q-axis current
-  double uq_V = 0.0;            ///< q-axis voltage, minus Ls w_r id when id is not zero
-  double w_r_rad_per_s = 0.0;   ///< electrical angular speed
+  double iq_A = 0.0;           ///< q-axis current
+  double uq_V = 0.0;           ///< q-axis voltage, minus Ls w_r id when id is not zero
+  double w_r_rad_per_s = 0.0;  ///< electrical angular speed
 };
 
 /// Result of eq. 8; `valid` is false when the two points are (nearly) linearly dependent

@@ -23,9 +23,9 @@ constexpr double kDriftSmoothing_s = 20.0;
 // z = |eps| / sqrt(S) (S = phi^T P phi + r, the innovation variance) instead of |eps| / |y|.
 double NormalisedWeight(double z) noexcept {
   if (!(z < kMaxEvidenceZ)) return 0.0;  // untrusted (also NaN)
-  if (z >= 4.0) return 0.1;    // low confidence
-  if (z >= 3.0) return 0.5;    // high confidence
-  return 1.0;                  // fully trusted
+  if (z >= 4.0) return 0.1;              // low confidence
+  if (z >= 3.0) return 0.5;              // high confidence
+  return 1.0;                            // fully trusted
 }
 
 bool IsFinite(const DqSample& s) noexcept {
@@ -37,13 +37,20 @@ bool IsFinite(const DqSample& s) noexcept {
 
 std::string_view ToString(ResistanceStatus status) noexcept {
   switch (status) {
-    case ResistanceStatus::kInitialising: return "initialising";
-    case ResistanceStatus::kConverging: return "converging";
-    case ResistanceStatus::kTracking: return "tracking";
-    case ResistanceStatus::kNotIdentifiable: return "not_identifiable";
-    case ResistanceStatus::kImplausible: return "implausible";
-    case ResistanceStatus::kInvalidInput: return "invalid_input";
-    case ResistanceStatus::kHeld: return "held";
+    case ResistanceStatus::kInitialising:
+      return "initialising";
+    case ResistanceStatus::kConverging:
+      return "converging";
+    case ResistanceStatus::kTracking:
+      return "tracking";
+    case ResistanceStatus::kNotIdentifiable:
+      return "not_identifiable";
+    case ResistanceStatus::kImplausible:
+      return "implausible";
+    case ResistanceStatus::kInvalidInput:
+      return "invalid_input";
+    case ResistanceStatus::kHeld:
+      return "held";
   }
   return "unknown";
 }
@@ -56,9 +63,8 @@ ResistanceIdentifier::ResistanceIdentifier(const MotorDescription& motor,
       !(config.excitation_window_s > 0.0) || !(config.identifiable_sigma_rel > 0.0) ||
       !(config.tracking_bound_K > 0.0) || !(config.voltage_error_allowance_V >= 0.0) ||
       !(config.consistency_window_s > 0.0) || !(config.max_consistency_nis > 0.0) ||
-      !(config.initial_resistance_sigma_rel > 0.0) ||
-      !(config.initial_flux_sigma_rel > 0.0) || !(config.winding_drift_K_per_sqrt_h >= 0.0) ||
-      !(config.magnet_drift_K_per_sqrt_h >= 0.0) ||
+      !(config.initial_resistance_sigma_rel > 0.0) || !(config.initial_flux_sigma_rel > 0.0) ||
+      !(config.winding_drift_K_per_sqrt_h >= 0.0) || !(config.magnet_drift_K_per_sqrt_h >= 0.0) ||
       !(config.winding_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
       !(config.steady_winding_drift_K_per_sqrt_h >= 0.0) ||
       !(config.steady_winding_rate_walk_K_per_h_per_sqrt_h >= 0.0) ||
@@ -122,8 +128,8 @@ Eigen::Matrix3d MomentsFromTwoRegressors(const Eigen::Matrix2d& moments) {
 }
 
 ResistanceIdentifierState StateFromSingleFilter(const Eigen::Vector4d& x, const Eigen::Matrix4d& p,
-                                                const Eigen::Matrix3d& moments, std::uint64_t blocks,
-                                                int consecutive_rejections,
+                                                const Eigen::Matrix3d& moments,
+                                                std::uint64_t blocks, int consecutive_rejections,
                                                 const ResistanceIdentifierConfig& config) {
   ResistanceIdentifierState s;
   for (auto& h : s.hypotheses) {
@@ -212,8 +218,8 @@ bool ResistanceIdentifier::Restore(const ResistanceIdentifierState& state) noexc
   const Excitation ex = AssessExcitation(0.0, 0.0);
   if (ex.spread_A > 0.0) allowance_ohm_ = config_.voltage_error_allowance_V / ex.spread_A;
   Mix();
-  Publish(state_.blocks == 0 ? ResistanceStatus::kInitialising : ResistanceStatus::kConverging,
-          0.0, 0.0);
+  Publish(state_.blocks == 0 ? ResistanceStatus::kInitialising : ResistanceStatus::kConverging, 0.0,
+          0.0);
   return true;
 }
 
@@ -238,8 +244,9 @@ void ResistanceIdentifier::Publish(ResistanceStatus status, double eps_V, double
   estimate_.weight = weight;
   estimate_.mean_nis = mean_nis_;
   estimate_.steady_magnet_probability = state_.hypotheses[kSteadyMagnet].probability;
-  estimate_.unexplained_drift_K = state_.anchor_valid ? EffectiveDriftOhm() / (motor_.copper.r0_ohm * motor_.copper.alpha_per_K)
-                                                : std::numeric_limits<double>::quiet_NaN();
+  estimate_.unexplained_drift_K =
+      state_.anchor_valid ? EffectiveDriftOhm() / (motor_.copper.r0_ohm * motor_.copper.alpha_per_K)
+                          : std::numeric_limits<double>::quiet_NaN();
   estimate_.voltage_offset_V = offset_V_;
   estimate_.voltage_offset_sd_V = offset_sd_V_;
   estimate_.status = status;
@@ -326,13 +333,15 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
   // A load change makes the block count at once (its information is not spent on psi_f while
   // the window catches up): its iq's distance from the window's iq at this speed.
   const auto enough = [&](double info) {
-    return info > 0.0 && (info >= info_needed || ex.block_info >= kFreshExcitationShare * info_needed);
+    return info > 0.0 &&
+           (info >= info_needed || ex.block_info >= kFreshExcitationShare * info_needed);
   };
   // separable: Rs apart from psi_f (Han 2019 eq. 6 as it stands); identifiable: also apart from
   // a constant voltage offset (the inverter's error at one sign of iq). Only the second moves Rs.
   const bool separable = !idle && enough(ex.info_two);
   const bool identifiable = separable && enough(ex.info_three);
-  if (identifiable && ex.spread_A > 0.0) allowance_ohm_ = config_.voltage_error_allowance_V / ex.spread_A;
+  if (identifiable && ex.spread_A > 0.0)
+    allowance_ohm_ = config_.voltage_error_allowance_V / ex.spread_A;
   // Too little current for the voltage model (dead-time knee): no measurement update.
   const bool measure = !(std::abs(iq) < config_.min_current_A);
   // A load change that identifies Rs ends the stretch in which a drift of uq could be either
@@ -376,7 +385,9 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     const bool hold_rs = !identifiable;
     x = f * x;
     p = f * p * f.transpose() + q;
-    if (idle) p(kStateResistanceRate, kStateResistanceRate) = p0_[j](kStateResistanceRate, kStateResistanceRate);
+    if (idle)
+      p(kStateResistanceRate, kStateResistanceRate) =
+          p0_[j](kStateResistanceRate, kStateResistanceRate);
     // Bound the growth while nothing is learnt: scale row and column i together (a congruence
     // with a diagonal matrix), which keeps P symmetric positive definite.
     for (int i = 0; i < 4; ++i) {
@@ -431,7 +442,8 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     // contradict while this hypothesis' flux is stiff): re-open P.
     if (weight >= 1.0) {
       state_.hypotheses[j].consecutive_rejections = 0;
-    } else if (++state_.hypotheses[j].consecutive_rejections >= config_.reacquire_after_rejections) {
+    } else if (++state_.hypotheses[j].consecutive_rejections >=
+               config_.reacquire_after_rejections) {
       p = p0_[j];
       state_.hypotheses[j].consecutive_rejections = 0;
     }
@@ -450,19 +462,23 @@ void ResistanceIdentifier::ProcessBlock() noexcept {
     }
     for (int j = 0; j < kMagnetHypotheses; ++j) {
       double& mu = state_.hypotheses[j].probability;
-      mu = total > 0.0 ? mu / total : (j == kSteadyMagnet ? config_.steady_magnet_prior : 1.0 - config_.steady_magnet_prior);
+      mu = total > 0.0 ? mu / total
+                       : (j == kSteadyMagnet ? config_.steady_magnet_prior
+                                             : 1.0 - config_.steady_magnet_prior);
       mu = std::max(mu, config_.hypothesis_probability_floor);
     }
-    const double sum = state_.hypotheses[kSteadyMagnet].probability + state_.hypotheses[kDriftingMagnet].probability;
+    const double sum = state_.hypotheses[kSteadyMagnet].probability +
+                       state_.hypotheses[kDriftingMagnet].probability;
     for (int j = 0; j < kMagnetHypotheses; ++j) state_.hypotheses[j].probability /= sum;
   }
   last_z_ = z_of;
   const double keep = std::exp(-dt / config_.consistency_window_s);
   if (measure) RefuteInconsistent(keep);
   Mix();
-  const int best = state_.hypotheses[kSteadyMagnet].probability >= state_.hypotheses[kDriftingMagnet].probability
-                       ? kSteadyMagnet
-                       : kDriftingMagnet;
+  const int best =
+      state_.hypotheses[kSteadyMagnet].probability >= state_.hypotheses[kDriftingMagnet].probability
+          ? kSteadyMagnet
+          : kDriftingMagnet;
   const bool anchored = fresh_change || anchor_pending_;
   if (anchored) {
     state_.anchor = x_;
@@ -496,7 +512,9 @@ void ResistanceIdentifier::RefuteInconsistent(double keep) noexcept {
   // Refuted: above the limit while the other is within half of it (a margin, so that two
   // filters that both struggle, e.g. with a flux step both reject, do not take turns).
   const double limit = config_.max_consistency_nis;
-  const auto refutes = [&](int a, int b) { return hypothesis_nis_[a] > limit && hypothesis_nis_[b] <= 0.5 * limit; };
+  const auto refutes = [&](int a, int b) {
+    return hypothesis_nis_[a] > limit && hypothesis_nis_[b] <= 0.5 * limit;
+  };
   int refuted = -1;
   if (refutes(kSteadyMagnet, kDriftingMagnet)) refuted = kSteadyMagnet;
   if (refutes(kDriftingMagnet, kSteadyMagnet)) refuted = kDriftingMagnet;
@@ -534,11 +552,13 @@ void ResistanceIdentifier::ReopenAlongLine(double iq, double w, double var_ohm2)
   // alone, which would break the line's correlation and leave the flux free to take the step.
   Eigen::Vector4d n(1.0, 0.0, 0.0, 0.0);
   if (std::abs(w) > 0.0 && std::isfinite(iq)) n(kStateFlux) = -iq / w;
-  const double var = std::min(var_ohm2, 3.0 * p0_[kDriftingMagnet](kStateResistance, kStateResistance));
+  const double var =
+      std::min(var_ohm2, 3.0 * p0_[kDriftingMagnet](kStateResistance, kStateResistance));
   state_.hypotheses[kDriftingMagnet].p += var * n * n.transpose();
 }
 
-void ResistanceIdentifier::UpdateOffset(double iq, double w, double y, double decay, double r) noexcept {
+void ResistanceIdentifier::UpdateOffset(double iq, double w, double y, double decay,
+                                        double r) noexcept {
   // Least squares of y = Rs iq + psi_f w_r + u0 sign(iq) over the window's blocks (the static
   // form of Han 2019 eq. 6 with the dead-time term): u0 is separable where iq varies
   // independently of w_r and of sign(iq), i.e. where the Schur complement of the sign's moment
@@ -553,7 +573,8 @@ void ResistanceIdentifier::UpdateOffset(double iq, double w, double y, double de
   if (!(det > 1e-12 * trace * trace)) return;
   // Schur complement m22 - c^T A^-1 c with A the [iq, w_r] block and c its column to the sign.
   const double c0 = m(0, 2), c1 = m(1, 2);
-  const double info = m(2, 2) - (m(1, 1) * c0 * c0 - 2.0 * m(0, 1) * c0 * c1 + m(0, 0) * c1 * c1) / det;
+  const double info =
+      m(2, 2) - (m(1, 1) * c0 * c0 - 2.0 * m(0, 1) * c0 * c1 + m(0, 0) * c1 * c1) / det;
   if (!(info > 0.0)) return;
   const double sd = std::sqrt(r / info);
   if (!(sd <= config_.offset_identifiable_sd_V)) return;
@@ -563,7 +584,8 @@ void ResistanceIdentifier::UpdateOffset(double iq, double w, double y, double de
   offset_sd_V_ = sd;
 }
 
-ResistanceIdentifier::Excitation ResistanceIdentifier::AssessExcitation(double iq, double w) const noexcept {
+ResistanceIdentifier::Excitation ResistanceIdentifier::AssessExcitation(double iq,
+                                                                        double w) const noexcept {
   // Information on Rs with the other regressors free: the Schur complement of the moments
   // (the residual sum of squares of iq regressed on them). w_r is scaled to the rated speed so
   // that [w_r, 1], collinear at constant speed, stay well conditioned; a ridge of 1e-9 of the
@@ -604,8 +626,8 @@ double ResistanceIdentifier::EffectiveDriftOhm() const noexcept {
 
 double ResistanceIdentifier::WindingSd_K() const noexcept {
   const double drift = EffectiveDriftOhm();
-  const double var = std::max(p_(kStateResistance, kStateResistance), 0.0) + allowance_ohm_ * allowance_ohm_ +
-                     drift * drift;
+  const double var = std::max(p_(kStateResistance, kStateResistance), 0.0) +
+                     allowance_ohm_ * allowance_ohm_ + drift * drift;
   return std::sqrt(var) / (motor_.copper.r0_ohm * motor_.copper.alpha_per_K);
 }
 

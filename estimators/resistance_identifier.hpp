@@ -93,10 +93,10 @@ std::string_view ToString(ResistanceStatus status) noexcept;
 /// Tuning of the identifier; the defaults suit the Han 2019 TMP at 10 ms sampling with the
 /// noise of ../shared/reference/realistic-signals.md.
 struct ResistanceIdentifierConfig {
-  int block_samples = 100;                ///< raw samples averaged per update (10 ms -> 1 s)
-  double current_noise_A = 0.01;          ///< rms noise of one raw iq sample
-  double voltage_noise_V = 0.02;          ///< rms noise of one raw uq sample
-  double speed_noise_rpm = 1.0;           ///< rms noise of one raw mechanical speed sample
+  int block_samples = 100;        ///< raw samples averaged per update (10 ms -> 1 s)
+  double current_noise_A = 0.01;  ///< rms noise of one raw iq sample
+  double voltage_noise_V = 0.02;  ///< rms noise of one raw uq sample
+  double speed_noise_rpm = 1.0;   ///< rms noise of one raw mechanical speed sample
   /// Drifting-magnet hypothesis: random walk of the winding temperature, and of its rate.
   double winding_drift_K_per_sqrt_h = 1.0;
   double winding_rate_walk_K_per_h_per_sqrt_h = 10.0;
@@ -118,12 +118,12 @@ struct ResistanceIdentifierConfig {
   /// A block whose mean iq differs from the previous block's by more than this is a load change:
   /// its innovations update the hypotheses' probabilities (block noise of iq is ~1 mA).
   double load_change_A = 0.02;
-  double rate_time_constant_s = 3600.0;      ///< rates decay towards zero with this constant
+  double rate_time_constant_s = 3600.0;  ///< rates decay towards zero with this constant
   double flux_temperature_coefficient_per_K = -1e-3;  ///< NdFeB, d(psi_f)/psi_f per K
   double initial_resistance_sigma_rel = 0.1;  ///< nameplate Rs uncertainty (relative, 1 sigma)
   double initial_flux_sigma_rel = 0.05;       ///< nameplate psi_f uncertainty (relative)
-  double excitation_window_s = 600.0;     ///< time constant of the excitation monitor
-  double identifiable_sigma_rel = 0.005;  ///< Rs std (relative) the window must support
+  double excitation_window_s = 600.0;         ///< time constant of the excitation monitor
+  double identifiable_sigma_rel = 0.005;      ///< Rs std (relative) the window must support
   /// "tracking" only while twice the winding temperature's 1-sigma is within this bound, K.
   double tracking_bound_K = 2.0;
   /// Voltage error left after compensation that may vary with the current (the dead-time
@@ -170,9 +170,9 @@ struct ResistanceEstimate {
   /// 1-sigma of winding_degC, K: sqrt(P_RR + allowance^2) / (R0 alpha) (Han 2019 eq. 3),
   /// the allowance being voltage_error_allowance_V over the window's spread of iq.
   double winding_sd_K = 0.0;
-  double flux_sd_Wb = 0.0;            ///< sqrt(P_psi psi)
-  double innovation_V = 0.0;          ///< eps of the last block update
-  double weight = 0.0;                ///< Lambda of the last block update
+  double flux_sd_Wb = 0.0;    ///< sqrt(P_psi psi)
+  double innovation_V = 0.0;  ///< eps of the last block update
+  double weight = 0.0;        ///< Lambda of the last block update
   /// EW mean of the squared normalised innovation over consistency_window_s (1 when the
   /// residuals match their variance; above max_consistency_nis: no "tracking").
   double mean_nis = 1.0;
@@ -204,7 +204,7 @@ struct ResistanceIdentifierState {
   /// EW moments of the block means [iq A, w_r rad/s, 1], 3x3 (the (2,2) element is the EW
   /// block count).
   Eigen::Matrix3d moments = Eigen::Matrix3d::Zero();
-  std::uint64_t blocks = 0;                         ///< block updates since start or reset
+  std::uint64_t blocks = 0;  ///< block updates since start or reset
   /// The mixture's x after the last load change, propagated since with its rates: what the
   /// unexplained drift is measured against. anchor_valid false (e.g. a state file without it):
   /// the drift is measured from the first block after Restore.
@@ -221,8 +221,8 @@ Eigen::Matrix3d MomentsFromTwoRegressors(const Eigen::Matrix2d& moments);
 /// A state of the single-filter identifier (pumpthermd saved state version 1: one x, one P)
 /// carried over: both hypotheses continue from it, with the prior probabilities of `config`.
 ResistanceIdentifierState StateFromSingleFilter(const Eigen::Vector4d& x, const Eigen::Matrix4d& p,
-                                                const Eigen::Matrix3d& moments, std::uint64_t blocks,
-                                                int consecutive_rejections,
+                                                const Eigen::Matrix3d& moments,
+                                                std::uint64_t blocks, int consecutive_rejections,
                                                 const ResistanceIdentifierConfig& config);
 
 class ResistanceIdentifier {
@@ -293,15 +293,15 @@ class ResistanceIdentifier {
   double sum_id_A_ = 0.0;
   double sum_w_rad_per_s_ = 0.0;
   double sum_y_V_ = 0.0;
-  double uq_first_V_ = 0.0;      // first uq of the block: the sums below are relative to it
-  double sum_duq_V_ = 0.0;       // (exact variance of 100 values near 40 V)
+  double uq_first_V_ = 0.0;  // first uq of the block: the sums below are relative to it
+  double sum_duq_V_ = 0.0;   // (exact variance of 100 values near 40 V)
   double sum_duq2_V2_ = 0.0;
   double last_block_iq_A_ = 0.0;  // NaN after start, reset or restore: no load change seen
   double mean_nis_ = 1.0;         // EW mean of the squared normalised innovation (expected 1)
   std::array<double, kMagnetHypotheses> hypothesis_nis_{1.0, 1.0};  // the same per hypothesis
   std::array<double, kMagnetHypotheses> last_z_{};  // normalised innovations of the last block
-  double allowance_ohm_ = 0.0;    // voltage_error_allowance_V over the iq spread when last
-                                  // identified (held with Rs)
+  double allowance_ohm_ = 0.0;  // voltage_error_allowance_V over the iq spread when last
+                                // identified (held with Rs)
   // Unexplained drift (anchor and drift in state_).
   bool anchor_pending_ = false;  // after a restore without an anchor: anchor on the next block
   bool flux_freed_ = false;      // the drifting filter's flux took excess drift since the anchor

@@ -21,9 +21,8 @@ DiscountedRls::DiscountedRls(const RlsConfig& config, const Eigen::Vector2d& the
 
 RlsStep DiscountedRls::Update(const Eigen::Vector2d& phi, double y_V) noexcept {
   const double eps = y_V - phi.dot(state_.theta);
-  const double weight = config_.weighting == RlsWeighting::kHan2019FourLevel
-                            ? Han2019Weight(eps, y_V)
-                            : 1.0;
+  const double weight =
+      config_.weighting == RlsWeighting::kHan2019FourLevel ? Han2019Weight(eps, y_V) : 1.0;
   return UpdateWeighted(phi, y_V, weight);
 }
 

@@ -37,7 +37,7 @@ enum class RlsWeighting {
 
 /// Settings of the recursion.
 struct RlsConfig {
-  double forgetting = 1.0;                     ///< lambda in (0, 1]
+  double forgetting = 1.0;  ///< lambda in (0, 1]
   RlsWeighting weighting = RlsWeighting::kUnity;
 
   /// Plain RLS: lambda = Lambda = 1.

@@ -26,7 +26,8 @@ namespace {
 
 /// || a0^-1 (a - a0) ||_F with fixed-size matrices (unrolled products; see kalman_filter.cpp).
 template <int N>
-double RelativeChangeFixed(const Eigen::MatrixXd& a0_inv, const Eigen::MatrixXd& a0, const Eigen::MatrixXd& a) {
+double RelativeChangeFixed(const Eigen::MatrixXd& a0_inv, const Eigen::MatrixXd& a0,
+                           const Eigen::MatrixXd& a) {
   using M = Eigen::Matrix<double, N, N>;
   const M d = Eigen::Map<const M>(a.data()) - Eigen::Map<const M>(a0.data());
   const M r = Eigen::Map<const M>(a0_inv.data()) * d;
@@ -44,7 +45,8 @@ double ThermalDiscretiser::RelativeChange(const Eigen::MatrixXd& a_per_s) {
 }
 
 bool ThermalDiscretiser::Update(const ThermalLinearModel& lin, double dt_s) {
-  const bool same_shape = a_last_.rows() == lin.a_per_s.rows() && a_last_.cols() == lin.a_per_s.cols();
+  const bool same_shape =
+      a_last_.rows() == lin.a_per_s.rows() && a_last_.cols() == lin.a_per_s.cols();
   if (same_shape && discrete_.dt_s > 0.0 &&
       std::abs(dt_s - discrete_.dt_s) <= 1e-9 * discrete_.dt_s) {
     if (RelativeChange(lin.a_per_s) <= relative_tolerance_) return false;

@@ -2,6 +2,8 @@
 
 #include <fmt/core.h>
 #include <fmt/format.h>
+#include <muParser.h>
+#include <toml++/toml.h>
 
 #include <Eigen/LU>
 #include <algorithm>
@@ -9,10 +11,8 @@
 #include <cstdlib>
 #include <deque>
 #include <map>
-#include <muParser.h>
 #include <optional>
 #include <set>
-#include <toml++/toml.h>
 
 namespace pumptherm::estimators {
 namespace {
@@ -40,10 +40,10 @@ struct ExpressionVariables {
 /// its lookup rule. Outside the grid the value at the nearest edge is taken (no extrapolation).
 struct Table {
   std::string name;
-  bool linear = true;       ///< linear interpolation, else rounding to the nearest grid point
-  std::vector<double> x;    ///< row axis (first column), strictly increasing
-  std::vector<double> y;    ///< column axis (header of a map), strictly increasing; empty: curve
-  std::vector<double> v;    ///< values, row-major: v[i * max(1, y.size()) + j]
+  bool linear = true;     ///< linear interpolation, else rounding to the nearest grid point
+  std::vector<double> x;  ///< row axis (first column), strictly increasing
+  std::vector<double> y;  ///< column axis (header of a map), strictly increasing; empty: curve
+  std::vector<double> v;  ///< values, row-major: v[i * max(1, y.size()) + j]
 
   /// Index and weight of the upper neighbour along `axis` (linear), or the nearest index with
   /// weight 0 (rounding; a tie goes to the point farther from zero, as MATLAB's round does).
@@ -59,8 +59,8 @@ struct Table {
       i0 = n - 1;
       return;
     }
-    const std::size_t hi = static_cast<std::size_t>(
-        std::upper_bound(axis.begin(), axis.end(), q) - axis.begin());  // axis[hi-1] <= q < axis[hi]
+    const std::size_t hi = static_cast<std::size_t>(std::upper_bound(axis.begin(), axis.end(), q) -
+                                                    axis.begin());  // axis[hi-1] <= q < axis[hi]
     const std::size_t lo = hi - 1;
     const double span = axis[hi] - axis[lo];
     const double f = (q - axis[lo]) / span;
@@ -77,7 +77,9 @@ struct Table {
     }
   }
 
-  double At(std::size_t i, std::size_t j) const { return v[i * std::max<std::size_t>(1, y.size()) + j]; }
+  double At(std::size_t i, std::size_t j) const {
+    return v[i * std::max<std::size_t>(1, y.size()) + j];
+  }
 
   double Curve(double q) const {
     std::size_t i = 0;
@@ -96,7 +98,9 @@ struct Table {
            wi * ((1.0 - wj) * At(i1, j) + wj * At(i1, j1));
   }
 
-  static double CurveCallback(void* self, double q) { return static_cast<const Table*>(self)->Curve(q); }
+  static double CurveCallback(void* self, double q) {
+    return static_cast<const Table*>(self)->Curve(q);
+  }
   static double MapCallback(void* self, double qr, double qc) {
     return static_cast<const Table*>(self)->Map(qr, qc);
   }
@@ -137,7 +141,8 @@ void ParseTableCsv(std::string_view text, const std::string& where, bool map, Ta
     std::size_t c = 0;
     while (true) {
       const std::size_t comma = l.find(',', c);
-      cells.push_back(l.substr(c, comma == std::string_view::npos ? std::string_view::npos : comma - c));
+      cells.push_back(
+          l.substr(c, comma == std::string_view::npos ? std::string_view::npos : comma - c));
       if (comma == std::string_view::npos) break;
       c = comma + 1;
     }
@@ -147,15 +152,20 @@ void ParseTableCsv(std::string_view text, const std::string& where, bool map, Ta
   auto fail = [&](int l, std::size_t col, const std::string& what) {
     throw std::runtime_error(fmt::format("{}:{}: column {}: {}", where, l, col + 1, what));
   };
-  if (rows.size() < 2) throw std::runtime_error(fmt::format("{}: needs a header and at least one row", where));
+  if (rows.size() < 2)
+    throw std::runtime_error(fmt::format("{}: needs a header and at least one row", where));
   const std::size_t cols = rows[0].size();
-  if (!map && cols != 2) fail(lines[0], 0, fmt::format("a curve has 2 columns (x, value), found {}", cols));
+  if (!map && cols != 2)
+    fail(lines[0], 0, fmt::format("a curve has 2 columns (x, value), found {}", cols));
   if (map && cols < 2) fail(lines[0], 0, "a map needs the row axis and at least one value column");
   if (map) {
     for (std::size_t j = 1; j < cols; ++j) {
       auto v = ParseNumber(rows[0][j], true);
-      if (!v) fail(lines[0], j, fmt::format("header '{}' does not start with the column's axis value", rows[0][j]));
-      if (!t.y.empty() && !(*v > t.y.back())) fail(lines[0], j, "column axis values must increase strictly");
+      if (!v)
+        fail(lines[0], j,
+             fmt::format("header '{}' does not start with the column's axis value", rows[0][j]));
+      if (!t.y.empty() && !(*v > t.y.back()))
+        fail(lines[0], j, "column axis values must increase strictly");
       t.y.push_back(*v);
     }
   }
@@ -168,7 +178,8 @@ void ParseTableCsv(std::string_view text, const std::string& where, bool map, Ta
       auto v = ParseNumber(rows[r][j], false);
       if (!v) fail(lines[r], j, fmt::format("'{}' is not a finite number", rows[r][j]));
       if (j == 0) {
-        if (!t.x.empty() && !(*v > t.x.back())) fail(lines[r], j, "row axis values must increase strictly");
+        if (!t.x.empty() && !(*v > t.x.back()))
+          fail(lines[r], j, "row axis values must increase strictly");
         t.x.push_back(*v);
       } else {
         t.v.push_back(*v);
@@ -188,7 +199,7 @@ struct Expression {
   double value = 0.0;                  ///< the value when constant
   std::unique_ptr<mu::Parser> parser;  ///< set only when the expression reads an input
   std::string text;
-  bool reads_nodes = false;            ///< reads a node temperature `<node>_C`
+  bool reads_nodes = false;  ///< reads a node temperature `<node>_C`
 
   bool Varies() const { return parser != nullptr; }
   double Eval() const { return parser ? parser->Eval() : value; }
@@ -319,7 +330,8 @@ struct ThermalModel::Impl {
         e.value = p->Eval();
         const auto used = p->GetUsedVar();
         for (const auto& [used_name, ptr] : used) {
-          for (const std::string& st : state_names) e.reads_nodes = e.reads_nodes || used_name == st + "_C";
+          for (const std::string& st : state_names)
+            e.reads_nodes = e.reads_nodes || used_name == st + "_C";
           for (const Quantity& q : quantities) {
             e.reads_nodes = e.reads_nodes || (used_name == q.name && q.value.reads_nodes);
           }
@@ -327,8 +339,8 @@ struct ThermalModel::Impl {
         if (!used.empty()) e.parser = std::move(p);
       } catch (const mu::Parser::exception_type& err) {
         Fail(LineOf(n),
-             fmt::format("key '{}': expression \"{}\": {} (at position {}){}", key, *s, err.GetMsg(),
-                         err.GetPos() + 1,
+             fmt::format("key '{}': expression \"{}\": {} (at position {}){}", key, *s,
+                         err.GetMsg(), err.GetPos() + 1,
                          inputs_allowed ? "" : " (only parameters and tables may be used here)"));
       }
     } else {
@@ -447,8 +459,8 @@ struct ThermalModel::Impl {
   const Reduced& Current() const {
     if (!resistances_vary) return cached;
     if (!Reduce(scratch)) {
-      throw std::domain_error(fmt::format(
-          "{}: the massless sub-network is singular at this operating point", source));
+      throw std::domain_error(
+          fmt::format("{}: the massless sub-network is singular at this operating point", source));
     }
     return scratch;
   }
@@ -467,8 +479,8 @@ struct ThermalModel::Impl {
       for (const auto& [node, share] : t.shares) {
         p0(node) += share * p * scale0;
         if (t.alpha_per_K != 0.0) {
-          const double w = share * p * t.alpha_per_K /
-                           static_cast<double>(t.temperature_states.size());
+          const double w =
+              share * p * t.alpha_per_K / static_cast<double>(t.temperature_states.size());
           for (int s : t.temperature_states) d(node, s) += w;
         }
       }
@@ -492,8 +504,8 @@ void CheckKeys(const toml::table& t, std::initializer_list<const char*> allowed,
     bool ok = false;
     for (const char* a : allowed) ok = ok || k.str() == a;
     if (!ok) {
-      throw ThermalModelError(fmt::format("{}: {}: unknown key '{}'", Where(source, LineOf(v)),
-                                          what, k.str()));
+      throw ThermalModelError(
+          fmt::format("{}: {}: unknown key '{}'", Where(source, LineOf(v)), what, k.str()));
     }
   }
 }
@@ -503,13 +515,15 @@ void CheckKeys(const toml::table& t, std::initializer_list<const char*> allowed,
 ThermalOperatingRange ParseOperatingRange(const toml::node& n, const std::string& source) {
   const toml::table* t = n.as_table();
   auto fail = [&](const toml::node& at, const std::string& what) {
-    throw ThermalModelError(fmt::format("{}: [operating_range]: {}", Where(source, LineOf(at)), what));
+    throw ThermalModelError(
+        fmt::format("{}: [operating_range]: {}", Where(source, LineOf(at)), what));
   };
   if (!t) fail(n, "must be a table");
   CheckKeys(*t, {"speed_rpm", "iq_A", "scale_current_A"}, "[operating_range]", source);
   ThermalOperatingRange r;
   const auto speed = (*t)["speed_rpm"].value<double>();
-  if (!speed || !(*speed > 0.0) || !std::isfinite(*speed)) fail(n, "speed_rpm must be a positive number");
+  if (!speed || !(*speed > 0.0) || !std::isfinite(*speed))
+    fail(n, "speed_rpm must be a positive number");
   r.speed_rpm = *speed;
   const toml::array* iq = (*t)["iq_A"].as_array();
   if (!iq || iq->empty() || iq->size() > 8) fail(n, "iq_A must be an array of 1 to 8 currents");
@@ -521,10 +535,12 @@ ThermalOperatingRange ParseOperatingRange(const toml::node& n, const std::string
   }
   if (const toml::node* sc = t->get("scale_current_A")) {
     const auto a = sc->value<double>();
-    if (!a || !(*a > 0.0) || !std::isfinite(*a)) fail(*sc, "scale_current_A must be a positive number");
+    if (!a || !(*a > 0.0) || !std::isfinite(*a))
+      fail(*sc, "scale_current_A must be a positive number");
     r.scale_current_A = *a;
   }
-  if (!(r.scale_current_A > 0.0)) fail(n, "iq_A must hold a non-zero current (or give scale_current_A)");
+  if (!(r.scale_current_A > 0.0))
+    fail(n, "iq_A must hold a non-zero current (or give scale_current_A)");
   return r;
 }
 
@@ -534,11 +550,14 @@ ThermalOperatingRange ParseOperatingRange(const toml::node& n, const std::string
 /// ThermalModelError naming the file and line (Impl::Fail).
 class ThermalModel::Impl::Parser {
  public:
-  Parser(Impl& m, const toml::table& root, const ThermalModelFiles& files) : m_(m), root_(root), files_(files) {}
+  Parser(Impl& m, const toml::table& root, const ThermalModelFiles& files)
+      : m_(m), root_(root), files_(files) {}
 
   void Parse() {
-    CheckKeys(root_, {"model", "parameters", "operating_range", "table", "quantity", "node", "edge", "loss"},
-              "top level", m_.source);
+    CheckKeys(
+        root_,
+        {"model", "parameters", "operating_range", "table", "quantity", "node", "edge", "loss"},
+        "top level", m_.source);
     ParseHeader();
     ParseNodes();
     ReserveBuiltInNames();
@@ -557,10 +576,10 @@ class ThermalModel::Impl::Parser {
   Impl& m_;
   const toml::table& root_;
   const ThermalModelFiles& files_;
-  std::map<std::string, int> index_;     ///< node index by name
-  std::set<std::string> names_taken_;    ///< names an expression can read
+  std::map<std::string, int> index_;         ///< node index by name
+  std::set<std::string> names_taken_;        ///< names an expression can read
   std::vector<std::vector<int>> adjacency_;  ///< node-to-node edges
-  std::vector<bool> touches_boundary_;   ///< per node: an edge to ambient or coolant
+  std::vector<bool> touches_boundary_;       ///< per node: an edge to ambient or coolant
 
   /// [model], [parameters], [operating_range].
   void ParseHeader() {
@@ -605,12 +624,16 @@ class ThermalModel::Impl::Parser {
     if (*node_name == "ambient" || *node_name == "coolant") {
       m_.Fail(line, fmt::format("node '{}': the name is reserved for a boundary", *node_name));
     }
-    if (index_.count(*node_name)) m_.Fail(line, fmt::format("node '{}' is declared twice", *node_name));
+    if (index_.count(*node_name))
+      m_.Fail(line, fmt::format("node '{}' is declared twice", *node_name));
     const toml::node* cap = nt->get("capacity_J_per_K");
-    if (!cap) m_.Fail(line, fmt::format("node '{}': missing capacity_J_per_K (0 for massless)", *node_name));
+    if (!cap)
+      m_.Fail(line,
+              fmt::format("node '{}': missing capacity_J_per_K (0 for massless)", *node_name));
     const double c = m_.Compile(*cap, "capacity_J_per_K", false).value;
     if (c < 0.0) {
-      m_.Fail(LineOf(*cap), fmt::format("node '{}': negative capacity_J_per_K ({})", *node_name, c));
+      m_.Fail(LineOf(*cap),
+              fmt::format("node '{}': negative capacity_J_per_K ({})", *node_name, c));
     }
     index_[*node_name] = static_cast<int>(m_.nodes.size());
     m_.nodes.push_back({*node_name, c == 0.0, line});
@@ -643,8 +666,8 @@ class ThermalModel::Impl::Parser {
   void ReserveBuiltInNames() {
     for (const auto& [k, v] : m_.parameters) names_taken_.insert(k);
     for (const auto& st : m_.state_names) names_taken_.insert(st + "_C");
-    for (const char* v : {"speed_rpm", "speed_rad_per_s", "id_A", "iq_A", "is_A", "i2_A2", "ambient_C",
-                          "coolant_C"}) {
+    for (const char* v : {"speed_rpm", "speed_rad_per_s", "id_A", "iq_A", "is_A", "i2_A2",
+                          "ambient_C", "coolant_C"}) {
       names_taken_.insert(v);
     }
   }
@@ -655,12 +678,15 @@ class ThermalModel::Impl::Parser {
     static const std::string kRest = kFirst + "0123456789";
     if (nm.empty() || kFirst.find(nm[0]) == std::string::npos ||
         nm.find_first_not_of(kRest) != std::string::npos) {
-      m_.Fail(line, fmt::format("{} '{}': a name is letters, digits and '_', not starting with a digit", what, nm));
+      m_.Fail(line,
+              fmt::format("{} '{}': a name is letters, digits and '_', not starting with a digit",
+                          what, nm));
     }
     if (!names_taken_.insert(nm).second) {
-      m_.Fail(line, fmt::format("{} '{}': the name is already a parameter, input, node temperature, table "
-                                "or quantity",
-                                what, nm));
+      m_.Fail(line, fmt::format(
+                        "{} '{}': the name is already a parameter, input, node temperature, table "
+                        "or quantity",
+                        what, nm));
     }
   }
 
@@ -689,17 +715,21 @@ class ThermalModel::Impl::Parser {
     }
     const std::string lookup = (*tt)["lookup"].value_or(std::string{});
     if (lookup != "linear" && lookup != "nearest") {
-      m_.Fail(line, fmt::format("table '{}': lookup must be \"linear\" (interpolation) or \"nearest\" "
-                                "(rounding to the grid)",
-                                t->name));
+      m_.Fail(line,
+              fmt::format("table '{}': lookup must be \"linear\" (interpolation) or \"nearest\" "
+                          "(rounding to the grid)",
+                          t->name));
     }
     t->linear = lookup == "linear";
     const std::string file = (*tt)["file"].value_or(std::string{});
-    if (file.empty()) m_.Fail(line, fmt::format("table '{}': missing file = \"<path relative to the model file>\"", t->name));
+    if (file.empty())
+      m_.Fail(line, fmt::format("table '{}': missing file = \"<path relative to the model file>\"",
+                                t->name));
     if (!files_.read) {
-      m_.Fail(line, fmt::format("table '{}': this model names a file ({}) but no file reader was given "
-                                "to the parser",
-                                t->name, file));
+      m_.Fail(line,
+              fmt::format("table '{}': this model names a file ({}) but no file reader was given "
+                          "to the parser",
+                          t->name, file));
     }
     const std::string path = JoinPath(files_.directory, file);
     try {
@@ -761,7 +791,8 @@ class ThermalModel::Impl::Parser {
     const toml::array* between = (*et)["between"].as_array();
     if (!between || between->size() != 2 || !(*between)[0].is_string() ||
         !(*between)[1].is_string()) {
-      m_.Fail(line, "[[edge]]: 'between' must name two nodes, e.g. between = [\"frame\", \"ambient\"]");
+      m_.Fail(line,
+              "[[edge]]: 'between' must name two nodes, e.g. between = [\"frame\", \"ambient\"]");
     }
     const std::string na = *(*between)[0].value<std::string>();
     const std::string nb = *(*between)[1].value<std::string>();
@@ -778,7 +809,8 @@ class ThermalModel::Impl::Parser {
     if (!r) m_.Fail(line, fmt::format("edge {}: missing resistance_K_per_W", label));
     e.resistance_K_per_W = m_.Compile(*r, "resistance_K_per_W", true);
     if (e.resistance_K_per_W.value == 0.0) {
-      m_.Fail(LineOf(*r), fmt::format("edge {}: zero resistance (merge the two nodes instead)", label));
+      m_.Fail(LineOf(*r),
+              fmt::format("edge {}: zero resistance (merge the two nodes instead)", label));
     }
     m_.resistances_vary = m_.resistances_vary || e.resistance_K_per_W.Varies();
     m_.uses_node_temperatures = m_.uses_node_temperatures || e.resistance_K_per_W.reads_nodes;
@@ -797,7 +829,8 @@ class ThermalModel::Impl::Parser {
     const Impl& m = m_;
     for (int i = 0; i < m.N(); ++i) {
       if (adjacency_[i].empty() && !touches_boundary_[i]) {
-        m.Fail(m.nodes[i].line, fmt::format("node '{}' is not connected to any edge", m.nodes[i].name));
+        m.Fail(m.nodes[i].line,
+               fmt::format("node '{}' is not connected to any edge", m.nodes[i].name));
       }
     }
     std::vector<bool> reached(static_cast<std::size_t>(m.N()), false);
@@ -864,7 +897,8 @@ class ThermalModel::Impl::Parser {
   void ParseShares(const toml::table& tt, LossTerm& t) {
     const toml::table* shares = tt["shares"].as_table();
     if (!shares || shares->empty()) {
-      m_.Fail(t.line, fmt::format("loss '{}': missing shares = {{ node = fraction, ... }}", t.name));
+      m_.Fail(t.line,
+              fmt::format("loss '{}': missing shares = {{ node = fraction, ... }}", t.name));
     }
     for (const auto& [k, v] : *shares) {
       auto it = index_.find(std::string(k.str()));
@@ -925,7 +959,8 @@ class ThermalModel::Impl::Parser {
     m_.winding_weights = Eigen::VectorXd::Zero(m_.n());
     std::set<int> states;
     for (const LossTerm& t : m_.losses) {
-      if (t.alpha_per_K > 0.0) states.insert(t.temperature_states.begin(), t.temperature_states.end());
+      if (t.alpha_per_K > 0.0)
+        states.insert(t.temperature_states.begin(), t.temperature_states.end());
     }
     for (int s : states) m_.winding_weights(s) = 1.0 / static_cast<double>(states.size());
   }
@@ -988,8 +1023,9 @@ class ThermalModel::Impl::Parser {
     lu.setThreshold(1e-10);
     if (lu.isInvertible()) return;
     std::string names;
-    for (int i : members) names += fmt::format("{}'{}' (line {})", names.empty() ? "" : ", ",
-                                              m_.nodes[i].name, m_.nodes[i].line);
+    for (int i : members)
+      names += fmt::format("{}'{}' (line {})", names.empty() ? "" : ", ", m_.nodes[i].name,
+                           m_.nodes[i].line);
     m_.Fail(m_.nodes[members.front()].line,
             fmt::format("massless nodes {} form a singular sub-network: Y22 of eq. S25 "
                         "cannot be inverted",
@@ -1005,8 +1041,8 @@ ThermalModel ThermalModel::Parse(std::string_view toml_text, const std::string& 
   try {
     root = toml::parse(toml_text, source);
   } catch (const toml::parse_error& e) {
-    throw ThermalModelError(fmt::format("{}: {}", Where(source, static_cast<int>(e.source().begin.line)),
-                                        e.description()));
+    throw ThermalModelError(fmt::format(
+        "{}: {}", Where(source, static_cast<int>(e.source().begin.line)), e.description()));
   }
   Impl::Parser(*impl, root, files).Parse();
   return ThermalModel(std::move(impl));
@@ -1119,7 +1155,8 @@ Eigen::VectorXd ThermalModel::SteadyState_degC(const ThermalInputs& in) const {
   ThermalLinearModel lin;
   Linearise(in, lin);
   Eigen::FullPivLU<Eigen::MatrixXd> lu(lin.a_per_s);
-  if (!lu.isInvertible()) throw std::domain_error("thermal model: singular system, no steady state");
+  if (!lu.isInvertible())
+    throw std::domain_error("thermal model: singular system, no steady state");
   return lu.solve(-lin.f_K_per_s);
 }
 

@@ -83,9 +83,9 @@ struct ThermalLinearModel {
 /// The model's typical operation, from its optional `[operating_range]` table: the defaults of
 /// tools that need operating points (sensor placement).
 struct ThermalOperatingRange {
-  double speed_rpm = 0.0;                ///< typical mechanical speed
-  std::vector<double> iq_A;              ///< q-axis currents spanning the typical load (1 to 8)
-  double scale_current_A = 0.0;          ///< a sustained high load (the scaling run's current)
+  double speed_rpm = 0.0;        ///< typical mechanical speed
+  std::vector<double> iq_A;      ///< q-axis currents spanning the typical load (1 to 8)
+  double scale_current_A = 0.0;  ///< a sustained high load (the scaling run's current)
 };
 
 /// How one node was declared.

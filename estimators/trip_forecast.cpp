@@ -13,12 +13,14 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 
 TripForecast::TripForecast(int states) : x_(states), next_(states), steady_(states) {}
 
-double TripForecast::TimeToTrip_s(const ThermalModel& model, const ThermalInputs& in, const Eigen::VectorXd& x_degC,
-                                  const std::vector<double>& trip_degC, const DisturbanceThermalSensor* disturbances,
-                                  int* node) {
+double TripForecast::TimeToTrip_s(const ThermalModel& model, const ThermalInputs& in,
+                                  const Eigen::VectorXd& x_degC,
+                                  const std::vector<double>& trip_degC,
+                                  const DisturbanceThermalSensor* disturbances, int* node) {
   *node = -1;
   const auto n = static_cast<std::size_t>(x_degC.size());
-  if (trip_degC.size() < n || std::none_of(trip_degC.begin(), trip_degC.end(), [](double t) { return std::isfinite(t); })) {
+  if (trip_degC.size() < n ||
+      std::none_of(trip_degC.begin(), trip_degC.end(), [](double t) { return std::isfinite(t); })) {
     return kInf;
   }
   x_ = x_degC;
@@ -38,7 +40,8 @@ double TripForecast::TimeToTrip_s(const ThermalModel& model, const ThermalInputs
     steady_ = -steady_;
     if (!steady_.allFinite()) return kInf;
     bool reaches = false;
-    for (std::size_t i = 0; i < n; ++i) reaches = reaches || steady_(static_cast<Eigen::Index>(i)) >= trip_degC[i];
+    for (std::size_t i = 0; i < n; ++i)
+      reaches = reaches || steady_(static_cast<Eigen::Index>(i)) >= trip_degC[i];
     if (!reaches) return kInf;
     model.Linearise(in, x_, lin_);
     if (disturbances) disturbances->AddDisturbanceForcing(lin_);

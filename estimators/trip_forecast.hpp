@@ -5,7 +5,6 @@
 /// no allocation per call once sized.
 
 #include <Eigen/Dense>
-
 #include <vector>
 
 #include "estimators/disturbance_sensor.hpp"
@@ -29,9 +28,9 @@ class TripForecast {
   /// steady state stays below every level never trips). `node` gets the node that trips first
   /// (-1: none). With `disturbances`, the disturbance-state filter's heat (frame path, rotor)
   /// is held too. A model that cannot be linearised or solved at these inputs: infinity.
-  double TimeToTrip_s(const ThermalModel& model, const ThermalInputs& in, const Eigen::VectorXd& x_degC,
-                      const std::vector<double>& trip_degC, const DisturbanceThermalSensor* disturbances,
-                      int* node);
+  double TimeToTrip_s(const ThermalModel& model, const ThermalInputs& in,
+                      const Eigen::VectorXd& x_degC, const std::vector<double>& trip_degC,
+                      const DisturbanceThermalSensor* disturbances, int* node);
 
  private:
   ThermalLinearModel lin_;

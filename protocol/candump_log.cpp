@@ -121,7 +121,8 @@ const char* ParseId(std::string_view s, std::size_t& i, char stop, CanFrame& f) 
 }
 
 bool ValidFdLength(std::size_t n) noexcept {
-  static constexpr std::size_t kFdLengths[] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64};
+  static constexpr std::size_t kFdLengths[] = {0, 1,  2,  3,  4,  5,  6,  7,
+                                               8, 12, 16, 20, 24, 32, 48, 64};
   for (std::size_t l : kFdLengths) {
     if (l == n) return true;
   }
@@ -186,10 +187,12 @@ const char* ParseExtraInfo(std::string_view s, std::size_t& i, CandumpRecord& r)
   i += 2;
   i = SkipBlanks(s, i);
   const bool brs = i < s.size() && s[i] == 'B';
-  if (i >= s.size() || (s[i] != 'B' && s[i] != '-')) return "expected 'B' or '-' (candump -x flags)";
+  if (i >= s.size() || (s[i] != 'B' && s[i] != '-'))
+    return "expected 'B' or '-' (candump -x flags)";
   i = SkipBlanks(s, i + 1);
   const bool esi = i < s.size() && s[i] == 'E';
-  if (i >= s.size() || (s[i] != 'E' && s[i] != '-')) return "expected 'E' or '-' (candump -x flags)";
+  if (i >= s.size() || (s[i] != 'E' && s[i] != '-'))
+    return "expected 'E' or '-' (candump -x flags)";
   r.frame.fd_flags = static_cast<std::uint8_t>((brs ? 1 : 0) | (esi ? 2 : 0));
   i = SkipBlanks(s, i + 1);
   return nullptr;
@@ -197,7 +200,8 @@ const char* ParseExtraInfo(std::string_view s, std::size_t& i, CandumpRecord& r)
 
 /// "[8]" (classic) or "[08]" (CAN FD): the length candump prints after the ID.
 const char* ParseBracketLength(std::string_view s, std::size_t& i, CanFrame& f) noexcept {
-  if (i >= s.size() || s[i] != '[') return "expected '[' and the length after the CAN ID (or '#' of the log format)";
+  if (i >= s.size() || s[i] != '[')
+    return "expected '[' and the length after the CAN ID (or '#' of the log format)";
   ++i;
   std::size_t len = 0, digits = 0;
   while (i < s.size() && s[i] >= '0' && s[i] <= '9' && digits < 2) {
@@ -205,7 +209,8 @@ const char* ParseBracketLength(std::string_view s, std::size_t& i, CanFrame& f) 
     ++i;
     ++digits;
   }
-  if (digits == 0 || i >= s.size() || s[i] != ']') return "expected the length in brackets, as [8] or [64]";
+  if (digits == 0 || i >= s.size() || s[i] != ']')
+    return "expected the length in brackets, as [8] or [64]";
   f.fd = digits == 2;
   if (f.fd ? !ValidFdLength(len) : len > 8) return "frame length out of range";
   f.len = static_cast<std::uint8_t>(len);
@@ -236,7 +241,8 @@ const char* ParseLongFrame(std::string_view s, std::size_t& i, CandumpRecord& r)
   while (i < s.size() && s[i] != '\'' && s.substr(i) != "ERRORFRAME") {
     const int hi = HexValue(s[i]);
     const int lo = i + 1 < s.size() ? HexValue(s[i + 1]) : -1;
-    if (hi < 0 || lo < 0 || (i + 2 < s.size() && !IsBlank(s[i + 2]))) return "expected a payload byte (two hex digits)";
+    if (hi < 0 || lo < 0 || (i + 2 < s.size() && !IsBlank(s[i + 2])))
+      return "expected a payload byte (two hex digits)";
     if (n >= f.len) return "more payload bytes than the length in brackets";
     f.data[n++] = static_cast<std::uint8_t>((hi << 4) | lo);
     i = SkipBlanks(s, i + 2);
@@ -261,7 +267,8 @@ CandumpParse ParseCandumpLine(std::string_view line) noexcept {
   CandumpRecord& r = p.record;
   if (line[i] == '(') {
     if (const char* e = ParseTimestamp(line, i, r.time_us)) return Fail(i + 1, e);
-    if (i >= line.size() || !IsBlank(line[i])) return Fail(i + 1, "expected a space after the timestamp");
+    if (i >= line.size() || !IsBlank(line[i]))
+      return Fail(i + 1, "expected a space after the timestamp");
   } else {
     r.has_time = false;  // the screen format without -t
   }
@@ -274,13 +281,15 @@ CandumpParse ParseCandumpLine(std::string_view line) noexcept {
     return Fail(if_begin + 1, "expected '(' starting the timestamp");
   }
   if (r.interface.size() > 15) {
-    return Fail(if_begin + 1, r.has_time ? "interface name longer than 15 characters"
-                                         : "not a candump line: expected '(' and a timestamp, or an interface "
-                                           "(at most 15 characters)");
+    return Fail(if_begin + 1,
+                r.has_time ? "interface name longer than 15 characters"
+                           : "not a candump line: expected '(' and a timestamp, or an interface "
+                             "(at most 15 characters)");
   }
   i = SkipBlanks(line, i);
   std::size_t token_end = i;
-  while (token_end < line.size() && !IsBlank(line[token_end]) && line[token_end] != '#') ++token_end;
+  while (token_end < line.size() && !IsBlank(line[token_end]) && line[token_end] != '#')
+    ++token_end;
   if (token_end < line.size() && line[token_end] == '#') {
     // The log format (-l, -L, asc2log): "ID#DATA", then " R" or " T" with -x (received, sent).
     if (line.size() >= 2 && IsBlank(line[line.size() - 2]) &&
@@ -297,8 +306,9 @@ CandumpParse ParseCandumpLine(std::string_view line) noexcept {
     if (const char* e = ParseLongFrame(line, i, r)) {
       // Without a timestamp and a CAN ID after the first word, it is not candump's output at all.
       if (!r.has_time && i <= token_end && i >= frame_begin) {
-        return Fail(if_begin + 1, "not a candump line: expected '(' and a timestamp, or an interface, a CAN ID "
-                                  "and [length]");
+        return Fail(if_begin + 1,
+                    "not a candump line: expected '(' and a timestamp, or an interface, a CAN ID "
+                    "and [length]");
       }
       return Fail(i + 1, e);
     }
@@ -346,7 +356,8 @@ void AppendCandumpLine(std::string& out, std::int64_t time_us, std::string_view 
     AppendDecimal(out, static_cast<std::uint64_t>(time_us % 1000000), 6);
     out += ") ";
   } else {  // not from a clock; formatted as before (C++ division: "-000000001.-00001")
-    fmt::format_to(std::back_inserter(out), "({:010d}.{:06d}) ", time_us / 1000000, time_us % 1000000);
+    fmt::format_to(std::back_inserter(out), "({:010d}.{:06d}) ", time_us / 1000000,
+                   time_us % 1000000);
   }
   out.append(interface);
   out += ' ';

@@ -116,7 +116,8 @@ void MessageCodec::Insert(const SignalPlan& p, std::uint64_t bits, std::uint8_t*
     if (p.shift + p.length > 64) {
       const int spill = 64 - p.shift;
       const auto high_mask = static_cast<std::uint8_t>(p.mask >> spill);
-      buf[p.window + 8] = static_cast<std::uint8_t>((buf[p.window + 8] & ~high_mask) | (bits >> spill));
+      buf[p.window + 8] =
+          static_cast<std::uint8_t>((buf[p.window + 8] & ~high_mask) | (bits >> spill));
     }
     return;
   }
@@ -147,14 +148,16 @@ double MessageCodec::ToPhysical(const SignalPlan& p, std::uint64_t bits) const n
       raw = std::bit_cast<double>(bits);
       break;
     default:
-      raw = p.sign_bit != 0 ? static_cast<double>(static_cast<std::int64_t>((bits ^ p.sign_bit) - p.sign_bit))
-                            : static_cast<double>(bits);
+      raw = p.sign_bit != 0
+                ? static_cast<double>(static_cast<std::int64_t>((bits ^ p.sign_bit) - p.sign_bit))
+                : static_cast<double>(bits);
       break;
   }
   return raw * p.factor + p.offset;
 }
 
-std::uint64_t MessageCodec::ToRaw(const SignalPlan& p, double value, EncodeResult& result) const noexcept {
+std::uint64_t MessageCodec::ToRaw(const SignalPlan& p, double value,
+                                  EncodeResult& result) const noexcept {
   if (std::isnan(value)) {
     if (p.has_sna) return p.sna_bits;
     ++result.nan_without_sna;
@@ -184,8 +187,8 @@ std::uint64_t MessageCodec::ToRaw(const SignalPlan& p, double value, EncodeResul
     ++result.saturated;
   }
   if (p.sign_bit != 0) {
-    const std::int64_t r = x >= kTwoTo63 ? std::numeric_limits<std::int64_t>::max()
-                                         : static_cast<std::int64_t>(x);
+    const std::int64_t r =
+        x >= kTwoTo63 ? std::numeric_limits<std::int64_t>::max() : static_cast<std::int64_t>(x);
     return static_cast<std::uint64_t>(std::clamp(r, p.raw_min_int, p.raw_max_int)) & p.mask;
   }
   const std::uint64_t u = x >= kTwoTo64 ? ~std::uint64_t{0} : static_cast<std::uint64_t>(x);
@@ -207,7 +210,8 @@ bool MessageCodec::Selected(const std::uint8_t* buf, std::size_t index) const no
   return Selected(buf, sw) && InRanges(p, Extract(signals_[sw], buf));
 }
 
-bool MessageCodec::SelectedByValues(std::span<const double> values, std::size_t index) const noexcept {
+bool MessageCodec::SelectedByValues(std::span<const double> values,
+                                    std::size_t index) const noexcept {
   const SignalPlan& p = signals_[index];
   if (p.overhangs) return false;
   if (p.switch_index < 0) return true;
@@ -235,7 +239,8 @@ CodecStatus MessageCodec::Decode(std::span<const std::uint8_t> payload,
   return CodecStatus::kOk;
 }
 
-std::uint64_t MessageCodec::RawBits(std::span<const std::uint8_t> payload, std::size_t index) const noexcept {
+std::uint64_t MessageCodec::RawBits(std::span<const std::uint8_t> payload,
+                                    std::size_t index) const noexcept {
   if (signals_[index].overhangs) return 0;
   alignas(8) std::uint8_t buf[kBufferBytes_];
   std::memcpy(buf, payload.data(), min_bytes_);
@@ -243,7 +248,8 @@ std::uint64_t MessageCodec::RawBits(std::span<const std::uint8_t> payload, std::
   return Extract(signals_[index], buf);
 }
 
-bool MessageCodec::IsPresent(std::span<const std::uint8_t> payload, std::size_t index) const noexcept {
+bool MessageCodec::IsPresent(std::span<const std::uint8_t> payload,
+                             std::size_t index) const noexcept {
   alignas(8) std::uint8_t buf[kBufferBytes_];
   std::memcpy(buf, payload.data(), min_bytes_);
   std::memset(buf + min_bytes_, 0, 9);

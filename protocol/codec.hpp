@@ -32,8 +32,8 @@ namespace pumptherm::protocol {
 /// Outcome of decoding or encoding one frame.
 enum class CodecStatus {
   kOk,
-  kTooShort,      ///< payload shorter than `MessageCodec::min_bytes()`: nothing decoded/written
-  kWrongCount,    ///< values span smaller than `MessageCodec::signal_count()`
+  kTooShort,    ///< payload shorter than `MessageCodec::min_bytes()`: nothing decoded/written
+  kWrongCount,  ///< values span smaller than `MessageCodec::signal_count()`
 };
 
 /// What encoding one frame did.
@@ -60,7 +60,8 @@ class MessageCodec {
   /// signal absent by multiplexing or "not available"). No allocation, never throws.
   /// Returns kTooShort (values untouched) if `payload` is shorter than min_bytes(), kWrongCount
   /// if `values` has fewer than signal_count() elements.
-  CodecStatus Decode(std::span<const std::uint8_t> payload, std::span<double> values) const noexcept;
+  CodecStatus Decode(std::span<const std::uint8_t> payload,
+                     std::span<double> values) const noexcept;
 
   /// Raw bits of signal `index` (unsigned, masked to its length; 0 for a signal that overhangs
   /// the declared length), and whether the frame's multiplexer values select it (never for a
@@ -71,7 +72,8 @@ class MessageCodec {
   /// Encodes `values` (message signal order, DBC units) into the first min_bytes() bytes of
   /// `payload`. Multiplexed signals are written only where the given multiplexer values select
   /// them. No allocation, never throws.
-  EncodeResult Encode(std::span<const double> values, std::span<std::uint8_t> payload) const noexcept;
+  EncodeResult Encode(std::span<const double> values,
+                      std::span<std::uint8_t> payload) const noexcept;
 
  private:
   struct SignalPlan {
@@ -80,20 +82,20 @@ class MessageCodec {
     std::uint64_t sna_bits = 0;
     double factor = 1.0;
     double offset = 0.0;
-    double raw_min = 0.0;        ///< saturation range for encoding (integers only)
+    double raw_min = 0.0;  ///< saturation range for encoding (integers only)
     double raw_max = 0.0;
-    std::int64_t raw_min_int = 0;   ///< the same range as integers: doubles round above 2^53
-    std::int64_t raw_max_int = 0;   ///< (signed signals)
-    std::uint64_t raw_max_uint = 0; ///< (unsigned signals)
-    std::uint32_t first_range = 0;  ///< into ranges_
+    std::int64_t raw_min_int = 0;    ///< the same range as integers: doubles round above 2^53
+    std::int64_t raw_max_int = 0;    ///< (signed signals)
+    std::uint64_t raw_max_uint = 0;  ///< (unsigned signals)
+    std::uint32_t first_range = 0;   ///< into ranges_
     std::uint32_t range_count = 0;
     std::int32_t switch_index = -1;
-    std::uint8_t window = 0;     ///< first byte of the 8-byte window
-    std::int8_t shift = 0;       ///< LE: right shift; BE: position of the LSB (negative: 9 bytes)
+    std::uint8_t window = 0;  ///< first byte of the 8-byte window
+    std::int8_t shift = 0;    ///< LE: right shift; BE: position of the LSB (negative: 9 bytes)
     std::uint8_t length = 0;
     bool big_endian = false;
     bool has_sna = false;
-    bool overhangs = false;      ///< reaches past the declared length: always NaN
+    bool overhangs = false;  ///< reaches past the declared length: always NaN
     SignalValueType value_type = SignalValueType::kInteger;
   };
 

@@ -65,21 +65,46 @@ struct Token {
 
 /// Top-level keywords: a node list (`BU_`) or a receiver list ends at one of these.
 bool IsKeyword(std::string_view s) {
-  static constexpr std::array<std::string_view, 36> kKeywords = {
-      "VERSION",      "NS_",           "BS_",          "BU_",          "BO_",
-      "SG_",          "CM_",           "BA_DEF_",      "BA_DEF_DEF_",  "BA_",
-      "VAL_",         "VAL_TABLE_",    "SIG_VALTYPE_", "SG_MUL_VAL_",  "EV_",
-      "ENVVAR_DATA_", "SGTYPE_",       "SGTYPE_VAL_",  "BA_DEF_SGTYPE_", "BA_SGTYPE_",
-      "SIG_TYPE_REF_", "SIG_GROUP_",   "SIGTYPE_VALTYPE_", "BO_TX_BU_", "BA_DEF_REL_",
-      "BA_REL_",      "BA_DEF_DEF_REL_", "BU_SG_REL_", "BU_EV_REL_",   "BU_BO_REL_",
-      "CAT_DEF_",     "CAT_",          "FILTER",       "NS_DESC_",     "EV_DATA_",
-      "ENVVAR_DATA"};
+  static constexpr std::array<std::string_view, 36> kKeywords = {"VERSION",
+                                                                 "NS_",
+                                                                 "BS_",
+                                                                 "BU_",
+                                                                 "BO_",
+                                                                 "SG_",
+                                                                 "CM_",
+                                                                 "BA_DEF_",
+                                                                 "BA_DEF_DEF_",
+                                                                 "BA_",
+                                                                 "VAL_",
+                                                                 "VAL_TABLE_",
+                                                                 "SIG_VALTYPE_",
+                                                                 "SG_MUL_VAL_",
+                                                                 "EV_",
+                                                                 "ENVVAR_DATA_",
+                                                                 "SGTYPE_",
+                                                                 "SGTYPE_VAL_",
+                                                                 "BA_DEF_SGTYPE_",
+                                                                 "BA_SGTYPE_",
+                                                                 "SIG_TYPE_REF_",
+                                                                 "SIG_GROUP_",
+                                                                 "SIGTYPE_VALTYPE_",
+                                                                 "BO_TX_BU_",
+                                                                 "BA_DEF_REL_",
+                                                                 "BA_REL_",
+                                                                 "BA_DEF_DEF_REL_",
+                                                                 "BU_SG_REL_",
+                                                                 "BU_EV_REL_",
+                                                                 "BU_BO_REL_",
+                                                                 "CAT_DEF_",
+                                                                 "CAT_",
+                                                                 "FILTER",
+                                                                 "NS_DESC_",
+                                                                 "EV_DATA_",
+                                                                 "ENVVAR_DATA"};
   return std::find(kKeywords.begin(), kKeywords.end(), s) != kKeywords.end();
 }
 
-bool IsIdentStart(char c) {
-  return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || c == '_';
-}
+bool IsIdentStart(char c) { return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || c == '_'; }
 bool IsIdentChar(char c) { return IsIdentStart(c) || (c >= '0' && c <= '9'); }
 bool IsDigit(char c) { return c >= '0' && c <= '9'; }
 
@@ -123,6 +148,7 @@ class Lexer {
   }
   /// Whether the lexer itself failed (an unterminated string): nothing after it can be read.
   bool failed() const { return failed_; }
+
  private:
   char At(std::size_t i) const { return i < text_.size() ? text_[i] : '\0'; }
   void Advance() {
@@ -172,11 +198,13 @@ class Lexer {
       return t;
     }
     const bool signed_number =
-        (c == '-' || c == '+') && (IsDigit(At(pos_ + 1)) || (At(pos_ + 1) == '.' && IsDigit(At(pos_ + 2))));
+        (c == '-' || c == '+') &&
+        (IsDigit(At(pos_ + 1)) || (At(pos_ + 1) == '.' && IsDigit(At(pos_ + 2))));
     if (IsDigit(c) || signed_number || (c == '.' && IsDigit(At(pos_ + 1)))) {
       if (signed_number) Advance();
       while (IsDigit(At(pos_))) Advance();
-      if (!signed_number && IsDigit(c) && IsIdentStart(At(pos_)) && At(pos_) != 'e' && At(pos_) != 'E') {
+      if (!signed_number && IsDigit(c) && IsIdentStart(At(pos_)) && At(pos_) != 'e' &&
+          At(pos_) != 'E') {
         // Real files name things "2017_5" or "5_SEC_TIMER": digits then letters is a name.
         while (IsIdentChar(At(pos_))) Advance();
         t.kind = TokenKind::kIdentifier;
@@ -309,7 +337,8 @@ class Parser {
       skipped = "signal skipped";
     }
     if (e.line() != kw.line && kw.kind == TokenKind::kIdentifier) {
-      Problem(e.line(), e.column(), fmt::format("{}; the {} of line {} skipped", e.detail(), kw.text, kw.line));
+      Problem(e.line(), e.column(),
+              fmt::format("{}; the {} of line {} skipped", e.detail(), kw.text, kw.line));
     } else {
       Problem(e.line(), e.column(), fmt::format("{}; {}", e.detail(), skipped));
     }
@@ -475,9 +504,10 @@ class Parser {
         FailAt(kw.line, kw.column, fmt::format("message ID {:#x} above 29 bits", m.id));
       }
       // Some writers omit bit 31; such an ID can only be a 29-bit one.
-      Problem(kw.line, kw.column, fmt::format("message ID {:#x} above 11 bits without bit 31 set: read as "
-                                   "a 29-bit ID",
-                                   m.id));
+      Problem(kw.line, kw.column,
+              fmt::format("message ID {:#x} above 11 bits without bit 31 set: read as "
+                          "a 29-bit ID",
+                          m.id));
       m.extended = true;
     }
     if (dbc_.FindMessage(m.id, m.extended) != nullptr) {
@@ -508,7 +538,8 @@ class Parser {
       } else if (v == "m") {
         // vw_pq.dbc (opendbc) writes a lone lower-case "m" for the multiplexer.
         s.is_multiplexer = true;
-        Problem(ind.line, ind.column, fmt::format("multiplexer indicator 'm' of {} read as 'M'", s.name));
+        Problem(ind.line, ind.column,
+                fmt::format("multiplexer indicator 'm' of {} read as 'M'", s.name));
       } else if (v.size() >= 2 && v[0] == 'm' && IsDigit(v[1])) {
         v.remove_prefix(1);
         if (v.back() == 'M') {
@@ -517,7 +548,8 @@ class Parser {
         }
         std::uint64_t n = 0;
         auto [p, ec] = std::from_chars(v.data(), v.data() + v.size(), n);
-        if (ec != std::errc() || p != v.data() + v.size()) Fail(ind, "a multiplexer indicator (M, mN or mNM)");
+        if (ec != std::errc() || p != v.data() + v.size())
+          Fail(ind, "a multiplexer indicator (M, mN or mNM)");
         mux_value = n;
       } else {
         Fail(ind, "a multiplexer indicator (M, mN or mNM) or ':'");
@@ -568,7 +600,8 @@ class Parser {
     if (skipping_signals_) return;
     DbcMessage& m = dbc_.messages[static_cast<std::size_t>(current_message_)];
     if (m.FindSignal(s.name) >= 0) {
-      FailAt(name.line, name.column, fmt::format("duplicate signal {} in message {}", s.name, m.name));
+      FailAt(name.line, name.column,
+             fmt::format("duplicate signal {} in message {}", s.name, m.name));
     }
     simple_mux_.resize(dbc_.messages.size());
     simple_mux_[static_cast<std::size_t>(current_message_)].push_back(mux_value.has_value());
@@ -580,8 +613,9 @@ class Parser {
     while (!AcceptPunct(';')) {
       const Token& t = lex_.Peek();
       if ((t.kind == TokenKind::kIdentifier && IsKeyword(t.text)) || t.kind == TokenKind::kEnd) {
-        Problem(t.line, t.column, t.kind == TokenKind::kEnd ? "missing ';' at the end of the file"
-                                                  : "missing ';' before this line");
+        Problem(t.line, t.column,
+                t.kind == TokenKind::kEnd ? "missing ';' at the end of the file"
+                                          : "missing ';' before this line");
         break;
       }
       if (t.kind != TokenKind::kNumber) Fail(t, "a raw value or ';'");
@@ -597,7 +631,8 @@ class Parser {
       if (!(v >= -9223372036854775808.0 && v < 9223372036854775808.0)) {
         Fail(num, "a raw value within the 64-bit integer range");
       }
-      const std::string label = Unescape(Expect(TokenKind::kString, "a value description string").text);
+      const std::string label =
+          Unescape(Expect(TokenKind::kString, "a value description string").text);
       out[static_cast<std::int64_t>(v)] = label;
     }
     return out;
@@ -619,7 +654,8 @@ class Parser {
     }
     const int i = m->FindSignal(name);
     if (i < 0) {
-      Problem(line, column, fmt::format("{} refers to unknown signal {} in message {}", where, name, m->name));
+      Problem(line, column,
+              fmt::format("{} refers to unknown signal {} in message {}", where, name, m->name));
       return nullptr;
     }
     return &m->signals[static_cast<std::size_t>(i)];
@@ -669,11 +705,16 @@ class Parser {
     d.object = DbcAttributeDefinition::Object::kNetwork;
     if (lex_.Peek().kind == TokenKind::kIdentifier) {
       const Token obj = lex_.Next();
-      if (obj.text == "BU_") d.object = DbcAttributeDefinition::Object::kNode;
-      else if (obj.text == "BO_") d.object = DbcAttributeDefinition::Object::kMessage;
-      else if (obj.text == "SG_") d.object = DbcAttributeDefinition::Object::kSignal;
-      else if (obj.text == "EV_") d.object = DbcAttributeDefinition::Object::kEnvironment;
-      else Fail(obj, "BU_, BO_, SG_, EV_ or the attribute name");
+      if (obj.text == "BU_")
+        d.object = DbcAttributeDefinition::Object::kNode;
+      else if (obj.text == "BO_")
+        d.object = DbcAttributeDefinition::Object::kMessage;
+      else if (obj.text == "SG_")
+        d.object = DbcAttributeDefinition::Object::kSignal;
+      else if (obj.text == "EV_")
+        d.object = DbcAttributeDefinition::Object::kEnvironment;
+      else
+        Fail(obj, "BU_, BO_, SG_, EV_ or the attribute name");
     }
     d.name = Unescape(Expect(TokenKind::kString, "the attribute name").text);
     const Token type = Expect(TokenKind::kIdentifier, "INT, HEX, FLOAT, STRING or ENUM");
@@ -712,7 +753,8 @@ class Parser {
     if (DbcAttributeDefinition* d = Definition(Unescape(name.text))) {
       d->default_value = std::move(v);
     } else {
-      Problem(kw.line, kw.column, fmt::format("BA_DEF_DEF_ for undeclared attribute {}", name.text));
+      Problem(kw.line, kw.column,
+              fmt::format("BA_DEF_DEF_ for undeclared attribute {}", name.text));
     }
   }
 
@@ -754,7 +796,8 @@ class Parser {
     const std::uint32_t id = MessageId();
     const std::string sig(Expect(TokenKind::kIdentifier, "a signal name").text);
     auto values = ValueDescriptions();
-    if (DbcSignal* s = SignalByRawId(id, sig, kw.line, kw.column, "VAL_")) s->value_descriptions = std::move(values);
+    if (DbcSignal* s = SignalByRawId(id, sig, kw.line, kw.column, "VAL_"))
+      s->value_descriptions = std::move(values);
   }
 
   void SignalValueType_(const Token& kw) {
@@ -773,7 +816,7 @@ class Parser {
              fmt::format("signal {} is {} bits long; an IEEE {} needs {}", sig, s->length_bits,
                          type == 1 ? "float" : "double", need));
     }
-    s->value_type = type == 0 ? SignalValueType::kInteger
+    s->value_type = type == 0   ? SignalValueType::kInteger
                     : type == 1 ? SignalValueType::kFloat32
                                 : SignalValueType::kFloat64;
   }
@@ -794,7 +837,8 @@ class Parser {
         p.ranges.push_back({low, Unsigned("the high end of a range")});
         continue;
       }
-      if (high.kind != TokenKind::kNumber || h.empty() || h[0] != '-') Fail(high, "'-' and the high end of a range");
+      if (high.kind != TokenKind::kNumber || h.empty() || h[0] != '-')
+        Fail(high, "'-' and the high end of a range");
       h.remove_prefix(1);
       std::uint64_t hv = 0;
       auto [q, ec] = std::from_chars(h.data(), h.data() + h.size(), hv);
@@ -856,7 +900,8 @@ class Parser {
         }
       }
       for (std::size_t si = 0; si < m.signals.size(); ++si) {
-        if (!muxed[si] || explicit_mux.contains({static_cast<int>(mi), static_cast<int>(si)})) continue;
+        if (!muxed[si] || explicit_mux.contains({static_cast<int>(mi), static_cast<int>(si)}))
+          continue;
         DbcSignal& s = m.signals[si];
         if (top_count != 1) {
           FailAt(s.line, 1,
@@ -892,7 +937,8 @@ class Parser {
         DbcMessage* m = MessageByRawId(a.message_id_raw);
         if (m == nullptr) {
           if (!Ignored(a.message_id_raw)) {
-            Problem(a.line, a.column, fmt::format("BA_ refers to unknown message ID {}", a.message_id_raw));
+            Problem(a.line, a.column,
+                    fmt::format("BA_ refers to unknown message ID {}", a.message_id_raw));
           }
           break;
         }
@@ -909,7 +955,8 @@ class Parser {
         if (a.name == "GenSigSNA") {
           // Real files declare it as a STRING ("FFFh"); only an integer raw value is usable.
           const double* v = std::get_if<double>(&a.value);
-          if (v == nullptr || *v != std::floor(*v) || !(*v >= -9223372036854775808.0 && *v < 9223372036854775808.0)) {
+          if (v == nullptr || *v != std::floor(*v) ||
+              !(*v >= -9223372036854775808.0 && *v < 9223372036854775808.0)) {
             Problem(a.line, a.column,
                     fmt::format("GenSigSNA of signal {} is not an integer raw value within the "
                                 "64-bit range; ignored",
@@ -929,8 +976,9 @@ class Parser {
     for (auto& s : m.signals) {
       const std::uint32_t need = SignalEndByte(s);
       if (need > 64) {
-        FailAt(s.line, 1, fmt::format("signal {} of {} reaches byte {}, beyond 64 bytes", s.name,
-                                      m.name, need - 1));
+        FailAt(s.line, 1,
+               fmt::format("signal {} of {} reaches byte {}, beyond 64 bytes", s.name, m.name,
+                           need - 1));
       }
       if (need > m.size_bytes) {
         Problem(s.line, s.column,
@@ -940,11 +988,10 @@ class Parser {
       }
       if (s.not_available_raw) {
         const std::int64_t v = *s.not_available_raw;
-        const bool fits =
-            s.length_bits >= 63 ||
-            (s.is_signed ? (v >= -(std::int64_t{1} << (s.length_bits - 1)) &&
-                            v < (std::int64_t{1} << (s.length_bits - 1)))
-                         : (v >= 0 && v < (std::int64_t{1} << s.length_bits)));
+        const bool fits = s.length_bits >= 63 ||
+                          (s.is_signed ? (v >= -(std::int64_t{1} << (s.length_bits - 1)) &&
+                                          v < (std::int64_t{1} << (s.length_bits - 1)))
+                                       : (v >= 0 && v < (std::int64_t{1} << s.length_bits)));
         if (!fits) {
           Problem(s.line, s.column,
                   fmt::format("GenSigSNA {} of signal {} does not fit in {} bits; ignored", v,
@@ -958,7 +1005,8 @@ class Parser {
       const DbcSignal* cur = &s;
       for (std::size_t steps = 0; !cur->multiplexer_switch.empty(); ++steps) {
         if (steps > m.signals.size()) {
-          FailAt(s.line, 1, fmt::format("multiplexer cycle through signal {} of {}", s.name, m.name));
+          FailAt(s.line, 1,
+                 fmt::format("multiplexer cycle through signal {} of {}", s.name, m.name));
         }
         cur = &m.signals[static_cast<std::size_t>(m.FindSignal(cur->multiplexer_switch))];
       }

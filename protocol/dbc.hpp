@@ -57,7 +57,7 @@ struct DbcSignal {
   ByteOrder byte_order = ByteOrder::kLittleEndian;
   bool is_signed = false;
   SignalValueType value_type = SignalValueType::kInteger;
-  double factor = 1.0;   ///< physical = raw * factor + offset
+  double factor = 1.0;  ///< physical = raw * factor + offset
   double offset = 0.0;
   double minimum = 0.0;  ///< declared physical range (both 0 often means "not given")
   double maximum = 0.0;
@@ -145,10 +145,11 @@ class DbcError : public std::runtime_error {
  public:
   DbcError(std::string file, int line, int column, const std::string& what);
   const std::string& file() const noexcept { return file_; }
-  int line() const noexcept { return line_; }     ///< 1-based
-  int column() const noexcept { return column_; } ///< 1-based
+  int line() const noexcept { return line_; }      ///< 1-based
+  int column() const noexcept { return column_; }  ///< 1-based
   /// What went wrong, without the file:line:column prefix.
   const std::string& detail() const noexcept { return detail_; }
+
  private:
   std::string file_;
   std::string detail_;

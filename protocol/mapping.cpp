@@ -11,18 +11,43 @@ namespace pumptherm::protocol {
 
 namespace {
 
-constexpr std::array<std::string_view, kMappingInputCount> kInputNames = {
-    "id_A",          "iq_A",          "ud_V",       "uq_V",
-    "speed_elec_rad_per_s", "speed_mech_rpm", "rolling_counter", "drive_state",
-    "frame_temp_degC", "ambient_temp_degC", "dc_link_V", "alarm_clear"};
+constexpr std::array<std::string_view, kMappingInputCount> kInputNames = {"id_A",
+                                                                          "iq_A",
+                                                                          "ud_V",
+                                                                          "uq_V",
+                                                                          "speed_elec_rad_per_s",
+                                                                          "speed_mech_rpm",
+                                                                          "rolling_counter",
+                                                                          "drive_state",
+                                                                          "frame_temp_degC",
+                                                                          "ambient_temp_degC",
+                                                                          "dc_link_V",
+                                                                          "alarm_clear"};
 
 constexpr std::array<std::string_view, kMappingOutputCount> kOutputNames = {
-    "winding_resistance_degC", "rs_ohm",       "flux_Wb",       "rs_status",
-    "flux_status",             "alarm_level",  "alarm_reason",  "alarm_node",
-    "alarm_value_degC",        "time_to_trip_s", "uptime_s",    "frame_rate_Hz",
-    "drops",                   "bus_state",    "magnet_flux_degC", "node_index",
-    "node_count",              "node_temp_degC", "node_sd_K",   "winding_resistance_sd_K",
-    "magnet_flux_sd_K",        "mismatch_state", "mismatch_effect"};
+    "winding_resistance_degC",
+    "rs_ohm",
+    "flux_Wb",
+    "rs_status",
+    "flux_status",
+    "alarm_level",
+    "alarm_reason",
+    "alarm_node",
+    "alarm_value_degC",
+    "time_to_trip_s",
+    "uptime_s",
+    "frame_rate_Hz",
+    "drops",
+    "bus_state",
+    "magnet_flux_degC",
+    "node_index",
+    "node_count",
+    "node_temp_degC",
+    "node_sd_K",
+    "winding_resistance_sd_K",
+    "magnet_flux_sd_K",
+    "mismatch_state",
+    "mismatch_effect"};
 
 std::string Where(const toml::source_region& r) {
   const std::string file = r.path ? *r.path : std::string("<mapping>");
@@ -45,8 +70,8 @@ constexpr std::array<RenamedKey, 3> kRenamedOutputs = {{
 /// (recorded in `deprecations`); nullopt when unknown.
 template <std::size_t N>
 std::optional<std::size_t> KeyIndex(std::string_view section, std::string_view k,
-                                    const std::array<std::string_view, N>& names, const toml::node& at,
-                                    std::vector<std::string>* deprecations) {
+                                    const std::array<std::string_view, N>& names,
+                                    const toml::node& at, std::vector<std::string>* deprecations) {
   const auto it = std::find(names.begin(), names.end(), k);
   if (it != names.end()) return static_cast<std::size_t>(it - names.begin());
   if (section != "outputs") return std::nullopt;
@@ -60,12 +85,12 @@ std::optional<std::size_t> KeyIndex(std::string_view section, std::string_view k
   return std::nullopt;
 }
 
-
 [[noreturn]] void Fail(const toml::node& at, const std::string& key, const std::string& what) {
   throw MappingError(fmt::format("{}: key {}: {}", Where(at.source()), key, what));
 }
 
-double NumberOr(const toml::table& t, std::string_view name, double fallback, const std::string& key) {
+double NumberOr(const toml::table& t, std::string_view name, double fallback,
+                const std::string& key) {
   const toml::node* n = t.get(name);
   if (n == nullptr) return fallback;
   if (auto v = n->value<double>()) {
@@ -86,19 +111,23 @@ SignalRef Resolve(const toml::node& node, const std::string& key, const Dbc& dbc
   SignalRef ref;
   const toml::node* msg = t->get("message");
   const toml::node* sig = t->get("signal");
-  if (msg == nullptr || !msg->is_string()) Fail(node, key + ".message", "expected the DBC message name");
-  if (sig == nullptr || !sig->is_string()) Fail(node, key + ".signal", "expected the DBC signal name");
+  if (msg == nullptr || !msg->is_string())
+    Fail(node, key + ".message", "expected the DBC message name");
+  if (sig == nullptr || !sig->is_string())
+    Fail(node, key + ".signal", "expected the DBC signal name");
   ref.message = **msg->as_string();
   ref.signal = **sig->as_string();
   const DbcMessage* m = dbc.FindMessage(ref.message);
   if (m == nullptr) {
-    Fail(*msg, key + ".message", fmt::format("unknown message {} in {}", ref.message, dbc.file_name));
+    Fail(*msg, key + ".message",
+         fmt::format("unknown message {} in {}", ref.message, dbc.file_name));
   }
   ref.message_index = static_cast<int>(m - dbc.messages.data());
   ref.signal_index = m->FindSignal(ref.signal);
   if (ref.signal_index < 0) {
-    Fail(*sig, key + ".signal", fmt::format("unknown signal {} in message {} of {}", ref.signal,
-                                           ref.message, dbc.file_name));
+    Fail(*sig, key + ".signal",
+         fmt::format("unknown signal {} in message {} of {}", ref.signal, ref.message,
+                     dbc.file_name));
   }
   ref.scale = NumberOr(*t, "scale", 1.0, key);
   ref.offset = NumberOr(*t, "offset", 0.0, key);
@@ -108,7 +137,8 @@ SignalRef Resolve(const toml::node& node, const std::string& key, const Dbc& dbc
 template <std::size_t N, typename Slot>
 void ResolveSection(const toml::table& root, std::string_view section,
                     const std::array<std::string_view, N>& names, std::array<Slot, N>& out,
-                    const Dbc& dbc, const toml::table** nested_nodes, std::vector<std::string>* deprecations) {
+                    const Dbc& dbc, const toml::table** nested_nodes,
+                    std::vector<std::string>* deprecations) {
   const toml::node* n = root.get(section);
   if (n == nullptr) return;
   const toml::table* t = n->as_table();
@@ -117,18 +147,22 @@ void ResolveSection(const toml::table& root, std::string_view section,
     const std::string key = fmt::format("{}.{}", section, k.str());
     if (nested_nodes != nullptr && k == "nodes") {
       *nested_nodes = v.as_table();
-      if (*nested_nodes == nullptr) Fail(v, key, "expected a table of node name = { message, signal }");
+      if (*nested_nodes == nullptr)
+        Fail(v, key, "expected a table of node name = { message, signal }");
       continue;
     }
     const std::optional<std::size_t> index = KeyIndex(section, k.str(), names, v, deprecations);
     if (!index) {
       std::string known;
       for (auto name : names) known += fmt::format("{}{}", known.empty() ? "" : ", ", name);
-      Fail(v, key, fmt::format("unknown {} (known: {}{})", section, known,
-                               nested_nodes != nullptr ? ", nodes" : ""));
+      Fail(v, key,
+           fmt::format("unknown {} (known: {}{})", section, known,
+                       nested_nodes != nullptr ? ", nodes" : ""));
     }
-    if (out[*index]) Fail(v, key, fmt::format("{}.{} is given twice (under its old and its current name)",
-                                              section, names[*index]));
+    if (out[*index])
+      Fail(v, key,
+           fmt::format("{}.{} is given twice (under its old and its current name)", section,
+                       names[*index]));
     out[*index] = Resolve(v, key, dbc);
   }
 }
@@ -143,7 +177,8 @@ void CheckNodeTable(const toml::table& table, const SignalMapping& mapping) {
   if (index.has_value() != temp.has_value()) {
     Fail(where, "outputs", "node_index and node_temp_degC go together (a node-indexed message)");
   }
-  for (MappingOutput o : {MappingOutput::kNodeTempDegC, MappingOutput::kNodeSdK, MappingOutput::kNodeCount}) {
+  for (MappingOutput o :
+       {MappingOutput::kNodeTempDegC, MappingOutput::kNodeSdK, MappingOutput::kNodeCount}) {
     const auto& r = mapping.output(o);
     if (r && (!index || r->message_index != index->message_index)) {
       Fail(where, fmt::format("outputs.{}", MappingOutputName(o)),
@@ -164,7 +199,8 @@ std::string_view MappingOutputName(MappingOutput output) noexcept {
 
 std::uint32_t SignalMapping::CanId(const Dbc& dbc, int message_index, std::uint32_t node_id) const {
   if (node_id >= node_id_limit) {
-    throw std::out_of_range(fmt::format("node ID {} not below node_id_limit {}", node_id, node_id_limit));
+    throw std::out_of_range(
+        fmt::format("node ID {} not below node_id_limit {}", node_id, node_id_limit));
   }
   return dbc.messages.at(static_cast<std::size_t>(message_index)).id + node_id;
 }
@@ -178,12 +214,14 @@ SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
   }
   if (const toml::node* n = table.get("node_id_limit")) {
     const auto v = n->value<std::int64_t>();
-    if (!v || *v < 1 || *v > 65536) Fail(*n, "node_id_limit", "expected an integer from 1 to 65536");
+    if (!v || *v < 1 || *v > 65536)
+      Fail(*n, "node_id_limit", "expected an integer from 1 to 65536");
     mapping.node_id_limit = static_cast<std::uint32_t>(*v);
   }
   ResolveSection(table, "inputs", kInputNames, mapping.inputs, dbc, nullptr, &mapping.deprecations);
   const toml::table* nodes = nullptr;
-  ResolveSection(table, "outputs", kOutputNames, mapping.outputs, dbc, &nodes, &mapping.deprecations);
+  ResolveSection(table, "outputs", kOutputNames, mapping.outputs, dbc, &nodes,
+                 &mapping.deprecations);
   if (nodes != nullptr) {
     for (const auto& [k, v] : *nodes) {
       mapping.node_temperatures.emplace(std::string(k.str()),
@@ -195,10 +233,12 @@ SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
 
   // The estimators cannot run without the dq quantities and a speed.
   std::vector<std::string> missing;
-  for (MappingInput i : {MappingInput::kIdA, MappingInput::kIqA, MappingInput::kUdV, MappingInput::kUqV}) {
+  for (MappingInput i :
+       {MappingInput::kIdA, MappingInput::kIqA, MappingInput::kUdV, MappingInput::kUqV}) {
     if (!mapping.input(i)) missing.emplace_back(MappingInputName(i));
   }
-  if (!mapping.input(MappingInput::kSpeedElecRadPerS) && !mapping.input(MappingInput::kSpeedMechRpm)) {
+  if (!mapping.input(MappingInput::kSpeedElecRadPerS) &&
+      !mapping.input(MappingInput::kSpeedMechRpm)) {
     missing.emplace_back("speed_elec_rad_per_s or speed_mech_rpm");
   }
   if (!missing.empty()) {
@@ -243,7 +283,8 @@ SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
   return mapping;
 }
 
-SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name, const Dbc& dbc) {
+SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name,
+                           const Dbc& dbc) {
   toml::table table;
   try {
     table = toml::parse(toml_text, source_name);

@@ -8,13 +8,12 @@
 ///     [inputs]
 ///     id_A = { message = "PUMP_FAST_I", signal = "Id_A" }
 ///     speed_elec_rad_per_s = { message = "PUMP_FAST_I", signal = "SpeedElec_rad_per_s" }
-///     frame_temp_degC = { message = "PUMP_STATUS", signal = "FrameTemp_degC", scale = 1.0, offset = 0.0 }
-///     [outputs]
-///     winding_resistance_degC = { message = "GW_TEMPS_A", signal = "WindingRes_degC" }
-///     node_index = { message = "GW_NODE_TEMP", signal = "NodeIndex" }    # node-indexed message:
-///     node_temp_degC = { message = "GW_NODE_TEMP", signal = "NodeTemp_degC" }  # any model's nodes
-///     [outputs.nodes]                     # thermal-model node name -> signal, degC
-///     frame = { message = "GW_TEMPS_A", signal = "Frame_degC" }
+///     frame_temp_degC = { message = "PUMP_STATUS", signal = "FrameTemp_degC", scale = 1.0, offset
+///     = 0.0 } [outputs] winding_resistance_degC = { message = "GW_TEMPS_A", signal =
+///     "WindingRes_degC" } node_index = { message = "GW_NODE_TEMP", signal = "NodeIndex" }    #
+///     node-indexed message: node_temp_degC = { message = "GW_NODE_TEMP", signal = "NodeTemp_degC"
+///     }  # any model's nodes [outputs.nodes]                     # thermal-model node name ->
+///     signal, degC frame = { message = "GW_TEMPS_A", signal = "Frame_degC" }
 ///
 /// Node ID rule: the DBC defines each message for node ID 0; pump n uses CAN ID = DBC ID + n,
 /// with 0 <= n < node_id_limit (docs/protocol.md). Each mapped message therefore owns a block of
@@ -22,6 +21,8 @@
 ///
 /// Value rule: estimator value = scale * DBC value + offset (defaults 1 and 0), so a DBC in other
 /// units (mA, rpm for an electrical speed, ...) maps without recompiling.
+
+#include <toml++/toml.h>
 
 #include <array>
 #include <cstdint>
@@ -31,8 +32,6 @@
 #include <string>
 #include <string_view>
 
-#include <toml++/toml.h>
-
 #include "protocol/dbc.hpp"
 
 namespace pumptherm::protocol {
@@ -40,18 +39,18 @@ namespace pumptherm::protocol {
 /// What the daemon reads from a pump drive. Speeds: electrical angular speed (pole pairs times
 /// mechanical, rad/s) and mechanical speed (r/min); at least one of the two must be mapped.
 enum class MappingInput {
-  kIdA,                 ///< id_A: d-axis current, amplitude-invariant dq, A
-  kIqA,                 ///< iq_A: q-axis current, A
-  kUdV,                 ///< ud_V: d-axis voltage, V
-  kUqV,                 ///< uq_V: q-axis voltage, V
-  kSpeedElecRadPerS,    ///< speed_elec_rad_per_s: electrical speed, rad/s
-  kSpeedMechRpm,        ///< speed_mech_rpm: mechanical speed, r/min
-  kRollingCounter,      ///< rolling_counter: counter of the fast telemetry frames
-  kDriveState,          ///< drive_state: 0 stopped, 1 accelerating, 2 steady, 3 braking, 4 fault
-  kFrameTempDegC,       ///< frame_temp_degC: frame temperature sensor
-  kAmbientTempDegC,     ///< ambient_temp_degC: ambient or coolant temperature
-  kDcLinkV,             ///< dc_link_V: DC-link voltage
-  kAlarmClear,          ///< alarm_clear: a command frame; 1 clears the pump's latched trips
+  kIdA,               ///< id_A: d-axis current, amplitude-invariant dq, A
+  kIqA,               ///< iq_A: q-axis current, A
+  kUdV,               ///< ud_V: d-axis voltage, V
+  kUqV,               ///< uq_V: q-axis voltage, V
+  kSpeedElecRadPerS,  ///< speed_elec_rad_per_s: electrical speed, rad/s
+  kSpeedMechRpm,      ///< speed_mech_rpm: mechanical speed, r/min
+  kRollingCounter,    ///< rolling_counter: counter of the fast telemetry frames
+  kDriveState,        ///< drive_state: 0 stopped, 1 accelerating, 2 steady, 3 braking, 4 fault
+  kFrameTempDegC,     ///< frame_temp_degC: frame temperature sensor
+  kAmbientTempDegC,   ///< ambient_temp_degC: ambient or coolant temperature
+  kDcLinkV,           ///< dc_link_V: DC-link voltage
+  kAlarmClear,        ///< alarm_clear: a command frame; 1 clears the pump's latched trips
 };
 inline constexpr std::size_t kMappingInputCount = 12;
 
@@ -77,13 +76,13 @@ enum class MappingOutput {
   /// model's node with this index (model order), so any model's nodes reach the bus. The
   /// gateway sends the nodes in turn, each once per period.
   kNodeIndex,
-  kNodeCount,           ///< node_count: how many nodes the pump's model has
-  kNodeTempDegC,        ///< node_temp_degC: that node's estimated temperature
-  kNodeSdK,             ///< node_sd_K: its standard deviation (Kalman covariance), K
-  kWindingResSdK,       ///< winding_resistance_sd_K: 1-sigma of the resistance-based temperature, K
-  kMagnetFluxSdK,       ///< magnet_flux_sd_K: 1-sigma of the magnet temperature from the flux, K
-  kMismatchState,       ///< mismatch_state: estimators::MismatchState
-  kMismatchEffect,      ///< mismatch_effect: estimators::MismatchEffect
+  kNodeCount,       ///< node_count: how many nodes the pump's model has
+  kNodeTempDegC,    ///< node_temp_degC: that node's estimated temperature
+  kNodeSdK,         ///< node_sd_K: its standard deviation (Kalman covariance), K
+  kWindingResSdK,   ///< winding_resistance_sd_K: 1-sigma of the resistance-based temperature, K
+  kMagnetFluxSdK,   ///< magnet_flux_sd_K: 1-sigma of the magnet temperature from the flux, K
+  kMismatchState,   ///< mismatch_state: estimators::MismatchState
+  kMismatchEffect,  ///< mismatch_effect: estimators::MismatchEffect
 };
 inline constexpr std::size_t kMappingOutputCount = 23;
 
@@ -133,7 +132,8 @@ class MappingError : public std::runtime_error {
 /// a message or signal the DBC does not have, a missing required input (id_A, iq_A, ud_V, uq_V
 /// and one speed), node_index without node_temp_degC (or the reverse) or node outputs outside
 /// node_index's message, a node_id_limit outside 1..65536, or ID blocks that overflow or overlap.
-SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name, const Dbc& dbc);
+SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name,
+                           const Dbc& dbc);
 
 /// The same, from a table already parsed (e.g. the `[mapping]` table of the daemon config);
 /// errors name the table's source file, line and column.

@@ -21,10 +21,14 @@ struct KindInfo {
 
 KindInfo Info(FileKind kind) {
   switch (kind) {
-    case FileKind::kModel: return {"models", "estimators/models", ".toml"};
-    case FileKind::kMotor: return {"motors", "estimators/motors", ".toml"};
-    case FileKind::kDbc: return {"dbc", "protocol", ""};
-    case FileKind::kScenario: return {"scenarios", "tools/plant/scenarios", ".toml"};
+    case FileKind::kModel:
+      return {"models", "estimators/models", ".toml"};
+    case FileKind::kMotor:
+      return {"motors", "estimators/motors", ".toml"};
+    case FileKind::kDbc:
+      return {"dbc", "protocol", ""};
+    case FileKind::kScenario:
+      return {"scenarios", "tools/plant/scenarios", ".toml"};
   }
   return {"", "", ""};
 }
@@ -45,8 +49,11 @@ std::vector<std::string> SearchDirs(FileKind kind) {
   std::vector<std::string> dirs;
   std::error_code ec;
   const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec) dirs.push_back((exe.parent_path() / ".." / "share" / "pumptherm" / info.share_dir).lexically_normal());
-  dirs.push_back((fs::path(PUMPTHERM_INSTALL_DATADIR) / "pumptherm" / info.share_dir).lexically_normal());
+  if (!ec)
+    dirs.push_back(
+        (exe.parent_path() / ".." / "share" / "pumptherm" / info.share_dir).lexically_normal());
+  dirs.push_back(
+      (fs::path(PUMPTHERM_INSTALL_DATADIR) / "pumptherm" / info.share_dir).lexically_normal());
   dirs.push_back((fs::path(PUMPTHERM_SOURCE_DIR) / info.source_dir).lexically_normal());
   return dirs;
 }
@@ -68,7 +75,8 @@ std::string Resolve(FileKind kind, const std::string& reference, const std::stri
     if (fs::is_regular_file(c, ec)) return c.lexically_normal().string();
     tried += "\n  " + c.lexically_normal().string();
   }
-  throw FileNotFound(fmt::format("'{}': no such {} file; looked for:{}", reference, info.share_dir, tried));
+  throw FileNotFound(
+      fmt::format("'{}': no such {} file; looked for:{}", reference, info.share_dir, tried));
 }
 
 std::string ReadTextFile(const std::string& path) {
@@ -76,7 +84,8 @@ std::string ReadTextFile(const std::string& path) {
   if (!in) throw std::runtime_error(fmt::format("{}: cannot open: {}", path, std::strerror(errno)));
   std::ostringstream ss;
   ss << in.rdbuf();
-  if (in.bad()) throw std::runtime_error(fmt::format("{}: cannot read: {}", path, std::strerror(errno)));
+  if (in.bad())
+    throw std::runtime_error(fmt::format("{}: cannot read: {}", path, std::strerror(errno)));
   return ss.str();
 }
 

@@ -12,7 +12,7 @@ packages=(
   liblcm-dev liblcm-bin liblcm-java libglib2.0-dev
   libsystemd-dev libsodium-dev libtomlplusplus-dev libcli11-dev libfmt-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
-  clang libclang-rt-14-dev
+  clang libclang-rt-14-dev clang-format   # clang-format: tools/format-check.sh (CI's first stage)
   can-utils iproute2 kmod cpio gzip busybox-static qemu-system-x86 debootstrap e2fsprogs
   gnuplot-nox default-jdk-headless libjchart2d-java xvfb xauth xdotool x11-apps imagemagick
   chromium

@@ -13,6 +13,9 @@ fuzz_seconds=${PUMPTHERM_FUZZ_SECONDS:-60}
 start=$(date +%s)
 stage() { printf '\n=== %s (%ds)\n' "$*" $(( $(date +%s) - start )); }
 
+stage "format (.clang-format: clang-format 14, 100 columns)"
+tools/format-check.sh
+
 stage "build (warnings are errors)"
 # -g1 (line tables): backtraces keep file:line, and the build takes a fifth less time than with
 # full debug information (measured per file, docs/testing.md).

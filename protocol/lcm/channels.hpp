@@ -149,9 +149,9 @@ inline std::optional<ParsedChannel> ParsePumpChannel(std::string_view prefix,
   if (!IsValidPumpName(pump)) {
     return std::nullopt;
   }
-  for (const PumpChannel c : {PumpChannel::kTelemetry, PumpChannel::kTemperatures,
-                              PumpChannel::kAlarm, PumpChannel::kAlarmClear,
-                              PumpChannel::kAlarmClearReply}) {
+  for (const PumpChannel c :
+       {PumpChannel::kTelemetry, PumpChannel::kTemperatures, PumpChannel::kAlarm,
+        PumpChannel::kAlarmClear, PumpChannel::kAlarmClearReply}) {
     if (suffix == Suffix(c)) {
       return ParsedChannel{std::string(pump), c};
     }

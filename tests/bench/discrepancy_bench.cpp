@@ -6,8 +6,8 @@
 #include <fmt/core.h>
 
 #include <chrono>
-#include <ctime>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -21,7 +21,6 @@
 #include "tools/discrepancy/workflow.hpp"
 
 namespace pd = pumptherm::tools::discrepancy;
-
 
 int main(int argc, char** argv) {
   double hours = 24.0, step_s = 1.0;
@@ -42,7 +41,8 @@ int main(int argc, char** argv) {
   c.step_s = step_s;
   const auto dir = std::filesystem::temp_directory_path() / "pumptherm_discrepancy_bench";
   std::filesystem::create_directories(dir);
-  const std::string train_csv = (dir / "train.csv").string(), val_csv = (dir / "validate.csv").string();
+  const std::string train_csv = (dir / "train.csv").string(),
+                    val_csv = (dir / "validate.csv").string();
   pd::WriteData(train_csv, pd::MakeHiddenEffectData(c), false);
   c.profile_seed = 2;
   c.noise_seed = 8;
@@ -60,12 +60,16 @@ int main(int argc, char** argv) {
   std::string named;
   for (const auto& e : r.effects) named += (named.empty() ? "" : ",") + e.effect.name;
   fmt::print(
-      "{{\"benchmark\": \"discrepancy_whole_run\", \"hours\": {}, \"step_s\": {}, \"rows_per_file\": {}, "
-      "\"measured_nodes\": {}, \"run_time_s\": {:.2f}, \"cpu_time_s\": {:.2f}, \"verdict\": \"{}\", \"effects\": \"{}\", "
-      "\"validate_max_abs_K\": [{:.3f}, {:.3f}], \"simulation\": \"{}\", \"averaging_cost_K\": [{:.4f}, {:.4f}], "
+      "{{\"benchmark\": \"discrepancy_whole_run\", \"hours\": {}, \"step_s\": {}, "
+      "\"rows_per_file\": {}, "
+      "\"measured_nodes\": {}, \"run_time_s\": {:.2f}, \"cpu_time_s\": {:.2f}, \"verdict\": "
+      "\"{}\", \"effects\": \"{}\", "
+      "\"validate_max_abs_K\": [{:.3f}, {:.3f}], \"simulation\": \"{}\", \"averaging_cost_K\": "
+      "[{:.4f}, {:.4f}], "
       "\"goal_s\": 60}}\n",
-      hours, step_s, train.size(), train.measured.size(), s, cpu_s, r.verdict, named, r.validate_before.back().max_abs_K,
-      r.validate_after.back().max_abs_K, r.simulation, r.averaging_cost_train_K, r.averaging_cost_validate_K);
+      hours, step_s, train.size(), train.measured.size(), s, cpu_s, r.verdict, named,
+      r.validate_before.back().max_abs_K, r.validate_after.back().max_abs_K, r.simulation,
+      r.averaging_cost_train_K, r.averaging_cost_validate_K);
   std::filesystem::remove_all(dir);
   return 0;
 }

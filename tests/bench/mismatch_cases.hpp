@@ -26,17 +26,32 @@ namespace mismatch_cases {
 
 namespace pe = pumptherm::estimators;
 
-enum class Fault { kNone, kCoolingLost, kRotorLoss, kLosses40, kAmbientRise, kSensorOffset, kSensorStuck };
+enum class Fault {
+  kNone,
+  kCoolingLost,
+  kRotorLoss,
+  kLosses40,
+  kAmbientRise,
+  kSensorOffset,
+  kSensorStuck
+};
 
 inline const char* FaultName(Fault f) {
   switch (f) {
-    case Fault::kNone: return "no fault";
-    case Fault::kCoolingLost: return "cooling lost (frame-ambient R x4)";
-    case Fault::kRotorLoss: return "extra rotor loss +6 W";
-    case Fault::kLosses40: return "losses +40 %";
-    case Fault::kAmbientRise: return "unmeasured ambient +8 K";
-    case Fault::kSensorOffset: return "frame sensor offset +3 K";
-    case Fault::kSensorStuck: return "frame sensor stuck";
+    case Fault::kNone:
+      return "no fault";
+    case Fault::kCoolingLost:
+      return "cooling lost (frame-ambient R x4)";
+    case Fault::kRotorLoss:
+      return "extra rotor loss +6 W";
+    case Fault::kLosses40:
+      return "losses +40 %";
+    case Fault::kAmbientRise:
+      return "unmeasured ambient +8 K";
+    case Fault::kSensorOffset:
+      return "frame sensor offset +3 K";
+    case Fault::kSensorStuck:
+      return "frame sensor stuck";
   }
   return "?";
 }
@@ -44,13 +59,20 @@ inline const char* FaultName(Fault f) {
 /// The effect a right answer names.
 inline pe::MismatchEffect ExpectedEffect(Fault f) {
   switch (f) {
-    case Fault::kNone: return pe::MismatchEffect::kNone;
-    case Fault::kCoolingLost: return pe::MismatchEffect::kFrameAmbientResistance;
-    case Fault::kRotorLoss: return pe::MismatchEffect::kRotorLoss;
-    case Fault::kLosses40: return pe::MismatchEffect::kLossScale;
-    case Fault::kAmbientRise: return pe::MismatchEffect::kUnmeasuredAmbient;
-    case Fault::kSensorOffset: return pe::MismatchEffect::kSensorOffset;
-    case Fault::kSensorStuck: return pe::MismatchEffect::kSensorStuck;
+    case Fault::kNone:
+      return pe::MismatchEffect::kNone;
+    case Fault::kCoolingLost:
+      return pe::MismatchEffect::kFrameAmbientResistance;
+    case Fault::kRotorLoss:
+      return pe::MismatchEffect::kRotorLoss;
+    case Fault::kLosses40:
+      return pe::MismatchEffect::kLossScale;
+    case Fault::kAmbientRise:
+      return pe::MismatchEffect::kUnmeasuredAmbient;
+    case Fault::kSensorOffset:
+      return pe::MismatchEffect::kSensorOffset;
+    case Fault::kSensorStuck:
+      return pe::MismatchEffect::kSensorStuck;
   }
   return pe::MismatchEffect::kNone;
 }
@@ -83,7 +105,8 @@ inline std::string FaultedModelText(const std::string& nominal, Fault f) {
       t = Replace(t, "rotor_eddy_W = 3.0", "rotor_eddy_W = 4.2");
       return Replace(t, "rotor_share = 0.05", "rotor_share = 0.07");
     }
-    default: return nominal;
+    default:
+      return nominal;
   }
 }
 
@@ -122,17 +145,17 @@ struct CaseSpec {
 
 struct CaseResult {
   double detect_delay_s = std::numeric_limits<double>::quiet_NaN();  ///< after the fault
-  double name_delay_s = std::numeric_limits<double>::quiet_NaN();    ///< first named, after the fault
+  double name_delay_s = std::numeric_limits<double>::quiet_NaN();  ///< first named, after the fault
   pe::MismatchFinding at_naming;
   pe::MismatchFinding at_end;
-  int false_alarms = 0;       ///< transitions into a fault state before the fault began
+  int false_alarms = 0;  ///< transitions into a fault state before the fault began
   double first_false_s = std::numeric_limits<double>::quiet_NaN();
   std::vector<std::string> nodes;
-  std::vector<double> max_error_K;   ///< published filter, after the first 300 s
-  std::vector<double> coverage;      ///< share of steps with |error| <= 2 sd, after 300 s
+  std::vector<double> max_error_K;       ///< published filter, after the first 300 s
+  std::vector<double> coverage;          ///< share of steps with |error| <= 2 sd, after 300 s
   std::vector<double> dist_max_error_K;  ///< the same for the disturbance-state filter
   std::vector<double> dist_coverage;
-  double detector_step_max_us = 0.0; ///< not filled here (timed by the benchmark)
+  double detector_step_max_us = 0.0;  ///< not filled here (timed by the benchmark)
 };
 
 /// The gas-load current at time t: run-up at 3 A for 120 s, then steps every 10 minutes.
@@ -167,7 +190,8 @@ inline std::string FaultedModelTextByEffects(const std::string& nominal, const s
     const double krpm = speed_rpm / 1000.0;
     effects.push_back({"rotor_loss", {rotor_loss_W / (krpm * krpm)}, {}});
   }
-  if (f == Fault::kLosses40) throw std::invalid_argument("losses +40 % is made for tmp-generic only");
+  if (f == Fault::kLosses40)
+    throw std::invalid_argument("losses +40 % is made for tmp-generic only");
   return pe::ApplyModelEffects(nominal, source, effects, tables_dir);
 }
 
@@ -180,7 +204,8 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   const std::string tables_dir = spec.tables_dir.empty() ? model_dir : spec.tables_dir;
   const std::string raw_text = ReadFile(source);
   // Relative table paths made absolute, so that the nominal and the faulted text load alike.
-  const std::string nominal_text = tmp ? raw_text : pe::ApplyModelEffects(raw_text, source, {}, tables_dir);
+  const std::string nominal_text =
+      tmp ? raw_text : pe::ApplyModelEffects(raw_text, source, {}, tables_dir);
   const pe::ThermalModelFiles files{tables_dir, ReadFile};
   const auto nominal = pe::ThermalModel::Parse(nominal_text, spec.model, files);
   double speed_rpm = 21000.0, iq_scale = 1.0;  // tmp-generic: the load of the published figures
@@ -188,10 +213,12 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   if (!tmp) {
     const pe::ThermalOperatingRange* range = nominal.OperatingRange();
     speed_rpm = spec.speed_rpm > 0.0 ? spec.speed_rpm : range ? range->speed_rpm : 0.0;
-    const double iq_max_A = spec.iq_max_A > 0.0 ? spec.iq_max_A
-                            : range && !range->iq_A.empty() ? range->iq_A.back() : 0.0;
+    const double iq_max_A = spec.iq_max_A > 0.0             ? spec.iq_max_A
+                            : range && !range->iq_A.empty() ? range->iq_A.back()
+                                                            : 0.0;
     if (!(speed_rpm > 0.0) || !(iq_max_A > 0.0)) {
-      throw std::invalid_argument(spec.model + " has no [operating_range]: give its speed and largest iq");
+      throw std::invalid_argument(spec.model +
+                                  " has no [operating_range]: give its speed and largest iq");
     }
     iq_scale = iq_max_A / 4.0;
     const pe::EffectTargets targets = pe::FindEffectTargets(nominal_text, source);
@@ -200,14 +227,16 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   }
   const auto faulted = pe::ThermalModel::Parse(
       tmp ? FaultedModelText(nominal_text, spec.fault)
-          : FaultedModelTextByEffects(nominal_text, source, spec.fault, spec.rotor_loss_W, speed_rpm, tables_dir),
+          : FaultedModelTextByEffects(nominal_text, source, spec.fault, spec.rotor_loss_W,
+                                      speed_rpm, tables_dir),
       spec.model + "+fault", files);
   vts_config.measured_nodes = {frame_node};
   const int n = nominal.StateCount();
   const double ambient = 22.0;
   pumptherm::sim::ThermalPlantConfig pc;
   pc.process_sd_K = spec.truth_process_sd_K;
-  auto plant = std::make_unique<pumptherm::sim::ThermalPlant>(nominal, Eigen::VectorXd::Constant(n, ambient), pc, spec.seed);
+  auto plant = std::make_unique<pumptherm::sim::ThermalPlant>(
+      nominal, Eigen::VectorXd::Constant(n, ambient), pc, spec.seed);
   std::mt19937_64 rng(spec.seed * 7919 + 1);
   pumptherm::sim::SensorConfig sc;
   sc.noise_sd = 0.05;
@@ -220,7 +249,8 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   pe::VirtualThermalSensor vts(nominal, vts_config);
   pe::MismatchDetectorConfig detector_config = DetectorConfig(spec.sensor_lag_s);
   detector_config.measured_node = frame_node;
-  if (spec.magnet_noise_sd_K > 0.0 && spec.magnet_to_detector) detector_config.magnet_node = rotor_node;
+  if (spec.magnet_noise_sd_K > 0.0 && spec.magnet_to_detector)
+    detector_config.magnet_node = rotor_node;
   pe::MismatchDetector det(nominal, detector_config);
   dc.sensor_lag_s = spec.sensor_lag_s;
   dc.measured_node = frame_node;
@@ -232,7 +262,8 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   if (spec.magnet_noise_sd_K > 0.0) dc.magnet_node = rotor_node;
   const int rotor = nominal.StateIndex(rotor_node);
   const int frame = nominal.StateIndex(frame_node);
-  std::mt19937_64 magnet_rng(spec.seed * 104729 + 3);  // its own: the other cases' draws stay as they were
+  std::mt19937_64 magnet_rng(spec.seed * 104729 +
+                             3);  // its own: the other cases' draws stay as they were
   std::normal_distribution<double> magnet_normal(0.0, 1.0);
   double magnet_bias_K = spec.magnet_bias_sd_K * magnet_normal(magnet_rng);
   pe::DisturbanceThermalSensor dist(nominal, dc);
@@ -252,7 +283,8 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   for (double t = spec.dt_s; t <= spec.duration_s + 1e-9; t += spec.dt_s) {
     if (!faulted_now && t > spec.fault_s) {
       faulted_now = true;
-      plant = std::make_unique<pumptherm::sim::ThermalPlant>(faulted, plant->State_degC(), pc, spec.seed + 99);
+      plant = std::make_unique<pumptherm::sim::ThermalPlant>(faulted, plant->State_degC(), pc,
+                                                             spec.seed + 99);
     }
     pe::ThermalInputs in;
     in.speed_rpm = std::min(t / 120.0, 1.0) * speed_rpm;
@@ -277,16 +309,18 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     }
     meas(0) = y;
     vts.Step(in, spec.dt_s, meas, std::numeric_limits<double>::quiet_NaN());
-    const double winding = spec.winding_noise_sd_K > 0.0
-                               ? nominal.WindingWeights().dot(x) + spec.winding_noise_sd_K * normal(rng)
-                               : std::numeric_limits<double>::quiet_NaN();
+    const double winding = spec.winding_noise_sd_K > 0.0 ? nominal.WindingWeights().dot(x) +
+                                                               spec.winding_noise_sd_K * normal(rng)
+                                                         : std::numeric_limits<double>::quiet_NaN();
     pe::DisturbanceReadings readings;
     readings.frame_degC = y;
     readings.winding_degC = winding;
     if (spec.magnet_noise_sd_K > 0.0) {
       const double a = std::exp(-spec.dt_s / spec.magnet_bias_tau_s);
-      magnet_bias_K = a * magnet_bias_K + spec.magnet_bias_sd_K * std::sqrt(1.0 - a * a) * magnet_normal(magnet_rng);
-      readings.magnet_degC = x(rotor) + magnet_bias_K + spec.magnet_noise_sd_K * magnet_normal(magnet_rng);
+      magnet_bias_K = a * magnet_bias_K +
+                      spec.magnet_bias_sd_K * std::sqrt(1.0 - a * a) * magnet_normal(magnet_rng);
+      readings.magnet_degC =
+          x(rotor) + magnet_bias_K + spec.magnet_noise_sd_K * magnet_normal(magnet_rng);
       readings.magnet_sd_K = spec.magnet_noise_sd_K;
     }
     dist.Step(in, spec.dt_s, readings);
@@ -323,8 +357,11 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     }
   }
   for (int i = 0; i < n; ++i) {
-    r.coverage[static_cast<std::size_t>(i)] = counted > 0 ? static_cast<double>(covered[static_cast<std::size_t>(i)]) / counted : 0.0;
-    r.dist_coverage[static_cast<std::size_t>(i)] = counted > 0 ? static_cast<double>(dist_covered[static_cast<std::size_t>(i)]) / counted : 0.0;
+    r.coverage[static_cast<std::size_t>(i)] =
+        counted > 0 ? static_cast<double>(covered[static_cast<std::size_t>(i)]) / counted : 0.0;
+    r.dist_coverage[static_cast<std::size_t>(i)] =
+        counted > 0 ? static_cast<double>(dist_covered[static_cast<std::size_t>(i)]) / counted
+                    : 0.0;
   }
   r.at_end = det.Finding();
   return r;

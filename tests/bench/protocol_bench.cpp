@@ -1,7 +1,8 @@
 // Protocol figures: decode rate of 8-byte frames with 4 to 8 signals, and the time to
 // load Model3CAN.dbc. Prints figures; never fails on time.
 //
-//   build-rel/tests/bench/protocol_bench --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
+//   build-rel/tests/bench/protocol_bench --benchmark_repetitions=5
+//   --benchmark_report_aggregates_only=true
 //
 // items_per_second of the BM_Decode* benchmarks is frames decoded per second on one core.
 #include <benchmark/benchmark.h>
@@ -54,7 +55,8 @@ void DecodeLoop(benchmark::State& state, const DbcMessage& message) {
 }
 
 const Dbc& PumpthermDbc() {
-  static const Dbc dbc = ParseDbc(ReadFile(SourceDir() / "protocol" / "pumptherm.dbc"), "pumptherm.dbc");
+  static const Dbc dbc =
+      ParseDbc(ReadFile(SourceDir() / "protocol" / "pumptherm.dbc"), "pumptherm.dbc");
   return dbc;
 }
 

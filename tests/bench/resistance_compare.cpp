@@ -50,28 +50,28 @@ struct Scenario {
   bool nameplate_error = false;
   double load_step_mean_interval_s = 600.0;
   // Added for the status figures (0 or false: as before).
-  double hours = 0.0;              // run length after the ramp (0: --hours)
-  double ramp_s = 0.0;             // run-up time (0: the simulator's 480 s)
-  double ramp_current_A = 0.0;     // accelerating current (0: the simulator's 6 A)
-  double warm_start_K = 0.0;       // winding this much above T0 at start (decays in 2 h)
-  double plant_flux_scale = 1.0;   // the plant's psi_f against the nameplate
-  double dead_time_V = 0.0;        // inverter voltage error (0: the `dead_time` switch's 0.2 V)
-  bool fast_heating = false;       // the demo's pump 3: the heavy profile, winding ~6 K/min
-  bool fast_magnet = false;        // with fast_heating: the demo's rotor, flux -0.1 %/K
+  double hours = 0.0;             // run length after the ramp (0: --hours)
+  double ramp_s = 0.0;            // run-up time (0: the simulator's 480 s)
+  double ramp_current_A = 0.0;    // accelerating current (0: the simulator's 6 A)
+  double warm_start_K = 0.0;      // winding this much above T0 at start (decays in 2 h)
+  double plant_flux_scale = 1.0;  // the plant's psi_f against the nameplate
+  double dead_time_V = 0.0;       // inverter voltage error (0: the `dead_time` switch's 0.2 V)
+  bool fast_heating = false;      // the demo's pump 3: the heavy profile, winding ~6 K/min
+  bool fast_magnet = false;       // with fast_heating: the demo's rotor, flux -0.1 %/K
 };
 
 // Figures of one method on one run (definitions in docs/resistance-identification.md).
 struct Figures {
   double flux_after_ramp_Wb = kNan;
-  double d_r_percent = kNan;          // eq. 24 over the 10 min window starting 11 h after the ramp
-  double convergence_s = kNan;        // after the ramp, until within 2 % of the truth for 60 s
-  double d_t_percent = kNan;          // eq. 25 on the 30-min log (49 points)
-  double d_t_every_s_percent = kNan;  // eq. 25 with the max over every 1 s after the first 30 min
-  double r_error_percent = kNan;      // max |Rs - true Rs| / true Rs over every 1 s, same span
-  double tracking_fraction = kNan;    // ours only: share of 1 s outputs with status "tracking"
-  double tracking_max_error_K = kNan; // ours only: max |T - T_true| over 1 s outputs "tracking"
-  double held_fraction = kNan;        // ours only: share of 1 s outputs with status "held"
-  double max_sd_ratio = kNan;         // ours only: max |T - T_true| / winding_sd_K while tracking
+  double d_r_percent = kNan;           // eq. 24 over the 10 min window starting 11 h after the ramp
+  double convergence_s = kNan;         // after the ramp, until within 2 % of the truth for 60 s
+  double d_t_percent = kNan;           // eq. 25 on the 30-min log (49 points)
+  double d_t_every_s_percent = kNan;   // eq. 25 with the max over every 1 s after the first 30 min
+  double r_error_percent = kNan;       // max |Rs - true Rs| / true Rs over every 1 s, same span
+  double tracking_fraction = kNan;     // ours only: share of 1 s outputs with status "tracking"
+  double tracking_max_error_K = kNan;  // ours only: max |T - T_true| over 1 s outputs "tracking"
+  double held_fraction = kNan;         // ours only: share of 1 s outputs with status "held"
+  double max_sd_ratio = kNan;          // ours only: max |T - T_true| / winding_sd_K while tracking
 };
 
 struct MethodTrace {
@@ -108,8 +108,8 @@ double FastHeatingLoad_A(double t_s) {
 double FastHeatingWinding_degC(double t_s) {
   // The demo's truth once a minute, 0 to 20 min (`pumptherm plant demo`, pump3.truth.csv,
   // column winding_res_C), linear in between.
-  static constexpr double kDegC[] = {22.00, 26.89, 31.01, 34.67, 37.86, 44.52, 50.06,
-                                     55.52, 60.82, 70.44, 76.94, 83.11, 89.17, 95.21,
+  static constexpr double kDegC[] = {22.00,  26.89,  31.01,  34.67,  37.86,  44.52,  50.06,
+                                     55.52,  60.82,  70.44,  76.94,  83.11,  89.17,  95.21,
                                      101.15, 107.06, 112.95, 118.79, 124.59, 130.30, 135.99};
   const double t_min = std::clamp(t_s / 60.0, 0.0, 20.0);
   const int i = std::min(static_cast<int>(t_min), 19);
@@ -119,9 +119,9 @@ double FastHeatingWinding_degC(double t_s) {
 // The demo's pump 3 rotor (the magnet), once a minute, 0 to 20 min (`pumptherm plant demo`,
 // pump3.truth.csv, column rotor_C): about 5.6 K/min from 9 min on.
 double FastHeatingMagnet_degC(double t_s) {
-  static constexpr double kDegC[] = {22.00, 22.81, 25.50, 28.84, 32.12, 36.37, 40.74, 45.17,
-                                     49.71, 55.24, 60.81, 66.37, 71.93, 77.52, 83.18, 88.75,
-                                     94.37, 99.94, 105.54, 111.16, 116.60};
+  static constexpr double kDegC[] = {22.00, 22.81, 25.50, 28.84, 32.12,  36.37,  40.74,
+                                     45.17, 49.71, 55.24, 60.81, 66.37,  71.93,  77.52,
+                                     83.18, 88.75, 94.37, 99.94, 105.54, 111.16, 116.60};
   const double t_min = std::clamp(t_s / 60.0, 0.0, 20.0);
   const int i = std::min(static_cast<int>(t_min), 19);
   return kDegC[i] + (t_min - i) * (kDegC[i + 1] - kDegC[i]);
@@ -159,7 +159,9 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
   cfg.winding_degC = WindingTrajectory_degC;
   if (sc.warm_start_K != 0.0) {
     const double warm = sc.warm_start_K;
-    cfg.winding_degC = [warm](double t) { return WindingTrajectory_degC(t) + warm * std::exp(-t / 7200.0); };
+    cfg.winding_degC = [warm](double t) {
+      return WindingTrajectory_degC(t) + warm * std::exp(-t / 7200.0);
+    };
   }
   if (sc.fast_heating) {
     cfg.winding_degC = FastHeatingWinding_degC;
@@ -239,8 +241,7 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
     rls.Update(phi, y);
     rlsf.Update(phi, y);
     dfrls.Update(phi, y);
-    const est::ResistanceEstimate e =
-        ours.Update({s.id_A, s.iq_A, s.ud_V, s.uq_V, w}, dt);
+    const est::ResistanceEstimate e = ours.Update({s.id_A, s.iq_A, s.ud_V, s.uq_V, w}, dt);
     if (!have_accel && s.time_s >= 0.5 * cfg.ramp_s) {  // eq. 7: one point during acceleration
       accel_point = {s.iq_A, y, w};
       have_accel = true;
@@ -275,10 +276,14 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
     if (c_ours && std::isnan(conv_start) && load_changed) conv_start = t;
     if (!c_ours && t >= window_start) {
       const Eigen::Vector2d start_r(0.9 * nameplate.copper.r0_ohm, 0.0);
-      c_rls.emplace(est::RlsConfig::Plain(), Eigen::Vector2d(start_r(0), m[1].fig.flux_after_ramp_Wb), p0);
-      c_rlsf.emplace(est::RlsConfig::Forgetting(0.9995), Eigen::Vector2d(start_r(0), m[2].fig.flux_after_ramp_Wb), p0);
-      c_dfrls.emplace(est::RlsConfig::Dfrls(0.9995), Eigen::Vector2d(start_r(0), m[3].fig.flux_after_ramp_Wb), p0);
-      c_dfrls_means.emplace(est::RlsConfig::Dfrls(0.9995), Eigen::Vector2d(start_r(0), m[5].fig.flux_after_ramp_Wb), p0);
+      c_rls.emplace(est::RlsConfig::Plain(),
+                    Eigen::Vector2d(start_r(0), m[1].fig.flux_after_ramp_Wb), p0);
+      c_rlsf.emplace(est::RlsConfig::Forgetting(0.9995),
+                     Eigen::Vector2d(start_r(0), m[2].fig.flux_after_ramp_Wb), p0);
+      c_dfrls.emplace(est::RlsConfig::Dfrls(0.9995),
+                      Eigen::Vector2d(start_r(0), m[3].fig.flux_after_ramp_Wb), p0);
+      c_dfrls_means.emplace(est::RlsConfig::Dfrls(0.9995),
+                            Eigen::Vector2d(start_r(0), m[5].fig.flux_after_ramp_Wb), p0);
       c_ours.emplace(ours_motor, ours_config);
       auto st = c_ours->Save();
       for (auto& h : st.hypotheses) {
@@ -330,11 +335,14 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
         std::fprintf(trace, ",%.4f", est::TemperatureAt(nameplate.copper, mt.last_r));
       }
       const est::ResistanceIdentifierState st = ours.Save();
-      std::fprintf(trace, ",%d,%.6f,%.4f,%.4f,%.3f,%.4f,%.5f,%.5f,%.4f,%.4f\n", static_cast<int>(e.status),
-                   e.steady_magnet_probability, e.winding_sd_K, s.true_iq_A, e.mean_nis,
-                   e.unexplained_drift_K, e.voltage_offset_V, e.voltage_offset_sd_V,
-                   est::TemperatureAt(nameplate.copper, st.hypotheses[est::kSteadyMagnet].x(est::kStateResistance)),
-                   est::TemperatureAt(nameplate.copper, st.hypotheses[est::kDriftingMagnet].x(est::kStateResistance)));
+      std::fprintf(
+          trace, ",%d,%.6f,%.4f,%.4f,%.3f,%.4f,%.5f,%.5f,%.4f,%.4f\n", static_cast<int>(e.status),
+          e.steady_magnet_probability, e.winding_sd_K, s.true_iq_A, e.mean_nis,
+          e.unexplained_drift_K, e.voltage_offset_V, e.voltage_offset_sd_V,
+          est::TemperatureAt(nameplate.copper,
+                             st.hypotheses[est::kSteadyMagnet].x(est::kStateResistance)),
+          est::TemperatureAt(nameplate.copper,
+                             st.hypotheses[est::kDriftingMagnet].x(est::kStateResistance)));
     }
     if (t < ramp_end) continue;
     if (at_second) {
@@ -390,8 +398,8 @@ std::vector<Figures> Run(const Scenario& sc, double hours, std::uint64_t seed,
   return out;
 }
 
-const char* kMethodNames[] = {"equation-based", "RLS", "RLS forgetting", "DFRLS (paper)", "ours",
-                              "DFRLS 1s means"};
+const char* kMethodNames[] = {"equation-based", "RLS",  "RLS forgetting",
+                              "DFRLS (paper)",  "ours", "DFRLS 1s means"};
 
 }  // namespace
 
@@ -401,7 +409,8 @@ int main(int argc, char** argv) {
   std::string only = "all";
   std::string json_path;
   std::uint64_t seed = 1;
-  app.add_option("--hours", hours, "hours at rated speed after the 8-minute ramp")->capture_default_str();
+  app.add_option("--hours", hours, "hours at rated speed after the 8-minute ramp")
+      ->capture_default_str();
   app.add_option("--scenario", only, "all, or one scenario name")->capture_default_str();
   app.add_option("--seed", seed, "simulator seed")->capture_default_str();
   int seeds = 1;
@@ -414,12 +423,20 @@ int main(int argc, char** argv) {
                  "with one --scenario: write true and estimated winding temperature once a "
                  "simulated minute as CSV");
   est::ResistanceIdentifierConfig oc;
-  app.add_option("--winding-drift", oc.winding_drift_K_per_sqrt_h, "ours: K/sqrt(h)")->capture_default_str();
-  app.add_option("--winding-rate-walk", oc.winding_rate_walk_K_per_h_per_sqrt_h, "ours: K/h/sqrt(h)")->capture_default_str();
-  app.add_option("--steady-winding-drift", oc.steady_winding_drift_K_per_sqrt_h, "ours: K/sqrt(h)")->capture_default_str();
-  app.add_option("--steady-winding-rate-walk", oc.steady_winding_rate_walk_K_per_h_per_sqrt_h, "ours: K/h/sqrt(h)")->capture_default_str();
-  app.add_option("--magnet-drift", oc.magnet_drift_K_per_sqrt_h, "ours: K/sqrt(h)")->capture_default_str();
-  app.add_option("--magnet-rate-walk", oc.magnet_rate_walk_K_per_h_per_sqrt_h, "ours: K/h/sqrt(h)")->capture_default_str();
+  app.add_option("--winding-drift", oc.winding_drift_K_per_sqrt_h, "ours: K/sqrt(h)")
+      ->capture_default_str();
+  app.add_option("--winding-rate-walk", oc.winding_rate_walk_K_per_h_per_sqrt_h,
+                 "ours: K/h/sqrt(h)")
+      ->capture_default_str();
+  app.add_option("--steady-winding-drift", oc.steady_winding_drift_K_per_sqrt_h, "ours: K/sqrt(h)")
+      ->capture_default_str();
+  app.add_option("--steady-winding-rate-walk", oc.steady_winding_rate_walk_K_per_h_per_sqrt_h,
+                 "ours: K/h/sqrt(h)")
+      ->capture_default_str();
+  app.add_option("--magnet-drift", oc.magnet_drift_K_per_sqrt_h, "ours: K/sqrt(h)")
+      ->capture_default_str();
+  app.add_option("--magnet-rate-walk", oc.magnet_rate_walk_K_per_h_per_sqrt_h, "ours: K/h/sqrt(h)")
+      ->capture_default_str();
   app.add_option("--rate-tau", oc.rate_time_constant_s, "ours: s")->capture_default_str();
   app.add_option("--block", oc.block_samples, "ours: samples per block")->capture_default_str();
   app.add_option("--excitation-window", oc.excitation_window_s, "ours: s")->capture_default_str();
@@ -427,20 +444,28 @@ int main(int argc, char** argv) {
   app.add_option("--steady-magnet-prior", oc.steady_magnet_prior,
                  "ours: prior probability of the steady magnet (0 = one filter, drifting)")
       ->capture_default_str();
-  app.add_option("--steady-magnet-drift", oc.steady_magnet_drift_K_per_sqrt_h, "ours: K/sqrt(h)")->capture_default_str();
-  app.add_option("--steady-magnet-rate-walk", oc.steady_magnet_rate_walk_K_per_h_per_sqrt_h, "ours: K/h/sqrt(h)")->capture_default_str();
-  app.add_option("--load-change", oc.load_change_A, "ours: A, block-to-block iq change that is evidence")->capture_default_str();
+  app.add_option("--steady-magnet-drift", oc.steady_magnet_drift_K_per_sqrt_h, "ours: K/sqrt(h)")
+      ->capture_default_str();
+  app.add_option("--steady-magnet-rate-walk", oc.steady_magnet_rate_walk_K_per_h_per_sqrt_h,
+                 "ours: K/h/sqrt(h)")
+      ->capture_default_str();
+  app.add_option("--load-change", oc.load_change_A,
+                 "ours: A, block-to-block iq change that is evidence")
+      ->capture_default_str();
   Chain chain;
   app.add_option("--adc-bits", chain.adc_bits, "simulator: ADC bits (0 = default 12)");
-  app.add_option("--sim-voltage-noise", chain.voltage_noise_V, "simulator: rms uq/ud jitter, V (default 0.01)");
+  app.add_option("--sim-voltage-noise", chain.voltage_noise_V,
+                 "simulator: rms uq/ud jitter, V (default 0.01)");
   bool no_correction = false;
   app.add_flag("--no-quantisation-correction", no_correction,
                "ours: no uq resolution in its motor description (no quantisation-bias correction)");
   app.add_flag("--voltage-error-model", chain.voltage_error_model,
                "ours: the simulator's inverter voltage error (size and knee) in its motor "
                "description, compensated before identification");
-  app.add_option("--voltage-error-allowance", oc.voltage_error_allowance_V, "ours: V")->capture_default_str();
-  app.add_option("--tracking-bound", oc.tracking_bound_K, "ours: K (2-sigma)")->capture_default_str();
+  app.add_option("--voltage-error-allowance", oc.voltage_error_allowance_V, "ours: V")
+      ->capture_default_str();
+  app.add_option("--tracking-bound", oc.tracking_bound_K, "ours: K (2-sigma)")
+      ->capture_default_str();
   app.add_option("--consistency-window", oc.consistency_window_s, "ours: s")->capture_default_str();
   CLI11_PARSE(app, argc, argv);
   chain.quantisation_correction = !no_correction;
@@ -450,28 +475,34 @@ int main(int argc, char** argv) {
       {"flux_drift", "base + magnet flux -0.1 %/K", true, false, false, true, false},
       {"dead_time", "base + 0.2 V dead-time error", false, true, false, true, false},
       {"speed_ripple", "base + 3 r/min mechanical ripple", false, false, true, true, false},
-      {"nameplate", "base + plant R0 +4 %, psi_f -3 % vs nameplate", false, false, false, true, true},
-      {"no_load_steps", "base without gas-load steps (constant 2 A)", false, false, false, false, false},
-      {"no_load_steps_flux_drift", "no gas-load steps, magnet flux -0.1 %/K", true, false, false, false, false},
-      {"frequent_steps", "base with gas-load changes every 3 min on average", false, false, false, true, false, 180.0},
+      {"nameplate", "base + plant R0 +4 %, psi_f -3 % vs nameplate", false, false, false, true,
+       true},
+      {"no_load_steps", "base without gas-load steps (constant 2 A)", false, false, false, false,
+       false},
+      {"no_load_steps_flux_drift", "no gas-load steps, magnet flux -0.1 %/K", true, false, false,
+       false, false},
+      {"frequent_steps", "base with gas-load changes every 3 min on average", false, false, false,
+       true, false, 180.0},
       {"everything", "every disturbance above, with load steps", true, true, true, true, true},
       // Start-up: a warm winding, the plant's flux off the nameplate, a 9 A run-up.
-      {"warm_start", "winding 35 degC at start, plant psi_f +1.6 %, 9 A run-up", false, false, false, true,
-       false, 600.0, 0.0, 0.0, 9.0, 7.8, 1.016},
-      {"voltage_error_0.10", "warm_start + inverter voltage error 0.10 V", false, true, false, true, false,
-       600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.10},
-      {"voltage_error_0.15", "warm_start + inverter voltage error 0.15 V", false, true, false, true, false,
-       600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.15},
-      {"voltage_error_0.20", "warm_start + inverter voltage error 0.20 V", false, true, false, true, false,
-       600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.20},
-      {"pump3_heating", "the demo's pump 3: 2 min run-up at 3 A, 2.5/3.5/4.5 A, winding up to 6 K/min",
-       false, false, false, false, false, 600.0, 0.3, 120.0, 3.0, 0.0, 1.0, 0.0, true},
-      {"pump3_heating_magnet", "pump3_heating with the demo's rotor: flux -0.1 %/K, magnet up to 5.6 K/min",
-       true, false, false, false, false, 600.0, 0.3, 120.0, 3.0, 0.0, 1.0, 0.0, true, true},
+      {"warm_start", "winding 35 degC at start, plant psi_f +1.6 %, 9 A run-up", false, false,
+       false, true, false, 600.0, 0.0, 0.0, 9.0, 7.8, 1.016},
+      {"voltage_error_0.10", "warm_start + inverter voltage error 0.10 V", false, true, false, true,
+       false, 600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.10},
+      {"voltage_error_0.15", "warm_start + inverter voltage error 0.15 V", false, true, false, true,
+       false, 600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.15},
+      {"voltage_error_0.20", "warm_start + inverter voltage error 0.20 V", false, true, false, true,
+       false, 600.0, 0.0, 0.0, 9.0, 7.8, 1.016, 0.20},
+      {"pump3_heating",
+       "the demo's pump 3: 2 min run-up at 3 A, 2.5/3.5/4.5 A, winding up to 6 K/min", false, false,
+       false, false, false, 600.0, 0.3, 120.0, 3.0, 0.0, 1.0, 0.0, true},
+      {"pump3_heating_magnet",
+       "pump3_heating with the demo's rotor: flux -0.1 %/K, magnet up to 5.6 K/min", true, false,
+       false, false, false, 600.0, 0.3, 120.0, 3.0, 0.0, 1.0, 0.0, true, true},
   };
-  std::string json = "{\n  \"hours\": " + fmt::format("{}", hours) + ",\n  \"seed\": " +
-                     fmt::format("{}", seed) + ",\n  \"seeds\": " + fmt::format("{}", seeds) +
-                     ",\n  \"scenarios\": [\n";
+  std::string json = "{\n  \"hours\": " + fmt::format("{}", hours) +
+                     ",\n  \"seed\": " + fmt::format("{}", seed) +
+                     ",\n  \"seeds\": " + fmt::format("{}", seeds) + ",\n  \"scenarios\": [\n";
   bool first = true;
   for (const auto& sc : scenarios) {
     if (only != "all" && only != sc.name) continue;
@@ -484,25 +515,32 @@ int main(int argc, char** argv) {
       }
       std::fprintf(trace, "time_h,true_degC");
       for (const char* name : kMethodNames) std::fprintf(trace, ",%s", name);
-      std::fprintf(trace, ",ours_status,ours_steady_magnet_probability,ours_winding_sd_K,true_iq_A,ours_mean_nis,ours_unexplained_drift_K,ours_voltage_offset_V,ours_voltage_offset_sd_V,ours_steady_degC,ours_drifting_degC\n");
+      std::fprintf(trace,
+                   ",ours_status,ours_steady_magnet_probability,ours_winding_sd_K,true_iq_A,ours_"
+                   "mean_nis,ours_unexplained_drift_K,ours_voltage_offset_V,ours_voltage_offset_sd_"
+                   "V,ours_steady_degC,ours_drifting_degC\n");
     }
     const auto figs = Run(sc, hours, seed, oc, chain, trace);
     if (trace != nullptr) std::fclose(trace);
     fmt::print("\n== {}: {} ==\n", sc.name, sc.description);
-    fmt::print("{:<16} {:>12} {:>9} {:>12} {:>9} {:>11} {:>11} {:>9} {:>11} {:>7} {:>9}\n", "method",
-               "psi_ramp_Wb", "dR_%", "converge_s", "dT_%", "dT_1s_%", "Rs_err_%", "tracking",
-               "trk_err_K", "held", "err/sd");
+    fmt::print("{:<16} {:>12} {:>9} {:>12} {:>9} {:>11} {:>11} {:>9} {:>11} {:>7} {:>9}\n",
+               "method", "psi_ramp_Wb", "dR_%", "converge_s", "dT_%", "dT_1s_%", "Rs_err_%",
+               "tracking", "trk_err_K", "held", "err/sd");
     if (!first) json += ",\n";
     first = false;
-    json += fmt::format("    {{\"name\": \"{}\", \"description\": \"{}\", \"methods\": [\n", sc.name,
-                        sc.description);
-    auto num = [](double v) { return std::isfinite(v) ? fmt::format("{:.6g}", v) : std::string("null"); };
+    json += fmt::format("    {{\"name\": \"{}\", \"description\": \"{}\", \"methods\": [\n",
+                        sc.name, sc.description);
+    auto num = [](double v) {
+      return std::isfinite(v) ? fmt::format("{:.6g}", v) : std::string("null");
+    };
     for (std::size_t i = 0; i < figs.size(); ++i) {
       const auto& f = figs[i];
-      fmt::print("{:<16} {:>12.6f} {:>9.3f} {:>12.2f} {:>9.2f} {:>11.2f} {:>11.2f} {:>9.3f} {:>11.2f} {:>7.3f} {:>9.2f}\n",
-                 kMethodNames[i], f.flux_after_ramp_Wb, f.d_r_percent, f.convergence_s,
-                 f.d_t_percent, f.d_t_every_s_percent, f.r_error_percent, f.tracking_fraction,
-                 f.tracking_max_error_K, f.held_fraction, f.max_sd_ratio);
+      fmt::print(
+          "{:<16} {:>12.6f} {:>9.3f} {:>12.2f} {:>9.2f} {:>11.2f} {:>11.2f} {:>9.3f} {:>11.2f} "
+          "{:>7.3f} {:>9.2f}\n",
+          kMethodNames[i], f.flux_after_ramp_Wb, f.d_r_percent, f.convergence_s, f.d_t_percent,
+          f.d_t_every_s_percent, f.r_error_percent, f.tracking_fraction, f.tracking_max_error_K,
+          f.held_fraction, f.max_sd_ratio);
       json += fmt::format(
           "      {{\"method\": \"{}\", \"flux_after_ramp_Wb\": {}, \"dR_percent\": {}, "
           "\"convergence_s\": {}, \"dT_percent\": {}, \"dT_every_1s_percent\": {}, "
@@ -511,14 +549,13 @@ int main(int argc, char** argv) {
           kMethodNames[i], num(f.flux_after_ramp_Wb), num(f.d_r_percent), num(f.convergence_s),
           num(f.d_t_percent), num(f.d_t_every_s_percent), num(f.r_error_percent),
           num(f.tracking_fraction), num(f.tracking_max_error_K), num(f.held_fraction),
-          num(f.max_sd_ratio),
-          i + 1 < figs.size() ? "," : "");
+          num(f.max_sd_ratio), i + 1 < figs.size() ? "," : "");
     }
     json += "    ]";
     if (seeds > 1) {
       // Ours on further seeds: the figures per seed, then the worst and the mean of dT.
-      fmt::print("ours by seed:\n{:>6} {:>9} {:>9} {:>11} {:>11} {:>12} {:>9} {:>11}\n", "seed", "dR_%",
-                 "dT_%", "dT_1s_%", "Rs_err_%", "converge_s", "tracking", "trk_err_K");
+      fmt::print("ours by seed:\n{:>6} {:>9} {:>9} {:>11} {:>11} {:>12} {:>9} {:>11}\n", "seed",
+                 "dR_%", "dT_%", "dT_1s_%", "Rs_err_%", "converge_s", "tracking", "trk_err_K");
       json += ",\n     \"ours_by_seed\": [\n";
       double worst = 0.0, sum = 0.0;
       for (int k = 0; k < seeds; ++k) {
@@ -535,11 +572,11 @@ int main(int argc, char** argv) {
             "\"tracking_fraction\": {}, \"tracking_max_error_K\": {}}}{}\n",
             sd, num(f.d_r_percent), num(f.d_t_percent), num(f.d_t_every_s_percent),
             num(f.r_error_percent), num(f.convergence_s), num(f.tracking_fraction),
-            num(f.tracking_max_error_K),
-            k + 1 < seeds ? "," : "");
+            num(f.tracking_max_error_K), k + 1 < seeds ? "," : "");
         std::fflush(stdout);
       }
-      fmt::print("ours dT over {} seeds: worst {:.2f} %, mean {:.2f} %\n", seeds, worst, sum / seeds);
+      fmt::print("ours dT over {} seeds: worst {:.2f} %, mean {:.2f} %\n", seeds, worst,
+                 sum / seeds);
       json += "     ]";
     }
     json += "}";

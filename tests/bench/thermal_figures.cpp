@@ -45,8 +45,9 @@ using pumptherm::test_files::ReadFile;
 /// A model by name (shipped, or kept with the tests); tables it names are read relative to it.
 pe::ThermalModel Load(const std::string& name) {
   const std::string path = pumptherm::test_files::ModelPath(name);
-  return pe::ThermalModel::Parse(ReadFile(path), name,
-                                 pe::ThermalModelFiles{pumptherm::test_files::DirectoryOf(path), &ReadFile});
+  return pe::ThermalModel::Parse(
+      ReadFile(path), name,
+      pe::ThermalModelFiles{pumptherm::test_files::DirectoryOf(path), &ReadFile});
 }
 
 struct Segment {
@@ -94,7 +95,8 @@ std::vector<StateFigures> Score(const std::vector<std::string>& names,
     int count = 0;
     for (std::size_t k = 0; k < truth.size(); ++k) {
       const double t = static_cast<double>(k) * dt_s;
-      const double e = std::abs(est[k](static_cast<Eigen::Index>(i)) - truth[k](static_cast<Eigen::Index>(i)));
+      const double e =
+          std::abs(est[k](static_cast<Eigen::Index>(i)) - truth[k](static_cast<Eigen::Index>(i)));
       if (e > 3.0) f.t_within_3K_s = t + dt_s;
       if (t > 60.0) {
         if (e > f.max_after_60s_K) {
@@ -190,7 +192,8 @@ Run ModelAlone(const std::string& label, const pe::ThermalModel& truth_model,
   for (std::size_t i = 0; i < r.states.size(); ++i) {
     double mx = 0.0;
     for (std::size_t k = 0; k < r.truth.size(); ++k) {
-      mx = std::max(mx, std::abs(r.estimate[k](static_cast<Eigen::Index>(i)) - r.truth[k](static_cast<Eigen::Index>(i))));
+      mx = std::max(mx, std::abs(r.estimate[k](static_cast<Eigen::Index>(i)) -
+                                 r.truth[k](static_cast<Eigen::Index>(i))));
     }
     r.states[i].max_after_60s_K = mx;
   }
@@ -201,18 +204,22 @@ std::string StatesJson(const Run& r) {
   std::string s = "{";
   for (std::size_t i = 0; i < r.states.size(); ++i) {
     const auto& f = r.states[i];
-    s += fmt::format("{}\"{}\": {{\"t_within_3K_s\": {}, \"max_after_60s_K\": {:.4f}, \"max_at_s\": {}, \"rms_after_60s_K\": {:.4f}}}",
-                     i ? ", " : "", f.node, f.t_within_3K_s, f.max_after_60s_K, f.max_at_s, f.rms_after_60s_K);
+    s += fmt::format(
+        "{}\"{}\": {{\"t_within_3K_s\": {}, \"max_after_60s_K\": {:.4f}, \"max_at_s\": {}, "
+        "\"rms_after_60s_K\": {:.4f}}}",
+        i ? ", " : "", f.node, f.t_within_3K_s, f.max_after_60s_K, f.max_at_s, f.rms_after_60s_K);
   }
   return s + "}";
 }
 
 void PrintRun(const Run& r) {
-  fmt::print("\n{}{}\n", r.label, r.mean_nis > 0 ? fmt::format("  (mean NIS {:.3f})", r.mean_nis) : "");
-  fmt::print("  {:<14} {:>14} {:>16} {:>16}\n", "node", "within 3 K at", "max |e| >60 s K", "rms >60 s K");
+  fmt::print("\n{}{}\n", r.label,
+             r.mean_nis > 0 ? fmt::format("  (mean NIS {:.3f})", r.mean_nis) : "");
+  fmt::print("  {:<14} {:>14} {:>16} {:>16}\n", "node", "within 3 K at", "max |e| >60 s K",
+             "rms >60 s K");
   for (const auto& f : r.states) {
-    fmt::print("  {:<14} {:>12.0f} s {:>16.3f} {:>16.3f}\n", f.node, f.t_within_3K_s, f.max_after_60s_K,
-               f.rms_after_60s_K);
+    fmt::print("  {:<14} {:>12.0f} s {:>16.3f} {:>16.3f}\n", f.node, f.t_within_3K_s,
+               f.max_after_60s_K, f.rms_after_60s_K);
   }
 }
 
@@ -276,44 +283,57 @@ int main(int argc, char** argv) {
     for (const auto* filter : {&improved, &baseline}) {
       for (bool fuse : {false, true}) {
         const std::string fm = filter == &improved ? "improved" : "baseline";
-        const Run r = Kalman(fmt::format("Fig. {}: truth improved + process noise, filter {}, frame sensor{}", fig,
-                                         fm, fuse ? " + resistance-based winding (1 K)" : ""),
-                             improved, *filter, profile, fuse, Sensor::kPaper, 100 + static_cast<std::uint64_t>(fig));
+        const Run r =
+            Kalman(fmt::format("Fig. {}: truth improved + process noise, filter {}, frame sensor{}",
+                               fig, fm, fuse ? " + resistance-based winding (1 K)" : ""),
+                   improved, *filter, profile, fuse, Sensor::kPaper,
+                   100 + static_cast<std::uint64_t>(fig));
         PrintRun(r);
-        json += fmt::format("  \"fig{}_filter_{}{}\": {{\"mean_nis\": {:.4f}, \"states\": {}}},\n", fig, fm,
-                            fuse ? "_fused" : "", r.mean_nis, StatesJson(r));
+        json += fmt::format("  \"fig{}_filter_{}{}\": {{\"mean_nis\": {:.4f}, \"states\": {}}},\n",
+                            fig, fm, fuse ? "_fused" : "", r.mean_nis, StatesJson(r));
         if (filter == &improved && !fuse) {
           const std::string csv = (work / fmt::format("fig{}.csv", fig)).string();
           WriteTrace(csv, r, names);
-          Plot(KalmanPlot(fmt::format("{}/thermal_fig{}.png", out_dir, fig), csv,
-                          fmt::format("Fig. {} set-up, 800 r/min: lines truth (improved + process noise), "
-                                      "points estimate (frame only, 10 K off)",
-                                      fig)));
+          Plot(KalmanPlot(
+              fmt::format("{}/thermal_fig{}.png", out_dir, fig), csv,
+              fmt::format("Fig. {} set-up, 800 r/min: lines truth (improved + process noise), "
+                          "points estimate (frame only, 10 K off)",
+                          fig)));
         }
       }
     }
-    const Run rtd = Kalman(fmt::format("Fig. {}: as above, filter improved, RTD-like frame sensor (0.1 K steps, 20 s lag)", fig),
-                           improved, improved, profile, false, Sensor::kRtd, 100 + static_cast<std::uint64_t>(fig));
+    const Run rtd = Kalman(
+        fmt::format(
+            "Fig. {}: as above, filter improved, RTD-like frame sensor (0.1 K steps, 20 s lag)",
+            fig),
+        improved, improved, profile, false, Sensor::kRtd, 100 + static_cast<std::uint64_t>(fig));
     PrintRun(rtd);
     NoiseLevels noiseless_truth;
     noiseless_truth.truth_sd_K = 0.0;
-    const Run exact = Kalman(fmt::format("Fig. {}: truth = improved model without process noise (the model exactly right), filter improved, frame sensor", fig),
-                             improved, improved, profile, false, Sensor::kPaper, 100 + static_cast<std::uint64_t>(fig),
-                             noiseless_truth);
+    const Run exact = Kalman(fmt::format("Fig. {}: truth = improved model without process noise "
+                                         "(the model exactly right), filter improved, frame sensor",
+                                         fig),
+                             improved, improved, profile, false, Sensor::kPaper,
+                             100 + static_cast<std::uint64_t>(fig), noiseless_truth);
     PrintRun(exact);
     NoiseLevels daemon_prior;
     daemon_prior.initial_spread_sd_K = pe::VirtualSensorConfig{}.initial_spread_sd_K;
-    const Run wide = Kalman(fmt::format("Fig. {}: as the first, filter improved, frame sensor, the daemon's default initial spread ({} K)", fig,
-                                        daemon_prior.initial_spread_sd_K),
-                            improved, improved, profile, false, Sensor::kPaper, 100 + static_cast<std::uint64_t>(fig),
-                            daemon_prior);
+    const Run wide = Kalman(fmt::format("Fig. {}: as the first, filter improved, frame sensor, the "
+                                        "daemon's default initial spread ({} K)",
+                                        fig, daemon_prior.initial_spread_sd_K),
+                            improved, improved, profile, false, Sensor::kPaper,
+                            100 + static_cast<std::uint64_t>(fig), daemon_prior);
     PrintRun(wide);
-    json += fmt::format("  \"fig{}_filter_improved_default_spread\": {{\"initial_spread_sd_K\": {}, \"mean_nis\": {:.4f}, \"states\": {}}},\n",
-                        fig, daemon_prior.initial_spread_sd_K, wide.mean_nis, StatesJson(wide));
-    json += fmt::format("  \"fig{}_filter_improved_noiseless_truth\": {{\"mean_nis\": {:.4f}, \"states\": {}}},\n", fig,
-                        exact.mean_nis, StatesJson(exact));
-    json += fmt::format("  \"fig{}_filter_improved_rtd_sensor\": {{\"mean_nis\": {:.4f}, \"states\": {}}},\n", fig,
-                        rtd.mean_nis, StatesJson(rtd));
+    json += fmt::format(
+        "  \"fig{}_filter_improved_default_spread\": {{\"initial_spread_sd_K\": {}, \"mean_nis\": "
+        "{:.4f}, \"states\": {}}},\n",
+        fig, daemon_prior.initial_spread_sd_K, wide.mean_nis, StatesJson(wide));
+    json += fmt::format(
+        "  \"fig{}_filter_improved_noiseless_truth\": {{\"mean_nis\": {:.4f}, \"states\": {}}},\n",
+        fig, exact.mean_nis, StatesJson(exact));
+    json += fmt::format(
+        "  \"fig{}_filter_improved_rtd_sensor\": {{\"mean_nis\": {:.4f}, \"states\": {}}},\n", fig,
+        rtd.mean_nis, StatesJson(rtd));
   }
 
   // Noise sweeps (right model, frame sensor only), five seeds per setting, worst seed reported:
@@ -325,8 +345,10 @@ int main(int argc, char** argv) {
     const double paper_sd_K = NoiseLevels{}.truth_sd_K;
     const int kSeeds = 5;
     const auto& C = improved.Capacities_J_per_K();
-    fmt::print("\nEquivalent random heat flow of eq. 39's noise (C_i x {} K / 1 s), W:", paper_sd_K);
-    for (Eigen::Index i = 0; i < C.size(); ++i) fmt::print(" {} {:.0f}", names[static_cast<std::size_t>(i)], C(i) * paper_sd_K);
+    fmt::print("\nEquivalent random heat flow of eq. 39's noise (C_i x {} K / 1 s), W:",
+               paper_sd_K);
+    for (Eigen::Index i = 0; i < C.size(); ++i)
+      fmt::print(" {} {:.0f}", names[static_cast<std::size_t>(i)], C(i) * paper_sd_K);
     fmt::print("\n");
     struct Worst {
       double winding_max_K = 0, winding_rms_K = 0, rotor_max_K = 0, all_max_K = 0, all_t3_s = 0;
@@ -336,8 +358,9 @@ int main(int argc, char** argv) {
       for (const auto& [fig, segs] : figs) {
         const auto profile = Profile(segs);
         for (int s = 0; s < kSeeds; ++s) {
-          const Run r = Kalman("", improved, improved, profile, false, Sensor::kPaper,
-                               1000 + 10 * static_cast<std::uint64_t>(fig) + static_cast<std::uint64_t>(s), noise);
+          const Run r = Kalman(
+              "", improved, improved, profile, false, Sensor::kPaper,
+              1000 + 10 * static_cast<std::uint64_t>(fig) + static_cast<std::uint64_t>(s), noise);
           for (const auto& f : r.states) {
             const bool winding = f.node == "slot_winding" || f.node == "end_winding";
             if (winding) {
@@ -353,27 +376,38 @@ int main(int argc, char** argv) {
       return w;
     };
     auto worst_json = [](const Worst& w) {
-      return fmt::format("\"winding_max_K\": {:.4f}, \"winding_rms_K\": {:.4f}, \"rotor_max_K\": {:.4f}, "
-                         "\"all_max_K\": {:.4f}, \"all_within_3K_at_s\": {}",
-                         w.winding_max_K, w.winding_rms_K, w.rotor_max_K, w.all_max_K, w.all_t3_s);
+      return fmt::format(
+          "\"winding_max_K\": {:.4f}, \"winding_rms_K\": {:.4f}, \"rotor_max_K\": {:.4f}, "
+          "\"all_max_K\": {:.4f}, \"all_within_3K_at_s\": {}",
+          w.winding_max_K, w.winding_rms_K, w.rotor_max_K, w.all_max_K, w.all_t3_s);
     };
     static constexpr char head[] = "  {:>10} {:>10} {:>13} {:>13} {:>11} {:>11} {:>12}\n";
-    static constexpr char row[] = "  {:>10.4f} {:>10.4f} {:>11.2f} K {:>11.2f} K {:>9.2f} K {:>9.2f} K {:>10.0f} s\n";
-    fmt::print("\nSweep A (Figs. 7 and 8, {} seeds each, worst seed): truth with eq. 39's noise, filter Q scaled\n", kSeeds);
-    fmt::print(head, "truth sd", "filter sd", "winding max", "winding rms", "rotor max", "all max", "3 K at");
+    static constexpr char row[] =
+        "  {:>10.4f} {:>10.4f} {:>11.2f} K {:>11.2f} K {:>9.2f} K {:>9.2f} K {:>10.0f} s\n";
+    fmt::print(
+        "\nSweep A (Figs. 7 and 8, {} seeds each, worst seed): truth with eq. 39's noise, filter Q "
+        "scaled\n",
+        kSeeds);
+    fmt::print(head, "truth sd", "filter sd", "winding max", "winding rms", "rotor max", "all max",
+               "3 K at");
     json += "  \"sweep_filter_q\": [";
     bool first = true;
     for (double scale : {0.25, 0.5, 1.0, 2.0, 4.0}) {
       const NoiseLevels noise{paper_sd_K, paper_sd_K * scale};
       const Worst w = run_seeds(noise);
-      fmt::print(row, noise.truth_sd_K, noise.filter_sd_K, w.winding_max_K, w.winding_rms_K, w.rotor_max_K, w.all_max_K, w.all_t3_s);
-      json += fmt::format("{}{{\"truth_sd_K\": {}, \"filter_sd_K\": {:.5f}, {}}}", first ? "" : ", ",
-                          noise.truth_sd_K, noise.filter_sd_K, worst_json(w));
+      fmt::print(row, noise.truth_sd_K, noise.filter_sd_K, w.winding_max_K, w.winding_rms_K,
+                 w.rotor_max_K, w.all_max_K, w.all_t3_s);
+      json += fmt::format("{}{{\"truth_sd_K\": {}, \"filter_sd_K\": {:.5f}, {}}}",
+                          first ? "" : ", ", noise.truth_sd_K, noise.filter_sd_K, worst_json(w));
       first = false;
     }
     json += "],\n";
-    fmt::print("\nSweep B (Figs. 7 and 8, {} seeds each, worst seed): truth noise scaled, filter matched (eq. 39's when the truth has none)\n", kSeeds);
-    fmt::print(head, "truth sd", "filter sd", "winding max", "winding rms", "rotor max", "all max", "3 K at");
+    fmt::print(
+        "\nSweep B (Figs. 7 and 8, {} seeds each, worst seed): truth noise scaled, filter matched "
+        "(eq. 39's when the truth has none)\n",
+        kSeeds);
+    fmt::print(head, "truth sd", "filter sd", "winding max", "winding rms", "rotor max", "all max",
+               "3 K at");
     json += "  \"sweep_truth_noise\": [";
     first = true;
     const std::string sweep_csv = (work / "sweep_truth_noise.csv").string();
@@ -382,29 +416,37 @@ int main(int argc, char** argv) {
     for (double scale : {0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0}) {
       const NoiseLevels noise{paper_sd_K * scale, scale > 0.0 ? paper_sd_K * scale : paper_sd_K};
       const Worst w = run_seeds(noise);
-      fmt::print(row, noise.truth_sd_K, noise.filter_sd_K, w.winding_max_K, w.winding_rms_K, w.rotor_max_K, w.all_max_K, w.all_t3_s);
-      json += fmt::format("{}{{\"truth_sd_K\": {:.5f}, \"filter_sd_K\": {:.5f}, {}}}", first ? "" : ", ",
-                          noise.truth_sd_K, noise.filter_sd_K, worst_json(w));
-      sweep_out.print("{:.5f},{:.4f},{:.4f},{:.4f}\n", noise.truth_sd_K, w.winding_max_K, w.rotor_max_K, w.all_max_K);
+      fmt::print(row, noise.truth_sd_K, noise.filter_sd_K, w.winding_max_K, w.winding_rms_K,
+                 w.rotor_max_K, w.all_max_K, w.all_t3_s);
+      json += fmt::format("{}{{\"truth_sd_K\": {:.5f}, \"filter_sd_K\": {:.5f}, {}}}",
+                          first ? "" : ", ", noise.truth_sd_K, noise.filter_sd_K, worst_json(w));
+      sweep_out.print("{:.5f},{:.4f},{:.4f},{:.4f}\n", noise.truth_sd_K, w.winding_max_K,
+                      w.rotor_max_K, w.all_max_K);
       first = false;
     }
     sweep_out.close();
     json += "],\n";
-    Plot(fmt::format(
-        "set terminal pngcairo size 900,550\nset output '{}/thermal_noise_sweep.png'\nset datafile separator ','\n"
-        "set key top left noenhanced\nset grid\nset xlabel 'process noise of the truth, K per sqrt(s) and state (eq. 39: {})'\n"
-        "set ylabel 'max |error| after 60 s, worst of 10 runs (K)'\n"
-        "set title 'Virtual sensor, right model, frame sensor only, filter Q matched (Figs. 7 and 8 set-ups)' noenhanced\n"
-        "plot '{}' using 1:2 with linespoints lw 2 pt 7 title 'windings', '' using 1:3 with linespoints lw 2 pt 5 title 'rotor', "
-        "'' using 1:4 with lines lw 1 dt 4 lc rgb 'black' title 'worst state', 1.0 with lines dt 2 lc rgb 'black' title 'goal 1.0 K', "
-        "3.0 with lines dt 3 lc rgb 'gray40' title '3 K'\n",
-        out_dir, paper_sd_K, sweep_csv));
+    Plot(
+        fmt::format("set terminal pngcairo size 900,550\nset output "
+                    "'{}/thermal_noise_sweep.png'\nset datafile separator ','\n"
+                    "set key top left noenhanced\nset grid\nset xlabel 'process noise of the "
+                    "truth, K per sqrt(s) and state (eq. 39: {})'\n"
+                    "set ylabel 'max |error| after 60 s, worst of 10 runs (K)'\n"
+                    "set title 'Virtual sensor, right model, frame sensor only, filter Q matched "
+                    "(Figs. 7 and 8 set-ups)' noenhanced\n"
+                    "plot '{}' using 1:2 with linespoints lw 2 pt 7 title 'windings', '' using 1:3 "
+                    "with linespoints lw 2 pt 5 title 'rotor', "
+                    "'' using 1:4 with lines lw 1 dt 4 lc rgb 'black' title 'worst state', 1.0 "
+                    "with lines dt 2 lc rgb 'black' title 'goal 1.0 K', "
+                    "3.0 with lines dt 3 lc rgb 'gray40' title '3 K'\n",
+                    out_dir, paper_sd_K, sweep_csv));
   }
 
   // Model alone (Figs. 4-6): baseline against the improved truth, both from 22 degC.
   for (const auto& [label, segs] : std::vector<std::pair<std::string, std::vector<Segment>>>{
            {"fig4_50A", {{50, 2700}}}, {"fig5_6_45_55_45A", {{45, 870}, {55, 850}, {45, 480}}}}) {
-    const Run r = ModelAlone("Model alone (" + label + "): baseline model against improved truth; max over the whole run",
+    const Run r = ModelAlone("Model alone (" + label +
+                                 "): baseline model against improved truth; max over the whole run",
                              improved, baseline, Profile(segs));
     PrintRun(r);
     json += fmt::format("  \"model_alone_{}\": {},\n", label, StatesJson(r));
@@ -419,14 +461,14 @@ int main(int argc, char** argv) {
     const auto wall = Load("wallscheid2017-4node");
     const auto csv = pumptherm::tools::CsvTable::Read(data);
     // The data set's own column names (time_s was added to it).
-    const std::map<std::string, std::string> kNames{{"time_s", "time_s"},  {"speed_rpm", "motor_speed"},
-                                                    {"id_A", "i_d"},       {"iq_A", "i_q"},
-                                                    {"ambient_C", "ambient"}, {"coolant_C", "coolant"}};
-    const pumptherm::tools::ThermalInputSeries series =
-        pumptherm::tools::ReadThermalInputs(csv, {[&](const std::string& c) { return kNames.at(c); }, true});
+    const std::map<std::string, std::string> kNames{
+        {"time_s", "time_s"}, {"speed_rpm", "motor_speed"}, {"id_A", "i_d"},
+        {"iq_A", "i_q"},      {"ambient_C", "ambient"},     {"coolant_C", "coolant"}};
+    const pumptherm::tools::ThermalInputSeries series = pumptherm::tools::ReadThermalInputs(
+        csv, {[&](const std::string& c) { return kNames.at(c); }, true});
     const std::vector<double>& t = series.time_s;
-    const auto pm = csv.Column("pm"), sy = csv.Column("stator_yoke"), st = csv.Column("stator_tooth"),
-               sw = csv.Column("stator_winding");
+    const auto pm = csv.Column("pm"), sy = csv.Column("stator_yoke"),
+               st = csv.Column("stator_tooth"), sw = csv.Column("stator_winding");
     // Inputs a fraction w of the way from row k-1 to row k (the reference interpolates linearly).
     auto between = [&](std::size_t k, double w) { return series.Between(k, w, true); };
     constexpr int kSub = 10;  // 0.5 s steps between the 5 s rows, as the reference
@@ -484,35 +526,46 @@ int main(int argc, char** argv) {
     const auto est_known_low_q = filtered(measured0, 0.01);
     const PaderbornFigures fa = score(alone), fk = score(est_known), fu = score(est_unknown),
                            fl = score(est_known_low_q);
-    fmt::print("\nPaderborn profile 46 (218 rows, 5 s; 0.5 s steps, inputs linear), wallscheid2017-4node with its loss map, stator yoke measured\n");
-    fmt::print("  {:<48} {:>12} {:>10} {:>12} {:>10}\n", "", "winding MSE", "max", "magnet MSE", "max");
+    fmt::print(
+        "\nPaderborn profile 46 (218 rows, 5 s; 0.5 s steps, inputs linear), wallscheid2017-4node "
+        "with its loss map, stator yoke measured\n");
+    fmt::print("  {:<48} {:>12} {:>10} {:>12} {:>10}\n", "", "winding MSE", "max", "magnet MSE",
+               "max");
     auto line = [](const char* what, const PaderbornFigures& f) {
-      fmt::print("  {:<48} {:>9.3f} K2 {:>8.3f} K {:>9.3f} K2 {:>8.3f} K\n", what, f.winding_mse_K2, f.winding_max_K,
-                 f.magnet_mse_K2, f.magnet_max_K);
+      fmt::print("  {:<48} {:>9.3f} K2 {:>8.3f} K {:>9.3f} K2 {:>8.3f} K\n", what, f.winding_mse_K2,
+                 f.winding_max_K, f.magnet_mse_K2, f.magnet_max_K);
     };
     line("model alone, started from the measurements", fa);
     line("filtered, started from the measurements", fk);
     line("filtered, started at the yoke reading everywhere", fu);
     line("filtered, known start, process sd 0.01 K", fl);
     auto pj = [](const PaderbornFigures& f) {
-      return fmt::format("{{\"winding_mse_K2\": {:.4f}, \"winding_max_K\": {:.4f}, \"magnet_mse_K2\": {:.4f}, \"magnet_max_K\": {:.4f}}}",
-                         f.winding_mse_K2, f.winding_max_K, f.magnet_mse_K2, f.magnet_max_K);
+      return fmt::format(
+          "{{\"winding_mse_K2\": {:.4f}, \"winding_max_K\": {:.4f}, \"magnet_mse_K2\": {:.4f}, "
+          "\"magnet_max_K\": {:.4f}}}",
+          f.winding_mse_K2, f.winding_max_K, f.magnet_mse_K2, f.magnet_max_K);
     };
-    json += fmt::format("  \"paderborn46\": {{\"model_alone\": {}, \"filtered_known_start\": {}, \"filtered_unknown_start\": {}, \"filtered_known_start_process_sd_0_01K\": {}}}\n}}\n",
-                        pj(fa), pj(fk), pj(fu), pj(fl));
+    json += fmt::format(
+        "  \"paderborn46\": {{\"model_alone\": {}, \"filtered_known_start\": {}, "
+        "\"filtered_unknown_start\": {}, \"filtered_known_start_process_sd_0_01K\": {}}}\n}}\n",
+        pj(fa), pj(fk), pj(fu), pj(fl));
     const std::string pcsv = (work / "paderborn.csv").string();
     {
       auto out = fmt::output_file(pcsv);
-      out.print("time_s,winding_measured,winding_model,winding_filtered,pm_measured,pm_model,pm_filtered,yoke_measured\n");
+      out.print(
+          "time_s,winding_measured,winding_model,winding_filtered,pm_measured,pm_model,pm_filtered,"
+          "yoke_measured\n");
       for (std::size_t k = 0; k < t.size(); ++k) {
-        out.print("{},{},{},{},{},{},{},{}\n", t[k], sw[k], alone[k](3), est_unknown[k](3), pm[k], alone[k](0),
-                  est_unknown[k](0), sy[k]);
+        out.print("{},{},{},{},{},{},{},{}\n", t[k], sw[k], alone[k](3), est_unknown[k](3), pm[k],
+                  alone[k](0), est_unknown[k](0), sy[k]);
       }
     }
     Plot(fmt::format(
-        "set terminal pngcairo size 1100,650\nset output '{}/thermal_paderborn.png'\nset datafile separator ','\n"
+        "set terminal pngcairo size 1100,650\nset output '{}/thermal_paderborn.png'\nset datafile "
+        "separator ','\n"
         "set key outside right noenhanced\nset xlabel 'time (s)'\nset ylabel 'temperature (degC)'\n"
-        "set title 'Paderborn profile 46 (LEA data set, Wallscheid, Kirchgaessner, Boecker): 4-node model, yoke measured' noenhanced\n"
+        "set title 'Paderborn profile 46 (LEA data set, Wallscheid, Kirchgaessner, Boecker): "
+        "4-node model, yoke measured' noenhanced\n"
         "plot for [i=2:8] '{}' using 1:i with lines lw 2 title columnhead(i)\n",
         out_dir, pcsv));
   }

@@ -7,16 +7,16 @@
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
-#include <memory>
 #include <fstream>
+#include <memory>
 #include <new>
 #include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
-#include "estimators/kalman_virtual_sensor.hpp"
 #include "estimators/disturbance_sensor.hpp"
+#include "estimators/kalman_virtual_sensor.hpp"
 #include "estimators/mismatch_detector.hpp"
 #include "tests/common/test_files.hpp"
 
@@ -42,8 +42,9 @@ using pumptherm::test_files::ReadFile;
 /// A model by name (shipped, or kept with the tests); the tables it names are read relative to it.
 pe::ThermalModel Load(const std::string& name) {
   const std::string path = pumptherm::test_files::ModelPath(name);
-  return pe::ThermalModel::Parse(ReadFile(path), name,
-                                 pe::ThermalModelFiles{pumptherm::test_files::DirectoryOf(path), &ReadFile});
+  return pe::ThermalModel::Parse(
+      ReadFile(path), name,
+      pe::ThermalModelFiles{pumptherm::test_files::DirectoryOf(path), &ReadFile});
 }
 
 /// Linearise (losses with the copper law), discretisation check, time and measurement update:
@@ -92,7 +93,8 @@ void BM_MismatchStep(benchmark::State& state) {
   const long before = g_allocations.load();
   long steps = 0;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(det.Step(in, 1.0, 30.0 + 1e-3 * static_cast<double>(steps & 7), t += 1.0).window_nis);
+    benchmark::DoNotOptimize(
+        det.Step(in, 1.0, 30.0 + 1e-3 * static_cast<double>(steps & 7), t += 1.0).window_nis);
     ++steps;
   }
   state.counters["allocs_per_step"] =
@@ -167,7 +169,8 @@ BENCHMARK(BM_MismatchFit)->Unit(benchmark::kMillisecond);
 /// (the discretisation is kept); 1: the operating point moves every step through the rows of the
 /// Paderborn profile 46 (re-discretised whenever a moves beyond the tolerance).
 void BM_WallscheidStep(benchmark::State& state) {
-  const std::string data = std::string(PUMPTHERM_SOURCE_DIR) + "/../shared/data/paderborn/profile46_every10th_dt5s.csv";
+  const std::string data =
+      std::string(PUMPTHERM_SOURCE_DIR) + "/../shared/data/paderborn/profile46_every10th_dt5s.csv";
   std::vector<pe::ThermalInputs> rows;
   std::unique_ptr<pe::ThermalModel> model;
   try {
@@ -190,7 +193,8 @@ void BM_WallscheidStep(benchmark::State& state) {
       rows.push_back(in);
     }
   } catch (const std::exception& e) {
-    state.SkipWithError((std::string("needs the Paderborn data and loss map: ") + e.what()).c_str());
+    state.SkipWithError(
+        (std::string("needs the Paderborn data and loss map: ") + e.what()).c_str());
     return;
   }
   const bool moving = state.range(0) != 0;
@@ -204,7 +208,8 @@ void BM_WallscheidStep(benchmark::State& state) {
   const long rediscretised_before = vts.Discretiser().Recomputations();
   long steps = 0;
   for (auto _ : state) {
-    const pe::ThermalInputs& in = rows[moving ? static_cast<std::size_t>(steps) % rows.size() : 100];
+    const pe::ThermalInputs& in =
+        rows[moving ? static_cast<std::size_t>(steps) % rows.size() : 100];
     y(0) = 60.0 + 1e-3 * static_cast<double>(steps & 7);
     benchmark::DoNotOptimize(vts.Step(in, 0.5, y, std::nan("")).nis);
     ++steps;
@@ -212,7 +217,8 @@ void BM_WallscheidStep(benchmark::State& state) {
   state.counters["allocs_per_step"] =
       static_cast<double>(g_allocations.load() - before) / static_cast<double>(steps);
   state.counters["rediscretised_per_step"] =
-      static_cast<double>(vts.Discretiser().Recomputations() - rediscretised_before) / static_cast<double>(steps);
+      static_cast<double>(vts.Discretiser().Recomputations() - rediscretised_before) /
+      static_cast<double>(steps);
 }
 BENCHMARK(BM_WallscheidStep)->Arg(0)->Arg(1)->ArgName("moving");
 

@@ -17,7 +17,9 @@ struct CommandResult {
   std::string out;     ///< what it wrote (RunCommand: stdout; RunCommandStderr: stderr)
 };
 
-inline int ExitCode(int status) { return status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1; }
+inline int ExitCode(int status) {
+  return status != -1 && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
 
 /// Runs `command` with /bin/sh and collects its stdout.
 inline CommandResult RunCommand(const std::string& command) {

@@ -2,18 +2,19 @@
 // command signed with the clear key, inside the time window, with a new counter; spoofed and
 // replayed commands are refused and counted, also after a restart; the key file's permissions
 // are checked when the key is loaded.
-#include <gtest/gtest.h>
+#include "daemon/alarm_clear_auth.hpp"
+
 #include <grp.h>
+#include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <toml++/toml.h>
 #include <unistd.h>
 
 #include <cstdio>
-#include <stdexcept>
 #include <lcm/lcm-cpp.hpp>
+#include <stdexcept>
 #include <string>
-#include <toml++/toml.h>
 
-#include "daemon/alarm_clear_auth.hpp"
 #include "daemon/config.hpp"
 #include "daemon/gateway.hpp"
 #include "daemon/log.hpp"
@@ -33,7 +34,8 @@ ClearKey Key(std::uint8_t first) {
   return k;
 }
 
-pumptherm::alarm_clear_t Command(std::int64_t utime, std::int64_t counter, const std::string& source = "operator") {
+pumptherm::alarm_clear_t Command(std::int64_t utime, std::int64_t counter,
+                                 const std::string& source = "operator") {
   pumptherm::alarm_clear_t m;
   m.utime = utime;
   m.pump = "tmp1";
@@ -67,12 +69,24 @@ TEST(ClearAuth, CodeFollowsTheDocumentedLayout) {
   for (int field = 0; field < 6; ++field) {
     pumptherm::alarm_clear_t t = m;
     switch (field) {
-      case 0: ++t.utime; break;
-      case 1: t.pump = "tmp2"; break;
-      case 2: t.node = "winding"; break;
-      case 3: t.source = "operatorx"; break;
-      case 4: t.comment += "."; break;
-      default: ++t.counter; break;
+      case 0:
+        ++t.utime;
+        break;
+      case 1:
+        t.pump = "tmp2";
+        break;
+      case 2:
+        t.node = "winding";
+        break;
+      case 3:
+        t.source = "operatorx";
+        break;
+      case 4:
+        t.comment += ".";
+        break;
+      default:
+        ++t.counter;
+        break;
     }
     EXPECT_FALSE(Verify(Key(0), t)) << "field " << field;
   }
@@ -98,12 +112,15 @@ node_id = 1
 thermal_model = "tmp-generic"
 )";
 
-  static DaemonConfig Config() { return ParseConfig(kConfig, std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml"); }
+  static DaemonConfig Config() {
+    return ParseConfig(kConfig, std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml");
+  }
 
   ClearGateway() : gateway_(Config()) { gateway_.SetClearKey(Key(1)); }
 
   void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
-  bool PublishLcm(const std::string& channel, std::int64_t, const std::vector<std::uint8_t>& b) override {
+  bool PublishLcm(const std::string& channel, std::int64_t,
+                  const std::vector<std::uint8_t>& b) override {
     Reply r;
     EXPECT_EQ(channel, "PUMPTHERM/tmp1/ALARM_CLEAR_REPLY");
     EXPECT_GT(r.decode(b.data(), 0, static_cast<int>(b.size())), 0);
@@ -146,11 +163,11 @@ TEST_F(ClearGateway, SpoofedClearsFromAnAcceptedSourceAreRefusedAndCounted) {
   Latch(gateway_);
   pumptherm::alarm_clear_t none = Command(kNowUs, 10);  // no code at all
   pumptherm::alarm_clear_t wrong = Command(kNowUs, 11);
-  Sign(Key(2), wrong);                                  // a code made with another key
+  Sign(Key(2), wrong);  // a code made with another key
   EXPECT_FALSE(Send(none));
   EXPECT_FALSE(Send(wrong));
   EXPECT_FALSE(gateway_.ClearFromLcm(nullptr, kNowUs, *this));  // does not decode
-  EXPECT_FALSE(gateway_.Clear("tmp1", "operator", "no code"));   // a source name alone
+  EXPECT_FALSE(gateway_.Clear("tmp1", "operator", "no code"));  // a source name alone
   EXPECT_TRUE(Latched());
   EXPECT_EQ(gateway_.counters().clears_refused, 4U);
   EXPECT_EQ(gateway_.counters().clears_unauthenticated, 4U);
@@ -230,7 +247,8 @@ TEST_F(ClearGateway, ClientSeesTheGatewaysSignedAnswer) {
     Gateway& gateway;
     Responder(lcm::LCM& l, Gateway& g) : lcm(l), gateway(g) {}
     void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
-    bool PublishLcm(const std::string& channel, std::int64_t, const std::vector<std::uint8_t>& b) override {
+    bool PublishLcm(const std::string& channel, std::int64_t,
+                    const std::vector<std::uint8_t>& b) override {
       return lcm.publish(channel, b.data(), static_cast<unsigned>(b.size())) == 0;
     }
     void On(const lcm::ReceiveBuffer* rbuf, const std::string&) {
@@ -240,8 +258,8 @@ TEST_F(ClearGateway, ClientSeesTheGatewaysSignedAnswer) {
       gateway.ClearFromLcm(ok ? &m : nullptr, kNowUs, *this);
     }
   } responder(lcm, gateway_);
-  lcm.subscribe(lcm_channels::AllPumpsPattern("PUMPTHERM", lcm_channels::PumpChannel::kAlarmClear), &Responder::On,
-                &responder);
+  lcm.subscribe(lcm_channels::AllPumpsPattern("PUMPTHERM", lcm_channels::PumpChannel::kAlarmClear),
+                &Responder::On, &responder);
   Latch(gateway_);
   const ClearExchange ok = SendClear(lcm, "PUMPTHERM", Key(1), Command(kNowUs, 7), 2.0);
   ASSERT_TRUE(ok.reply.has_value());
@@ -261,9 +279,10 @@ TEST_F(ClearGateway, ClientSeesTheGatewaysSignedAnswer) {
 }
 
 TEST(ClearAuth, GatewayWithoutAKeyRefusesEveryLcmClear) {
-  Gateway g(ParseConfig("[alarms]\nclear_lcm_sources = [\"operator\"]\n[[can]]\ninterface = \"can0\"\n"
-                        "[[pump]]\nname = \"tmp1\"\nnode_id = 1\n",
-                        std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml"));
+  Gateway g(
+      ParseConfig("[alarms]\nclear_lcm_sources = [\"operator\"]\n[[can]]\ninterface = \"can0\"\n"
+                  "[[pump]]\nname = \"tmp1\"\nnode_id = 1\n",
+                  std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml"));
   g.LoadClearKey("");  // no key file configured: a warning, no error
   struct Sink : OutputSink {
     std::int8_t result = -1;
@@ -288,7 +307,7 @@ TEST(LogRateLimiter, BurstPerWindowThenCountsAndReportsWhatWasHeldBack) {
   EXPECT_TRUE(limit.Allow(1'000'000));
   for (int i = 0; i < 7; ++i) EXPECT_FALSE(limit.Allow(2'000'000 + i));
   EXPECT_EQ(limit.TakeHeldBack(9'000'000), 0U);  // the window still runs
-  EXPECT_TRUE(limit.Allow(10'000'000, &held));    // a new window: the line carries the 7
+  EXPECT_TRUE(limit.Allow(10'000'000, &held));   // a new window: the line carries the 7
   EXPECT_EQ(held, 7U);
   EXPECT_TRUE(limit.Allow(10'500'000, &held));
   EXPECT_EQ(held, 0U);
@@ -300,16 +319,20 @@ TEST(LogRateLimiter, BurstPerWindowThenCountsAndReportsWhatWasHeldBack) {
 }
 
 TEST(ClearAuth, RefusedClearsAreLoggedRateLimitedWithTheCountOfTheRest) {
-  Gateway g(ParseConfig("[alarms]\nclear_can_interfaces = [\"can0\"]\n[[can]]\ninterface = \"can0\"\n"
-                        "[[pump]]\nname = \"tmp1\"\nnode_id = 1\n",
-                        std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml"));
+  Gateway g(
+      ParseConfig("[alarms]\nclear_can_interfaces = [\"can0\"]\n[[can]]\ninterface = \"can0\"\n"
+                  "[[pump]]\nname = \"tmp1\"\nnode_id = 1\n",
+                  std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml"));
   struct Sink : OutputSink {
     void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
-    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override { return true; }
+    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override {
+      return true;
+    }
   } sink;
   auto lines = [](const std::string& text, const std::string& what) {
     std::size_t n = 0;
-    for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+    for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1))
+      ++n;
     return n;
   };
   g.Advance(kNowUs, sink);
@@ -331,11 +354,14 @@ TEST(ClearAuth, StateWithoutCountersLoadsAndCountersNeverGoDown) {
   ClearAuthenticator a(30.0);
   EXPECT_EQ(a.Restore(toml::parse("version = 2\n")), "");  // a state file from before
   EXPECT_EQ(a.last_counter("tmp1"), 0);
-  EXPECT_EQ(a.Restore(toml::parse("[clear_auth]\nversion = 1\nlast_counter = { tmp1 = 50 }\n")), "");
+  EXPECT_EQ(a.Restore(toml::parse("[clear_auth]\nversion = 1\nlast_counter = { tmp1 = 50 }\n")),
+            "");
   EXPECT_EQ(a.Restore(toml::parse("[clear_auth]\nversion = 1\nlast_counter = { tmp1 = 7 }\n")), "");
   EXPECT_EQ(a.last_counter("tmp1"), 50);
-  EXPECT_NE(a.Restore(toml::parse("[clear_auth]\nversion = 9\n")).find("unknown version"), std::string::npos);
-  EXPECT_NE(a.Restore(toml::parse("[clear_auth]\nversion = 1\nlast_counter = { tmp1 = 'x' }\n")).find("tmp1"),
+  EXPECT_NE(a.Restore(toml::parse("[clear_auth]\nversion = 9\n")).find("unknown version"),
+            std::string::npos);
+  EXPECT_NE(a.Restore(toml::parse("[clear_auth]\nversion = 1\nlast_counter = { tmp1 = 'x' }\n"))
+                .find("tmp1"),
             std::string::npos);
 }
 
@@ -359,9 +385,11 @@ class KeyFile : public ::testing::Test {
     ::rmdir(dir_.c_str());
   }
   DaemonConfig Config(const std::string& group) const {
-    return ParseConfig("[alarms]\nclear_lcm_sources = [\"operator\"]\nclear_key_file = \"clear.key\"\n"
-                       "clear_key_group = \"" + group + "\"\n",
-                       dir_ + "/pumpthermd.toml");
+    return ParseConfig(
+        "[alarms]\nclear_lcm_sources = [\"operator\"]\nclear_key_file = \"clear.key\"\n"
+        "clear_key_group = \"" +
+            group + "\"\n",
+        dir_ + "/pumpthermd.toml");
   }
   std::string dir_, path_, group_;
 };
@@ -370,27 +398,32 @@ TEST_F(KeyFile, PermissionsAreCheckedWhenTheKeyIsLoaded) {
   EXPECT_EQ(ClearKeyFileProblem(path_, group_), "");
   EXPECT_EQ(LoadConfiguredClearKey(Config(group_), ""), Key(9));
   ASSERT_EQ(::chmod(path_.c_str(), 0644), 0);  // world-readable: a configuration error
-  EXPECT_NE(ClearKeyFileProblem(path_, group_).find("open to others (mode 0644)"), std::string::npos);
+  EXPECT_NE(ClearKeyFileProblem(path_, group_).find("open to others (mode 0644)"),
+            std::string::npos);
   try {
     LoadConfiguredClearKey(Config(group_), "");
     ADD_FAILURE() << "a world-readable key was accepted";
   } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find(dir_ + "/pumpthermd.toml:3: key 'alarms.clear_key_file': " + path_ +
-                                         " is open to others (mode 0644)"),
-              std::string::npos)
+    EXPECT_NE(
+        std::string(e.what()).find(dir_ + "/pumpthermd.toml:3: key 'alarms.clear_key_file': " +
+                                   path_ + " is open to others (mode 0644)"),
+        std::string::npos)
         << e.what();
   }
   ASSERT_EQ(::chmod(path_.c_str(), 0660), 0);
-  EXPECT_NE(ClearKeyFileProblem(path_, group_).find("writable by its group (mode 0660)"), std::string::npos);
+  EXPECT_NE(ClearKeyFileProblem(path_, group_).find("writable by its group (mode 0660)"),
+            std::string::npos);
   ASSERT_EQ(::chmod(path_.c_str(), 0600), 0);
   EXPECT_EQ(ClearKeyFileProblem(path_, group_), "");
-  EXPECT_NE(ClearKeyFileProblem(path_, "no-such-group-pumptherm").find("does not exist"), std::string::npos);
+  EXPECT_NE(ClearKeyFileProblem(path_, "no-such-group-pumptherm").find("does not exist"),
+            std::string::npos);
   // Another existing group than the file's.
   const std::string other = group_ == "root" ? "daemon" : "root";
   if (::getgrnam(other.c_str())) {
     EXPECT_NE(ClearKeyFileProblem(path_, other).find("not to '" + other + "'"), std::string::npos);
   }
-  EXPECT_NE(ClearKeyFileProblem(dir_ + "/missing.key", group_).find("cannot stat"), std::string::npos);
+  EXPECT_NE(ClearKeyFileProblem(dir_ + "/missing.key", group_).find("cannot stat"),
+            std::string::npos);
 }
 
 TEST_F(KeyFile, WrongSizeIsAnErrorAndASystemdCredentialIsPreferred) {
@@ -411,9 +444,14 @@ TEST_F(KeyFile, WrongSizeIsAnErrorAndASystemdCredentialIsPreferred) {
 
 TEST(ClearAuth, KeyKeysAreParsedAndAGroupIsRequired) {
   // Sources without a key parse (the gateway warns and refuses every LCM clear: NO_KEY above).
-  EXPECT_EQ(ParseConfig("[alarms]\nclear_lcm_sources = [\"operator\"]\n", "/etc/p.toml").clear_auth.key_file, "");
-  EXPECT_THROW(ParseConfig("[alarms]\nclear_key_file = \"k\"\n", "/etc/p.toml"), ConfigError);  // no group
-  const DaemonConfig c = ParseConfig("[alarms]\nclear_key_file = \"k\"\nclear_key_group = \"ops\"\nclear_window_s = 5\n", "/etc/p.toml");
+  EXPECT_EQ(ParseConfig("[alarms]\nclear_lcm_sources = [\"operator\"]\n", "/etc/p.toml")
+                .clear_auth.key_file,
+            "");
+  EXPECT_THROW(ParseConfig("[alarms]\nclear_key_file = \"k\"\n", "/etc/p.toml"),
+               ConfigError);  // no group
+  const DaemonConfig c = ParseConfig(
+      "[alarms]\nclear_key_file = \"k\"\nclear_key_group = \"ops\"\nclear_window_s = 5\n",
+      "/etc/p.toml");
   EXPECT_EQ(c.clear_auth.key_file, "/etc/k");  // relative to the configuration's directory
   EXPECT_EQ(c.clear_auth.key_group, "ops");
   EXPECT_EQ(c.clear_auth.window_s, 5.0);

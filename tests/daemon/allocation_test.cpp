@@ -29,7 +29,8 @@
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
 #define PUMPTHERM_COUNT_MALLOC 0
 #elif defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || __has_feature(memory_sanitizer)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || \
+    __has_feature(memory_sanitizer)
 #define PUMPTHERM_COUNT_MALLOC 0
 #else
 #define PUMPTHERM_COUNT_MALLOC 1
@@ -134,12 +135,14 @@ struct NullSink : OutputSink {
 /// The demo's configuration over the pipeline recording; `disturbance_states` switches every
 /// pump to the disturbance-state filter.
 void ExpectNoAllocationPerFrame(bool disturbance_states) {
-  const std::string config_path = std::string(PUMPTHERM_SOURCE_DIR) + "/tools/demo/pumpthermd-demo.toml";
+  const std::string config_path =
+      std::string(PUMPTHERM_SOURCE_DIR) + "/tools/demo/pumpthermd-demo.toml";
   DaemonConfig config = LoadConfig(config_path);
   for (auto& pump : config.pumps) pump.disturbance_states = disturbance_states;
   Gateway gateway(config);
   std::ifstream in(PUMPTHERM_ALLOCATION_RECORDING);
-  ASSERT_TRUE(in) << PUMPTHERM_ALLOCATION_RECORDING << ": cannot open (built by vcan_pipeline_recording)";
+  ASSERT_TRUE(in) << PUMPTHERM_ALLOCATION_RECORDING
+                  << ": cannot open (built by vcan_pipeline_recording)";
   std::vector<std::string> lines;
   for (std::string line; std::getline(in, line);) lines.push_back(line);
   ASSERT_GT(lines.size(), 50000U);
@@ -150,8 +153,10 @@ void ExpectNoAllocationPerFrame(bool disturbance_states) {
   probe = new std::vector<int>(1000);
   g_counting = false;
   ASSERT_GE(g_allocations.load(), 1U) << "the counting allocator is not in use";
-  std::printf("counting %s\n", PUMPTHERM_COUNT_MALLOC ? "malloc, calloc, realloc (and so operator new and Eigen)"
-                                                        : "operator new only (sanitizer build: Eigen's malloc not seen)");
+  std::printf("counting %s\n",
+              PUMPTHERM_COUNT_MALLOC
+                  ? "malloc, calloc, realloc (and so operator new and Eigen)"
+                  : "operator new only (sanitizer build: Eigen's malloc not seen)");
   delete probe;
   g_allocations = 0;
   g_bytes = 0;
@@ -191,25 +196,31 @@ void ExpectNoAllocationPerFrame(bool disturbance_states) {
   steps -= steps_before;
   counted_outputs = sink.frames - counted_outputs;
   counted_lcm = sink.lcm - counted_lcm;
-  std::printf("counted %llu frames (%.1f s of log, %zu pumps): %llu thermal steps, %llu CAN outputs, "
-              "%llu LCM messages; %llu heap allocations (%llu bytes)\n",
-              static_cast<unsigned long long>(counted_frames), static_cast<double>(last_us - start_us - kWarmUpUs) * 1e-6,
-              gateway.pumps().size(), static_cast<unsigned long long>(steps),
-              static_cast<unsigned long long>(counted_outputs), static_cast<unsigned long long>(counted_lcm),
-              static_cast<unsigned long long>(g_allocations.load()), static_cast<unsigned long long>(g_bytes.load()));
+  std::printf(
+      "counted %llu frames (%.1f s of log, %zu pumps): %llu thermal steps, %llu CAN outputs, "
+      "%llu LCM messages; %llu heap allocations (%llu bytes)\n",
+      static_cast<unsigned long long>(counted_frames),
+      static_cast<double>(last_us - start_us - kWarmUpUs) * 1e-6, gateway.pumps().size(),
+      static_cast<unsigned long long>(steps), static_cast<unsigned long long>(counted_outputs),
+      static_cast<unsigned long long>(counted_lcm),
+      static_cast<unsigned long long>(g_allocations.load()),
+      static_cast<unsigned long long>(g_bytes.load()));
   // The counted window must hold everything the steady state does, or zero means nothing.
   ASSERT_GT(counted_frames, 20000U);
   ASSERT_GE(steps, 3U * 30U);
   ASSERT_GT(counted_outputs, 1000U);
   ASSERT_GT(counted_lcm, 3U * 3U * 30U);
-  EXPECT_EQ(g_allocations.load(), 0U) << "heap allocations in the per-frame path after warm-up ("
-                                      << static_cast<double>(g_allocations.load()) / static_cast<double>(counted_frames)
-                                      << " per frame); PUMPTHERM_ABORT_ON_ALLOCATION=1 under gdb shows where";
+  EXPECT_EQ(g_allocations.load(), 0U)
+      << "heap allocations in the per-frame path after warm-up ("
+      << static_cast<double>(g_allocations.load()) / static_cast<double>(counted_frames)
+      << " per frame); PUMPTHERM_ABORT_ON_ALLOCATION=1 under gdb shows where";
 }
 
 TEST(Allocation, NoHeapAllocationPerFrameInSteadyState) { ExpectNoAllocationPerFrame(false); }
 
-TEST(Allocation, NoHeapAllocationPerFrameWithDisturbanceStates) { ExpectNoAllocationPerFrame(true); }
+TEST(Allocation, NoHeapAllocationPerFrameWithDisturbanceStates) {
+  ExpectNoAllocationPerFrame(true);
+}
 
 }  // namespace
 }  // namespace pumptherm::daemon

@@ -13,11 +13,11 @@
 
 #include "daemon/config.hpp"
 #include "daemon/gateway.hpp"
-#include "pumptherm/alarm_clear_reply_t.hpp"
 #include "estimators/motor.hpp"
 #include "estimators/thermal_model.hpp"
 #include "protocol/candump_log.hpp"
 #include "protocol/dbc.hpp"
+#include "pumptherm/alarm_clear_reply_t.hpp"
 #include "tools/common/csv.hpp"
 
 namespace pumptherm::daemon {
@@ -108,13 +108,15 @@ std::string Candump(const std::string& line) {
 }
 
 // --- DBC ---
-const std::string kDbc = "VERSION \"\"\n\nBU_: N\n\nBO_ 256 M: 8 N\n SG_ S : 0|16@1+ (0.1,0) [0|6553.5] \"A\" N\n";
+const std::string kDbc =
+    "VERSION \"\"\n\nBU_: N\n\nBO_ 256 M: 8 N\n SG_ S : 0|16@1+ (0.1,0) [0|6553.5] \"A\" N\n";
 std::string Dbc(const std::string& text) {
   try {
     const auto d = protocol::ParseDbc(text, "x.dbc");
     std::string answer = "accepted (" + std::to_string(d.messages.size()) + " messages)";
     for (const auto& p : d.problems) {
-      answer += "; warning x.dbc:" + std::to_string(p.line) + ":" + std::to_string(p.column) + ": " + p.message;
+      answer += "; warning x.dbc:" + std::to_string(p.line) + ":" + std::to_string(p.column) +
+                ": " + p.message;
     }
     return answer;
   } catch (const protocol::DbcError& e) {
@@ -142,7 +144,9 @@ thermal_model = "tmp-generic"
 
 struct NullSink : OutputSink {
   void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
-  bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override { return true; }
+  bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override {
+    return true;
+  }
 };
 
 /// Feeds one frame (hex payload) to a fresh gateway and names the counters it moved.
@@ -203,7 +207,8 @@ std::string LcmClear(const std::vector<const pumptherm::alarm_clear_t*>& message
   g.SetClearKey(TestKey(1));
   struct ReplySink : NullSink {
     std::string last;
-    bool PublishLcm(const std::string& channel, std::int64_t, const std::vector<std::uint8_t>& b) override {
+    bool PublishLcm(const std::string& channel, std::int64_t,
+                    const std::vector<std::uint8_t>& b) override {
       pumptherm::alarm_clear_reply_t r;
       if (r.decode(b.data(), 0, static_cast<int>(b.size())) > 0) last = channel + ": " + r.reason;
       return true;
@@ -214,12 +219,14 @@ std::string LcmClear(const std::vector<const pumptherm::alarm_clear_t*>& message
   return std::string(ok ? "accepted" : "refused") + ", logged; clears_accepted " +
          std::to_string(g.counters().clears_accepted) + ", clears_refused " +
          std::to_string(g.counters().clears_refused) + ", clears_unauthenticated " +
-         std::to_string(g.counters().clears_unauthenticated) + (sink.last.empty() ? "; no reply" : "; reply " + sink.last);
+         std::to_string(g.counters().clears_unauthenticated) +
+         (sink.last.empty() ? "; no reply" : "; reply " + sink.last);
 }
 
 /// A clear command for `pump` from `source`, signed with TestKey(key_seed) (0: no code).
-pumptherm::alarm_clear_t ClearCommand(const std::string& pump, const std::string& source, std::uint8_t key_seed,
-                                      std::int64_t utime = kNowUs, std::int64_t counter = 5) {
+pumptherm::alarm_clear_t ClearCommand(const std::string& pump, const std::string& source,
+                                      std::uint8_t key_seed, std::int64_t utime = kNowUs,
+                                      std::int64_t counter = 5) {
   pumptherm::alarm_clear_t m;
   m.utime = utime;
   m.pump = pump;
@@ -245,7 +252,8 @@ std::string SavedState() {
     tf.frame.id = 0x181;  // PUMP_STATUS of node 1: 800 rpm, frame and ambient 25 degC
     tf.frame.len = 8;
     const std::uint64_t bits = 400ULL | (2ULL << 16) | (750ULL << 19) | (750ULL << 31);
-    for (int i = 0; i < 8; ++i) tf.frame.data[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(bits >> (8 * i));
+    for (int i = 0; i < 8; ++i)
+      tf.frame.data[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(bits >> (8 * i));
     g.OnFrame(iface, tf);
     g.Advance(tf.time_us, sink);
   }
@@ -265,105 +273,234 @@ std::vector<Row> Catalogue() {
   std::vector<Row> rows = {
       // --- configuration ---
       {"config", "truncated", "`[gateway`", [] { return Config("[gateway"); }, "p.toml:1:"},
-      {"config", "wrong type", "`heartbeat_period_s = \"1\"`", [] { return Config("[gateway]\nheartbeat_period_s = \"1\"\n"); }, "heartbeat_period_s"},
-      {"config", "out of range", "`thermal_period_s = 0`", [] { return Config("[gateway]\nthermal_period_s = 0\n"); }, "thermal_period_s"},
-      {"config", "NaN", "`thermal_period_s = nan`", [] { return Config("[gateway]\nthermal_period_s = nan\n"); }, "thermal_period_s"},
-      {"config", "Inf", "`heartbeat_period_s = inf`", [] { return Config("[gateway]\nheartbeat_period_s = inf\n"); }, "heartbeat_period_s"},
-      {"config", "duplicate", "two `[[pump]]` named `a`", [] { return Config(kPump + "[[pump]]\nname = \"a\"\nnode_id = 2\n"); }, "listed twice"},
-      {"config", "duplicate", "a key twice", [] { return Config("[gateway]\nname = \"x\"\nname = \"y\"\n"); }, "p.toml:3:"},
-      {"config", "unknown", "`[gateway] colour = 1`", [] { return Config("[gateway]\ncolour = 1\n"); }, "colour"},
-      {"config", "huge", "`node_id = 99999999999`", [] { return Config("[[pump]]\nname = \"a\"\nnode_id = 99999999999\n"); }, "node_id"},
+      {"config", "wrong type", "`heartbeat_period_s = \"1\"`",
+       [] { return Config("[gateway]\nheartbeat_period_s = \"1\"\n"); }, "heartbeat_period_s"},
+      {"config", "out of range", "`thermal_period_s = 0`",
+       [] { return Config("[gateway]\nthermal_period_s = 0\n"); }, "thermal_period_s"},
+      {"config", "NaN", "`thermal_period_s = nan`",
+       [] { return Config("[gateway]\nthermal_period_s = nan\n"); }, "thermal_period_s"},
+      {"config", "Inf", "`heartbeat_period_s = inf`",
+       [] { return Config("[gateway]\nheartbeat_period_s = inf\n"); }, "heartbeat_period_s"},
+      {"config", "duplicate", "two `[[pump]]` named `a`",
+       [] { return Config(kPump + "[[pump]]\nname = \"a\"\nnode_id = 2\n"); }, "listed twice"},
+      {"config", "duplicate", "a key twice",
+       [] { return Config("[gateway]\nname = \"x\"\nname = \"y\"\n"); }, "p.toml:3:"},
+      {"config", "unknown", "`[gateway] colour = 1`",
+       [] { return Config("[gateway]\ncolour = 1\n"); }, "colour"},
+      {"config", "huge", "`node_id = 99999999999`",
+       [] { return Config("[[pump]]\nname = \"a\"\nnode_id = 99999999999\n"); }, "node_id"},
       {"config", "empty", "empty file", [] { return Config(""); }, "accepted (0 pumps)"},
-      {"config", "non-UTF-8", "`name = \"\\xff\"`", [] { return Config("[gateway]\nname = \"\xff\"\n"); }, "p.toml:2:"},
-      {"config", "wrong value", "pump name with `/`", [] { return Config("[[pump]]\nname = \"a/b\"\nnode_id = 1\n"); }, "name"},
+      {"config", "non-UTF-8", "`name = \"\\xff\"`",
+       [] { return Config("[gateway]\nname = \"\xff\"\n"); }, "p.toml:2:"},
+      {"config", "wrong value", "pump name with `/`",
+       [] { return Config("[[pump]]\nname = \"a/b\"\nnode_id = 1\n"); }, "name"},
       // --- thermal model ---
-      {"model", "truncated", "file cut after `capacity_J_per_K =`", [] { return Model(kModel.substr(0, kModel.find("10.0"))); }, "m.toml:"},
-      {"model", "wrong type", "`capacity_J_per_K = \"ten\"`", [] { return Model(Replace(kModel, "10.0", "\"ten\"")); }, "capacity_J_per_K"},
-      {"model", "out of range", "`capacity_J_per_K = -1`", [] { return Model(Replace(kModel, "10.0", "-1.0")); }, "capacity"},
-      {"model", "NaN", "`capacity_J_per_K = nan`", [] { return Model(Replace(kModel, "10.0", "nan")); }, "capacity"},
-      {"model", "Inf", "`resistance_K_per_W = inf`", [] { return Model(Replace(kModel, "= 1.0", "= inf")); }, "resistance"},
-      {"model", "out of range", "`resistance_K_per_W = 0`", [] { return Model(Replace(kModel, "= 1.0", "= 0.0")); }, "resistance"},
-      {"model", "duplicate", "node `a` twice", [] { return Model(kModel + "[[node]]\nname = \"a\"\ncapacity_J_per_K = 1.0\n"); }, "declared twice"},
-      {"model", "unknown", "edge to node `b`", [] { return Model(Replace(kModel, "\"a\", \"ambient\"", "\"b\", \"ambient\"")); }, "b"},
-      {"model", "unknown", "key `colour`", [] { return Model(Replace(kModel, "[[edge]]", "colour = 1\n[[edge]]")); }, "colour"},
+      {"model", "truncated", "file cut after `capacity_J_per_K =`",
+       [] { return Model(kModel.substr(0, kModel.find("10.0"))); }, "m.toml:"},
+      {"model", "wrong type", "`capacity_J_per_K = \"ten\"`",
+       [] { return Model(Replace(kModel, "10.0", "\"ten\"")); }, "capacity_J_per_K"},
+      {"model", "out of range", "`capacity_J_per_K = -1`",
+       [] { return Model(Replace(kModel, "10.0", "-1.0")); }, "capacity"},
+      {"model", "NaN", "`capacity_J_per_K = nan`",
+       [] { return Model(Replace(kModel, "10.0", "nan")); }, "capacity"},
+      {"model", "Inf", "`resistance_K_per_W = inf`",
+       [] { return Model(Replace(kModel, "= 1.0", "= inf")); }, "resistance"},
+      {"model", "out of range", "`resistance_K_per_W = 0`",
+       [] { return Model(Replace(kModel, "= 1.0", "= 0.0")); }, "resistance"},
+      {"model", "duplicate", "node `a` twice",
+       [] { return Model(kModel + "[[node]]\nname = \"a\"\ncapacity_J_per_K = 1.0\n"); },
+       "declared twice"},
+      {"model", "unknown", "edge to node `b`",
+       [] { return Model(Replace(kModel, "\"a\", \"ambient\"", "\"b\", \"ambient\"")); }, "b"},
+      {"model", "unknown", "key `colour`",
+       [] { return Model(Replace(kModel, "[[edge]]", "colour = 1\n[[edge]]")); }, "colour"},
       {"model", "empty", "empty file", [] { return Model(""); }, "m.toml"},
-      {"model", "non-UTF-8", "node name `\\xff`", [] { return Model(Replace(kModel, "name = \"a\"", "name = \"\xff\"")); }, "m.toml:"},
+      {"model", "non-UTF-8", "node name `\\xff`",
+       [] { return Model(Replace(kModel, "name = \"a\"", "name = \"\xff\"")); }, "m.toml:"},
       // --- motor description ---
-      {"motor", "truncated", "no `[resistance]`", [] { return Motor(kMotor.substr(0, kMotor.find("[resistance]"))); }, "resistance"},
-      {"motor", "wrong type", "`pole_pairs = 1.5`", [] { return Motor(Replace(kMotor, "pole_pairs = 1", "pole_pairs = 1.5")); }, "pole_pairs"},
-      {"motor", "out of range", "`pole_pairs = 0`", [] { return Motor(Replace(kMotor, "pole_pairs = 1", "pole_pairs = 0")); }, "pole_pairs"},
-      {"motor", "NaN", "`flux_Wb = nan`", [] { return Motor(Replace(kMotor, "0.0182", "nan")); }, "flux_Wb"},
-      {"motor", "Inf", "`r0_ohm = inf`", [] { return Motor(Replace(kMotor, "0.28", "inf")); }, "r0_ohm"},
-      {"motor", "duplicate", "`flux_Wb` twice", [] { return Motor(Replace(kMotor, "inductance_H", "flux_Wb = 1.0\ninductance_H")); }, "motor.toml:"},
-      {"motor", "unknown", "`fluxx_Wb = 1`", [] { return Motor(Replace(kMotor, "inductance_H", "fluxx_Wb = 1.0\ninductance_H")); }, "fluxx_Wb"},
-      {"motor", "huge", "`rated_speed_rpm = 1e400`", [] { return Motor(Replace(kMotor, "21000.0", "1e400")); }, "motor.toml:"},
+      {"motor", "truncated", "no `[resistance]`",
+       [] { return Motor(kMotor.substr(0, kMotor.find("[resistance]"))); }, "resistance"},
+      {"motor", "wrong type", "`pole_pairs = 1.5`",
+       [] { return Motor(Replace(kMotor, "pole_pairs = 1", "pole_pairs = 1.5")); }, "pole_pairs"},
+      {"motor", "out of range", "`pole_pairs = 0`",
+       [] { return Motor(Replace(kMotor, "pole_pairs = 1", "pole_pairs = 0")); }, "pole_pairs"},
+      {"motor", "NaN", "`flux_Wb = nan`", [] { return Motor(Replace(kMotor, "0.0182", "nan")); },
+       "flux_Wb"},
+      {"motor", "Inf", "`r0_ohm = inf`", [] { return Motor(Replace(kMotor, "0.28", "inf")); },
+       "r0_ohm"},
+      {"motor", "duplicate", "`flux_Wb` twice",
+       [] { return Motor(Replace(kMotor, "inductance_H", "flux_Wb = 1.0\ninductance_H")); },
+       "motor.toml:"},
+      {"motor", "unknown", "`fluxx_Wb = 1`",
+       [] { return Motor(Replace(kMotor, "inductance_H", "fluxx_Wb = 1.0\ninductance_H")); },
+       "fluxx_Wb"},
+      {"motor", "huge", "`rated_speed_rpm = 1e400`",
+       [] { return Motor(Replace(kMotor, "21000.0", "1e400")); }, "motor.toml:"},
       {"motor", "empty", "empty file", [] { return Motor(""); }, "motor.toml"},
       // --- CSV ---
-      {"CSV", "truncated", "last row cut: `0.2`", [] { return Csv("time_s,iq_A\n0,1\n0.1,2\n0.2\n"); }, "row 4"},
-      {"CSV", "wrong type", "`iq_A` cell `abc`", [] { return Csv("time_s,iq_A\n0,1\n0.1,abc\n"); }, "iq_A"},
-      {"CSV", "NaN", "`iq_A` cell `nan`", [] { return Csv("time_s,iq_A\n0,1\n0.1,nan\n"); }, "iq_A"},
-      {"CSV", "Inf", "`iq_A` cell `inf`", [] { return Csv("time_s,iq_A\n0,1\n0.1,inf\n"); }, "iq_A"},
-      {"CSV", "huge", "`iq_A` cell `1e999`", [] { return Csv("time_s,iq_A\n0,1\n0.1,1e999\n"); }, "iq_A"},
-      {"CSV", "out of order", "time goes back", [] { return Csv("time_s,iq_A\n0,1\n0.1,2\n0.05,3\n"); }, "time_s"},
-      {"CSV", "duplicate", "column `iq_A` twice", [] { return Csv("time_s,iq_A,iq_A\n0,1,1\n"); }, "twice"},
+      {"CSV", "truncated", "last row cut: `0.2`",
+       [] { return Csv("time_s,iq_A\n0,1\n0.1,2\n0.2\n"); }, "row 4"},
+      {"CSV", "wrong type", "`iq_A` cell `abc`", [] { return Csv("time_s,iq_A\n0,1\n0.1,abc\n"); },
+       "iq_A"},
+      {"CSV", "NaN", "`iq_A` cell `nan`", [] { return Csv("time_s,iq_A\n0,1\n0.1,nan\n"); },
+       "iq_A"},
+      {"CSV", "Inf", "`iq_A` cell `inf`", [] { return Csv("time_s,iq_A\n0,1\n0.1,inf\n"); },
+       "iq_A"},
+      {"CSV", "huge", "`iq_A` cell `1e999`", [] { return Csv("time_s,iq_A\n0,1\n0.1,1e999\n"); },
+       "iq_A"},
+      {"CSV", "out of order", "time goes back",
+       [] { return Csv("time_s,iq_A\n0,1\n0.1,2\n0.05,3\n"); }, "time_s"},
+      {"CSV", "duplicate", "column `iq_A` twice", [] { return Csv("time_s,iq_A,iq_A\n0,1,1\n"); },
+       "twice"},
       {"CSV", "unknown", "no `iq_A` column", [] { return Csv("time_s,id_A\n0,1\n"); }, "iq_A"},
       {"CSV", "empty", "empty file", [] { return Csv(""); }, "empty"},
       {"CSV", "empty", "empty cell", [] { return Csv("time_s,iq_A\n0,\n"); }, "iq_A"},
       {"CSV", "non-UTF-8", "cell `\\xff`", [] { return Csv("time_s,iq_A\n0,\xff\n"); }, "iq_A"},
       // --- candump log lines ---
-      {"candump log", "truncated", "`(1.0) can0 12`", [] { return Candump("(1.0) can0 12"); }, "column"},
-      {"candump log", "wrong length", "`123#1` (odd hex digits)", [] { return Candump("(1.0) can0 123#1"); }, "column"},
-      {"candump log", "wrong length", "9 data bytes, classic", [] { return Candump("(1.0) can0 123#001122334455667788"); }, "column"},
-      {"candump log", "out of range", "`800#00` (11-bit ID above 7FF)", [] { return Candump("(1.0) can0 800#00"); }, "column"},
-      {"candump log", "out of range", "`40000123#00` (CAN ID above 29 bits)", [] { return Candump("(1.0) can0 40000123#00"); }, "column 12: CAN ID above 29 bits"},
-      {"candump log", "out of range", "remote length 9 `123#R9`", [] { return Candump("(1.0) can0 123#R9"); }, "column"},
-      {"candump log", "wrong type", "time `(abc)`", [] { return Candump("(abc) can0 123#00"); }, "column 2"},
-      {"candump log", "huge", "time of 30 digits", [] { return Candump("(999999999999999999999999999999.0) can0 123#00"); }, "column"},
+      {"candump log", "truncated", "`(1.0) can0 12`", [] { return Candump("(1.0) can0 12"); },
+       "column"},
+      {"candump log", "wrong length", "`123#1` (odd hex digits)",
+       [] { return Candump("(1.0) can0 123#1"); }, "column"},
+      {"candump log", "wrong length", "9 data bytes, classic",
+       [] { return Candump("(1.0) can0 123#001122334455667788"); }, "column"},
+      {"candump log", "out of range", "`800#00` (11-bit ID above 7FF)",
+       [] { return Candump("(1.0) can0 800#00"); }, "column"},
+      {"candump log", "out of range", "`40000123#00` (CAN ID above 29 bits)",
+       [] { return Candump("(1.0) can0 40000123#00"); }, "column 12: CAN ID above 29 bits"},
+      {"candump log", "out of range", "remote length 9 `123#R9`",
+       [] { return Candump("(1.0) can0 123#R9"); }, "column"},
+      {"candump log", "wrong type", "time `(abc)`", [] { return Candump("(abc) can0 123#00"); },
+       "column 2"},
+      {"candump log", "huge", "time of 30 digits",
+       [] { return Candump("(999999999999999999999999999999.0) can0 123#00"); }, "column"},
       {"candump log", "empty", "empty line", [] { return Candump(""); }, "skipped"},
-      {"candump log", "non-UTF-8", "data `\\xff\\xff`", [] { return Candump("(1.0) can0 123#\xff\xff"); }, "column"},
+      {"candump log", "non-UTF-8", "data `\\xff\\xff`",
+       [] { return Candump("(1.0) can0 123#\xff\xff"); }, "column"},
       // --- DBC ---
-      {"DBC", "truncated", "`SG_` line cut after the start bit", [] { return Dbc(kDbc.substr(0, kDbc.find("@"))); }, "x.dbc:6:"},
+      {"DBC", "truncated", "`SG_` line cut after the start bit",
+       [] { return Dbc(kDbc.substr(0, kDbc.find("@"))); }, "x.dbc:6:"},
       // Accepted with a warning: the signal decodes as not available, the frames decode.
-      {"DBC", "wrong length", "signal past the 8 bytes of its message", [] { return Dbc(Replace(kDbc, "0|16@", "60|16@")); }, "accepted"},
-      {"DBC", "huge", "signal past 64 bytes", [] { return Dbc(Replace(kDbc, "0|16@", "510|16@")); }, "beyond 64 bytes"},
-      {"DBC", "duplicate", "message 256 twice", [] { return Dbc(kDbc + "BO_ 256 M2: 8 N\n"); }, "x.dbc:"},
-      {"DBC", "wrong type", "length `eight`", [] { return Dbc(Replace(kDbc, "M: 8", "M: eight")); }, "x.dbc:5:"},
+      {"DBC", "wrong length", "signal past the 8 bytes of its message",
+       [] { return Dbc(Replace(kDbc, "0|16@", "60|16@")); }, "accepted"},
+      {"DBC", "huge", "signal past 64 bytes", [] { return Dbc(Replace(kDbc, "0|16@", "510|16@")); },
+       "beyond 64 bytes"},
+      {"DBC", "duplicate", "message 256 twice", [] { return Dbc(kDbc + "BO_ 256 M2: 8 N\n"); },
+       "x.dbc:"},
+      {"DBC", "wrong type", "length `eight`", [] { return Dbc(Replace(kDbc, "M: 8", "M: eight")); },
+       "x.dbc:5:"},
       {"DBC", "empty", "empty file", [] { return Dbc(""); }, "accepted (0 messages)"},
       // --- CAN frames (PUMP_FAST_I of node 1 is 0x101, PUMP_STATUS 0x181, PUMP_CLEAR 0x701) ---
-      {"CAN frame", "wrong length", "PUMP_FAST_I with 4 bytes", [] { return Frame(0x101, "00000000"); }, "rx_bad_length 1"},
-      {"CAN frame", "unknown", "ID 0x123", [] { return Frame(0x123, "0000000000000000"); }, "rx_unknown_id 1"},
-      {"CAN frame", "unknown", "PUMP_FAST_I of node 2 (not configured)", [] { return Frame(0x102, "0000000000000000"); }, "rx_unknown_id 1, rx_unconfigured_node 1"},
-      {"CAN frame", "NaN", "PUMP_FAST_I, Id_A not-available (0x8000)", [] { return Frame(0x101, "0080000000000000"); }, "rejected_values 1"},
-      {"CAN frame", "huge", "PUMP_FAST_I as a 64-byte CAN FD frame", [] { return Frame(0x101, std::string(128, '0'), true); }, "fast_frames 1"},
-      {"CAN frame", "wrong type", "remote frame on 0x101", [] { return Frame(0x101, "", false, true); }, "ignored"},
-      {"CAN frame", "wrong type", "error frame", [] { return Frame(0x004, "0000000000000000", false, false, true); }, "ignored"},
-      {"CAN frame", "empty", "PUMP_STATUS with 0 bytes", [] { return Frame(0x181, ""); }, "rx_bad_length 1"},
+      {"CAN frame", "wrong length", "PUMP_FAST_I with 4 bytes",
+       [] { return Frame(0x101, "00000000"); }, "rx_bad_length 1"},
+      {"CAN frame", "unknown", "ID 0x123", [] { return Frame(0x123, "0000000000000000"); },
+       "rx_unknown_id 1"},
+      {"CAN frame", "unknown", "PUMP_FAST_I of node 2 (not configured)",
+       [] { return Frame(0x102, "0000000000000000"); }, "rx_unknown_id 1, rx_unconfigured_node 1"},
+      {"CAN frame", "NaN", "PUMP_FAST_I, Id_A not-available (0x8000)",
+       [] { return Frame(0x101, "0080000000000000"); }, "rejected_values 1"},
+      {"CAN frame", "huge", "PUMP_FAST_I as a 64-byte CAN FD frame",
+       [] { return Frame(0x101, std::string(128, '0'), true); }, "fast_frames 1"},
+      {"CAN frame", "wrong type", "remote frame on 0x101",
+       [] { return Frame(0x101, "", false, true); }, "ignored"},
+      {"CAN frame", "wrong type", "error frame",
+       [] { return Frame(0x004, "0000000000000000", false, false, true); }, "ignored"},
+      {"CAN frame", "empty", "PUMP_STATUS with 0 bytes", [] { return Frame(0x181, ""); },
+       "rx_bad_length 1"},
       // --- clear commands (LCM alarm_clear_t and PUMP_CLEAR frames) ---
-      {"LCM clear", "spoofed", "source `panel` (configured), no code", [] { return LcmClear(ClearCommand("tmp1", "panel", 0)); }, "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1; reply PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: no or a wrong authentication code"},
-      {"LCM clear", "spoofed", "source `panel`, code made with another key", [] { return LcmClear(ClearCommand("tmp1", "panel", 2)); }, "wrong authentication code"},
-      {"LCM clear", "spoofed", "source `panel`, no code, through the unauthenticated path", [] { return Clear("tmp1", "panel"); }, "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1"},
-      {"LCM clear", "replayed", "a valid command received twice", [] { const auto m = ClearCommand("tmp1", "panel", 1); return LcmClear({&m, &m}); }, "refused, logged; clears_accepted 1, clears_refused 1, clears_unauthenticated 0; reply PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: counter 5 is not above the last accepted 5"},
-      {"LCM clear", "old", "a valid command issued 31 s ago", [] { return LcmClear(ClearCommand("tmp1", "panel", 1, kNowUs - 31'000'000)); }, "window 30 s"},
-      {"LCM clear", "huge", "a valid command with `utime` INT64_MIN", [] { return LcmClear(ClearCommand("tmp1", "panel", 1, std::numeric_limits<std::int64_t>::min())); }, "refused"},
-      {"LCM clear", "unknown", "source `intruder` with a valid code", [] { return LcmClear(ClearCommand("tmp1", "intruder", 1)); }, "not in alarms.clear_lcm_sources"},
-      {"LCM clear", "unknown", "pump `nope`", [] { return LcmClear(ClearCommand("nope", "panel", 1)); }, "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 0; no reply"},
-      {"LCM clear", "wrong type", "bytes that do not decode as alarm_clear_t", [] { return LcmClear({nullptr}); }, "clears_unauthenticated 1; no reply"},
-      {"LCM clear", "valid", "source `panel`, signed with the key, new counter", [] { return LcmClear(ClearCommand("tmp1", "panel", 1)); }, "accepted, logged; clears_accepted 1, clears_refused 0"},
-      {"CAN clear", "unknown", "PUMP_CLEAR on `can:can1`", [] { return Clear("tmp1", "can:can1"); }, "refused"},
+      {"LCM clear", "spoofed", "source `panel` (configured), no code",
+       [] { return LcmClear(ClearCommand("tmp1", "panel", 0)); },
+       "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1; reply "
+       "PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: no or a wrong authentication code"},
+      {"LCM clear", "spoofed", "source `panel`, code made with another key",
+       [] { return LcmClear(ClearCommand("tmp1", "panel", 2)); }, "wrong authentication code"},
+      {"LCM clear", "spoofed", "source `panel`, no code, through the unauthenticated path",
+       [] { return Clear("tmp1", "panel"); },
+       "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1"},
+      {"LCM clear", "replayed", "a valid command received twice",
+       [] {
+         const auto m = ClearCommand("tmp1", "panel", 1);
+         return LcmClear({&m, &m});
+       },
+       "refused, logged; clears_accepted 1, clears_refused 1, clears_unauthenticated 0; reply "
+       "PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: counter 5 is not above the last accepted 5"},
+      {"LCM clear", "old", "a valid command issued 31 s ago",
+       [] { return LcmClear(ClearCommand("tmp1", "panel", 1, kNowUs - 31'000'000)); },
+       "window 30 s"},
+      {"LCM clear", "huge", "a valid command with `utime` INT64_MIN",
+       [] {
+         return LcmClear(
+             ClearCommand("tmp1", "panel", 1, std::numeric_limits<std::int64_t>::min()));
+       },
+       "refused"},
+      {"LCM clear", "unknown", "source `intruder` with a valid code",
+       [] { return LcmClear(ClearCommand("tmp1", "intruder", 1)); },
+       "not in alarms.clear_lcm_sources"},
+      {"LCM clear", "unknown", "pump `nope`",
+       [] { return LcmClear(ClearCommand("nope", "panel", 1)); },
+       "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 0; no reply"},
+      {"LCM clear", "wrong type", "bytes that do not decode as alarm_clear_t",
+       [] { return LcmClear({nullptr}); }, "clears_unauthenticated 1; no reply"},
+      {"LCM clear", "valid", "source `panel`, signed with the key, new counter",
+       [] { return LcmClear(ClearCommand("tmp1", "panel", 1)); },
+       "accepted, logged; clears_accepted 1, clears_refused 0"},
+      {"CAN clear", "unknown", "PUMP_CLEAR on `can:can1`", [] { return Clear("tmp1", "can:can1"); },
+       "refused"},
       // --- saved state ---
-      {"saved state", "valid", "a state saved by the same gateway", [state] { return Restore(state); }, "restored 1"},
-      {"saved state", "truncated", "the file cut in half", [state] { return Restore(state.substr(0, state.size() / 2)); }, "restored 0"},
+      {"saved state", "valid", "a state saved by the same gateway",
+       [state] { return Restore(state); }, "restored 1"},
+      {"saved state", "truncated", "the file cut in half",
+       [state] { return Restore(state.substr(0, state.size() / 2)); }, "restored 0"},
       {"saved state", "empty", "empty file", [] { return Restore(""); }, "restored 0"},
-      {"saved state", "NaN", "first temperature `nan`", [state, first_x] { return Restore(state.substr(0, first_x) + "nan" + state.substr(state.find(',', first_x))); }, "restored 0; saved state of pump(s) tmp1 does not fit"},
-      {"saved state", "huge", "first temperature `1e300`", [state, first_x] { return Restore(state.substr(0, first_x) + "1e300" + state.substr(state.find(',', first_x))); }, "restored 0; saved state of pump(s) tmp1 does not fit"},
-      {"saved state", "NaN", "held input `speed_rpm = nan`", [state] { return Restore(Replace(state, "speed_rpm = ", "speed_rpm = nan\nold_speed_rpm = ")); }, "does not fit the configuration or is damaged"},
-      {"saved state", "wrong length", "one temperature missing", [state, first_x] { return Restore(state.substr(0, first_x) + state.substr(state.find(',', first_x) + 2)); }, "restored 0"},
-      {"saved state", "unknown", "`version = 7`", [state] { return Restore(Replace(state, "version = 2", "version = 7")); }, "unknown version"},
-      {"saved state", "wrong length", "`resistance_probability = [ 0.5 ]` (two hypotheses)", [state] { return Restore(Replace(state, "resistance_probability = [", "resistance_probability = [ 0.5 ]\nold_resistance_probability = [")); }, "does not fit the configuration or is damaged"},
-      {"saved state", "out of range", "`resistance_probability = [ 1.5, 0.1 ]`", [state] { return Restore(Replace(state, "resistance_probability = [", "resistance_probability = [ 1.5, 0.1 ]\nold_resistance_probability = [")); }, "does not fit the configuration or is damaged"},
-      {"saved state", "wrong type", "`resistance_rejections = [ 0.5, 0 ]`", [state] { return Restore(Replace(state, "resistance_rejections = [", "resistance_rejections = [ 0.5, 0 ]\nold_resistance_rejections = [")); }, "does not fit the configuration or is damaged"},
-      {"saved state", "wrong type", "`model = \"other\"`", [state] { return Restore(Replace(state, "model = 'tmp-generic'", "model = 'other'")); }, "restored 0"},
-      {"saved state", "non-UTF-8", "a byte `\\xff` in a key", [state] { return Restore(Replace(state, "version", "ver\xffsion")); }, "restored 0"},
+      {"saved state", "NaN", "first temperature `nan`",
+       [state, first_x] {
+         return Restore(state.substr(0, first_x) + "nan" + state.substr(state.find(',', first_x)));
+       },
+       "restored 0; saved state of pump(s) tmp1 does not fit"},
+      {"saved state", "huge", "first temperature `1e300`",
+       [state, first_x] {
+         return Restore(state.substr(0, first_x) + "1e300" +
+                        state.substr(state.find(',', first_x)));
+       },
+       "restored 0; saved state of pump(s) tmp1 does not fit"},
+      {"saved state", "NaN", "held input `speed_rpm = nan`",
+       [state] {
+         return Restore(Replace(state, "speed_rpm = ", "speed_rpm = nan\nold_speed_rpm = "));
+       },
+       "does not fit the configuration or is damaged"},
+      {"saved state", "wrong length", "one temperature missing",
+       [state, first_x] {
+         return Restore(state.substr(0, first_x) + state.substr(state.find(',', first_x) + 2));
+       },
+       "restored 0"},
+      {"saved state", "unknown", "`version = 7`",
+       [state] { return Restore(Replace(state, "version = 2", "version = 7")); },
+       "unknown version"},
+      {"saved state", "wrong length", "`resistance_probability = [ 0.5 ]` (two hypotheses)",
+       [state] {
+         return Restore(
+             Replace(state, "resistance_probability = [",
+                     "resistance_probability = [ 0.5 ]\nold_resistance_probability = ["));
+       },
+       "does not fit the configuration or is damaged"},
+      {"saved state", "out of range", "`resistance_probability = [ 1.5, 0.1 ]`",
+       [state] {
+         return Restore(
+             Replace(state, "resistance_probability = [",
+                     "resistance_probability = [ 1.5, 0.1 ]\nold_resistance_probability = ["));
+       },
+       "does not fit the configuration or is damaged"},
+      {"saved state", "wrong type", "`resistance_rejections = [ 0.5, 0 ]`",
+       [state] {
+         return Restore(
+             Replace(state, "resistance_rejections = [",
+                     "resistance_rejections = [ 0.5, 0 ]\nold_resistance_rejections = ["));
+       },
+       "does not fit the configuration or is damaged"},
+      {"saved state", "wrong type", "`model = \"other\"`",
+       [state] { return Restore(Replace(state, "model = 'tmp-generic'", "model = 'other'")); },
+       "restored 0"},
+      {"saved state", "non-UTF-8", "a byte `\\xff` in a key",
+       [state] { return Restore(Replace(state, "version", "ver\xffsion")); }, "restored 0"},
   };
   return rows;
 }
@@ -374,7 +511,8 @@ TEST(BadInput, EveryRowOfTheCatalogueGivesItsAnswer) {
   for (const Row& r : Catalogue()) {
     const std::string answer = r.run();
     EXPECT_NE(answer.find(r.expect), std::string::npos)
-        << r.surface << " / " << r.kind << " / " << r.input << ": answer '" << answer << "' lacks '" << r.expect << "'";
+        << r.surface << " / " << r.kind << " / " << r.input << ": answer '" << answer << "' lacks '"
+        << r.expect << "'";
     if (print) {
       std::string a = answer;
       for (char& c : a) {
@@ -401,12 +539,15 @@ TEST(UnconfiguredNode, WarnsOnceAMinuteNamingTheSilentPump) {
   }
   const std::string err = testing::internal::GetCapturedStderr();
   EXPECT_EQ(g.counters().rx_unconfigured_node, 100u);
-  EXPECT_NE(err.find("can0: PUMP_FAST_I frames (ID 102) from node ID 2, which no pump on can0 has; not "
-                     "heard from yet there: tmp1 (node_id 1) - is its node_id wrong?"),
-            std::string::npos)
+  EXPECT_NE(
+      err.find("can0: PUMP_FAST_I frames (ID 102) from node ID 2, which no pump on can0 has; not "
+               "heard from yet there: tmp1 (node_id 1) - is its node_id wrong?"),
+      std::string::npos)
       << err;
   std::size_t lines = 0;
-  for (std::size_t at = err.find("node ID 2"); at != std::string::npos; at = err.find("node ID 2", at + 1)) ++lines;
+  for (std::size_t at = err.find("node ID 2"); at != std::string::npos;
+       at = err.find("node ID 2", at + 1))
+    ++lines;
   EXPECT_EQ(lines, 2u) << "one warning at 0 s and one at 60 s:\n" << err;
 }
 
@@ -418,8 +559,12 @@ TEST(NeverHeardPump, RaisesStaleTelemetryOnCanAndInTheStatusLine) {
   Gateway g(ParseConfig(kGatewayConfig, std::string(PUMPTHERM_SOURCE_DIR) + "/p.toml"));
   struct Frames : OutputSink {
     std::vector<protocol::CanFrame> sent;
-    void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame& f) override { sent.push_back(f); }
-    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override { return true; }
+    void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame& f) override {
+      sent.push_back(f);
+    }
+    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override {
+      return true;
+    }
   } sink;
   const std::int64_t t0 = 1'700'000'000'000'000;
   g.Advance(t0, sink);
@@ -430,10 +575,12 @@ TEST(NeverHeardPump, RaisesStaleTelemetryOnCanAndInTheStatusLine) {
   EXPECT_EQ(a.level, estimators::AlarmLevel::kWarning);
   EXPECT_EQ(a.reason, estimators::AlarmReason::kStaleTelemetry);
   EXPECT_NE(g.StatusLine().find("1 warning"), std::string::npos) << g.StatusLine();
-  EXPECT_NE(g.PumpTable().find("never heard; warning (stale_telemetry)"), std::string::npos) << g.PumpTable();
+  EXPECT_NE(g.PumpTable().find("never heard; warning (stale_telemetry)"), std::string::npos)
+      << g.PumpTable();
   bool alarm_frame = false;
   for (const auto& f : sink.sent) {
-    if (f.id == 0x201) alarm_frame = alarm_frame || (f.data[0] & 0x3) == 1;  // GW_ALARM of node 1: warning
+    if (f.id == 0x201)
+      alarm_frame = alarm_frame || (f.data[0] & 0x3) == 1;  // GW_ALARM of node 1: warning
   }
   EXPECT_TRUE(alarm_frame) << sink.sent.size() << " frames sent";
 }

@@ -45,12 +45,21 @@ rx_buffer_bytes = 4194304
 
 TEST(Config, ReceiveBufferRange) {
   EXPECT_EQ(kDefaultRxBufferBytes, 1048576);  // docs/daemon.md and pumpthermd.toml(5) say so
-  EXPECT_EQ(ParseConfig("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 0\n", "p.toml").interfaces[0].rx_buffer_bytes, 0);
-  EXPECT_EQ(ParseConfig("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 4096\n", "p.toml").interfaces[0].rx_buffer_bytes, 4096);
-  EXPECT_EQ(ParseConfig("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 268435456\n", "p.toml").interfaces[0].rx_buffer_bytes,
+  EXPECT_EQ(ParseConfig("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 0\n", "p.toml")
+                .interfaces[0]
+                .rx_buffer_bytes,
+            0);
+  EXPECT_EQ(ParseConfig("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 4096\n", "p.toml")
+                .interfaces[0]
+                .rx_buffer_bytes,
+            4096);
+  EXPECT_EQ(ParseConfig("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 268435456\n", "p.toml")
+                .interfaces[0]
+                .rx_buffer_bytes,
             268435456);
-  EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 4095\n"),
-            "p.toml:3: key 'can[0].rx_buffer_bytes': 4095 is below 4096 (0 keeps the kernel's default)");
+  EXPECT_EQ(
+      ErrorOf("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 4095\n"),
+      "p.toml:3: key 'can[0].rx_buffer_bytes': 4095 is below 4096 (0 keeps the kernel's default)");
   EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 268435457\n"),
             "p.toml:3: key 'can[0].rx_buffer_bytes': 268435457 is outside [0, 268435456]");
   EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = -1\n"),
@@ -91,7 +100,8 @@ TEST(Config, UnreadableFileIsAConfigError) {
     LoadConfig("/nonexistent/pumpthermd.toml");
     FAIL() << "no error";
   } catch (const ConfigError& e) {
-    EXPECT_EQ(std::string(e.what()), "/nonexistent/pumpthermd.toml: cannot open: No such file or directory");
+    EXPECT_EQ(std::string(e.what()),
+              "/nonexistent/pumpthermd.toml: cannot open: No such file or directory");
   }
 }
 

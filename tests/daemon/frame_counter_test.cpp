@@ -70,7 +70,7 @@ TEST(FrameCounter, HeartbeatCarriesUptimeAndFrameCount) {
   for (int k = 0; k < 300; ++k) g.OnFrame(i, Frame(0x100));
   const auto f = g.HeartbeatDue(8'000'000);
   ASSERT_TRUE(f);
-  EXPECT_EQ(f->data[0], 3);                      // uptime 3 s
+  EXPECT_EQ(f->data[0], 3);  // uptime 3 s
   EXPECT_EQ(f->data[4] | (f->data[5] << 8), 300);
   EXPECT_FALSE(g.HeartbeatDue(8'500'000));
 }
@@ -88,7 +88,9 @@ TEST(FrameCounter, DisabledHeartbeatNeverComes) {
 TEST(Gateway, StatusLineCountsErrorFramesAndLcmFailures) {
   struct FailingSink : OutputSink {
     void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
-    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override { return false; }
+    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override {
+      return false;
+    }
   };
   DaemonConfig c;
   c.gateway.heartbeat_period_s = 0.0;
@@ -106,7 +108,8 @@ TEST(Gateway, StatusLineCountsErrorFramesAndLcmFailures) {
   g.Advance(1'000'000, sink);  // the gateway's health message is due: it fails
   EXPECT_EQ(g.counters().lcm_failed, 1U);
   EXPECT_EQ(g.StatusLine(),
-            "0 pumps, 0 warning, 0 trip; rx 1 frames, 1 IDs, 0 rx drops; tx 0 frames, 0 tx dropped; can0:up; "
+            "0 pumps, 0 warning, 0 trip; rx 1 frames, 1 IDs, 0 rx drops; tx 0 frames, 0 tx "
+            "dropped; can0:up; "
             "1 unknown, 0 bad length, 2 error frames; lcm 0 sent, 1 failed");
 }
 
@@ -154,7 +157,8 @@ TEST(Offline, ReadsLinesAcrossTheReadersBlocks) {
   std::string text;
   const int n = 60000;
   for (int k = 0; k < n; ++k) {
-    text += fmt::format("({}.{:06d}) can0 {:03X}#0102030405060708\n", 1 + k / 1000, (k % 1000) * 1000, k % 0x7FF);
+    text += fmt::format("({}.{:06d}) can0 {:03X}#0102030405060708\n", 1 + k / 1000,
+                        (k % 1000) * 1000, k % 0x7FF);
     if (k == n / 2) text += std::string(1 << 21, 'x') + "\n";
   }
   std::istringstream log(text);

@@ -37,7 +37,8 @@ TEST(LcmLog, OfflineLogReadsBackWithLcmsReaderAndDecodesByChannel) {
   std::filesystem::create_directories(dir);
   const std::string lcm_path = (dir / "gateway.lcm").string();
 
-  const DaemonConfig config = LoadConfig(std::string(PUMPTHERM_SOURCE_DIR) + "/tools/demo/pumpthermd-demo.toml");
+  const DaemonConfig config =
+      LoadConfig(std::string(PUMPTHERM_SOURCE_DIR) + "/tools/demo/pumpthermd-demo.toml");
   Gateway gateway(config);
   std::ifstream in(PUMPTHERM_RECORDING);
   ASSERT_TRUE(in) << PUMPTHERM_RECORDING << ": cannot open (built by vcan_pipeline_recording)";
@@ -110,7 +111,8 @@ TEST(LcmLog, OfflineLogReadsBackWithLcmsReaderAndDecodesByChannel) {
   EXPECT_EQ(events, r.lcm_out) << "every message handed to the log is in it";
   for (const char* pump : {"pump1", "pump2", "pump3"}) {
     for (const char* kind : {"TELEMETRY", "TEMPS", "ALARM"}) {
-      EXPECT_GT(per_channel[std::string("PUMPTHERM/") + pump + "/" + kind], 0) << pump << " " << kind;
+      EXPECT_GT(per_channel[std::string("PUMPTHERM/") + pump + "/" + kind], 0)
+          << pump << " " << kind;
     }
     // The last TEMPS in the log carries the gateway's final frame estimate (published at the
     // thermal period, so it is at most one step older: the frame moves far less than 0.2 K).

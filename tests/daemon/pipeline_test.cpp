@@ -2,6 +2,7 @@
 // through the shipped DBC, goes through decode, resistance identification, the virtual thermal
 // sensor, alarms, CAN encoding and LCM encoding.
 #include <gtest/gtest.h>
+#include <toml++/toml.h>
 
 #include <cmath>
 #include <filesystem>
@@ -12,7 +13,6 @@
 #include <regex>
 #include <set>
 #include <sstream>
-#include <toml++/toml.h>
 
 #include "daemon/gateway.hpp"
 #include "daemon/lcm_bridge.hpp"
@@ -36,8 +36,11 @@ constexpr double kR_ohm = 0.28;
 struct RecordingSink : OutputSink {
   std::vector<std::pair<std::int64_t, protocol::CanFrame>> frames;
   std::multimap<std::string, std::vector<std::uint8_t>> lcm;
-  void SendFrame(std::size_t, std::int64_t t, const protocol::CanFrame& f) override { frames.emplace_back(t, f); }
-  bool PublishLcm(const std::string& ch, std::int64_t, const std::vector<std::uint8_t>& b) override {
+  void SendFrame(std::size_t, std::int64_t t, const protocol::CanFrame& f) override {
+    frames.emplace_back(t, f);
+  }
+  bool PublishLcm(const std::string& ch, std::int64_t,
+                  const std::vector<std::uint8_t>& b) override {
     lcm.emplace(ch, b);
     return true;
   }
@@ -77,7 +80,8 @@ const ClearKey kKey = [] {
 }();
 
 /// A clear command for pump tmp1 from "panel", signed with kKey.
-pumptherm::alarm_clear_t SignedClear(std::int64_t utime, std::int64_t counter, const std::string& comment) {
+pumptherm::alarm_clear_t SignedClear(std::int64_t utime, std::int64_t counter,
+                                     const std::string& comment) {
   pumptherm::alarm_clear_t m;
   m.utime = utime;
   m.pump = "tmp1";
@@ -94,13 +98,17 @@ pumptherm::alarm_clear_t SignedClear(std::int64_t utime, std::int64_t counter, c
 class Bench {
  public:
   explicit Bench(const std::string& config_text)
-      : config_(ParseConfig(config_text, std::string(PUMPTHERM_SOURCE_DIR) + "/tests/daemon/pipeline.toml")),
+      : config_(ParseConfig(config_text,
+                            std::string(PUMPTHERM_SOURCE_DIR) + "/tests/daemon/pipeline.toml")),
         gateway_(config_),
-        dbc_(protocol::ParseDbc(ReadTextFile(ResolveResource(ResourceKind::kDbc, "pumptherm.dbc")), "pumptherm.dbc")),
+        dbc_(protocol::ParseDbc(ReadTextFile(ResolveResource(ResourceKind::kDbc, "pumptherm.dbc")),
+                                "pumptherm.dbc")),
         codec_(dbc_),
         model_(estimators::ThermalModel::Parse(
-            ReadTextFile(ResolveResource(ResourceKind::kModel, "saheba2010-improved")), "improved")),
-        plant_(model_, Eigen::VectorXd::Constant(model_.StateCount(), 25.0), {.process_sd_K = 0.0}, 7) {
+            ReadTextFile(ResolveResource(ResourceKind::kModel, "saheba2010-improved")),
+            "improved")),
+        plant_(model_, Eigen::VectorXd::Constant(model_.StateCount(), 25.0), {.process_sd_K = 0.0},
+               7) {
     iface_ = gateway_.Interface("can0");
   }
 
@@ -110,7 +118,8 @@ class Bench {
     const int index = static_cast<int>(m - dbc_.messages.data());
     const auto& codec = codec_.message(static_cast<std::size_t>(index));
     std::vector<double> v(codec.signal_count(), 0.0);
-    for (const auto& [name, value] : values) v[static_cast<std::size_t>(m->FindSignal(name))] = value;
+    for (const auto& [name, value] : values)
+      v[static_cast<std::size_t>(m->FindSignal(name))] = value;
     protocol::TimedFrame tf;
     tf.time_us = t_us;
     tf.frame.id = m->id + 1;  // node 1
@@ -128,7 +137,9 @@ class Bench {
     for (const auto& [t, f] : sink.frames) {
       if (f.id != m->id + 1) continue;
       std::vector<double> v(codec.signal_count());
-      if (codec.Decode(std::span<const std::uint8_t>(f.data.data(), f.len), v) != protocol::CodecStatus::kOk) continue;
+      if (codec.Decode(std::span<const std::uint8_t>(f.data.data(), f.len), v) !=
+          protocol::CodecStatus::kOk)
+        continue;
       std::map<std::string, double> named;
       for (std::size_t i = 0; i < v.size(); ++i) named[m->signals[i].name] = v[i];
       out.push_back(std::move(named));
@@ -149,16 +160,26 @@ class Bench {
       const double r_ohm = kR_ohm * (1.0 + 4.1e-3 * (t_w - 27.2));
       const double uq = r_ohm * iq_A + w * kPsi_Wb;
       const double c = counter_++ % 16;
-      Frame("PUMP_FAST_I", t, {{"Id_A", 0.0}, {"Iq_A", iq_A}, {"SpeedElec_rad_per_s", w}, {"RollingCounter", c}});
-      Frame("PUMP_FAST_U", t + 200, {{"Ud_V", -w * 0.24e-3 * iq_A}, {"Uq_V", uq}, {"RollingCounter", c}});
+      Frame("PUMP_FAST_I", t,
+            {{"Id_A", 0.0}, {"Iq_A", iq_A}, {"SpeedElec_rad_per_s", w}, {"RollingCounter", c}});
+      Frame("PUMP_FAST_U", t + 200,
+            {{"Ud_V", -w * 0.24e-3 * iq_A}, {"Uq_V", uq}, {"RollingCounter", c}});
       if (k % 10 == 0) {
-        plant_.Step({.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = truth_ambient_degC}, 0.1);
+        plant_.Step(
+            {.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = truth_ambient_degC},
+            0.1);
         truth_ = plant_.State_degC();
-        Frame("PUMP_STATUS", t + 400, {{"SpeedMech_rpm", 800.0}, {"DriveState", 2.0},
-                                        {"FrameTemp_degC", truth_(0) + frame_offset_K}, {"AmbientTemp_degC", 25.0},
-                                        {"DcLink_V", 48.0}, {"RollingCounter", static_cast<double>(k / 10 % 16)}});
+        Frame("PUMP_STATUS", t + 400,
+              {{"SpeedMech_rpm", 800.0},
+               {"DriveState", 2.0},
+               {"FrameTemp_degC", truth_(0) + frame_offset_K},
+               {"AmbientTemp_degC", 25.0},
+               {"DcLink_V", 48.0},
+               {"RollingCounter", static_cast<double>(k / 10 % 16)}});
       } else {
-        plant_.Step({.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = truth_ambient_degC}, 0.0 + 1e-9);
+        plant_.Step(
+            {.speed_rpm = 800.0, .id_A = 0.0, .iq_A = iq_A, .ambient_degC = truth_ambient_degC},
+            0.0 + 1e-9);
       }
     }
   }
@@ -209,7 +230,8 @@ TEST(Pipeline, EstimatesFollowTheTruthAndGoOutOnCanAndLcm) {
   EXPECT_NEAR(count, 900, 2);
   const auto& codec = b.codec_.message(static_cast<std::size_t>(temps - b.dbc_.messages.data()));
   std::vector<double> v(codec.signal_count());
-  ASSERT_EQ(codec.Decode(std::span<const std::uint8_t>(last.data.data(), last.len), v), protocol::CodecStatus::kOk);
+  ASSERT_EQ(codec.Decode(std::span<const std::uint8_t>(last.data.data(), last.len), v),
+            protocol::CodecStatus::kOk);
   EXPECT_NEAR(v[static_cast<std::size_t>(temps->FindSignal("Frame_degC"))], s.node_degC[0], 0.02);
   EXPECT_NEAR(v[static_cast<std::size_t>(temps->FindSignal("Teeth_degC"))], s.node_degC[2], 0.02);
 
@@ -251,7 +273,8 @@ TEST(Pipeline, EstimatesFollowTheTruthAndGoOutOnCanAndLcm) {
 
 std::string GenericConfig(const std::string& dbc_section = "") {
   std::string c = Config();
-  c.replace(c.find("saheba2010-improved"), std::string("saheba2010-improved").size(), "tmp-generic");
+  c.replace(c.find("saheba2010-improved"), std::string("saheba2010-improved").size(),
+            "tmp-generic");
   return dbc_section + c;
 }
 
@@ -277,7 +300,8 @@ TEST(Pipeline, EveryNodeOfTheDefaultModelReachesCanWithItsSd) {
 
 TEST(Pipeline, ANodeWithoutCanOutputIsAConfigurationErrorNamingIt) {
   // The shipped mapping without the node-indexed message: tmp-generic's stator has no signal.
-  std::string mapping = ReadTextFile(std::string(PUMPTHERM_SOURCE_DIR) + "/protocol/mapping_pumptherm.toml");
+  std::string mapping =
+      ReadTextFile(std::string(PUMPTHERM_SOURCE_DIR) + "/protocol/mapping_pumptherm.toml");
   std::istringstream in(mapping);
   std::string line, kept;
   while (std::getline(in, line)) {
@@ -285,13 +309,17 @@ TEST(Pipeline, ANodeWithoutCanOutputIsAConfigurationErrorNamingIt) {
   }
   const std::string path = ::testing::TempDir() + "pumptherm_mapping_no_node_table.toml";
   std::ofstream(path) << kept;
-  const std::string config = GenericConfig("[dbc]\nfile = \"pumptherm.dbc\"\nmapping = \"" + path + "\"\n");
+  const std::string config =
+      GenericConfig("[dbc]\nfile = \"pumptherm.dbc\"\nmapping = \"" + path + "\"\n");
   try {
-    const Gateway g(ParseConfig(config, std::string(PUMPTHERM_SOURCE_DIR) + "/tests/daemon/pipeline.toml"));
+    const Gateway g(
+        ParseConfig(config, std::string(PUMPTHERM_SOURCE_DIR) + "/tests/daemon/pipeline.toml"));
     ADD_FAILURE() << "accepted a model node without CAN output";
   } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("pump[0].thermal_model': node 'stator' of tmp-generic has no CAN output"),
-              std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(
+                  "pump[0].thermal_model': node 'stator' of tmp-generic has no CAN output"),
+              std::string::npos)
+        << e.what();
   }
   std::remove(path.c_str());
 }
@@ -305,7 +333,8 @@ std::pair<double, double> LastMismatchOnCan(const Bench& b) {
   }
   const auto& codec = b.codec_.message(static_cast<std::size_t>(alarm - b.dbc_.messages.data()));
   std::vector<double> v(codec.signal_count());
-  EXPECT_EQ(codec.Decode(std::span<const std::uint8_t>(last.data.data(), last.len), v), protocol::CodecStatus::kOk);
+  EXPECT_EQ(codec.Decode(std::span<const std::uint8_t>(last.data.data(), last.len), v),
+            protocol::CodecStatus::kOk);
   return {v[static_cast<std::size_t>(alarm->FindSignal("MismatchState"))],
           v[static_cast<std::size_t>(alarm->FindSignal("MismatchEffect"))]};
 }
@@ -329,7 +358,8 @@ TEST(Pipeline, DisturbanceStatesPublishAndTheModelIsFoundConsistent) {
     EXPECT_GE(s.node_sd_K[k], 1.0) << "the 1 K floor";
   }
   // The filter's own model as the truth: the mismatch test passes, on LCM and CAN.
-  EXPECT_EQ(s.mismatch.state, estimators::MismatchState::kConsistent) << estimators::DescribeFinding(s.mismatch);
+  EXPECT_EQ(s.mismatch.state, estimators::MismatchState::kConsistent)
+      << estimators::DescribeFinding(s.mismatch);
   const pumptherm::alarm_t m = LastAlarmOnLcm(b);
   EXPECT_EQ(m.mismatch_state, pumptherm::alarm_t::MISMATCH_CONSISTENT);
   EXPECT_EQ(m.mismatch_effect, pumptherm::alarm_t::EFFECT_NONE);
@@ -340,23 +370,33 @@ TEST(Pipeline, DisturbanceStatesPublishAndTheModelIsFoundConsistent) {
 // machine's boundary reaches it through the frame alone, so it is on; a written value stands.
 TEST(Pipeline, DisturbanceStatesDefaultFollowsTheModel) {
   EXPECT_TRUE(Bench(Config()).gateway_.pumps()[0]->config().disturbance_states);
-  EXPECT_FALSE(Bench(Config("disturbance_states = false\n")).gateway_.pumps()[0]->config().disturbance_states);
+  EXPECT_FALSE(Bench(Config("disturbance_states = false\n"))
+                   .gateway_.pumps()[0]
+                   ->config()
+                   .disturbance_states);
   // Measured on the rotor, the boundary (at the frame) reaches another node: off unless written.
   const std::string rotor = std::regex_replace(Config(), std::regex("measured_node = \"frame\""),
                                                "measured_node = \"rotor\"");
   EXPECT_FALSE(Bench(rotor).gateway_.pumps()[0]->config().disturbance_states);
-  EXPECT_TRUE(Bench(rotor + "disturbance_states = true\n").gateway_.pumps()[0]->config().disturbance_states);
+  EXPECT_TRUE(Bench(rotor + "disturbance_states = true\n")
+                  .gateway_.pumps()[0]
+                  ->config()
+                  .disturbance_states);
 }
 
 TEST(Pipeline, AnUnmeasuredAmbientRiseIsAPlantChangeNotAnImplausibleSensor) {
   Bench b(Config());
   b.Run(900.0, 40.0);
-  ASSERT_EQ(b.gateway_.pumps()[0]->snapshot().mismatch.state, estimators::MismatchState::kConsistent);
+  ASSERT_EQ(b.gateway_.pumps()[0]->snapshot().mismatch.state,
+            estimators::MismatchState::kConsistent);
   b.truth_ambient_degC = 33.0;  // the room warms by 8 K; the ambient sensor still says 25
   b.Run(600.0, 40.0);
   const PumpSnapshot& s = b.gateway_.pumps()[0]->snapshot();
-  EXPECT_EQ(s.mismatch.state, estimators::MismatchState::kPlantChange) << estimators::DescribeFinding(s.mismatch);
-  EXPECT_EQ(s.alarm.active_reasons & (1u << static_cast<unsigned>(estimators::AlarmReason::kImplausibleSensor)), 0u);
+  EXPECT_EQ(s.mismatch.state, estimators::MismatchState::kPlantChange)
+      << estimators::DescribeFinding(s.mismatch);
+  EXPECT_EQ(s.alarm.active_reasons &
+                (1u << static_cast<unsigned>(estimators::AlarmReason::kImplausibleSensor)),
+            0u);
   const pumptherm::alarm_t m = LastAlarmOnLcm(b);
   EXPECT_EQ(m.mismatch_state, pumptherm::alarm_t::MISMATCH_PLANT_CHANGE);
   EXPECT_EQ(m.mismatch_effect, static_cast<std::int8_t>(s.mismatch.effect));
@@ -372,7 +412,8 @@ TEST(Pipeline, AFrameSensorJumpIsASuspectedSensorFault) {
   b.frame_offset_K = 3.0;
   b.Run(120.0, 40.0);
   const PumpSnapshot& s = b.gateway_.pumps()[0]->snapshot();
-  EXPECT_EQ(s.mismatch.state, estimators::MismatchState::kSensorFaultSuspected) << estimators::DescribeFinding(s.mismatch);
+  EXPECT_EQ(s.mismatch.state, estimators::MismatchState::kSensorFaultSuspected)
+      << estimators::DescribeFinding(s.mismatch);
   EXPECT_EQ(s.mismatch.effect, estimators::MismatchEffect::kSensorOffset);
   EXPECT_NEAR(s.mismatch.value, 3.0, 0.5);
   EXPECT_EQ(LastAlarmOnLcm(b).mismatch_state, pumptherm::alarm_t::MISMATCH_SENSOR_FAULT_SUSPECTED);
@@ -463,7 +504,8 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
     }
     ASSERT_NE(first, nullptr);
     codec.Decode(std::span<const std::uint8_t>(first->data.data(), first->len), v);
-    EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0) << "first GW_ALARM after the restart";
+    EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0)
+        << "first GW_ALARM after the restart";
   }
   r.gateway_.SetClearKey(kKey);
   const auto after_restart = SignedClear(r.t_us_, 1, "after the restart");
@@ -493,7 +535,8 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
     }
     ASSERT_NE(first, nullptr);
     codec.Decode(std::span<const std::uint8_t>(first->data.data(), first->len), v);
-    EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0) << "first GW_ALARM";
+    EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0)
+        << "first GW_ALARM";
     EXPECT_TRUE(c.gateway_.pumps()[0]->snapshot().alarm.trip_latched);
   }
   // A state without the key (written before trips were saved) restores with none latched; a
@@ -550,7 +593,8 @@ TEST(Pipeline, StateRoundTripsThroughText) {
   const std::string text = a.gateway_.SaveState();
   Bench b(Config());
   std::string warning;
-  EXPECT_EQ(b.gateway_.RestoreState(text, a.gateway_.pumps()[0]->snapshot().time_us, &warning), 1) << warning;
+  EXPECT_EQ(b.gateway_.RestoreState(text, a.gateway_.pumps()[0]->snapshot().time_us, &warning), 1)
+      << warning;
   EXPECT_TRUE(warning.empty()) << warning;
   const auto& x = a.gateway_.pumps()[0]->snapshot().node_degC;
   const auto& y = b.gateway_.pumps()[0]->snapshot().node_degC;
@@ -562,7 +606,9 @@ TEST(Pipeline, StateRoundTripsThroughText) {
   EXPECT_DOUBLE_EQ(rb.resistance_ohm, ra.resistance_ohm);
   // Aged by an hour with the motor at the same load: hotter, not reset to cold.
   Bench c(Config());
-  EXPECT_EQ(c.gateway_.RestoreState(text, a.gateway_.pumps()[0]->snapshot().time_us + 3'600'000'000LL, &warning), 1);
+  EXPECT_EQ(c.gateway_.RestoreState(
+                text, a.gateway_.pumps()[0]->snapshot().time_us + 3'600'000'000LL, &warning),
+            1);
   EXPECT_GT(c.gateway_.pumps()[0]->snapshot().node_degC[3], x[3] + 1.0);
   // A state of version 1 (one resistance filter, before the magnet hypotheses): restored, the
   // filter continuing as both hypotheses with the prior probabilities.
@@ -571,8 +617,10 @@ TEST(Pipeline, StateRoundTripsThroughText) {
     v1.insert_or_assign("version", 1);
     toml::table& p = *v1["pump"]["tmp1"].as_table();
     toml::array x1, p1;
-    for (std::size_t i = 0; i < 4; ++i) x1.push_back(*(*p["resistance_x"].as_array())[i].value<double>());
-    for (std::size_t i = 0; i < 16; ++i) p1.push_back(*(*p["resistance_p"].as_array())[i].value<double>());
+    for (std::size_t i = 0; i < 4; ++i)
+      x1.push_back(*(*p["resistance_x"].as_array())[i].value<double>());
+    for (std::size_t i = 0; i < 16; ++i)
+      p1.push_back(*(*p["resistance_p"].as_array())[i].value<double>());
     p.insert_or_assign("resistance_x", x1);
     p.insert_or_assign("resistance_p", p1);
     p.insert_or_assign("resistance_rejections", 0);
@@ -580,11 +628,15 @@ TEST(Pipeline, StateRoundTripsThroughText) {
     std::ostringstream old;
     old << v1;
     Bench e(Config());
-    EXPECT_EQ(e.gateway_.RestoreState(old.str(), a.gateway_.pumps()[0]->snapshot().time_us, &warning), 1) << warning;
+    EXPECT_EQ(
+        e.gateway_.RestoreState(old.str(), a.gateway_.pumps()[0]->snapshot().time_us, &warning), 1)
+        << warning;
     const auto& re = e.gateway_.pumps()[0]->snapshot().resistance;
     EXPECT_EQ(re.resistance_ohm, x1[0].value<double>().value());
-    EXPECT_NEAR(re.steady_magnet_probability, pumptherm::estimators::ResistanceIdentifierConfig{}.steady_magnet_prior, 1e-12);
-    for (std::size_t i = 0; i < x.size(); ++i) EXPECT_NEAR(e.gateway_.pumps()[0]->snapshot().node_degC[i], x[i], 1e-6);
+    EXPECT_NEAR(re.steady_magnet_probability,
+                pumptherm::estimators::ResistanceIdentifierConfig{}.steady_magnet_prior, 1e-12);
+    for (std::size_t i = 0; i < x.size(); ++i)
+      EXPECT_NEAR(e.gateway_.pumps()[0]->snapshot().node_degC[i], x[i], 1e-6);
   }
   // A version-2 state written before the excitation moments gained the constant regressor
   // (4 numbers, [iq, w_r]): restored, the constant's row starting empty.
@@ -599,15 +651,19 @@ TEST(Pipeline, StateRoundTripsThroughText) {
     std::ostringstream old;
     old << v2;
     Bench f(Config());
-    EXPECT_EQ(f.gateway_.RestoreState(old.str(), a.gateway_.pumps()[0]->snapshot().time_us, &warning), 1) << warning;
+    EXPECT_EQ(
+        f.gateway_.RestoreState(old.str(), a.gateway_.pumps()[0]->snapshot().time_us, &warning), 1)
+        << warning;
     const auto saved = f.gateway_.pumps()[0]->Save().resistance;
     EXPECT_EQ(saved.moments(0, 1), m4[1].value<double>().value());
     EXPECT_EQ(saved.moments(2, 2), 0.0);
-    EXPECT_DOUBLE_EQ(f.gateway_.pumps()[0]->snapshot().resistance.resistance_ohm, ra.resistance_ohm);
+    EXPECT_DOUBLE_EQ(f.gateway_.pumps()[0]->snapshot().resistance.resistance_ohm,
+                     ra.resistance_ohm);
   }
   // Damaged or foreign state: ignored with a warning, never a crash.
   Bench d(Config());
-  EXPECT_EQ(d.gateway_.RestoreState("version = 1\n[pump.tmp1]\nmodel = \"other\"\n", 0, &warning), 0);
+  EXPECT_EQ(d.gateway_.RestoreState("version = 1\n[pump.tmp1]\nmodel = \"other\"\n", 0, &warning),
+            0);
   EXPECT_NE(warning.find("tmp1"), std::string::npos);
   EXPECT_EQ(d.gateway_.RestoreState("\x01\x02 not toml", 0, &warning), 0);
   EXPECT_NE(warning.find("does not parse"), std::string::npos);
@@ -617,9 +673,10 @@ TEST(Pipeline, LcmOverMemqCarriesEveryTypeAndAcceptsClearCommands) {
   Bench b(Config());
   b.Run(5.0, 40.0);
   std::vector<std::string> cleared;
-  LcmBridge bridge("memq://", "PUMPTHERM", [&](const std::string&, const pumptherm::alarm_clear_t* m) {
-    cleared.push_back(m ? m->pump + "/" + m->source : "undecodable");
-  });
+  LcmBridge bridge("memq://", "PUMPTHERM",
+                   [&](const std::string&, const pumptherm::alarm_clear_t* m) {
+                     cleared.push_back(m ? m->pump + "/" + m->source : "undecodable");
+                   });
   struct Counter {
     std::map<std::string, int> n;
     void On(const lcm::ReceiveBuffer*, const std::string& ch) { ++n[ch]; }
@@ -655,7 +712,8 @@ TEST(Pipeline, ConfigurationErrorsNameTheKey) {
     return std::string();
   };
   EXPECT_NE(error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n")
-                .find("p.toml:17: key 'pump[0]': pump 'tmp1': alarm levels (line 25) for node 'winding', which model 'saheba2010-improved' does not have"),
+                .find("p.toml:17: key 'pump[0]': pump 'tmp1': alarm levels (line 25) for node "
+                      "'winding', which model 'saheba2010-improved' does not have"),
             std::string::npos)
       << error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n");
   const std::string bad_model = [] {
@@ -667,18 +725,25 @@ interface = "can0"
 name = "p"
 node_id = 1
 thermal_model = "no-such-model"
-)"), "p.toml"));
+)"),
+                            "p.toml"));
     } catch (const ConfigError& e) {
       return std::string(e.what());
     }
     return std::string();
   }();
-  EXPECT_NE(bad_model.find("p.toml:4: key 'pump[0].thermal_model': 'no-such-model': no such models file"), std::string::npos) << bad_model;
+  EXPECT_NE(
+      bad_model.find("p.toml:4: key 'pump[0].thermal_model': 'no-such-model': no such models file"),
+      std::string::npos)
+      << bad_model;
   // The magnet temperature: a node with capacity, and a motor that states its magnet law.
   const std::string massless = error_of("magnet_node = \"7\"\n");
-  EXPECT_NE(massless.find("magnet_node '7' is not a node with heat capacity of model 'saheba2010-improved'"),
-            std::string::npos) << massless;
-  const std::string motor_path = (std::filesystem::temp_directory_path() / "pipeline_test_no_magnet.toml").string();
+  EXPECT_NE(massless.find(
+                "magnet_node '7' is not a node with heat capacity of model 'saheba2010-improved'"),
+            std::string::npos)
+      << massless;
+  const std::string motor_path =
+      (std::filesystem::temp_directory_path() / "pipeline_test_no_magnet.toml").string();
   {
     std::ofstream f(motor_path);
     f << "pole_pairs = 1\nrated_speed_rpm = 21000\nflux_Wb = 0.0182\ninductance_H = 0.24e-3\n"
@@ -693,7 +758,8 @@ thermal_model = "no-such-model"
     no_law_error = e.what();
   }
   std::filesystem::remove(motor_path);
-  EXPECT_NE(no_law_error.find("magnet_node 'rotor' is set but motor"), std::string::npos) << no_law_error;
+  EXPECT_NE(no_law_error.find("magnet_node 'rotor' is set but motor"), std::string::npos)
+      << no_law_error;
   EXPECT_NE(no_law_error.find("states no [magnet] table"), std::string::npos) << no_law_error;
 }
 

@@ -1,21 +1,21 @@
 // Robustness of the daemon's pipeline (docs/robustness.md): inputs far outside any
 // rating must not make the daemon publish a garbage temperature.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <memory>
 #include <sstream>
 #include <string>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include "daemon/config.hpp"
 #include "daemon/gateway.hpp"
 #include "daemon/live_loop.hpp"
 #include "daemon/offline.hpp"
 #include "daemon/pump.hpp"
-#include "daemon/state_store.hpp"
 #include "daemon/resources.hpp"
+#include "daemon/state_store.hpp"
 #include "estimators/motor.hpp"
 #include "estimators/thermal_model.hpp"
 
@@ -32,10 +32,10 @@ std::unique_ptr<Pump> MakePump() {
   return std::make_unique<Pump>(pc, estimators::MotorPreset("han2019-tmp"), model, 1.0);
 }
 
-// Found by pipeline_step_fuzz: currents far above any rating (here 20 A in d and q on a motor of a few
-// amperes), held while the frame sensor falls silent, make the temperature-dependent copper loss
-// outgrow the network's conduction (Saheba 2010 eqs. 12-16): the open-loop estimate ran away to
-// 6e159 degC with an infinite standard deviation, and was published. Now such a filter is reset
+// Found by pipeline_step_fuzz: currents far above any rating (here 20 A in d and q on a motor of a
+// few amperes), held while the frame sensor falls silent, make the temperature-dependent copper
+// loss outgrow the network's conduction (Saheba 2010 eqs. 12-16): the open-loop estimate ran away
+// to 6e159 degC with an infinite standard deviation, and was published. Now such a filter is reset
 // (counted) and nothing is published until it runs again.
 TEST(PumpRobustness, RunawayEstimateIsResetNeverPublished) {
   auto pump = MakePump();
@@ -50,14 +50,16 @@ TEST(PumpRobustness, RunawayEstimateIsResetNeverPublished) {
     if (!s.initialised) continue;
     for (std::size_t i = 0; i < s.node_degC.size(); ++i) {
       ASSERT_TRUE(std::isfinite(s.node_degC[i]) && std::isfinite(s.node_sd_K[i]))
-          << "state " << i << " at step " << k << ": " << s.node_degC[i] << " degC, sd " << s.node_sd_K[i];
+          << "state " << i << " at step " << k << ": " << s.node_degC[i] << " degC, sd "
+          << s.node_sd_K[i];
       ASSERT_LE(s.node_degC[i], kMaxEstimate_degC) << "state " << i << " at step " << k;
       hottest_published = std::max(hottest_published, s.node_degC[i]);
     }
   }
   EXPECT_GT(pump->counters().filter_resets, 0U) << "the runaway was expected to happen here";
   EXPECT_GT(hottest_published, 200.0);  // it did run hot before the reset
-  EXPECT_TRUE(pump->snapshot().alarm.trip_latched || pump->snapshot().alarm.level != estimators::AlarmLevel::kNone);
+  EXPECT_TRUE(pump->snapshot().alarm.trip_latched ||
+              pump->snapshot().alarm.level != estimators::AlarmLevel::kNone);
 }
 
 // Offline, the log's stamps are the clock: a stamp a little behind (another interface) is taken
@@ -68,12 +70,12 @@ TEST(PipelineClock, OfflineBackwardStepHoldsThenRunsOn) {
   const std::int64_t t0 = 1'767'225'600'000'000;
   EXPECT_EQ(c.Now(t0), t0);
   EXPECT_EQ(c.Now(t0 + 1'000'000), t0 + 1'000'000);
-  EXPECT_EQ(c.Now(t0 + 999'000), t0 + 1'000'000);            // 1 ms out of order
-  EXPECT_EQ(c.Now(t0 - 199'000'000), t0 + 1'000'000);        // set back 200 s
-  EXPECT_EQ(c.Now(t0 - 198'000'000), t0 + 2'000'000);        // runs on, 1 s later
-  EXPECT_EQ(c.Now(t0 + 100'000'000), t0 + 300'000'000);      // forward: elapsed
-  EXPECT_EQ(c.steps_back(), 1u);                             // the 1 ms reorder is no step
-  EXPECT_EQ(c.last_step_back_us(), 199'999'000);             // from the stamp just before it
+  EXPECT_EQ(c.Now(t0 + 999'000), t0 + 1'000'000);        // 1 ms out of order
+  EXPECT_EQ(c.Now(t0 - 199'000'000), t0 + 1'000'000);    // set back 200 s
+  EXPECT_EQ(c.Now(t0 - 198'000'000), t0 + 2'000'000);    // runs on, 1 s later
+  EXPECT_EQ(c.Now(t0 + 100'000'000), t0 + 300'000'000);  // forward: elapsed
+  EXPECT_EQ(c.steps_back(), 1u);                         // the 1 ms reorder is no step
+  EXPECT_EQ(c.last_step_back_us(), 199'999'000);         // from the stamp just before it
 }
 
 // Two logs concatenated: the second's stamps go back. Warned with the line, counted, and its
@@ -123,10 +125,15 @@ TEST(PumpRobustness, FrozenAndSilentSensorsAreFaultsAndLeftOut) {
     }
     const PumpSnapshot& s = pump->snapshot();
     const char* what = frozen ? "frozen" : "silent";
-    EXPECT_EQ(s.sensor_fault, frozen ? estimators::SensorFault::kStuck : estimators::SensorFault::kMissing) << what;
+    EXPECT_EQ(s.sensor_fault,
+              frozen ? estimators::SensorFault::kStuck : estimators::SensorFault::kMissing)
+        << what;
     EXPECT_TRUE(std::isnan(s.frame_measured_degC)) << what << ": a failed sensor must not be fused";
-    EXPECT_TRUE(s.alarm.active_reasons & (1U << static_cast<unsigned>(estimators::AlarmReason::kSensorFault))) << what;
-    EXPECT_GT(s.node_sd_K[0], sd_when_failed) << what << ": the frame's sd must grow without its sensor";
+    EXPECT_TRUE(s.alarm.active_reasons &
+                (1U << static_cast<unsigned>(estimators::AlarmReason::kSensorFault)))
+        << what;
+    EXPECT_GT(s.node_sd_K[0], sd_when_failed)
+        << what << ": the frame's sd must grow without its sensor";
   }
 }
 
@@ -179,10 +186,12 @@ TEST(FilePermissions, ConfigWritableByOthersIsWarnedAbout) {
   ASSERT_EQ(::chmod(path.c_str(), 0600), 0);
   EXPECT_EQ(ConfigPermissionWarning(path), "");
   ASSERT_EQ(::chmod(path.c_str(), 0664), 0);
-  EXPECT_NE(ConfigPermissionWarning(path).find("writable by its group (mode 0664)"), std::string::npos)
+  EXPECT_NE(ConfigPermissionWarning(path).find("writable by its group (mode 0664)"),
+            std::string::npos)
       << ConfigPermissionWarning(path);
   ASSERT_EQ(::chmod(path.c_str(), 0666), 0);
-  EXPECT_NE(ConfigPermissionWarning(path).find("writable by group and others (mode 0666)"), std::string::npos);
+  EXPECT_NE(ConfigPermissionWarning(path).find("writable by group and others (mode 0666)"),
+            std::string::npos);
   EXPECT_EQ(ConfigPermissionWarning(std::string(dir_template) + "/missing.toml"), "");
   ::unlink(path.c_str());
 

@@ -18,8 +18,11 @@ namespace {
 struct CountingSink : OutputSink {
   std::vector<std::pair<std::int64_t, std::uint32_t>> frames;  // time, CAN ID
   std::vector<std::pair<std::int64_t, std::string>> lcm;       // time, channel
-  void SendFrame(std::size_t, std::int64_t t, const protocol::CanFrame& f) override { frames.emplace_back(t, f.id); }
-  bool PublishLcm(const std::string& channel, std::int64_t t, const std::vector<std::uint8_t>&) override {
+  void SendFrame(std::size_t, std::int64_t t, const protocol::CanFrame& f) override {
+    frames.emplace_back(t, f.id);
+  }
+  bool PublishLcm(const std::string& channel, std::int64_t t,
+                  const std::vector<std::uint8_t>&) override {
     lcm.emplace_back(t, channel);
     return true;
   }
@@ -85,7 +88,8 @@ TEST(Scheduling, AdvancingOnlyAtTheNextDueTimeKeepsEveryOutputOnItsGrid) {
     ASSERT_FALSE(times.empty()) << "node " << node << ": no stale alarm in 20 s";
     EXPECT_LT(times.front(), 6'000'000 + kAlarmPeriodUs) << "node " << node;
     for (std::size_t k = 1; k < times.size(); ++k) {
-      ASSERT_EQ(times[k] - times[k - 1], kAlarmPeriodUs) << "node " << node << ": frame " << k << " at " << times[k];
+      ASSERT_EQ(times[k] - times[k - 1], kAlarmPeriodUs)
+          << "node " << node << ": frame " << k << " at " << times[k];
     }
     EXPECT_GE(times.back(), 20'000'000 - kAlarmPeriodUs) << "node " << node << ": frames stopped";
   }

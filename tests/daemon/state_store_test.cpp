@@ -46,7 +46,8 @@ TEST(StateStore, FailureLeavesTheOldFileAndNamesThePath) {
     WriteFileAtomically(path, "new");
     FAIL() << "no error";
   } catch (const std::system_error& e) {
-    EXPECT_NE(std::string(e.what()).find("cannot create " + path + ".tmp"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("cannot create " + path + ".tmp"), std::string::npos)
+        << e.what();
   }
   EXPECT_EQ(ReadFileIfExists(path).value(), "old");
 }
@@ -72,7 +73,8 @@ TEST(StateStore, KillDuringAWriteLeavesTheOldFileWhole) {
   for (int k = 0; k < 500 && std::filesystem::file_size(tmp, ec) != new_text.size() / 2; ++k) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
-  ASSERT_EQ(std::filesystem::file_size(tmp, ec), new_text.size() / 2) << "the writer never reached its pause";
+  ASSERT_EQ(std::filesystem::file_size(tmp, ec), new_text.size() / 2)
+      << "the writer never reached its pause";
   ASSERT_EQ(::kill(child, SIGKILL), 0);
   int status = 0;
   ASSERT_EQ(::waitpid(child, &status, 0), child);

@@ -12,7 +12,8 @@ namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // One node to ambient: C dT/dt = P - (T - Ta) / R with P = 2 W per A^2 of iq, C = 100 J/K,
-// R = 1 K/W. Closed form (first-order linear ODE): T(t) = Ta + P R + (T0 - Ta - P R) e^(-t / (R C)).
+// R = 1 K/W. Closed form (first-order linear ODE): T(t) = Ta + P R + (T0 - Ta - P R) e^(-t / (R
+// C)).
 constexpr const char* kOneNode = R"(
 [model]
 name = "one"
@@ -69,20 +70,23 @@ TEST(LagBias, CoolingUnknownAndNoLagGiveZero) {
 }
 
 struct SilenceFixture {
-  std::shared_ptr<const ThermalModel> model = std::make_shared<ThermalModel>(ThermalModel::Parse(kOneNode, "one"));
+  std::shared_ptr<const ThermalModel> model =
+      std::make_shared<ThermalModel>(ThermalModel::Parse(kOneNode, "one"));
   SilenceBound bound;
   Eigen::VectorXd x = Eigen::VectorXd::Constant(1, 30.0);
   Eigen::VectorXd sd = Eigen::VectorXd::Constant(1, 0.5);
   double t_s = 0.0;
-  void Step(double iq_A, bool fresh) { bound.Step(*model, Load(iq_A), fresh, x, sd, t_s += 1.0, 1.0, 2.0, 2.0); }
+  void Step(double iq_A, bool fresh) {
+    bound.Step(*model, Load(iq_A), fresh, x, sd, t_s += 1.0, 1.0, 2.0, 2.0);
+  }
 };
 
 TEST(SilenceBound, ReRunsTheSilenceAtTheWorseLoad) {
   SilenceFixture f;
   f.Step(1.0, true);  // estimate 30 degC at 1 A (2 W): the last step before the silence
   for (int k = 0; k < 59; ++k) f.Step(1.0, false);  // 59 silent steps at the held 1 A
-  f.x(0) = 25.0;                                      // the estimate that ran on at 1 A
-  f.Step(3.0, true);                                  // back, at 3 A (18 W)
+  f.x(0) = 25.0;                                    // the estimate that ran on at 1 A
+  f.Step(3.0, true);                                // back, at 3 A (18 W)
   ASSERT_EQ(f.bound.bound_degC().size(), 1);
   // The truth can have run 3 A for the 59 silent steps and this one: 60 s from 30 degC.
   EXPECT_NEAR(f.bound.bound_degC()(0), Closed(30.0, 20.0, 18.0, 60.0), 1e-6);
@@ -155,7 +159,8 @@ TEST(BlindBound, TheNetworkWithoutItsBoundaryPathsFromTheLastEstimate) {
   const ThermalModel model = ThermalModel::Parse(kOneNode, "one.toml");
   BlindBound blind;
   EXPECT_EQ(blind.bound_degC().size(), 0);
-  for (int k = 0; k < 10; ++k) blind.Step(model, Load(5.0), 1.0, Eigen::VectorXd::Constant(1, 50.0 + k));
+  for (int k = 0; k < 10; ++k)
+    blind.Step(model, Load(5.0), 1.0, Eigen::VectorXd::Constant(1, 50.0 + k));
   ASSERT_EQ(blind.bound_degC().size(), 1);
   EXPECT_NEAR(blind.bound_degC()(0), 55.0, 1e-9);  // from 50 (the first step's estimate), 10 s
   blind.Reset();

@@ -122,13 +122,12 @@ TEST(Alarms, TripLatchesUntilClearedAndReassertsWhenStillHot) {
   EXPECT_FALSE(f.m.state().trip_latched);
   EXPECT_EQ(f.At(73).level, AlarmLevel::kTrip);
   EXPECT_TRUE(f.At(74).trip_latched);
-
 }
 
 TEST(Alarms, LatchedTripsSaveAndRestoreAcrossARestart) {
   Fixture f;
   f.nodes[0] = 50.0;
-  f.nodes[1] = 150.0;  // node 1 over its trip level (140)
+  f.nodes[1] = 150.0;       // node 1 over its trip level (140)
   f.in.sensor_degC = 95.0;  // the sensor over its own trip level (90)
   for (double t = 0; t <= 3; t += 1) f.At(t);
   ASSERT_TRUE(f.m.state().trip_latched);
@@ -243,7 +242,7 @@ TEST(Alarms, StaleTelemetryFollowsTheHoldBothWays) {
   EXPECT_EQ(f.At(0).level, AlarmLevel::kNone);
   f.in.telemetry_age_s = 2.5;
   EXPECT_EQ(f.At(1).level, AlarmLevel::kNone);  // 0 s of the 2 s hold
-  f.in.telemetry_age_s = 0.01;                   // one frame got through: the hold restarts
+  f.in.telemetry_age_s = 0.01;                  // one frame got through: the hold restarts
   EXPECT_EQ(f.At(2).level, AlarmLevel::kNone);
   f.in.telemetry_age_s = 2.5;
   f.At(3);

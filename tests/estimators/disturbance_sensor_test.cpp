@@ -38,7 +38,8 @@ mc::CaseResult RunFault(mc::Fault fault, std::uint64_t seed, double magnet_white
 }
 
 std::size_t Rotor(const mc::CaseResult& r) {
-  return static_cast<std::size_t>(std::find(r.nodes.begin(), r.nodes.end(), "rotor") - r.nodes.begin());
+  return static_cast<std::size_t>(std::find(r.nodes.begin(), r.nodes.end(), "rotor") -
+                                  r.nodes.begin());
 }
 
 TEST(DisturbanceSensor, CoversTheTruthOnAHealthyPump) {
@@ -62,7 +63,8 @@ TEST(DisturbanceSensor, LostCoolingGoesIntoTheFramePathHeat) {
 TEST(DisturbanceSensor, HeatInsideTheRotorShowsInItsSd) {
   // The frame barely sees it: the rotor is off by many kelvin, but its sd says so.
   const mc::CaseResult r = RunFault(mc::Fault::kRotorLoss, 23);
-  const auto rotor = static_cast<std::size_t>(std::find(r.nodes.begin(), r.nodes.end(), "rotor") - r.nodes.begin());
+  const auto rotor = static_cast<std::size_t>(std::find(r.nodes.begin(), r.nodes.end(), "rotor") -
+                                              r.nodes.begin());
   ASSERT_LT(rotor, r.nodes.size());
   EXPECT_GT(r.dist_max_error_K[rotor], 5.0);
   EXPECT_GE(r.dist_coverage[rotor], 0.9);
@@ -74,7 +76,8 @@ TEST(DisturbanceSensor, TheFluxReadingsSlowBiasIsNotAveragedAway) {
   // becomes far smaller than its error.
   const mc::CaseResult r = RunFault(mc::Fault::kNone, 1, 1.0, 2.0);
   for (std::size_t i = 0; i < r.nodes.size(); ++i) {
-    EXPECT_GE(r.dist_coverage[i], 0.9) << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
+    EXPECT_GE(r.dist_coverage[i], 0.9)
+        << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
   }
   pe::DisturbanceSensorConfig white;
   white.magnet_bias_sd_K = 0.0;
@@ -89,19 +92,22 @@ TEST(DisturbanceSensor, TheFluxReadingFindsHeatInsideTheRotor) {
   ASSERT_LT(Rotor(r), r.nodes.size());
   EXPECT_LE(r.dist_max_error_K[Rotor(r)], 3.0);
   for (std::size_t i = 0; i < r.nodes.size(); ++i) {
-    EXPECT_GE(r.dist_coverage[i], 0.9) << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
+    EXPECT_GE(r.dist_coverage[i], 0.9)
+        << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
   }
 }
 
 TEST(DisturbanceSensor, LostCoolingWithTheFluxReadingStaysCovered) {
   const mc::CaseResult r = RunFault(mc::Fault::kCoolingLost, 22, 1.0, 2.0);
   for (std::size_t i = 0; i < r.nodes.size(); ++i) {
-    EXPECT_GE(r.dist_coverage[i], 0.9) << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
+    EXPECT_GE(r.dist_coverage[i], 0.9)
+        << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
   }
 }
 
 TEST(DisturbanceSensor, RejectsAnUnknownNode) {
-  const auto model = pe::ThermalModel::Parse(mc::ReadFile(ModelDir() + "/tmp-generic.toml"), "tmp-generic");
+  const auto model =
+      pe::ThermalModel::Parse(mc::ReadFile(ModelDir() + "/tmp-generic.toml"), "tmp-generic");
   pe::DisturbanceSensorConfig c;
   c.measured_node = "lid";
   EXPECT_THROW(pe::DisturbanceThermalSensor(model, c), std::invalid_argument);
@@ -114,7 +120,8 @@ TEST(DisturbanceSensor, RejectsAnUnknownNode) {
 // only when the boundary reaches the network through the measured node alone.
 TEST(DisturbanceSensor, BoundaryOnlyThroughTheMeasuredNode) {
   for (const char* name : {"tmp-generic", "saheba2010-baseline", "saheba2010-improved"}) {
-    const auto model = pe::ThermalModel::Parse(mc::ReadFile(ModelDir() + "/" + name + ".toml"), name);
+    const auto model =
+        pe::ThermalModel::Parse(mc::ReadFile(ModelDir() + "/" + name + ".toml"), name);
     EXPECT_TRUE(pe::BoundaryOnlyThrough(model, "frame")) << name;
     EXPECT_FALSE(pe::BoundaryOnlyThrough(model, "rotor")) << name;
     EXPECT_FALSE(pe::BoundaryOnlyThrough(model, "lid")) << name;
@@ -129,7 +136,8 @@ TEST(DisturbanceSensor, BoundaryOnlyThroughTheMeasuredNode) {
   // The rotor with its own path to the ambient, as the magnet of wallscheid2017-4node.
   const std::string rotor_cooled =
       two_nodes + "[[edge]]\nbetween = [\"rotor\", \"ambient\"]\nresistance_K_per_W = 2.0\n";
-  EXPECT_FALSE(pe::BoundaryOnlyThrough(pe::ThermalModel::Parse(rotor_cooled, "rotor-cooled"), "frame"));
+  EXPECT_FALSE(
+      pe::BoundaryOnlyThrough(pe::ThermalModel::Parse(rotor_cooled, "rotor-cooled"), "frame"));
 }
 
 // Another shipped model the daemon may run (its faults as effects of the discrepancy vocabulary).
@@ -142,7 +150,8 @@ TEST(DisturbanceSensor, LostCoolingOnTheSahebaMachineStaysCovered) {
   spec.seed = 23;
   const mc::CaseResult r = mc::RunCase(spec, ModelDir());
   for (std::size_t i = 0; i < r.nodes.size(); ++i) {
-    EXPECT_GE(r.dist_coverage[i], 0.9) << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
+    EXPECT_GE(r.dist_coverage[i], 0.9)
+        << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
     EXPECT_LE(r.dist_max_error_K[i], 3.0) << r.nodes[i];
   }
 }

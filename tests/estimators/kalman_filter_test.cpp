@@ -37,7 +37,8 @@ TEST(KalmanFilter, OneStepGainMatchesFormula) {
   kf.Reset(Eigen::Vector2d(1.0, 2.0), s);
   Eigen::MatrixXd c(1, 2);
   c << 1.0, 0.0;
-  const auto& rep = kf.Update(c, Eigen::VectorXd::Constant(1, 3.0), Eigen::MatrixXd::Constant(1, 1, 1.0));
+  const auto& rep =
+      kf.Update(c, Eigen::VectorXd::Constant(1, 3.0), Eigen::MatrixXd::Constant(1, 1, 1.0));
   EXPECT_NEAR(kf.Gain()(0, 0), 4.0 / 5.0, 1e-15);
   EXPECT_NEAR(kf.Gain()(1, 0), 1.0 / 5.0, 1e-15);
   EXPECT_NEAR(rep.innovation(0), 2.0, 1e-15);
@@ -141,8 +142,10 @@ TEST(KalmanFilter, FixedSizePathsMatchTheEquationsWrittenOut) {
       EXPECT_LT((kf.Gain() - gain).cwiseAbs().maxCoeff(), 1e-10) << "n=" << n;
     }
     EXPECT_LT((kf.State() - x).cwiseAbs().maxCoeff(), 1e-9) << "n=" << n;
-    EXPECT_LT((kf.Covariance() - s).cwiseAbs().maxCoeff(), 1e-9 * s.cwiseAbs().maxCoeff()) << "n=" << n;
-    EXPECT_EQ((kf.Covariance() - kf.Covariance().transpose()).cwiseAbs().maxCoeff(), 0.0) << "n=" << n;
+    EXPECT_LT((kf.Covariance() - s).cwiseAbs().maxCoeff(), 1e-9 * s.cwiseAbs().maxCoeff())
+        << "n=" << n;
+    EXPECT_EQ((kf.Covariance() - kf.Covariance().transpose()).cwiseAbs().maxCoeff(), 0.0)
+        << "n=" << n;
   }
 }
 
@@ -152,7 +155,8 @@ TEST(KalmanFilter, FixedSizePathReportsANonPositiveInnovationCovariance) {
   kf.Reset(Eigen::VectorXd::Ones(7), Eigen::MatrixXd::Zero(7, 7));
   Eigen::MatrixXd c = Eigen::MatrixXd::Zero(1, 7);
   c(0, 0) = 1.0;
-  const auto& rep = kf.Update(c, Eigen::VectorXd::Constant(1, 3.0), Eigen::MatrixXd::Constant(1, 1, -1.0));
+  const auto& rep =
+      kf.Update(c, Eigen::VectorXd::Constant(1, 3.0), Eigen::MatrixXd::Constant(1, 1, -1.0));
   EXPECT_FALSE(rep.ok);
   EXPECT_EQ(kf.State(), Eigen::VectorXd::Ones(7));
 }

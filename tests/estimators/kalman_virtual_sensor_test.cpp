@@ -87,11 +87,11 @@ TEST(VirtualThermalSensor, ConvergesOnSimulatedDataWithTheFrameSensor) {
   EXPECT_LT(r.mean_nis, 2.0);
 }
 
-// The virtual sensor's goal on the Fig. 7 set-up (800 r/min, 40-60-40 A, shortened to 600 + 600 + 600 s):
-// with the model right (truth = the same model, no process noise), the frame sensor alone and the
-// filter started 10 K above a machine at rest, every state is within 3 K by 60 s and within 1.0 K
-// after. The prior says what a machine at rest is: one unknown temperature, parts within 1 K.
-// The same run with the baseline model in the filter misses (max 3.4 K after 60 s).
+// The virtual sensor's goal on the Fig. 7 set-up (800 r/min, 40-60-40 A, shortened to 600 + 600 +
+// 600 s): with the model right (truth = the same model, no process noise), the frame sensor alone
+// and the filter started 10 K above a machine at rest, every state is within 3 K by 60 s and
+// within 1.0 K after. The prior says what a machine at rest is: one unknown temperature, parts
+// within 1 K. The same run with the baseline model in the filter misses (max 3.4 K after 60 s).
 // docs/virtual-sensor.md, "How much process noise the 1.0 K goal allows".
 TEST(VirtualThermalSensor, MeetsTheOneKelvinGoalWhenTheModelIsRight) {
   const auto improved = Load("saheba2010-improved");

@@ -52,7 +52,8 @@ TEST(MismatchDetector, DetectsLostCoolingAndNamesTheFramePath) {
   ASSERT_FALSE(std::isnan(r.detect_delay_s));
   EXPECT_LE(r.detect_delay_s, 60.0);
   EXPECT_EQ(r.at_end.state, pe::MismatchState::kPlantChange);
-  EXPECT_EQ(r.at_end.effect, pe::MismatchEffect::kFrameAmbientResistance) << pe::DescribeFinding(r.at_end);
+  EXPECT_EQ(r.at_end.effect, pe::MismatchEffect::kFrameAmbientResistance)
+      << pe::DescribeFinding(r.at_end);
   EXPECT_GT(r.at_end.value, 2.0);  // the resistance grew (x4 in the truth)
   EXPECT_EQ(r.false_alarms, 0);
 }
@@ -69,7 +70,8 @@ TEST(MismatchDetector, TheFluxReadingKeepsAnAmbientRiseOffTheRotor) {
   // From the frame alone an unmeasured ambient rise looks like heat inside the rotor (named
   // rotor_loss about 17 W); a rotor reading with a 2 K slow bias contradicts that size.
   const mc::CaseResult frame_only = RunFault(mc::Fault::kAmbientRise, 7);
-  EXPECT_EQ(frame_only.at_end.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(frame_only.at_end);
+  EXPECT_EQ(frame_only.at_end.effect, pe::MismatchEffect::kRotorLoss)
+      << pe::DescribeFinding(frame_only.at_end);
   const mc::CaseResult r = RunFault(mc::Fault::kAmbientRise, 7, 3600.0 + 1500.0, 1.0);
   EXPECT_EQ(r.at_end.state, pe::MismatchState::kPlantChange);
   EXPECT_NE(r.at_end.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(r.at_end);
@@ -79,7 +81,8 @@ TEST(MismatchDetector, TheFluxReadingKeepsAnAmbientRiseOffTheRotor) {
 TEST(MismatchDetector, TheFluxReadingNamesRotorHeatAtFirst) {
   // Seed 2: from the frame alone the first name is loss_scale; with the rotor reading, rotor_loss.
   const mc::CaseResult frame_only = RunFault(mc::Fault::kRotorLoss, 2, 3600.0 + 600.0);
-  EXPECT_NE(frame_only.at_naming.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(frame_only.at_naming);
+  EXPECT_NE(frame_only.at_naming.effect, pe::MismatchEffect::kRotorLoss)
+      << pe::DescribeFinding(frame_only.at_naming);
   const mc::CaseResult r = RunFault(mc::Fault::kRotorLoss, 2, 3600.0 + 600.0, 1.0);
   ASSERT_FALSE(std::isnan(r.name_delay_s));
   EXPECT_EQ(r.at_naming.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(r.at_naming);

@@ -30,7 +30,9 @@ pe::ThermalModelFiles Files() {
 // The Wallscheid model needs its loss map, which stays outside the project.
 bool TablesPresent(const std::string& name) {
   return name != "wallscheid2017-4node" ||
-         std::ifstream(Files().directory + "/../../../../shared/reference/wallscheid-losses/total_loss_W.csv").good();
+         std::ifstream(Files().directory +
+                       "/../../../../shared/reference/wallscheid-losses/total_loss_W.csv")
+             .good();
 }
 
 pe::ThermalInputs Load() {
@@ -71,7 +73,8 @@ TEST(ModelEffects, TargetsOfTheShippedModels) {
 TEST(ModelEffects, NeutralValuesChangeNothing) {
   for (const char* name : {"saheba2010-baseline", "wallscheid2017-4node"}) {
     if (!TablesPresent(name)) {
-      GTEST_SKIP() << name << ": its loss map is absent from ../shared/reference/wallscheid-losses/";
+      GTEST_SKIP() << name
+                   << ": its loss map is absent from ../shared/reference/wallscheid-losses/";
     }
     const std::string text = ReadModel(name);
     const pe::ThermalModel base = pe::ThermalModel::Parse(text, name, Files());
@@ -136,15 +139,15 @@ TEST(ModelEffects, EachEffectActsAsItsEquationSays) {
 
 TEST(ModelEffects, EffectsCombineAndSensorEffectsAreParametersOnly) {
   const std::string text = ReadModel("saheba2010-baseline");
-  const std::string edited = pe::ApplyModelEffects(
-      text, "b",
-      {{"frame_thermal_mass", {1000.0}, {}}, {"iron_loss_scale", {1.3}, {}},
-       {"sensor_offset", {0.7}, "frame"}});
+  const std::string edited = pe::ApplyModelEffects(text, "b",
+                                                   {{"frame_thermal_mass", {1000.0}, {}},
+                                                    {"iron_loss_scale", {1.3}, {}},
+                                                    {"sensor_offset", {0.7}, "frame"}});
   const pe::ThermalModel m = pe::ThermalModel::Parse(edited, "edited");
   EXPECT_EQ(m.Name(), "saheba2010-baseline+effects");
   EXPECT_NE(edited.find("sensor_offset_K__frame = 0.69999"), std::string::npos) << edited;
-  EXPECT_THROW(pe::ApplyModelEffects(text, "b", {{"iron_loss_scale", {1.3}, {}},
-                                                  {"iron_loss_scale", {1.1}, {}}}),
+  EXPECT_THROW(pe::ApplyModelEffects(
+                   text, "b", {{"iron_loss_scale", {1.3}, {}}, {"iron_loss_scale", {1.1}, {}}}),
                pe::ThermalModelError);
   EXPECT_THROW(pe::ApplyModelEffects(text, "b", {{"no_such_effect", {1.0}, {}}}),
                pe::ThermalModelError);

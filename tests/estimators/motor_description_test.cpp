@@ -50,8 +50,8 @@ TEST(MotorDescription, PresetHasTable1Values) {
 }
 
 TEST(MotorDescription, ShippedPresetFileMatchesBuiltInPreset) {
-  const std::string text =
-      pumptherm::test_files::ReadFile(pumptherm::test_files::SourceDir() + "/estimators/motors/han2019-tmp.toml");
+  const std::string text = pumptherm::test_files::ReadFile(pumptherm::test_files::SourceDir() +
+                                                           "/estimators/motors/han2019-tmp.toml");
   EXPECT_EQ(text, std::string(MotorPresetText("han2019-tmp")));
 }
 
@@ -102,15 +102,18 @@ TEST(MotorDescription, OutOfRangeValuesAreErrors) {
   EXPECT_NE(ErrorOf(neg).find("m.toml:7: key 'resistance.r0_ohm' must be positive"),
             std::string::npos)
       << ErrorOf(neg);
-  const std::string band = std::string(kValid) + "plausible_min_degC = 100.0\nplausible_max_degC = 50.0\n";
+  const std::string band =
+      std::string(kValid) + "plausible_min_degC = 100.0\nplausible_max_degC = 50.0\n";
   EXPECT_NE(ErrorOf(band).find("plausible_min_degC"), std::string::npos) << ErrorOf(band);
   // Found by motor_description_fuzz: alpha_per_K = 4.1e-31 was accepted, an empty resistance band.
   std::string alpha = kValid;
   alpha.replace(alpha.find("alpha_per_K = 3.93e-3"), 21, "alpha_per_K = 4.1e-31");
-  EXPECT_NE(ErrorOf(alpha).find("key 'resistance.alpha_per_K' must be within [0.0001, 0.02]"), std::string::npos)
+  EXPECT_NE(ErrorOf(alpha).find("key 'resistance.alpha_per_K' must be within [0.0001, 0.02]"),
+            std::string::npos)
       << ErrorOf(alpha);
   // A band too narrow to tell two resistances apart.
-  const std::string thin = std::string(kValid) + "plausible_min_degC = 1.0\nplausible_max_degC = 1.0000000000000002\n";
+  const std::string thin =
+      std::string(kValid) + "plausible_min_degC = 1.0\nplausible_max_degC = 1.0000000000000002\n";
   EXPECT_NE(ErrorOf(thin).find("plausible_min_degC"), std::string::npos) << ErrorOf(thin);
 }
 
@@ -119,20 +122,27 @@ TEST(MotorDescription, OutOfRangeValuesAreErrors) {
 TEST(MotorDescription, DriveTableGivesTheUqResolution) {
   EXPECT_EQ(ParseMotorDescription(kValid, "m.toml").uq_resolution_V, 0.0);
   EXPECT_EQ(MotorPreset("han2019-tmp").uq_resolution_V, 0.0);
-  const MotorDescription m =
-      ParseMotorDescription(std::string(kValid) + "[drive]\nuq_resolution_V = 0.0234375\n", "m.toml");
+  const MotorDescription m = ParseMotorDescription(
+      std::string(kValid) + "[drive]\nuq_resolution_V = 0.0234375\n", "m.toml");
   EXPECT_DOUBLE_EQ(m.uq_resolution_V, 96.0 / 4096.0);
-  EXPECT_EQ(ParseMotorDescription(std::string(kValid) + "[drive]\n", "m.toml").uq_resolution_V, 0.0);
+  EXPECT_EQ(ParseMotorDescription(std::string(kValid) + "[drive]\n", "m.toml").uq_resolution_V,
+            0.0);
   const std::string zero = ErrorOf(std::string(kValid) + "[drive]\nuq_resolution_V = 0\n");
-  EXPECT_NE(zero.find("m.toml:11: key 'drive.uq_resolution_V' must be within (0, 10] V, got 0"), std::string::npos) << zero;
+  EXPECT_NE(zero.find("m.toml:11: key 'drive.uq_resolution_V' must be within (0, 10] V, got 0"),
+            std::string::npos)
+      << zero;
   const std::string huge = ErrorOf(std::string(kValid) + "[drive]\nuq_resolution_V = 48\n");
-  EXPECT_NE(huge.find("'drive.uq_resolution_V' must be within (0, 10] V"), std::string::npos) << huge;
+  EXPECT_NE(huge.find("'drive.uq_resolution_V' must be within (0, 10] V"), std::string::npos)
+      << huge;
   const std::string text = ErrorOf(std::string(kValid) + "[drive]\nuq_resolution_V = \"23 mV\"\n");
-  EXPECT_NE(text.find("m.toml:11: key 'drive.uq_resolution_V' must be a number"), std::string::npos) << text;
+  EXPECT_NE(text.find("m.toml:11: key 'drive.uq_resolution_V' must be a number"), std::string::npos)
+      << text;
   const std::string unknown = ErrorOf(std::string(kValid) + "[drive]\nud_resolution_V = 0.02\n");
-  EXPECT_NE(unknown.find("m.toml:11: unknown key 'drive.ud_resolution_V'"), std::string::npos) << unknown;
+  EXPECT_NE(unknown.find("m.toml:11: unknown key 'drive.ud_resolution_V'"), std::string::npos)
+      << unknown;
   const std::string not_table = ErrorOf(std::string("drive = 1.0\n") + kValid);
-  EXPECT_NE(not_table.find("m.toml:1: key 'drive' must be a table"), std::string::npos) << not_table;
+  EXPECT_NE(not_table.find("m.toml:1: key 'drive' must be a table"), std::string::npos)
+      << not_table;
 }
 
 // The optional [magnet] table and the temperature it gives from a flux (estimators/magnet.hpp):
@@ -142,7 +152,9 @@ TEST(MotorDescription, MagnetTableGivesTheFluxTemperatureLaw) {
   EXPECT_FALSE(none.magnet.Given());
   EXPECT_TRUE(std::isnan(MagnetTemperatureFromFlux(none, 0.1, 1e-4).degC));
   const MotorDescription m = ParseMotorDescription(
-      std::string(kValid) + "[magnet]\nt0_degC = 20.0\nflux_temperature_coefficient_per_K = -1.0e-3\n", "m.toml");
+      std::string(kValid) +
+          "[magnet]\nt0_degC = 20.0\nflux_temperature_coefficient_per_K = -1.0e-3\n",
+      "m.toml");
   ASSERT_TRUE(m.magnet.Given());
   // 0.1 Wb at 20 degC; 0.0995 Wb is 0.5 % less: 5 K hotter. sd 1e-5 Wb is 0.01 %: 0.1 K.
   const MagnetTemperature t = MagnetTemperatureFromFlux(m, 0.0995, 1e-5);
@@ -155,10 +167,14 @@ TEST(MotorDescription, MagnetTableGivesTheFluxTemperatureLaw) {
   EXPECT_DOUBLE_EQ(han.magnet.t0_degC, 27.2);
   EXPECT_DOUBLE_EQ(han.magnet.flux_temperature_coefficient_per_K, -1e-3);
   const std::string rising =
-      ErrorOf(std::string(kValid) + "[magnet]\nt0_degC = 20.0\nflux_temperature_coefficient_per_K = 1e-3\n");
-  EXPECT_NE(rising.find("m.toml:12: key 'magnet.flux_temperature_coefficient_per_K' must be within"),
-            std::string::npos) << rising;
-  const std::string missing = ErrorOf(std::string(kValid) + "[magnet]\nflux_temperature_coefficient_per_K = -1e-3\n");
+      ErrorOf(std::string(kValid) +
+              "[magnet]\nt0_degC = 20.0\nflux_temperature_coefficient_per_K = 1e-3\n");
+  EXPECT_NE(
+      rising.find("m.toml:12: key 'magnet.flux_temperature_coefficient_per_K' must be within"),
+      std::string::npos)
+      << rising;
+  const std::string missing =
+      ErrorOf(std::string(kValid) + "[magnet]\nflux_temperature_coefficient_per_K = -1e-3\n");
   EXPECT_NE(missing.find("missing key 'magnet.t0_degC'"), std::string::npos) << missing;
   const std::string unknown = ErrorOf(std::string(kValid) + "[magnet]\ngrade = 1\n");
   EXPECT_NE(unknown.find("m.toml:11: unknown key 'magnet.grade'"), std::string::npos) << unknown;
@@ -169,23 +185,32 @@ TEST(MotorDescription, MagnetTableGivesTheFluxTemperatureLaw) {
 TEST(MotorDescription, DriveTableGivesTheVoltageError) {
   EXPECT_EQ(ParseMotorDescription(kValid, "m.toml").voltage_error_V, 0.0);
   const MotorDescription m = ParseMotorDescription(
-      std::string(kValid) + "[drive]\nvoltage_error_V = 0.15\nvoltage_error_knee_A = 0.5\n", "m.toml");
+      std::string(kValid) + "[drive]\nvoltage_error_V = 0.15\nvoltage_error_knee_A = 0.5\n",
+      "m.toml");
   EXPECT_DOUBLE_EQ(m.voltage_error_V, 0.15);
   EXPECT_DOUBLE_EQ(m.voltage_error_knee_A, 0.5);
   EXPECT_NEAR(VoltageErrorQ_V(m, 0.0, 2.0), 0.15 * std::tanh(4.0), 1e-15);
   EXPECT_NEAR(VoltageErrorQ_V(m, 0.0, -2.0), -0.15 * std::tanh(4.0), 1e-15);
   EXPECT_NEAR(VoltageErrorQ_V(m, 3.0, 4.0), 0.15 * std::tanh(10.0) * 0.8, 1e-15);
   EXPECT_EQ(VoltageErrorQ_V(m, 0.0, 0.0), 0.0);
-  const MotorDescription sign = ParseMotorDescription(std::string(kValid) + "[drive]\nvoltage_error_V = 0.1\n", "m.toml");
+  const MotorDescription sign =
+      ParseMotorDescription(std::string(kValid) + "[drive]\nvoltage_error_V = 0.1\n", "m.toml");
   EXPECT_EQ(sign.voltage_error_knee_A, 0.0);
   EXPECT_DOUBLE_EQ(VoltageErrorQ_V(sign, 0.0, 0.01), 0.1);
   const std::string neg = ErrorOf(std::string(kValid) + "[drive]\nvoltage_error_V = -0.1\n");
-  EXPECT_NE(neg.find("m.toml:11: key 'drive.voltage_error_V' must be within [0, 5] V, got -0.1"), std::string::npos) << neg;
-  const std::string knee_alone = ErrorOf(std::string(kValid) + "[drive]\nvoltage_error_knee_A = 0.5\n");
-  EXPECT_NE(knee_alone.find("m.toml:11: key 'drive.voltage_error_knee_A' needs 'drive.voltage_error_V'"), std::string::npos)
+  EXPECT_NE(neg.find("m.toml:11: key 'drive.voltage_error_V' must be within [0, 5] V, got -0.1"),
+            std::string::npos)
+      << neg;
+  const std::string knee_alone =
+      ErrorOf(std::string(kValid) + "[drive]\nvoltage_error_knee_A = 0.5\n");
+  EXPECT_NE(
+      knee_alone.find("m.toml:11: key 'drive.voltage_error_knee_A' needs 'drive.voltage_error_V'"),
+      std::string::npos)
       << knee_alone;
-  const std::string bad_knee = ErrorOf(std::string(kValid) + "[drive]\nvoltage_error_V = 0.1\nvoltage_error_knee_A = -1\n");
-  EXPECT_NE(bad_knee.find("m.toml:12: key 'drive.voltage_error_knee_A' must be within [0, 100] A"), std::string::npos)
+  const std::string bad_knee =
+      ErrorOf(std::string(kValid) + "[drive]\nvoltage_error_V = 0.1\nvoltage_error_knee_A = -1\n");
+  EXPECT_NE(bad_knee.find("m.toml:12: key 'drive.voltage_error_knee_A' must be within [0, 100] A"),
+            std::string::npos)
       << bad_knee;
 }
 

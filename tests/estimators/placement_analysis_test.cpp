@@ -1,13 +1,13 @@
 // Sensor placement (Saheba 2010 eqs. 35-37).
-#include "estimators/placement.hpp"
-#include "tests/common/test_files.hpp"
-
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+
+#include "estimators/placement.hpp"
+#include "tests/common/test_files.hpp"
 
 namespace pe = pumptherm::estimators;
 
@@ -24,7 +24,8 @@ TEST(Placement, RiccatiMeanMatchesLocalLevelClosedForm) {
 }
 
 TEST(Placement, SahebaImprovedRanksTheWindingSensorsBestForTheWindings) {
-  const auto m = pe::ThermalModel::Parse(pumptherm::test_files::ReadModel("saheba2010-improved"), "improved");
+  const auto m =
+      pe::ThermalModel::Parse(pumptherm::test_files::ReadModel("saheba2010-improved"), "improved");
   pe::PlacementConfig cfg;
   for (double i : {40.0, 52.5, 65.0}) {
     pe::ThermalInputs in;

@@ -55,7 +55,8 @@ TEST(Quantisation, MeanBiasMatchesMonteCarlo) {
   // The size the docs quote: about step/pi exp(-2 pi^2 sigma^2/step^2) = 0.2 mV at 10 mV noise.
   const double amplitude = QuantisedMeanBias((1707.0 + 0.75) * kStep_V, 1e-4, kStep_V);
   EXPECT_NEAR(std::abs(amplitude),
-              kStep_V / std::numbers::pi * std::exp(-2.0 * std::numbers::pi * std::numbers::pi * 1e-4 / (kStep_V * kStep_V)),
+              kStep_V / std::numbers::pi *
+                  std::exp(-2.0 * std::numbers::pi * std::numbers::pi * 1e-4 / (kStep_V * kStep_V)),
               1e-7);
   EXPECT_GT(std::abs(amplitude), 1.5e-4);
   EXPECT_LT(std::abs(amplitude), 2.5e-4);
@@ -111,7 +112,8 @@ TEST(Quantisation, CorrectedBlockMeansLoseTheBias) {
     }
     raw /= blocks;
     corrected /= blocks;
-    const double standard_error = std::sqrt((sigma * sigma + kStep_V * kStep_V / 12.0) / (100.0 * blocks));
+    const double standard_error =
+        std::sqrt((sigma * sigma + kStep_V * kStep_V / 12.0) / (100.0 * blocks));
     EXPECT_NEAR(raw, bias, 5.0 * standard_error) << "phase " << phase;
     EXPECT_LT(std::abs(corrected), 0.2 * std::abs(bias) + 5.0 * standard_error)
         << "phase " << phase << ": raw " << raw << " V, corrected " << corrected << " V";
@@ -125,7 +127,8 @@ TEST(Quantisation, NoCorrectionWhereItIsNotDefined) {
   // Noise below 0.3 step: not corrected.
   const double small = std::pow(0.25 * kStep_V, 2) + kStep_V * kStep_V / 12.0;
   EXPECT_EQ(CorrectQuantisedMean(mean, small, 100, kStep_V), mean);
-  EXPECT_EQ(CorrectQuantisedMean(mean, std::numeric_limits<double>::quiet_NaN(), 100, kStep_V), mean);
+  EXPECT_EQ(CorrectQuantisedMean(mean, std::numeric_limits<double>::quiet_NaN(), 100, kStep_V),
+            mean);
   EXPECT_EQ(QuantisedMeanBias(mean, 1e-4, 0.0), 0.0);
   EXPECT_EQ(QuantisedMeanBias(std::numeric_limits<double>::infinity(), 1e-4, kStep_V), 0.0);
   // At a code and half-way between two codes the bias is zero by symmetry.

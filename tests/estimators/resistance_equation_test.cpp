@@ -1,8 +1,8 @@
+#include "estimators/resistance_equation.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
-
-#include "estimators/resistance_equation.hpp"
 
 namespace pumptherm::estimators {
 namespace {

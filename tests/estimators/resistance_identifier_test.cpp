@@ -1,3 +1,5 @@
+#include "estimators/resistance_identifier.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -7,7 +9,6 @@
 #include <set>
 
 #include "estimators/motor.hpp"
-#include "estimators/resistance_identifier.hpp"
 #include "tools/sim/tmp_drive.hpp"
 
 namespace pumptherm::estimators {
@@ -163,7 +164,8 @@ TEST(ResistanceIdentifier, SaveRestoreContinuesIdentically) {
   ResistanceIdentifier a(motor, {});
   ResistanceIdentifier b(motor, {});
   long k = 0;
-  for (; k < 100L * 100; ++k) a.Update(Exact(0.31, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  for (; k < 100L * 100; ++k)
+    a.Update(Exact(0.31, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
   ASSERT_TRUE(b.Restore(a.Save()));  // at a block boundary: nothing pending
   // A restored identifier says "converging" until its first block confirms the state.
   EXPECT_EQ(b.estimate().status, ResistanceStatus::kConverging);
@@ -182,10 +184,12 @@ TEST(ResistanceIdentifier, SaveRestoreContinuesIdentically) {
 TEST(ResistanceIdentifier, RestoreRejectsBrokenStateAndResetReturnsToNameplate) {
   const MotorDescription motor = MotorPreset("han2019-tmp");
   ResistanceIdentifier id(motor, {});
-  for (long k = 0; k < 6000; ++k) id.Update(Exact(0.31, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  for (long k = 0; k < 6000; ++k)
+    id.Update(Exact(0.31, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
   const ResistanceIdentifierState good = id.Save();
   ResistanceIdentifierState nan_state = good;
-  nan_state.hypotheses[kSteadyMagnet].x(kStateResistance) = std::numeric_limits<double>::quiet_NaN();
+  nan_state.hypotheses[kSteadyMagnet].x(kStateResistance) =
+      std::numeric_limits<double>::quiet_NaN();
   EXPECT_FALSE(id.Restore(nan_state));
   ResistanceIdentifierState not_pd = good;
   not_pd.hypotheses[kDriftingMagnet].p(kStateFlux, kStateFlux) = -1.0;
@@ -215,7 +219,8 @@ TEST(ResistanceIdentifier, RestoreRejectsBrokenStateAndResetReturnsToNameplate) 
 TEST(ResistanceIdentifier, StaleRestoredStateIsReacquired) {
   const MotorDescription motor = MotorPreset("han2019-tmp");
   ResistanceIdentifier id(motor, {});
-  for (long k = 0; k < 600L * 100; ++k) id.Update(Exact(0.30, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  for (long k = 0; k < 600L * 100; ++k)
+    id.Update(Exact(0.30, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
   ResistanceIdentifierState stale = id.Save();
   for (auto& h : stale.hypotheses) h.x(kStateResistance) = 0.39;
   ASSERT_TRUE(id.Restore(stale));
@@ -258,7 +263,8 @@ TEST(ResistanceIdentifier, HoldsWithoutExtrapolatingAtZeroCurrent) {
   const long warm = 3600L * 100;
   const auto rs_warming = [&](long k) { return 0.28 + 0.02 * static_cast<double>(k) / warm; };
   long k = 0;
-  for (; k < warm; ++k) id.Update(Exact(rs_warming(k), 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  for (; k < warm; ++k)
+    id.Update(Exact(rs_warming(k), 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
   ASSERT_EQ(id.estimate().status, ResistanceStatus::kTracking);
   ASSERT_GT(id.x()(kStateResistanceRate), 0.5 * 0.02 / 3600.0) << "the warming trend was learnt";
   const double at_idle = id.estimate().resistance_ohm;
@@ -278,7 +284,8 @@ TEST(ResistanceIdentifier, HoldsWithoutExtrapolatingAtZeroCurrent) {
   EXPECT_NEAR(e.flux_Wb, 0.0182, 1e-9);  // the flux is still tracked at zero current
   EXPECT_EQ(id.x()(kStateResistanceRate), 0.0);
   // Load again (winding at 0.29 ohm): identified at once, tracking within 5 minutes.
-  for (long j = 0; j < 300L * 100; ++j, ++k) e = id.Update(Exact(0.29, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  for (long j = 0; j < 300L * 100; ++j, ++k)
+    e = id.Update(Exact(0.29, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
   EXPECT_NEAR(e.resistance_ohm, 0.29, 1e-4);
   EXPECT_EQ(e.status, ResistanceStatus::kTracking);
 }
@@ -367,7 +374,8 @@ TEST(ResistanceIdentifier, SingleFilterStateCarriesOver) {
   ResistanceIdentifierConfig config;
   config.steady_magnet_prior = 0.0;  // one filter, as before the hypotheses
   ResistanceIdentifier single(motor, config);
-  for (long k = 0; k < 600L * 100; ++k) single.Update(Exact(0.30, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  for (long k = 0; k < 600L * 100; ++k)
+    single.Update(Exact(0.30, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
   // A copy: Save() returns by value, so a reference into its result would dangle (ASan:
   // stack-use-after-scope).
   const ResistanceIdentifierState saved = single.Save();
@@ -387,7 +395,8 @@ TEST(ResistanceIdentifier, SingleFilterStateCarriesOver) {
     EXPECT_EQ(h.consecutive_rejections, 3);
   }
   ResistanceEstimate e;
-  for (long k = 0; k < 600L * 100; ++k) e = both.Update(Exact(0.30, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  for (long k = 0; k < 600L * 100; ++k)
+    e = both.Update(Exact(0.30, 0.0181, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
   EXPECT_NEAR(e.resistance_ohm, 0.30, 1e-6);
   EXPECT_EQ(e.status, ResistanceStatus::kTracking);
 }
@@ -399,7 +408,8 @@ TEST(ResistanceIdentifier, ConfigOutOfRangeThrows) {
   for (const double prior : {-0.1, 1.0}) {
     ResistanceIdentifierConfig p;
     p.steady_magnet_prior = prior;
-    EXPECT_THROW(ResistanceIdentifier(MotorPreset("han2019-tmp"), p), std::invalid_argument) << prior;
+    EXPECT_THROW(ResistanceIdentifier(MotorPreset("han2019-tmp"), p), std::invalid_argument)
+        << prior;
   }
   ResistanceIdentifierConfig d;
   d.drift_hold_K = 0.0;
@@ -516,7 +526,8 @@ TEST(ResistanceIdentifier, WindingSigmaCoversTheErrorWhileTracking) {
     if (e.status != ResistanceStatus::kTracking) continue;
     ++tracking;
     EXPECT_LE(e.winding_sd_K, 1.0) << "tracking means 2 sigma within 2 K, t " << s.time_s;
-    worst_ratio = std::max(worst_ratio, std::abs(e.winding_degC - s.true_winding_degC) / e.winding_sd_K);
+    worst_ratio =
+        std::max(worst_ratio, std::abs(e.winding_degC - s.true_winding_degC) / e.winding_sd_K);
   }
   EXPECT_GT(tracking, 600);
   EXPECT_LT(worst_ratio, 3.0);
@@ -565,7 +576,8 @@ FastHeatingFigures RunFastHeating(bool magnet_heats) {
     if (e.status == ResistanceStatus::kHeld) ++held;
     if (e.status != ResistanceStatus::kTracking) continue;
     ++tracking;
-    f.max_tracking_error_K = std::max(f.max_tracking_error_K, std::abs(e.winding_degC - s.true_winding_degC));
+    f.max_tracking_error_K =
+        std::max(f.max_tracking_error_K, std::abs(e.winding_degC - s.true_winding_degC));
   }
   f.tracking = static_cast<double>(tracking) / outputs;
   f.held = static_cast<double>(held) / outputs;
@@ -602,7 +614,8 @@ TEST(ResistanceIdentifier, OffsetEstimatedWhereIdentifiable) {
   const double rs = 0.29, psi = 0.0182, u_err = 0.15;
   ResistanceEstimate e;
   long k = 0;
-  for (; k < 48000; ++k) e = id.Update(WithOffset(rs, psi, 9.0, (k / 48000.0) * kRated_rad_per_s, u_err), kDt_s);
+  for (; k < 48000; ++k)
+    e = id.Update(WithOffset(rs, psi, 9.0, (k / 48000.0) * kRated_rad_per_s, u_err), kDt_s);
   for (long j = 0; j < 5L * 60 * 100; ++j, ++k) {
     e = id.Update(WithOffset(rs, psi, SteppedCurrent_A(k), kRated_rad_per_s, u_err), kDt_s);
   }
@@ -626,7 +639,8 @@ namespace {
 // refused like any other damage.
 TEST(ResistanceIdentifier, RestoreRejectsBrokenDriftAnchor) {
   ResistanceIdentifier id(MotorPreset("han2019-tmp"), {});
-  for (long k = 0; k < 600L * 100; ++k) id.Update(Exact(0.30, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
+  for (long k = 0; k < 600L * 100; ++k)
+    id.Update(Exact(0.30, 0.0182, SteppedCurrent_A(k), kRated_rad_per_s), kDt_s);
   const ResistanceIdentifierState good = id.Save();
   ASSERT_TRUE(good.anchor_valid);
   ResistanceIdentifierState nan_anchor = good;

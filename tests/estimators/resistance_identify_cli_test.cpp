@@ -1,10 +1,9 @@
 // `pumptherm identify` run as a process: bad input gives exit code 2 and a message naming the
 // row and column (or line and key); good input gives the documented output columns.
 #include <gtest/gtest.h>
-
-#include <algorithm>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -102,7 +101,8 @@ TEST(IdentifyCli, IdentifiesSimulatedTelemetry) {
   sim::TmpDrive plant(cfg);
   double true_r = 0.0;
   {
-    tools::CsvWriter w(TempPath("good.csv"), {"speed_rpm", "uq_V", "time_s", "iq_A", "ud_V", "id_A"});
+    tools::CsvWriter w(TempPath("good.csv"),
+                       {"speed_rpm", "uq_V", "time_s", "iq_A", "ud_V", "id_A"});
     while (plant.Running()) {
       const sim::TmpDriveSample s = plant.Step();
       w.Row({s.speed_rpm, s.uq_V, s.time_s, s.iq_A, s.ud_V, s.id_A});
@@ -113,9 +113,9 @@ TEST(IdentifyCli, IdentifiesSimulatedTelemetry) {
   const Result r = Identify("good");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const tools::CsvTable out = tools::CsvTable::Read(TempPath("good.out.csv"));
-  EXPECT_EQ(out.columns(), (std::vector<std::string>{"time_s", "resistance_ohm", "flux_Wb",
-                                                     "winding_resistance_C", "status", "winding_resistance_sd_K",
-                                                     "flux_sd_Wb"}));
+  EXPECT_EQ(out.columns(),
+            (std::vector<std::string>{"time_s", "resistance_ohm", "flux_Wb", "winding_resistance_C",
+                                      "status", "winding_resistance_sd_K", "flux_sd_Wb"}));
   EXPECT_EQ(out.rows(), 60000u);
   const auto rs = out.Column("resistance_ohm");
   const auto temp = out.Column("winding_resistance_C");
@@ -125,7 +125,8 @@ TEST(IdentifyCli, IdentifiesSimulatedTelemetry) {
   EXPECT_EQ(status.front(), 0.0);  // initialising
   for (double st : status) ASSERT_TRUE(st >= 0.0 && st <= 6.0 && st == std::floor(st)) << st;
   const auto sd = out.Column("winding_resistance_sd_K");
-  for (std::size_t k = 100; k < sd.size(); ++k) ASSERT_TRUE(sd[k] > 0.0 && std::isfinite(sd[k])) << k;
+  for (std::size_t k = 100; k < sd.size(); ++k)
+    ASSERT_TRUE(sd[k] > 0.0 && std::isfinite(sd[k])) << k;
   EXPECT_LT(sd.back(), 1.0) << "the last 1-sigma, K";
 }
 
@@ -133,8 +134,8 @@ TEST(IdentifyCli, IdentifiesSimulatedTelemetry) {
 TEST(IdentifyCli, ShortOptionsAndStandardOutputByDefault) {
   WriteText(TempPath("short.csv"), std::string(kHeader) + kRow1 + kRow2);
   const std::string out = TempPath("short.stdout");
-  const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' identify -i '" + TempPath("short.csv") +
-                          "' > '" + out + "' 2>/dev/null";
+  const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' identify -i '" +
+                          TempPath("short.csv") + "' > '" + out + "' 2>/dev/null";
   const int status = std::system(cmd.c_str());
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0);

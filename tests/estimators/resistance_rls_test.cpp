@@ -1,3 +1,5 @@
+#include "estimators/resistance_rls.hpp"
+
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
@@ -6,12 +8,10 @@
 #include <random>
 #include <vector>
 
-#include "estimators/resistance_rls.hpp"
-
 namespace pumptherm::estimators {
 namespace {
 
-constexpr double kRs_ohm = 0.28;    // Han 2019 Table 1
+constexpr double kRs_ohm = 0.28;  // Han 2019 Table 1
 constexpr double kPsi_Wb = 0.0182;
 
 struct Sample {
@@ -31,11 +31,11 @@ std::vector<Sample> NoiseFree(int n) {
 }
 
 TEST(Han2019Weight, FourLevelsOfEq23) {
-  EXPECT_EQ(Han2019Weight(0.2, 10.0), 0.0);     // |eps| >= 1e-2 |y|
-  EXPECT_EQ(Han2019Weight(0.1, 10.0), 0.0);     // boundary belongs to "untrusted"
-  EXPECT_EQ(Han2019Weight(0.05, 10.0), 0.1);    // 1e-4 |y| <= |eps| < 1e-2 |y|
-  EXPECT_EQ(Han2019Weight(-5e-4, 10.0), 0.5);   // 1e-5 |y| <= |eps| < 1e-4 |y|
-  EXPECT_EQ(Han2019Weight(5e-5, 10.0), 1.0);    // |eps| < 1e-5 |y|
+  EXPECT_EQ(Han2019Weight(0.2, 10.0), 0.0);    // |eps| >= 1e-2 |y|
+  EXPECT_EQ(Han2019Weight(0.1, 10.0), 0.0);    // boundary belongs to "untrusted"
+  EXPECT_EQ(Han2019Weight(0.05, 10.0), 0.1);   // 1e-4 |y| <= |eps| < 1e-2 |y|
+  EXPECT_EQ(Han2019Weight(-5e-4, 10.0), 0.5);  // 1e-5 |y| <= |eps| < 1e-4 |y|
+  EXPECT_EQ(Han2019Weight(5e-5, 10.0), 1.0);   // |eps| < 1e-5 |y|
   EXPECT_EQ(Han2019Weight(std::numeric_limits<double>::quiet_NaN(), 10.0), 0.0);
 }
 
@@ -132,7 +132,8 @@ TEST(DiscountedRls, ForgettingWithoutExcitationWindsUp) {
   DiscountedRls rls(RlsConfig::Forgetting(0.9995), Eigen::Vector2d(0.28, 0.0182), 1.0);
   for (const auto& s : NoiseFree(2000)) rls.Update(s.phi, s.y);
   const double before = rls.covariance().trace();
-  for (int k = 0; k < 20000; ++k) rls.Update(Eigen::Vector2d(2.0, 2000.0), 0.28 * 2 + 0.0182 * 2000);
+  for (int k = 0; k < 20000; ++k)
+    rls.Update(Eigen::Vector2d(2.0, 2000.0), 0.28 * 2 + 0.0182 * 2000);
   EXPECT_GT(rls.covariance().trace(), 100.0 * before);  // the direction without data grows
 }
 

@@ -1,6 +1,5 @@
 // Exact ZOH discretisation (Saheba 2010 eqs. 20-21) against fine-step integration.
 #include "estimators/thermal_discretisation.hpp"
-#include "tests/common/test_files.hpp"
 
 #include <gtest/gtest.h>
 
@@ -8,11 +7,14 @@
 #include <fstream>
 #include <sstream>
 
+#include "tests/common/test_files.hpp"
+
 namespace pe = pumptherm::estimators;
 
 namespace {
 pe::ThermalModel Improved() {
-  return pe::ThermalModel::Parse(pumptherm::test_files::ReadModel("saheba2010-improved"), "improved");
+  return pe::ThermalModel::Parse(pumptherm::test_files::ReadModel("saheba2010-improved"),
+                                 "improved");
 }
 }  // namespace
 
@@ -33,7 +35,9 @@ TEST(ThermalDiscretisation, ExactStepMatchesFineRungeKutta) {
   // Classical RK4 with 1 ms steps (the fastest time constant of the network is ~0.1 s).
   Eigen::VectorXd x = x0;
   const double h = 1e-3;
-  auto f = [&](const Eigen::VectorXd& v) -> Eigen::VectorXd { return lin.a_per_s * v + lin.f_K_per_s; };
+  auto f = [&](const Eigen::VectorXd& v) -> Eigen::VectorXd {
+    return lin.a_per_s * v + lin.f_K_per_s;
+  };
   for (int k = 0; k < static_cast<int>(dt_s / h); ++k) {
     const Eigen::VectorXd k1 = f(x), k2 = f(x + 0.5 * h * k1), k3 = f(x + 0.5 * h * k2),
                           k4 = f(x + h * k3);

@@ -31,7 +31,9 @@ const std::string kMap = kSource + "/../shared/reference/wallscheid-losses/total
 // Not a shipped model (its loss map may not be redistributed): named by path.
 const std::string kModel = pumptherm::test_files::ModelPath("wallscheid2017-4node");
 
-std::string TempPath(const std::string& name) { return ::testing::TempDir() + "pumptherm_lossmap_" + name; }
+std::string TempPath(const std::string& name) {
+  return ::testing::TempDir() + "pumptherm_lossmap_" + name;
+}
 
 struct Result {
   int exit_code;
@@ -39,14 +41,16 @@ struct Result {
 };
 
 Result RunCli(const std::string& args, const std::string& name) {
-  auto r = pumptherm::test_files::RunCommandStderr(std::string("'") + PUMPTHERM_CLI + "' " + args, TempPath(name + ".err"));
+  auto r = pumptherm::test_files::RunCommandStderr(std::string("'") + PUMPTHERM_CLI + "' " + args,
+                                                   TempPath(name + ".err"));
   return {r.exit_code, std::move(r.out)};
 }
 
 bool DataPresent(std::string& why) {
   for (const std::string& p : {kData, kMap}) {
     if (!std::ifstream(p).good()) {
-      why = p + " is absent (the Paderborn data and the Wallscheid loss map stay outside the project)";
+      why = p +
+            " is absent (the Paderborn data and the Wallscheid loss map stay outside the project)";
       return false;
     }
   }
@@ -69,9 +73,11 @@ TEST(LossMapCli, SimulateReproducesTheReferenceFiguresWithin10Percent) {
   std::string why;
   if (!DataPresent(why)) GTEST_SKIP() << why;
   const std::string out = TempPath("sim.csv");
-  const Result r = RunCli("simulate --model '" + kModel + "' --columns paderborn --initial first-row "
-                       "--max-step-s 0.5 --inputs linear --input '" + kData + "' --output '" + out + "'",
-                       "sim");
+  const Result r = RunCli("simulate --model '" + kModel +
+                              "' --columns paderborn --initial first-row "
+                              "--max-step-s 0.5 --inputs linear --input '" +
+                              kData + "' --output '" + out + "'",
+                          "sim");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto data = pumptherm::tools::CsvTable::Read(kData);
   const auto sim = pumptherm::tools::CsvTable::Read(out);
@@ -80,7 +86,8 @@ TEST(LossMapCli, SimulateReproducesTheReferenceFiguresWithin10Percent) {
       {"pm", 13.42}, {"stator_yoke", 1.81}, {"stator_tooth", 1.70}, {"stator_winding", 4.21}};
   for (const auto& [node, ref_K2] : reference) {
     const double mse = Mse_K2(data, sim, node);
-    EXPECT_NEAR(mse, ref_K2, 0.10 * ref_K2) << node << ": ours " << mse << " K^2, reference " << ref_K2 << " K^2";
+    EXPECT_NEAR(mse, ref_K2, 0.10 * ref_K2)
+        << node << ": ours " << mse << " K^2, reference " << ref_K2 << " K^2";
   }
 }
 
@@ -88,9 +95,11 @@ TEST(LossMapCli, EstimateWithTheYokeMeasuredRuns) {
   std::string why;
   if (!DataPresent(why)) GTEST_SKIP() << why;
   const std::string out = TempPath("est.csv");
-  const Result r = RunCli("estimate --model '" + kModel + "' --columns paderborn --initial first-row "
-                       "--measure stator_yoke --input '" + kData + "' --output '" + out + "'",
-                       "est");
+  const Result r = RunCli("estimate --model '" + kModel +
+                              "' --columns paderborn --initial first-row "
+                              "--measure stator_yoke --input '" +
+                              kData + "' --output '" + out + "'",
+                          "est");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto data = pumptherm::tools::CsvTable::Read(kData);
   const auto est = pumptherm::tools::CsvTable::Read(out);
@@ -105,9 +114,9 @@ TEST(LossMapCli, FirstRowWithoutTheNodeColumnIsExit2NamingIt) {
   std::string why;
   if (!DataPresent(why)) GTEST_SKIP() << why;
   // Without the Paderborn preset the node columns are looked up as <node>_C, which the data lack.
-  const Result r = RunCli("simulate --model '" + kModel + "' --initial first-row --input '" + kData +
-                           "' --output '" + TempPath("bad.csv") + "'",
-                       "bad");
+  const Result r = RunCli("simulate --model '" + kModel + "' --initial first-row --input '" +
+                              kData + "' --output '" + TempPath("bad.csv") + "'",
+                          "bad");
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("speed_rpm"), std::string::npos) << r.err;
 }
@@ -118,7 +127,8 @@ TEST(LossMapCli, UnknownInitialWordIsExit2) {
     std::ofstream f(in);
     f << "time_s,speed_rpm,id_A,iq_A,ambient_C\n0,0,0,0,20\n1,0,0,0,20\n";
   }
-  const Result r = RunCli("simulate --model saheba2010-improved --initial warm --input '" + in + "'", "word");
+  const Result r =
+      RunCli("simulate --model saheba2010-improved --initial warm --input '" + in + "'", "word");
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("--initial"), std::string::npos) << r.err;
 }

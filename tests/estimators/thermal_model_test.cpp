@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <string>
 #include <vector>
+
 #include "tests/common/test_files.hpp"
 
 namespace pe = pumptherm::estimators;
@@ -90,7 +91,8 @@ TEST(ThermalModel, ReducedModelEqualsFullNetworkWithMasslessNode) {
   pe::ThermalLinearModel lin;
   m.Linearise(in, lin);
   const double r1 = 0.5, r2 = -0.1, r3 = 2.0, pa = 10.0, pb = 3.0;
-  for (const auto& [xa, xb] : {std::pair{30.0, 40.0}, std::pair{-5.0, 80.0}, std::pair{15.0, 15.0}}) {
+  for (const auto& [xa, xb] :
+       {std::pair{30.0, 40.0}, std::pair{-5.0, 80.0}, std::pair{15.0, 15.0}}) {
     // Full network: solve KCL at the massless node, then the capacitive nodes' balances.
     const double zm = (xa / r1 + xb / r2 + in.ambient_degC / r3) / (1 / r1 + 1 / r2 + 1 / r3);
     const double dxa = ((zm - xa) / r1 + pa) / 100.0;
@@ -107,7 +109,7 @@ TEST(ThermalModel, ShippedSahebaModelsHaveThePaperNodes) {
   for (const char* name : {"saheba2010-baseline", "saheba2010-improved"}) {
     const auto m = pe::ThermalModel::Parse(ReadModel(name), name);
     EXPECT_EQ(m.Name(), name);
-    const std::vector<std::string> states{"frame", "yoke", "teeth", "slot_winding",
+    const std::vector<std::string> states{"frame",       "yoke",  "teeth", "slot_winding",
                                           "end_winding", "rotor", "shaft"};
     EXPECT_EQ(m.StateNames(), states);
     EXPECT_EQ(m.Nodes().size(), 13u);
@@ -115,7 +117,9 @@ TEST(ThermalModel, ShippedSahebaModelsHaveThePaperNodes) {
     EXPECT_DOUBLE_EQ(m.WindingWeights()(3), 0.5);
     EXPECT_DOUBLE_EQ(m.WindingWeights()(4), 0.5);
   }
-  EXPECT_DOUBLE_EQ(pe::ThermalModel::Parse(ReadModel("saheba2010-improved"), "i").Capacities_J_per_K()(0), 4478.0);
+  EXPECT_DOUBLE_EQ(
+      pe::ThermalModel::Parse(ReadModel("saheba2010-improved"), "i").Capacities_J_per_K()(0),
+      4478.0);
 }
 
 TEST(ThermalModel, SahebaSteadyStateBalancesEnergyThroughTheFrame) {
@@ -166,7 +170,8 @@ TEST(ThermalModel, WallscheidModelWithoutFileReaderNamesTheTable) {
 
 TEST(ThermalModel, WallscheidModelParsesWithSpeedDependentResistances) {
   const std::string models = pumptherm::test_files::ReferenceModelDir();
-  const std::string map = models + "/../../../../shared/reference/wallscheid-losses/total_loss_W.csv";
+  const std::string map =
+      models + "/../../../../shared/reference/wallscheid-losses/total_loss_W.csv";
   if (!std::ifstream(map).good()) {
     GTEST_SKIP() << "the Wallscheid loss map is not at " << map
                  << " (it stays outside the project; see docs/thermal-model.md)";
@@ -196,26 +201,29 @@ TEST(ThermalModelValidation, UnknownNodeInEdgeNamesTheEdge) {
 }
 
 TEST(ThermalModelValidation, DisconnectedNodeIsNamed) {
-  const std::string e = ExpectParseError(std::string(kStar) + "[[node]]\nname = \"lonely\"\ncapacity_J_per_K = 1\n");
+  const std::string e =
+      ExpectParseError(std::string(kStar) + "[[node]]\nname = \"lonely\"\ncapacity_J_per_K = 1\n");
   EXPECT_NE(e.find("node 'lonely'"), std::string::npos) << e;
   EXPECT_NE(e.find("not connected"), std::string::npos) << e;
 }
 
 TEST(ThermalModelValidation, IslandWithoutBoundaryIsNamed) {
-  const std::string e = ExpectParseError(std::string(kStar) +
-                                         "[[node]]\nname = \"c\"\ncapacity_J_per_K = 1\n"
-                                         "[[node]]\nname = \"d\"\ncapacity_J_per_K = 1\n"
-                                         "[[edge]]\nbetween = [\"c\", \"d\"]\nresistance_K_per_W = 1\n");
+  const std::string e =
+      ExpectParseError(std::string(kStar) +
+                       "[[node]]\nname = \"c\"\ncapacity_J_per_K = 1\n"
+                       "[[node]]\nname = \"d\"\ncapacity_J_per_K = 1\n"
+                       "[[edge]]\nbetween = [\"c\", \"d\"]\nresistance_K_per_W = 1\n");
   EXPECT_NE(e.find("node 'c'"), std::string::npos) << e;
   EXPECT_NE(e.find("no path to a boundary"), std::string::npos) << e;
 }
 
 TEST(ThermalModelValidation, SingularMasslessSubNetworkIsNamed) {
   // m2's conductances cancel: +1 W/K to a, -1 W/K to ambient, so its KCL row of Y22 is zero.
-  const std::string e = ExpectParseError(std::string(kStar) +
-                                         "[[node]]\nname = \"m2\"\ncapacity_J_per_K = 0\n"
-                                         "[[edge]]\nbetween = [\"m2\", \"a\"]\nresistance_K_per_W = 1\n"
-                                         "[[edge]]\nbetween = [\"m2\", \"ambient\"]\nresistance_K_per_W = -1\n");
+  const std::string e =
+      ExpectParseError(std::string(kStar) +
+                       "[[node]]\nname = \"m2\"\ncapacity_J_per_K = 0\n"
+                       "[[edge]]\nbetween = [\"m2\", \"a\"]\nresistance_K_per_W = 1\n"
+                       "[[edge]]\nbetween = [\"m2\", \"ambient\"]\nresistance_K_per_W = -1\n");
   EXPECT_NE(e.find("'m2'"), std::string::npos) << e;
   EXPECT_NE(e.find("singular"), std::string::npos) << e;
 }
@@ -275,12 +283,16 @@ TEST(ThermalModelOperatingRange, BadValuesNameTheTableAndLine) {
     }
     return std::string("no error");
   };
-  EXPECT_NE(error("[operating_range]\nspeed_rpm = -1\niq_A = [1.0]\n").find("m.toml:1: [operating_range]: speed_rpm"),
+  EXPECT_NE(error("[operating_range]\nspeed_rpm = -1\niq_A = [1.0]\n")
+                .find("m.toml:1: [operating_range]: speed_rpm"),
             std::string::npos)
       << error("[operating_range]\nspeed_rpm = -1\niq_A = [1.0]\n");
-  EXPECT_NE(error("[operating_range]\nspeed_rpm = 5\niq_A = []\n").find("iq_A must be an array"), std::string::npos);
-  EXPECT_NE(error("[operating_range]\nspeed_rpm = 5\niq_A = [0.0]\n").find("non-zero current"), std::string::npos);
-  EXPECT_NE(error("[operating_range]\nspeed_rpm = 5\niq_A = [1.0]\nrpm = 3\n").find("unknown key 'rpm'"),
-            std::string::npos)
+  EXPECT_NE(error("[operating_range]\nspeed_rpm = 5\niq_A = []\n").find("iq_A must be an array"),
+            std::string::npos);
+  EXPECT_NE(error("[operating_range]\nspeed_rpm = 5\niq_A = [0.0]\n").find("non-zero current"),
+            std::string::npos);
+  EXPECT_NE(
+      error("[operating_range]\nspeed_rpm = 5\niq_A = [1.0]\nrpm = 3\n").find("unknown key 'rpm'"),
+      std::string::npos)
       << error("[operating_range]\nspeed_rpm = 5\niq_A = [1.0]\nrpm = 3\n");
 }

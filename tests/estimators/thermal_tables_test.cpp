@@ -18,7 +18,8 @@ namespace {
 pe::ThermalModelFiles Files(std::map<std::string, std::string> texts) {
   return {"/models", [texts](const std::string& path) {
             auto it = texts.find(path);
-            if (it == texts.end()) throw std::runtime_error("cannot read " + path + ": no such file");
+            if (it == texts.end())
+              throw std::runtime_error("cannot read " + path + ": no such file");
             return it->second;
           }};
 }
@@ -33,9 +34,11 @@ constexpr const char* kCurve = "speed_rpm,drag\n0,0\n1000,10\n2000,30\n";
 
 // One node to ambient through 1 K/W; its loss is the looked-up value.
 std::string Model(const std::string& lookup, const std::string& power) {
-  return "[[table]]\nname = \"loss_map\"\nkind = \"map\"\nfile = \"maps/loss.csv\"\nlookup = \"" + lookup +
+  return "[[table]]\nname = \"loss_map\"\nkind = \"map\"\nfile = \"maps/loss.csv\"\nlookup = \"" +
+         lookup +
          "\"\n"
-         "[[table]]\nname = \"drag\"\nkind = \"curve\"\nfile = \"/abs/drag.csv\"\nlookup = \"linear\"\n"
+         "[[table]]\nname = \"drag\"\nkind = \"curve\"\nfile = \"/abs/drag.csv\"\nlookup = "
+         "\"linear\"\n"
          "[[quantity]]\nname = \"i_signed_A\"\nvalue = \"iq_A < 0 ? -is_A : is_A\"\n"
          "[[quantity]]\nname = \"n_abs_rpm\"\nvalue = \"abs(speed_rpm)\"\n"
          "[[node]]\nname = \"a\"\ncapacity_J_per_K = 10\n"
@@ -45,8 +48,8 @@ std::string Model(const std::string& lookup, const std::string& power) {
 }
 
 pe::ThermalModel Parse(const std::string& text) {
-  return pe::ThermalModel::Parse(text, "m.toml",
-                                 Files({{"/models/maps/loss.csv", kMap}, {"/abs/drag.csv", kCurve}}));
+  return pe::ThermalModel::Parse(
+      text, "m.toml", Files({{"/models/maps/loss.csv", kMap}, {"/abs/drag.csv", kCurve}}));
 }
 
 // Steady state of a single node to ambient at 0 degC through 1 K/W equals its loss in W.
@@ -116,9 +119,10 @@ TEST(ThermalTables, ModelsWithoutNodeTemperaturesSaySo) {
 }
 
 TEST(ThermalTablesValidation, BadCellNamesTableFileLineAndColumn) {
-  const std::string e = ParseError(
-      Model("linear", "1"),
-      Files({{"/models/maps/loss.csv", "current_A,0rpm,1000rpm\n-10,1,3\n0,zero,2\n"}, {"/abs/drag.csv", kCurve}}));
+  const std::string e =
+      ParseError(Model("linear", "1"),
+                 Files({{"/models/maps/loss.csv", "current_A,0rpm,1000rpm\n-10,1,3\n0,zero,2\n"},
+                        {"/abs/drag.csv", kCurve}}));
   EXPECT_NE(e.find("m.toml:1"), std::string::npos) << e;
   EXPECT_NE(e.find("table 'loss_map'"), std::string::npos) << e;
   EXPECT_NE(e.find("/models/maps/loss.csv:3: column 2"), std::string::npos) << e;
@@ -131,8 +135,9 @@ TEST(ThermalTablesValidation, UnreadableFileIsNamed) {
 }
 
 TEST(ThermalTablesValidation, AxisMustIncrease) {
-  const std::string e = ParseError(
-      Model("linear", "1"), Files({{"/models/maps/loss.csv", kMap}, {"/abs/drag.csv", "n,d\n0,0\n0,1\n"}}));
+  const std::string e =
+      ParseError(Model("linear", "1"),
+                 Files({{"/models/maps/loss.csv", kMap}, {"/abs/drag.csv", "n,d\n0,0\n0,1\n"}}));
   EXPECT_NE(e.find("table 'drag'"), std::string::npos) << e;
   EXPECT_NE(e.find("increase strictly"), std::string::npos) << e;
 }
@@ -143,8 +148,9 @@ TEST(ThermalTablesValidation, UnknownLookupRuleIsNamed) {
 }
 
 TEST(ThermalTablesValidation, ExpressionErrorNamesKeyAndPosition) {
-  const std::string e = ParseError(Model("linear", "drag(n_abs_rpm) + bogus_W"),
-                                   Files({{"/models/maps/loss.csv", kMap}, {"/abs/drag.csv", kCurve}}));
+  const std::string e =
+      ParseError(Model("linear", "drag(n_abs_rpm) + bogus_W"),
+                 Files({{"/models/maps/loss.csv", kMap}, {"/abs/drag.csv", kCurve}}));
   EXPECT_NE(e.find("key 'power_W'"), std::string::npos) << e;
   EXPECT_NE(e.find("bogus_W"), std::string::npos) << e;
   EXPECT_NE(e.find("position 19"), std::string::npos) << e;
@@ -153,6 +159,7 @@ TEST(ThermalTablesValidation, ExpressionErrorNamesKeyAndPosition) {
 TEST(ThermalTablesValidation, QuantityNameClashIsAnError) {
   std::string t = Model("linear", "1");
   t.replace(t.find("name = \"n_abs_rpm\""), 18, "name = \"speed_rpm\"");
-  const std::string e = ParseError(t, Files({{"/models/maps/loss.csv", kMap}, {"/abs/drag.csv", kCurve}}));
+  const std::string e =
+      ParseError(t, Files({{"/models/maps/loss.csv", kMap}, {"/abs/drag.csv", kCurve}}));
   EXPECT_NE(e.find("quantity 'speed_rpm'"), std::string::npos) << e;
 }

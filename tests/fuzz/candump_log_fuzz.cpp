@@ -20,7 +20,9 @@ void CheckLine(std::string_view line) {
   const CandumpParse p = ParseCandumpLine(copy);
   if (p.skip) return;
   if (!p.ok) {
-    if (p.error == nullptr || std::strlen(p.error) == 0 || p.column < 1 || p.column > copy.size() + 1) std::abort();
+    if (p.error == nullptr || std::strlen(p.error) == 0 || p.column < 1 ||
+        p.column > copy.size() + 1)
+      std::abort();
     return;
   }
   const CanFrame& f = p.record.frame;
@@ -28,10 +30,11 @@ void CheckLine(std::string_view line) {
   if (f.id > (f.extended ? 0x1FFFFFFFu : 0x7FFu) && !f.error) std::abort();
   const std::string again = FormatCandumpLine(p.record.time_us, p.record.interface, f);
   const CandumpParse q = ParseCandumpLine(again);
-  if (!q.ok || q.record.time_us != p.record.time_us || q.record.interface != p.record.interface) std::abort();
+  if (!q.ok || q.record.time_us != p.record.time_us || q.record.interface != p.record.interface)
+    std::abort();
   const CanFrame& g = q.record.frame;
-  if (g.id != f.id || g.extended != f.extended || g.fd != f.fd || g.remote != f.remote || g.error != f.error ||
-      g.len != f.len || (f.fd && g.fd_flags != f.fd_flags)) {
+  if (g.id != f.id || g.extended != f.extended || g.fd != f.fd || g.remote != f.remote ||
+      g.error != f.error || g.len != f.len || (f.fd && g.fd_flags != f.fd_flags)) {
     std::abort();
   }
   if (!f.remote && std::memcmp(g.data.data(), f.data.data(), f.len) != 0) std::abort();

@@ -20,10 +20,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (std::string(e.what()).rfind("/etc/pumptherm/fuzz.toml", 0) != 0) std::abort();
     return 0;
   }
-  if (!(config.gateway.thermal_period_s > 0.0) || !std::isfinite(config.gateway.thermal_period_s)) std::abort();
+  if (!(config.gateway.thermal_period_s > 0.0) || !std::isfinite(config.gateway.thermal_period_s))
+    std::abort();
   if (!(config.lcm.period_s > 0.0) || !(config.lcm.health_period_s > 0.0)) std::abort();
   for (const auto& i : config.interfaces) {
-    if (i.rx_buffer_bytes != 0 && (i.rx_buffer_bytes < kMinRxBufferBytes || i.rx_buffer_bytes > kMaxRxBufferBytes)) std::abort();
+    if (i.rx_buffer_bytes != 0 &&
+        (i.rx_buffer_bytes < kMinRxBufferBytes || i.rx_buffer_bytes > kMaxRxBufferBytes))
+      std::abort();
   }
   for (const auto& p : config.pumps) {
     if (p.name.empty()) std::abort();

@@ -27,8 +27,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     for (auto& b : frame) b = 0xFF;
     double values[512];
     if (m.signal_count() > 512) continue;
-    if (m.Decode(std::span<const std::uint8_t>(frame, m.min_bytes()), std::span<double>(values, m.signal_count())) !=
-        CodecStatus::kOk) {
+    if (m.Decode(std::span<const std::uint8_t>(frame, m.min_bytes()),
+                 std::span<double>(values, m.signal_count())) != CodecStatus::kOk) {
       std::abort();
     }
   }

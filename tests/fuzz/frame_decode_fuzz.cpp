@@ -69,7 +69,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (codec.Encode(values, out).status != CodecStatus::kOk) std::abort();
   for (std::size_t i = 0; i < codec.signal_count(); ++i) {
     const DbcSignal& s = message->signals[i];
-    if (std::isnan(values[i]) || s.value_type != SignalValueType::kInteger || s.length_bits > 53) continue;
+    if (std::isnan(values[i]) || s.value_type != SignalValueType::kInteger || s.length_bits > 53)
+      continue;
     if (codec.RawBits(out, i) != codec.RawBits(payload, i)) std::abort();
   }
   return 0;

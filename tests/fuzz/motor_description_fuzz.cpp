@@ -24,12 +24,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   }
   if (m.pole_pairs < 1) std::abort();
-  if (!PositiveFinite(m.rated_speed_rpm) || !PositiveFinite(m.flux_Wb) || !PositiveFinite(m.inductance_H)) std::abort();
+  if (!PositiveFinite(m.rated_speed_rpm) || !PositiveFinite(m.flux_Wb) ||
+      !PositiveFinite(m.inductance_H))
+    std::abort();
   if (!std::isfinite(m.plausible_min_degC) || !std::isfinite(m.plausible_max_degC) ||
       !(m.plausible_min_degC < m.plausible_max_degC)) {
     std::abort();
   }
-  if (!(m.uq_resolution_V == 0.0 || (m.uq_resolution_V > 0.0 && m.uq_resolution_V <= 10.0))) std::abort();
+  if (!(m.uq_resolution_V == 0.0 || (m.uq_resolution_V > 0.0 && m.uq_resolution_V <= 10.0)))
+    std::abort();
   const double lo = PlausibleMinResistance_ohm(m), hi = PlausibleMaxResistance_ohm(m);
   if (!std::isfinite(lo) || !std::isfinite(hi) || !(lo < hi)) std::abort();
   return 0;

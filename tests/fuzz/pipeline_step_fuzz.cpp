@@ -5,8 +5,8 @@
 // Input: records of [selector][dt lo][dt hi][len][payload bytes...]. The selector picks the CAN
 // ID (the pump's PUMP_FAST_I, PUMP_FAST_U, PUMP_STATUS, PUMP_CLEAR, another node's or an unknown
 // ID; bit 7 marks the frame CAN FD, bit 6 sends it as remote, bit 5 as extended), dt is the time
-// step in milliseconds (little-endian, modulo 5001; selector bit 4 makes it go backwards), len the payload
-// length (mod 65); a payload cut short by the end of the input is what it is.
+// step in milliseconds (little-endian, modulo 5001; selector bit 4 makes it go backwards), len the
+// payload length (mod 65); a payload cut short by the end of the input is what it is.
 //
 // Findings: a crash, a sanitizer report, an exception out of OnFrame/Advance (documented never
 // to throw), a published temperatures_t message while the pump is not initialised, a
@@ -52,7 +52,8 @@ struct CheckingSink : OutputSink {
   void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame& f) override {
     if (f.len > 64) std::abort();
   }
-  bool PublishLcm(const std::string& channel, std::int64_t, const std::vector<std::uint8_t>&) override {
+  bool PublishLcm(const std::string& channel, std::int64_t,
+                  const std::vector<std::uint8_t>&) override {
     // Temperatures are published only once the filter has run (docs/daemon.md).
     if (channel.size() >= 6 && channel.compare(channel.size() - 6, 6, "/TEMPS") == 0) {
       if (!gateway->pumps()[0]->snapshot().initialised) std::abort();
@@ -62,7 +63,8 @@ struct CheckingSink : OutputSink {
 };
 
 const DaemonConfig& Config() {
-  static const DaemonConfig config = ParseConfig(kConfig, std::string(PUMPTHERM_SOURCE_DIR_DEFAULT) + "/fuzz.toml");
+  static const DaemonConfig config =
+      ParseConfig(kConfig, std::string(PUMPTHERM_SOURCE_DIR_DEFAULT) + "/fuzz.toml");
   return config;
 }
 
@@ -70,7 +72,8 @@ void CheckSnapshot(const Pump& pump) {
   const PumpSnapshot& s = pump.snapshot();
   if (s.initialised) {
     for (std::size_t i = 0; i < s.node_degC.size(); ++i) {
-      if (!std::isfinite(s.node_degC[i]) || !std::isfinite(s.node_sd_K[i]) || s.node_sd_K[i] < 0.0) {
+      if (!std::isfinite(s.node_degC[i]) || !std::isfinite(s.node_sd_K[i]) ||
+          s.node_sd_K[i] < 0.0) {
         std::fprintf(stderr, "pipeline_step_fuzz: state %zu at %lld us: %g degC, sd %g K\n", i,
                      static_cast<long long>(s.time_us), s.node_degC[i], s.node_sd_K[i]);
         std::abort();
@@ -99,7 +102,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const unsigned dt_ms = (data[pos + 1] | (static_cast<unsigned>(data[pos + 2]) << 8)) % 5001;
     std::size_t len = data[pos + 3] % 65;
     pos += 4;
-    t_us += (sel & 0x10) ? -static_cast<std::int64_t>(dt_ms) * 1000 : static_cast<std::int64_t>(dt_ms) * 1000;
+    t_us += (sel & 0x10) ? -static_cast<std::int64_t>(dt_ms) * 1000
+                         : static_cast<std::int64_t>(dt_ms) * 1000;
     protocol::TimedFrame tf;
     tf.time_us = t_us;
     tf.frame.id = kIds[sel % 8];

@@ -24,7 +24,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     } catch (const std::domain_error&) {
       return 0;
     }
-    if (lin.a_per_s.rows() != n || lin.a_per_s.cols() != n || lin.f_K_per_s.size() != n) std::abort();
+    if (lin.a_per_s.rows() != n || lin.a_per_s.cols() != n || lin.f_K_per_s.size() != n)
+      std::abort();
   } catch (const ThermalModelError&) {
   }
   return 0;

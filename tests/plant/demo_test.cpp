@@ -34,7 +34,9 @@ TEST(PlantDemo, Pump3WarnsThenTripsPumps1And2StayBelowWarning) {
     const fs::path p = src / "estimators" / "models" / (ref + ".toml");
     return LoadedText{ReadFile(p), p.string()};
   };
-  res.motor_file = [](const std::string& ref) -> LoadedText { throw std::runtime_error("no motor file " + ref); };
+  res.motor_file = [](const std::string& ref) -> LoadedText {
+    throw std::runtime_error("no motor file " + ref);
+  };
   res.dbc = {ReadFile(src / "protocol" / "pumptherm.dbc"), "pumptherm.dbc"};
   res.mapping = {ReadFile(src / "protocol" / "mapping_pumptherm.toml"), "mapping_pumptherm.toml"};
   const fs::path out = fs::path(testing::TempDir()) / "pumptherm_plant_demo";
@@ -78,9 +80,10 @@ TEST(PlantDemo, Pump3WarnsThenTripsPumps1And2StayBelowWarning) {
     EXPECT_LT(p3.above_warning_s[k].first, p3.above_warning_s[k].second);
     EXPECT_LE(p3.above_warning_s[k].second, p3.above_warning_s[k + 1].first);
   }
-  std::printf("demo: pump1 max %.1f degC, pump2 max %.1f degC, pump3 warning at %.0f s, trip at %.0f s\n",
-              r.pumps[0].max_level_node_degC, r.pumps[1].max_level_node_degC, p3.warning_crossed_s,
-              p3.trip_crossed_s);
+  std::printf(
+      "demo: pump1 max %.1f degC, pump2 max %.1f degC, pump3 warning at %.0f s, trip at %.0f s\n",
+      r.pumps[0].max_level_node_degC, r.pumps[1].max_level_node_degC, p3.warning_crossed_s,
+      p3.trip_crossed_s);
 }
 
 }  // namespace

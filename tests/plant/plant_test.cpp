@@ -1,5 +1,7 @@
 // The plant simulator end to end on short scenarios: determinism, the frames decode back through
 // the DBC to the simulated values, rolling counters, jitter bounds, faults, cooling failure.
+#include "tools/plant/plant.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -13,7 +15,6 @@
 #include "protocol/dbc.hpp"
 #include "tests/common/test_files.hpp"
 #include "tools/common/csv.hpp"
-#include "tools/plant/plant.hpp"
 
 namespace pumptherm::plant {
 namespace {
@@ -34,7 +35,9 @@ PlantResources Resources() {
     if (!fs::exists(p)) throw std::runtime_error("no model " + p.string());
     return LoadedText{ReadFile(p), p.string()};
   };
-  r.motor_file = [](const std::string& ref) -> LoadedText { throw std::runtime_error("no motor file " + ref); };
+  r.motor_file = [](const std::string& ref) -> LoadedText {
+    throw std::runtime_error("no motor file " + ref);
+  };
   const fs::path proto = fs::path(SourceDir()) / "protocol";
   r.dbc = {ReadFile(proto / "pumptherm.dbc"), "pumptherm.dbc"};
   r.mapping = {ReadFile(proto / "mapping_pumptherm.toml"), "mapping_pumptherm.toml"};
@@ -48,12 +51,14 @@ fs::path OutDir(const std::string& name) {
 }
 
 /// Two pumps on can0, one on can1, 30 s: a run-up and a load step; `faults` go to pump "a".
-std::string ScenarioText(const std::string& faults = "", const std::string& extra = "", int seed = 7) {
+std::string ScenarioText(const std::string& faults = "", const std::string& extra = "",
+                         int seed = 7) {
   return R"(
 [scenario]
 name = "t"
 duration_s = 30
-seed = )" + std::to_string(seed) + R"(
+seed = )" +
+         std::to_string(seed) + R"(
 jitter_sd_us = 100
 jitter_max_us = 300
 [defaults]
@@ -65,7 +70,8 @@ segments = [ { duration_s = 10, speed_rpm = 21000, iq_A = 3.0 }, { duration_s = 
 name = "a"
 node_id = 1
 profile = "p"
-faults = [ )" + faults + R"( ]
+faults = [ )" +
+         faults + R"( ]
 [[pump]]
 name = "b"
 node_id = 2
@@ -93,7 +99,8 @@ struct Decoded {
 };
 
 std::vector<Decoded> DecodeLog(const fs::path& path) {
-  const protocol::Dbc dbc = protocol::ParseDbc(ReadFile(fs::path(SourceDir()) / "protocol" / "pumptherm.dbc"), "dbc");
+  const protocol::Dbc dbc =
+      protocol::ParseDbc(ReadFile(fs::path(SourceDir()) / "protocol" / "pumptherm.dbc"), "dbc");
   const protocol::DbcCodec codec(dbc);
   std::vector<Decoded> out;
   std::ifstream f(path);
@@ -109,9 +116,11 @@ std::vector<Decoded> DecodeLog(const fs::path& path) {
     if (mi < 0) continue;
     const auto& msg = dbc.messages[static_cast<std::size_t>(mi)];
     std::vector<double> v(msg.signals.size());
-    EXPECT_EQ(codec.message(static_cast<std::size_t>(mi)).Decode(
-                  std::span<const std::uint8_t>(p.record.frame.data.data(), p.record.frame.len), v),
-              protocol::CodecStatus::kOk);
+    EXPECT_EQ(
+        codec.message(static_cast<std::size_t>(mi))
+            .Decode(std::span<const std::uint8_t>(p.record.frame.data.data(), p.record.frame.len),
+                    v),
+        protocol::CodecStatus::kOk);
     Decoded d{p.record.time_us, std::string(p.record.interface), p.record.frame.id, msg.name, {}};
     for (std::size_t i = 0; i < v.size(); ++i) d.values[msg.signals[i].name] = v[i];
     out.push_back(std::move(d));
@@ -119,7 +128,8 @@ std::vector<Decoded> DecodeLog(const fs::path& path) {
   return out;
 }
 
-std::vector<Decoded> Select(const std::vector<Decoded>& all, const std::string& iface, std::uint32_t id) {
+std::vector<Decoded> Select(const std::vector<Decoded>& all, const std::string& iface,
+                            std::uint32_t id) {
   std::vector<Decoded> out;
   for (const Decoded& d : all) {
     if (d.interface == iface && d.id == id) out.push_back(d);
@@ -139,7 +149,8 @@ TEST(Plant, SameSeedSameBytesOtherSeedOtherBytes) {
     ASSERT_FALSE(x.empty()) << f;
     EXPECT_EQ(std::hash<std::string>{}(x), std::hash<std::string>{}(y)) << f;
   }
-  EXPECT_NE(std::hash<std::string>{}(ReadFile(a / "t.log")), std::hash<std::string>{}(ReadFile(c / "t.log")));
+  EXPECT_NE(std::hash<std::string>{}(ReadFile(a / "t.log")),
+            std::hash<std::string>{}(ReadFile(c / "t.log")));
 }
 
 TEST(Plant, FramesDecodeToTheSimulatedValues) {
@@ -197,7 +208,8 @@ TEST(Plant, RollingCountersIncrementAndWrap) {
     ASSERT_GT(f.size(), 100u);
     int wraps = 0;
     for (std::size_t i = 1; i < f.size(); ++i) {
-      const double prev = f[i - 1].values.at("RollingCounter"), cur = f[i].values.at("RollingCounter");
+      const double prev = f[i - 1].values.at("RollingCounter"),
+                   cur = f[i].values.at("RollingCounter");
       EXPECT_EQ(cur, std::fmod(prev + 1.0, 16.0)) << "frame " << i;
       if (cur == 0.0) ++wraps;
     }
@@ -216,16 +228,19 @@ TEST(Plant, JitterStaysWithinBoundsAndLogIsTimeOrdered) {
   const fs::path out = OutDir("jitter");
   RunScenario(ScenarioText(), out);
   const auto frames = DecodeLog(out / "t.log");
-  for (std::size_t i = 1; i < frames.size(); ++i) ASSERT_GE(frames[i].time_us, frames[i - 1].time_us) << i;
+  for (std::size_t i = 1; i < frames.size(); ++i)
+    ASSERT_GE(frames[i].time_us, frames[i - 1].time_us) << i;
   const auto f = Select(frames, "can1", 0x101);
   ASSERT_EQ(f.size(), 3000u);
   // Nominal time of step k: epoch + k 10 ms + a fixed phase; the phase is the mean offset.
   double mean = 0.0;
-  for (std::size_t k = 0; k < f.size(); ++k) mean += static_cast<double>(f[k].time_us - kEpochUs - static_cast<std::int64_t>(k) * 10000);
+  for (std::size_t k = 0; k < f.size(); ++k)
+    mean += static_cast<double>(f[k].time_us - kEpochUs - static_cast<std::int64_t>(k) * 10000);
   mean /= static_cast<double>(f.size());
   double max_dev = 0.0, sum2 = 0.0;
   for (std::size_t k = 0; k < f.size(); ++k) {
-    const double dev = static_cast<double>(f[k].time_us - kEpochUs - static_cast<std::int64_t>(k) * 10000) - mean;
+    const double dev =
+        static_cast<double>(f[k].time_us - kEpochUs - static_cast<std::int64_t>(k) * 10000) - mean;
     max_dev = std::max(max_dev, std::abs(dev));
     sum2 += dev * dev;
   }
@@ -238,8 +253,10 @@ TEST(Plant, JitterStaysWithinBoundsAndLogIsTimeOrdered) {
 
 TEST(Plant, DroppedFramesAreMissing) {
   const fs::path out = OutDir("dropped");
-  const PlantResult r = RunScenario(ScenarioText(R"({ kind = "dropped_frames", start_s = 5, end_s = 10, probability = 1.0 },
-      { kind = "dropped_frames", start_s = 20, end_s = 25, probability = 0.3 })"), out);
+  const PlantResult r = RunScenario(
+      ScenarioText(R"({ kind = "dropped_frames", start_s = 5, end_s = 10, probability = 1.0 },
+      { kind = "dropped_frames", start_s = 20, end_s = 25, probability = 0.3 })"),
+      out);
   const auto frames = DecodeLog(out / "t.log");
   const auto a = Select(frames, "can0", 0x101);
   const auto b = Select(frames, "can0", 0x102);
@@ -249,7 +266,9 @@ TEST(Plant, DroppedFramesAreMissing) {
     const double t_s = static_cast<double>(a[i].time_us - kEpochUs) / 1e6;
     if (t_s >= 5.01 && t_s < 9.99) ++in_full;
     if (t_s >= 20.01 && t_s < 24.99) ++in_partial;
-    if (i > 0 && a[i].values.at("RollingCounter") != std::fmod(a[i - 1].values.at("RollingCounter") + 1.0, 16.0)) ++gaps;
+    if (i > 0 && a[i].values.at("RollingCounter") !=
+                     std::fmod(a[i - 1].values.at("RollingCounter") + 1.0, 16.0))
+      ++gaps;
   }
   EXPECT_EQ(in_full, 0u);
   EXPECT_NEAR(static_cast<double>(in_partial), 0.7 * 500.0, 50.0);
@@ -270,7 +289,7 @@ TEST(Plant, StaleSensorStopsStatusFrames) {
   }
   EXPECT_EQ(during, 0u);
   EXPECT_GT(after, 90u);
-  EXPECT_EQ(Select(frames, "can0", 0x182).size(), 300u);  // pump b unaffected
+  EXPECT_EQ(Select(frames, "can0", 0x182).size(), 300u);   // pump b unaffected
   EXPECT_EQ(Select(frames, "can0", 0x101).size(), 3000u);  // fast frames continue
   const tools::CsvTable m = tools::CsvTable::Read((out / "a.measured.csv").string());
   const auto frame = m.ColumnAllowingNaN("frame_C");
@@ -280,15 +299,16 @@ TEST(Plant, StaleSensorStopsStatusFrames) {
 
 TEST(Plant, StuckSensorHoldsItsValueWhileTheFrameHeats) {
   const fs::path out = OutDir("stuck");
-  RunScenario(ScenarioText(R"({ kind = "stuck_sensor", start_s = 10 })",
-               "", 7), out);
+  RunScenario(ScenarioText(R"({ kind = "stuck_sensor", start_s = 10 })", "", 7), out);
   const auto frames = DecodeLog(out / "t.log");
   std::vector<double> stuck, free_running;
   for (const Decoded& d : Select(frames, "can0", 0x181)) {
-    if (static_cast<double>(d.time_us - kEpochUs) / 1e6 > 10.05) stuck.push_back(d.values.at("FrameTemp_degC"));
+    if (static_cast<double>(d.time_us - kEpochUs) / 1e6 > 10.05)
+      stuck.push_back(d.values.at("FrameTemp_degC"));
   }
   for (const Decoded& d : Select(frames, "can0", 0x182)) {
-    if (static_cast<double>(d.time_us - kEpochUs) / 1e6 > 10.05) free_running.push_back(d.values.at("FrameTemp_degC"));
+    if (static_cast<double>(d.time_us - kEpochUs) / 1e6 > 10.05)
+      free_running.push_back(d.values.at("FrameTemp_degC"));
   }
   ASSERT_GT(stuck.size(), 150u);
   for (double v : stuck) EXPECT_EQ(v, stuck.front());
@@ -298,7 +318,8 @@ TEST(Plant, StuckSensorHoldsItsValueWhileTheFrameHeats) {
 
 TEST(Plant, BusOffSilencesEveryPumpOnTheInterface) {
   const fs::path out = OutDir("busoff");
-  RunScenario(ScenarioText("", "[[bus_off]]\ninterface = \"can0\"\nstart_s = 14\nend_s = 16.5\n"), out);
+  RunScenario(ScenarioText("", "[[bus_off]]\ninterface = \"can0\"\nstart_s = 14\nend_s = 16.5\n"),
+              out);
   const auto frames = DecodeLog(out / "t.log");
   std::int64_t last_before = 0, first_after = INT64_MAX;
   std::size_t can1_during = 0;
@@ -313,13 +334,15 @@ TEST(Plant, BusOffSilencesEveryPumpOnTheInterface) {
     }
   }
   EXPECT_GE(first_after - last_before, 2'400'000);  // a gap of about 2.5 s
-  EXPECT_GT(can1_during, 400u);                      // can1 unaffected
+  EXPECT_GT(can1_during, 400u);                     // can1 unaffected
 }
 
 TEST(Plant, CoolingFailureRaisesTemperatures) {
   const fs::path ok = OutDir("cool_ok"), failed = OutDir("cool_failed");
   RunScenario(ScenarioText(), ok);
-  RunScenario(ScenarioText(R"({ kind = "cooling_failure", start_s = 5, edge = "cooling", factor = 20 })"), failed);
+  RunScenario(
+      ScenarioText(R"({ kind = "cooling_failure", start_s = 5, edge = "cooling", factor = 20 })"),
+      failed);
   const tools::CsvTable a = tools::CsvTable::Read((ok / "a.truth.csv").string());
   const tools::CsvTable b = tools::CsvTable::Read((failed / "a.truth.csv").string());
   const double frame_ok = a.Column("frame_C").back(), frame_failed = b.Column("frame_C").back();
@@ -355,20 +378,24 @@ resistance_K_per_W = 2.0
 between = ["x", "y"]
 resistance_K_per_W = "1 + speed_rpm"
 )";
-  EXPECT_NE(ScaleEdgeResistance(model, "m", "e", 3.0).find("resistance_K_per_W = 6.0"), std::string::npos);
-  EXPECT_NE(ScaleEdgeResistance(model, "m", "y-x", 3.0).find("(1 + speed_rpm) * 3"), std::string::npos);
+  EXPECT_NE(ScaleEdgeResistance(model, "m", "e", 3.0).find("resistance_K_per_W = 6.0"),
+            std::string::npos);
+  EXPECT_NE(ScaleEdgeResistance(model, "m", "y-x", 3.0).find("(1 + speed_rpm) * 3"),
+            std::string::npos);
   try {
     ScaleEdgeResistance(model, "m", "z", 3.0);
     FAIL();
   } catch (const ScenarioError& e) {
-    EXPECT_NE(std::string(e.what()).find("no edge named 'z' (edges: e, x-y)"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("no edge named 'z' (edges: e, x-y)"), std::string::npos)
+        << e.what();
   }
 }
 
 TEST(Plant, UnknownNodeIsAnError) {
   const fs::path out = OutDir("badnode");
   std::string text = ScenarioText();
-  text.replace(text.find("initial_C = 40"), 14, "initial_C = 40\nframe_sensor = { node = \"housing\" }");
+  text.replace(text.find("initial_C = 40"), 14,
+               "initial_C = 40\nframe_sensor = { node = \"housing\" }");
   try {
     RunScenario(text, out);
     FAIL();

@@ -1,4 +1,6 @@
 // Scenario files of the plant simulator: parsing, defaults, groups, and errors that name where.
+#include "tools/plant/scenario.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -6,7 +8,6 @@
 #include <sstream>
 
 #include "tests/common/test_files.hpp"
-#include "tools/plant/scenario.hpp"
 
 namespace pumptherm::plant {
 namespace {
@@ -69,7 +70,8 @@ node_id = 2
 count = 3
 stagger_s = 4
 segments = [ { duration_s = 5, speed_rpm = 1000 } ]
-)", "g.toml");
+)",
+                                    "g.toml");
   ASSERT_EQ(sc.pumps.size(), 3u);
   EXPECT_EQ(sc.pumps[0].name, "f02");
   EXPECT_EQ(sc.pumps[2].name, "f04");
@@ -90,7 +92,8 @@ TEST(PlantScenario, FaultsParse) {
 interface = "can0"
 start_s = 7
 end_s = 8
-)", "s.toml");
+)",
+                                    "s.toml");
   const auto& f = sc.pumps[0].faults;
   ASSERT_EQ(f.size(), 4u);
   EXPECT_EQ(f[0].kind, FaultKind::kDroppedFrames);
@@ -123,7 +126,8 @@ TEST(PlantScenario, ProfileRepeatRunsTheSegmentsAgain) {
 TEST(PlantScenario, ErrorsNameLineAndKey) {
   std::string text = kMinimal;
   text.replace(text.find("node_id = 3"), 11, "node_ib = 3");
-  EXPECT_NE(ErrorOf(text).find("s.toml:11: pump[0].node_ib: unknown key"), std::string::npos) << ErrorOf(text);
+  EXPECT_NE(ErrorOf(text).find("s.toml:11: pump[0].node_ib: unknown key"), std::string::npos)
+      << ErrorOf(text);
 
   text = kMinimal;
   text.replace(text.find("node_id = 3"), 11, "node_id = 16");
@@ -131,17 +135,20 @@ TEST(PlantScenario, ErrorsNameLineAndKey) {
 
   text = kMinimal;
   text.replace(text.find("profile = \"p\""), 13, "profile = \"q\"");
-  EXPECT_NE(ErrorOf(text).find("s.toml:12: pump[0].profile: no [profile.q]"), std::string::npos) << ErrorOf(text);
+  EXPECT_NE(ErrorOf(text).find("s.toml:12: pump[0].profile: no [profile.q]"), std::string::npos)
+      << ErrorOf(text);
 
   text = std::string(kMinimal) + "faults = [ { kind = \"melted\" } ]\n";
   EXPECT_NE(ErrorOf(text).find("pump[0].faults[0].kind"), std::string::npos) << ErrorOf(text);
 
   text = std::string(kMinimal) + "[[pump]]\nname = \"b\"\nnode_id = 3\nprofile = \"p\"\n";
-  EXPECT_NE(ErrorOf(text).find("node ID 3 on can0 is used by another pump"), std::string::npos) << ErrorOf(text);
+  EXPECT_NE(ErrorOf(text).find("node ID 3 on can0 is used by another pump"), std::string::npos)
+      << ErrorOf(text);
 
   text = kMinimal;
   text.replace(text.find("duration_s = 5, speed"), 14, "duration_s = -5");
-  EXPECT_NE(ErrorOf(text).find("profile.p.segments[0].duration_s: must be positive"), std::string::npos)
+  EXPECT_NE(ErrorOf(text).find("profile.p.segments[0].duration_s: must be positive"),
+            std::string::npos)
       << ErrorOf(text);
 
   EXPECT_NE(ErrorOf("[scenario\n").find("s.toml:1:"), std::string::npos);
@@ -150,16 +157,18 @@ TEST(PlantScenario, ErrorsNameLineAndKey) {
 TEST(PlantScenario, BundledScenariosParse) {
   const char* dir = std::getenv("PUMPTHERM_SOURCE_DIR");
   ASSERT_NE(dir, nullptr);
-  for (const char* name : {"demo", "fleet32", "saheba2010-fig4", "saheba2010-fig5", "saheba2010-fig7",
-                           "saheba2010-fig8"}) {
+  for (const char* name : {"demo", "fleet32", "saheba2010-fig4", "saheba2010-fig5",
+                           "saheba2010-fig7", "saheba2010-fig8"}) {
     const std::string path = std::string(dir) + "/tools/plant/scenarios/" + name + ".toml";
     EXPECT_NO_THROW(ParseScenario(test_files::ReadFile(path), path)) << path;
   }
-  const Scenario fleet = ParseScenario(test_files::ReadFile(std::string(dir) + "/tools/plant/scenarios/fleet32.toml"), "fleet32");
+  const Scenario fleet = ParseScenario(
+      test_files::ReadFile(std::string(dir) + "/tools/plant/scenarios/fleet32.toml"), "fleet32");
   EXPECT_EQ(fleet.pumps.size(), 32u);
   EXPECT_DOUBLE_EQ(fleet.duration_s, 3600.0);
-  const Scenario week =
-      ParseScenario(test_files::ReadFile(std::string(dir) + "/tools/plant/scenarios/fleet32-week.toml"), "fleet32-week");
+  const Scenario week = ParseScenario(
+      test_files::ReadFile(std::string(dir) + "/tools/plant/scenarios/fleet32-week.toml"),
+      "fleet32-week");
   ASSERT_EQ(week.pumps.size(), 32u);
   EXPECT_DOUBLE_EQ(week.duration_s, 7 * 86400.0);
   for (const PumpSpec& p : week.pumps) {  // the daily cycle, seven times, after the group's stagger

@@ -196,7 +196,7 @@ TEST(CandumpLog, ScreenFormatErrorsSayWhatIsWrong) {
       {"  can0  123   [3]  11 22", 25, "fewer payload bytes"},
       {"  can0  123   [1]  11 22", 23, "more payload bytes"},
       {"  can0  123   [9]  11", 17, "out of range"},
-      {"  can0  123  [13]  11", 17, "out of range"},                             // no FD length
+      {"  can0  123  [13]  11", 17, "out of range"},  // no FD length
       {"  can0  123   8  11", 15, "expected '['"},
       {"  can0  123   [2]  1 22", 20, "two hex digits"},
       {"  can0  RX x -  123   [0]", 12, "candump -x flags"},
@@ -207,7 +207,8 @@ TEST(CandumpLog, ScreenFormatErrorsSayWhatIsWrong) {
     const auto p = ParseCandumpLine(c.line);
     EXPECT_FALSE(p.ok) << c.line;
     EXPECT_EQ(p.column, c.column) << c.line << ": " << p.error;
-    EXPECT_NE(std::string_view(p.error).find(c.says), std::string_view::npos) << c.line << ": " << p.error;
+    EXPECT_NE(std::string_view(p.error).find(c.says), std::string_view::npos)
+        << c.line << ": " << p.error;
   }
 }
 
@@ -234,7 +235,8 @@ TEST(CandumpLog, FormatRoundTrips) {
     EXPECT_EQ(q.record.frame.fd, p.record.frame.fd);
     EXPECT_EQ(q.record.frame.remote, p.record.frame.remote);
   }
-  EXPECT_EQ(FormatCandumpLine(1436509052249713, "vcan0", ParseCandumpLine("(1.0) x 044#2A366C2BBA").record.frame),
+  EXPECT_EQ(FormatCandumpLine(1436509052249713, "vcan0",
+                              ParseCandumpLine("(1.0) x 044#2A366C2BBA").record.frame),
             "(1436509052.249713) vcan0 044#2A366C2BBA");
   EXPECT_EQ(FormatCandumpLine(4000000, "can0", ParseCandumpLine("(4.0) can0 7FF#R3").record.frame),
             "(0000000004.000000) can0 7FF#R3");
@@ -244,8 +246,10 @@ TEST(CandumpLog, FormatRoundTrips) {
 
 // The formatter before it was made allocation-free (one fmt::format per field), kept as the
 // oracle: the plant's "same seed, same bytes" and every golden log depend on identical output.
-std::string ReferenceFormat(std::int64_t time_us, std::string_view interface, const CanFrame& frame) {
-  std::string out = fmt::format("({:010d}.{:06d}) {} ", time_us / 1000000, time_us % 1000000, interface);
+std::string ReferenceFormat(std::int64_t time_us, std::string_view interface,
+                            const CanFrame& frame) {
+  std::string out =
+      fmt::format("({:010d}.{:06d}) {} ", time_us / 1000000, time_us % 1000000, interface);
   if (frame.error) {
     out += fmt::format("{:08X}#", frame.id | 0x20000000U);
   } else if (frame.extended) {

@@ -24,6 +24,7 @@
 // DBC gives a range; DBC ranges are informational, so our codec does not clamp. Where candied
 // clamped, the test checks candied's value is the clamp of ours.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <bit>
 #include <cmath>
@@ -35,7 +36,6 @@
 #include <random>
 #include <sstream>
 #include <string>
-#include <unistd.h>
 #include <vector>
 
 #include "protocol/codec.hpp"
@@ -140,7 +140,8 @@ bool LineHasExponent(const std::vector<std::string>& lines, int line) {
   const std::string& l = lines[static_cast<std::size_t>(line - 1)];
   for (std::size_t i = 1; i + 1 < l.size(); ++i) {
     if ((l[i] == 'e' || l[i] == 'E') && std::isdigit(static_cast<unsigned char>(l[i - 1])) &&
-        (l[i + 1] == '-' || l[i + 1] == '+' || std::isdigit(static_cast<unsigned char>(l[i + 1])))) {
+        (l[i + 1] == '-' || l[i + 1] == '+' ||
+         std::isdigit(static_cast<unsigned char>(l[i + 1])))) {
       return true;
     }
   }
@@ -160,7 +161,8 @@ struct Tally {
   std::size_t clamped_by_candied = 0;
 };
 
-void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_message, Tally& tally) {
+void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_message,
+                    Tally& tally) {
   SCOPED_TRACE(path.string());
   const std::string text = test::ReadFile(path);
   const Dbc dbc = ParseDbc(text, path.string());
@@ -233,8 +235,9 @@ void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_mes
       const CandiedSig& c = it->second;
       const std::uint64_t bits = mc.RawBits(data, si);
       const std::uint64_t sign_bit = std::uint64_t{1} << (s.length_bits - 1);
-      const double our_raw = s.is_signed ? static_cast<double>(static_cast<std::int64_t>((bits ^ sign_bit) - sign_bit))
-                                         : static_cast<double>(bits);
+      const double our_raw =
+          s.is_signed ? static_cast<double>(static_cast<std::int64_t>((bits ^ sign_bit) - sign_bit))
+                      : static_cast<double>(bits);
       double their_raw = c.raw;
       if (s.byte_order == ByteOrder::kBigEndian && s.length_bits > 1) {
         their_raw = c.motorola_raw;  // defect 1: candied's bit string, sliced correctly
@@ -247,16 +250,18 @@ void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_mes
       ++tally.compared;
       if (std::isnan(ours[si])) {
         // Absent by multiplexing, or the declared "not available" raw value.
-        const bool sna = s.not_available_raw && (bits == (static_cast<std::uint64_t>(*s.not_available_raw) &
-                                                          (s.length_bits >= 64 ? ~0ull : (1ull << s.length_bits) - 1)));
+        const bool sna = s.not_available_raw &&
+                         (bits == (static_cast<std::uint64_t>(*s.not_available_raw) &
+                                   (s.length_bits >= 64 ? ~0ull : (1ull << s.length_bits) - 1)));
         const bool float_nan = s.value_type != SignalValueType::kInteger;
         EXPECT_TRUE(sna || float_nan || !mc.IsPresent(data, si)) << m.name << "." << s.name;
         continue;
       }
       if (s.value_type != SignalValueType::kInteger) {  // defect 2: by hand
-        const double ieee = s.value_type == SignalValueType::kFloat32
-                                ? static_cast<double>(std::bit_cast<float>(static_cast<std::uint32_t>(bits)))
-                                : std::bit_cast<double>(bits);
+        const double ieee =
+            s.value_type == SignalValueType::kFloat32
+                ? static_cast<double>(std::bit_cast<float>(static_cast<std::uint32_t>(bits)))
+                : std::bit_cast<double>(bits);
         EXPECT_EQ(ours[si], ieee * s.factor + s.offset) << m.name << "." << s.name;
         ++tally.float_by_hand;
         continue;
@@ -300,7 +305,8 @@ TEST(CodecCandiedTest, DecodesLikeCandiedOnEveryDbc) {
   EXPECT_GT(tally.float_by_hand, 0u);
   std::cout << "compared " << tally.compared << " signal values over " << files.size()
             << " files; by hand: " << tally.motorola_by_hand << " Motorola, " << tally.float_by_hand
-            << " IEEE; candied dropped " << tally.dropped_by_candied << " exponent-notation signals; "
+            << " IEEE; candied dropped " << tally.dropped_by_candied
+            << " exponent-notation signals; "
             << "candied clamped " << tally.clamped_by_candied << " values to [min, max]\n";
   EXPECT_GT(tally.compared, 0u);
 }
@@ -315,7 +321,8 @@ TEST(CodecCandiedTest, CandiedMotorolaDefectIsReal) {
   const fs::path dir = fs::temp_directory_path();
   const fs::path dbc_path = dir / ("pumptherm_moto_" + std::to_string(getpid()) + ".dbc");
   const fs::path frames_path = dir / ("pumptherm_moto_" + std::to_string(getpid()) + ".txt");
-  std::ofstream(dbc_path) << "VERSION \"\"\nBS_:\nBU_: X\nBO_ 1 M: 8 X\n SG_ Be16 : 7|16@0+ (1,0) [0|0] \"\" X\n";
+  std::ofstream(dbc_path)
+      << "VERSION \"\"\nBS_:\nBU_: X\nBO_ 1 M: 8 X\n SG_ Be16 : 7|16@0+ (1,0) [0|0] \"\" X\n";
   std::ofstream(frames_path) << "M 1234000000000000\n";
   const CandiedResult r = RunCandied(dbc_path, frames_path);
   fs::remove(dbc_path);
@@ -324,7 +331,8 @@ TEST(CodecCandiedTest, CandiedMotorolaDefectIsReal) {
   ASSERT_NE(it, r.sigs.end());
   EXPECT_TRUE(std::isnan(it->second.raw)) << "candied now decodes Motorola: drop the workaround";
   EXPECT_EQ(it->second.motorola_raw, 0x1234);
-  const MessageCodec ours(ParseDbc("BO_ 1 M: 8 X\n SG_ Be16 : 7|16@0+ (1,0) [0|0] \"\" X\n", "m.dbc").messages[0]);
+  const MessageCodec ours(
+      ParseDbc("BO_ 1 M: 8 X\n SG_ Be16 : 7|16@0+ (1,0) [0|0] \"\" X\n", "m.dbc").messages[0]);
   const std::vector<std::uint8_t> frame = {0x12, 0x34, 0, 0, 0, 0, 0, 0};
   EXPECT_EQ(ours.RawBits(frame, 0), 0x1234u);
 }

@@ -13,6 +13,7 @@
 //    it, e.g. vw_pq.dbc's lone "m" multiplexer indicator), counted.
 // Figures (docs/protocol.md) are printed at the end.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
@@ -23,7 +24,6 @@
 #include <random>
 #include <sstream>
 #include <string>
-#include <unistd.h>
 #include <vector>
 
 #include "protocol/codec.hpp"
@@ -83,7 +83,8 @@ double ParsePyNumber(const std::string& s) {
 /// Runs decode.py once on every (DBC, frames) pair; canmatrix's answer for each pair.
 std::vector<Theirs> RunCanmatrix(const std::vector<std::pair<fs::path, fs::path>>& pairs) {
   std::string command = std::string(kPython) + " '" + Script().string() + "'";
-  for (const auto& [dbc, frames] : pairs) command += " '" + dbc.string() + "' '" + frames.string() + "'";
+  for (const auto& [dbc, frames] : pairs)
+    command += " '" + dbc.string() + "' '" + frames.string() + "'";
   int status = 0;
   const std::string out = Run(command + " 2>/dev/null", status);
   EXPECT_EQ(status, 0) << "decode.py failed: " << command;
@@ -151,14 +152,15 @@ Case MakeCase(const fs::path& path, std::uint64_t seed, int frames_per_message, 
   Case c{path, ParseDbc(test::ReadFile(path), path.string()), {}, {}};
   const DbcCodec codec(c.dbc);
   std::mt19937_64 rng(seed);
-  c.frames_path = fs::temp_directory_path() /
-                  ("pumptherm_canmatrix_" + std::to_string(getpid()) + "_" + std::to_string(n) + ".txt");
+  c.frames_path = fs::temp_directory_path() / ("pumptherm_canmatrix_" + std::to_string(getpid()) +
+                                               "_" + std::to_string(n) + ".txt");
   std::ofstream f(c.frames_path);
   for (std::size_t mi = 0; mi < c.dbc.messages.size(); ++mi) {
     for (int k = 0; k < frames_per_message; ++k) {
       std::vector<std::uint8_t> data(codec.message(mi).min_bytes());
       for (auto& b : data) b = static_cast<std::uint8_t>(rng());
-      f << std::hex << c.dbc.messages[mi].id << std::dec << ' ' << (c.dbc.messages[mi].extended ? 1 : 0) << ' ';
+      f << std::hex << c.dbc.messages[mi].id << std::dec << ' '
+        << (c.dbc.messages[mi].extended ? 1 : 0) << ' ';
       for (auto b : data) f << "0123456789ABCDEF"[b >> 4] << "0123456789ABCDEF"[b & 15];
       f << '\n';
       c.frames.emplace_back(mi, std::move(data));
@@ -197,7 +199,8 @@ void Compare(const Case& test_case, const Theirs& theirs, Tally& tally) {
         const std::uint64_t mask = s.length_bits >= 64 ? ~0ull : (1ull << s.length_bits) - 1;
         if (overhangs) {
           ++tally.null_overhang;
-        } else if (s.not_available_raw && bits == (static_cast<std::uint64_t>(*s.not_available_raw) & mask)) {
+        } else if (s.not_available_raw &&
+                   bits == (static_cast<std::uint64_t>(*s.not_available_raw) & mask)) {
           ++tally.null_sna;
         } else {
           EXPECT_FALSE(mc.IsPresent(data, si)) << m.name << "." << s.name << " frame " << fi
@@ -254,8 +257,8 @@ TEST(CodecCanmatrixTest, DecodesLikeCanmatrixOnEveryDbc) {
             << " values agree with canmatrix; ours null where canmatrix has a number: "
             << tally.null_overhang << " overhanging, " << tally.null_sna << " GenSigSNA, "
             << tally.null_mux << " not selected by the multiplexer; canmatrix lacks "
-            << tally.canmatrix_lacks_signal << " values we decode and " << tally.canmatrix_lacks_message
-            << " frames' messages; " << tally.canmatrix_padded
+            << tally.canmatrix_lacks_signal << " values we decode and "
+            << tally.canmatrix_lacks_message << " frames' messages; " << tally.canmatrix_padded
             << " frames canmatrix could decode only padded to 64 bytes\n";
   EXPECT_GT(tally.compared, 0u);
   EXPECT_EQ(tally.agreed, tally.compared);

@@ -39,7 +39,8 @@ std::uint64_t OracleRaw(const Bytes& data, const DbcSignal& s) {
   const auto bit = [&](std::uint32_t pos) { return (data[pos / 8] >> (pos % 8)) & 1u; };
   std::uint64_t raw = 0;
   if (s.byte_order == ByteOrder::kLittleEndian) {
-    for (std::uint32_t i = 0; i < s.length_bits; ++i) raw |= std::uint64_t{bit(s.start_bit + i)} << i;
+    for (std::uint32_t i = 0; i < s.length_bits; ++i)
+      raw |= std::uint64_t{bit(s.start_bit + i)} << i;
     return raw;
   }
   std::uint32_t pos = s.start_bit;
@@ -51,13 +52,13 @@ std::uint64_t OracleRaw(const Bytes& data, const DbcSignal& s) {
 }
 
 TEST(CodecTest, IntelAndMotorolaMatchHandComputedFrames) {
-  const MessageCodec codec(Message(
-      "BO_ 1 M: 8 X\n"
-      " SG_ U16 : 0|16@1+ (1,0) [0|0] \"\" X\n"
-      " SG_ S16 : 16|16@1- (0.01,0) [0|0] \"A\" X\n"
-      " SG_ Be16 : 39|16@0+ (1,0) [0|0] \"\" X\n"
-      " SG_ BeNibbles : 51|8@0+ (1,0) [0|0] \"\" X\n"
-      " SG_ BeSigned : 63|4@0- (2,1) [0|0] \"\" X\n"));
+  const MessageCodec codec(
+      Message("BO_ 1 M: 8 X\n"
+              " SG_ U16 : 0|16@1+ (1,0) [0|0] \"\" X\n"
+              " SG_ S16 : 16|16@1- (0.01,0) [0|0] \"A\" X\n"
+              " SG_ Be16 : 39|16@0+ (1,0) [0|0] \"\" X\n"
+              " SG_ BeNibbles : 51|8@0+ (1,0) [0|0] \"\" X\n"
+              " SG_ BeSigned : 63|4@0- (2,1) [0|0] \"\" X\n"));
   // U16 = 0x1234 little endian; S16 raw 0xFFFE = -2 -> -0.02 A; Be16: byte 4 = 0x12 (MSB),
   // byte 5 = 0x34; BeNibbles: low nibble of byte 6 (0xA) is the high half, high nibble of
   // byte 7 (0xB) the low half -> 0xAB; BeSigned: high nibble of byte 7 = 0xB = -5 -> -9.
@@ -137,19 +138,21 @@ TEST(CodecTest, EncodeWritesOnlyTheSignalsBits) {
     std::uint32_t pos = s.start_bit;
     for (std::uint32_t i = 0; i < s.length_bits; ++i) {
       expected[pos / 8] = static_cast<std::uint8_t>(expected[pos / 8] | (1u << (pos % 8)));
-      if (s.byte_order == ByteOrder::kLittleEndian) ++pos;
-      else pos = (pos % 8 == 0) ? pos + 15 : pos - 1;
+      if (s.byte_order == ByteOrder::kLittleEndian)
+        ++pos;
+      else
+        pos = (pos % 8 == 0) ? pos + 15 : pos - 1;
     }
     ASSERT_EQ(out, expected) << "start " << s.start_bit << " len " << s.length_bits;
   }
 }
 
 TEST(CodecTest, FloatAndDoubleSignals) {
-  const MessageCodec codec(Message(
-      "BO_ 2147483649 M: 16 X\n"
-      " SG_ F : 0|32@1- (1,0) [0|0] \"\" X\n"
-      " SG_ D : 71|64@0- (2,0) [0|0] \"\" X\n"
-      "SIG_VALTYPE_ 2147483649 F : 1;\nSIG_VALTYPE_ 2147483649 D : 2;\n"));
+  const MessageCodec codec(
+      Message("BO_ 2147483649 M: 16 X\n"
+              " SG_ F : 0|32@1- (1,0) [0|0] \"\" X\n"
+              " SG_ D : 71|64@0- (2,0) [0|0] \"\" X\n"
+              "SIG_VALTYPE_ 2147483649 F : 1;\nSIG_VALTYPE_ 2147483649 D : 2;\n"));
   Bytes frame(16, 0);
   // 1.0f = 0x3F800000, little endian in bytes 0..3; -0.25 = 0xBFD0000000000000 big endian in
   // bytes 8..15, scaled by 2.
@@ -166,20 +169,20 @@ TEST(CodecTest, FloatAndDoubleSignals) {
 }
 
 TEST(CodecTest, EncodeRoundsHalvesAwayFromZeroAndSaturates) {
-  const MessageCodec codec(Message(
-      "BO_ 1 M: 8 X\n"
-      " SG_ U : 0|8@1+ (0.5,0) [0|0] \"\" X\n"
-      " SG_ S : 8|8@1- (0.5,0) [0|0] \"\" X\n"
-      " SG_ Sna : 16|8@1+ (1,0) [0|0] \"\" X\n"
-      " SG_ SnaLow : 24|8@1- (1,0) [0|0] \"\" X\n"
-      "BA_DEF_ SG_ \"GenSigSNA\" INT -128 255;\n"
-      "BA_ \"GenSigSNA\" SG_ 1 Sna 255;\nBA_ \"GenSigSNA\" SG_ 1 SnaLow -128;\n"));
+  const MessageCodec codec(
+      Message("BO_ 1 M: 8 X\n"
+              " SG_ U : 0|8@1+ (0.5,0) [0|0] \"\" X\n"
+              " SG_ S : 8|8@1- (0.5,0) [0|0] \"\" X\n"
+              " SG_ Sna : 16|8@1+ (1,0) [0|0] \"\" X\n"
+              " SG_ SnaLow : 24|8@1- (1,0) [0|0] \"\" X\n"
+              "BA_DEF_ SG_ \"GenSigSNA\" INT -128 255;\n"
+              "BA_ \"GenSigSNA\" SG_ 1 Sna 255;\nBA_ \"GenSigSNA\" SG_ 1 SnaLow -128;\n"));
   Bytes out(8);
   auto r = codec.Encode(std::vector<double>{1.25, -1.25, 300.0, -300.0}, out);
-  EXPECT_EQ(out[0], 3);                                // 2.5 -> 3
-  EXPECT_EQ(static_cast<std::int8_t>(out[1]), -3);     // -2.5 -> -3
-  EXPECT_EQ(out[2], 254);                              // saturated one short of the SNA 255
-  EXPECT_EQ(static_cast<std::int8_t>(out[3]), -127);   // one short of the SNA -128
+  EXPECT_EQ(out[0], 3);                               // 2.5 -> 3
+  EXPECT_EQ(static_cast<std::int8_t>(out[1]), -3);    // -2.5 -> -3
+  EXPECT_EQ(out[2], 254);                             // saturated one short of the SNA 255
+  EXPECT_EQ(static_cast<std::int8_t>(out[3]), -127);  // one short of the SNA -128
   EXPECT_EQ(r.saturated, 2);
   r = codec.Encode(std::vector<double>{1000.0, -1000.0, -1.0, 1000.0}, out);
   EXPECT_EQ(out[0], 255);
@@ -187,17 +190,18 @@ TEST(CodecTest, EncodeRoundsHalvesAwayFromZeroAndSaturates) {
   EXPECT_EQ(out[2], 0);
   EXPECT_EQ(out[3], 127);
   EXPECT_EQ(r.saturated, 4);
-  r = codec.Encode(std::vector<double>{std::numeric_limits<double>::infinity(), 0.0, 0.0, 0.0}, out);
+  r = codec.Encode(std::vector<double>{std::numeric_limits<double>::infinity(), 0.0, 0.0, 0.0},
+                   out);
   EXPECT_EQ(out[0], 255);
   EXPECT_EQ(r.saturated, 1);
 }
 
 TEST(CodecTest, NanEncodesToTheNotAvailableValueAndBack) {
-  const MessageCodec codec(Message(
-      "BO_ 1 M: 4 X\n"
-      " SG_ T : 0|16@1- (0.1,-40) [0|0] \"degC\" X\n"
-      " SG_ Plain : 16|8@1+ (1,0) [0|0] \"\" X\n"
-      "BA_DEF_ SG_ \"GenSigSNA\" INT -32768 65535;\nBA_ \"GenSigSNA\" SG_ 1 T -32768;\n"));
+  const MessageCodec codec(
+      Message("BO_ 1 M: 4 X\n"
+              " SG_ T : 0|16@1- (0.1,-40) [0|0] \"degC\" X\n"
+              " SG_ Plain : 16|8@1+ (1,0) [0|0] \"\" X\n"
+              "BA_DEF_ SG_ \"GenSigSNA\" INT -32768 65535;\nBA_ \"GenSigSNA\" SG_ 1 T -32768;\n"));
   Bytes out(4, 0xFF);
   const EncodeResult r = codec.Encode(std::vector<double>{kNaN, kNaN}, out);
   EXPECT_EQ(out, (Bytes{0x00, 0x80, 0x00, 0x00}));
@@ -232,7 +236,8 @@ TEST(CodecTest, SignalsOverhangingTheDeclaredLengthAreNullAndTheOthersDecode) {
       "BO_ 1 M: 8 X\n SG_ Over : 55|30@0+ (1,0) [0|0] \"\" X\n SG_ A : 0|8@1+ (1,0) [0|0] \"\" X\n"
       " SG_ B : 15|16@0- (0.5,1) [0|0] \"\" X\n SG_ Tail : 48|8@1+ (1,0) [0|0] \"\" X\n"));
   EXPECT_EQ(codec.min_bytes(), 8u);
-  const Bytes frame = {0x2A, 0xFF, 0xFE, 0, 0, 0, 0x99, 0x55};  // exactly 8 bytes: ASan checks reads
+  const Bytes frame = {0x2A, 0xFF, 0xFE, 0,
+                       0,    0,    0x99, 0x55};  // exactly 8 bytes: ASan checks reads
   std::vector<double> values(4, 42.0);
   ASSERT_EQ(codec.Decode(frame, values), CodecStatus::kOk);
   EXPECT_TRUE(std::isnan(values[0]));
@@ -247,8 +252,9 @@ TEST(CodecTest, SignalsOverhangingTheDeclaredLengthAreNullAndTheOthersDecode) {
   ASSERT_EQ(codec.Encode(in, out).status, CodecStatus::kOk);
   EXPECT_EQ(out, (Bytes{7, 0xFF, 0xFF, 0, 0, 0, 1, 0}));
   // A multiplexer that overhangs selects nothing.
-  const MessageCodec muxed(Message("BO_ 1 M: 1 X\n SG_ Mux M : 8|8@1+ (1,0) [0|0] \"\" X\n"
-                                   " SG_ A m0 : 0|8@1+ (1,0) [0|0] \"\" X\n"));
+  const MessageCodec muxed(
+      Message("BO_ 1 M: 1 X\n SG_ Mux M : 8|8@1+ (1,0) [0|0] \"\" X\n"
+              " SG_ A m0 : 0|8@1+ (1,0) [0|0] \"\" X\n"));
   std::vector<double> two(2);
   ASSERT_EQ(muxed.Decode(Bytes{5}, two), CodecStatus::kOk);
   EXPECT_TRUE(std::isnan(two[0]));
@@ -256,14 +262,14 @@ TEST(CodecTest, SignalsOverhangingTheDeclaredLengthAreNullAndTheOthersDecode) {
 }
 
 TEST(CodecTest, MultiplexedSignalsAreNanUnlessSelected) {
-  const MessageCodec codec(Message(
-      "BO_ 1 M: 8 X\n"
-      " SG_ Mux M : 0|8@1+ (1,0) [0|0] \"\" X\n"
-      " SG_ A m0 : 8|16@1+ (1,0) [0|0] \"\" X\n"
-      " SG_ B m1 : 8|16@1+ (1,0) [0|0] \"\" X\n"
-      " SG_ Sub m2M : 8|8@1+ (1,0) [0|0] \"\" X\n"
-      " SG_ C : 16|8@1+ (1,0) [0|0] \"\" X\n"
-      "SG_MUL_VAL_ 1 C Sub 3-5, 7-7;\nSG_MUL_VAL_ 1 Sub Mux 2-2;\n"));
+  const MessageCodec codec(
+      Message("BO_ 1 M: 8 X\n"
+              " SG_ Mux M : 0|8@1+ (1,0) [0|0] \"\" X\n"
+              " SG_ A m0 : 8|16@1+ (1,0) [0|0] \"\" X\n"
+              " SG_ B m1 : 8|16@1+ (1,0) [0|0] \"\" X\n"
+              " SG_ Sub m2M : 8|8@1+ (1,0) [0|0] \"\" X\n"
+              " SG_ C : 16|8@1+ (1,0) [0|0] \"\" X\n"
+              "SG_MUL_VAL_ 1 C Sub 3-5, 7-7;\nSG_MUL_VAL_ 1 Sub Mux 2-2;\n"));
   auto v = Decode(codec, Bytes{0, 0x34, 0x12, 0, 0, 0, 0, 0});
   EXPECT_EQ(v[1], 0x1234);
   EXPECT_TRUE(std::isnan(v[2]));
@@ -286,8 +292,8 @@ TEST(CodecTest, MultiplexedSignalsAreNanUnlessSelected) {
 }
 
 TEST(CodecTest, DbcCodecFindsMessagesById) {
-  const Dbc dbc = ParseDbc(
-      "BO_ 256 A: 8 X\nBO_ 2147483904 B: 8 X\n", "t.dbc");  // 0x100 standard and extended
+  const Dbc dbc =
+      ParseDbc("BO_ 256 A: 8 X\nBO_ 2147483904 B: 8 X\n", "t.dbc");  // 0x100 standard and extended
   const DbcCodec codec(dbc);
   ASSERT_EQ(codec.size(), 2u);
   EXPECT_EQ(codec.Find(0x100, false), 0);

@@ -1,6 +1,9 @@
 // `pumptherm dbc check|decode` end to end: the built binary on protocol/pumptherm.dbc and on a
 // candump log whose frames our encoder wrote.
 #include <gtest/gtest.h>
+#include <poll.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -8,9 +11,6 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <poll.h>
-#include <sys/wait.h>
-#include <unistd.h>
 #include <vector>
 
 #include "protocol/candump_log.hpp"
@@ -44,13 +44,15 @@ TEST(DbcCliTest, CheckListsThePumpthermFrameSet) {
   const RunResult r = RunPumptherm("dbc check '" + test::PumpthermDbc().string() + "'");
   EXPECT_EQ(r.exit_code, 0) << r.out;
   EXPECT_NE(r.out.find("11 messages, 49 signals, 3 nodes"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("0x100 PUMP_FAST_I 8 bytes, 10 ms, from PumpDrive"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0x100 PUMP_FAST_I 8 bytes, 10 ms, from PumpDrive"), std::string::npos)
+      << r.out;
   EXPECT_NE(r.out.find("n/a raw -32768"), std::string::npos) << r.out;
 }
 
 TEST(DbcCliTest, CheckNamesWhereAFileIsBroken) {
   const fs::path bad = TempFile("bad.dbc");
-  std::ofstream(bad) << "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0 [0|0] \"\" X\n SG_ T : 8|8@1+ (1,0) [0|0] \"\" X\n";
+  std::ofstream(bad)
+      << "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0 [0|0] \"\" X\n SG_ T : 8|8@1+ (1,0) [0|0] \"\" X\n";
   // The broken signal is a warning; the rest loads.
   RunResult r = RunPumptherm("dbc check '" + bad.string() + "'");
   EXPECT_EQ(r.exit_code, 0) << r.out;
@@ -64,7 +66,8 @@ TEST(DbcCliTest, CheckNamesWhereAFileIsBroken) {
   std::ofstream(bad) << "BO_ 1 M: 65 X\n";
   r = RunPumptherm("dbc check '" + bad.string() + "'");
   EXPECT_EQ(r.exit_code, 2) << r.out;
-  EXPECT_NE(r.out.find(bad.string() + ":1:10: message length above 64 bytes"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(bad.string() + ":1:10: message length above 64 bytes"), std::string::npos)
+      << r.out;
   // An empty DBC is no frame set: --strict fails it.
   std::ofstream(bad) << "VERSION \"\"\nBU_: X\n";
   r = RunPumptherm("dbc check '" + bad.string() + "'");
@@ -90,7 +93,8 @@ TEST(DbcCliTest, DecodeGivesBackWhatTheEncoderWrote) {
   f.id = fast.id + 3;  // pump 3
   f.len = 8;
   const std::vector<double> values = {12.345, -0.5, 2199.11, 7};
-  ASSERT_EQ(codec.Encode(values, std::span<std::uint8_t>(f.data.data(), 8)).status, CodecStatus::kOk);
+  ASSERT_EQ(codec.Encode(values, std::span<std::uint8_t>(f.data.data(), 8)).status,
+            CodecStatus::kOk);
   CanFrame short_frame = f;
   short_frame.len = 4;
   CanFrame unknown = f;
@@ -106,16 +110,18 @@ TEST(DbcCliTest, DecodeGivesBackWhatTheEncoderWrote) {
   RunResult r = RunPumptherm("dbc decode --node-id-limit 16" + dbc_arg + "'" + log.string() + "'");
   EXPECT_EQ(r.exit_code, 0) << r.out;
   // 12.345 A at 5 mA per step -> raw 2469 -> 12.345; 2199.11 rad/s at 0.01 -> 2199.11.
-  EXPECT_NE(r.out.find(R"({"time_s":1700000000.123456,"interface":"vcan0","can_id":"0x103","node":3,)"
-                       R"("message":"PUMP_FAST_I","signals":{"Id_A":12.345,"Iq_A":-0.5,)"
-                       R"("SpeedElec_rad_per_s":2199.11,"RollingCounter":7}})"),
-            std::string::npos)
+  EXPECT_NE(
+      r.out.find(R"({"time_s":1700000000.123456,"interface":"vcan0","can_id":"0x103","node":3,)"
+                 R"("message":"PUMP_FAST_I","signals":{"Id_A":12.345,"Iq_A":-0.5,)"
+                 R"("SpeedElec_rad_per_s":2199.11,"RollingCounter":7}})"),
+      std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("1 frames decoded, 1 with IDs not in"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("1 shorter than their message"), std::string::npos) << r.out;
 
   // CSV from stdin, one message selected.
-  r = RunPumptherm("dbc decode --format csv --message PUMP_FAST_I --node-id-limit 16" + dbc_arg, log.string());
+  r = RunPumptherm("dbc decode --format csv --message PUMP_FAST_I --node-id-limit 16" + dbc_arg,
+                   log.string());
   EXPECT_EQ(r.exit_code, 0) << r.out;
   EXPECT_NE(r.out.find("time_s,interface,can_id,node,message,PUMP_FAST_I.Id_A,PUMP_FAST_I.Iq_A,"
                        "PUMP_FAST_I.SpeedElec_rad_per_s,PUMP_FAST_I.RollingCounter\n"
@@ -131,18 +137,24 @@ TEST(DbcCliTest, DecodeGivesBackWhatTheEncoderWrote) {
 
 TEST(DbcCliTest, DecodeSkipsAndCountsBadLogLines) {
   const fs::path log = TempFile("bad.log");
-  std::ofstream(log) << "(1.000000) vcan0 100#0011223344556677\n(2.0) vcan0 10Z#00\n"
-                     << "(3.0) vcan0 40000100#0011223344556677\n(4.000000) vcan0 100#0011223344556677\n";
+  std::ofstream(log)
+      << "(1.000000) vcan0 100#0011223344556677\n(2.0) vcan0 10Z#00\n"
+      << "(3.0) vcan0 40000100#0011223344556677\n(4.000000) vcan0 100#0011223344556677\n";
   const RunResult r = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + log.string() + "'");
   fs::remove(log);
   EXPECT_EQ(r.exit_code, 0) << r.out;
-  EXPECT_NE(r.out.find(log.string() + ":2:15: warning: expected a hexadecimal CAN ID; line skipped"),
-            std::string::npos) << r.out;
+  EXPECT_NE(
+      r.out.find(log.string() + ":2:15: warning: expected a hexadecimal CAN ID; line skipped"),
+      std::string::npos)
+      << r.out;
   EXPECT_NE(r.out.find(log.string() + ":3:13: warning: CAN ID above 29 bits; line skipped"),
-            std::string::npos) << r.out;
+            std::string::npos)
+      << r.out;
   EXPECT_NE(r.out.find("\"time_s\":4.000000"), std::string::npos) << r.out;  // reading went on
-  EXPECT_NE(r.out.find("2 frames decoded, 0 with IDs not in pumptherm.dbc, 0 shorter than their message, 2 bad lines skipped"),
-            std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("2 frames decoded, 0 with IDs not in pumptherm.dbc, 0 shorter than their "
+                       "message, 2 bad lines skipped"),
+            std::string::npos)
+      << r.out;
 }
 
 // pumptherm.dbc's IDs are per pump (DBC ID + node ID): without --node-id-limit a pump's frames
@@ -151,17 +163,25 @@ TEST(DbcCliTest, UnknownPerPumpFramesNameTheNodeIdOption) {
   const fs::path log = TempFile("perpump.log");
   std::ofstream(log) << "(1.000000) can0 203#0622784000000207\n(2.000000) can0 7FF#00\n";
   const RunResult plain = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + log.string() + "'");
-  const RunResult offset = RunPumptherm("dbc decode --dbc pumptherm.dbc --node-id-limit 16 '" + log.string() + "'");
+  const RunResult offset =
+      RunPumptherm("dbc decode --dbc pumptherm.dbc --node-id-limit 16 '" + log.string() + "'");
   fs::remove(log);
   EXPECT_EQ(plain.exit_code, 0) << plain.out;
-  EXPECT_NE(plain.out.find("0 frames decoded, 2 with IDs not in pumptherm.dbc"), std::string::npos) << plain.out;
-  EXPECT_NE(plain.out.find("1 of the unknown frames are a message at CAN ID = DBC ID + node ID (node below 16)"),
-            std::string::npos) << plain.out;
-  EXPECT_NE(offset.out.find("1 frames decoded, 1 with IDs not in pumptherm.dbc"), std::string::npos) << offset.out;
-  EXPECT_EQ(offset.out.find("of the unknown frames are a message"), std::string::npos) << offset.out;
+  EXPECT_NE(plain.out.find("0 frames decoded, 2 with IDs not in pumptherm.dbc"), std::string::npos)
+      << plain.out;
+  EXPECT_NE(
+      plain.out.find(
+          "1 of the unknown frames are a message at CAN ID = DBC ID + node ID (node below 16)"),
+      std::string::npos)
+      << plain.out;
+  EXPECT_NE(offset.out.find("1 frames decoded, 1 with IDs not in pumptherm.dbc"), std::string::npos)
+      << offset.out;
+  EXPECT_EQ(offset.out.find("of the unknown frames are a message"), std::string::npos)
+      << offset.out;
 }
 
-/// PUMP_FAST_I of pump 3 as our encoder writes it (Id 12.345 A, Iq -0.5 A, 2199.11 rad/s, counter 7).
+/// PUMP_FAST_I of pump 3 as our encoder writes it (Id 12.345 A, Iq -0.5 A, 2199.11 rad/s, counter
+/// 7).
 CanFrame FastFrameOfPump3() {
   const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "pumptherm.dbc");
   const DbcMessage& fast = *dbc.FindMessage("PUMP_FAST_I");
@@ -169,7 +189,8 @@ CanFrame FastFrameOfPump3() {
   f.id = fast.id + 3;
   f.len = 8;
   const std::vector<double> values = {12.345, -0.5, 2199.11, 7};
-  EXPECT_EQ(MessageCodec(fast).Encode(values, std::span<std::uint8_t>(f.data.data(), 8)).status, CodecStatus::kOk);
+  EXPECT_EQ(MessageCodec(fast).Encode(values, std::span<std::uint8_t>(f.data.data(), 8)).status,
+            CodecStatus::kOk);
   return f;
 }
 
@@ -179,28 +200,42 @@ TEST(DbcCliTest, AnnotateEchoesEveryLineAsCantoolsDecodeDoes) {
   unknown.id = 0x7FF;
   const std::string frame_line = FormatCandumpLine(1700000000123456, "vcan0", f);
   const fs::path log = TempFile("annotate.log");
-  std::ofstream(log) << "# recorded on the bench\n" << frame_line << '\n'
+  std::ofstream(log) << "# recorded on the bench\n"
+                     << frame_line << '\n'
                      << FormatCandumpLine(1700000000133456, "vcan0", unknown) << '\n'
                      << "(2.0) vcan0 10Z#00\n";
-  RunResult r = RunPumptherm("dbc decode --dbc pumptherm.dbc --node-id-limit 16 --format annotate -s", log.string());
+  RunResult r = RunPumptherm(
+      "dbc decode --dbc pumptherm.dbc --node-id-limit 16 --format annotate -s", log.string());
   EXPECT_EQ(r.exit_code, 0) << r.out;
   // Lines that are not frames come back unchanged; a frame gets " ::" and its message.
   EXPECT_NE(r.out.find("# recorded on the bench\n" + frame_line +
-                       " :: PUMP_FAST_I[node 3](Id_A: 12.345 A, Iq_A: -0.5 A, SpeedElec_rad_per_s: 2199.11 rad/s, "
+                       " :: PUMP_FAST_I[node 3](Id_A: 12.345 A, Iq_A: -0.5 A, SpeedElec_rad_per_s: "
+                       "2199.11 rad/s, "
                        "RollingCounter: 7)\n(1700000000.133456) vcan0 7FF#"),
-            std::string::npos) << r.out;
+            std::string::npos)
+      << r.out;
   EXPECT_NE(r.out.find(" :: Unknown frame id 2047 (0x7ff)\n"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("\n(2.0) vcan0 10Z#00\n"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("<stdin>:4:15: warning: expected a hexadecimal CAN ID; line passed through undecoded"),
-            std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("1 frames decoded, 1 with IDs not in pumptherm.dbc, 0 shorter than their message, 1 bad "
-                       "lines passed through undecoded"), std::string::npos) << r.out;
+  EXPECT_NE(
+      r.out.find(
+          "<stdin>:4:15: warning: expected a hexadecimal CAN ID; line passed through undecoded"),
+      std::string::npos)
+      << r.out;
+  EXPECT_NE(
+      r.out.find(
+          "1 frames decoded, 1 with IDs not in pumptherm.dbc, 0 shorter than their message, 1 bad "
+          "lines passed through undecoded"),
+      std::string::npos)
+      << r.out;
 
   // Without -s: one signal per indented line, as cantools decode's default.
-  r = RunPumptherm("dbc decode --dbc pumptherm.dbc --node-id-limit 16 --format annotate '" + log.string() + "'");
-  EXPECT_NE(r.out.find(frame_line + " ::\nPUMP_FAST_I[node 3](\n    Id_A: 12.345 A,\n    Iq_A: -0.5 A,\n"
+  r = RunPumptherm("dbc decode --dbc pumptherm.dbc --node-id-limit 16 --format annotate '" +
+                   log.string() + "'");
+  EXPECT_NE(r.out.find(frame_line +
+                       " ::\nPUMP_FAST_I[node 3](\n    Id_A: 12.345 A,\n    Iq_A: -0.5 A,\n"
                        "    SpeedElec_rad_per_s: 2199.11 rad/s,\n    RollingCounter: 7\n)\n"),
-            std::string::npos) << r.out;
+            std::string::npos)
+      << r.out;
   fs::remove(log);
 }
 
@@ -214,18 +249,23 @@ TEST(DbcCliTest, AnnotatePrintsValueLabelsAndLeavesOutUnselectedMuxSignals) {
   CanFrame f;
   f.id = alarm.id;
   f.len = static_cast<std::uint8_t>(alarm.size_bytes);
-  ASSERT_EQ(MessageCodec(alarm).Encode(values, std::span<std::uint8_t>(f.data.data(), f.len)).status, CodecStatus::kOk);
+  ASSERT_EQ(
+      MessageCodec(alarm).Encode(values, std::span<std::uint8_t>(f.data.data(), f.len)).status,
+      CodecStatus::kOk);
   const fs::path log = TempFile("alarm.log");
   std::ofstream(log) << FormatCandumpLine(1, "can0", f) << '\n';
-  RunResult r = RunPumptherm("dbc decode --dbc pumptherm.dbc --format annotate -s '" + log.string() + "'");
+  RunResult r =
+      RunPumptherm("dbc decode --dbc pumptherm.dbc --format annotate -s '" + log.string() + "'");
   EXPECT_NE(r.out.find("AlarmNode: none"), std::string::npos) << r.out;
 
   // Multiplexed signals: only those the multiplexer selects are printed (as cantools does).
   const fs::path mux_dbc = TempFile("mux.dbc");
-  std::ofstream(mux_dbc) << "BO_ 100 MUXED: 2 X\n SG_ Sel M : 0|8@1+ (1,0) [0|1] \"\" X\n"
-                         << " SG_ A_V m0 : 8|8@1+ (1,0) [0|255] \"V\" X\n SG_ B_A m1 : 8|8@1+ (1,0) [0|255] \"A\" X\n";
+  std::ofstream(mux_dbc)
+      << "BO_ 100 MUXED: 2 X\n SG_ Sel M : 0|8@1+ (1,0) [0|1] \"\" X\n"
+      << " SG_ A_V m0 : 8|8@1+ (1,0) [0|255] \"V\" X\n SG_ B_A m1 : 8|8@1+ (1,0) [0|255] \"A\" X\n";
   std::ofstream(log) << "(1.000000) can0 064#0105\n(2.000000) can0 064#0007\n";
-  r = RunPumptherm("dbc decode --dbc '" + mux_dbc.string() + "' --format annotate -s '" + log.string() + "'");
+  r = RunPumptherm("dbc decode --dbc '" + mux_dbc.string() + "' --format annotate -s '" +
+                   log.string() + "'");
   EXPECT_NE(r.out.find("064#0105 :: MUXED(Sel: 1, B_A: 5 A)\n"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("064#0007 :: MUXED(Sel: 0, A_V: 7 V)\n"), std::string::npos) << r.out;
   fs::remove(mux_dbc);
@@ -245,8 +285,8 @@ TEST(DbcCliTest, AnnotateFromAPipeAnswersEachLineAtOnce) {
     dup2(from_child[1], 1);
     close(to_child[1]);
     close(from_child[0]);
-    execl(PUMPTHERM_BIN, PUMPTHERM_BIN, "dbc", "decode", "--dbc", "pumptherm.dbc", "--node-id-limit", "16",
-          "--format", "annotate", "-s", static_cast<char*>(nullptr));
+    execl(PUMPTHERM_BIN, PUMPTHERM_BIN, "dbc", "decode", "--dbc", "pumptherm.dbc",
+          "--node-id-limit", "16", "--format", "annotate", "-s", static_cast<char*>(nullptr));
     _exit(127);
   }
   close(to_child[0]);
@@ -266,7 +306,8 @@ TEST(DbcCliTest, AnnotateFromAPipeAnswersEachLineAtOnce) {
   close(from_child[0]);
   int status = 0;
   waitpid(pid, &status, 0);
-  EXPECT_NE(out.find(" :: PUMP_FAST_I[node 3](Id_A: 12.345 A"), std::string::npos) << "got: '" << out << "'";
+  EXPECT_NE(out.find(" :: PUMP_FAST_I[node 3](Id_A: 12.345 A"), std::string::npos)
+      << "got: '" << out << "'";
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
 }
 

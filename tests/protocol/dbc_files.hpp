@@ -23,7 +23,8 @@ inline std::filesystem::path SourceDir() {
 /// PUMPTHERM_SHARED_DIR names another copy of shared/ (a git worktree sits elsewhere).
 inline std::filesystem::path SharedDbcDir() {
   const char* shared = std::getenv("PUMPTHERM_SHARED_DIR");
-  const std::filesystem::path root = shared != nullptr ? std::filesystem::path(shared) : SourceDir() / ".." / "shared";
+  const std::filesystem::path root =
+      shared != nullptr ? std::filesystem::path(shared) : SourceDir() / ".." / "shared";
   return root / "data" / "dbc";
 }
 

@@ -1,7 +1,6 @@
 // DBC reader: every construct the reader supports on a hand-written file, errors with line and
 // column, and every real DBC under ../shared/data/dbc/ loading.
 #include "protocol/dbc.hpp"
-#include "protocol/codec.hpp"
 
 #include <gtest/gtest.h>
 
@@ -10,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "protocol/codec.hpp"
 #include "tests/protocol/dbc_files.hpp"
 
 namespace pumptherm::protocol {
@@ -179,7 +179,8 @@ TEST(DbcTest, ErrorsNameLineColumnAndWhatWasExpected) {
   ExpectError("BO_ 1 M: 8 X\n SG_ S : 510|16@1+ (1,0) [0|0] \"\" X\n", 2, 1, "beyond 64 bytes");
   ExpectError("BO_ 536870912 M: 8 X\n", 1, 1, "above 29 bits");
   ExpectError("BO_ 1 M: 65 X\n", 1, 10, "above 64 bytes");
-  ExpectError("BO_ 1 M: 8 X\n SG_ S m1 : 0|8@1+ (1,0) [0|0] \"\" X\n", 2, 1, "0 top-level multiplexers");
+  ExpectError("BO_ 1 M: 8 X\n SG_ S m1 : 0|8@1+ (1,0) [0|0] \"\" X\n", 2, 1,
+              "0 top-level multiplexers");
   ExpectError("12 BO_\n", 1, 1, "a DBC keyword");
 }
 
@@ -190,30 +191,39 @@ TEST(DbcTest, MalformedStatementsAreSkippedWithWhereAndTheRestLoads) {
     return n != nullptr && n->signals.size() == 1 && n->signals[0].name == "T";
   };
   // One SG_ skipped: the message keeps its other signals.
-  Dbc dbc = ExpectSkipped("BO_ 1 M: 8 X\n SG_ S : 0|8@2+ (1,0) [0|0] \"\" X\n SG_ U : 8|8@1+ (1,0) [0|0] \"\" X\n" + next,
-                          2, 14, "byte order");
+  Dbc dbc = ExpectSkipped(
+      "BO_ 1 M: 8 X\n SG_ S : 0|8@2+ (1,0) [0|0] \"\" X\n SG_ U : 8|8@1+ (1,0) [0|0] \"\" X\n" +
+          next,
+      2, 14, "byte order");
   ASSERT_NE(dbc.FindMessage("M"), nullptr);
   ASSERT_EQ(dbc.FindMessage("M")->signals.size(), 1u);
   EXPECT_EQ(dbc.FindMessage("M")->signals[0].name, "U");
   EXPECT_TRUE(loads_next(dbc));
   EXPECT_NE(dbc.problems[0].message.find("signal skipped"), std::string::npos);
-  EXPECT_TRUE(loads_next(ExpectSkipped("BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0 [0|0] \"\" X\n" + next, 2, 22, "')'")));
-  EXPECT_TRUE(loads_next(ExpectSkipped("BO_ 1 M: 8 X\n SG_ S : 0|0@1+ (1,0) [0|0] \"\" X\n" + next, 2, 12, "1 to 64 bits")));
-  dbc = ExpectSkipped("BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ S : 8|8@1+ (1,0) [0|0] \"\" X\n" + next,
-                      3, 6, "duplicate signal S");
+  EXPECT_TRUE(loads_next(
+      ExpectSkipped("BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0 [0|0] \"\" X\n" + next, 2, 22, "')'")));
+  EXPECT_TRUE(loads_next(ExpectSkipped("BO_ 1 M: 8 X\n SG_ S : 0|0@1+ (1,0) [0|0] \"\" X\n" + next,
+                                       2, 12, "1 to 64 bits")));
+  dbc = ExpectSkipped(
+      "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ S : 8|8@1+ (1,0) [0|0] \"\" X\n" +
+          next,
+      3, 6, "duplicate signal S");
   EXPECT_EQ(dbc.FindMessage("M")->signals.size(), 1u);
   // A duplicate message ID: the second message and its signals are skipped.
-  dbc = ExpectSkipped("BO_ 1 M: 8 X\nBO_ 1 Dup: 8 X\n SG_ D : 0|8@1+ (1,0) [0|0] \"\" X\n" + next, 2, 1,
-                      "duplicate message ID");
+  dbc = ExpectSkipped("BO_ 1 M: 8 X\nBO_ 1 Dup: 8 X\n SG_ D : 0|8@1+ (1,0) [0|0] \"\" X\n" + next,
+                      2, 1, "duplicate message ID");
   EXPECT_EQ(dbc.FindMessage("Dup"), nullptr);
   EXPECT_TRUE(dbc.FindMessage("M")->signals.empty());
   EXPECT_TRUE(loads_next(dbc));
-  dbc = ExpectSkipped("BO_ 1 M: 65 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n" + next, 1, 10, "above 64 bytes");
+  dbc = ExpectSkipped("BO_ 1 M: 65 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n" + next, 1, 10,
+                      "above 64 bytes");
   EXPECT_EQ(dbc.FindMessage("M"), nullptr);
   EXPECT_TRUE(loads_next(dbc));
-  // An IEEE type that does not fit the signal: the SIG_VALTYPE_ is skipped, the signal stays an integer.
-  dbc = ExpectSkipped("BO_ 1 M: 8 X\n SG_ F : 0|16@1+ (1,0) [0|0] \"\" X\nSIG_VALTYPE_ 1 F : 1;\n" + next, 3, 20,
-                      "needs 32");
+  // An IEEE type that does not fit the signal: the SIG_VALTYPE_ is skipped, the signal stays an
+  // integer.
+  dbc = ExpectSkipped(
+      "BO_ 1 M: 8 X\n SG_ F : 0|16@1+ (1,0) [0|0] \"\" X\nSIG_VALTYPE_ 1 F : 1;\n" + next, 3, 20,
+      "needs 32");
   EXPECT_EQ(dbc.FindMessage("M")->signals[0].value_type, SignalValueType::kInteger);
   EXPECT_TRUE(loads_next(dbc));
 }
@@ -225,7 +235,8 @@ TEST(DbcTest, MessageIdsWithBit30AreSkippedWithTheirReferences) {
       "BO_ 3221225763 Bad: 8 X\n SG_ B : 0|8@1+ (1,0) [0|0] \"\" X\n"
       "BO_ 2147483940 Good: 8 X\n SG_ G : 0|8@1+ (1,0) [0|0] \"\" X\n"
       "BA_DEF_ BO_ \"GenMsgCycleTime\" INT 0 10000;\n"
-      "CM_ BO_ 3221225763 \"bad\";\nCM_ SG_ 3221225763 B \"bad\";\nBA_ \"GenMsgCycleTime\" BO_ 3221225763 10;\n"
+      "CM_ BO_ 3221225763 \"bad\";\nCM_ SG_ 3221225763 B \"bad\";\nBA_ \"GenMsgCycleTime\" BO_ "
+      "3221225763 10;\n"
       "VAL_ 3221225763 B 0 \"zero\" ;\n",
       1, 1, "above 29 bits");
   ASSERT_EQ(dbc.messages.size(), 1u);
@@ -253,20 +264,23 @@ TEST(DbcTest, StringGenSigSnaIsAWarningAndIgnored) {
   EXPECT_FALSE(dbc.messages[0].signals[0].not_available_raw.has_value());
   const MessageCodec codec(dbc.messages[0]);
   std::vector<double> v(1);
-  ASSERT_EQ(codec.Decode(std::vector<std::uint8_t>{0xFF, 0x0F, 0, 0, 0, 0, 0, 0}, v), CodecStatus::kOk);
+  ASSERT_EQ(codec.Decode(std::vector<std::uint8_t>{0xFF, 0x0F, 0, 0, 0, 0, 0, 0}, v),
+            CodecStatus::kOk);
   EXPECT_EQ(v[0], 4095.0);  // a real value, not "not available"
 }
 
-// Raw values beyond the 64-bit range are a skipped statement, not undefined behaviour in the conversion
-// (dbc_reader_fuzz found a value description 4.44444e+101 under UBSan).
+// Raw values beyond the 64-bit range are a skipped statement, not undefined behaviour in the
+// conversion (dbc_reader_fuzz found a value description 4.44444e+101 under UBSan).
 TEST(DbcTest, RawValuesOutsideThe64BitRangeAreErrors) {
   const std::string message = "BO_ 1 M: 8 X\n SG_ S : 0|8@1+ (1,0) [0|0] \"\" X\n";
   ExpectSkipped(message + "VAL_ 1 S 4.44444e+101 \"huge\" ;\n", 3, 10, "64-bit integer range");
   ExpectSkipped(message + "VAL_ 1 S -1e19 \"huge\" ;\n", 3, 10, "64-bit integer range");
-  ExpectSkipped(message + "BA_DEF_ SG_ \"GenSigSNA\" FLOAT 0 1e300;\nBA_ \"GenSigSNA\" SG_ 1 S 1e30;\n", 4, 1,
-                "within the 64-bit range");
+  ExpectSkipped(
+      message + "BA_DEF_ SG_ \"GenSigSNA\" FLOAT 0 1e300;\nBA_ \"GenSigSNA\" SG_ 1 S 1e30;\n", 4, 1,
+      "within the 64-bit range");
   // The largest values that fit are fine.
-  const Dbc dbc = ParseDbc(message + "VAL_ 1 S 4294967295 \"u32\" -9223372036854775808 \"min\" ;\n", "ok.dbc");
+  const Dbc dbc =
+      ParseDbc(message + "VAL_ 1 S 4294967295 \"u32\" -9223372036854775808 \"min\" ;\n", "ok.dbc");
   ASSERT_EQ(dbc.messages.size(), 1u);
 }
 
@@ -298,7 +312,8 @@ TEST(DbcTest, ReadsAnIdAbove11BitsWithoutTheFlagAs29Bit) {
 
 TEST(DbcTest, RejectsMultiplexerCycles) {
   ExpectError(
-      "BO_ 1 M: 8 X\n SG_ A m1M : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ B m1M : 8|8@1+ (1,0) [0|0] \"\" X\n"
+      "BO_ 1 M: 8 X\n SG_ A m1M : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ B m1M : 8|8@1+ (1,0) [0|0] \"\" "
+      "X\n"
       "SG_MUL_VAL_ 1 A B 1-1;\nSG_MUL_VAL_ 1 B A 1-1;\n",
       2, 1, "multiplexer cycle");
 }
@@ -323,7 +338,8 @@ TEST(DbcTest, EveryRealDbcLoads) {
 
 TEST(DbcTest, PumpthermFrameSetIsCompleteAndConsistent) {
   const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "protocol/pumptherm.dbc");
-  EXPECT_TRUE(dbc.problems.empty()) << dbc.problems.front().line << ": " << dbc.problems.front().message;
+  EXPECT_TRUE(dbc.problems.empty())
+      << dbc.problems.front().line << ": " << dbc.problems.front().message;
   EXPECT_EQ(dbc.messages.size(), 11u);
   for (const auto& m : dbc.messages) {
     SCOPED_TRACE(m.name);
@@ -338,7 +354,8 @@ TEST(DbcTest, PumpthermFrameSetIsCompleteAndConsistent) {
       EXPECT_LE(SignalEndByte(s), m.size_bytes);
       // The declared physical range lies inside what the raw field can carry, and the
       // "not available" raw value lies outside the declared range.
-      const double raw_lo = s.is_signed ? -std::ldexp(1.0, static_cast<int>(s.length_bits) - 1) : 0.0;
+      const double raw_lo =
+          s.is_signed ? -std::ldexp(1.0, static_cast<int>(s.length_bits) - 1) : 0.0;
       const double raw_hi = s.is_signed ? std::ldexp(1.0, static_cast<int>(s.length_bits) - 1) - 1
                                         : std::ldexp(1.0, static_cast<int>(s.length_bits)) - 1;
       EXPECT_GE(s.minimum, raw_lo * s.factor + s.offset - 1e-9);

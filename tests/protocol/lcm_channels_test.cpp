@@ -50,9 +50,9 @@ TEST(LcmChannels, InvalidNamesAreRefusedWithTheName) {
 }
 
 TEST(LcmChannels, ParseInvertsPumpChannelName) {
-  for (const PumpChannel c : {PumpChannel::kTelemetry, PumpChannel::kTemperatures,
-                              PumpChannel::kAlarm, PumpChannel::kAlarmClear,
-                              PumpChannel::kAlarmClearReply}) {
+  for (const PumpChannel c :
+       {PumpChannel::kTelemetry, PumpChannel::kTemperatures, PumpChannel::kAlarm,
+        PumpChannel::kAlarmClear, PumpChannel::kAlarmClearReply}) {
     const auto parsed = ParsePumpChannel("SITE.1/PT", PumpChannelName("SITE.1/PT", "tmp-7", c));
     ASSERT_TRUE(parsed.has_value());
     EXPECT_EQ(parsed->pump, "tmp-7");
@@ -86,8 +86,11 @@ TEST(LcmChannels, AllPumpsPatternMatchesInLcm) {
       PumpChannelName(prefix, "tmp1", PumpChannel::kAlarmClear),
       PumpChannelName(prefix, "line-2.b", PumpChannel::kAlarmClear)};
   const std::vector<std::string> not_matching{
-      "SITEx1/PT/tmp1/ALARM_CLEAR", "SITE.1/PT/tmp1/ALARM", "SITE.1/PT/a/b/ALARM_CLEAR",
-      "SITE.1/PT/tmp1/ALARM_CLEAR2", "X/SITE.1/PT/tmp1/ALARM_CLEAR",
+      "SITEx1/PT/tmp1/ALARM_CLEAR",
+      "SITE.1/PT/tmp1/ALARM",
+      "SITE.1/PT/a/b/ALARM_CLEAR",
+      "SITE.1/PT/tmp1/ALARM_CLEAR2",
+      "X/SITE.1/PT/tmp1/ALARM_CLEAR",
       PumpChannelName(prefix, "tmp1", PumpChannel::kAlarmClearReply)};
   pumptherm::alarm_clear_t message;
   message.utime = 1;

@@ -128,7 +128,8 @@ void FlattenInto(Flat& f, const std::string& p, const alarm_clear_t& m) {
   f.Text(p + ".comment", m.comment);
   f.Integer(p + ".counter", m.counter);
   // Java's byte is signed.
-  for (std::size_t i = 0; i < 32; ++i) f.Integer(Index(p + ".mac", i), static_cast<std::int8_t>(m.mac[i]));
+  for (std::size_t i = 0; i < 32; ++i)
+    f.Integer(Index(p + ".mac", i), static_cast<std::int8_t>(m.mac[i]));
 }
 
 void FlattenInto(Flat& f, const std::string& p, const alarm_clear_reply_t& m) {
@@ -139,7 +140,8 @@ void FlattenInto(Flat& f, const std::string& p, const alarm_clear_reply_t& m) {
   f.Text(p + ".reason", m.reason);
   f.Integer(p + ".last_counter", m.last_counter);
   f.Bool(p + ".trip_latched", m.trip_latched);
-  for (std::size_t i = 0; i < 32; ++i) f.Integer(Index(p + ".mac", i), static_cast<std::int8_t>(m.mac[i]));
+  for (std::size_t i = 0; i < 32; ++i)
+    f.Integer(Index(p + ".mac", i), static_cast<std::int8_t>(m.mac[i]));
 }
 
 void FlattenInto(Flat& f, const std::string& p, const gateway_health_t& m) {

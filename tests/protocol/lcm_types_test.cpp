@@ -133,10 +133,10 @@ TEST(LcmTypes, InflatedArrayCountIsRefused) {
 }
 
 TEST(LcmTypes, FingerprintsAndNamesAreDistinct) {
-  const std::set<std::int64_t> hashes{telemetry_t::getHash(),       temperatures_t::getHash(),
-                                      alarm_t::getHash(),           alarm_condition_t::getHash(),
-                                      alarm_clear_t::getHash(),     gateway_health_t::getHash(),
-                                      interface_health_t::getHash(), alarm_clear_reply_t::getHash()};
+  const std::set<std::int64_t> hashes{
+      telemetry_t::getHash(),        temperatures_t::getHash(),     alarm_t::getHash(),
+      alarm_condition_t::getHash(),  alarm_clear_t::getHash(),      gateway_health_t::getHash(),
+      interface_health_t::getHash(), alarm_clear_reply_t::getHash()};
   EXPECT_EQ(hashes.size(), 8U);
   EXPECT_STREQ(telemetry_t::getTypeName(), "telemetry_t");
   EXPECT_STREQ(temperatures_t::getTypeName(), "temperatures_t");
@@ -158,13 +158,14 @@ TEST(LcmTypes, AlarmClearWireLayoutFollowsTheSpecification) {
   m.counter = 0x1112131415161718;
   for (int i = 0; i < 32; ++i) m.mac[i] = static_cast<std::uint8_t>(0xA0 + i);
   const std::vector<std::uint8_t> bytes = Encode(m);
-  std::vector<std::uint8_t> body{0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08,  // utime
-                                 0,    0,    0,    2,    'p',  0,                 // pump
-                                 0,    0,    0,    1,    0,                       // node ""
-                                 0,    0,    0,    2,    's',  0,                 // source
-                                 0,    0,    0,    1,    0,                       // comment ""
+  std::vector<std::uint8_t> body{0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08,   // utime
+                                 0,    0,    0,    2,    'p',  0,                  // pump
+                                 0,    0,    0,    1,    0,                        // node ""
+                                 0,    0,    0,    2,    's',  0,                  // source
+                                 0,    0,    0,    1,    0,                        // comment ""
                                  0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18};  // counter
-  for (int i = 0; i < 32; ++i) body.push_back(static_cast<std::uint8_t>(0xA0 + i));  // mac: 32 bytes, no length
+  for (int i = 0; i < 32; ++i)
+    body.push_back(static_cast<std::uint8_t>(0xA0 + i));  // mac: 32 bytes, no length
   ASSERT_EQ(bytes.size(), 8 + body.size());
   EXPECT_EQ(std::vector<std::uint8_t>(bytes.begin() + 8, bytes.end()), body);
   std::uint64_t hash = 0;

@@ -22,7 +22,8 @@ uq_V = { message = "PUMP_FAST_U", signal = "Uq_V" }
 )";
 
 /// Expects ParseMapping(text) to throw a MappingError whose text contains every needle.
-void ExpectMappingError(const std::string& text, const Dbc& dbc, std::initializer_list<const char*> needles) {
+void ExpectMappingError(const std::string& text, const Dbc& dbc,
+                        std::initializer_list<const char*> needles) {
   try {
     ParseMapping(text, "m.toml", dbc);
     ADD_FAILURE() << "no error for:\n" << text;
@@ -52,7 +53,9 @@ TEST(MappingTest, ShippedMappingResolvesEverySignal) {
   EXPECT_EQ(fast.signals[static_cast<std::size_t>(id.signal_index)].name, "Id_A");
   EXPECT_EQ(id.scale, 1.0);
   const SignalRef& rotor = m.node_temperatures.at("rotor");
-  EXPECT_EQ(dbc.messages[static_cast<std::size_t>(rotor.message_index)].signals[static_cast<std::size_t>(rotor.signal_index)].name,
+  EXPECT_EQ(dbc.messages[static_cast<std::size_t>(rotor.message_index)]
+                .signals[static_cast<std::size_t>(rotor.signal_index)]
+                .name,
             "Rotor_degC");
   // Pump 3's fast frame: 0x100 + 3.
   EXPECT_EQ(m.CanId(dbc, id.message_index, 3), 0x103u);
@@ -61,10 +64,10 @@ TEST(MappingTest, ShippedMappingResolvesEverySignal) {
 
 TEST(MappingTest, ScaleAndOffsetAreRead) {
   const Dbc dbc = PumpthermDbc();
-  const SignalMapping m = ParseMapping(
-      std::string(kMinimal) +
-          "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\", scale = 0.5, offset = -1 }\n",
-      "m.toml", dbc);
+  const SignalMapping m = ParseMapping(std::string(kMinimal) +
+                                           "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = "
+                                           "\"SpeedMech_rpm\", scale = 0.5, offset = -1 }\n",
+                                       "m.toml", dbc);
   EXPECT_EQ(m.input(MappingInput::kSpeedMechRpm)->scale, 0.5);
   EXPECT_EQ(m.input(MappingInput::kSpeedMechRpm)->offset, -1.0);
   EXPECT_FALSE(m.input(MappingInput::kDcLinkV).has_value());
@@ -73,10 +76,12 @@ TEST(MappingTest, ScaleAndOffsetAreRead) {
 TEST(MappingTest, OldOutputKeysStillWorkAndAreReportedDeprecated) {
   const Dbc dbc = PumpthermDbc();
   const std::string kWithSpeed =
-      std::string(kMinimal) + "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
+      std::string(kMinimal) +
+      "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
   // The names before one name per quantity (docs/daemon.md, "Names").
   const SignalMapping m = ParseMapping(
-      kWithSpeed + "[outputs]\n"
+      kWithSpeed +
+          "[outputs]\n"
           "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n"
           "winding_res_sd_K = { message = \"GW_IDENT_SD\", signal = \"WindingResSd_K\" }\n"
           "magnet_flux_temp_degC = { message = \"GW_IDENT\", signal = \"MagnetFlux_degC\" }\n",
@@ -88,62 +93,88 @@ TEST(MappingTest, OldOutputKeysStillWorkAndAreReportedDeprecated) {
   std::string all;
   for (const auto& d : m.deprecations) all += d + "\n";
   EXPECT_NE(all.find("m.toml:9:25: key outputs.winding_res_temp_degC is deprecated: it is now "
-                     "outputs.winding_resistance_degC\n"), std::string::npos) << all;
-  EXPECT_NE(all.find("key outputs.winding_res_sd_K is deprecated: it is now outputs.winding_resistance_sd_K"),
-            std::string::npos) << all;
-  EXPECT_NE(all.find("key outputs.magnet_flux_temp_degC is deprecated: it is now outputs.magnet_flux_degC"),
-            std::string::npos) << all;
+                     "outputs.winding_resistance_degC\n"),
+            std::string::npos)
+      << all;
+  EXPECT_NE(
+      all.find(
+          "key outputs.winding_res_sd_K is deprecated: it is now outputs.winding_resistance_sd_K"),
+      std::string::npos)
+      << all;
+  EXPECT_NE(
+      all.find(
+          "key outputs.magnet_flux_temp_degC is deprecated: it is now outputs.magnet_flux_degC"),
+      std::string::npos)
+      << all;
   // The current names give no such line; both names at once are an error.
-  const SignalMapping now = ParseMapping(
-      kWithSpeed + "[outputs]\nwinding_resistance_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
-      "m.toml", dbc);
+  const SignalMapping now = ParseMapping(kWithSpeed +
+                                             "[outputs]\nwinding_resistance_degC = { message = "
+                                             "\"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
+                                         "m.toml", dbc);
   EXPECT_TRUE(now.deprecations.empty());
-  ExpectMappingError(kWithSpeed + "[outputs]\n"
-                         "winding_resistance_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n"
-                         "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
-                     dbc, {"outputs.winding_resistance_degC is given twice"});
+  ExpectMappingError(
+      kWithSpeed +
+          "[outputs]\n"
+          "winding_resistance_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n"
+          "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
+      dbc, {"outputs.winding_resistance_degC is given twice"});
 }
 
 TEST(MappingTest, UnknownMessageOrSignalIsNamed) {
   const Dbc dbc = PumpthermDbc();
-  const std::string speed = "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
+  const std::string speed =
+      "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
   ExpectMappingError(std::string(kMinimal) + speed +
                          "dc_link_V = { message = \"PUMP_STATUSS\", signal = \"DcLink_V\" }\n",
-                     dbc, {"m.toml:8:", "inputs.dc_link_V.message", "unknown message PUMP_STATUSS"});
-  ExpectMappingError(std::string(kMinimal) + speed +
-                         "dc_link_V = { message = \"PUMP_STATUS\", signal = \"DcLink\" }\n",
-                     dbc, {"m.toml:8:", "inputs.dc_link_V.signal", "unknown signal DcLink in message PUMP_STATUS"});
-  ExpectMappingError(std::string(kMinimal) + speed + "[outputs.nodes]\nrotor = { message = \"GW_TEMPS_B\" }\n", dbc,
-                     {"outputs.nodes.rotor.signal", "expected the DBC signal name"});
+                     dbc,
+                     {"m.toml:8:", "inputs.dc_link_V.message", "unknown message PUMP_STATUSS"});
+  ExpectMappingError(
+      std::string(kMinimal) + speed +
+          "dc_link_V = { message = \"PUMP_STATUS\", signal = \"DcLink\" }\n",
+      dbc,
+      {"m.toml:8:", "inputs.dc_link_V.signal", "unknown signal DcLink in message PUMP_STATUS"});
+  ExpectMappingError(
+      std::string(kMinimal) + speed + "[outputs.nodes]\nrotor = { message = \"GW_TEMPS_B\" }\n",
+      dbc, {"outputs.nodes.rotor.signal", "expected the DBC signal name"});
 }
 
 TEST(MappingTest, UnknownKeysAndMissingInputsAreErrors) {
   const Dbc dbc = PumpthermDbc();
-  const std::string speed = "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
-  ExpectMappingError(std::string(kMinimal) + speed + "speed_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n",
+  const std::string speed =
+      "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
+  ExpectMappingError(std::string(kMinimal) + speed +
+                         "speed_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n",
                      dbc, {"m.toml:8:1", "inputs.speed_rpm", "unknown inputs"});
-  ExpectMappingError(std::string(kMinimal) + speed + "dc_link_V = { message = \"PUMP_STATUS\", signal = \"DcLink_V\", gain = 2 }\n",
-                     dbc, {"inputs.dc_link_V.gain", "unknown key"});
-  ExpectMappingError(std::string("nodeid_limit = 3\n") + kMinimal + speed, dbc, {"m.toml:1:1", "nodeid_limit"});
-  ExpectMappingError(kMinimal, dbc, {"missing required input speed_elec_rad_per_s or speed_mech_rpm"});
-  ExpectMappingError("[inputs]\nid_A = { message = \"PUMP_FAST_I\", signal = \"Id_A\" }\n", dbc,
-                     {"missing required input iq_A, ud_V, uq_V, speed_elec_rad_per_s or speed_mech_rpm"});
+  ExpectMappingError(
+      std::string(kMinimal) + speed +
+          "dc_link_V = { message = \"PUMP_STATUS\", signal = \"DcLink_V\", gain = 2 }\n",
+      dbc, {"inputs.dc_link_V.gain", "unknown key"});
+  ExpectMappingError(std::string("nodeid_limit = 3\n") + kMinimal + speed, dbc,
+                     {"m.toml:1:1", "nodeid_limit"});
+  ExpectMappingError(kMinimal, dbc,
+                     {"missing required input speed_elec_rad_per_s or speed_mech_rpm"});
+  ExpectMappingError(
+      "[inputs]\nid_A = { message = \"PUMP_FAST_I\", signal = \"Id_A\" }\n", dbc,
+      {"missing required input iq_A, ud_V, uq_V, speed_elec_rad_per_s or speed_mech_rpm"});
   ExpectMappingError("[inputs\n", dbc, {"m.toml:1:"});
 }
 
 TEST(MappingTest, NodeIdBlocksMustNotOverlapOrOverflow) {
   const Dbc dbc = PumpthermDbc();
-  const std::string speed = "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
+  const std::string speed =
+      "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
   // PUMP_FAST_I (0x100) and PUMP_FAST_U (0x110) are 16 apart: 17 pumps would collide.
   ExpectMappingError(std::string("node_id_limit = 17\n") + kMinimal + speed, dbc,
                      {"PUMP_FAST_I", "PUMP_FAST_U", "closer than node_id_limit 17"});
   ExpectMappingError(std::string("node_id_limit = 0\n") + kMinimal + speed, dbc, {"1 to 65536"});
   const Dbc high = ParseDbc(
       "BO_ 2040 F: 8 X\n SG_ I : 0|8@1+ (1,0) [0|0] \"\" X\n SG_ Q : 8|8@1+ (1,0) [0|0] \"\" X\n"
-      " SG_ D : 16|8@1+ (1,0) [0|0] \"\" X\n SG_ U : 24|8@1+ (1,0) [0|0] \"\" X\n SG_ W : 32|8@1+ (1,0) [0|0] \"\" X\n",
+      " SG_ D : 16|8@1+ (1,0) [0|0] \"\" X\n SG_ U : 24|8@1+ (1,0) [0|0] \"\" X\n SG_ W : 32|8@1+ "
+      "(1,0) [0|0] \"\" X\n",
       "high.dbc");
   ExpectMappingError(
-      "[inputs]\nid_A = { message = \"F\", signal = \"I\" }\niq_A = { message = \"F\", signal = \"Q\" }\n"
+      "[inputs]\nid_A = { message = \"F\", signal = \"I\" }\niq_A = { message = \"F\", signal = "
+      "\"Q\" }\n"
       "ud_V = { message = \"F\", signal = \"D\" }\nuq_V = { message = \"F\", signal = \"U\" }\n"
       "speed_elec_rad_per_s = { message = \"F\", signal = \"W\" }\n",
       high, {"leaves the 11-bit ID range"});

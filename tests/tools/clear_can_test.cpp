@@ -22,7 +22,8 @@ namespace {
 namespace fs = std::filesystem;
 
 daemon::DaemonConfig ConfigFrom(const std::string& toml) {
-  const fs::path dir = fs::temp_directory_path() / ("pumptherm_clear_can_" + std::to_string(getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("pumptherm_clear_can_" + std::to_string(getpid()));
   fs::create_directories(dir);
   const fs::path file = dir / "d.toml";
   std::ofstream(file) << toml;
@@ -47,7 +48,8 @@ interface = "can1"
 )";
 
 TEST(ClearRouteTest, AutoTakesLcmWhenKeyedElseTheCanInterfaceTheConfigLists) {
-  const daemon::DaemonConfig can_only = ConfigFrom(std::string("[alarms]\nclear_can_interfaces = [\"can0\"]\n") + kPumps);
+  const daemon::DaemonConfig can_only =
+      ConfigFrom(std::string("[alarms]\nclear_can_interfaces = [\"can0\"]\n") + kPumps);
   ClearRouteChoice r = ChooseClearRoute(can_only, can_only.pumps[0], "auto");
   EXPECT_EQ(r.route, ClearRoute::kCan);
   EXPECT_EQ(r.interface, "can0");
@@ -57,7 +59,9 @@ TEST(ClearRouteTest, AutoTakesLcmWhenKeyedElseTheCanInterfaceTheConfigLists) {
     ADD_FAILURE() << "tmp2 has no authorised route";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("pump 'tmp2' is on interface 'can1', which is not in "
-                                         "alarms.clear_can_interfaces"), std::string::npos) << e.what();
+                                         "alarms.clear_can_interfaces"),
+              std::string::npos)
+        << e.what();
   }
   EXPECT_THROW(ChooseClearRoute(can_only, can_only.pumps[0], "lcm"), InputError);
 
@@ -96,8 +100,9 @@ TEST(ClearFrameTest, PumpClearOfNode3IsId0x703WithClearTripsSet) {
   // Decoded back with the DBC it is ClearTrips = 1.
   const protocol::DbcMessage& m = *fs.dbc.FindMessage("PUMP_CLEAR");
   std::vector<double> v(m.signals.size());
-  ASSERT_EQ(protocol::MessageCodec(m).Decode(std::span<const std::uint8_t>(f.data.data(), f.len), v),
-            protocol::CodecStatus::kOk);
+  ASSERT_EQ(
+      protocol::MessageCodec(m).Decode(std::span<const std::uint8_t>(f.data.data(), f.len), v),
+      protocol::CodecStatus::kOk);
   EXPECT_EQ(v[0], 1.0);
   EXPECT_THROW(EncodeClearFrame(fs.dbc, fs.mapping, fs.mapping.node_id_limit), InputError);
 }
@@ -111,8 +116,9 @@ protocol::CanFrame AlarmFrame(const FrameSet& fs, std::uint32_t node_id, double 
   protocol::CanFrame f;
   f.id = m.id + node_id;
   f.len = static_cast<std::uint8_t>(m.size_bytes);
-  EXPECT_EQ(protocol::MessageCodec(m).Encode(v, std::span<std::uint8_t>(f.data.data(), f.len)).status,
-            protocol::CodecStatus::kOk);
+  EXPECT_EQ(
+      protocol::MessageCodec(m).Encode(v, std::span<std::uint8_t>(f.data.data(), f.len)).status,
+      protocol::CodecStatus::kOk);
   return f;
 }
 
@@ -120,9 +126,12 @@ TEST(ClearFrameTest, AlarmLevelIsReadFromThisPumpsGwAlarmOnly) {
   const FrameSet fs = Shipped();
   EXPECT_EQ(AlarmLevelOf(fs.dbc, fs.mapping, 3, AlarmFrame(fs, 3, 2)), GatewayAlarmLevel::kTrip);
   EXPECT_EQ(AlarmLevelOf(fs.dbc, fs.mapping, 3, AlarmFrame(fs, 3, 0)), GatewayAlarmLevel::kNormal);
-  EXPECT_EQ(AlarmLevelOf(fs.dbc, fs.mapping, 3, AlarmFrame(fs, 4, 2)), std::nullopt);  // another pump
-  EXPECT_EQ(AlarmLevelOf(fs.dbc, fs.mapping, 3, AlarmFrame(fs, 3, std::nan(""))), std::nullopt);  // n/a
-  EXPECT_EQ(AlarmLevelOf(fs.dbc, fs.mapping, 3, EncodeClearFrame(fs.dbc, fs.mapping, 3)), std::nullopt);
+  EXPECT_EQ(AlarmLevelOf(fs.dbc, fs.mapping, 3, AlarmFrame(fs, 4, 2)),
+            std::nullopt);  // another pump
+  EXPECT_EQ(AlarmLevelOf(fs.dbc, fs.mapping, 3, AlarmFrame(fs, 3, std::nan(""))),
+            std::nullopt);  // n/a
+  EXPECT_EQ(AlarmLevelOf(fs.dbc, fs.mapping, 3, EncodeClearFrame(fs.dbc, fs.mapping, 3)),
+            std::nullopt);
 }
 
 TEST(ClearFrameTest, OutcomeSaysWhetherTheTripWentAway) {

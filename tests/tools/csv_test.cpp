@@ -31,19 +31,22 @@ TEST(Csv, OldColumnNamesAreReadUnderTheCurrentOneWithAWarning) {
   EXPECT_EQ(plant.Column("winding_resistance_C"), std::vector<double>{41.5});
   EXPECT_FALSE(plant.Has("winding_res_C"));
   ASSERT_EQ(plant.deprecations().size(), 1U);
-  EXPECT_EQ(plant.deprecations()[0], "truth.csv:1: column 'winding_res_C' is deprecated: read as 'winding_resistance_C'");
+  EXPECT_EQ(plant.deprecations()[0],
+            "truth.csv:1: column 'winding_res_C' is deprecated: read as 'winding_resistance_C'");
   const auto identify = CsvTable::Parse("time_s,winding_degC\n0,30\n", "rs.csv");
   EXPECT_EQ(identify.Column("winding_resistance_C"), std::vector<double>{30.0});
   // A file with the current name is read as it is, and one with both keeps both.
   const auto both = CsvTable::Parse("time_s,winding_res_C,winding_resistance_C\n0,1,2\n", "b.csv");
   EXPECT_TRUE(both.deprecations().empty());
   EXPECT_EQ(both.Column("winding_resistance_C"), std::vector<double>{2.0});
-  EXPECT_TRUE(CsvTable::Parse("time_s,winding_resistance_C\n0,1\n", "n.csv").deprecations().empty());
+  EXPECT_TRUE(
+      CsvTable::Parse("time_s,winding_resistance_C\n0,1\n", "n.csv").deprecations().empty());
 }
 
 TEST(Csv, ErrorsNameFileRowAndColumn) {
   const auto t = CsvTable::Parse("time_s,iq_A\n0,1\n1,abc\n2,nan\n3,inf\n", "t.csv");
-  EXPECT_EQ(ErrorOf([&] { t.Column("iq_A"); }), "t.csv: row 3, column 'iq_A': 'abc' is not a number");
+  EXPECT_EQ(ErrorOf([&] { t.Column("iq_A"); }),
+            "t.csv: row 3, column 'iq_A': 'abc' is not a number");
   EXPECT_EQ(ErrorOf([&] { t.Column("uq_V"); }),
             "t.csv: missing column 'uq_V' (the header has: time_s, iq_A)");
   const auto u = CsvTable::Parse("time_s,iq_A\n0,1\n1,nan\n", "u.csv");
@@ -51,13 +54,16 @@ TEST(Csv, ErrorsNameFileRowAndColumn) {
             "u.csv: row 3, column 'iq_A': 'nan' is not a finite number");
   EXPECT_TRUE(std::isnan(u.ColumnAllowingNaN("iq_A")[1]));
   const auto v = CsvTable::Parse("time_s,iq_A\n0,1\n2,1\n1,1\n", "v.csv");
-  EXPECT_EQ(ErrorOf([&] { v.Time(); }), "v.csv: row 4, column 'time_s': time 1 does not advance past 2");
+  EXPECT_EQ(ErrorOf([&] { v.Time(); }),
+            "v.csv: row 4, column 'time_s': time 1 does not advance past 2");
   EXPECT_EQ(ErrorOf([] { CsvTable::Parse("a,b\n1\n", "w.csv"); }),
             "w.csv: row 2: 1 cells, but the header has 2 columns");
   EXPECT_EQ(ErrorOf([] { CsvTable::Parse("a,a\n", "d.csv"); }),
             "d.csv:1: column 'a' appears twice in the header");
-  EXPECT_EQ(ErrorOf([] { CsvTable::Parse("\n\n", "e.csv"); }), "e.csv: empty file: expected a header row");
-  EXPECT_NE(ErrorOf([] { CsvTable::Read("/nonexistent/x.csv"); }).find("cannot open"), std::string::npos);
+  EXPECT_EQ(ErrorOf([] { CsvTable::Parse("\n\n", "e.csv"); }),
+            "e.csv: empty file: expected a header row");
+  EXPECT_NE(ErrorOf([] { CsvTable::Read("/nonexistent/x.csv"); }).find("cannot open"),
+            std::string::npos);
 }
 
 TEST(Csv, WriterRoundTrips) {

@@ -12,8 +12,8 @@ namespace pumptherm::tests {
 /// Train and validation data (different load profiles and noise) for a truth model with
 /// `hidden` effects. Short data at coarse steps: `hours` at `step_s`.
 inline std::pair<tools::discrepancy::Data, tools::discrepancy::Data> HiddenCase(
-    const std::string& truth_model, const std::vector<estimators::Effect>& hidden, double hours = 8.0,
-    double step_s = 10.0, std::uint64_t seed = 1) {
+    const std::string& truth_model, const std::vector<estimators::Effect>& hidden,
+    double hours = 8.0, double step_s = 10.0, std::uint64_t seed = 1) {
   tools::discrepancy::HiddenDataConfig c;
   c.model_text = test_files::ReadModel(truth_model);
   c.model_source = truth_model;

@@ -33,26 +33,27 @@ struct CliRun {
 };
 
 CliRun Discrepancy(const std::string& args) {
-  auto r = pumptherm::test_files::RunCommandStderr(std::string("'") + PUMPTHERM_CLI + "' discrepancy " + args,
-                                                   Dir() + "/err.txt");
+  auto r = pumptherm::test_files::RunCommandStderr(
+      std::string("'") + PUMPTHERM_CLI + "' discrepancy " + args, Dir() + "/err.txt");
   return {r.exit_code, std::move(r.out)};
 }
 
 }  // namespace
 
 TEST(DiscrepancyCli, WritesReportModelAndHtml) {
-  auto [train, validate] =
-      pumptherm::tests::HiddenCase("saheba2010-baseline", {{"iron_loss_scale", {2.0}, {}}}, 4.0, 60.0);
+  auto [train, validate] = pumptherm::tests::HiddenCase(
+      "saheba2010-baseline", {{"iron_loss_scale", {2.0}, {}}}, 4.0, 60.0);
   pd::WriteData(Dir() + "/train.csv", train, false);
   pd::WriteData(Dir() + "/validate.csv", validate, false);
-  const CliRun r = Discrepancy("--model saheba2010-baseline --train " + Dir() + "/train.csv --validate " +
-                            Dir() + "/validate.csv --out " + Dir() + "/out --max-effects 1 " +
-                            "--effects iron_loss_scale,rotor_loss,frame_thermal_mass");
+  const CliRun r =
+      Discrepancy("--model saheba2010-baseline --train " + Dir() + "/train.csv --validate " +
+                  Dir() + "/validate.csv --out " + Dir() + "/out --max-effects 1 " +
+                  "--effects iron_loss_scale,rotor_loss,frame_thermal_mass");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const std::string json = ReadFile(Dir() + "/out/report.json");
-  for (const char* key : {"\"verdict\": \"named\"", "\"effect\": \"iron_loss_scale\"", "\"effects\"",
-                          "\"candidates\"", "\"gap\"", "\"rmse_K\"", "\"max_abs_K\"", "\"ci95\"",
-                          "\"reading\"", "\"validate\"", "\"train\""})
+  for (const char* key : {"\"verdict\": \"named\"", "\"effect\": \"iron_loss_scale\"",
+                          "\"effects\"", "\"candidates\"", "\"gap\"", "\"rmse_K\"", "\"max_abs_K\"",
+                          "\"ci95\"", "\"reading\"", "\"validate\"", "\"train\""})
     EXPECT_NE(json.find(key), std::string::npos) << key << "\n" << json;
   const std::string model = ReadFile(Dir() + "/out/model.toml");
   EXPECT_NO_THROW(pumptherm::estimators::ThermalModel::Parse(model, "model.toml")) << model;
@@ -61,18 +62,19 @@ TEST(DiscrepancyCli, WritesReportModelAndHtml) {
 }
 
 TEST(DiscrepancyCli, BadCellIsExit2NamingRowAndColumn) {
-  std::ofstream(Dir() + "/bad.csv") << "time_s,speed_rpm,id_A,iq_A,ambient_C,frame_C\n"
-                                       "0,800,0,40,22,22\n10,800,0,40,22,22.1\n20,800,0,forty,22,22.2\n";
-  const CliRun r = Discrepancy("--model saheba2010-baseline --train " + Dir() + "/bad.csv --validate " +
-                            Dir() + "/bad.csv --out " + Dir() + "/bad");
+  std::ofstream(Dir() + "/bad.csv")
+      << "time_s,speed_rpm,id_A,iq_A,ambient_C,frame_C\n"
+         "0,800,0,40,22,22\n10,800,0,40,22,22.1\n20,800,0,forty,22,22.2\n";
+  const CliRun r = Discrepancy("--model saheba2010-baseline --train " + Dir() +
+                               "/bad.csv --validate " + Dir() + "/bad.csv --out " + Dir() + "/bad");
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("iq_A"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("4"), std::string::npos) << r.err;  // file line 4
 }
 
 TEST(DiscrepancyCli, UnknownEffectIsExit2) {
-  const CliRun r = Discrepancy("--model saheba2010-baseline --train x.csv --validate x.csv --out " + Dir() +
-                            "/u --effects no_such_effect");
+  const CliRun r = Discrepancy("--model saheba2010-baseline --train x.csv --validate x.csv --out " +
+                               Dir() + "/u --effects no_such_effect");
   EXPECT_EQ(r.exit_code, 2) << r.err;
   EXPECT_NE(r.err.find("no_such_effect"), std::string::npos) << r.err;
 }
@@ -115,30 +117,36 @@ std::string Fact(const std::string& facts, const std::string& key) {
 TEST(DiscrepancyCli, ReportRendersInChromium) {
   const char* ci = std::getenv("CI");
   if (std::system("command -v chromium > /dev/null 2>&1") != 0) {
-    if (ci != nullptr && std::string(ci) == "true") FAIL() << "chromium is not installed (tools/setup.sh installs it)";
-    GTEST_SKIP() << "chromium is not installed (Debian package chromium; CI=true makes this a failure)";
+    if (ci != nullptr && std::string(ci) == "true")
+      FAIL() << "chromium is not installed (tools/setup.sh installs it)";
+    GTEST_SKIP()
+        << "chromium is not installed (Debian package chromium; CI=true makes this a failure)";
   }
   const std::string dir = Dir() + "/chromium_" + std::to_string(getpid());
   std::filesystem::create_directories(dir);
-  auto [train, validate] =
-      pumptherm::tests::HiddenCase("saheba2010-baseline", {{"iron_loss_scale", {2.0}, {}}}, 4.0, 60.0);
+  auto [train, validate] = pumptherm::tests::HiddenCase(
+      "saheba2010-baseline", {{"iron_loss_scale", {2.0}, {}}}, 4.0, 60.0);
   pd::WriteData(dir + "/train.csv", train, false);
   pd::WriteData(dir + "/validate.csv", validate, false);
-  const CliRun r = Discrepancy("--model saheba2010-baseline --train " + dir + "/train.csv --validate " + dir +
-                               "/validate.csv --out " + dir + "/out --max-effects 2 " +
-                               "--effects iron_loss_scale,rotor_loss,frame_thermal_mass --quiet");
+  const CliRun r =
+      Discrepancy("--model saheba2010-baseline --train " + dir + "/train.csv --validate " + dir +
+                  "/validate.csv --out " + dir + "/out --max-effects 2 " +
+                  "--effects iron_loss_scale,rotor_loss,frame_thermal_mass --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   std::string html = ReadFile(dir + "/out/report.html");
   html.insert(html.rfind("</body>"), kFactsScript);
   std::ofstream(dir + "/out/check.html") << html;
-  const std::string cmd = "timeout 120 chromium --headless --no-sandbox --disable-gpu --disable-background-networking "
-                          "--no-first-run --disable-component-update --disable-sync --user-data-dir='" + dir +
-                          "/profile' --window-size=1200,900 --dump-dom 'file://" + dir + "/out/check.html' > '" +
-                          dir + "/dom.html' 2> '" + dir + "/chromium.log'";
+  const std::string cmd =
+      "timeout 120 chromium --headless --no-sandbox --disable-gpu --disable-background-networking "
+      "--no-first-run --disable-component-update --disable-sync --user-data-dir='" +
+      dir + "/profile' --window-size=1200,900 --dump-dom 'file://" + dir + "/out/check.html' > '" +
+      dir + "/dom.html' 2> '" + dir + "/chromium.log'";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << ReadFile(dir + "/chromium.log");
   const std::string dom = ReadFile(dir + "/dom.html");
   const std::size_t b = dom.find("FACTS\n"), e = dom.find("\nEND_FACTS");
-  ASSERT_TRUE(b != std::string::npos && e != std::string::npos) << "the page's script did not run:\n" << dom.substr(0, 2000);
+  ASSERT_TRUE(b != std::string::npos && e != std::string::npos)
+      << "the page's script did not run:\n"
+      << dom.substr(0, 2000);
   const std::string facts = dom.substr(b, e - b + 1);
   const std::string text = facts.substr(facts.find("\nTEXT\n"));
   // Five measured nodes, each: temperature, speed strip, current strip, residual; three
@@ -148,16 +156,20 @@ TEST(DiscrepancyCli, ReportRendersInChromium) {
   EXPECT_EQ(Fact(facts, "corr_plots"), "15");
   EXPECT_EQ(Fact(facts, "overflow_px"), "0");
   EXPECT_EQ(Fact(facts, "links"), "model.toml,report.json");
-  EXPECT_TRUE(std::filesystem::exists(dir + "/out/model.toml") && std::filesystem::exists(dir + "/out/report.json"));
-  for (const char* must : {"Verdict: named", "iron_loss_scale = ", "(95 % ", "why not named", "named",
-                           "- power_W = 'k_e_W_s2", "+ power_W = 'iron_loss_scale * (", "lower is better",
-                           "W/(1000 r/min)^2", "J/K", "Round 1: named", "Round 2: "})
+  EXPECT_TRUE(std::filesystem::exists(dir + "/out/model.toml") &&
+              std::filesystem::exists(dir + "/out/report.json"));
+  for (const char* must :
+       {"Verdict: named", "iron_loss_scale = ", "(95 % ", "why not named", "named",
+        "- power_W = 'k_e_W_s2", "+ power_W = 'iron_loss_scale * (", "lower is better",
+        "W/(1000 r/min)^2", "J/K", "Round 1: named", "Round 2: "})
     EXPECT_NE(text.find(must), std::string::npos) << must << "\n" << text.substr(0, 3000);
   // The named effect's interval is printed with digits that show its width.
   const std::size_t v = text.find("iron_loss_scale = ");
   const std::string line = text.substr(v, text.find('\n', v) - v);
   double value = 0, low = 0, high = 0;
-  ASSERT_EQ(std::sscanf(line.c_str(), "iron_loss_scale = %lf (95 %% %lf to %lf)", &value, &low, &high), 3) << line;
+  ASSERT_EQ(
+      std::sscanf(line.c_str(), "iron_loss_scale = %lf (95 %% %lf to %lf)", &value, &low, &high), 3)
+      << line;
   EXPECT_LT(low, value) << line;
   EXPECT_LT(value, high) << line;
   EXPECT_NEAR(value, 2.0, 0.05) << line;

@@ -18,19 +18,21 @@
 
 namespace pd = pumptherm::tools::discrepancy;
 namespace pe = pumptherm::estimators;
-using pumptherm::tests::HiddenCase;
 using pumptherm::test_files::ReadModel;
+using pumptherm::tests::HiddenCase;
 
 namespace {
 
 struct Case {
-  std::string truth;                // model the data come from
-  std::vector<pe::Effect> hidden;   // switched on in the truth
-  std::string expected;             // label expected first, or "none"
+  std::string truth;               // model the data come from
+  std::vector<pe::Effect> hidden;  // switched on in the truth
+  std::string expected;            // label expected first, or "none"
   std::uint64_t seed;
 };
 
-std::string LabelOf(const pe::Effect& e) { return e.node.empty() ? e.name : e.name + "(" + e.node + ")"; }
+std::string LabelOf(const pe::Effect& e) {
+  return e.node.empty() ? e.name : e.name + "(" + e.node + ")";
+}
 
 }  // namespace
 
@@ -45,8 +47,14 @@ TEST(DiscrepancyMatrix, EveryEffectNullAndPapersCase) {
       {base, {{"speed_dependent_cooling", {0.4}, {}}}, "speed_dependent_cooling", 16},
       {base, {{"winding_conductance", {25.0}, {}}}, "winding_conductance", 17},
       {base, {{"winding_conductance", {40.0}, {}}}, "winding_conductance", 18},
-      {base, {{"copper_temperature_coefficient", {0.0015}, {}}}, "copper_temperature_coefficient", 19},
-      {base, {{"copper_temperature_coefficient", {0.003}, {}}}, "copper_temperature_coefficient", 20},
+      {base,
+       {{"copper_temperature_coefficient", {0.0015}, {}}},
+       "copper_temperature_coefficient",
+       19},
+      {base,
+       {{"copper_temperature_coefficient", {0.003}, {}}},
+       "copper_temperature_coefficient",
+       20},
       {base, {{"iron_loss_scale", {1.5}, {}}}, "iron_loss_scale", 21},
       {base, {{"iron_loss_scale", {2.0}, {}}}, "iron_loss_scale", 22},
       {base, {{"rotor_loss", {3.0}, {}}}, "rotor_loss", 23},
@@ -61,7 +69,9 @@ TEST(DiscrepancyMatrix, EveryEffectNullAndPapersCase) {
       {"saheba2010-improved", {}, "frame_thermal_mass", 41},
   };
   std::vector<double> ratios;
-  std::printf("| hidden effect | value | named (in order) | verdict | validate RMSE before -> after, K | max before -> after, K | run, s |\n");
+  std::printf(
+      "| hidden effect | value | named (in order) | verdict | validate RMSE before -> after, K | "
+      "max before -> after, K | run, s |\n");
   std::printf("| --- | --- | --- | --- | --- | --- | --- |\n");
   // PUMPTHERM_MATRIX_ONLY=<text> runs only the cases whose expected answer contains <text>.
   const char* only = std::getenv("PUMPTHERM_MATRIX_ONLY");
@@ -73,7 +83,8 @@ TEST(DiscrepancyMatrix, EveryEffectNullAndPapersCase) {
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::string named;
     for (const auto& e : r.effects)
-      named += (named.empty() ? "" : ", ") + LabelOf(e.effect) + fmt::format(" = {:.4g}", e.parameters[0].value);
+      named += (named.empty() ? "" : ", ") + LabelOf(e.effect) +
+               fmt::format(" = {:.4g}", e.parameters[0].value);
     for (const auto& rd : r.rounds)
       if (rd.verdict == "ambiguous") {
         named += named.empty() ? "(ambiguous:" : "; then ambiguous:";
@@ -81,14 +92,15 @@ TEST(DiscrepancyMatrix, EveryEffectNullAndPapersCase) {
         named += ")";
       }
     const std::string first = r.effects.empty() ? "none" : LabelOf(r.effects.front().effect);
-    const std::string hidden =
-        c.truth != base ? "(data from saheba2010-improved)" : c.hidden.empty() ? "none" : LabelOf(c.hidden[0]);
+    const std::string hidden = c.truth != base    ? "(data from saheba2010-improved)"
+                               : c.hidden.empty() ? "none"
+                                                  : LabelOf(c.hidden[0]);
     const auto& vb = r.validate_before.back();
     const auto& va = r.validate_after.back();
     std::printf("| %s | %s | %s | %s | %.3f -> %.3f | %.2f -> %.2f | %.1f |\n", hidden.c_str(),
                 c.hidden.empty() ? "" : fmt::format("{:g}", c.hidden[0].values[0]).c_str(),
-                named.empty() ? "none" : named.c_str(), r.verdict.c_str(), vb.rmse_K, va.rmse_K, vb.max_abs_K,
-                va.max_abs_K, s);
+                named.empty() ? "none" : named.c_str(), r.verdict.c_str(), vb.rmse_K, va.rmse_K,
+                vb.max_abs_K, va.max_abs_K, s);
     std::fflush(stdout);
     EXPECT_EQ(first, c.expected) << hidden << " seed " << c.seed;
     if (c.expected == "none") {

@@ -34,13 +34,13 @@ std::string Dir() {
   return d.string();
 }
 
-
 /// The model written to a file of its own with the tables it names by absolute path.
 std::string ModelFile(const std::string& name) {
   std::string text = pumptherm::test_files::ReadModel(name);
   const std::string rel = "../../../../shared";
   const std::string shared = SharedDir();
-  for (std::size_t p = text.find(rel); p != std::string::npos; p = text.find(rel, p + shared.size()))
+  for (std::size_t p = text.find(rel); p != std::string::npos;
+       p = text.find(rel, p + shared.size()))
     text.replace(p, rel.size(), shared);
   const std::string path = Dir() + "/" + name + ".toml";
   std::ofstream(path) << text;
@@ -64,12 +64,15 @@ std::string PaderbornCsv() {
   std::string renamed;
   std::stringstream hs(header);
   for (std::string c; std::getline(hs, c, ',');) {
-    static const std::map<std::string, std::string> kName{
-        {"motor_speed", "speed_rpm"},         {"i_d", "id_A"},
-        {"i_q", "iq_A"},                      {"ambient", "ambient_C"},
-        {"coolant", "coolant_C"},             {"pm", "pm_C"},
-        {"stator_yoke", "stator_yoke_C"},     {"stator_tooth", "stator_tooth_C"},
-        {"stator_winding", "stator_winding_C"}};
+    static const std::map<std::string, std::string> kName{{"motor_speed", "speed_rpm"},
+                                                          {"i_d", "id_A"},
+                                                          {"i_q", "iq_A"},
+                                                          {"ambient", "ambient_C"},
+                                                          {"coolant", "coolant_C"},
+                                                          {"pm", "pm_C"},
+                                                          {"stator_yoke", "stator_yoke_C"},
+                                                          {"stator_tooth", "stator_tooth_C"},
+                                                          {"stator_winding", "stator_winding_C"}};
     const auto it = kName.find(c);
     renamed += (renamed.empty() ? "" : ",") + (it == kName.end() ? c : it->second);
   }
@@ -79,11 +82,13 @@ std::string PaderbornCsv() {
 }
 
 /// `pumptherm simulate` output: column name -> values.
-std::map<std::string, std::vector<double>> Simulate(const std::string& model, const std::string& csv,
+std::map<std::string, std::vector<double>> Simulate(const std::string& model,
+                                                    const std::string& csv,
                                                     const std::string& initial) {
   const std::string out = Dir() + "/simulated.csv";
-  const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' simulate --model '" + model + "' --input '" +
-                          csv + "' --initial " + initial + " --output '" + out + "'";
+  const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' simulate --model '" + model +
+                          "' --input '" + csv + "' --initial " + initial + " --output '" + out +
+                          "'";
   const int status = std::system(cmd.c_str());
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << cmd;
   std::map<std::string, std::vector<double>> cols;
@@ -96,7 +101,8 @@ std::map<std::string, std::vector<double>> Simulate(const std::string& model, co
   while (std::getline(f, line)) {
     std::stringstream ls(line);
     std::size_t i = 0;
-    for (std::string c; std::getline(ls, c, ',') && i < names.size(); ++i) cols[names[i]].push_back(std::stod(c));
+    for (std::string c; std::getline(ls, c, ',') && i < names.size(); ++i)
+      cols[names[i]].push_back(std::stod(c));
   }
   return cols;
 }
@@ -104,7 +110,8 @@ std::map<std::string, std::vector<double>> Simulate(const std::string& model, co
 /// RMSE of the workflow's simulation against `simulate` at the grid points after the start.
 double Compare(const std::string& model_path, const std::string& csv, const std::string& initial,
                const pd::Options& o = {}) {
-  const pe::ThermalModel model = pe::ThermalModel::Parse(ReadFile(model_path), model_path, FilesOf(model_path));
+  const pe::ThermalModel model =
+      pe::ThermalModel::Parse(ReadFile(model_path), model_path, FilesOf(model_path));
   const pd::Data data = pd::ReadData(csv, model);
   const pd::Simulated w = pd::SimulateModel(model, data, o);
   const auto s = Simulate(model_path, csv, initial);
@@ -123,14 +130,17 @@ double Compare(const std::string& model_path, const std::string& csv, const std:
   }
   const double rmse = n ? std::sqrt(ss / static_cast<double>(n)) : INFINITY;
   EXPECT_LT(hottest, 250.0) << "the data drive " << model_path << " out of any physical range";
-  std::printf("%s on %s: workflow vs simulate RMSE %.2e K over %zu values (%s), hottest %.1f degC\n",
-              model_path.c_str(), csv.c_str(), rmse, n, w.averaged ? "inputs averaged" : "row by row", hottest);
+  std::printf(
+      "%s on %s: workflow vs simulate RMSE %.2e K over %zu values (%s), hottest %.1f degC\n",
+      model_path.c_str(), csv.c_str(), rmse, n, w.averaged ? "inputs averaged" : "row by row",
+      hottest);
   return rmse;
 }
 
 /// Two hours at 10 s generated from the model itself; measured: every state of the model.
 std::string GeneratedCsv(const std::string& name) {
-  const pe::ThermalModel model = pe::ThermalModel::Parse(pumptherm::test_files::ReadModel(name), name);
+  const pe::ThermalModel model =
+      pe::ThermalModel::Parse(pumptherm::test_files::ReadModel(name), name);
   pd::HiddenDataConfig c;
   c.model_text = pumptherm::test_files::ReadModel(name);
   c.model_source = name;
@@ -186,7 +196,8 @@ TEST(DiscrepancySimulate, AveragedInputsReportTheirCost) {
 namespace {
 
 /// Writes rows [from, to) of the CSV at `path` (after its header) to `out`.
-std::string Rows(const std::string& path, std::size_t from, std::size_t to, const std::string& out) {
+std::string Rows(const std::string& path, std::size_t from, std::size_t to,
+                 const std::string& out) {
   std::ifstream f(path);
   std::ofstream o(Dir() + "/" + out);
   std::string line;
@@ -203,7 +214,8 @@ std::string StrippedModelFile() {
   std::string text, line;
   while (std::getline(f, line)) {
     if (line.rfind("resistance_K_per_W", 0) == 0)
-      for (std::size_t p = line.find("speed_norm"); p != std::string::npos; p = line.find("speed_norm", p))
+      for (std::size_t p = line.find("speed_norm"); p != std::string::npos;
+           p = line.find("speed_norm", p))
         line.replace(p, 10, "0");
     text += line + "\n";
   }

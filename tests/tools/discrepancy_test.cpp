@@ -14,8 +14,8 @@
 
 namespace pd = pumptherm::tools::discrepancy;
 namespace pe = pumptherm::estimators;
-using pumptherm::tests::HiddenCase;
 using pumptherm::test_files::ReadModel;
+using pumptherm::tests::HiddenCase;
 
 namespace {
 
@@ -74,8 +74,8 @@ TEST(Discrepancy, PapersCaseNamesFrameThermalMassFirst) {
   auto [train, validate] = HiddenCase("saheba2010-improved", {}, 6.0, 30.0);
   pd::Options o;
   o.max_effects = 1;  // the first effect only here; the slow matrix test runs every round
-  const pd::Result r = pd::Run(ReadModel("saheba2010-baseline"), "saheba2010-baseline", train,
-                               validate, o);
+  const pd::Result r =
+      pd::Run(ReadModel("saheba2010-baseline"), "saheba2010-baseline", train, validate, o);
   const std::string s = Summary(r);
   ASSERT_FALSE(r.effects.empty()) << s;
   EXPECT_EQ(r.effects.front().effect.name, "frame_thermal_mass") << s;

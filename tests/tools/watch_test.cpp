@@ -50,7 +50,8 @@ TEST(PumpWatch, ShowsEveryNodeWithItsBandAndTheAlarmByName) {
   EXPECT_NE(t.find("frame 40.0±0.4"), std::string::npos) << t;
   EXPECT_NE(t.find("winding 91.3±3.0"), std::string::npos) << t;
   EXPECT_NE(t.find("84.2±1.0 (tracking)"), std::string::npos) << t;
-  EXPECT_NE(t.find("TRIP [TRIP estimated_over_temperature winding LATCHED]"), std::string::npos) << t;
+  EXPECT_NE(t.find("TRIP [TRIP estimated_over_temperature winding LATCHED]"), std::string::npos)
+      << t;
   EXPECT_NE(t.find(" 2s "), std::string::npos) << t;
   EXPECT_EQ(t.find("STALE"), std::string::npos) << t;
 }
@@ -75,8 +76,8 @@ TEST(PumpWatch, UnknownCodesAreShownAsNumbersNotHidden) {
 
 #ifdef PUMPTHERM_CLI
 TEST(PumpthermWatchCli, SaysNothingWasHeardAndExitsOne) {
-  const std::string cmd = std::string(PUMPTHERM_CLI) +
-                          " watch --lcm-url memq:// --period-s 0.05 --count 2 2>&1";
+  const std::string cmd =
+      std::string(PUMPTHERM_CLI) + " watch --lcm-url memq:// --period-s 0.05 --count 2 2>&1";
   FILE* p = popen(cmd.c_str(), "r");
   ASSERT_NE(p, nullptr);
   std::string out;

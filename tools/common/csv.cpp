@@ -17,7 +17,8 @@ namespace {
 
 std::string_view Trim(std::string_view s) {
   while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
-  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r')) s.remove_suffix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r'))
+    s.remove_suffix(1);
   return s;
 }
 
@@ -26,8 +27,8 @@ std::vector<std::string> SplitCells(std::string_view line) {
   std::size_t start = 0;
   for (;;) {
     const std::size_t comma = line.find(',', start);
-    cells.emplace_back(Trim(line.substr(start, comma == std::string_view::npos ? std::string_view::npos
-                                                                               : comma - start)));
+    cells.emplace_back(Trim(line.substr(
+        start, comma == std::string_view::npos ? std::string_view::npos : comma - start)));
     if (comma == std::string_view::npos) break;
     start = comma + 1;
   }
@@ -52,8 +53,8 @@ void CsvTable::RenameDeprecatedColumns(std::size_t header_line) {
     const auto old_index = Index(r.old_name);
     if (!old_index || Index(r.name)) continue;
     columns_[*old_index] = std::string(r.name);
-    deprecations_.push_back(fmt::format("{}:{}: column '{}' is deprecated: read as '{}'", source_, header_line,
-                                        r.old_name, r.name));
+    deprecations_.push_back(fmt::format("{}:{}: column '{}' is deprecated: read as '{}'", source_,
+                                        header_line, r.old_name, r.name));
     fmt::print(stderr, "warning: {}\n", deprecations_.back());
   }
 }
@@ -77,13 +78,13 @@ CsvTable CsvTable::Parse(std::string_view text, std::string source) {
       t.columns_ = SplitCells(line);
       for (std::size_t i = 0; i < t.columns_.size(); ++i) {
         if (t.columns_[i].empty()) {
-          throw CsvError(fmt::format("{}:{}: column {} of the header has no name", t.source_,
-                                     line_no, i + 1));
+          throw CsvError(
+              fmt::format("{}:{}: column {} of the header has no name", t.source_, line_no, i + 1));
         }
         for (std::size_t j = 0; j < i; ++j) {
           if (t.columns_[j] == t.columns_[i]) {
-            throw CsvError(fmt::format("{}:{}: column '{}' appears twice in the header",
-                                       t.source_, line_no, t.columns_[i]));
+            throw CsvError(fmt::format("{}:{}: column '{}' appears twice in the header", t.source_,
+                                       line_no, t.columns_[i]));
           }
         }
       }
@@ -139,15 +140,16 @@ std::vector<double> CsvTable::Numbers(std::string_view column, bool allow_nan) c
       continue;
     }
     if (cell.empty()) {
-      throw CsvError(fmt::format("{}: row {}, column '{}': empty cell", source_, lines_[r], column));
+      throw CsvError(
+          fmt::format("{}: row {}, column '{}': empty cell", source_, lines_[r], column));
     }
     double v = 0.0;
     const char* first = cell.data();
     if (*first == '+') ++first;
     const auto [ptr, ec] = std::from_chars(first, cell.data() + cell.size(), v);
     if (ec != std::errc() || ptr != cell.data() + cell.size()) {
-      throw CsvError(fmt::format("{}: row {}, column '{}': '{}' is not a number", source_, lines_[r],
-                                 column, cell));
+      throw CsvError(fmt::format("{}: row {}, column '{}': '{}' is not a number", source_,
+                                 lines_[r], column, cell));
     }
     if (!std::isfinite(v)) {
       throw CsvError(fmt::format("{}: row {}, column '{}': '{}' is not a finite number", source_,
@@ -200,8 +202,9 @@ void CsvWriter::Row(const std::vector<double>& values) { Row(values, {}); }
 
 void CsvWriter::Row(const std::vector<double>& values, const std::vector<std::string>& text) {
   if (values.size() + text.size() != columns_) {
-    throw std::logic_error(fmt::format("CsvWriter {}: row of {} values and {} text cells for {} columns",
-                                       path_, values.size(), text.size(), columns_));
+    throw std::logic_error(
+        fmt::format("CsvWriter {}: row of {} values and {} text cells for {} columns", path_,
+                    values.size(), text.size(), columns_));
   }
   line_.clear();
   for (std::size_t i = 0; i < values.size(); ++i) {
@@ -215,7 +218,8 @@ void CsvWriter::Row(const std::vector<double>& values, const std::vector<std::st
   for (std::size_t i = 0; i < text.size(); ++i) {
     if (i || !values.empty()) line_ += ',';
     if (text[i].find_first_of(",\"\n\r") != std::string::npos) {
-      throw std::logic_error(fmt::format("CsvWriter {}: text cell '{}' needs quoting", path_, text[i]));
+      throw std::logic_error(
+          fmt::format("CsvWriter {}: text cell '{}' needs quoting", path_, text[i]));
     }
     line_ += text[i];
   }

@@ -20,7 +20,9 @@ estimators::ThermalInputs ThermalInputSeries::Between(std::size_t k, double w, b
 }
 
 ThermalInputSeries ReadThermalInputs(const CsvTable& csv, const ThermalInputColumns& columns) {
-  auto name = [&](const std::string& standard) { return columns.name ? columns.name(standard) : standard; };
+  auto name = [&](const std::string& standard) {
+    return columns.name ? columns.name(standard) : standard;
+  };
   ThermalInputSeries s;
   s.time_s = csv.Time(name("time_s"));
   s.speed_rpm = csv.Column(name("speed_rpm"));

@@ -23,8 +23,8 @@ Data ReadData(const std::string& path, const estimators::ThermalModel& model) {
   if (d.measured.empty()) {
     std::string names;
     for (const auto& node : model.Nodes()) names += (names.empty() ? "" : ", ") + node.name + "_C";
-    throw CsvError(fmt::format("{}: no measured temperature column (the model's nodes: {})", path,
-                               names));
+    throw CsvError(
+        fmt::format("{}: no measured temperature column (the model's nodes: {})", path, names));
   }
   return d;
 }

@@ -20,7 +20,7 @@ struct MeasuredNode {
 
 /// A data set: the inputs and the measured series, every vector with one value per row.
 struct Data : ThermalInputSeries {
-  std::string source;  ///< file name for messages
+  std::string source;                  ///< file name for messages
   std::vector<MeasuredNode> measured;  ///< in the model's node order
 };
 

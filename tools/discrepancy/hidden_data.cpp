@@ -81,7 +81,8 @@ Data MakeHiddenEffectData(const HiddenDataConfig& c) {
     in.speed_rpm = segments[seg].speed_rpm;
     in.id_A = 0.0;
     in.iq_A = segments[seg].iq_A;
-    in.ambient_degC = c.ambient_degC + c.ambient_drift_K * std::sin(2.0 * M_PI * t / 86400.0 + phase);
+    in.ambient_degC =
+        c.ambient_degC + c.ambient_drift_K * std::sin(2.0 * M_PI * t / 86400.0 + phase);
     in.coolant_degC = c.coolant_degC;
     // The sample at t reports the inputs that act from t on (zero-order hold, as `simulate`):
     // the step that ends at t ran with the previous sample's inputs.

@@ -20,12 +20,12 @@ namespace {
 /// A data set on the simulation grid. The simulation steps over `rows` (each row's inputs held
 /// until the next row); the residuals are taken at the grid points, rows `at[j]`.
 struct Grid {
-  std::vector<double> t_s;               ///< grid points' times
-  std::vector<std::size_t> at;           ///< grid point j is row at[j]
-  std::vector<double> row_t_s;           ///< rows' times
-  std::vector<pe::ThermalInputs> in;     ///< in[k] acts over [row_t_k, row_t_k+1)
-  std::vector<char> rediscretise;        ///< row step k needs a new exp(A tau): fixed by the data
-  bool averaged = false;                 ///< rows are averages over grid steps, not the data's rows
+  std::vector<double> t_s;            ///< grid points' times
+  std::vector<std::size_t> at;        ///< grid point j is row at[j]
+  std::vector<double> row_t_s;        ///< rows' times
+  std::vector<pe::ThermalInputs> in;  ///< in[k] acts over [row_t_k, row_t_k+1)
+  std::vector<char> rediscretise;     ///< row step k needs a new exp(A tau): fixed by the data
+  bool averaged = false;              ///< rows are averages over grid steps, not the data's rows
   std::vector<std::string> nodes;
   std::vector<std::vector<double>> measured;  ///< [node][j]
 };
@@ -76,11 +76,11 @@ std::vector<char> CoarseSchedule(const Grid& g) {
     const double i2a = a.id_A * a.id_A + a.iq_A * a.iq_A, i2b = b.id_A * b.id_A + b.iq_A * b.iq_A;
     const double dta = ref + 1 < g.row_t_s.size() ? g.row_t_s[ref + 1] - g.row_t_s[ref] : 0.0;
     const double dtb = g.row_t_s[j + 1] - g.row_t_s[j];
-    const bool moved = j == 0 || std::abs(i2a - i2b) > 0.02 * std::max(i2a, 1.0) ||
-                       std::abs(a.speed_rpm - b.speed_rpm) > 0.02 * std::max(std::abs(a.speed_rpm), 50.0) ||
-                       std::abs(a.ambient_degC - b.ambient_degC) > 1.0 ||
-                       std::abs(a.coolant_degC - b.coolant_degC) > 1.0 ||
-                       std::abs(dta - dtb) > 1e-6 * dtb;
+    const bool moved =
+        j == 0 || std::abs(i2a - i2b) > 0.02 * std::max(i2a, 1.0) ||
+        std::abs(a.speed_rpm - b.speed_rpm) > 0.02 * std::max(std::abs(a.speed_rpm), 50.0) ||
+        std::abs(a.ambient_degC - b.ambient_degC) > 1.0 ||
+        std::abs(a.coolant_degC - b.coolant_degC) > 1.0 || std::abs(dta - dtb) > 1e-6 * dtb;
     if (moved) {
       out[j] = 1;
       ref = j;
@@ -219,8 +219,8 @@ class Evaluator {
     }
     Cache& c = cache_[&g];
     if (!c.valid || c.key != key) {
-      const pe::ThermalModel m =
-          pe::ThermalModel::Parse(pe::ApplyModelEffects(text_, source_, model_effects), source_, files_);
+      const pe::ThermalModel m = pe::ThermalModel::Parse(
+          pe::ApplyModelEffects(text_, source_, model_effects), source_, files_);
       c.series = Simulate(m, g);
       c.key = key;
       c.valid = true;
@@ -385,14 +385,18 @@ FitResult Fit(Evaluator& ev, std::vector<double> p0, const Grid& g, const Option
   return fr;
 }
 
-std::string Label(const pe::Effect& e) { return e.node.empty() ? e.name : e.name + "(" + e.node + ")"; }
+std::string Label(const pe::Effect& e) {
+  return e.node.empty() ? e.name : e.name + "(" + e.node + ")";
+}
 
 /// RMSE between two simulations on the same grid points (every node, points 1..).
-double SeriesRmse(const std::vector<std::vector<double>>& a, const std::vector<std::vector<double>>& b) {
+double SeriesRmse(const std::vector<std::vector<double>>& a,
+                  const std::vector<std::vector<double>>& b) {
   double ss = 0.0;
   std::size_t n = 0;
   for (std::size_t i = 0; i < a.size(); ++i)
-    for (std::size_t j = 1; j < a[i].size(); ++j, ++n) ss += (a[i][j] - b[i][j]) * (a[i][j] - b[i][j]);
+    for (std::size_t j = 1; j < a[i].size(); ++j, ++n)
+      ss += (a[i][j] - b[i][j]) * (a[i][j] - b[i][j]);
   return n ? std::sqrt(ss / static_cast<double>(n)) : 0.0;
 }
 
@@ -422,7 +426,8 @@ std::string SeparatingExperiment(const std::vector<std::string>& effects) {
        "the same losses at two speeds, e.g. a current step at standstill and at full speed"},
       {"winding_conductance", "current steps with both slot and end winding measured"},
       {"copper_temperature_coefficient",
-       "the same current from a cold and from a warm start (the copper loss grows with temperature)"},
+       "the same current from a cold and from a warm start (the copper loss grows with "
+       "temperature)"},
       {"iron_loss_scale", "speed steps at zero current (iron loss alone, in the stator)"},
       {"rotor_loss", "speed steps at zero current with the rotor temperature measured"},
       {"sensor_lag", "fast load steps sampled at 1 Hz (a sensor lag shows in the first minute)"},
@@ -453,7 +458,8 @@ Result Run(const std::string& text, const std::string& source, const Data& train
     for (const auto& m : d->measured)
       if (std::none_of(base.Nodes().begin(), base.Nodes().end(),
                        [&](const auto& n) { return n.name == m.node; }))
-        throw std::invalid_argument(fmt::format("{}: node {} is not in the model", d->source, m.node));
+        throw std::invalid_argument(
+            fmt::format("{}: node {} is not in the model", d->source, m.node));
   const Grid gt = MakeGrid(train, o, base);
   const Grid gv = MakeGrid(validate, o, base);
   const pe::EffectTargets targets = pe::FindEffectTargets(text, source);
@@ -481,7 +487,8 @@ Result Run(const std::string& text, const std::string& source, const Data& train
     pool.push_back({spec.name, {spec.parameters[0].neutral}, {}});
   }
   for (const std::string& name : o.effects)
-    if (pe::FindEffect(name) == nullptr) throw std::invalid_argument("unknown effect '" + name + "'");
+    if (pe::FindEffect(name) == nullptr)
+      throw std::invalid_argument("unknown effect '" + name + "'");
 
   Result res;
   std::vector<pe::Effect> added;  // with their fitted values
@@ -494,9 +501,10 @@ Result Run(const std::string& text, const std::string& source, const Data& train
     res.simulation = "averaged";
     if (gt.averaged) res.averaging_cost_train_K = AveragingCost(base, train, o, before_train);
     if (gv.averaged) res.averaging_cost_validate_K = AveragingCost(base, validate, o, before_val);
-    progress(fmt::format("inputs averaged over grid steps: costs {:.3f} K RMSE on train, {:.3f} K on "
-                         "validate (input model against row by row)",
-                         res.averaging_cost_train_K, res.averaging_cost_validate_K));
+    progress(
+        fmt::format("inputs averaged over grid steps: costs {:.3f} K RMSE on train, {:.3f} K on "
+                    "validate (input model against row by row)",
+                    res.averaging_cost_train_K, res.averaging_cost_validate_K));
   }
   progress(fmt::format("model {}: gap train RMSE {:.3f} K, validate RMSE {:.3f} K", source,
                        current.stats.rmse, current_val_rmse));
@@ -510,13 +518,15 @@ Result Run(const std::string& text, const std::string& source, const Data& train
     std::size_t tried = 0;
     for (const pe::Effect& cand : pool) {
       ++tried;
-      if (std::any_of(added.begin(), added.end(), [&](const pe::Effect& a) { return Label(a) == Label(cand); }))
+      if (std::any_of(added.begin(), added.end(),
+                      [&](const pe::Effect& a) { return Label(a) == Label(cand); }))
         continue;
       std::vector<pe::Effect> effects = added;
       effects.push_back(cand);
       Evaluator ev(text, source, files, effects);
       std::vector<double> p0;
-      for (std::size_t e = 0; e < effects.size(); ++e) p0.push_back(ev.Internal(e, effects[e].values[0]));
+      for (std::size_t e = 0; e < effects.size(); ++e)
+        p0.push_back(ev.Internal(e, effects[e].values[0]));
       Candidate c;
       c.effect = cand.name;
       c.node = cand.node;
@@ -529,8 +539,9 @@ Result Run(const std::string& text, const std::string& source, const Data& train
       c.rho = fr.stats.rho;
       c.n_eff = fr.stats.n_eff;
       // Information criterion at the candidate's effective sample size (one more parameter).
-      c.delta_ic = c.n_eff * std::log(std::max(fr.stats.ssr, 1e-300) / std::max(current.stats.ssr, 1e-300)) +
-                   std::log(c.n_eff);
+      c.delta_ic =
+          c.n_eff * std::log(std::max(fr.stats.ssr, 1e-300) / std::max(current.stats.ssr, 1e-300)) +
+          std::log(c.n_eff);
       const std::size_t e = effects.size() - 1;
       const auto& ps = ev.Spec(e).parameters[0];
       FittedParameter fp{ps.name, ev.Value(e, fr.p[e]), std::nan(""), std::nan(""), ps.neutral};
@@ -542,9 +553,10 @@ Result Run(const std::string& text, const std::string& source, const Data& train
       c.parameters.push_back(fp);
       c.eligible = c.significant && c.delta_ic <= -o.ic_threshold &&
                    c.validate_rmse_K <= (1.0 - o.min_validation_gain) * current_val_rmse;
-      progress(fmt::format("round {} candidate {}/{} {}: train {:.3f} K, validate {:.3f} K, dIC {:.1f}{}",
-                           round + 1, tried, pool.size(), c.label, c.train_rmse_K, c.validate_rmse_K,
-                           c.delta_ic, c.eligible ? " (eligible)" : ""));
+      progress(fmt::format(
+          "round {} candidate {}/{} {}: train {:.3f} K, validate {:.3f} K, dIC {:.1f}{}", round + 1,
+          tried, pool.size(), c.label, c.train_rmse_K, c.validate_rmse_K, c.delta_ic,
+          c.eligible ? " (eligible)" : ""));
       rd.candidates.push_back(c);
       fits.push_back(std::move(fr));
       fitted_effects.push_back(ev.EffectsAt(fits.back().p.data()));
@@ -565,7 +577,8 @@ Result Run(const std::string& text, const std::string& source, const Data& train
     } else {
       const double limit = (1.0 + o.margin) * rd.candidates[best].validate_rmse_K;
       for (std::size_t i : order)
-        if (i != best && rd.candidates[i].validate_rmse_K < limit) rd.tied.push_back(rd.candidates[i].label);
+        if (i != best && rd.candidates[i].validate_rmse_K < limit)
+          rd.tied.push_back(rd.candidates[i].label);
       if (rd.tied.empty()) {
         rd.verdict = "named";
       } else {
@@ -607,7 +620,8 @@ Result Run(const std::string& text, const std::string& source, const Data& train
 
   Evaluator final_ev(text, source, files, added);
   std::vector<double> pf;
-  for (std::size_t e = 0; e < added.size(); ++e) pf.push_back(final_ev.Internal(e, added[e].values[0]));
+  for (std::size_t e = 0; e < added.size(); ++e)
+    pf.push_back(final_ev.Internal(e, added[e].values[0]));
   const auto after_train = final_ev.Series(pf.data(), gt);
   const auto after_val = final_ev.Series(pf.data(), gv);
   res.train_before = Gaps(before_train, gt);

@@ -26,9 +26,9 @@ struct Options {
   int max_grid_points = 2000;
   long max_exact_rows = 20000;
   // Decision rule (docs/discrepancy.md).
-  double ic_threshold = 10.0;      ///< delta IC at least this far below the current model
+  double ic_threshold = 10.0;         ///< delta IC at least this far below the current model
   double min_validation_gain = 0.10;  ///< validation RMSE cut by at least this fraction
-  double margin = 0.20;            ///< runner-up's validation RMSE at least (1 + margin) x best
+  double margin = 0.20;               ///< runner-up's validation RMSE at least (1 + margin) x best
   int max_fit_iterations = 30;
   /// Called with one line of progress (the command prints it on a terminal).
   std::function<void(const std::string&)> progress;
@@ -48,9 +48,9 @@ struct FittedParameter {
 
 struct Candidate {
   std::string effect;
-  std::string node;        ///< sensor effects: the measured node
-  std::string label;       ///< effect or effect(node)
-  std::string not_applicable;  ///< reason, when it was not tried
+  std::string node;                         ///< sensor effects: the measured node
+  std::string label;                        ///< effect or effect(node)
+  std::string not_applicable;               ///< reason, when it was not tried
   std::vector<FittedParameter> parameters;  ///< the candidate's own parameters
   double train_rmse_K = 0.0, validate_rmse_K = 0.0;
   double rho = 0.0, n_eff = 0.0, delta_ic = 0.0;
@@ -102,7 +102,8 @@ struct Simulated {
   std::vector<std::vector<double>> temps_degC;  ///< [node][point]
   bool averaged = false;
 };
-Simulated SimulateModel(const estimators::ThermalModel& model, const Data& data, const Options& options);
+Simulated SimulateModel(const estimators::ThermalModel& model, const Data& data,
+                        const Options& options);
 
 /// Runs the workflow. `model_text` is the model file, `source` its name, `files` how the tables
 /// it names are read (estimators/thermal_model.hpp); the model.toml of the result names those

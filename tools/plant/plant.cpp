@@ -1,6 +1,7 @@
 #include "tools/plant/plant.hpp"
 
 #include <fmt/core.h>
+#include <toml++/toml.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -13,7 +14,6 @@
 #include <random>
 #include <sstream>
 #include <system_error>
-#include <toml++/toml.h>
 
 #include "estimators/copper.hpp"
 #include "estimators/model_effects.hpp"
@@ -152,8 +152,8 @@ struct PumpState {
   ThermalInputs held;  // inputs held over the current thermal step (ZOH)
   Eigen::VectorXd winding_weights;
   int magnet_state = -1;
-  int frame_node = -1;   // index into Nodes()
-  int level_node = -1;   // index into Nodes(), -1 = the winding from resistance
+  int frame_node = -1;  // index into Nodes()
+  int level_node = -1;  // index into Nodes(), -1 = the winding from resistance
   std::mt19937_64 rng_drive, rng_thermal, rng_bus, rng_jitter;
   std::normal_distribution<double> normal{0.0, 1.0};
   std::uniform_real_distribution<double> uniform{0.0, 1.0};
@@ -223,7 +223,8 @@ void LoadFrameLayout(const PlantResources& res, FrameLayout& layout) {
     p.message_index = ref->message_index;
     p.codec = &codecs->message(static_cast<std::size_t>(ref->message_index));
     p.values.assign(p.codec->signal_count(), std::nan(""));
-    p.counter_signal = dbc->messages[static_cast<std::size_t>(ref->message_index)].FindSignal("RollingCounter");
+    p.counter_signal =
+        dbc->messages[static_cast<std::size_t>(ref->message_index)].FindSignal("RollingCounter");
     return p;
   };
   layout.fast_i = plan_of(MappingInput::kIqA, "iq_A");
@@ -232,9 +233,11 @@ void LoadFrameLayout(const PlantResources& res, FrameLayout& layout) {
 }
 
 /// The pump's motor: a preset or a file the scenario names.
-estimators::MotorDescription PumpMotor(const PumpSpec& spec, const PlantResources& res, const std::string& where) {
+estimators::MotorDescription PumpMotor(const PumpSpec& spec, const PlantResources& res,
+                                       const std::string& where) {
   try {
-    if (!estimators::MotorPresetText(spec.motor).empty()) return estimators::MotorPreset(spec.motor);
+    if (!estimators::MotorPresetText(spec.motor).empty())
+      return estimators::MotorPreset(spec.motor);
     const LoadedText t = res.motor_file(spec.motor);
     return estimators::ParseMotorDescription(t.text, t.source);
   } catch (const std::exception& e) {
@@ -244,7 +247,8 @@ estimators::MotorDescription PumpMotor(const PumpSpec& spec, const PlantResource
 
 /// The pump's truth model (with the scenario's hidden effects added), and the variants its
 /// cooling faults switch to.
-void LoadTruthModels(PumpState& state, const PumpSpec& spec, const PlantResources& res, const std::string& where) {
+void LoadTruthModels(PumpState& state, const PumpSpec& spec, const PlantResources& res,
+                     const std::string& where) {
   PumpState* ps = &state;
   LoadedText model_text;
   try {
@@ -252,22 +256,25 @@ void LoadTruthModels(PumpState& state, const PumpSpec& spec, const PlantResource
     // Tables the model names are read relative to the model file.
     const std::size_t slash = model_text.source.rfind('/');
     const estimators::ThermalModelFiles files{
-        slash == std::string::npos ? std::string(".") : model_text.source.substr(0, slash), res.read_file};
+        slash == std::string::npos ? std::string(".") : model_text.source.substr(0, slash),
+        res.read_file};
     if (!spec.effects.empty()) {
       // Hidden effects: the truth is the model with the workflow's effects added.
-      model_text.text = estimators::ApplyModelEffects(model_text.text, model_text.source, spec.effects);
+      model_text.text =
+          estimators::ApplyModelEffects(model_text.text, model_text.source, spec.effects);
       for (const auto& e : spec.effects) {
         model_text.source += fmt::format(" +{}", e.name);
       }
     }
-    ps->models.push_back(
-        std::make_unique<ThermalModel>(ThermalModel::Parse(model_text.text, model_text.source, files)));
+    ps->models.push_back(std::make_unique<ThermalModel>(
+        ThermalModel::Parse(model_text.text, model_text.source, files)));
     for (const Fault& f : spec.faults) {
       if (f.kind != FaultKind::kCoolingFailure) {
         ps->model_of_fault.push_back(-1);
         continue;
       }
-      const std::string scaled = ScaleEdgeResistance(model_text.text, model_text.source, f.edge, f.factor);
+      const std::string scaled =
+          ScaleEdgeResistance(model_text.text, model_text.source, f.edge, f.factor);
       ps->models.push_back(std::make_unique<ThermalModel>(ThermalModel::Parse(
           scaled, fmt::format("{} (edge {} x {})", model_text.source, f.edge, f.factor), files)));
       ps->model_of_fault.push_back(static_cast<int>(ps->models.size()) - 1);
@@ -278,14 +285,16 @@ void LoadTruthModels(PumpState& state, const PumpSpec& spec, const PlantResource
 }
 
 /// Node index of `name` in `m`; throws ScenarioError listing the nodes.
-int NodeIndex(const ThermalModel& m, const std::string& name, const PumpSpec& spec, const std::string& where) {
+int NodeIndex(const ThermalModel& m, const std::string& name, const PumpSpec& spec,
+              const std::string& where) {
   const auto& nodes = m.Nodes();
   for (std::size_t i = 0; i < nodes.size(); ++i) {
     if (nodes[i].name == name) return static_cast<int>(i);
   }
   std::string list;
   for (const auto& n : nodes) list += (list.empty() ? "" : ", ") + n.name;
-  throw ScenarioError(fmt::format("{}: model '{}' has no node '{}' (nodes: {})", where, spec.model, name, list));
+  throw ScenarioError(
+      fmt::format("{}: model '{}' has no node '{}' (nodes: {})", where, spec.model, name, list));
 }
 
 /// Pump `pi` of the scenario at its start: motor, truth models, nodes, random streams, sensors,
@@ -302,25 +311,30 @@ std::unique_ptr<PumpState> SetUpPump(const Scenario& sc, const PlantResources& r
   LoadTruthModels(*ps, spec, res, where);
   const ThermalModel& m = *ps->models[0];
   if (m.UsesCoolant()) {
-    throw ScenarioError(fmt::format("{}: model '{}' has a coolant boundary; the plant drives only "
-                                    "'ambient' (map the coolant to ambient in the model file)",
-                                    where, spec.model));
+    throw ScenarioError(
+        fmt::format("{}: model '{}' has a coolant boundary; the plant drives only "
+                    "'ambient' (map the coolant to ambient in the model file)",
+                    where, spec.model));
   }
 
   ps->frame_node = NodeIndex(m, spec.frame_sensor.node, spec, where);
-  if (sc.levels.node != kWindingResistanceLevel) ps->level_node = NodeIndex(m, sc.levels.node, spec, where);
+  if (sc.levels.node != kWindingResistanceLevel)
+    ps->level_node = NodeIndex(m, sc.levels.node, spec, where);
   ps->winding_weights = m.WindingWeights();
-  if (ps->winding_weights.sum() <= 0.0 && (electrical || sc.levels.node == kWindingResistanceLevel)) {
-    throw ScenarioError(fmt::format("{}: model '{}' has no temperature-dependent copper loss, so "
-                                    "it defines no winding temperature",
-                                    where, spec.model));
+  if (ps->winding_weights.sum() <= 0.0 &&
+      (electrical || sc.levels.node == kWindingResistanceLevel)) {
+    throw ScenarioError(
+        fmt::format("{}: model '{}' has no temperature-dependent copper loss, so "
+                    "it defines no winding temperature",
+                    where, spec.model));
   }
   if (!spec.drive.magnet_node.empty()) {
     ps->magnet_state = m.StateIndex(spec.drive.magnet_node);
     if (ps->magnet_state < 0) {
-      throw ScenarioError(fmt::format("{}: drive.magnet_node '{}' is not a node with heat capacity "
-                                      "in model '{}'",
-                                      where, spec.drive.magnet_node, spec.model));
+      throw ScenarioError(
+          fmt::format("{}: drive.magnet_node '{}' is not a node with heat capacity "
+                      "in model '{}'",
+                      where, spec.drive.magnet_node, spec.model));
     }
   }
   ps->rng_drive.seed(Mix(sc.seed, pi, 1));
@@ -354,7 +368,8 @@ std::unique_ptr<PumpState> SetUpPump(const Scenario& sc, const PlantResources& r
   ps->summary.max_level_node_degC = -1e300;
   for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
     const Fault& f = spec.faults[fi];
-    if (f.kind == FaultKind::kCoolingFailure && f.start_s <= 0.0) ps->active_model = ps->model_of_fault[fi];
+    if (f.kind == FaultKind::kCoolingFailure && f.start_s <= 0.0)
+      ps->active_model = ps->model_of_fault[fi];
   }
 
   std::vector<std::string> tcols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C"};
@@ -362,10 +377,12 @@ std::unique_ptr<PumpState> SetUpPump(const Scenario& sc, const PlantResources& r
   tcols.insert(tcols.end(), {"winding_resistance_C", "resistance_ohm", "flux_Wb"});
   for (const auto& n : m.Nodes()) tcols.push_back("loss_" + n.name + "_W");
   tcols.insert(tcols.end(), {"loss_total_W", "cooling_model", "drive_state"});
-  ps->truth = std::make_unique<tools::CsvWriter>((fs::path(out_dir) / (spec.name + ".truth.csv")).string(), tcols);
+  ps->truth = std::make_unique<tools::CsvWriter>(
+      (fs::path(out_dir) / (spec.name + ".truth.csv")).string(), tcols);
   ps->measured = std::make_unique<tools::CsvWriter>(
       (fs::path(out_dir) / (spec.name + ".measured.csv")).string(),
-      std::vector<std::string>{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C", spec.frame_sensor.node + "_C"});
+      std::vector<std::string>{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C",
+                               spec.frame_sensor.node + "_C"});
   return ps;
 }
 
@@ -375,9 +392,11 @@ void WriteSummaryJson(const std::string& out_dir, const Scenario& sc, const Plan
   const std::string summary_path = (fs::path(out_dir) / "summary.json").string();
   std::string json = fmt::format(
       "{{\n  \"scenario\": \"{}\",\n  \"seed\": {},\n  \"duration_s\": {},\n  \"log\": \"{}\",\n"
-      "  \"frames_written\": {},\n  \"levels\": {{\"node\": \"{}\", \"warning_C\": {}, \"trip_C\": {}}},\n"
+      "  \"frames_written\": {},\n  \"levels\": {{\"node\": \"{}\", \"warning_C\": {}, \"trip_C\": "
+      "{}}},\n"
       "  \"pumps\": [\n",
-      sc.name, sc.seed, sc.duration_s, result.log_path.empty() ? "" : fs::path(result.log_path).filename().string(),
+      sc.name, sc.seed, sc.duration_s,
+      result.log_path.empty() ? "" : fs::path(result.log_path).filename().string(),
       result.frames_written, sc.levels.node, sc.levels.warning_degC, sc.levels.trip_degC);
   for (std::size_t i = 0; i < result.pumps.size(); ++i) {
     const PumpSummary& s = result.pumps[i];
@@ -388,20 +407,25 @@ void WriteSummaryJson(const std::string& out_dir, const Scenario& sc, const Plan
       above += fmt::format("{}[{}, {}]", above.empty() ? "" : ", ", at(a), at(b));
     }
     json += fmt::format(
-        "    {{\"name\": \"{}\", \"interface\": \"{}\", \"node_id\": {}, \"truth\": \"{}.truth.csv\", "
+        "    {{\"name\": \"{}\", \"interface\": \"{}\", \"node_id\": {}, \"truth\": "
+        "\"{}.truth.csv\", "
         "\"measured\": \"{}.measured.csv\", \"max_C\": {:.3f}, \"max_time_s\": {}, "
-        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"above_warning_s\": [{}], \"frames_written\": {}, "
+        "\"warning_crossed_s\": {}, \"trip_crossed_s\": {}, \"above_warning_s\": [{}], "
+        "\"frames_written\": {}, "
         "\"frames_suppressed\": {}}}{}\n",
         s.name, s.interface, s.node_id, s.name, s.name, s.max_level_node_degC, s.max_level_time_s,
-        opt(s.warning_crossed_s), opt(s.trip_crossed_s), above, s.frames_written, s.frames_suppressed,
-        i + 1 < result.pumps.size() ? "," : "");
+        opt(s.warning_crossed_s), opt(s.trip_crossed_s), above, s.frames_written,
+        s.frames_suppressed, i + 1 < result.pumps.size() ? "," : "");
   }
   json += "  ]\n}\n";
   std::FILE* f = std::fopen(summary_path.c_str(), "wb");
-  if (f == nullptr) throw std::system_error(errno, std::generic_category(), fmt::format("opening '{}'", summary_path));
+  if (f == nullptr)
+    throw std::system_error(errno, std::generic_category(),
+                            fmt::format("opening '{}'", summary_path));
   const bool ok = std::fwrite(json.data(), 1, json.size(), f) == json.size();
   if (std::fclose(f) != 0 || !ok) {
-    throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", summary_path));
+    throw std::system_error(errno, std::generic_category(),
+                            fmt::format("writing '{}'", summary_path));
   }
 }
 
@@ -436,7 +460,8 @@ double TrueFlux_Wb(const PumpState& p) {
 
 /// The frame and ambient sensors read `dt_s` after their last reading (0: the first); a stuck
 /// frame sensor holds the reading it had when it stuck.
-void SampleSensors(PumpState& p, const ThermalInputs& in, double ambient_degC, bool stuck_now, double dt_s) {
+void SampleSensors(PumpState& p, const ThermalInputs& in, double ambient_degC, bool stuck_now,
+                   double dt_s) {
   const double frame_true = p.model().AllTemperatures_degC(in, p.x)(p.frame_node);
   const double reading = p.frame_sensor->Measure(frame_true, dt_s);
   p.frame_lagged_degC = p.frame_sensor->lagged();
@@ -462,7 +487,8 @@ DriveReport ReportDrive(PumpState& p, const SetPoint& sp, double rs_ohm, double 
   const double w = estimators::ElectricalSpeed_rad_per_s(motor, sp.speed_rpm);
   const double diq = first ? 0.0 : (p.iq_A - iq_prev_A) / step_s;
   const double did = first ? 0.0 : (p.id_A - id_prev_A) / step_s;
-  double uq = rs_ohm * p.iq_A + motor.inductance_H * diq + w * (motor.inductance_H * p.id_A + flux_Wb);
+  double uq =
+      rs_ohm * p.iq_A + motor.inductance_H * diq + w * (motor.inductance_H * p.id_A + flux_Wb);
   double ud = rs_ohm * p.id_A + motor.inductance_H * did - motor.inductance_H * w * p.iq_A;
   if (drive.dead_time_V > 0.0) {
     const double mag = std::hypot(p.id_A, p.iq_A);
@@ -479,12 +505,17 @@ DriveReport ReportDrive(PumpState& p, const SetPoint& sp, double rs_ohm, double 
   const double ripple_d = drive.phase_offset_A * std::sin(p.angle_rad + p.offset_phase_rad);
   const double range = drive.current_range_A;
   // The noise draws keep this order: one random stream per pump.
-  p.rep_id_A = sim::Quantise(p.id_A + ripple_d + p.Noise(drive.current_noise_A), i_lsb, -range, range);
-  p.rep_iq_A = sim::Quantise(p.iq_A + ripple_q + p.Noise(drive.current_noise_A), i_lsb, -range, range);
+  p.rep_id_A =
+      sim::Quantise(p.id_A + ripple_d + p.Noise(drive.current_noise_A), i_lsb, -range, range);
+  p.rep_iq_A =
+      sim::Quantise(p.iq_A + ripple_q + p.Noise(drive.current_noise_A), i_lsb, -range, range);
   DriveReport r;
-  r.ud_V = sim::Quantise(ud + p.Noise(drive.voltage_noise_V), u_lsb, -drive.dc_link_V, drive.dc_link_V);
-  r.uq_V = sim::Quantise(uq + p.Noise(drive.voltage_noise_V), u_lsb, -drive.dc_link_V, drive.dc_link_V);
-  p.rep_speed_rpm = sp.speed_rpm > 0.0 ? std::max(0.0, sp.speed_rpm + p.Noise(drive.speed_noise_rpm)) : 0.0;
+  r.ud_V =
+      sim::Quantise(ud + p.Noise(drive.voltage_noise_V), u_lsb, -drive.dc_link_V, drive.dc_link_V);
+  r.uq_V =
+      sim::Quantise(uq + p.Noise(drive.voltage_noise_V), u_lsb, -drive.dc_link_V, drive.dc_link_V);
+  p.rep_speed_rpm =
+      sp.speed_rpm > 0.0 ? std::max(0.0, sp.speed_rpm + p.Noise(drive.speed_noise_rpm)) : 0.0;
   r.dc_link_V = drive.dc_link_V + p.Noise(drive.dc_link_noise_V);
   return r;
 }
@@ -496,7 +527,8 @@ struct TruthElectrical {
 
 /// One row of the truth CSV: inputs, every node's temperature, the electrical truth, each node's
 /// loss and their sum, the cooling model in force and the drive state.
-void WriteTruthRow(PumpState& p, const ThermalInputs& in, const SetPoint& sp, double t, const TruthElectrical& e) {
+void WriteTruthRow(PumpState& p, const ThermalInputs& in, const SetPoint& sp, double t,
+                   const TruthElectrical& e) {
   const ThermalModel& m = p.model();
   const Eigen::VectorXd all = m.AllTemperatures_degC(in, p.x);
   const Eigen::VectorXd losses = m.NodeLosses_W(in, p.x);
@@ -504,7 +536,8 @@ void WriteTruthRow(PumpState& p, const ThermalInputs& in, const SetPoint& sp, do
   for (Eigen::Index i = 0; i < all.size(); ++i) row.push_back(all(i));
   row.insert(row.end(), {e.winding_degC, e.rs_ohm, e.flux_Wb});
   for (Eigen::Index i = 0; i < losses.size(); ++i) row.push_back(losses(i));
-  row.insert(row.end(), {losses.sum(), static_cast<double>(p.active_model), static_cast<double>(sp.drive_state)});
+  row.insert(row.end(), {losses.sum(), static_cast<double>(p.active_model),
+                         static_cast<double>(sp.drive_state)});
   p.truth->Row(row);
 }
 
@@ -523,9 +556,14 @@ ActiveFaults FaultsAt(const PumpSpec& spec, double t) {
         a.dropped_window = true;
         a.drop_probability = std::max(a.drop_probability, f.probability);
         break;
-      case FaultKind::kStaleSensor: a.stale = true; break;
-      case FaultKind::kStuckSensor: a.stuck = true; break;
-      case FaultKind::kCoolingFailure: break;
+      case FaultKind::kStaleSensor:
+        a.stale = true;
+        break;
+      case FaultKind::kStuckSensor:
+        a.stuck = true;
+        break;
+      case FaultKind::kCoolingFailure:
+        break;
     }
   }
   return a;
@@ -583,25 +621,28 @@ struct FrameEmitter {
  private:
   std::int64_t Jitter(PumpState& p) const {
     const double j = sc.jitter_sd_us * p.normal(p.rng_jitter);
-    return static_cast<std::int64_t>(std::llround(std::clamp(j, -sc.jitter_max_us, sc.jitter_max_us)));
+    return static_cast<std::int64_t>(
+        std::llround(std::clamp(j, -sc.jitter_max_us, sc.jitter_max_us)));
   }
 
   bool IsBusOff(const std::string& iface, double t) const {
     for (const BusOff& b : sc.bus_offs) {
-      if ((b.interface.empty() || b.interface == iface) && t >= b.start_s && t < b.end_s) return true;
+      if ((b.interface.empty() || b.interface == iface) && t >= b.start_s && t < b.end_s)
+        return true;
     }
     return false;
   }
 
-  void Emit(PumpState& p, std::uint32_t pump, MessagePlan& plan, std::uint32_t counter, std::int64_t time_us,
-            std::uint32_t order, bool off, const ActiveFaults& faults) {
+  void Emit(PumpState& p, std::uint32_t pump, MessagePlan& plan, std::uint32_t counter,
+            std::int64_t time_us, std::uint32_t order, bool off, const ActiveFaults& faults) {
     bool drop = off;
     if (!drop && faults.dropped_window) drop = p.uniform(p.rng_bus) < faults.drop_probability;
     if (drop) {
       ++p.summary.frames_suppressed;
       return;
     }
-    if (plan.counter_signal >= 0) plan.values[static_cast<std::size_t>(plan.counter_signal)] = counter;
+    if (plan.counter_signal >= 0)
+      plan.values[static_cast<std::size_t>(plan.counter_signal)] = counter;
     PendingFrame f;
     f.time_us = time_us;
     f.pump = pump;
@@ -670,7 +711,8 @@ std::string ScaleEdgeResistance(std::string_view model_text, const std::string& 
       toml::table* t = n.as_table();
       if (t == nullptr) continue;
       std::string a, b;
-      if (const toml::array* between = (*t)["between"].as_array(); between && between->size() == 2) {
+      if (const toml::array* between = (*t)["between"].as_array();
+          between && between->size() == 2) {
         a = (*between)[0].value_or(std::string{});
         b = (*between)[1].value_or(std::string{});
       }
@@ -682,7 +724,8 @@ std::string ScaleEdgeResistance(std::string_view model_text, const std::string& 
       if (std::optional<double> v = r->value<double>()) {
         t->insert_or_assign("resistance_K_per_W", *v * factor);
       } else if (std::optional<std::string> s = r->value<std::string>()) {
-        t->insert_or_assign("resistance_K_per_W", fmt::format("({}) * {}", *s, FormatNumber(factor)));
+        t->insert_or_assign("resistance_K_per_W",
+                            fmt::format("({}) * {}", *s, FormatNumber(factor)));
       }
       std::ostringstream os;
       os << root;
@@ -708,8 +751,11 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   // Pumps.
   const bool electrical = sc.can_log;
   const double step_s = electrical ? sc.fast_period_s : sc.thermal_period_s;
-  const auto steps = static_cast<std::int64_t>(std::llround(std::ceil(sc.duration_s / step_s - 1e-9)));
-  const auto per = [&](double period) { return static_cast<std::int64_t>(std::llround(period / step_s)); };
+  const auto steps =
+      static_cast<std::int64_t>(std::llround(std::ceil(sc.duration_s / step_s - 1e-9)));
+  const auto per = [&](double period) {
+    return static_cast<std::int64_t>(std::llround(period / step_s));
+  };
   const std::int64_t thermal_every = electrical ? per(sc.thermal_period_s) : 1;
   const std::int64_t status_every = per(sc.status_period_s);
   const std::int64_t truth_every = per(sc.truth_period_s);
@@ -717,7 +763,8 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   const double thermal_dt_s = static_cast<double>(thermal_every) * step_s;
 
   std::vector<std::unique_ptr<PumpState>> pumps;
-  for (std::size_t pi = 0; pi < sc.pumps.size(); ++pi) pumps.push_back(SetUpPump(sc, res, pi, out_dir));
+  for (std::size_t pi = 0; pi < sc.pumps.size(); ++pi)
+    pumps.push_back(SetUpPump(sc, res, pi, out_dir));
 
   // Log file.
   PlantResult result;
@@ -726,7 +773,8 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
     result.log_path = (fs::path(out_dir) / (sc.name + ".log")).string();
     log = std::fopen(result.log_path.c_str(), "wb");
     if (log == nullptr) {
-      throw std::system_error(errno, std::generic_category(), fmt::format("opening '{}'", result.log_path));
+      throw std::system_error(errno, std::generic_category(),
+                              fmt::format("opening '{}'", result.log_path));
     }
   }
   struct LogCloser {
@@ -749,7 +797,8 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       ++n;
     }
     if (std::fwrite(line.data(), 1, line.size(), log) != line.size()) {
-      throw std::system_error(errno, std::generic_category(), fmt::format("writing '{}'", result.log_path));
+      throw std::system_error(errno, std::generic_category(),
+                              fmt::format("writing '{}'", result.log_path));
     }
     pending.erase(pending.begin(), pending.begin() + static_cast<std::ptrdiff_t>(n));
     result.frames_written += n;
@@ -782,12 +831,17 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
 
       // Sensors, sampled at the status rate (every thermal step in a thermal-only run).
       if (!electrical || k % status_every == 0) {
-        SampleSensors(p, in, sp.ambient_degC, faults.stuck, k == 0 ? 0.0 : electrical ? sc.status_period_s : step_s);
+        SampleSensors(p, in, sp.ambient_degC, faults.stuck,
+                      k == 0       ? 0.0
+                      : electrical ? sc.status_period_s
+                                   : step_s);
       }
 
       if (electrical) {
-        const DriveReport drive = ReportDrive(p, sp, rs_ohm, flux_Wb, k == 0, iq_prev, id_prev, step_s);
-        frames.ControlStep(p, static_cast<std::uint32_t>(pi), k, t, sp, drive, faults, k % status_every == 0);
+        const DriveReport drive =
+            ReportDrive(p, sp, rs_ohm, flux_Wb, k == 0, iq_prev, id_prev, step_s);
+        frames.ControlStep(p, static_cast<std::uint32_t>(pi), k, t, sp, drive, faults,
+                           k % status_every == 0);
       } else {
         p.rep_id_A = sp.id_A;
         p.rep_iq_A = sp.iq_A;
@@ -796,7 +850,8 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
 
       // Truth level summary (every thermal step).
       if (k % thermal_every == 0) {
-        const double level = p.level_node < 0 ? winding_degC : m.AllTemperatures_degC(in, p.x)(p.level_node);
+        const double level =
+            p.level_node < 0 ? winding_degC : m.AllTemperatures_degC(in, p.x)(p.level_node);
         RecordLevel(p.summary, sc.levels, level, t);
       }
       if (k % truth_every == 0) WriteTruthRow(p, in, sp, t, {winding_degC, rs_ohm, flux_Wb});
@@ -806,7 +861,8 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
       }
 
       // End of a thermal period: advance the truth with the latched inputs.
-      if ((k + 1) % thermal_every == 0) AdvanceTruth(p, thermal_dt_s, static_cast<double>(k + 1) * step_s);
+      if ((k + 1) % thermal_every == 0)
+        AdvanceTruth(p, thermal_dt_s, static_cast<double>(k + 1) * step_s);
     }
     if (electrical && (k % 100 == 99 || k + 1 == steps)) {
       write_until(k + 1 == steps ? INT64_MAX
@@ -829,7 +885,9 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
   if (log != nullptr) {
     const int rc = std::fclose(log);
     log = nullptr;
-    if (rc != 0) throw std::system_error(errno, std::generic_category(), fmt::format("closing '{}'", result.log_path));
+    if (rc != 0)
+      throw std::system_error(errno, std::generic_category(),
+                              fmt::format("closing '{}'", result.log_path));
   }
 
   WriteSummaryJson(out_dir, sc, result);

@@ -50,8 +50,8 @@ struct PumpSummary {
   std::uint32_t node_id = 0;
   double max_level_node_degC = 0.0;  ///< highest truth of the levels' node
   double max_level_time_s = 0.0;
-  double warning_crossed_s = -1.0;   ///< first time the truth exceeds warning_C (-1 = never)
-  double trip_crossed_s = -1.0;      ///< first time the truth exceeds trip_C (-1 = never)
+  double warning_crossed_s = -1.0;  ///< first time the truth exceeds warning_C (-1 = never)
+  double trip_crossed_s = -1.0;     ///< first time the truth exceeds trip_C (-1 = never)
   /// Every interval in which the truth was above warning_C: [start, end) at thermal-step
   /// resolution; end -1 = still above at the end of the run.
   std::vector<std::pair<double, double>> above_warning_s;
@@ -74,8 +74,7 @@ struct PlantResult {
 /// Throws ScenarioError for references that do not resolve or do not fit (unknown node, edge
 /// or motor), std::system_error when an output cannot be written.
 PlantResult RunPlant(const Scenario& scenario, const PlantResources& resources,
-                     const std::string& out_dir,
-                     const std::function<void(double)>& progress = {});
+                     const std::string& out_dir, const std::function<void(double)>& progress = {});
 
 /// Model text with edge `edge`'s resistance multiplied by `factor` (the cooling-failure fault).
 /// `edge` matches an edge's `name`, or "a-b" / "b-a" of its `between`. A number is multiplied;

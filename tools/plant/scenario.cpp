@@ -1,13 +1,13 @@
 #include "tools/plant/scenario.hpp"
 
 #include <fmt/core.h>
+#include <toml++/toml.h>
 
 #include <algorithm>
 #include <cmath>
 #include <initializer_list>
 #include <optional>
 #include <set>
-#include <toml++/toml.h>
 
 namespace pumptherm::plant {
 namespace {
@@ -34,8 +34,11 @@ class Reader {
  public:
   Reader(const toml::table* primary, const toml::table* fallback, std::string source,
          std::string prefix, int line)
-      : primary_(primary), fallback_(fallback), source_(std::move(source)),
-        prefix_(std::move(prefix)), line_(line) {}
+      : primary_(primary),
+        fallback_(fallback),
+        source_(std::move(source)),
+        prefix_(std::move(prefix)),
+        line_(line) {}
 
   const toml::node* Find(std::string_view key) const {
     if (primary_ != nullptr) {
@@ -151,7 +154,8 @@ TemperatureSensorSpec ParseSensor(const toml::table* pump, const toml::table* de
   for (const toml::table* t : {p, d}) {
     if (t == nullptr) continue;
     if (with_node) {
-      CheckKeys(*t, {"node", "noise_sd_K", "accuracy_K", "offset_K", "resolution_K", "lag_s"}, source, at);
+      CheckKeys(*t, {"node", "noise_sd_K", "accuracy_K", "offset_K", "resolution_K", "lag_s"},
+                source, at);
     } else {
       CheckKeys(*t, {"noise_sd_K", "accuracy_K", "offset_K", "resolution_K", "lag_s"}, source, at);
     }
@@ -166,8 +170,8 @@ TemperatureSensorSpec ParseSensor(const toml::table* pump, const toml::table* de
   return spec;
 }
 
-DriveSpec ParseDrive(const toml::table* pump, const toml::table* defaults, const std::string& source,
-                     const std::string& where) {
+DriveSpec ParseDrive(const toml::table* pump, const toml::table* defaults,
+                     const std::string& source, const std::string& where) {
   const toml::table* p = SubTable(pump, "drive", source, where);
   const toml::table* d = SubTable(defaults, "drive", source, "defaults.");
   const std::string at = where + "drive.";
@@ -192,8 +196,8 @@ DriveSpec ParseDrive(const toml::table* pump, const toml::table* defaults, const
   s.dead_time_V = r.Number("dead_time_V", s.dead_time_V, 0.0, 10.0);
   s.dead_time_knee_A = r.Positive("dead_time_knee_A", s.dead_time_knee_A);
   s.magnet_node = r.String("magnet_node", s.magnet_node);
-  s.flux_temperature_coefficient_per_K =
-      r.Number("flux_temperature_coefficient_per_K", s.flux_temperature_coefficient_per_K, -0.1, 0.1);
+  s.flux_temperature_coefficient_per_K = r.Number("flux_temperature_coefficient_per_K",
+                                                  s.flux_temperature_coefficient_per_K, -0.1, 0.1);
   return s;
 }
 
@@ -218,14 +222,17 @@ std::vector<estimators::Effect> ParseEffects(const toml::node& node, const std::
       for (const auto& e : estimators::EffectVocabulary()) {
         if (!e.sensor) list += (list.empty() ? "" : ", ") + e.name;
       }
-      Fail(source, LineOf(*name), at + "name", fmt::format("unknown effect '{}' (known: {})", name->get(), list));
+      Fail(source, LineOf(*name), at + "name",
+           fmt::format("unknown effect '{}' (known: {})", name->get(), list));
     }
     if (spec->sensor) {
       Fail(source, LineOf(*name), at + "name",
-           fmt::format("'{}' is a sensor effect: set frame_sensor.lag_s or frame_sensor.offset_K instead",
-                       spec->name));
+           fmt::format(
+               "'{}' is a sensor effect: set frame_sensor.lag_s or frame_sensor.offset_K instead",
+               spec->name));
     }
-    if (!seen.insert(spec->name).second) Fail(source, LineOf(*name), at + "name", "effect given twice");
+    if (!seen.insert(spec->name).second)
+      Fail(source, LineOf(*name), at + "name", "effect given twice");
     const toml::array* values = t->get_as<toml::array>("values");
     if (values == nullptr) Fail(source, LineOf(*t), at + "values", "missing (an array of numbers)");
     if (values->size() != spec->parameters.size()) {
@@ -281,7 +288,8 @@ std::vector<Fault> ParseFaults(const toml::node& node, const std::string& source
     f.probability = r.Number("probability", 1.0, 0.0, 1.0);
     if (f.kind == FaultKind::kCoolingFailure) {
       f.edge = r.String("edge", "");
-      if (f.edge.empty()) Fail(source, f.line, at + "edge", "missing (the edge whose resistance rises)");
+      if (f.edge.empty())
+        Fail(source, f.line, at + "edge", "missing (the edge whose resistance rises)");
       f.factor = r.Positive("factor", 0.0);
     } else if (t->get("edge") || t->get("factor")) {
       Fail(source, f.line, at + "edge", "only a cooling_failure has an edge and a factor");
@@ -309,20 +317,23 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
   sc.source = source;
   const toml::table* head = SubTable(&root, "scenario", source, "");
   if (head == nullptr) Fail(source, 1, "scenario", "missing table [scenario]");
-  CheckKeys(*head,
-            {"name", "description", "duration_s", "seed", "can_log", "start_epoch_s",
-             "thermal_period_s", "truth_period_s", "measured_period_s", "jitter_sd_us",
-             "jitter_max_us"},
-            source, "scenario.");
+  CheckKeys(
+      *head,
+      {"name", "description", "duration_s", "seed", "can_log", "start_epoch_s", "thermal_period_s",
+       "truth_period_s", "measured_period_s", "jitter_sd_us", "jitter_max_us"},
+      source, "scenario.");
   Reader h(head, nullptr, source, "scenario.", LineOf(*head));
   sc.name = h.String("name", "");
   if (sc.name.empty()) Fail(source, LineOf(*head), "scenario.name", "missing");
   sc.description = h.String("description", "");
-  if (head->get("duration_s") == nullptr) Fail(source, LineOf(*head), "scenario.duration_s", "missing");
+  if (head->get("duration_s") == nullptr)
+    Fail(source, LineOf(*head), "scenario.duration_s", "missing");
   sc.duration_s = h.Positive("duration_s", 0.0);
-  sc.seed = static_cast<std::uint64_t>(h.Integer("seed", 1, 0, std::numeric_limits<std::int64_t>::max()));
+  sc.seed =
+      static_cast<std::uint64_t>(h.Integer("seed", 1, 0, std::numeric_limits<std::int64_t>::max()));
   sc.can_log = h.Bool("can_log", true);
-  sc.start_epoch_us = h.Integer("start_epoch_s", sc.start_epoch_us / 1000000, 0, 4102444800LL) * 1000000;
+  sc.start_epoch_us =
+      h.Integer("start_epoch_s", sc.start_epoch_us / 1000000, 0, 4102444800LL) * 1000000;
   sc.thermal_period_s = h.Positive("thermal_period_s", sc.thermal_period_s);
   sc.truth_period_s = h.Positive("truth_period_s", sc.truth_period_s);
   sc.measured_period_s = h.Positive("measured_period_s", sc.measured_period_s);
@@ -346,8 +357,9 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
     sc.levels.node = r.String("node", sc.levels.node);
     // The resistance-based winding's name before one name per quantity (docs/daemon.md, "Names").
     if (sc.levels.node == "winding_res") {
-      fmt::print(stderr, "warning: {}:{}: levels.node = \"winding_res\" is deprecated: read as \"{}\"\n", source,
-                 LineOf(*lv), kWindingResistanceLevel);
+      fmt::print(stderr,
+                 "warning: {}:{}: levels.node = \"winding_res\" is deprecated: read as \"{}\"\n",
+                 source, LineOf(*lv), kWindingResistanceLevel);
       sc.levels.node = kWindingResistanceLevel;
     }
     sc.levels.warning_degC = r.Number("warning_C", sc.levels.warning_degC, -50.0, 1000.0);
@@ -360,9 +372,9 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
   const toml::table* profiles = SubTable(&root, "profile", source, "");
   const toml::table* defaults = SubTable(&root, "defaults", source, "");
   const std::initializer_list<std::string_view> pump_keys = {
-      "name", "node_id", "count", "stagger_s", "interface", "model", "motor", "ambient_C",
-      "initial_C", "process_noise_K", "profile", "segments", "faults", "frame_sensor",
-      "ambient_sensor", "drive", "effects"};
+      "name",   "node_id",      "count",          "stagger_s",       "interface", "model",
+      "motor",  "ambient_C",    "initial_C",      "process_noise_K", "profile",   "segments",
+      "faults", "frame_sensor", "ambient_sensor", "drive",           "effects"};
   if (defaults != nullptr) {
     CheckKeys(*defaults,
               {"interface", "model", "motor", "ambient_C", "initial_C", "process_noise_K",
@@ -392,10 +404,12 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
     CheckKeys(pt, pump_keys, source, at);
     Reader r(&pt, defaults, source, at, LineOf(pt));
     const std::string name = r.String("name", fmt::format("pump{}", i + 1));
-    const auto first_id = static_cast<std::uint32_t>(r.Integer("node_id", static_cast<std::int64_t>(i), 0, 15));
+    const auto first_id =
+        static_cast<std::uint32_t>(r.Integer("node_id", static_cast<std::int64_t>(i), 0, 15));
     const auto count = static_cast<std::uint32_t>(r.Integer("count", 1, 1, 16));
     if (first_id + count > 16) {
-      Fail(source, LineOf(pt), at + "count", "node IDs must stay below 16 (the mapping's node_id_limit)");
+      Fail(source, LineOf(pt), at + "count",
+           "node IDs must stay below 16 (the mapping's node_id_limit)");
     }
     const double stagger_s = r.Number("stagger_s", 0.0, 0.0, 1e6);
 
@@ -403,29 +417,35 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
     base.line = LineOf(pt);
     base.interface = r.String("interface", base.interface);
     base.model = r.String("model", "");
-    if (base.model.empty()) Fail(source, LineOf(pt), at + "model", "missing (a shipped model name or a path)");
+    if (base.model.empty())
+      Fail(source, LineOf(pt), at + "model", "missing (a shipped model name or a path)");
     base.motor = r.String("motor", base.motor);
     base.ambient_degC = r.Number("ambient_C", base.ambient_degC, -60.0, 200.0);
     base.initial_degC = r.Number("initial_C", base.initial_degC, -60.0, 400.0);
     base.process_noise_K = r.Number("process_noise_K", base.process_noise_K, 0.0, 10.0);
-    base.frame_sensor = ParseSensor(&pt, defaults, "frame_sensor", source, at,
-                                    TemperatureSensorSpec{"frame", 0.05, 0.35, kNotGiven, 0.1, 30.0}, true);
-    base.ambient_sensor = ParseSensor(&pt, defaults, "ambient_sensor", source, at,
-                                      TemperatureSensorSpec{"", 0.05, 0.35, kNotGiven, 0.1, 60.0}, false);
+    base.frame_sensor =
+        ParseSensor(&pt, defaults, "frame_sensor", source, at,
+                    TemperatureSensorSpec{"frame", 0.05, 0.35, kNotGiven, 0.1, 30.0}, true);
+    base.ambient_sensor =
+        ParseSensor(&pt, defaults, "ambient_sensor", source, at,
+                    TemperatureSensorSpec{"", 0.05, 0.35, kNotGiven, 0.1, 60.0}, false);
     base.drive = ParseDrive(&pt, defaults, source, at);
     if (const toml::node* seg = pt.get("segments")) {
-      if (pt.get("profile")) Fail(source, LineOf(*seg), at + "segments", "give either segments or profile");
+      if (pt.get("profile"))
+        Fail(source, LineOf(*seg), at + "segments", "give either segments or profile");
       base.segments = ParseSegments(*seg, source, at + "segments");
     } else {
       const std::string profile = r.String("profile", "");
-      if (profile.empty()) Fail(source, LineOf(pt), at + "profile", "missing: give a profile name or segments");
+      if (profile.empty())
+        Fail(source, LineOf(pt), at + "profile", "missing: give a profile name or segments");
       const toml::table* p = profiles ? SubTable(profiles, profile, source, "profile.") : nullptr;
       if (p == nullptr) {
         const toml::node* pn = r.Find("profile");
         Fail(source, pn ? LineOf(*pn) : LineOf(pt), at + "profile",
              fmt::format("no [profile.{}] in the file", profile));
       }
-      base.segments = ParseSegments(*p->get("segments"), source, fmt::format("profile.{}.segments", profile));
+      base.segments =
+          ParseSegments(*p->get("segments"), source, fmt::format("profile.{}.segments", profile));
       // repeat = N: the segments N times in a row (a daily cycle over a week).
       Reader pr(p, nullptr, source, fmt::format("profile.{}.", profile), LineOf(*p));
       const auto repeat = static_cast<std::size_t>(pr.Integer("repeat", 1, 1, 100000));
@@ -435,8 +455,10 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
                              base.segments.begin() + static_cast<std::ptrdiff_t>(one));
       }
     }
-    if (const toml::node* f = pt.get("faults")) base.faults = ParseFaults(*f, source, at + "faults");
-    if (const toml::node* e = pt.get("effects")) base.effects = ParseEffects(*e, source, at + "effects");
+    if (const toml::node* f = pt.get("faults"))
+      base.faults = ParseFaults(*f, source, at + "faults");
+    if (const toml::node* e = pt.get("effects"))
+      base.effects = ParseEffects(*e, source, at + "effects");
 
     for (std::uint32_t k = 0; k < count; ++k) {
       PumpSpec p = base;

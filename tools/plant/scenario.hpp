@@ -43,27 +43,27 @@ struct Segment {
 
 /// Measurement chain of one temperature sensor (../shared/reference/realistic-signals.md).
 struct TemperatureSensorSpec {
-  std::string node;              ///< model node measured (frame sensor only)
-  double noise_sd_K = 0.05;      ///< white noise per sample
-  double accuracy_K = 0.35;      ///< offset drawn once per sensor, uniform in +/- accuracy_K
-  double offset_K = kNotGiven;   ///< fixed offset instead of the drawn one
-  double resolution_K = 0.1;     ///< quantisation step
-  double lag_s = 30.0;           ///< first-order lag time constant
+  std::string node;             ///< model node measured (frame sensor only)
+  double noise_sd_K = 0.05;     ///< white noise per sample
+  double accuracy_K = 0.35;     ///< offset drawn once per sensor, uniform in +/- accuracy_K
+  double offset_K = kNotGiven;  ///< fixed offset instead of the drawn one
+  double resolution_K = 0.1;    ///< quantisation step
+  double lag_s = 30.0;          ///< first-order lag time constant
 };
 
 /// Imperfections of the drive's electrical telemetry (defaults: realistic-signals.md).
 struct DriveSpec {
-  double current_response_s = 0.2;   ///< time constant of the current loop
-  double current_noise_A = 0.01;     ///< rms noise on id, iq
-  double current_range_A = 20.0;     ///< ADC range +/- (12 bits)
-  double phase_offset_A = 0.005;     ///< per-phase offset -> dq ripple at electrical frequency
-  double voltage_noise_V = 0.01;     ///< rms jitter of the commanded ud, uq
-  double dc_link_V = 48.0;           ///< DC-link voltage; voltages 12-bit over +/- this
-  double dc_link_noise_V = 0.1;      ///< rms noise of the reported DC-link voltage
-  double speed_noise_rpm = 1.0;      ///< rms noise of the speed estimate
-  double dead_time_V = 0.0;          ///< inverter dead-time error along the current (0 = off)
-  double dead_time_knee_A = 0.5;     ///< current where the dead-time error reaches 76 % (tanh)
-  std::string magnet_node;           ///< node whose temperature sets the flux (empty = constant)
+  double current_response_s = 0.2;  ///< time constant of the current loop
+  double current_noise_A = 0.01;    ///< rms noise on id, iq
+  double current_range_A = 20.0;    ///< ADC range +/- (12 bits)
+  double phase_offset_A = 0.005;    ///< per-phase offset -> dq ripple at electrical frequency
+  double voltage_noise_V = 0.01;    ///< rms jitter of the commanded ud, uq
+  double dc_link_V = 48.0;          ///< DC-link voltage; voltages 12-bit over +/- this
+  double dc_link_noise_V = 0.1;     ///< rms noise of the reported DC-link voltage
+  double speed_noise_rpm = 1.0;     ///< rms noise of the speed estimate
+  double dead_time_V = 0.0;         ///< inverter dead-time error along the current (0 = off)
+  double dead_time_knee_A = 0.5;    ///< current where the dead-time error reaches 76 % (tanh)
+  std::string magnet_node;          ///< node whose temperature sets the flux (empty = constant)
   double flux_temperature_coefficient_per_K = -1e-3;  ///< NdFeB, relative to flux at T0
 };
 
@@ -93,14 +93,14 @@ struct BusOff {
 };
 
 struct PumpSpec {
-  std::string name;                ///< used in output file names
+  std::string name;  ///< used in output file names
   std::string interface = "can0";
   std::uint32_t node_id = 0;
-  std::string model;               ///< truth thermal model: shipped name or path
+  std::string model;                  ///< truth thermal model: shipped name or path
   std::string motor = "han2019-tmp";  ///< motor preset name or path
-  double ambient_degC = 25.0;      ///< ambient at t = 0
-  double initial_degC = kNotGiven; ///< every state at t = 0 (NaN = the ambient)
-  double process_noise_K = 0.005;  ///< truth process noise per state, K per sqrt(s)
+  double ambient_degC = 25.0;         ///< ambient at t = 0
+  double initial_degC = kNotGiven;    ///< every state at t = 0 (NaN = the ambient)
+  double process_noise_K = 0.005;     ///< truth process noise per state, K per sqrt(s)
   std::vector<Segment> segments;
   TemperatureSensorSpec frame_sensor;
   TemperatureSensorSpec ambient_sensor;
@@ -126,18 +126,18 @@ struct TruthLevels {
 struct Scenario {
   std::string name;
   std::string description;
-  std::string source;           ///< file name, for messages
+  std::string source;  ///< file name, for messages
   double duration_s = 0.0;
   std::uint64_t seed = 1;
-  bool can_log = true;          ///< false: thermal-only (no drive, no log; exact inputs)
+  bool can_log = true;  ///< false: thermal-only (no drive, no log; exact inputs)
   std::int64_t start_epoch_us = 1767225600LL * 1000000;  ///< log time of t = 0 (2026-01-01)
-  double fast_period_s = 0.01;  ///< PUMP_FAST_I/U period (DBC GenMsgCycleTime 10 ms)
-  double status_period_s = 0.1; ///< PUMP_STATUS period (100 ms)
-  double thermal_period_s = 0.1;  ///< truth integration step
-  double truth_period_s = 1.0;    ///< truth CSV row period
-  double measured_period_s = 1.0; ///< measured CSV row period
-  double jitter_sd_us = 100.0;    ///< rms timestamp jitter
-  double jitter_max_us = 400.0;   ///< jitter bound (truncated)
+  double fast_period_s = 0.01;     ///< PUMP_FAST_I/U period (DBC GenMsgCycleTime 10 ms)
+  double status_period_s = 0.1;    ///< PUMP_STATUS period (100 ms)
+  double thermal_period_s = 0.1;   ///< truth integration step
+  double truth_period_s = 1.0;     ///< truth CSV row period
+  double measured_period_s = 1.0;  ///< measured CSV row period
+  double jitter_sd_us = 100.0;     ///< rms timestamp jitter
+  double jitter_max_us = 400.0;    ///< jitter bound (truncated)
   TruthLevels levels;
   std::vector<PumpSpec> pumps;
   std::vector<BusOff> bus_offs;

@@ -19,9 +19,12 @@ bool Contains(const std::vector<std::string>& v, const std::string& x) {
 
 const char* LevelName(GatewayAlarmLevel l) {
   switch (l) {
-    case GatewayAlarmLevel::kNormal: return "normal";
-    case GatewayAlarmLevel::kWarning: return "warning";
-    case GatewayAlarmLevel::kTrip: return "trip";
+    case GatewayAlarmLevel::kNormal:
+      return "normal";
+    case GatewayAlarmLevel::kWarning:
+      return "warning";
+    case GatewayAlarmLevel::kTrip:
+      return "trip";
   }
   return "?";
 }
@@ -31,19 +34,23 @@ const char* LevelName(GatewayAlarmLevel l) {
 ClearRouteChoice ChooseClearRoute(const daemon::DaemonConfig& c, const daemon::PumpConfig& pump,
                                   std::string_view via) {
   const bool lcm_ok = !c.lcm.url.empty() && !c.clear_auth.key_file.empty();
-  const bool can_ok = !pump.interface.empty() && Contains(pump.alarms.clear_can_interfaces, pump.interface);
+  const bool can_ok =
+      !pump.interface.empty() && Contains(pump.alarms.clear_can_interfaces, pump.interface);
   if (via == "lcm" || (via == "auto" && lcm_ok)) {
     if (!lcm_ok) {
-      throw InputError(fmt::format("{}: LCM clears need lcm.url and alarms.clear_key_file (or give --url and --key)",
-                                   c.source));
+      throw InputError(fmt::format(
+          "{}: LCM clears need lcm.url and alarms.clear_key_file (or give --url and --key)",
+          c.source));
     }
     return {ClearRoute::kLcm, {}};
   }
   if (via == "can" || via == "auto") {
     if (!can_ok) {
       throw InputError(fmt::format(
-          "{}: pump '{}' is on interface '{}', which is not in alarms.clear_can_interfaces{}: the gateway would "
-          "refuse a CAN clear{}", c.source, pump.name, pump.interface,
+          "{}: pump '{}' is on interface '{}', which is not in alarms.clear_can_interfaces{}: the "
+          "gateway would "
+          "refuse a CAN clear{}",
+          c.source, pump.name, pump.interface,
           pump.alarms.clear_can_interfaces.empty() ? " (empty)" : "",
           via == "auto" ? "; and LCM clears need lcm.url and alarms.clear_key_file" : ""));
     }
@@ -52,10 +59,11 @@ ClearRouteChoice ChooseClearRoute(const daemon::DaemonConfig& c, const daemon::P
   throw InputError(fmt::format("--via {}: expected lcm, can or auto", via));
 }
 
-protocol::CanFrame EncodeClearFrame(const protocol::Dbc& dbc, const protocol::SignalMapping& mapping,
-                                    std::uint32_t node_id) {
+protocol::CanFrame EncodeClearFrame(const protocol::Dbc& dbc,
+                                    const protocol::SignalMapping& mapping, std::uint32_t node_id) {
   const auto& ref = mapping.input(protocol::MappingInput::kAlarmClear);
-  if (!ref) throw InputError("the signal mapping has no alarm_clear: this frame set has no CAN clear");
+  if (!ref)
+    throw InputError("the signal mapping has no alarm_clear: this frame set has no CAN clear");
   if (node_id >= mapping.node_id_limit) {
     throw InputError(fmt::format("node ID {} is not below the mapping's node_id_limit {}", node_id,
                                  mapping.node_id_limit));
@@ -69,15 +77,18 @@ protocol::CanFrame EncodeClearFrame(const protocol::Dbc& dbc, const protocol::Si
   f.id = mapping.CanId(dbc, ref->message_index, node_id);
   f.extended = m.extended;
   f.len = static_cast<std::uint8_t>(m.size_bytes);
-  const auto r = protocol::MessageCodec(m).Encode(values, std::span<std::uint8_t>(f.data.data(), f.len));
+  const auto r =
+      protocol::MessageCodec(m).Encode(values, std::span<std::uint8_t>(f.data.data(), f.len));
   if (r.status != protocol::CodecStatus::kOk) {
     throw InputError(fmt::format("{}: cannot encode {}", dbc.file_name, m.name));
   }
   return f;
 }
 
-std::optional<GatewayAlarmLevel> AlarmLevelOf(const protocol::Dbc& dbc, const protocol::SignalMapping& mapping,
-                                              std::uint32_t node_id, const protocol::CanFrame& frame) {
+std::optional<GatewayAlarmLevel> AlarmLevelOf(const protocol::Dbc& dbc,
+                                              const protocol::SignalMapping& mapping,
+                                              std::uint32_t node_id,
+                                              const protocol::CanFrame& frame) {
   const auto& ref = mapping.output(protocol::MappingOutput::kAlarmLevel);
   if (!ref || node_id >= mapping.node_id_limit) return std::nullopt;
   const protocol::DbcMessage& m = dbc.messages[static_cast<std::size_t>(ref->message_index)];
@@ -86,7 +97,8 @@ std::optional<GatewayAlarmLevel> AlarmLevelOf(const protocol::Dbc& dbc, const pr
   }
   std::vector<double> values(m.signals.size());
   const protocol::MessageCodec codec(m);
-  if (codec.Decode(std::span<const std::uint8_t>(frame.data.data(), frame.len), values) != protocol::CodecStatus::kOk) {
+  if (codec.Decode(std::span<const std::uint8_t>(frame.data.data(), frame.len), values) !=
+      protocol::CodecStatus::kOk) {
     return std::nullopt;
   }
   const double v = ref->scale * values[static_cast<std::size_t>(ref->signal_index)] + ref->offset;
@@ -98,20 +110,27 @@ std::pair<int, std::string> DescribeCanClear(const std::string& pump, const std:
                                              const CanClearOutcome& o, double waited_s) {
   const std::string before = o.before ? LevelName(*o.before) : "not seen";
   if (!o.after) {
-    return {1, fmt::format("{}: PUMP_CLEAR sent on {}, but no GW_ALARM of this pump came back within {} s (is "
-                           "pumpthermd running and sending on {}?)", pump, interface, waited_s, interface)};
+    return {1,
+            fmt::format(
+                "{}: PUMP_CLEAR sent on {}, but no GW_ALARM of this pump came back within {} s (is "
+                "pumpthermd running and sending on {}?)",
+                pump, interface, waited_s, interface)};
   }
   const std::string after = LevelName(*o.after);
   if (*o.after != GatewayAlarmLevel::kTrip) {
     const bool was_trip = o.before == GatewayAlarmLevel::kTrip;
-    return {0, fmt::format("{}: PUMP_CLEAR sent on {}; the gateway's GW_ALARM: {} before, {} after{}", pump,
-                           interface, before, after,
-                           was_trip ? ": trip cleared" : " (there was no trip to clear)")};
+    return {0,
+            fmt::format("{}: PUMP_CLEAR sent on {}; the gateway's GW_ALARM: {} before, {} after{}",
+                        pump, interface, before, after,
+                        was_trip ? ": trip cleared" : " (there was no trip to clear)")};
   }
-  return {1, fmt::format("{}: PUMP_CLEAR sent on {}; the gateway's GW_ALARM still says trip after {} s: refused "
-                         "(the gateway does not list {} in alarms.clear_can_interfaces, or another clear came "
-                         "within 2 s) or the condition is still present; the gateway's journal says which",
-                         pump, interface, waited_s, interface)};
+  return {
+      1,
+      fmt::format(
+          "{}: PUMP_CLEAR sent on {}; the gateway's GW_ALARM still says trip after {} s: refused "
+          "(the gateway does not list {} in alarms.clear_can_interfaces, or another clear came "
+          "within 2 s) or the condition is still present; the gateway's journal says which",
+          pump, interface, waited_s, interface)};
 }
 
 }  // namespace pumptherm::tools

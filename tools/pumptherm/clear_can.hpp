@@ -32,16 +32,18 @@ ClearRouteChoice ChooseClearRoute(const daemon::DaemonConfig& c, const daemon::P
 
 /// The PUMP_CLEAR frame (the mapping's alarm_clear signal set to 1) for the pump with `node_id`.
 /// Throws InputError when the mapping has no alarm_clear or the node ID is above its limit.
-protocol::CanFrame EncodeClearFrame(const protocol::Dbc& dbc, const protocol::SignalMapping& mapping,
-                                    std::uint32_t node_id);
+protocol::CanFrame EncodeClearFrame(const protocol::Dbc& dbc,
+                                    const protocol::SignalMapping& mapping, std::uint32_t node_id);
 
 /// Alarm levels as GW_ALARM's AlarmLevel carries them.
 enum class GatewayAlarmLevel { kNormal = 0, kWarning = 1, kTrip = 2 };
 
 /// The alarm level in `frame` when it is the mapping's alarm_level message of the pump with
 /// `node_id`; nullopt for any other frame, a short one, or the not-available value.
-std::optional<GatewayAlarmLevel> AlarmLevelOf(const protocol::Dbc& dbc, const protocol::SignalMapping& mapping,
-                                              std::uint32_t node_id, const protocol::CanFrame& frame);
+std::optional<GatewayAlarmLevel> AlarmLevelOf(const protocol::Dbc& dbc,
+                                              const protocol::SignalMapping& mapping,
+                                              std::uint32_t node_id,
+                                              const protocol::CanFrame& frame);
 
 /// What the GW_ALARM frames before and after a CAN clear say, for the operator.
 struct CanClearOutcome {

@@ -4,10 +4,9 @@
 // PUMP_CLEAR frame on the pump's CAN interface, reporting the gateway's GW_ALARM level before
 // and after (docs/protocol.md).
 #include <fmt/core.h>
+#include <poll.h>
 #include <time.h>
 #include <unistd.h>
-
-#include <poll.h>
 
 #include <algorithm>
 #include <cmath>
@@ -64,8 +63,10 @@ daemon::DaemonConfig LoadDaemonConfig(const ClearTripOptions& o) {
 }
 
 const daemon::PumpConfig& FindPump(const daemon::DaemonConfig& c, const ClearTripOptions& o) {
-  const auto it = std::find_if(c.pumps.begin(), c.pumps.end(), [&](const auto& p) { return p.name == o.pump; });
-  if (it == c.pumps.end()) throw InputError(fmt::format("pump '{}' is not configured in {}", o.pump, o.config));
+  const auto it =
+      std::find_if(c.pumps.begin(), c.pumps.end(), [&](const auto& p) { return p.name == o.pump; });
+  if (it == c.pumps.end())
+    throw InputError(fmt::format("pump '{}' is not configured in {}", o.pump, o.config));
   return *it;
 }
 
@@ -77,9 +78,11 @@ Settings Resolve(const ClearTripOptions& o, const daemon::DaemonConfig& c) {
   s.key_group = c.clear_auth.key_group;
   const auto& sources = c.alarms.clear_lcm_sources;
   s.source = !o.source.empty() ? o.source : sources.empty() ? s.source : sources.front();
-  if (s.url.empty()) throw InputError(fmt::format("{}: LCM is off (lcm.url is empty); give --url", o.config));
+  if (s.url.empty())
+    throw InputError(fmt::format("{}: LCM is off (lcm.url is empty); give --url", o.config));
   if (s.key_file.empty()) {
-    throw InputError(fmt::format("{}: no alarms.clear_key_file: LCM clears are off in this configuration", o.config));
+    throw InputError(fmt::format(
+        "{}: no alarms.clear_key_file: LCM clears are off in this configuration", o.config));
   }
   return s;
 }
@@ -90,14 +93,19 @@ std::int64_t NowUs() {
   return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000 + ts.tv_nsec / 1000;
 }
 
-int Report(const std::string& pump, const daemon::ClearExchange& x, const Settings& s, double timeout_s) {
+int Report(const std::string& pump, const daemon::ClearExchange& x, const Settings& s,
+           double timeout_s) {
   if (!x.reply) {
     if (x.untrusted_replies > 0) {
-      fmt::print(stderr, "{}: the gateway answered '{}', but not signed with {}: it holds another key (or none)\n",
-                 pump, x.untrusted_reason, s.key_file);
+      fmt::print(
+          stderr,
+          "{}: the gateway answered '{}', but not signed with {}: it holds another key (or none)\n",
+          pump, x.untrusted_reason, s.key_file);
     } else {
-      fmt::print(stderr, "{}: no answer from the gateway within {} s on {} (is pumpthermd running there, "
-                 "with this pump?)\n", pump, timeout_s, s.url);
+      fmt::print(stderr,
+                 "{}: no answer from the gateway within {} s on {} (is pumpthermd running there, "
+                 "with this pump?)\n",
+                 pump, timeout_s, s.url);
     }
     return 1;
   }
@@ -112,7 +120,8 @@ int Report(const std::string& pump, const daemon::ClearExchange& x, const Settin
 }
 
 int RunLcmClear(const ClearTripOptions& o, const Settings& s) {
-  if (const std::string problem = daemon::ClearKeyFileProblem(s.key_file, s.key_group); !problem.empty()) {
+  if (const std::string problem = daemon::ClearKeyFileProblem(s.key_file, s.key_group);
+      !problem.empty()) {
     throw InputError(problem);
   }
   daemon::ClearKey key{};
@@ -143,10 +152,13 @@ int RunLcmClear(const ClearTripOptions& o, const Settings& s) {
 /// Loads the configuration's DBC and mapping, as the gateway does.
 std::pair<protocol::Dbc, protocol::SignalMapping> LoadFrameSet(const daemon::DaemonConfig& c) {
   try {
-    const std::string dbc_path = daemon::ResolveResource(daemon::ResourceKind::kDbc, c.dbc.file, c.dbc.base_dir);
+    const std::string dbc_path =
+        daemon::ResolveResource(daemon::ResourceKind::kDbc, c.dbc.file, c.dbc.base_dir);
     protocol::Dbc dbc = protocol::ParseDbc(daemon::ReadTextFile(dbc_path), dbc_path);
-    const std::string map_path = daemon::ResolveResource(daemon::ResourceKind::kDbc, c.dbc.mapping, c.dbc.base_dir);
-    protocol::SignalMapping mapping = protocol::ParseMapping(daemon::ReadTextFile(map_path), map_path, dbc);
+    const std::string map_path =
+        daemon::ResolveResource(daemon::ResourceKind::kDbc, c.dbc.mapping, c.dbc.base_dir);
+    protocol::SignalMapping mapping =
+        protocol::ParseMapping(daemon::ReadTextFile(map_path), map_path, dbc);
     return {std::move(dbc), std::move(mapping)};
   } catch (const std::exception& e) {
     throw InputError(fmt::format("{}: {}", c.source, e.what()));
@@ -163,8 +175,8 @@ double MonotonicS() {
 /// level seen; returns the last level seen.
 template <typename Stop>
 std::optional<GatewayAlarmLevel> ReadAlarmLevels(daemon::CanSocket& sock, const protocol::Dbc& dbc,
-                                                 const protocol::SignalMapping& mapping, std::uint32_t node_id,
-                                                 double until_s, Stop stop) {
+                                                 const protocol::SignalMapping& mapping,
+                                                 std::uint32_t node_id, double until_s, Stop stop) {
   std::optional<GatewayAlarmLevel> last;
   for (double now = MonotonicS(); now < until_s; now = MonotonicS()) {
     pollfd pfd{sock.fd(), POLLIN, 0};
@@ -179,11 +191,14 @@ std::optional<GatewayAlarmLevel> ReadAlarmLevels(daemon::CanSocket& sock, const 
   return last;
 }
 
-int RunCanClear(const ClearTripOptions& o, const daemon::DaemonConfig& c, const daemon::PumpConfig& pump,
-                const std::string& interface) {
+int RunCanClear(const ClearTripOptions& o, const daemon::DaemonConfig& c,
+                const daemon::PumpConfig& pump, const std::string& interface) {
   if (!o.node.empty() || !o.comment.empty()) {
-    fmt::print(stderr, "{}: note: PUMP_CLEAR carries no node and no comment: every latched trip of the pump is "
-               "cleared, and the gateway logs the interface as the source\n", o.pump);
+    fmt::print(
+        stderr,
+        "{}: note: PUMP_CLEAR carries no node and no comment: every latched trip of the pump is "
+        "cleared, and the gateway logs the interface as the source\n",
+        o.pump);
   }
   const auto [dbc, mapping] = LoadFrameSet(c);
   const protocol::CanFrame clear = EncodeClearFrame(dbc, mapping, pump.node_id);
@@ -191,21 +206,26 @@ int RunCanClear(const ClearTripOptions& o, const daemon::DaemonConfig& c, const 
   try {
     sock = daemon::CanSocket::Open(interface, false);
   } catch (const std::system_error& e) {
-    throw std::runtime_error(fmt::format("{}: cannot open CAN interface '{}' to send PUMP_CLEAR: {}", o.pump,
-                                         interface, e.code().message()));
+    throw std::runtime_error(
+        fmt::format("{}: cannot open CAN interface '{}' to send PUMP_CLEAR: {}", o.pump, interface,
+                    e.code().message()));
   }
   CanClearOutcome outcome;
   // GW_ALARM comes at 10 Hz: the level before the clear, if the gateway is there.
-  outcome.before = ReadAlarmLevels(sock, dbc, mapping, pump.node_id, MonotonicS() + std::min(1.0, o.timeout_s),
-                                   [](GatewayAlarmLevel) { return true; });
+  outcome.before =
+      ReadAlarmLevels(sock, dbc, mapping, pump.node_id, MonotonicS() + std::min(1.0, o.timeout_s),
+                      [](GatewayAlarmLevel) { return true; });
   if (sock.Send(clear) != daemon::TxStatus::kSent) {
-    throw std::runtime_error(fmt::format("{}: cannot send PUMP_CLEAR (errno {})", interface, sock.last_errno()));
+    throw std::runtime_error(
+        fmt::format("{}: cannot send PUMP_CLEAR (errno {})", interface, sock.last_errno()));
   }
   // The gateway acts at once, but GW_ALARM shows it from its next thermal step on.
   const double start_s = MonotonicS();
-  outcome.after = ReadAlarmLevels(sock, dbc, mapping, pump.node_id, start_s + o.timeout_s,
-                                  [](GatewayAlarmLevel l) { return l != GatewayAlarmLevel::kTrip; });
-  const auto [code, text] = DescribeCanClear(o.pump, interface, outcome, std::round((MonotonicS() - start_s) * 10) / 10);
+  outcome.after =
+      ReadAlarmLevels(sock, dbc, mapping, pump.node_id, start_s + o.timeout_s,
+                      [](GatewayAlarmLevel l) { return l != GatewayAlarmLevel::kTrip; });
+  const auto [code, text] =
+      DescribeCanClear(o.pump, interface, outcome, std::round((MonotonicS() - start_s) * 10) / 10);
   fmt::print(code == 0 ? stdout : stderr, "{}\n", text);
   return code;
 }
@@ -228,28 +248,35 @@ int RunClearTrip(const ClearTripOptions& o) {
 }
 
 const SubcommandRegistrar kRegistrar{
-    "clear-trip", "Clear a pump's latched trip through the gateway (signed LCM command, or PUMP_CLEAR on CAN)",
+    "clear-trip",
+    "Clear a pump's latched trip through the gateway (signed LCM command, or PUMP_CLEAR on CAN)",
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<ClearTripOptions>();
       app.add_option("pump", o->pump, "Pump name from the daemon configuration")->required();
-      app.add_option("-c,--config", o->config, "The daemon configuration: LCM URL, key file, sources")
+      app.add_option("-c,--config", o->config,
+                     "The daemon configuration: LCM URL, key file, sources")
           ->capture_default_str();
-      app.add_option("--key", o->key_file, "Key file (default: alarms.clear_key_file of the configuration)");
+      app.add_option("--key", o->key_file,
+                     "Key file (default: alarms.clear_key_file of the configuration)");
       app.add_option("--url", o->url, "LCM URL (default: lcm.url of the configuration)");
-      app.add_option("--prefix", o->prefix, "LCM channel prefix (default: lcm.channel_prefix, or PUMPTHERM)");
-      app.add_option("--source", o->source, "Who clears (default: the first of alarms.clear_lcm_sources)");
+      app.add_option("--prefix", o->prefix,
+                     "LCM channel prefix (default: lcm.channel_prefix, or PUMPTHERM)");
+      app.add_option("--source", o->source,
+                     "Who clears (default: the first of alarms.clear_lcm_sources)");
       app.add_option("--node", o->node, "Node whose trip to clear (default: every latched trip)");
       app.add_option("--comment", o->comment, "Why; the gateway logs it");
-      app.add_option("--via", o->via,
-                     "lcm, can, or auto: LCM when the configuration has lcm.url and a clear key, else CAN "
-                     "when the pump's interface is in alarms.clear_can_interfaces")
+      app.add_option(
+             "--via", o->via,
+             "lcm, can, or auto: LCM when the configuration has lcm.url and a clear key, else CAN "
+             "when the pump's interface is in alarms.clear_can_interfaces")
           ->check(CLI::IsMember({"auto", "lcm", "can"}))
           ->capture_default_str();
       app.add_option("--timeout-s", o->timeout_s, "How long to wait for the gateway's answer")
           ->check(CLI::PositiveNumber)
           ->capture_default_str();
       app.footer(
-          "Exit codes: 0 the gateway accepted the clear, 1 it refused or did not answer, 2 bad input.\n"
+          "Exit codes: 0 the gateway accepted the clear, 1 it refused or did not answer, 2 bad "
+          "input.\n"
           "Without the configuration file, --url and --key are needed (LCM).\n"
           "On CAN there is no answer: the command reports the gateway's GW_ALARM level before the\n"
           "clear and after it (the trip gone within --timeout-s: exit 0).\n"

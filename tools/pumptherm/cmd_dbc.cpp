@@ -65,7 +65,8 @@ int Check(const std::string& path, bool strict) {
     const std::string cycle = m.cycle_time_ms && *m.cycle_time_ms > 0
                                   ? fmt::format("{} ms", *m.cycle_time_ms)
                                   : std::string("no cycle time");
-    fmt::print("{} {} {} bytes, {}, from {}\n", IdText(m), m.name, m.size_bytes, cycle, m.transmitter);
+    fmt::print("{} {} {} bytes, {}, from {}\n", IdText(m), m.name, m.size_bytes, cycle,
+               m.transmitter);
     for (const auto& s : m.signals) {
       std::string mux;
       if (s.is_multiplexer) mux += " multiplexer";
@@ -77,13 +78,14 @@ int Check(const std::string& path, bool strict) {
       }
       const char* type = s.value_type == protocol::SignalValueType::kFloat32   ? " float"
                          : s.value_type == protocol::SignalValueType::kFloat64 ? " double"
-                         : s.is_signed                                          ? " signed"
-                                                                                : " unsigned";
-      fmt::print("  {} {}|{}@{}{} x{} {:+} [{}, {}] \"{}\"{}{}\n", s.name, s.start_bit, s.length_bits,
-                 s.byte_order == ByteOrder::kLittleEndian ? 1 : 0, type, s.factor, s.offset,
-                 s.minimum, s.maximum, s.unit,
-                 s.not_available_raw ? fmt::format(" n/a raw {}", *s.not_available_raw) : std::string(),
-                 mux);
+                         : s.is_signed                                         ? " signed"
+                                                                               : " unsigned";
+      fmt::print(
+          "  {} {}|{}@{}{} x{} {:+} [{}, {}] \"{}\"{}{}\n", s.name, s.start_bit, s.length_bits,
+          s.byte_order == ByteOrder::kLittleEndian ? 1 : 0, type, s.factor, s.offset, s.minimum,
+          s.maximum, s.unit,
+          s.not_available_raw ? fmt::format(" n/a raw {}", *s.not_available_raw) : std::string(),
+          mux);
     }
   }
   for (const auto& p : dbc.problems) {
@@ -114,8 +116,11 @@ std::string JsonEscape(std::string_view s) {
   return out;
 }
 
-/// 15 significant digits: raw * factor + offset without binary noise (308.4, not 308.40000000000003).
-std::string Number(double v) { return std::isfinite(v) ? fmt::format("{:.15g}", v) : std::string(); }
+/// 15 significant digits: raw * factor + offset without binary noise (308.4, not
+/// 308.40000000000003).
+std::string Number(double v) {
+  return std::isfinite(v) ? fmt::format("{:.15g}", v) : std::string();
+}
 
 /// Bad log lines warned about one by one; the rest are only counted.
 constexpr std::size_t kMaxReportedBadLines = 10;
@@ -135,7 +140,8 @@ struct FrameMatch {
   unsigned node = 0;
 };
 
-FrameMatch MatchFrame(const protocol::DbcCodec& codec, const protocol::CanFrame& f, unsigned node_id_limit) {
+FrameMatch MatchFrame(const protocol::DbcCodec& codec, const protocol::CanFrame& f,
+                      unsigned node_id_limit) {
   for (unsigned node = 0; node < node_id_limit && node <= f.id; ++node) {
     const int index = codec.Find(f.id - node, f.extended);
     if (index >= 0) return {index, node};
@@ -163,8 +169,9 @@ bool SignalPresent(const DbcMessage& m, std::size_t i, const std::vector<double>
 std::string CantoolsSignal(const DbcSignal& s, double value) {
   // NaN here is the declared not-available raw value, which may have a label of its own.
   const std::optional<std::int64_t> raw =
-      std::isfinite(value) ? std::optional<std::int64_t>(std::llround((value - s.offset) / s.factor))
-                           : s.not_available_raw;
+      std::isfinite(value)
+          ? std::optional<std::int64_t>(std::llround((value - s.offset) / s.factor))
+          : s.not_available_raw;
   if (raw) {
     if (const auto it = s.value_descriptions.find(*raw); it != s.value_descriptions.end()) {
       return fmt::format("{}: {}", s.name, it->second);
@@ -234,22 +241,25 @@ class DecodeWriter {
   bool Wanted(int index) const { return index >= 0 && wanted_[static_cast<std::size_t>(index)]; }
 
   /// A frame decoded into `values` (the message's signal order).
-  void Frame(const protocol::CandumpRecord& r, const FrameMatch& m, const std::vector<double>& values) {
+  void Frame(const protocol::CandumpRecord& r, const FrameMatch& m,
+             const std::vector<double>& values) {
     const DbcMessage& msg = dbc_.messages[static_cast<std::size_t>(m.index)];
     if (o_.format == "csv") {
       std::vector<std::string> row(columns_);
       const std::size_t first = first_column_[static_cast<std::size_t>(m.index)];
       for (std::size_t i = 0; i < values.size(); ++i) row[first + i] = Number(values[i]);
-      fmt::print("{},{},{},{},{},{}\n", TimeText(r.time_us), r.interface, CanIdText(r.frame), m.node, msg.name,
-                 fmt::join(row, ","));
+      fmt::print("{},{},{},{},{},{}\n", TimeText(r.time_us), r.interface, CanIdText(r.frame),
+                 m.node, msg.name, fmt::join(row, ","));
       return;
     }
-    std::string out = fmt::format(R"({{"time_s":{},"interface":"{}","can_id":"{}","node":{},"message":"{}","signals":{{)",
-                                  TimeText(r.time_us), JsonEscape(r.interface), CanIdText(r.frame), m.node,
-                                  JsonEscape(msg.name));
+    std::string out = fmt::format(
+        R"({{"time_s":{},"interface":"{}","can_id":"{}","node":{},"message":"{}","signals":{{)",
+        TimeText(r.time_us), JsonEscape(r.interface), CanIdText(r.frame), m.node,
+        JsonEscape(msg.name));
     for (std::size_t i = 0; i < values.size(); ++i) {
       const std::string v = Number(values[i]);
-      out += fmt::format(R"({}"{}":{})", i == 0 ? "" : ",", JsonEscape(msg.signals[i].name), v.empty() ? "null" : v);
+      out += fmt::format(R"({}"{}":{})", i == 0 ? "" : ",", JsonEscape(msg.signals[i].name),
+                         v.empty() ? "null" : v);
     }
     fmt::print("{}}}}}\n", out);
   }
@@ -266,7 +276,8 @@ std::vector<bool> WantedMessages(const Dbc& dbc, const DecodeOptions& o) {
   std::vector<bool> wanted(dbc.messages.size(), o.messages.empty());
   for (const auto& name : o.messages) {
     const DbcMessage* m = dbc.FindMessage(name);
-    if (m == nullptr) throw InputError(fmt::format("--message {}: no such message in {}", name, o.dbc_path));
+    if (m == nullptr)
+      throw InputError(fmt::format("--message {}: no such message in {}", name, o.dbc_path));
     wanted[static_cast<std::size_t>(m - dbc.messages.data())] = true;
   }
   return wanted;
@@ -276,8 +287,9 @@ std::vector<bool> WantedMessages(const Dbc& dbc, const DecodeOptions& o) {
 enum class LineResult { kNotAFrame, kBadLine, kUnknownId, kNotWanted, kTooShort, kDecoded };
 
 /// One parsed line against the DBC: its result, the message matched and the decoded values.
-LineResult DecodeLine(const protocol::CandumpParse& p, const protocol::DbcCodec& codec, const DecodeWriter& writer,
-                      unsigned node_id_limit, FrameMatch& match, std::vector<double>& values) {
+LineResult DecodeLine(const protocol::CandumpParse& p, const protocol::DbcCodec& codec,
+                      const DecodeWriter& writer, unsigned node_id_limit, FrameMatch& match,
+                      std::vector<double>& values) {
   if (p.skip) return LineResult::kNotAFrame;
   if (!p.ok) return LineResult::kBadLine;
   const protocol::CanFrame& f = p.record.frame;
@@ -288,21 +300,25 @@ LineResult DecodeLine(const protocol::CandumpParse& p, const protocol::DbcCodec&
   const protocol::MessageCodec& mc = codec.message(static_cast<std::size_t>(match.index));
   values.resize(mc.signal_count());
   const auto payload = std::span<const std::uint8_t>(f.data.data(), f.len);
-  return mc.Decode(payload, values) == protocol::CodecStatus::kOk ? LineResult::kDecoded : LineResult::kTooShort;
+  return mc.Decode(payload, values) == protocol::CodecStatus::kOk ? LineResult::kDecoded
+                                                                  : LineResult::kTooShort;
 }
 
 /// The text cantools decode appends to a line (empty for a line that is not a frame).
-std::string Annotation(LineResult result, const protocol::CanFrame& f, const Dbc& dbc, const FrameMatch& match,
-                       const std::vector<double>& values, bool single_line) {
+std::string Annotation(LineResult result, const protocol::CanFrame& f, const Dbc& dbc,
+                       const FrameMatch& match, const std::vector<double>& values,
+                       bool single_line) {
   switch (result) {
     case LineResult::kDecoded:
-      return " ::" + CantoolsMessage(dbc.messages[static_cast<std::size_t>(match.index)], match.node, values,
-                                     single_line);
-    case LineResult::kUnknownId: return fmt::format(" :: Unknown frame id {0} (0x{0:x})", f.id);
+      return " ::" + CantoolsMessage(dbc.messages[static_cast<std::size_t>(match.index)],
+                                     match.node, values, single_line);
+    case LineResult::kUnknownId:
+      return fmt::format(" :: Unknown frame id {0} (0x{0:x})", f.id);
     case LineResult::kTooShort:
       return fmt::format(" :: {}: {} bytes, shorter than the message",
                          dbc.messages[static_cast<std::size_t>(match.index)].name, f.len);
-    default: return {};
+    default:
+      return {};
   }
 }
 
@@ -344,7 +360,8 @@ int Decode(const DecodeOptions& o) {
     n.too_short += result == LineResult::kTooShort;
     n.decoded += result == LineResult::kDecoded;
     if (annotate) {
-      fmt::print("{}{}\n", line, Annotation(result, p.record.frame, dbc, match, values, o.single_line));
+      fmt::print("{}{}\n", line,
+                 Annotation(result, p.record.frame, dbc, match, values, o.single_line));
     } else if (result == LineResult::kDecoded) {
       writer.Frame(p.record, match, values);
     }
@@ -358,10 +375,11 @@ int Decode(const DecodeOptions& o) {
              log_name, n.decoded, n.unknown, o.dbc_path, n.too_short, n.bad_lines,
              annotate ? "passed through undecoded" : "skipped");
   if (n.unknown_per_pump > 0) {
-    fmt::print(stderr,
-               "{}: {} of the unknown frames are a message at CAN ID = DBC ID + node ID (node below {}): "
-               "the DBC's IDs are per pump; decode them with --node-id-limit {}\n",
-               log_name, n.unknown_per_pump, kHintNodeIdLimit, kHintNodeIdLimit);
+    fmt::print(
+        stderr,
+        "{}: {} of the unknown frames are a message at CAN ID = DBC ID + node ID (node below {}): "
+        "the DBC's IDs are per pump; decode them with --node-id-limit {}\n",
+        log_name, n.unknown_per_pump, kHintNodeIdLimit, kHintNodeIdLimit);
   }
   return 0;
 }
@@ -373,39 +391,57 @@ const SubcommandRegistrar kRegistrar{
       app.footer(
           "Examples:\n"
           "  pumptherm dbc check protocol/pumptherm.dbc\n"
-          "  candump -L vcan0 | pumptherm dbc decode --dbc protocol/pumptherm.dbc --node-id-limit 16\n"
+          "  candump -L vcan0 | pumptherm dbc decode --dbc protocol/pumptherm.dbc --node-id-limit "
+          "16\n"
           "  candump -L vcan0 | pumptherm dbc decode --dbc pumptherm.dbc --format annotate -s\n"
-          "  pumptherm dbc decode --dbc protocol/pumptherm.dbc --format csv recording.log > frames.csv");
+          "  pumptherm dbc decode --dbc protocol/pumptherm.dbc --format csv recording.log > "
+          "frames.csv");
 
       auto check_path = std::make_shared<std::string>();
       auto strict = std::make_shared<bool>(false);
-      CLI::App* check = app.add_subcommand("check", "Load a DBC file, list messages and signals, report problems");
-      check->add_option("FILE", *check_path, "DBC file, or a shipped one by name (pumptherm.dbc)")->required();
-      check->add_flag("--strict", *strict, "exit 2 if the file has problems (warnings) or no messages");
-      check->footer("Example: pumptherm dbc check protocol/pumptherm.dbc\n"
-                    "Warnings and errors name file:line:column. A malformed statement is a warning and\n"
-                    "is skipped (a BO_ with its signals, or one SG_); the rest of the file loads.");
+      CLI::App* check = app.add_subcommand(
+          "check", "Load a DBC file, list messages and signals, report problems");
+      check->add_option("FILE", *check_path, "DBC file, or a shipped one by name (pumptherm.dbc)")
+          ->required();
+      check->add_flag("--strict", *strict,
+                      "exit 2 if the file has problems (warnings) or no messages");
+      check->footer(
+          "Example: pumptherm dbc check protocol/pumptherm.dbc\n"
+          "Warnings and errors name file:line:column. A malformed statement is a warning and\n"
+          "is skipped (a BO_ with its signals, or one SG_); the rest of the file loads.");
 
       auto opts = std::make_shared<DecodeOptions>();
       CLI::App* decode = app.add_subcommand(
-          "decode", "Decode a candump log (file or stdin) to JSON lines or CSV, one row per decoded frame");
-      decode->add_option("--dbc", opts->dbc_path, "DBC file, or a shipped one by name (pumptherm.dbc)")->required();
+          "decode",
+          "Decode a candump log (file or stdin) to JSON lines or CSV, one row per decoded frame");
+      decode
+          ->add_option("--dbc", opts->dbc_path,
+                       "DBC file, or a shipped one by name (pumptherm.dbc)")
+          ->required();
       decode->add_option("LOG", opts->log_path, "candump -l/-L log; stdin if absent or '-'");
-      decode->add_option("--format", opts->format,
-                         "json (JSON lines, NaN as null), csv, or annotate (every input line echoed, a "
-                         "frame's decoded message appended after ' ::', as cantools decode prints it)")
+      decode
+          ->add_option(
+              "--format", opts->format,
+              "json (JSON lines, NaN as null), csv, or annotate (every input line echoed, a "
+              "frame's decoded message appended after ' ::', as cantools decode prints it)")
           ->check(CLI::IsMember({"json", "csv", "annotate"}));
-      decode->add_flag("-s,--single-line", opts->single_line,
-                       "annotate: the decoded message on the frame's own line (cantools decode -s)");
+      decode->add_flag(
+          "-s,--single-line", opts->single_line,
+          "annotate: the decoded message on the frame's own line (cantools decode -s)");
       decode->add_option("--message", opts->messages, "decode only this message (repeatable)");
-      decode->add_option("--node-id-limit", opts->node_id_limit,
-                         "match CAN ID = DBC ID + node ID for node IDs below this (pumptherm.dbc: 16)")
+      decode
+          ->add_option(
+              "--node-id-limit", opts->node_id_limit,
+              "match CAN ID = DBC ID + node ID for node IDs below this (pumptherm.dbc: 16)")
           ->check(CLI::Range(1u, 65536u));
       decode->footer(
           "Example: pumptherm dbc decode --dbc protocol/pumptherm.dbc --node-id-limit 16 run.log\n"
-          "Signals a frame's multiplexer does not select, and 'not available' raw values, are empty\n"
-          "(CSV) or null (JSON), left out or 'n/a' (annotate). Frames shorter than their message are\n"
-          "counted and skipped; so are malformed log lines, with a file:line:column warning for each\n"
+          "Signals a frame's multiplexer does not select, and 'not available' raw values, are "
+          "empty\n"
+          "(CSV) or null (JSON), left out or 'n/a' (annotate). Frames shorter than their message "
+          "are\n"
+          "counted and skipped; so are malformed log lines, with a file:line:column warning for "
+          "each\n"
           "of the first 10 (annotate echoes them undecoded). Reading stdin, each line's output is\n"
           "flushed at once, so the command works at the end of a live pipe.");
 

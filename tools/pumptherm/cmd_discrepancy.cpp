@@ -54,15 +54,17 @@ int RunDiscrepancy(const DiscrepancyOptions& o) {
     opt.progress = [](const std::string& line) { fmt::print(stderr, "\r\033[K{}\n", line); };
   discrepancy::Result r;
   try {
-    r = discrepancy::Run(text, path, train, validate, opt,
-                         estimators::ThermalModelFiles{shipped::DirectoryOf(path), &shipped::ReadTextFile});
+    r = discrepancy::Run(
+        text, path, train, validate, opt,
+        estimators::ThermalModelFiles{shipped::DirectoryOf(path), &shipped::ReadTextFile});
   } catch (const estimators::ThermalModelError& e) {
     throw InputError(e.what());
   } catch (const std::invalid_argument& e) {
     throw InputError(e.what());
   }
   discrepancy::ReportContext context;
-  context.input_model_toml = estimators::ApplyModelEffects(text, path, {}, shipped::DirectoryOf(path));
+  context.input_model_toml =
+      estimators::ApplyModelEffects(text, path, {}, shipped::DirectoryOf(path));
   context.options = opt;
   context.validate = &validate;
   discrepancy::WriteReport(o.out, r, o.model, o.train, o.validate, context);
@@ -70,13 +72,14 @@ int RunDiscrepancy(const DiscrepancyOptions& o) {
     const auto& vb = r.validate_before.back();
     const auto& va = r.validate_after.back();
     std::string named;
-    for (const auto& e : r.effects) named += (named.empty() ? "" : ", ") + e.effect.name +
-                                             (e.effect.node.empty() ? "" : "(" + e.effect.node + ")");
+    for (const auto& e : r.effects)
+      named += (named.empty() ? "" : ", ") + e.effect.name +
+               (e.effect.node.empty() ? "" : "(" + e.effect.node + ")");
     fmt::print(stderr,
                "verdict: {}{}\nvalidation gap: RMSE {:.3f} -> {:.3f} K, max {:.3f} -> {:.3f} K\n"
                "wrote {}/report.json, model.toml, report.html ({:.1f} s)\n",
-               r.verdict, named.empty() ? "" : " (" + named + ")", vb.rmse_K, va.rmse_K, vb.max_abs_K,
-               va.max_abs_K, o.out, r.seconds);
+               r.verdict, named.empty() ? "" : " (" + named + ")", vb.rmse_K, va.rmse_K,
+               vb.max_abs_K, va.max_abs_K, o.out, r.seconds);
   }
   return 0;
 }
@@ -85,13 +88,17 @@ const SubcommandRegistrar kRegistrar{
     "discrepancy", "Name the effect a thermal model misses, add it, show the gap shrink",
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<DiscrepancyOptions>();
-      app.add_option("--model,-m", o->model, "Shipped model name or path to a model .toml")->required();
-      app.add_option("--train", o->train,
-                     "CSV to fit on: time_s, speed_rpm, id_A+iq_A or phase_current_rms_A, ambient_C "
-                     "(coolant_C), <node>_C per measured node")
+      app.add_option("--model,-m", o->model, "Shipped model name or path to a model .toml")
           ->required();
-      app.add_option("--validate", o->validate, "CSV to score on (same columns, other data)")->required();
-      app.add_option("--out", o->out, "Directory for report.json, model.toml, report.html")->required();
+      app.add_option(
+             "--train", o->train,
+             "CSV to fit on: time_s, speed_rpm, id_A+iq_A or phase_current_rms_A, ambient_C "
+             "(coolant_C), <node>_C per measured node")
+          ->required();
+      app.add_option("--validate", o->validate, "CSV to score on (same columns, other data)")
+          ->required();
+      app.add_option("--out", o->out, "Directory for report.json, model.toml, report.html")
+          ->required();
       app.add_option("--effects", o->effects, "Candidate effects (default: all)")->delimiter(',');
       app.add_option("--max-effects", o->max_effects, "Effects to add at most (default 3)");
       app.add_flag("--quiet,-q", o->quiet, "No progress and no summary");

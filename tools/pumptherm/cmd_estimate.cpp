@@ -15,8 +15,8 @@
 #include "tools/common/thermal_input_series.hpp"
 #include "tools/pumptherm/model_files.hpp"
 #include "tools/pumptherm/recording.hpp"
-#include "tools/pumptherm/thermal_columns.hpp"
 #include "tools/pumptherm/subcommand.hpp"
+#include "tools/pumptherm/thermal_columns.hpp"
 
 namespace pumptherm::tools {
 namespace {
@@ -32,12 +32,13 @@ struct EstimateOptions {
   double magnet_sd_K = 3.0;
   double initial_degC = std::nan("");
   std::string initial = "measured";
-  std::string columns;  ///< column preset ("" or "paderborn")
-  double max_step_s = 0.0;        ///< 0: one step per row
+  std::string columns;      ///< column preset ("" or "paderborn")
+  double max_step_s = 0.0;  ///< 0: one step per row
   std::string interpolation = "hold";
   RecordingSource recording;  ///< --log: the inputs from a candump recording instead of --input
   bool disturbance_states = false;  ///< write the disturbance-state filter's nodes and sds
-  double sensor_lag_s = 0.0;        ///< the measured sensor's first-order lag (detector, disturbance filter)
+  double sensor_lag_s =
+      0.0;  ///< the measured sensor's first-order lag (detector, disturbance filter)
   estimators::VirtualSensorConfig config;
 };
 
@@ -50,8 +51,8 @@ int RunEstimate(EstimateOptions& o) {
     while (std::getline(ss, node, ',')) {
       if (node.empty()) continue;
       if (model.StateIndex(node) < 0) {
-        throw InputError(fmt::format("--measure: '{}' is not a node with heat capacity of model '{}'",
-                                     node, model.Name()));
+        throw InputError(fmt::format(
+            "--measure: '{}' is not a node with heat capacity of model '{}'", node, model.Name()));
       }
       o.config.measured_nodes.push_back(node);
     }
@@ -67,19 +68,24 @@ int RunEstimate(EstimateOptions& o) {
     throw InputError("--max-step-s: must be a finite number >= 0");
   }
   if (o.initial != "measured" && o.initial != "first-row") {
-    throw InputError(fmt::format("--initial: '{}' is neither 'measured' nor 'first-row'", o.initial));
+    throw InputError(
+        fmt::format("--initial: '{}' is neither 'measured' nor 'first-row'", o.initial));
   }
   try {
-    if (o.input.empty() == o.recording.log.empty()) throw InputError("give --input CSV or --log RECORDING");
-    const CsvTable csv = o.input.empty() ? CsvTable::Parse(RecordingToCsv(o.recording, nullptr), o.recording.log)
-                                         : CsvTable::Read(o.input);
+    if (o.input.empty() == o.recording.log.empty())
+      throw InputError("give --input CSV or --log RECORDING");
+    const CsvTable csv =
+        o.input.empty() ? CsvTable::Parse(RecordingToCsv(o.recording, nullptr), o.recording.log)
+                        : CsvTable::Read(o.input);
     series = ReadThermalInputs(
-        csv, {[&](const std::string& standard) { return InputColumn(o.columns, standard); }, model.UsesCoolant()});
+        csv, {[&](const std::string& standard) { return InputColumn(o.columns, standard); },
+              model.UsesCoolant()});
     for (const auto& node : o.config.measured_nodes) {
       measured.push_back(csv.ColumnAllowingNaN(InputColumn(o.columns, node + "_C")));
     }
     if (series.size() > 0 && o.initial == "first-row" && std::isnan(o.initial_degC)) {
-      x_first = InitialTemperatures_degC(model, csv, o.columns, o.initial, o.initial_degC, series.ambient_degC[0]);
+      x_first = InitialTemperatures_degC(model, csv, o.columns, o.initial, o.initial_degC,
+                                         series.ambient_degC[0]);
     }
     if (!o.winding_column.empty()) winding = csv.ColumnAllowingNaN(o.winding_column);
     if (!o.magnet_column.empty()) magnet = csv.ColumnAllowingNaN(o.magnet_column);
@@ -87,11 +93,13 @@ int RunEstimate(EstimateOptions& o) {
     throw InputError(e.what());
   }
   const std::vector<double>& t = series.time_s;
-  if (t.empty()) throw InputError(fmt::format("{}: no data rows", o.input.empty() ? o.recording.log : o.input));
+  if (t.empty())
+    throw InputError(fmt::format("{}: no data rows", o.input.empty() ? o.recording.log : o.input));
   const int magnet_state = magnet.empty() ? -1 : model.StateIndex(o.magnet_node);
   if (!magnet.empty() && magnet_state < 0) {
-    throw InputError(fmt::format("--magnet-node: '{}' is not a node with heat capacity of model '{}'",
-                                 o.magnet_node, model.Name()));
+    throw InputError(
+        fmt::format("--magnet-node: '{}' is not a node with heat capacity of model '{}'",
+                    o.magnet_node, model.Name()));
   }
   if (!(o.magnet_sd_K > 0.0) || !std::isfinite(o.magnet_sd_K)) {
     throw InputError("--magnet-sd-K: must be a positive finite number");
@@ -105,8 +113,9 @@ int RunEstimate(EstimateOptions& o) {
     throw InputError("--disturbance-states: give exactly one node to --measure");
   }
   if (o.disturbance_states && !winding.empty()) {
-    throw InputError("--disturbance-states: the winding from resistance is not fused into it (as in the "
-                     "daemon); leave out --winding-column");
+    throw InputError(
+        "--disturbance-states: the winding from resistance is not fused into it (as in the "
+        "daemon); leave out --winding-column");
   }
   // Inputs a fraction w of the way from row k-1 to row k (held at row k-1 unless linear).
   const bool linear = o.interpolation == "linear";
@@ -171,13 +180,15 @@ int RunEstimate(EstimateOptions& o) {
   columns.push_back("nis");
   const std::size_t numeric_columns = columns.size();
   if (detector) {
-    for (const char* c : {"mismatch_state", "mismatch_effect", "mismatch_value"}) columns.push_back(c);
+    for (const char* c : {"mismatch_state", "mismatch_effect", "mismatch_value"})
+      columns.push_back(c);
   }
   CsvWriter out(o.output, columns);
   std::vector<double> row(numeric_columns);
   std::vector<std::string> text(columns.size() - numeric_columns);
   Eigen::VectorXd y(static_cast<Eigen::Index>(m));
-  const Eigen::VectorXd no_measurement = Eigen::VectorXd::Constant(static_cast<Eigen::Index>(m), std::nan(""));
+  const Eigen::VectorXd no_measurement =
+      Eigen::VectorXd::Constant(static_cast<Eigen::Index>(m), std::nan(""));
   const estimators::NodeMeasurements none;
   estimators::NodeMeasurements extra;
   for (std::size_t k = 0; k < t.size(); ++k) {
@@ -191,22 +202,28 @@ int RunEstimate(EstimateOptions& o) {
     if (k > 0) {
       // Rows further apart than --max-step-s are split; the measurements enter at the row.
       const double dt_s = t[k] - t[k - 1];
-      const int steps =
-          o.max_step_s > 0.0 ? std::max(1, static_cast<int>(std::ceil(dt_s / o.max_step_s - 1e-9))) : 1;
+      const int steps = o.max_step_s > 0.0
+                            ? std::max(1, static_cast<int>(std::ceil(dt_s / o.max_step_s - 1e-9)))
+                            : 1;
       estimators::DisturbanceReadings readings;
       for (int j = 0; j + 1 < steps; ++j) {
         const estimators::ThermalInputs held = between(k, static_cast<double>(j) / steps);
         vts.Step(held, dt_s / steps, no_measurement, none);
         if (dist) dist->Step(held, dt_s / steps, readings);
-        if (detector) detector->Step(held, dt_s / steps, std::nan(""), t[k - 1] + dt_s * (j + 1) / steps);
+        if (detector)
+          detector->Step(held, dt_s / steps, std::nan(""), t[k - 1] + dt_s * (j + 1) / steps);
       }
       const estimators::ThermalInputs held = between(k, static_cast<double>(steps - 1) / steps);
       rep = vts.Step(held, dt_s / steps, y, extra);
       if (rep.refused) {
-        throw InputError(fmt::format("{}: data row {} (time_s {}): the inputs are not finite", o.input.empty() ? o.recording.log : o.input, k + 1, t[k]));
+        throw InputError(fmt::format("{}: data row {} (time_s {}): the inputs are not finite",
+                                     o.input.empty() ? o.recording.log : o.input, k + 1, t[k]));
       }
       if (rep.rejected_measurements > 0) {
-        throw InputError(fmt::format("data row {} (time_s {}): a winding or magnet reading with an sd that is not positive and finite", k + 1, t[k]));
+        throw InputError(
+            fmt::format("data row {} (time_s {}): a winding or magnet reading with an sd that is "
+                        "not positive and finite",
+                        k + 1, t[k]));
       }
       if (dist) {
         readings.frame_degC = measured[0][k];
@@ -239,7 +256,8 @@ int RunEstimate(EstimateOptions& o) {
     }
     // The winding row is stacked only when the model has a winding (WindingWeights).
     if (!winding.empty()) {
-      const bool valid = k > 0 && std::isfinite(w) && model.WindingWeights().sum() > 0.0 && r < rep.innovation.size();
+      const bool valid = k > 0 && std::isfinite(w) && model.WindingWeights().sum() > 0.0 &&
+                         r < rep.innovation.size();
       row[c++] = valid ? rep.innovation(r++) : std::nan("");
     }
     if (!magnet.empty()) {
@@ -263,23 +281,30 @@ const SubcommandRegistrar kRegistrar{
     "estimate", "Virtual thermal sensor: Kalman filter on a thermal model over recorded data",
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<EstimateOptions>();
-      app.add_option("--model,-m", o->model, "Shipped model name or path to a model .toml")->required();
-      app.add_option("--input,-i", o->input,
-                     "CSV with time_s, speed_rpm, id_A, iq_A, ambient_C (coolant_C if the model has "
-                     "a coolant) and <node>_C for every measured node (empty or nan = not measured); or --log");
+      app.add_option("--model,-m", o->model, "Shipped model name or path to a model .toml")
+          ->required();
+      app.add_option(
+          "--input,-i", o->input,
+          "CSV with time_s, speed_rpm, id_A, iq_A, ambient_C (coolant_C if the model has "
+          "a coolant) and <node>_C for every measured node (empty or nan = not measured); or "
+          "--log");
       AddRecordingOptions(app, o->recording);
-      app.add_option("--motor", o->recording.motor, "with --log: motor preset or file (pole pairs for the speed)")
+      app.add_option("--motor", o->recording.motor,
+                     "with --log: motor preset or file (pole pairs for the speed)")
           ->capture_default_str();
-      app.add_option("--output,-o", o->output,
-                     "CSV to write: <node>_C and <node>_sd_K per node, innovations (of the standard "
-                     "filter), nis and, with one --measure node, the mismatch detector's "
-                     "mismatch_state, mismatch_effect, mismatch_value (as the daemon's CSV)");
-      app.add_option("--measure", o->measure, "Measured nodes, comma-separated")->capture_default_str();
+      app.add_option(
+          "--output,-o", o->output,
+          "CSV to write: <node>_C and <node>_sd_K per node, innovations (of the standard "
+          "filter), nis and, with one --measure node, the mismatch detector's "
+          "mismatch_state, mismatch_effect, mismatch_value (as the daemon's CSV)");
+      app.add_option("--measure", o->measure, "Measured nodes, comma-separated")
+          ->capture_default_str();
       app.add_option("--winding-column", o->winding_column,
                      "Column with the winding temperature from resistance identification, degC");
-      app.add_option("--magnet-column", o->magnet_column,
-                     "Column with the magnet temperature from the identified flux, degC (the daemon's "
-                     "magnet_flux_C), fused as a measurement of --magnet-node");
+      app.add_option(
+          "--magnet-column", o->magnet_column,
+          "Column with the magnet temperature from the identified flux, degC (the daemon's "
+          "magnet_flux_C), fused as a measurement of --magnet-node");
       app.add_option("--magnet-node", o->magnet_node,
                      "Node the magnet temperature measures; also the rotor of the disturbance "
                      "filter's rotor heat and of the detector's rotor-loss hypothesis")
@@ -287,34 +312,43 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--magnet-sd-K", o->magnet_sd_K, "Noise of the flux-based magnet temperature")
           ->capture_default_str();
       app.add_option("--measurement-sd-K", o->config.measurement_sd_K,
-                     "Node sensor noise (Saheba 2010 eq. 38)")->capture_default_str();
+                     "Node sensor noise (Saheba 2010 eq. 38)")
+          ->capture_default_str();
       app.add_option("--process-sd-K", o->config.process_sd_K,
-                     "Process noise per state per second (eq. 39)")->capture_default_str();
+                     "Process noise per state per second (eq. 39)")
+          ->capture_default_str();
       app.add_option("--winding-sd-K", o->config.winding_measurement_sd_K,
-                     "Noise of the resistance-based winding temperature")->capture_default_str();
+                     "Noise of the resistance-based winding temperature")
+          ->capture_default_str();
       app.add_option("--initial-sd-K", o->config.initial_sd_K,
-                     "Initial uncertainty common to all nodes")->capture_default_str();
+                     "Initial uncertainty common to all nodes")
+          ->capture_default_str();
       app.add_option("--initial-spread-sd-K", o->config.initial_spread_sd_K,
-                     "Initial uncertainty of each node on its own")->capture_default_str();
+                     "Initial uncertainty of each node on its own")
+          ->capture_default_str();
       app.add_option("--initial-C", o->initial_degC,
                      "Initial estimate of every node, degC (overrides --initial)");
-      app.add_option("--initial", o->initial,
-                     "Initial estimate: 'measured' (every node at the mean of the first measured "
-                     "values) or 'first-row' (each node at its <node>_C of the first row, measured "
-                     "or not: a known start); the initial covariance is the configured one either way")
+      app.add_option(
+             "--initial", o->initial,
+             "Initial estimate: 'measured' (every node at the mean of the first measured "
+             "values) or 'first-row' (each node at its <node>_C of the first row, measured "
+             "or not: a known start); the initial covariance is the configured one either way")
           ->capture_default_str();
-      app.add_flag("--disturbance-states", o->disturbance_states,
-                   "Write the disturbance-state filter's nodes and sds (the daemon's "
-                   "pump[].disturbance_states: frame-path and rotor heat, loss scale, sensor lag and "
-                   "offset; the magnet column with a slow-bias state of sd --magnet-sd-K) instead of "
-                   "the standard filter's; one --measure node, no --winding-column");
-      app.add_option("--sensor-lag-s", o->sensor_lag_s,
-                     "First-order lag of the measured sensor, s (the daemon's frame_sensor_lag_s): a "
-                     "state of the disturbance filter and of the mismatch detector")
+      app.add_flag(
+          "--disturbance-states", o->disturbance_states,
+          "Write the disturbance-state filter's nodes and sds (the daemon's "
+          "pump[].disturbance_states: frame-path and rotor heat, loss scale, sensor lag and "
+          "offset; the magnet column with a slow-bias state of sd --magnet-sd-K) instead of "
+          "the standard filter's; one --measure node, no --winding-column");
+      app.add_option(
+             "--sensor-lag-s", o->sensor_lag_s,
+             "First-order lag of the measured sensor, s (the daemon's frame_sensor_lag_s): a "
+             "state of the disturbance filter and of the mismatch detector")
           ->capture_default_str();
-      app.add_option("--columns", o->columns,
-                     "Column names of a known data set: 'paderborn' (motor_speed, i_d, i_q, ambient, "
-                     "coolant, <node>)");
+      app.add_option(
+          "--columns", o->columns,
+          "Column names of a known data set: 'paderborn' (motor_speed, i_d, i_q, ambient, "
+          "coolant, <node>)");
       app.add_option("--max-step-s", o->max_step_s,
                      "Longest filter step, s; rows further apart are split and the measurements "
                      "enter at the rows (0 = one step per row)")
@@ -326,7 +360,8 @@ const SubcommandRegistrar kRegistrar{
       app.footer(
           "Example:\n  pumptherm estimate --model saheba2010-improved --input measured.csv "
           "--measure frame --output est.csv\n"
-          "  pumptherm estimate --model tests/data/models/wallscheid2017-4node.toml --columns paderborn --measure "
+          "  pumptherm estimate --model tests/data/models/wallscheid2017-4node.toml --columns "
+          "paderborn --measure "
           "stator_yoke --input profile46.csv");
       return [o] { return RunEstimate(*o); };
     }};

@@ -28,11 +28,13 @@ int Run(const std::string& input, const RecordingSource& recording, const std::s
   const est::MotorDescription motor = LoadMotor(motor_arg);
   std::vector<double> t, id, iq, ud, uq, rpm;
   try {
-    if (input.empty() == recording.log.empty()) throw InputError("give --input CSV or --log RECORDING");
+    if (input.empty() == recording.log.empty())
+      throw InputError("give --input CSV or --log RECORDING");
     RecordingSource source = recording;
     source.motor = motor_arg;
-    const CsvTable table = input.empty() ? CsvTable::Parse(RecordingToCsv(source, nullptr), recording.log)
-                                         : CsvTable::Read(input);
+    const CsvTable table = input.empty()
+                               ? CsvTable::Parse(RecordingToCsv(source, nullptr), recording.log)
+                               : CsvTable::Read(input);
     t = table.Time("time_s");
     id = table.Column("id_A");
     iq = table.Column("iq_A");
@@ -84,10 +86,11 @@ const SubcommandRegistrar kRegistrar{
                      "CSV with columns time_s, id_A, iq_A, ud_V, uq_V, speed_rpm (mechanical "
                      "r/min), any order; '-' reads standard input (or --log)");
       AddRecordingOptions(app, opt->recording);
-      app.add_option("--output,-o", opt->output,
-                     "CSV written with time_s, resistance_ohm, flux_Wb, winding_resistance_C, status, "
-                     "winding_resistance_sd_K, flux_sd_Wb; "
-                     "'-' is standard output (the default)")
+      app.add_option(
+             "--output,-o", opt->output,
+             "CSV written with time_s, resistance_ohm, flux_Wb, winding_resistance_C, status, "
+             "winding_resistance_sd_K, flux_sd_Wb; "
+             "'-' is standard output (the default)")
           ->capture_default_str();
       app.add_option("--motor", opt->motor,
                      "motor description: a preset (han2019-tmp) or a TOML file")
@@ -108,7 +111,8 @@ const SubcommandRegistrar kRegistrar{
           "Example:\n"
           "  pumptherm identify --input telemetry.csv --motor han2019-tmp --output rs.csv");
       return [opt]() {
-        return Run(opt->input, opt->recording, opt->output, opt->motor, opt->block_samples, opt->min_current_A);
+        return Run(opt->input, opt->recording, opt->output, opt->motor, opt->block_samples,
+                   opt->min_current_A);
       };
     }};
 

@@ -71,24 +71,30 @@ int RunPlacement(PlacementOptions& o) {
   auto rank = [&](auto key) {
     std::vector<std::size_t> idx(rows.size());
     for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
-    std::stable_sort(idx.begin(), idx.end(), [&](auto a, auto b) { return key(rows[a]) < key(rows[b]); });
+    std::stable_sort(idx.begin(), idx.end(),
+                     [&](auto a, auto b) { return key(rows[a]) < key(rows[b]); });
     std::vector<std::size_t> r(rows.size());
     for (std::size_t i = 0; i < idx.size(); ++i) r[idx[i]] = i + 1;
     return r;
   };
   const auto rank_all = rank([](const auto& r) { return r.mse_all; });
   const auto rank_w = rank([](const auto& r) { return r.mse_windings; });
-  fmt::print("# operating points {}\n", model.OperatingRange() ? "from the model's [operating_range] where not given"
-                                                                 : "from the command line's defaults (the model has no [operating_range])");
+  fmt::print("# operating points {}\n",
+             model.OperatingRange()
+                 ? "from the model's [operating_range] where not given"
+                 : "from the command line's defaults (the model has no [operating_range])");
   fmt::print("# model {}; {} r/min; A_D at {} A, each over 1/3 of N = {} steps of {} s\n",
-             model.Name(), o.speed_rpm, fmt::join(o.currents_A, ", "), o.config.steps, o.config.dt_s);
-  fmt::print("# nondimensional by the rises after {} s at {} A; Sm^1/2 {} K, Sp^1/2 {} K, S0^1/2 {} K\n",
-             o.scale_duration_s, o.scale_current_A, o.config.measurement_sd_K, o.config.process_sd_K,
-             o.config.initial_sd_K);
-  fmt::print("{:<16} {:>14} {:>5} {:>16} {:>5}\n", "sensor_node", "mse_all", "rank", "mse_windings", "rank");
+             model.Name(), o.speed_rpm, fmt::join(o.currents_A, ", "), o.config.steps,
+             o.config.dt_s);
+  fmt::print(
+      "# nondimensional by the rises after {} s at {} A; Sm^1/2 {} K, Sp^1/2 {} K, S0^1/2 {} K\n",
+      o.scale_duration_s, o.scale_current_A, o.config.measurement_sd_K, o.config.process_sd_K,
+      o.config.initial_sd_K);
+  fmt::print("{:<16} {:>14} {:>5} {:>16} {:>5}\n", "sensor_node", "mse_all", "rank", "mse_windings",
+             "rank");
   for (std::size_t i = 0; i < rows.size(); ++i) {
-    fmt::print("{:<16} {:>14.6g} {:>5} {:>16.6g} {:>5}\n", rows[i].node, rows[i].mse_all, rank_all[i],
-               rows[i].mse_windings, rank_w[i]);
+    fmt::print("{:<16} {:>14.6g} {:>5} {:>16.6g} {:>5}\n", rows[i].node, rows[i].mse_all,
+               rank_all[i], rows[i].mse_windings, rank_w[i]);
   }
   return 0;
 }
@@ -97,9 +103,11 @@ const SubcommandRegistrar kRegistrar{
     "placement", "Kalman-filter mean-square error for each candidate sensor node",
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<PlacementOptions>();
-      app.add_option("--model,-m", o->model, "Shipped model name or path to a model .toml")->required();
-      app.add_option("--speed-rpm", o->speed_rpm,
-                     "Speed of the operating points (default: the model's [operating_range], else this)")
+      app.add_option("--model,-m", o->model, "Shipped model name or path to a model .toml")
+          ->required();
+      app.add_option(
+             "--speed-rpm", o->speed_rpm,
+             "Speed of the operating points (default: the model's [operating_range], else this)")
           ->capture_default_str()
           ->each([o](const std::string&) { o->speed_given = true; });
       app.add_option("--currents-A", o->currents_A,
@@ -112,14 +120,19 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--coolant-C", o->coolant_degC, "Coolant temperature")->capture_default_str();
       app.add_option("--dt-s", o->config.dt_s, "Sampling time tau")->capture_default_str();
       app.add_option("--steps", o->config.steps, "Window length N")->capture_default_str();
-      app.add_option("--measurement-sd-K", o->config.measurement_sd_K, "eq. 38")->capture_default_str();
-      app.add_option("--process-sd-K", o->config.process_sd_K, "eq. 39, per step")->capture_default_str();
-      app.add_option("--initial-sd-K", o->config.initial_sd_K, "S(0)^1/2 per state")->capture_default_str();
-      app.add_option("--scale-current-A", o->scale_current_A,
-                     "Current of the scaling run (default: the model's [operating_range], else this)")
+      app.add_option("--measurement-sd-K", o->config.measurement_sd_K, "eq. 38")
+          ->capture_default_str();
+      app.add_option("--process-sd-K", o->config.process_sd_K, "eq. 39, per step")
+          ->capture_default_str();
+      app.add_option("--initial-sd-K", o->config.initial_sd_K, "S(0)^1/2 per state")
+          ->capture_default_str();
+      app.add_option(
+             "--scale-current-A", o->scale_current_A,
+             "Current of the scaling run (default: the model's [operating_range], else this)")
           ->capture_default_str()
           ->each([o](const std::string&) { o->scale_given = true; });
-      app.add_option("--scale-duration-s", o->scale_duration_s, "Length of the scaling run")->capture_default_str();
+      app.add_option("--scale-duration-s", o->scale_duration_s, "Length of the scaling run")
+          ->capture_default_str();
       app.footer("Example:\n  pumptherm placement --model saheba2010-improved");
       return [o] { return RunPlacement(*o); };
     }};

@@ -86,7 +86,8 @@ int RunPlantCommand(const PlantOptions& o) {
     ListScenarios();
     return 0;
   }
-  if (o.scenario.empty()) throw InputError("give a scenario (a bundled name or a .toml path); --list shows them");
+  if (o.scenario.empty())
+    throw InputError("give a scenario (a bundled name or a .toml path); --list shows them");
   const fs::path scenario_path = ResolveScenario(o.scenario);
   plant::Scenario sc;
   try {
@@ -102,7 +103,8 @@ int RunPlantCommand(const PlantOptions& o) {
   // Paths in a scenario are relative to the scenario file; names are shipped models.
   res.model = [&](const std::string& ref) {
     std::string arg = ref;
-    if ((ref.find('/') != std::string::npos || ref.ends_with(".toml")) && fs::path(ref).is_relative()) {
+    if ((ref.find('/') != std::string::npos || ref.ends_with(".toml")) &&
+        fs::path(ref).is_relative()) {
       arg = (base / ref).string();
     }
     const std::string path = ResolveModelPath(arg);
@@ -126,7 +128,8 @@ int RunPlantCommand(const PlantOptions& o) {
       }
     };
     const fs::path dbc = o.dbc.empty() ? shipped_dbc("pumptherm.dbc") : fs::path(o.dbc);
-    const fs::path map = o.mapping.empty() ? shipped_dbc("mapping_pumptherm.toml") : fs::path(o.mapping);
+    const fs::path map =
+        o.mapping.empty() ? shipped_dbc("mapping_pumptherm.toml") : fs::path(o.mapping);
     res.dbc = {ReadText(dbc), dbc.string()};
     res.mapping = {ReadText(map), map.string()};
   }
@@ -140,17 +143,25 @@ int RunPlantCommand(const PlantOptions& o) {
   } catch (const plant::ScenarioError& e) {
     throw InputError(e.what());
   }
-  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double wall_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (!o.quiet) {
-    fmt::print("scenario {} ({} pumps, {} s simulated, seed {}) in {:.1f} s\n", sc.name, sc.pumps.size(),
-               sc.duration_s, sc.seed, wall_s);
-    if (!r.log_path.empty()) fmt::print("  candump log: {} ({} frames)\n", r.log_path, r.frames_written);
+    fmt::print("scenario {} ({} pumps, {} s simulated, seed {}) in {:.1f} s\n", sc.name,
+               sc.pumps.size(), sc.duration_s, sc.seed, wall_s);
+    if (!r.log_path.empty())
+      fmt::print("  candump log: {} ({} frames)\n", r.log_path, r.frames_written);
     for (const plant::PumpSummary& p : r.pumps) {
-      auto when = [](double t) { return t < 0.0 ? std::string("never") : fmt::format("{:.0f} s", t); };
-      const std::string where = sc.can_log ? fmt::format("{}:{}", p.interface, p.node_id) : std::string("-");
-      fmt::print("  {:<10} {:<7} max {} {:.1f} degC at {:.0f} s, warning ({} degC) {}, trip ({} degC) {}\n",
-                 p.name, where, sc.levels.node, p.max_level_node_degC, p.max_level_time_s,
-                 sc.levels.warning_degC, when(p.warning_crossed_s), sc.levels.trip_degC, when(p.trip_crossed_s));
+      auto when = [](double t) {
+        return t < 0.0 ? std::string("never") : fmt::format("{:.0f} s", t);
+      };
+      const std::string where =
+          sc.can_log ? fmt::format("{}:{}", p.interface, p.node_id) : std::string("-");
+      fmt::print(
+          "  {:<10} {:<7} max {} {:.1f} degC at {:.0f} s, warning ({} degC) {}, trip ({} degC) "
+          "{}\n",
+          p.name, where, sc.levels.node, p.max_level_node_degC, p.max_level_time_s,
+          sc.levels.warning_degC, when(p.warning_crossed_s), sc.levels.trip_degC,
+          when(p.trip_crossed_s));
     }
     fmt::print("  truth, measured CSVs and summary.json in {}\n", o.out_dir);
   }
@@ -158,15 +169,19 @@ int RunPlantCommand(const PlantOptions& o) {
 }
 
 const SubcommandRegistrar kRegistrar{
-    "plant", "Simulate pumps (drive, thermal truth, sensors, faults): candump log + truth/measured CSVs",
+    "plant",
+    "Simulate pumps (drive, thermal truth, sensors, faults): candump log + truth/measured CSVs",
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<PlantOptions>();
-      app.add_option("scenario", o->scenario, "Bundled scenario name (demo, fleet32, saheba2010-fig4, ...) or a .toml path");
-      app.add_option("--out,-o", o->out_dir, "Output directory (created if missing)")->capture_default_str();
+      app.add_option("scenario", o->scenario,
+                     "Bundled scenario name (demo, fleet32, saheba2010-fig4, ...) or a .toml path");
+      app.add_option("--out,-o", o->out_dir, "Output directory (created if missing)")
+          ->capture_default_str();
       app.add_option("--seed", o->seed, "Override the scenario's seed (same seed => same bytes)");
       app.add_option("--duration-s", o->duration_s, "Override the scenario's duration, s");
       app.add_option("--dbc", o->dbc, "Frame layout (default: the shipped protocol/pumptherm.dbc)");
-      app.add_option("--mapping", o->mapping, "Signal mapping (default: protocol/mapping_pumptherm.toml)");
+      app.add_option("--mapping", o->mapping,
+                     "Signal mapping (default: protocol/mapping_pumptherm.toml)");
       app.add_flag("--list", o->list, "List the bundled scenarios and exit");
       app.add_flag("--quiet,-q", o->quiet, "No progress bar and no summary");
       app.footer(

@@ -1,10 +1,10 @@
 // pumptherm watch: the live table of every pump from the gateway's LCM messages, from any host
 // that receives the LCM group (the daemon's lcm.url with ttl=1 reaches the LAN segment).
 #include <fmt/core.h>
-#include <lcm/lcm-cpp.hpp>
 
 #include <chrono>
 #include <cstdio>
+#include <lcm/lcm-cpp.hpp>
 
 #include "protocol/lcm/channels.hpp"
 #include "tools/pumptherm/subcommand.hpp"
@@ -39,7 +39,8 @@ struct Receiver {
 
 int RunWatch(const WatchOptions& o) {
   if (!(o.period_s > 0.0)) throw InputError("--period-s must be positive");
-  if (!lcm_channels::IsValidPrefix(o.prefix)) throw InputError("--prefix: invalid channel prefix '" + o.prefix + "'");
+  if (!lcm_channels::IsValidPrefix(o.prefix))
+    throw InputError("--prefix: invalid channel prefix '" + o.prefix + "'");
   lcm::LCM lcm(o.lcm_url);
   if (!lcm.good()) throw std::runtime_error("LCM: cannot start with URL '" + o.lcm_url + "'");
   Receiver rx;
@@ -84,7 +85,8 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--period-s", o->period_s, "seconds between tables")->capture_default_str();
       app.add_option("--count", o->count, "tables to print, then exit (0: until interrupted)")
           ->capture_default_str();
-      app.add_option("--stale-after-s", o->stale_after_s, "mark a pump STALE after this long silent")
+      app.add_option("--stale-after-s", o->stale_after_s,
+                     "mark a pump STALE after this long silent")
           ->capture_default_str();
       app.footer(
           "Example: pumptherm watch --lcm-url 'udpm://239.255.76.67:7667?ttl=1' --period-s 2\n"

@@ -16,7 +16,8 @@ std::vector<SubcommandEntry>& Subcommands() {
 
 int main(int argc, char** argv) {
   using namespace pumptherm::tools;
-  CLI::App app{"pumptherm: tools for the pump thermal gateway (DBC, identification, thermal models)"};
+  CLI::App app{
+      "pumptherm: tools for the pump thermal gateway (DBC, identification, thermal models)"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "pumptherm " PUMPTHERM_VERSION);
   app.footer("Run `pumptherm <subcommand> --help` for the options and an example of each.");

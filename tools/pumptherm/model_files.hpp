@@ -7,6 +7,7 @@
 
 #include <fmt/core.h>
 #include <fmt/format.h>
+
 #include <stdexcept>
 #include <string>
 
@@ -55,8 +56,8 @@ inline estimators::MotorDescription LoadMotor(const std::string& reference) {
   } catch (const estimators::MotorDescriptionError& e) {
     throw InputError(e.what());
   } catch (const std::runtime_error& e) {
-    throw InputError(
-        fmt::format("motor {} (presets: {})", e.what(), fmt::join(estimators::MotorPresetNames(), ", ")));
+    throw InputError(fmt::format("motor {} (presets: {})", e.what(),
+                                 fmt::join(estimators::MotorPresetNames(), ", ")));
   }
 }
 

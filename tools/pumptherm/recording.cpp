@@ -53,9 +53,12 @@ class Assembler {
   void OnFrame(std::int64_t t_us, const double* v, bool currents, bool voltages, bool status) {
     auto at = [&](MappingInput i) { return v[static_cast<std::size_t>(i)]; };
     if (status) {
-      if (std::isfinite(at(MappingInput::kSpeedMechRpm))) speed_rpm_ = at(MappingInput::kSpeedMechRpm);
-      if (std::isfinite(at(MappingInput::kFrameTempDegC))) frame_C_ = at(MappingInput::kFrameTempDegC);
-      if (std::isfinite(at(MappingInput::kAmbientTempDegC))) ambient_C_ = at(MappingInput::kAmbientTempDegC);
+      if (std::isfinite(at(MappingInput::kSpeedMechRpm)))
+        speed_rpm_ = at(MappingInput::kSpeedMechRpm);
+      if (std::isfinite(at(MappingInput::kFrameTempDegC)))
+        frame_C_ = at(MappingInput::kFrameTempDegC);
+      if (std::isfinite(at(MappingInput::kAmbientTempDegC)))
+        ambient_C_ = at(MappingInput::kAmbientTempDegC);
     }
     const double counter = at(MappingInput::kRollingCounter);
     if (currents) {
@@ -81,16 +84,18 @@ class Assembler {
     if (!near || !same) return;  // the older half waits to be replaced (and counted unpaired)
     const std::int64_t t = std::max(currents_.t_us, voltages_.t_us);
     const bool finite = std::isfinite(currents_.a) && std::isfinite(currents_.b) &&
-                        std::isfinite(voltages_.a) && std::isfinite(voltages_.b) && std::isfinite(speed_rpm_);
+                        std::isfinite(voltages_.a) && std::isfinite(voltages_.b) &&
+                        std::isfinite(speed_rpm_);
     // Rows start once the status frame has given the temperatures, so that every cell is a number.
-    const bool temperatures = !status_mapped_ || (std::isfinite(frame_C_) && std::isfinite(ambient_C_));
+    const bool temperatures =
+        !status_mapped_ || (std::isfinite(frame_C_) && std::isfinite(ambient_C_));
     if (finite && temperatures) {
       if (counts_.first_us < 0) counts_.first_us = t;
       // Ten significant digits: a decoded value is raw * factor + offset, whose last binary
       // digits (21.700000000000003 for 217 * 0.1) are not information; time to the microsecond.
       csv_ << fmt::format("{:.12g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g}\n",
-                          static_cast<double>(t - counts_.first_us) * 1e-6, currents_.a, currents_.b,
-                          voltages_.a, voltages_.b, speed_rpm_, frame_C_, ambient_C_);
+                          static_cast<double>(t - counts_.first_us) * 1e-6, currents_.a,
+                          currents_.b, voltages_.a, voltages_.b, speed_rpm_, frame_C_, ambient_C_);
       ++counts_.rows;
     }
     currents_ = Half{};
@@ -108,12 +113,16 @@ class Assembler {
 }  // namespace
 
 void AddRecordingOptions(CLI::App& app, RecordingSource& s) {
-  app.add_option("--log", s.log, "candump log (-l/-L format) to read the pump's telemetry from ('-' = stdin)");
-  app.add_option("--node-id", s.node_id, "with --log: the pump's node ID (CAN ID = DBC ID + node ID)")
+  app.add_option("--log", s.log,
+                 "candump log (-l/-L format) to read the pump's telemetry from ('-' = stdin)");
+  app.add_option("--node-id", s.node_id,
+                 "with --log: the pump's node ID (CAN ID = DBC ID + node ID)")
       ->capture_default_str();
-  app.add_option("--interface", s.interface, "with --log: only frames of this interface (default: any)");
+  app.add_option("--interface", s.interface,
+                 "with --log: only frames of this interface (default: any)");
   app.add_option("--dbc", s.dbc, "with --log: DBC file or shipped name")->capture_default_str();
-  app.add_option("--mapping", s.mapping, "with --log: signal mapping file or shipped name")->capture_default_str();
+  app.add_option("--mapping", s.mapping, "with --log: signal mapping file or shipped name")
+      ->capture_default_str();
 }
 
 std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts) {
@@ -123,13 +132,14 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
   protocol::SignalMapping mapping;
   try {
     dbc = protocol::ParseDbc(Load(shipped::FileKind::kDbc, s.dbc, "dbc"), s.dbc);
-    mapping = protocol::ParseMapping(Load(shipped::FileKind::kDbc, s.mapping, "mapping"), s.mapping, dbc);
+    mapping =
+        protocol::ParseMapping(Load(shipped::FileKind::kDbc, s.mapping, "mapping"), s.mapping, dbc);
   } catch (const std::exception& e) {
     throw InputError(e.what());
   }
   if (s.node_id >= mapping.node_id_limit) {
-    throw InputError(fmt::format("--node-id {} is not below the mapping's node_id_limit {}", s.node_id,
-                                 mapping.node_id_limit));
+    throw InputError(fmt::format("--node-id {} is not below the mapping's node_id_limit {}",
+                                 s.node_id, mapping.node_id_limit));
   }
   const estimators::MotorDescription motor = LoadMotor(s.motor);
   const protocol::DbcCodec codec(dbc);
@@ -173,8 +183,11 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
     }
     if (!p.record.has_time) {
       if (++counts.untimed_lines <= kWarnedLines) {
-        fmt::print(stderr, "{}:{}: skipped: no timestamp (candump's screen format without -t a); record with "
-                   "candump -l, -L or -t a\n", where, counts.lines);
+        fmt::print(
+            stderr,
+            "{}:{}: skipped: no timestamp (candump's screen format without -t a); record with "
+            "candump -l, -L or -t a\n",
+            where, counts.lines);
       }
       continue;
     }
@@ -186,7 +199,8 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
     ++counts.frames;
     const auto& mc = codec.message(static_cast<std::size_t>(m));
     if (values.size() < mc.signal_count()) values.resize(mc.signal_count());
-    if (mc.Decode(std::span<const std::uint8_t>(f.data.data(), f.len), values) != protocol::CodecStatus::kOk) {
+    if (mc.Decode(std::span<const std::uint8_t>(f.data.data(), f.len), values) !=
+        protocol::CodecStatus::kOk) {
       ++counts.undecodable;
       continue;
     }
@@ -194,24 +208,28 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
     for (double& x : v) x = kNaN;
     bool currents = false, voltages = false, status = false;
     for (const Bound& b : bound[static_cast<std::size_t>(m)]) {
-      v[static_cast<std::size_t>(b.input)] = b.scale * values[static_cast<std::size_t>(b.signal)] + b.offset;
+      v[static_cast<std::size_t>(b.input)] =
+          b.scale * values[static_cast<std::size_t>(b.signal)] + b.offset;
       currents = currents || b.input == MappingInput::kIqA;
       voltages = voltages || b.input == MappingInput::kUqV;
-      status = status || b.input == MappingInput::kFrameTempDegC || b.input == MappingInput::kSpeedMechRpm;
+      status = status || b.input == MappingInput::kFrameTempDegC ||
+               b.input == MappingInput::kSpeedMechRpm;
     }
     assembler.OnFrame(p.record.time_us, v, currents, voltages, status);
   }
   if (counts.bad_lines > kWarnedLines) {
-    fmt::print(stderr, "{}: {} bad lines skipped in all (the first {} shown)\n", where, counts.bad_lines, kWarnedLines);
+    fmt::print(stderr, "{}: {} bad lines skipped in all (the first {} shown)\n", where,
+               counts.bad_lines, kWarnedLines);
   }
   if (counts.untimed_lines > kWarnedLines) {
-    fmt::print(stderr, "{}: {} lines without a timestamp skipped in all (the first {} shown)\n", where,
-               counts.untimed_lines, kWarnedLines);
+    fmt::print(stderr, "{}: {} lines without a timestamp skipped in all (the first {} shown)\n",
+               where, counts.untimed_lines, kWarnedLines);
   }
   if (counts.rows == 0) {
-    throw InputError(fmt::format("{}: no paired current and voltage frames of node ID {}{} ({} lines, {} of its frames)",
-                                 where, s.node_id, s.interface.empty() ? "" : " on " + s.interface,
-                                 counts.lines, counts.frames));
+    throw InputError(fmt::format(
+        "{}: no paired current and voltage frames of node ID {}{} ({} lines, {} of its frames)",
+        where, s.node_id, s.interface.empty() ? "" : " on " + s.interface, counts.lines,
+        counts.frames));
   }
   return csv.str();
 }

@@ -14,23 +14,23 @@
 namespace pumptherm::tools {
 
 struct RecordingSource {
-  std::string log;                          ///< candump log ('-': standard input)
-  std::uint32_t node_id = 1;                ///< the pump's node ID (CAN ID = DBC ID + node ID)
-  std::string interface;                    ///< only frames of this interface ("": any)
-  std::string dbc = "pumptherm.dbc";        ///< path or shipped name
+  std::string log;                    ///< candump log ('-': standard input)
+  std::uint32_t node_id = 1;          ///< the pump's node ID (CAN ID = DBC ID + node ID)
+  std::string interface;              ///< only frames of this interface ("": any)
+  std::string dbc = "pumptherm.dbc";  ///< path or shipped name
   std::string mapping = "mapping_pumptherm.toml";  ///< path or shipped name
-  std::string motor = "han2019-tmp";        ///< preset or file: pole pairs for the speed
+  std::string motor = "han2019-tmp";               ///< preset or file: pole pairs for the speed
 };
 
 struct RecordingCounts {
   std::uint64_t lines = 0;
-  std::uint64_t bad_lines = 0;       ///< not candump lines: skipped, the first few warned
-  std::uint64_t untimed_lines = 0;   ///< screen-format lines without a timestamp: skipped, warned
-  std::uint64_t frames = 0;          ///< frames of this pump's mapped input messages
-  std::uint64_t undecodable = 0;     ///< of those, too short for their message
-  std::uint64_t unpaired = 0;        ///< current or voltage frames without a partner
+  std::uint64_t bad_lines = 0;      ///< not candump lines: skipped, the first few warned
+  std::uint64_t untimed_lines = 0;  ///< screen-format lines without a timestamp: skipped, warned
+  std::uint64_t frames = 0;         ///< frames of this pump's mapped input messages
+  std::uint64_t undecodable = 0;    ///< of those, too short for their message
+  std::uint64_t unpaired = 0;       ///< current or voltage frames without a partner
   std::uint64_t rows = 0;
-  std::int64_t first_us = -1;        ///< the first row's time (time_s = 0), Unix microseconds
+  std::int64_t first_us = -1;  ///< the first row's time (time_s = 0), Unix microseconds
 };
 
 /// Adds --log, --node-id, --interface, --dbc, --mapping to `app` (the motor comes from the

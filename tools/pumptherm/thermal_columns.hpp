@@ -40,9 +40,10 @@ inline std::string InputColumn(const std::string& preset, const std::string& sta
 /// temperature; `first-row`: each state at its measured `<node>_C` of the first row) unless
 /// `initial_degC` (a number from `--initial-C`) is given. Throws InputError for another word,
 /// and CsvError (naming row and column) when a first-row column is missing or not a number.
-inline Eigen::VectorXd InitialTemperatures_degC(const estimators::ThermalModel& model, const CsvTable& csv,
-                                                const std::string& preset, const std::string& initial,
-                                                double initial_degC, double first_ambient_degC) {
+inline Eigen::VectorXd InitialTemperatures_degC(const estimators::ThermalModel& model,
+                                                const CsvTable& csv, const std::string& preset,
+                                                const std::string& initial, double initial_degC,
+                                                double first_ambient_degC) {
   const int n = model.StateCount();
   if (std::isfinite(initial_degC)) return Eigen::VectorXd::Constant(n, initial_degC);
   if (initial == "ambient") return Eigen::VectorXd::Constant(n, first_ambient_degC);
@@ -51,7 +52,8 @@ inline Eigen::VectorXd InitialTemperatures_degC(const estimators::ThermalModel& 
   }
   Eigen::VectorXd x(n);
   for (int s = 0; s < n; ++s) {
-    x(s) = csv.Column(InputColumn(preset, model.StateNames()[static_cast<std::size_t>(s)] + "_C"))[0];
+    x(s) =
+        csv.Column(InputColumn(preset, model.StateNames()[static_cast<std::size_t>(s)] + "_C"))[0];
   }
   return x;
 }

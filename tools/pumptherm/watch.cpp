@@ -22,21 +22,31 @@ std::string Age(std::int64_t now_us, std::int64_t rx_us) {
 
 std::string FilterStatusName(int status) {
   switch (status) {
-    case pumptherm::temperatures_t::FILTER_NOT_STARTED: return "not_started";
-    case pumptherm::temperatures_t::FILTER_CONVERGING: return "converging";
-    case pumptherm::temperatures_t::FILTER_TRACKING: return "tracking";
-    case pumptherm::temperatures_t::FILTER_REJECTING: return "rejecting";
-    case pumptherm::temperatures_t::FILTER_FAULT: return "fault";
-    default: return fmt::format("code{}", status);
+    case pumptherm::temperatures_t::FILTER_NOT_STARTED:
+      return "not_started";
+    case pumptherm::temperatures_t::FILTER_CONVERGING:
+      return "converging";
+    case pumptherm::temperatures_t::FILTER_TRACKING:
+      return "tracking";
+    case pumptherm::temperatures_t::FILTER_REJECTING:
+      return "rejecting";
+    case pumptherm::temperatures_t::FILTER_FAULT:
+      return "fault";
+    default:
+      return fmt::format("code{}", status);
   }
 }
 
 std::string LevelName(int level) {
   switch (level) {
-    case pumptherm::alarm_t::LEVEL_NORMAL: return "normal";
-    case pumptherm::alarm_t::LEVEL_WARNING: return "WARNING";
-    case pumptherm::alarm_t::LEVEL_TRIP: return "TRIP";
-    default: return fmt::format("level{}", level);
+    case pumptherm::alarm_t::LEVEL_NORMAL:
+      return "normal";
+    case pumptherm::alarm_t::LEVEL_WARNING:
+      return "WARNING";
+    case pumptherm::alarm_t::LEVEL_TRIP:
+      return "TRIP";
+    default:
+      return fmt::format("level{}", level);
   }
 }
 
@@ -45,7 +55,8 @@ std::string Nodes(const pumptherm::temperatures_t& t) {
   for (int i = 0; i < t.num_nodes; ++i) {
     const auto k = static_cast<std::size_t>(i);
     if (!out.empty()) out += "  ";
-    out += fmt::format("{} {}±{}", t.node_names[k], Num(t.node_degC[k], 1), Num(2.0 * t.node_sd_K[k], 1));
+    out += fmt::format("{} {}±{}", t.node_names[k], Num(t.node_degC[k], 1),
+                       Num(2.0 * t.node_sd_K[k], 1));
   }
   return out.empty() ? "-" : out;
 }
@@ -91,20 +102,22 @@ void PumpWatch::OnAlarm(const pumptherm::alarm_t& m, std::int64_t now_us) {
 }
 
 std::string PumpWatch::Table(std::int64_t now_us, double stale_after_s) const {
-  std::string out = fmt::format("{:<12} {:>6} {:<26} {:<16} {}\n", "pump", "age", "winding_R_C±2sd (status)",
-                                "filter (NIS)", "alarm");
+  std::string out = fmt::format("{:<12} {:>6} {:<26} {:<16} {}\n", "pump", "age",
+                                "winding_R_C±2sd (status)", "filter (NIS)", "alarm");
   for (const auto& [name, e] : pumps_) {
     const std::int64_t last = std::max(e.temps_rx_us, e.alarm_rx_us);
     const bool stale = static_cast<double>(now_us - last) * 1e-6 > stale_after_s;
     const bool temps = e.temps_rx_us >= 0;
     const std::string winding =
         temps ? fmt::format("{}±{} ({})", Num(e.temps.resistance_winding_degC, 1),
-                            Num(2.0 * e.temps.resistance_winding_sd_K, 1), IdentStatusName(e.temps.ident_status))
+                            Num(2.0 * e.temps.resistance_winding_sd_K, 1),
+                            IdentStatusName(e.temps.ident_status))
               : "-";
     const std::string filter =
-        temps ? fmt::format("{} ({})", FilterStatusName(e.temps.filter_status), Num(e.temps.nis, 1)) : "-";
-    out += fmt::format("{:<12} {:>6} {:<26} {:<16} {}{}\n", name, Age(now_us, last), winding, filter,
-                       Alarm(e.alarm, e.alarm_rx_us >= 0), stale ? "  STALE (silent)" : "");
+        temps ? fmt::format("{} ({})", FilterStatusName(e.temps.filter_status), Num(e.temps.nis, 1))
+              : "-";
+    out += fmt::format("{:<12} {:>6} {:<26} {:<16} {}{}\n", name, Age(now_us, last), winding,
+                       filter, Alarm(e.alarm, e.alarm_rx_us >= 0), stale ? "  STALE (silent)" : "");
     if (temps) out += fmt::format("{:<12} nodes degC±2sd: {}\n", "", Nodes(e.temps));
   }
   return out;

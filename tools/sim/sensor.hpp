@@ -14,12 +14,12 @@ double Quantise(double value, double lsb, double min, double max) noexcept;
 
 /// Settings of one measured channel. Units are those of the channel (A, V, degC).
 struct SensorConfig {
-  double noise_sd = 0.0;      ///< standard deviation of white noise added per sample
-  double offset = 0.0;        ///< constant offset added to every sample
-  double lsb = 0.0;           ///< quantisation step; 0 = none
-  double min = -1e300;        ///< range of the converter
+  double noise_sd = 0.0;  ///< standard deviation of white noise added per sample
+  double offset = 0.0;    ///< constant offset added to every sample
+  double lsb = 0.0;       ///< quantisation step; 0 = none
+  double min = -1e300;    ///< range of the converter
   double max = 1e300;
-  double lag_tau_s = 0.0;     ///< first-order lag time constant; 0 = none
+  double lag_tau_s = 0.0;  ///< first-order lag time constant; 0 = none
 };
 
 /// One measured channel: lag (exact first-order discretisation), then offset, noise and

@@ -9,7 +9,9 @@
 namespace pumptherm::sim {
 
 TmpDrive::TmpDrive(TmpDriveConfig config)
-    : config_(std::move(config)), rng_(config_.seed), load_rng_(config_.seed ^ 0x9e3779b97f4a7c15ULL) {
+    : config_(std::move(config)),
+      rng_(config_.seed),
+      load_rng_(config_.seed ^ 0x9e3779b97f4a7c15ULL) {
   load_target_A_ = config_.load_current_A;
   std::exponential_distribution<double> interval(1.0 / config_.load_step_mean_interval_s);
   next_load_change_s_ = config_.ramp_s + interval(load_rng_);
@@ -29,7 +31,8 @@ TmpDriveSample TmpDrive::Step() {
   const double set_rpm = ramping ? rated_rpm * t / config_.ramp_s : rated_rpm;
   double true_rpm = set_rpm;
   if (config_.speed_ripple && !ramping) {
-    true_rpm += config_.speed_ripple_rpm * std::sin(2.0 * std::numbers::pi * config_.speed_ripple_hz * t);
+    true_rpm +=
+        config_.speed_ripple_rpm * std::sin(2.0 * std::numbers::pi * config_.speed_ripple_hz * t);
   }
   const double w = estimators::ElectricalSpeed_rad_per_s(m, true_rpm);
 
@@ -44,9 +47,9 @@ TmpDriveSample TmpDrive::Step() {
   }
   const double speed_fraction = set_rpm / rated_rpm;
   if (config_.load_profile_A && !ramping) load_target_A_ = config_.load_profile_A(t);
-  const double target_A = ramping ? config_.ramp_current_A +
-                                        config_.load_current_A * speed_fraction * speed_fraction
-                                  : load_target_A_;
+  const double target_A =
+      ramping ? config_.ramp_current_A + config_.load_current_A * speed_fraction * speed_fraction
+              : load_target_A_;
   const double iq_prev = iq_A_;
   if (k_ == 1) {
     iq_A_ = target_A;
@@ -86,12 +89,14 @@ TmpDriveSample TmpDrive::Step() {
 
   TmpDriveSample s;
   s.time_s = t;
-  s.id_A = Quantise(id + ripple_d + Noise(config_.current_noise_A), i_lsb,
-                    -config_.current_range_A, config_.current_range_A);
+  s.id_A = Quantise(id + ripple_d + Noise(config_.current_noise_A), i_lsb, -config_.current_range_A,
+                    config_.current_range_A);
   s.iq_A = Quantise(iq_A_ + ripple_q + Noise(config_.current_noise_A), i_lsb,
                     -config_.current_range_A, config_.current_range_A);
-  s.ud_V = Quantise(ud + Noise(config_.voltage_noise_V), u_lsb, -config_.dc_link_V, config_.dc_link_V);
-  s.uq_V = Quantise(uq + Noise(config_.voltage_noise_V), u_lsb, -config_.dc_link_V, config_.dc_link_V);
+  s.ud_V =
+      Quantise(ud + Noise(config_.voltage_noise_V), u_lsb, -config_.dc_link_V, config_.dc_link_V);
+  s.uq_V =
+      Quantise(uq + Noise(config_.voltage_noise_V), u_lsb, -config_.dc_link_V, config_.dc_link_V);
   s.speed_rpm = set_rpm + Noise(config_.speed_noise_rpm);
   s.true_iq_A = iq_A_;
   s.load_target_A = target_A;

@@ -28,33 +28,33 @@ struct TmpDriveConfig {
   estimators::MotorDescription motor;  ///< the true plant (R0/T0/alpha, psi_f at T0, Ls, p)
   double sample_period_s = 0.01;
   double duration_s = 480.0 + 24.0 * 3600.0;  ///< ramp, then 24 h at rated speed
-  double ramp_s = 480.0;                     ///< 0 to rated speed, linear (Han 2019 sec. 4.2)
-  double ramp_current_A = 6.0;               ///< iq accelerating the rotor during the ramp
-  double load_current_A = 2.0;               ///< iq at rated speed in vacuum (drag)
+  double ramp_s = 480.0;                      ///< 0 to rated speed, linear (Han 2019 sec. 4.2)
+  double ramp_current_A = 6.0;                ///< iq accelerating the rotor during the ramp
+  double load_current_A = 2.0;                ///< iq at rated speed in vacuum (drag)
 
   // Measurement chain.
-  double current_noise_A = 0.01;     ///< rms white noise on id and iq
-  double current_range_A = 20.0;     ///< 12-bit ADC over +/- this range (9.8 mA per step)
-  double phase_offset_A = 0.005;     ///< per-phase offset -> dq ripple at electrical frequency
-  double voltage_noise_V = 0.01;     ///< rms jitter of the commanded ud, uq
-  double dc_link_V = 48.0;           ///< 12-bit over +/- this range (23 mV per step)
-  double speed_noise_rpm = 1.0;      ///< rms noise of the drive's speed estimate
+  double current_noise_A = 0.01;  ///< rms white noise on id and iq
+  double current_range_A = 20.0;  ///< 12-bit ADC over +/- this range (9.8 mA per step)
+  double phase_offset_A = 0.005;  ///< per-phase offset -> dq ripple at electrical frequency
+  double voltage_noise_V = 0.01;  ///< rms jitter of the commanded ud, uq
+  double dc_link_V = 48.0;        ///< 12-bit over +/- this range (23 mV per step)
+  double speed_noise_rpm = 1.0;   ///< rms noise of the drive's speed estimate
   int adc_bits = 12;
 
   // Disturbances, each switched on separately.
   bool flux_drift = false;
   double flux_temperature_coefficient_per_K = -1e-3;  ///< NdFeB, relative to psi_f at T0
   bool dead_time = false;
-  double dead_time_V = 0.2;          ///< voltage error along the current vector at high current
-  double dead_time_knee_A = 0.5;     ///< current magnitude where the error reaches 76 % (tanh)
+  double dead_time_V = 0.2;       ///< voltage error along the current vector at high current
+  double dead_time_knee_A = 0.5;  ///< current magnitude where the error reaches 76 % (tanh)
   bool speed_ripple = false;
-  double speed_ripple_rpm = 3.0;     ///< amplitude of the mechanical ripple
+  double speed_ripple_rpm = 3.0;  ///< amplitude of the mechanical ripple
   double speed_ripple_hz = 0.37;
   bool load_steps = false;
   double load_step_mean_interval_s = 600.0;  ///< exponential intervals between gas-load changes
-  double load_min_A = 1.0;           ///< gas-load current range at rated speed
+  double load_min_A = 1.0;                   ///< gas-load current range at rated speed
   double load_max_A = 4.0;
-  double current_response_s = 0.2;   ///< time constant of iq following a load change
+  double current_response_s = 0.2;  ///< time constant of iq following a load change
 
   /// Winding and magnet temperature trajectories (degC) against time (s); the test sets them.
   std::function<double(double)> winding_degC = [](double) { return 27.2; };
