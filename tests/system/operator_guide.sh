@@ -56,6 +56,8 @@ awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) c[$i] = i; next }
 journalctl -u "$unit" --no-pager | grep -q "pump pump3: alarm trip" || fail "pump3 never tripped live"
 journalctl -u "$unit" --no-pager | grep -q "alarm clear from 'can:can0' accepted (latched trip cleared)" ||
   fail "the PUMP_CLEAR frame did not clear pump3's latched trip"
+grep -q 'pump3: PUMP_CLEAR sent on can0' "$WORK_DIR"/block_*.out ||
+  fail "pumptherm clear-trip did not send PUMP_CLEAR on can0"
 [ -s disc/model.toml ] || fail "the discrepancy workflow wrote no model"
 [ -s /var/lib/pumptherm/state.toml ] || fail "no state saved at stop"
 echo "$T: PASS ($blocks blocks run, $norun not run)"
