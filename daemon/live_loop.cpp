@@ -100,7 +100,10 @@ struct LiveLoop::Impl : OutputSink {
     if (iface >= socket_of_iface.size() || socket_of_iface[iface] < 0) return;
     const auto i = static_cast<std::size_t>(socket_of_iface[iface]);
     if (!sockets[i].is_open()) return;
-    InterfaceCounters& c = gateway->counter().counters(iface);
+    SendCounted(i, gateway->counter().counters(iface), frame);
+  }
+  /// Sends `frame` on socket `i`, counted on `c`; a link found down is marked so.
+  void SendCounted(std::size_t i, InterfaceCounters& c, const protocol::CanFrame& frame) {
     switch (sockets[i].Send(frame)) {
       case TxStatus::kSent:
         ++c.tx_frames;
@@ -318,19 +321,7 @@ struct LiveLoop::Impl : OutputSink {
     while (auto frame = gateway->counter().HeartbeatDue(mono_us)) {
       for (std::size_t i = 0; i < sockets.size(); ++i) {
         if (!sockets[i].is_open()) continue;
-        InterfaceCounters& c = gateway->counter().counters(gateway_index[i]);
-        switch (sockets[i].Send(*frame)) {
-          case TxStatus::kSent:
-            ++c.tx_frames;
-            break;
-          case TxStatus::kDown:
-            ++c.tx_dropped;
-            MarkUp(i, false);
-            break;
-          default:
-            ++c.tx_dropped;
-            break;
-        }
+        SendCounted(i, gateway->counter().counters(gateway_index[i]), *frame);
       }
     }
   }

@@ -6,28 +6,14 @@
 #include <limits>
 #include <stdexcept>
 
+#include "tests/estimators/one_node_model.hpp"
+
 namespace pumptherm::estimators {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-// One node to ambient: C dT/dt = P - (T - Ta) / R with P = 2 W per A^2 of iq, C = 100 J/K,
-// R = 1 K/W. Closed form (first-order linear ODE): T(t) = Ta + P R + (T0 - Ta - P R) e^(-t / (R
-// C)).
-constexpr const char* kOneNode = R"(
-[model]
-name = "one"
-[[node]]
-name = "n"
-capacity_J_per_K = 100
-[[edge]]
-between = ["n", "ambient"]
-resistance_K_per_W = 1.0
-[[loss]]
-name = "joule"
-power_W = "2.0 * iq_A^2"
-shares = { n = 1 }
-)";
+using test::kOneNode;
 
 double Closed(double t0_degC, double ambient_degC, double p_W, double t_s) {
   return ambient_degC + p_W + (t0_degC - ambient_degC - p_W) * std::exp(-t_s / 100.0);
