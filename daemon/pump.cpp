@@ -359,7 +359,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
   // temperature ("n/a", alarms see unknown nodes and an unconverged filter, a latched trip
   // stays), the state is not saved, and the next step starts the filter again.
   const bool diverged =
-      !x.allFinite() || !s.diagonal().allFinite() ||
+      !x.allFinite() || !s.diagonal().allFinite() || (robust && !robust_sd_.allFinite()) ||
       (x.size() > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC));
   if (diverged) {
     ++counters_.filter_resets;

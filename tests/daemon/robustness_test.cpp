@@ -32,34 +32,54 @@ std::unique_ptr<Pump> MakePump() {
   return std::make_unique<Pump>(pc, estimators::MotorPreset("han2019-tmp"), model, 1.0);
 }
 
+// Runs one pump for `steps` seconds on currents far above any rating and asserts that nothing
+// non-finite or above kMaxEstimate_degC is ever published; returns the hottest published node.
+double RunOverloaded(double current_A, double speed_rpm, bool sensor_speaks, int steps,
+                     std::unique_ptr<Pump>& pump) {
+  pump = MakePump();
+  const std::int64_t t0 = 1'700'000'000'000'000;
+  pump->OnStatus(t0, 24000.0, 2.0, 25.0, 25.0);
+  double hottest_published = -kInf;
+  for (int k = 1; k <= steps; ++k) {
+    const std::int64_t t = t0 + std::int64_t{k} * 1'000'000;
+    pump->OnCurrents(t, current_A, current_A, speed_rpm, kNaN);
+    if (sensor_speaks) pump->OnStatus(t, 24000.0, 2.0, 25.0, 25.0);
+    pump->Advance(t);
+    const PumpSnapshot& s = pump->snapshot();
+    if (!s.initialised) continue;
+    for (std::size_t i = 0; i < s.node_degC.size(); ++i) {
+      EXPECT_TRUE(std::isfinite(s.node_degC[i]) && std::isfinite(s.node_sd_K[i]))
+          << "state " << i << " at step " << k << ": " << s.node_degC[i] << " degC, sd "
+          << s.node_sd_K[i];
+      EXPECT_LE(s.node_degC[i], kMaxEstimate_degC) << "state " << i << " at step " << k;
+      if (testing::Test::HasFailure()) return hottest_published;
+      hottest_published = std::max(hottest_published, s.node_degC[i]);
+    }
+  }
+  return hottest_published;
+}
+
 // Found by pipeline_step_fuzz: currents far above any rating (here 20 A in d and q on a motor of a
 // few amperes), held while the frame sensor falls silent, make the temperature-dependent copper
 // loss outgrow the network's conduction (Saheba 2010 eqs. 12-16): the open-loop estimate ran away
 // to 6e159 degC with an infinite standard deviation, and was published. Now such a filter is reset
 // (counted) and nothing is published until it runs again.
 TEST(PumpRobustness, RunawayEstimateIsResetNeverPublished) {
-  auto pump = MakePump();
-  const std::int64_t t0 = 1'700'000'000'000'000;
-  pump->OnStatus(t0, 24000.0, 2.0, 25.0, 25.0);  // the frame sensor speaks once, then never again
-  double hottest_published = -kInf;
-  for (int k = 1; k <= 3000; ++k) {
-    const std::int64_t t = t0 + std::int64_t{k} * 1'000'000;
-    pump->OnCurrents(t, 20.0, 20.0, 2513.0, kNaN);
-    pump->Advance(t);
-    const PumpSnapshot& s = pump->snapshot();
-    if (!s.initialised) continue;
-    for (std::size_t i = 0; i < s.node_degC.size(); ++i) {
-      ASSERT_TRUE(std::isfinite(s.node_degC[i]) && std::isfinite(s.node_sd_K[i]))
-          << "state " << i << " at step " << k << ": " << s.node_degC[i] << " degC, sd "
-          << s.node_sd_K[i];
-      ASSERT_LE(s.node_degC[i], kMaxEstimate_degC) << "state " << i << " at step " << k;
-      hottest_published = std::max(hottest_published, s.node_degC[i]);
-    }
-  }
+  std::unique_ptr<Pump> pump;
+  const double hottest = RunOverloaded(20.0, 2513.0, false, 3000, pump);
   EXPECT_GT(pump->counters().filter_resets, 0U) << "the runaway was expected to happen here";
-  EXPECT_GT(hottest_published, 200.0);  // it did run hot before the reset
+  EXPECT_GT(hottest, 200.0);  // it did run hot before the reset
   EXPECT_TRUE(pump->snapshot().alarm.trip_latched ||
               pump->snapshot().alarm.level != estimators::AlarmLevel::kNone);
+}
+
+// Found by pipeline_step_fuzz: 30 A at 30000 r/min with the frame sensor speaking. The runaway
+// winding is reset again and again; once, the disturbance-state filter's winding sd overflowed
+// while its mean (and the standard filter) were still finite, and the infinite sd was published.
+TEST(PumpRobustness, OverflowedDisturbanceSdIsResetNeverPublished) {
+  std::unique_ptr<Pump> pump;
+  RunOverloaded(30.0, 30000.0, true, 4000, pump);
+  EXPECT_GT(pump->counters().filter_resets, 0U) << "the runaway was expected to happen here";
 }
 
 // Offline, the log's stamps are the clock: a stamp a little behind (another interface) is taken
