@@ -74,8 +74,9 @@ AlarmMonitor::AlarmMonitor(AlarmConfig config, std::vector<TemperatureLimits> li
   for (const auto& l : limits_) check(l, "node limits");
   check(sensor_limits_, "sensor limits");
   if (!(config_.hysteresis_K >= 0.0) || !(config_.hold_s >= 0.0) ||
-      !(config_.rate_window_s > 0.0)) {
-    throw std::invalid_argument("alarm config: hysteresis and hold must be >= 0, window > 0");
+      !(config_.rate_window_s > 0.0) || !(config_.forecast_clear_s >= 0.0)) {
+    throw std::invalid_argument(
+        "alarm config: hysteresis, hold and forecast clear must be >= 0, window > 0");
   }
   over_.resize(limits_.size());
   rise_.resize(limits_.size());
@@ -84,7 +85,9 @@ AlarmMonitor::AlarmMonitor(AlarmConfig config, std::vector<TemperatureLimits> li
   rise_K_per_min_.assign(limits_.size(), std::nan(""));
 }
 
-void AlarmMonitor::Update(Channel& ch, AlarmLevel want, double value, double now_s, double hold_s) {
+void AlarmMonitor::Update(Channel& ch, AlarmLevel want, double value, double now_s, double hold_s,
+                          double clear_hold_s) {
+  if (clear_hold_s < 0.0) clear_hold_s = hold_s;
   if (ch.latched && want < AlarmLevel::kTrip) want = AlarmLevel::kTrip;
   // A trip cleared while its condition is still there latches again at once.
   if (want == AlarmLevel::kTrip && ch.level == AlarmLevel::kTrip) ch.latched = true;
@@ -116,7 +119,7 @@ void AlarmMonitor::Update(Channel& ch, AlarmLevel want, double value, double now
     return;
   }
   if (std::isnan(ch.below_since_s)) ch.below_since_s = now_s;
-  if (now_s - ch.below_since_s >= hold_s) {
+  if (now_s - ch.below_since_s >= clear_hold_s) {
     ch.level = want;
     ch.below_since_s = std::nan("");
   }
@@ -194,7 +197,7 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
     if (forecast_.level != AlarmLevel::kNone && ttt < 1.1 * config_.forecast_horizon_s) {
       want = AlarmLevel::kWarning;
     }
-    if (Known(ttt)) Update(forecast_, want, ttt, now_s, hold);
+    if (Known(ttt)) Update(forecast_, want, ttt, now_s, hold, config_.forecast_clear_s);
     if (forecast_.level != AlarmLevel::kNone && in.time_to_trip_node >= 0)
       forecast_node_ = in.time_to_trip_node;
   }

@@ -92,7 +92,11 @@ struct AlarmConfig {
   double disagree_hold_s = 30.0;
   double not_converged_grace_s = 600.0;  ///< after start, "not converged" is not yet an alarm
   double forecast_horizon_s = 600.0;     ///< warn when time to trip drops below this
-  int sensor_node = -1;                  ///< node index the measured sensor sits on (reports)
+  /// Off-delay of the forecast warning: it clears only after the forecast has stayed beyond the
+  /// horizon this long (a load alternating faster than this does not make it chatter; ISA-18.2
+  /// off-delay).
+  double forecast_clear_s = 60.0;
+  int sensor_node = -1;  ///< node index the measured sensor sits on (reports)
   /// Levels act on an upper bound of each estimate, mean + k sd (docs/daemon.md, "Alarm rule"):
   /// k for the trip and for the warning level.
   double trip_sd_factor = 2.0;
@@ -195,7 +199,10 @@ class AlarmMonitor {
     bool latched = false;
   };
   /// Moves `ch` toward `want` (with hold), `want` computed by the caller with hysteresis.
-  void Update(Channel& ch, AlarmLevel want, double value, double now_s, double hold_s);
+  /// Moves `ch` towards `want`: up after `hold_s` in the band, down after `clear_hold_s` below it
+  /// (negative: `hold_s`).
+  void Update(Channel& ch, AlarmLevel want, double value, double now_s, double hold_s,
+              double clear_hold_s = -1.0);
   void StepSensor(double now_s, const AlarmInputs& in);
   /// The level `ch` should be at: `warn_degC` against the warning level, `trip_degC` against the
   /// trip level (both the value itself for a measured sensor), with hysteresis.

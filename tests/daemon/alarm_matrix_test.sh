@@ -2,8 +2,9 @@
 # The alarm scenario matrix (docs/robustness.md, "Alarms against the truth"): the plant's
 # `alarm-matrix` recording through `pumpthermd -r`, each pump judged against its truth (the
 # winding temperature the resistance reflects). Goals: every true trip crossing tripped, no
-# later than 30 s after it and no earlier than 120 s before it (the filter runs ahead when its
-# model does not know a fault, docs/daemon.md "Alarms on the demo"); no trip where the truth
+# later than 30 s after it and no earlier than 150 s before it (early by the stated rules: the
+# trip acts on x + 2 sd and on the bounds of a silent link or a blind filter, docs/daemon.md
+# "Alarm rule"; the table shows the truth at the trip); no trip where the truth
 # never crosses; the sensor-fault alarm within 60 s of the sensor failing and never on a pump
 # whose sensor works; no chatter (alarm level changes counted). Then the same recording with the
 # clock stepped back and forward (offline: docs/daemon.md "Time").
@@ -57,30 +58,32 @@ run() {
   mkdir -p "$est"
   "$pumpthermd" --config "$src/tests/daemon/alarm_matrix.toml" -r "$in" --csv-dir "$est" \
     --csv-time-origin "$origin" >"$tmp/out-$name.txt" 2>"$tmp/err-$name.txt"
-  echo "| run | pump | true trip crossing s | trip s | delay s | sensor fault s | level changes |"
-  echo "| --- | --- | --- | --- | --- | --- | --- |"
+  echo "| run | pump | true trip crossing s | trip s | delay s | truth at trip degC | sensor fault s | level changes |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- |"
   while read -r pump failed_s max_changes max_delay; do
     max_changes=$((max_changes + extra))
     local truth=$tmp/$pump.truth.csv csv=$est/$pump.csv
-    local tt at sf ch
+    local tt at sf ch tat
     tt=$(first "$truth" winding_resistance_C 120)
     at=$(first "$csv" alarm_level 2)
     # Map the daemon's time back to the recording's time.
     if [[ $at != none ]]; then
       at=$(awk -v a="$at" -v f="$shift_from" -v s="$shift_s" 'BEGIN { print (a >= f + s && s != 0) ? a - s : a }')
     fi
+    tat=-
+    [[ $at != none ]] && tat=$(awk -F, -v a="$at" 'NR > 1 && $1 <= a { v = $10 } END { printf "%.1f", v }' "$truth")
     sf=$(first_bit "$csv" alarm_active_reasons 8)
     ch=$(changes "$csv")
     local delay=-
     [[ $tt != none && $at != none ]] && delay=$(awk -v a="$at" -v t="$tt" 'BEGIN { printf "%.1f", a - t }')
-    echo "| $name | $pump | $tt | $at | $delay | $sf | $ch |"
+    echo "| $name | $pump | $tt | $at | $delay | $tat | $sf | $ch |"
     if [[ $tt == none ]]; then
       [[ $at == none ]] || { echo "FAIL: $name/$pump: false trip at $at s"; fail=1; }
     elif [[ $at == none ]]; then
       echo "FAIL: $name/$pump: missed trip (truth crosses at $tt s)"; fail=1
     else
-      awk -v d="$delay" -v m="$max_delay" 'BEGIN { exit !(d <= m && d >= -120) }' ||
-        { echo "FAIL: $name/$pump: trip $delay s from the truth's crossing, outside [-120, $max_delay]"; fail=1; }
+      awk -v d="$delay" -v m="$max_delay" 'BEGIN { exit !(d <= m && d >= -150) }' ||
+        { echo "FAIL: $name/$pump: trip $delay s from the truth's crossing, outside [-150, $max_delay]"; fail=1; }
     fi
     if [[ $failed_s == - ]]; then
       [[ $sf == none ]] ||

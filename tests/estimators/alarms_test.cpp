@@ -413,7 +413,27 @@ TEST(Alarms, ForecastWarnsBelowTheHorizonWithHysteresis) {
   EXPECT_EQ(f.At(20).level, AlarmLevel::kWarning);
   f.in.time_to_trip_s = std::numeric_limits<double>::infinity();
   f.At(21);
-  EXPECT_EQ(f.At(23).level, AlarmLevel::kNone);
+  // The off-delay: beyond the horizon for forecast_clear_s (60 s) before it clears.
+  EXPECT_EQ(f.At(23).level, AlarmLevel::kWarning);
+  EXPECT_EQ(f.At(80).level, AlarmLevel::kWarning);
+  EXPECT_EQ(f.At(82).level, AlarmLevel::kNone);
+}
+
+// A load alternating every 20 s between a phase that forecasts a trip and one that does not: one
+// forecast warning, held through the light phases, not one per cycle.
+TEST(Alarms, ForecastOnAnAlternatingLoadDoesNotChatter) {
+  Fixture f;
+  int changes = 0;
+  AlarmLevel last = AlarmLevel::kNone;
+  for (double t = 0; t < 600; t += 1) {
+    const bool heavy = static_cast<int>(t / 20.0) % 2 == 1;
+    f.in.time_to_trip_s = heavy ? 200.0 : std::numeric_limits<double>::infinity();
+    const AlarmLevel level = f.At(t).level;
+    if (level != last) ++changes;
+    last = level;
+  }
+  EXPECT_EQ(changes, 1);
+  EXPECT_EQ(last, AlarmLevel::kWarning);
 }
 
 TEST(Alarms, RejectsTripBelowWarning) {
