@@ -29,7 +29,8 @@ double Gateway::OutputValue(std::size_t p, MappingOutput output, int node) const
     case MappingOutput::kFluxWb:
       return ident ? s.resistance.flux_Wb : kNaN;
     case MappingOutput::kWindingResSdK:
-      return ident ? s.resistance.winding_sd_K : kNaN;
+      // Only with the temperature it belongs to (as on LCM and in the CSV).
+      return std::isfinite(s.winding_resistance_degC) ? s.resistance.winding_sd_K : kNaN;
     case MappingOutput::kMagnetFluxSdK:
       return s.magnet_flux_sd_K;
     case MappingOutput::kRsStatus:

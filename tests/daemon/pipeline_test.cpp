@@ -130,9 +130,12 @@ class Bench {
   }
 
   /// The GW_NODE_TEMP frames sent for node 1, decoded: signal name -> value, in send order.
-  std::vector<std::map<std::string, double>> NodeFrames() const {
+  std::vector<std::map<std::string, double>> NodeFrames() const { return Frames("GW_NODE_TEMP"); }
+
+  /// Every frame of the message `name` sent for node ID 1, decoded, by signal name.
+  std::vector<std::map<std::string, double>> Frames(const std::string& name) const {
     std::vector<std::map<std::string, double>> out;
-    const protocol::DbcMessage* m = dbc_.FindMessage("GW_NODE_TEMP");
+    const protocol::DbcMessage* m = dbc_.FindMessage(name);
     const auto& codec = codec_.message(static_cast<std::size_t>(m - dbc_.messages.data()));
     for (const auto& [t, f] : sink.frames) {
       if (f.id != m->id + 1) continue;
@@ -296,6 +299,22 @@ TEST(Pipeline, EveryNodeOfTheDefaultModelReachesCanWithItsSd) {
     EXPECT_NEAR(frames[i].at("NodeSd_K"), s.node_sd_K[node], 0.002) << node;
   }
   EXPECT_EQ(seen.size(), 4u);
+}
+
+// The resistance-based winding temperature's sd goes out only with the temperature: while the
+// identifier runs but publishes no winding temperature (held, converging), GW_IDENT_SD says "not
+// available", not a saturated 65.534 K.
+TEST(Pipeline, WindingResistanceSdIsNotAvailableWithoutItsTemperature) {
+  Bench b(GenericConfig());
+  b.Run(30.0, 5.0);
+  const auto& s = b.gateway_.pumps()[0]->snapshot();
+  ASSERT_NE(s.resistance.status, estimators::ResistanceStatus::kInitialising);
+  ASSERT_TRUE(std::isnan(s.winding_resistance_degC))
+      << "this test needs an identifier without a published winding temperature; status "
+      << estimators::ToString(s.resistance.status);
+  const auto frames = b.Frames("GW_IDENT_SD");
+  ASSERT_FALSE(frames.empty());
+  EXPECT_TRUE(std::isnan(frames.back().at("WindingResSd_K"))) << frames.back().at("WindingResSd_K");
 }
 
 TEST(Pipeline, ANodeWithoutCanOutputIsAConfigurationErrorNamingIt) {
