@@ -13,6 +13,7 @@
 #include "estimators/thermal_model.hpp"
 #include "tests/common/run_command.hpp"
 #include "tests/common/test_files.hpp"
+#include "tests/common/test_temp_dir.hpp"
 #include "tests/tools/discrepancy_cases.hpp"
 
 namespace pd = pumptherm::tools::discrepancy;
@@ -21,11 +22,7 @@ namespace {
 
 using pumptherm::test_files::ReadFile;
 
-std::string Dir() {
-  const auto d = std::filesystem::temp_directory_path() / "pumptherm_discrepancy_cli_test";
-  std::filesystem::create_directories(d);
-  return d.string();
-}
+std::string Dir() { return pumptherm::test_files::TestTempDir("pumptherm_discrepancy_cli_test"); }
 
 struct CliRun {
   int exit_code;

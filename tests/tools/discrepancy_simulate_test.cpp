@@ -17,6 +17,7 @@
 
 #include "estimators/thermal_model.hpp"
 #include "tests/common/test_files.hpp"
+#include "tests/common/test_temp_dir.hpp"
 #include "tests/tools/discrepancy_cases.hpp"
 #include "tools/discrepancy/workflow.hpp"
 
@@ -29,9 +30,7 @@ using pumptherm::test_files::ReadFile;
 using pumptherm::test_files::SharedDir;
 
 std::string Dir() {
-  const auto d = std::filesystem::temp_directory_path() / "pumptherm_discrepancy_simulate_test";
-  std::filesystem::create_directories(d);
-  return d.string();
+  return pumptherm::test_files::TestTempDir("pumptherm_discrepancy_simulate_test");
 }
 
 /// The model written to a file of its own with the tables it names by absolute path.

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "tests/common/test_files.hpp"
+#include "tests/common/test_temp_dir.hpp"
 #include "tests/tools/discrepancy_cases.hpp"
 #include "tools/discrepancy/report.hpp"
 #include "tools/discrepancy/workflow.hpp"
@@ -43,8 +44,8 @@ std::string Summary(const pd::Result& r) {
 }  // namespace
 
 TEST(HiddenEffectData, SameSeedSameBytesOtherSeedOtherProfile) {
-  const auto dir = std::filesystem::temp_directory_path() / "pumptherm_hidden_data_test";
-  std::filesystem::create_directories(dir);
+  const std::filesystem::path dir =
+      pumptherm::test_files::TestTempDir("pumptherm_hidden_data_test");
   auto [a, va] = HiddenCase("saheba2010-baseline", {{"rotor_loss", {5.0}, {}}}, 1.0);
   auto [b, vb] = HiddenCase("saheba2010-baseline", {{"rotor_loss", {5.0}, {}}}, 1.0);
   pd::WriteData((dir / "a.csv").string(), a, false);
