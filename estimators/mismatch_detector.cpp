@@ -9,6 +9,10 @@
 namespace pumptherm::estimators {
 namespace {
 
+/// Largest frame-to-ambient resistance scale reported: beyond it the fitted conductance change
+/// (theta -> -1) no longer tells the size.
+constexpr double kMaxResistanceScale = 20.0;
+
 /// Hypotheses of the naming fit, in column-block order.
 enum Hypothesis : int { kCooling = 0, kRotor, kLoss, kAmbient, kOffset, kHypotheses };
 
@@ -85,7 +89,9 @@ std::string DescribeFinding(const MismatchFinding& f) {
   const double v = f.value;
   switch (f.effect) {
     case MismatchEffect::kFrameAmbientResistance:
-      return fmt::format("frame-to-ambient resistance x{:.1f} ({})", v,
+      // At the cap the fit says only that the conductance is (nearly) gone.
+      return fmt::format("frame-to-ambient resistance x{:.1f}{} ({})", v,
+                         v >= kMaxResistanceScale ? " or more" : "",
                          v >= 2.0  ? "cooling lost"
                          : v > 1.0 ? "cooling reduced"
                                    : "cooling improved");
@@ -225,6 +231,8 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
     fit_e_.setZero(n_aug_, onsets * kHypotheses);
     fit_u_col_.setZero(n_aug_);
     fit_phiu_.setZero(n_aug_, kHypotheses);
+    fit_frame_unit_.setZero(n_aug_);
+    fit_onset_offset_K_.setZero(onsets);
     fit_a_.setZero(onsets * kHypotheses);
     fit_b_.setZero(onsets * kHypotheses);
     fit_me_.setZero(onsets * kHypotheses);
@@ -392,6 +400,10 @@ void MismatchDetector::Fit(double now_s) {
   fit_mee_.setZero();
   fit_mre_.setZero();
   const int oldest = (head_ - size_ + cap_) % cap_;
+  for (int o = 0; o < onsets; ++o) {
+    const int k = (oldest + fit_onsets_[static_cast<std::size_t>(o)]) % cap_;
+    fit_onset_offset_K_(o) = h_xpre_(bias_, k);
+  }
   int active = 0;
   // The magnet channel: one sample per magnet_period_s, r = reading - the filter's estimate.
   const int magnet_every = std::max(
@@ -408,14 +420,21 @@ void MismatchDetector::Fit(double now_s) {
     Linearise(in, fit_x_);
     fit_disc_.Update(lin_block_, h_dt_[ks]);
     const ThermalDiscreteModel& d = fit_disc_.Current();
-    // The frame temperature for the cooling regressor: the reading less the estimated offset
-    // (the low-noise filter's own frame estimate lags a changed plant).
+    // The frame temperature for the cooling regressor: the reading less the sensor offset the
+    // filter had estimated before the onset (the low-noise filter's own frame estimate lags a
+    // changed plant, and its offset state soaks up the fault after the onset: on the demo's lost
+    // cooling it reached 28 K and turned the regressor's sign). Here the raw reading; each
+    // onset's column adds its offset's share, fit_frame_unit_ per kelvin.
     const double y = h_y_[ks];
-    const double frame = std::isfinite(y) ? y - fit_x_(bias_) : fit_x_(frame_);
+    const bool reading = std::isfinite(y);
     for (int h = 0; h < kHypotheses; ++h) {
-      EffectForcing(h, in, fit_x_, frame, fit_u_col_);
+      EffectForcing(h, in, fit_x_, reading ? y : fit_x_(frame_), fit_u_col_);
       fit_phiu_.col(h).setZero();
       fit_phiu_.col(h).head(nb).noalias() = d.phi_s * fit_u_col_.head(nb);
+    }
+    fit_frame_unit_.setZero();
+    if (reading) {
+      fit_frame_unit_.head(nb) = d.phi_s.col(frame_) * boundary_K_per_s_per_K_(frame_);
     }
     while (active < onsets && fit_onsets_[static_cast<std::size_t>(active)] <= i) ++active;
     const bool measured = std::isfinite(h_nu_[ks]);
@@ -426,6 +445,7 @@ void MismatchDetector::Fit(double now_s) {
         fit_tmp_ = e.head(nb);
         e.head(nb).noalias() = d.ad * fit_tmp_;
         e += fit_phiu_.col(h);
+        if (h == kCooling) e += fit_onset_offset_K_(o) * fit_frame_unit_;
         double g = e(sensor_) + e(bias_);
         if (h == kOffset) g += 1.0;
         if (!measured) continue;
@@ -516,7 +536,7 @@ void MismatchDetector::Choose(int onsets, int oldest) {
   finding_.onset_s = h_t_[static_cast<std::size_t>((oldest + onset) % cap_)];
   switch (h) {
     case kCooling:
-      finding_.value = 1.0 / std::max(1.0 + theta, 0.05);
+      finding_.value = 1.0 / std::max(1.0 + theta, 1.0 / kMaxResistanceScale);
       break;  // R'/R = G/G'
     case kLoss:
       finding_.value = 1.0 + theta;

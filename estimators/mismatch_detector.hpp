@@ -194,6 +194,8 @@ class MismatchDetector {
   std::vector<int> fit_onsets_;  ///< onset steps (chronological history index), ascending
   Eigen::MatrixXd fit_e_, fit_phiu_;
   Eigen::VectorXd fit_a_, fit_b_, fit_x_, fit_tmp_, fit_u_col_;
+  Eigen::VectorXd fit_frame_unit_;      ///< the cooling column's response per kelvin of offset
+  Eigen::VectorXd fit_onset_offset_K_;  ///< per onset: the sensor offset estimated before it
   Eigen::VectorXd fit_me_, fit_mee_, fit_mre_;  ///< magnet channel: sums of e, e^2, r e per column
   std::vector<char> fit_veto_;                  ///< per column: contradicted by the magnet
   MismatchFinding finding_;

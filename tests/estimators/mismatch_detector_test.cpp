@@ -54,7 +54,9 @@ TEST(MismatchDetector, DetectsLostCoolingAndNamesTheFramePath) {
   EXPECT_EQ(r.at_end.state, pe::MismatchState::kPlantChange);
   EXPECT_EQ(r.at_end.effect, pe::MismatchEffect::kFrameAmbientResistance)
       << pe::DescribeFinding(r.at_end);
-  EXPECT_GT(r.at_end.value, 2.0);  // the resistance grew (x4 in the truth)
+  // x4 in the truth. The regressor's frame temperature is the reading less the offset estimated
+  // before the onset: with the offset after it (which soaks up the fault) the fit said x9.2.
+  EXPECT_NEAR(r.at_end.value, 4.0, 0.5);
   EXPECT_EQ(r.false_alarms, 0);
 }
 
