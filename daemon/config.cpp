@@ -327,6 +327,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.fuse_winding = r.Bool("fuse_winding", pc.fuse_winding);
       pc.winding_sd_K = r.Number("winding_sd_K", pc.winding_sd_K, 0.01, 100.0);
       pc.magnet_node = r.String("magnet_node", &pc.magnet_node);
+      pc.rotor_node = r.String("rotor_node", &pc.rotor_node);
       pc.magnet_min_sd_K = r.Number("magnet_min_sd_K", pc.magnet_min_sd_K, 0.01, 100.0);
       pc.frame_sensor_lag_s = r.Number("frame_sensor_lag_s", pc.frame_sensor_lag_s, 0.0, 3600.0);
       pc.disturbance_states = r.Bool("disturbance_states", pc.disturbance_states);

@@ -101,6 +101,9 @@ struct PumpConfig {
   double winding_sd_K = 3.0;                  ///< its standard deviation in the filter
   /// Node the magnet temperature from the flux is fused into (empty: published, not fused).
   std::string magnet_node;
+  /// Node of the rotor-heat state (disturbance filter) and of the rotor-loss hypothesis (mismatch
+  /// test); empty: `magnet_node`, else "rotor" where the model has it.
+  std::string rotor_node;
   /// Least standard deviation of the magnet temperature from the flux, K, in the filter and as
   /// published: the identifier's covariance sees its noise, not the nameplate flux's error or
   /// the inverter's voltage error.

@@ -45,11 +45,20 @@ estimators::VirtualSensorConfig SensorConfig(const PumpConfig& c) {
   return v;
 }
 
+/// The node where heat inside the rotor appears: as configured, else the magnet's node (the
+/// magnet sits on the rotor), else the estimators' default ("rotor", absent: no rotor heat).
+std::string RotorNode(const PumpConfig& c) {
+  if (!c.rotor_node.empty()) return c.rotor_node;
+  if (!c.magnet_node.empty()) return c.magnet_node;
+  return estimators::DisturbanceSensorConfig{}.rotor_node;
+}
+
 estimators::MismatchDetectorConfig MismatchConfig(const PumpConfig& c,
                                                   const estimators::ThermalModel& model) {
   estimators::MismatchDetectorConfig m;
   m.measured_node = c.measured_node;
   m.sensor_lag_s = c.frame_sensor_lag_s;
+  m.rotor_node = RotorNode(c);
   // The magnet from the flux helps name an effect (heat inside the rotor or not); an unknown
   // node is reported by the pump with its config line, not here.
   if (model.StateIndex(c.magnet_node) >= 0) m.magnet_node = c.magnet_node;
@@ -61,6 +70,7 @@ estimators::DisturbanceSensorConfig RobustConfig(const PumpConfig& c,
   estimators::DisturbanceSensorConfig d;
   d.measured_node = c.measured_node;
   d.sensor_lag_s = c.frame_sensor_lag_s;
+  d.rotor_node = RotorNode(c);
   d.winding_measurement_sd_K = c.winding_sd_K;
   // The magnet reading's error is mostly a slow bias (nameplate flux, inverter voltage error):
   // the standard filter's floor on its sd becomes the stationary sd of a bias state here. An
@@ -142,6 +152,12 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
           "(t0_degC, flux_temperature_coefficient_per_K) to turn the flux into a temperature",
           config_.name, config_.line, config_.magnet_node, motor_.name));
     }
+  }
+  if (!config_.rotor_node.empty() && model_->StateIndex(config_.rotor_node) < 0) {
+    throw std::invalid_argument(
+        fmt::format("pump '{}' (line {}): rotor_node '{}' is not a node with heat capacity of "
+                    "model '{}'",
+                    config_.name, config_.line, config_.rotor_node, model_->Name()));
   }
   const int n = model_->StateCount();
   snapshot_.node_degC.assign(static_cast<std::size_t>(n), kNaN);

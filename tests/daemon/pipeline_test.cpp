@@ -761,6 +761,14 @@ thermal_model = "no-such-model"
                 "magnet_node '7' is not a node with heat capacity of model 'saheba2010-improved'"),
             std::string::npos)
       << massless;
+  // The rotor heat's node: one with capacity.
+  const std::string no_rotor = error_of("rotor_node = \"rotr\"\n");
+  EXPECT_NE(
+      no_rotor.find(
+          "rotor_node 'rotr' is not a node with heat capacity of model 'saheba2010-improved'"),
+      std::string::npos)
+      << no_rotor;
+  EXPECT_EQ(error_of("rotor_node = \"shaft\"\n"), "");
   const std::string motor_path =
       (std::filesystem::temp_directory_path() / "pipeline_test_no_magnet.toml").string();
   {
