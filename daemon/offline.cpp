@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "daemon/gateway_detail.hpp"
 #include "daemon/log.hpp"
 #include "protocol/candump_log.hpp"
 
@@ -116,7 +117,9 @@ class CsvSink {
   void Write(const Gateway& g) {
     for (std::size_t i = 0; i < files_.size(); ++i) {
       const PumpSnapshot& s = g.pumps()[i]->snapshot();
-      if (!s.initialised || s.time_us == last_[i]) continue;
+      // A row per step with an estimate, or with an alarm before the first estimate (its
+      // temperatures NaN): the CSV shows what went out on CAN.
+      if (!gateway_detail::AlarmKnown(s) || s.time_us == last_[i]) continue;
       last_[i] = s.time_us;
       std::string row = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6 - origin_s_);
       for (std::size_t k = 0; k < s.node_degC.size(); ++k)

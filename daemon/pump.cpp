@@ -281,6 +281,7 @@ bool Pump::CheckNeverHeard(std::int64_t since_us, std::int64_t t_us) {
   ai.telemetry_age_s = static_cast<double>(t_us - since_us) * 1e-6;
   const estimators::AlarmState before = snapshot_.alarm;
   snapshot_.alarm = alarms_.Step(static_cast<double>(t_us) * 1e-6, ai);
+  snapshot_.time_us = t_us;  // the alarm's time (LCM utime, CSV row)
   if (!(snapshot_.alarm == before)) ++snapshot_.alarm_changes;
   return !(snapshot_.alarm == before);
 }
@@ -336,7 +337,10 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const double measured = fault == estimators::SensorFault::kNone ? raw : kNaN;
   if (!initialised_) {
     const double x0 = std::isfinite(measured) ? measured : ambient_degC_;
-    if (!std::isfinite(x0)) return;  // no temperature at all yet: wait
+    if (!std::isfinite(x0)) {  // no temperature at all yet: nothing to estimate
+      StepAlarmsWithoutEstimate(end_us, fault);
+      return;
+    }
     sensor_.Initialise(Eigen::VectorXd::Constant(model_->StateCount(), x0));
     mismatch_.Initialise(x0, static_cast<double>(end_us) * 1e-6);
     robust_.Initialise(x0);
@@ -588,6 +592,24 @@ estimators::SensorFault Pump::SensorFaultAlarm(estimators::SensorFault fault,
                                               config_.alarms.monitor.stale_after_s;
   return fault == estimators::SensorFault::kMissing && link_silent ? estimators::SensorFault::kNone
                                                                    : fault;
+}
+
+// The drive's frames arrive but no temperature has yet (no status frame: neither the frame
+// sensor nor the ambient), so the filter cannot start. The sensor's absence while the drive
+// speaks is still a sensor fault, and it goes out with the pump's other conditions; no node is
+// known.
+void Pump::StepAlarmsWithoutEstimate(std::int64_t end_us, estimators::SensorFault fault) {
+  std::fill(alarm_values_.begin(), alarm_values_.end(), kNaN);
+  estimators::AlarmInputs ai;
+  ai.node_degC = alarm_values_.data();
+  ai.sensor_fault = SensorFaultAlarm(fault, end_us);
+  ai.telemetry_age_s = TelemetryAge_s(end_us);
+  ai.estimators_converged = false;
+  const estimators::AlarmState before = snapshot_.alarm;
+  snapshot_.alarm = alarms_.Step(static_cast<double>(end_us) * 1e-6, ai);
+  if (!(snapshot_.alarm == before)) ++snapshot_.alarm_changes;
+  snapshot_.time_us = end_us;  // the alarm's time (LCM utime, CSV row)
+  snapshot_.sensor_fault = fault;
 }
 
 double Pump::TelemetryAge_s(std::int64_t t_us) const {

@@ -186,6 +186,7 @@ class Pump {
   /// Steps the lagging reading's bias (`lagging_degC`: the fused reading the estimate follows
   /// without modelling its lag, else NaN) and the silence bound (`fresh_inputs`: this step had
   /// telemetry; `x` the estimate after it).
+  void StepAlarmsWithoutEstimate(std::int64_t end_us, estimators::SensorFault fault);
   void StepAlarmBounds(bool diverged, bool fresh_inputs, double lagging_degC,
                        const estimators::ThermalInputs& in, const Eigen::VectorXd& x);
   /// The value state `i`'s levels act on, from its estimate and the bounds.

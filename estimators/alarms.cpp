@@ -74,9 +74,10 @@ AlarmMonitor::AlarmMonitor(AlarmConfig config, std::vector<TemperatureLimits> li
   for (const auto& l : limits_) check(l, "node limits");
   check(sensor_limits_, "sensor limits");
   if (!(config_.hysteresis_K >= 0.0) || !(config_.hold_s >= 0.0) ||
-      !(config_.rate_window_s > 0.0) || !(config_.forecast_clear_s >= 0.0)) {
+      !(config_.rate_window_s > 0.0) || !(config_.forecast_clear_s >= 0.0) ||
+      !(config_.sensor_fault_clear_s >= 0.0)) {
     throw std::invalid_argument(
-        "alarm config: hysteresis, hold and forecast clear must be >= 0, window > 0");
+        "alarm config: hysteresis, hold and clear delays must be >= 0, window > 0");
   }
   over_.resize(limits_.size());
   rise_.resize(limits_.size());
@@ -213,7 +214,7 @@ void AlarmMonitor::StepSensor(double now_s, const AlarmInputs& in) {
   }
   Update(sensor_fault_,
          in.sensor_fault != SensorFault::kNone ? AlarmLevel::kWarning : AlarmLevel::kNone,
-         in.sensor_raw_degC, now_s, config_.hold_s);
+         in.sensor_raw_degC, now_s, config_.hold_s, config_.sensor_fault_clear_s);
   // Stuck while the model moves: the same raw reading while the estimate of that node (free of
   // the sensor once SensorHealth has left it out) moves.
   const double raw = in.sensor_raw_degC;

@@ -96,6 +96,10 @@ struct AlarmConfig {
   /// horizon this long (a load alternating faster than this does not make it chatter; ISA-18.2
   /// off-delay).
   double forecast_clear_s = 60.0;
+  /// Off-delay of the sensor-fault alarm: a sensor back from a fault clears it only after
+  /// reading well this long (one status frame through a lossy link is no recovery). The filter
+  /// takes the sensor back at once; this is the alarm only.
+  double sensor_fault_clear_s = 30.0;
   int sensor_node = -1;  ///< node index the measured sensor sits on (reports)
   /// Levels act on an upper bound of each estimate, mean + k sd (docs/daemon.md, "Alarm rule"):
   /// k for the trip and for the warning level.

@@ -157,6 +157,27 @@ TEST(PumpRobustness, FrozenAndSilentSensorsAreFaultsAndLeftOut) {
   }
 }
 
+// The drive's fast frames arrive but no status frame ever does (no frame temperature, no
+// ambient): the filter cannot start, yet the sensor's absence is a sensor fault, raised within
+// stale_after_s plus the hold, and no temperature is published.
+TEST(PumpRobustness, ASensorNeverHeardIsAFaultBeforeAnyEstimate) {
+  auto pump = MakePump();
+  const std::int64_t t0 = 1'700'000'000'000'000;
+  double raised_s = kNaN;
+  for (int k = 0; k < 600; ++k) {  // 60 s at 10 Hz
+    const std::int64_t t = t0 + std::int64_t{k} * 100'000;
+    pump->OnCurrents(t, 0.0, 3.0, 2513.0, kNaN);
+    pump->Advance(t);
+    const PumpSnapshot& s = pump->snapshot();
+    ASSERT_FALSE(s.initialised) << "no temperature was ever heard";
+    const bool fault = s.alarm.active_reasons &
+                       (1U << static_cast<unsigned>(estimators::AlarmReason::kSensorFault));
+    if (fault && std::isnan(raised_s)) raised_s = k * 0.1;
+  }
+  EXPECT_LE(raised_s, 6.0) << "raised at " << raised_s << " s";
+  EXPECT_EQ(pump->snapshot().alarm.level, estimators::AlarmLevel::kWarning);
+}
+
 // The time the daemon was down is a telemetry silence (docs/daemon.md, "The pipeline, per
 // pump"): a pump saved at 5 A that is heard again at 12 A 300 s later may have run 12 A all that
 // time, so it trips at once (winding trip level 110 degC; 12 A for 300 s from about 70 degC goes

@@ -268,9 +268,16 @@ TEST(Alarms, SensorFaultIsItsOwnAlarmWithTheHold) {
   const auto c = f.m.ActiveConditions();
   ASSERT_EQ(c.size(), 1U);
   EXPECT_STREQ(c[0].detail, "missing");
+  // The off-delay: one good reading for 5 s is no recovery (a lossy link); 30 s are.
   f.in.sensor_fault = SensorFault::kNone;
   f.At(3);
-  EXPECT_EQ(f.At(5).level, AlarmLevel::kNone);
+  EXPECT_EQ(f.At(8).level, AlarmLevel::kWarning);
+  f.in.sensor_fault = SensorFault::kMissing;
+  EXPECT_EQ(f.At(9).level, AlarmLevel::kWarning);
+  f.in.sensor_fault = SensorFault::kNone;
+  f.At(10);
+  EXPECT_EQ(f.At(39).level, AlarmLevel::kWarning);
+  EXPECT_EQ(f.At(40).level, AlarmLevel::kNone);
 }
 
 TEST(Alarms, SensorStuckAndDisagreeing) {
