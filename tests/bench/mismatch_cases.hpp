@@ -147,6 +147,9 @@ struct CaseResult {
   double detect_delay_s = std::numeric_limits<double>::quiet_NaN();  ///< after the fault
   double name_delay_s = std::numeric_limits<double>::quiet_NaN();  ///< first named, after the fault
   pe::MismatchFinding at_naming;
+  /// After the fault: from when on the expected effect was named at every step to the end (NaN:
+  /// not named right at the end).
+  double right_from_s = std::numeric_limits<double>::quiet_NaN();
   pe::MismatchFinding at_end;
   int false_alarms = 0;  ///< transitions into a fault state before the fault began
   double first_false_s = std::numeric_limits<double>::quiet_NaN();
@@ -331,6 +334,14 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     if (named && std::isnan(r.name_delay_s) && t > spec.fault_s) {
       r.name_delay_s = t - spec.fault_s;
       r.at_naming = f;
+    }
+    if (t > spec.fault_s) {
+      const bool right = named && f.effect == ExpectedEffect(spec.fault);
+      if (!right) {
+        r.right_from_s = std::numeric_limits<double>::quiet_NaN();
+      } else if (std::isnan(r.right_from_s)) {
+        r.right_from_s = t - spec.fault_s;
+      }
     }
     if (fault_state && !was_fault_state) {
       if (t <= spec.fault_s || spec.fault == Fault::kNone) {

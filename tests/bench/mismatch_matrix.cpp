@@ -103,8 +103,8 @@ int main(int argc, char** argv) {
       {mc::Fault::kAmbientRise, "ambient"}, {mc::Fault::kSensorOffset, "offset"},
       {mc::Fault::kSensorStuck, "stuck"}};
   if (!json) {
-    fmt::print("{:<36} {:>4} {:>9} {:>8} {:<60} {:<60} {}\n", "case", "seed", "detect_s", "named_s",
-               "named first", "named at end",
+    fmt::print("{:<36} {:>4} {:>9} {:>8} {:>8} {:<60} {:<60} {}\n", "case", "seed", "detect_s",
+               "named_s", "right_s", "named first", "named at end",
                "false | max err K / coverage per node (published filter)");
   }
   for (const auto& [f, key] : faults) {
@@ -147,7 +147,8 @@ int main(int argc, char** argv) {
         fmt::print(
             "{{\"case\": \"{}\", \"seed\": {}, \"duration_s\": {}, \"fault_s\": {}, "
             "\"detect_delay_s\": {}, "
-            "\"name_delay_s\": {}, \"named_first\": \"{}\", \"named_at_end\": \"{}\", "
+            "\"name_delay_s\": {}, \"right_from_s\": {}, \"named_first\": \"{}\", "
+            "\"named_at_end\": \"{}\", "
             "\"expected\": \"{}\", "
             "\"false_alarms\": {}, \"nodes\": {{{}}}}}\n",
             mc::FaultName(f), seed, duration_s, spec.fault_s,
@@ -155,14 +156,17 @@ int main(int argc, char** argv) {
                                          : fmt::format("{:.0f}", r.detect_delay_s),
             std::isnan(r.name_delay_s) ? std::string("null")
                                        : fmt::format("{:.0f}", r.name_delay_s),
+            std::isnan(r.right_from_s) ? std::string("null")
+                                       : fmt::format("{:.0f}", r.right_from_s),
             Named(r.at_naming), Named(r.at_end), pe::MismatchEffectName(mc::ExpectedEffect(f)),
             r.false_alarms, jn);
       } else {
         fmt::print(
-            "{:<36} {:>4} {:>9} {:>8} {:<60} {:<60} {} | {}\n", mc::FaultName(f), seed,
+            "{:<36} {:>4} {:>9} {:>8} {:>8} {:<60} {:<60} {} | {}\n", mc::FaultName(f), seed,
             std::isnan(r.detect_delay_s) ? std::string("-")
                                          : fmt::format("{:.0f}", r.detect_delay_s),
             std::isnan(r.name_delay_s) ? std::string("-") : fmt::format("{:.0f}", r.name_delay_s),
+            std::isnan(r.right_from_s) ? std::string("-") : fmt::format("{:.0f}", r.right_from_s),
             std::isnan(r.name_delay_s) ? std::string("-") : Named(r.at_naming), Named(r.at_end),
             r.false_alarms, nodes);
       }
