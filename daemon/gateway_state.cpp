@@ -59,6 +59,15 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
   t.insert("resistance_rejections", rrej);
   t.insert("resistance_moments", rm);
   t.insert("resistance_blocks", static_cast<std::int64_t>(s.resistance.blocks));
+  // What uq has drifted since the last load change (the status rests on it: held above
+  // drift_hold_K); absent in older files, then measured afresh from the first block.
+  if (s.resistance.anchor_valid) {
+    toml::array anchor;
+    for (int i = 0; i < kIdentStates; ++i) anchor.push_back(s.resistance.anchor(i));
+    t.insert("resistance_anchor", anchor);
+    t.insert("resistance_drift_V", s.resistance.drift_V);
+    t.insert("resistance_drift_ohm", s.resistance.drift_ohm);
+  }
 }
 
 /// The latched trips of one saved pump (two parallel arrays; both absent: none). False for a
@@ -225,6 +234,14 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
         }
         s.resistance.moments = moments;
         s.resistance.blocks = blocks;
+        std::vector<double> anchor;
+        if (numbers("resistance_anchor", kIdentStates, anchor)) {
+          s.resistance.anchor = Eigen::Map<const Eigen::Vector4d>(anchor.data());
+          s.resistance.anchor_valid = true;
+          // Damaged values are refused by the identifier's Restore (finite, drift_ohm >= 0).
+          s.resistance.drift_V = (*t)["resistance_drift_V"].value_or(kNaN);
+          s.resistance.drift_ohm = (*t)["resistance_drift_ohm"].value_or(kNaN);
+        }
       }
       ok = ok && pump->Restore(s, std::max(now_us, s.time_us));
     }

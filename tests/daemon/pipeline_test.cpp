@@ -606,6 +606,27 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
   EXPECT_NEAR(forecast_s, crossed_s, 0.1 * crossed_s + 20.0) << "forecast " << forecast_s << " s";
 }
 
+// The identifier's drift since the last load change (its status rests on it: held above
+// drift_hold_K) survives a restart; before, it was measured afresh from the first block after it.
+TEST(Pipeline, IdentifierDriftRoundTripsThroughText) {
+  Bench a(Config());
+  a.Run(200.0, 30.0);
+  a.Run(100.0, 40.0);  // a load change: the identifier anchors its drift there
+  Bench b(Config());
+  std::string warning;
+  ASSERT_EQ(b.gateway_.RestoreState(a.gateway_.SaveState(),
+                                    a.gateway_.pumps()[0]->snapshot().time_us, &warning),
+            1)
+      << warning;
+  const auto sa = a.gateway_.pumps()[0]->identifier().Save();
+  const auto sb = b.gateway_.pumps()[0]->identifier().Save();
+  ASSERT_TRUE(sa.anchor_valid);
+  EXPECT_TRUE(sb.anchor_valid);
+  EXPECT_EQ(sb.anchor, sa.anchor);
+  EXPECT_EQ(sb.drift_V, sa.drift_V);
+  EXPECT_EQ(sb.drift_ohm, sa.drift_ohm);
+}
+
 TEST(Pipeline, StateRoundTripsThroughText) {
   Bench a(Config());
   a.Run(300.0, 40.0);
