@@ -4,10 +4,11 @@ namespace pumptherm::estimators {
 namespace {
 
 // Fixed-size versions for the state counts of the shipped models (4: tmp-generic,
-// 7: saheba2010-*): Eigen unrolls fixed-size products on the stack, where its dynamic-size
-// products spend most of their instructions dispatching (docs/virtual-sensor.md, benchmark).
-// They map the dynamic members in place (column-major, contiguous) and compute the same
-// equations.
+// 7: saheba2010-*), of the mismatch test on them (5-6: a sensor's lag and offset added) and of
+// tmp-generic's disturbance-state filter (8-11 with its added states):
+// Eigen unrolls fixed-size products on the stack, where its dynamic-size products spend most of
+// their instructions dispatching and packing (docs/virtual-sensor.md, benchmark). They map the
+// dynamic members in place (column-major, contiguous) and compute the same equations.
 
 template <int N>
 void PredictFixed(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu, const Eigen::MatrixXd& sp,
@@ -62,6 +63,57 @@ void UpdateFixed1(const Eigen::MatrixXd& c, const Eigen::VectorXd& y, const Eige
   }
 }
 
+/// Mm measurements at once (Mm x Mm innovation covariance, Cholesky).
+template <int N, int Mm>
+void UpdateFixed(const Eigen::MatrixXd& c, const Eigen::VectorXd& y, const Eigen::MatrixXd& sm,
+                 CovarianceUpdate form, Eigen::VectorXd& x, Eigen::MatrixXd& s, Eigen::MatrixXd& k,
+                 KalmanUpdateReport& report) {
+  using M = Eigen::Matrix<double, N, N>;
+  using V = Eigen::Matrix<double, N, 1>;
+  using G = Eigen::Matrix<double, N, Mm>;
+  using Sq = Eigen::Matrix<double, Mm, Mm>;
+  using Y = Eigen::Matrix<double, Mm, 1>;
+  const Eigen::Map<const Eigen::Matrix<double, Mm, N>> cm(c.data());
+  Eigen::Map<V> xm(x.data());
+  Eigen::Map<M> sx(s.data());
+  const Eigen::Map<const Sq> r(sm.data());
+  const Y nu = Eigen::Map<const Y>(y.data()) - cm * xm;
+  const G sct = sx * cm.transpose();
+  const Sq innov = cm * sct + r;
+  report.innovation = nu;
+  report.innovation_var = innov.diagonal();
+  const Eigen::LLT<Sq> llt(innov);
+  if (llt.info() != Eigen::Success) {
+    report.ok = false;
+    return;
+  }
+  const G gain = llt.solve(sct.transpose()).transpose();  // eq. 34
+  report.nis = nu.dot(llt.solve(nu));
+  xm += gain * nu;  // eq. 32
+  k = gain;
+  const M ikc = M::Identity() - gain * cm;
+  if (form == CovarianceUpdate::kJoseph) {
+    const M t = ikc * sx;
+    M sn = t * ikc.transpose();
+    sn += gain * r * gain.transpose();
+    sx = 0.5 * (sn + sn.transpose());
+  } else {
+    const M t = ikc * sx;  // eq. 33
+    sx = t;
+  }
+}
+
+/// The fixed-size update for n states and m measurements, if there is one.
+template <int N>
+bool UpdateFixedN(Eigen::Index m, const Eigen::MatrixXd& c, const Eigen::VectorXd& y,
+                  const Eigen::MatrixXd& sm, CovarianceUpdate form, Eigen::VectorXd& x,
+                  Eigen::MatrixXd& s, Eigen::MatrixXd& k, KalmanUpdateReport& report) {
+  if (m == 1) UpdateFixed1<N>(c, y, sm, form, x, s, k, report);
+  if (m == 2) UpdateFixed<N, 2>(c, y, sm, form, x, s, k, report);
+  if (m == 3) UpdateFixed<N, 3>(c, y, sm, form, x, s, k, report);
+  return m >= 1 && m <= 3;
+}
+
 }  // namespace
 
 KalmanFilter::KalmanFilter(int n)
@@ -84,8 +136,26 @@ void KalmanFilter::Reset(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
 
 void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
                            const Eigen::MatrixXd& sp) {
-  if (x_.size() == 7) return PredictFixed<7>(ad, bu, sp, x_, s_);
-  if (x_.size() == 4) return PredictFixed<4>(ad, bu, sp, x_, s_);
+  switch (x_.size()) {
+    case 4:
+      return PredictFixed<4>(ad, bu, sp, x_, s_);
+    case 5:
+      return PredictFixed<5>(ad, bu, sp, x_, s_);
+    case 6:
+      return PredictFixed<6>(ad, bu, sp, x_, s_);
+    case 7:
+      return PredictFixed<7>(ad, bu, sp, x_, s_);
+    case 8:
+      return PredictFixed<8>(ad, bu, sp, x_, s_);
+    case 9:
+      return PredictFixed<9>(ad, bu, sp, x_, s_);
+    case 10:
+      return PredictFixed<10>(ad, bu, sp, x_, s_);
+    case 11:
+      return PredictFixed<11>(ad, bu, sp, x_, s_);
+    default:
+      break;
+  }
   xtmp_.noalias() = ad * x_;
   x_ = xtmp_ + bu;
   ntmp_.noalias() = ad * s_;
@@ -103,12 +173,37 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
   report_.innovation.resize(m);
   report_.innovation_var.resize(m);
   if (m == 0) return report_;
-  if (m == 1 && (n == 7 || n == 4)) {
-    k_.resize(n, 1);
-    if (n == 7) UpdateFixed1<7>(c, y, sm, form, x_, s_, k_, report_);
-    if (n == 4) UpdateFixed1<4>(c, y, sm, form, x_, s_, k_, report_);
-    return report_;
+  k_.resize(n, m);
+  bool fixed = false;
+  switch (n) {
+    case 4:
+      fixed = UpdateFixedN<4>(m, c, y, sm, form, x_, s_, k_, report_);
+      break;
+    case 5:
+      fixed = UpdateFixedN<5>(m, c, y, sm, form, x_, s_, k_, report_);
+      break;
+    case 6:
+      fixed = UpdateFixedN<6>(m, c, y, sm, form, x_, s_, k_, report_);
+      break;
+    case 7:
+      fixed = UpdateFixedN<7>(m, c, y, sm, form, x_, s_, k_, report_);
+      break;
+    case 8:
+      fixed = UpdateFixedN<8>(m, c, y, sm, form, x_, s_, k_, report_);
+      break;
+    case 9:
+      fixed = UpdateFixedN<9>(m, c, y, sm, form, x_, s_, k_, report_);
+      break;
+    case 10:
+      fixed = UpdateFixedN<10>(m, c, y, sm, form, x_, s_, k_, report_);
+      break;
+    case 11:
+      fixed = UpdateFixedN<11>(m, c, y, sm, form, x_, s_, k_, report_);
+      break;
+    default:
+      break;
   }
+  if (fixed) return report_;
   sct_.resize(n, m);
   innov_cov_.resize(m, m);
   k_.resize(n, m);

@@ -5,6 +5,8 @@
 
 #include <cmath>
 #include <random>
+#include <string>
+#include <utility>
 
 namespace pe = pumptherm::estimators;
 
@@ -98,65 +100,75 @@ TEST(KalmanFilter, IndefiniteInnovationCovarianceIsReportedNotThrown) {
   EXPECT_EQ(kf.State()(0), 0.0);
 }
 
-// The fixed-size paths (4 and 7 states, one measurement) against eqs. 30-34 with the Joseph form
-// written out here in dynamic-size Eigen (an oracle cross-check), and against a state count that
-// takes the dynamic path (5) for the same equations.
+// The fixed-size paths (4 to 11 states, 1 to 3 measurements) against eqs. 30-34 with the Joseph
+// form written out here in dynamic-size Eigen (an oracle cross-check), and against counts that
+// take the dynamic path (12 states, 4 measurements) for the same equations.
 TEST(KalmanFilter, FixedSizePathsMatchTheEquationsWrittenOut) {
-  for (const int n : {4, 5, 7}) {
-    std::mt19937_64 rng(11 + static_cast<unsigned>(n));
-    std::normal_distribution<double> nd;
-    Eigen::MatrixXd l(n, n), a(n, n), c(1, n);
-    for (int i = 0; i < n; ++i) {
-      c(0, i) = nd(rng);
-      for (int j = 0; j < n; ++j) {
-        l(i, j) = nd(rng);
-        a(i, j) = 0.1 * nd(rng) + (i == j ? 0.9 : 0.0);
+  for (const int n : {4, 5, 7, 9, 10, 11, 12}) {
+    for (const int m : {1, 2, 3, 4}) {
+      std::mt19937_64 rng(11 + static_cast<unsigned>(n) * 7 + static_cast<unsigned>(m));
+      std::normal_distribution<double> nd;
+      Eigen::MatrixXd l(n, n), a(n, n), c(m, n);
+      for (int i = 0; i < n; ++i) {
+        for (int j = 0; j < m; ++j) c(j, i) = nd(rng);
+        for (int j = 0; j < n; ++j) {
+          l(i, j) = nd(rng);
+          a(i, j) = 0.1 * nd(rng) + (i == j ? 0.9 : 0.0);
+        }
       }
+      Eigen::MatrixXd s = l * l.transpose() + Eigen::MatrixXd::Identity(n, n);
+      const Eigen::MatrixXd q = 0.02 * Eigen::MatrixXd::Identity(n, n);
+      const Eigen::MatrixXd r = 0.4 * Eigen::MatrixXd::Identity(m, m);
+      Eigen::VectorXd x = Eigen::VectorXd::Zero(n);
+      pe::KalmanFilter kf(n);
+      kf.Reset(x, s);
+      const std::string what = "n=" + std::to_string(n) + " m=" + std::to_string(m);
+      for (int k = 0; k < 20; ++k) {
+        Eigen::VectorXd u(n), y(m);
+        for (int i = 0; i < n; ++i) u(i) = nd(rng);
+        for (int i = 0; i < m; ++i) y(i) = nd(rng);
+        // Oracle.
+        x = a * x + u;
+        s = a * s * a.transpose() + q;
+        const Eigen::MatrixXd sy = c * s * c.transpose() + r;
+        const Eigen::MatrixXd gain = s * c.transpose() * sy.inverse();
+        const Eigen::VectorXd nu = y - c * x;
+        const double nis = nu.dot(sy.inverse() * nu);
+        x += gain * nu;
+        const Eigen::MatrixXd ikc = Eigen::MatrixXd::Identity(n, n) - gain * c;
+        s = ikc * s * ikc.transpose() + gain * r * gain.transpose();
+        // Filter.
+        kf.Predict(a, u, q);
+        const pe::KalmanUpdateReport& rep = kf.Update(c, y, r);
+        ASSERT_TRUE(rep.ok) << what;
+        EXPECT_LT((rep.innovation - nu).cwiseAbs().maxCoeff(),
+                  1e-9 * (1 + nu.cwiseAbs().maxCoeff()))
+            << what;
+        EXPECT_LT((rep.innovation_var - sy.diagonal()).cwiseAbs().maxCoeff(),
+                  1e-9 * sy.diagonal().maxCoeff())
+            << what;
+        EXPECT_NEAR(rep.nis, nis, 1e-9 * (1 + nis)) << what;
+        EXPECT_LT((kf.Gain() - gain).cwiseAbs().maxCoeff(), 1e-10) << what;
+      }
+      EXPECT_LT((kf.State() - x).cwiseAbs().maxCoeff(), 1e-9) << what;
+      EXPECT_LT((kf.Covariance() - s).cwiseAbs().maxCoeff(), 1e-9 * s.cwiseAbs().maxCoeff())
+          << what;
+      EXPECT_EQ((kf.Covariance() - kf.Covariance().transpose()).cwiseAbs().maxCoeff(), 0.0) << what;
     }
-    Eigen::MatrixXd s = l * l.transpose() + Eigen::MatrixXd::Identity(n, n);
-    const Eigen::MatrixXd q = 0.02 * Eigen::MatrixXd::Identity(n, n);
-    const Eigen::MatrixXd r = Eigen::MatrixXd::Constant(1, 1, 0.4);
-    Eigen::VectorXd x = Eigen::VectorXd::Zero(n);
-    pe::KalmanFilter kf(n);
-    kf.Reset(x, s);
-    for (int k = 0; k < 20; ++k) {
-      Eigen::VectorXd u(n), y(1);
-      for (int i = 0; i < n; ++i) u(i) = nd(rng);
-      y(0) = nd(rng);
-      // Oracle.
-      x = a * x + u;
-      s = a * s * a.transpose() + q;
-      const Eigen::MatrixXd sy = c * s * c.transpose() + r;
-      const Eigen::MatrixXd gain = s * c.transpose() * sy.inverse();
-      const double nu = y(0) - (c * x)(0);
-      x += gain * nu;
-      const Eigen::MatrixXd ikc = Eigen::MatrixXd::Identity(n, n) - gain * c;
-      s = ikc * s * ikc.transpose() + gain * r * gain.transpose();
-      // Filter.
-      kf.Predict(a, u, q);
-      const pe::KalmanUpdateReport& rep = kf.Update(c, y, r);
-      ASSERT_TRUE(rep.ok);
-      EXPECT_NEAR(rep.innovation(0), nu, 1e-9 * (1 + std::abs(nu))) << "n=" << n;
-      EXPECT_NEAR(rep.innovation_var(0), sy(0, 0), 1e-9 * sy(0, 0)) << "n=" << n;
-      EXPECT_NEAR(rep.nis, nu * nu / sy(0, 0), 1e-9 * (1 + rep.nis)) << "n=" << n;
-      EXPECT_LT((kf.Gain() - gain).cwiseAbs().maxCoeff(), 1e-10) << "n=" << n;
-    }
-    EXPECT_LT((kf.State() - x).cwiseAbs().maxCoeff(), 1e-9) << "n=" << n;
-    EXPECT_LT((kf.Covariance() - s).cwiseAbs().maxCoeff(), 1e-9 * s.cwiseAbs().maxCoeff())
-        << "n=" << n;
-    EXPECT_EQ((kf.Covariance() - kf.Covariance().transpose()).cwiseAbs().maxCoeff(), 0.0)
-        << "n=" << n;
   }
 }
 
-// A non-positive scalar innovation covariance on the fixed-size path is reported, not used.
+// A non-positive innovation covariance on a fixed-size path (scalar, and Cholesky) is reported,
+// not used.
 TEST(KalmanFilter, FixedSizePathReportsANonPositiveInnovationCovariance) {
-  pe::KalmanFilter kf(7);
-  kf.Reset(Eigen::VectorXd::Ones(7), Eigen::MatrixXd::Zero(7, 7));
-  Eigen::MatrixXd c = Eigen::MatrixXd::Zero(1, 7);
-  c(0, 0) = 1.0;
-  const auto& rep =
-      kf.Update(c, Eigen::VectorXd::Constant(1, 3.0), Eigen::MatrixXd::Constant(1, 1, -1.0));
-  EXPECT_FALSE(rep.ok);
-  EXPECT_EQ(kf.State(), Eigen::VectorXd::Ones(7));
+  for (const auto& [n, m] : {std::pair{7, 1}, std::pair{10, 2}}) {
+    pe::KalmanFilter kf(n);
+    kf.Reset(Eigen::VectorXd::Ones(n), Eigen::MatrixXd::Zero(n, n));
+    Eigen::MatrixXd c = Eigen::MatrixXd::Zero(m, n);
+    for (int i = 0; i < m; ++i) c(i, i) = 1.0;
+    const auto& rep =
+        kf.Update(c, Eigen::VectorXd::Constant(m, 3.0), -1.0 * Eigen::MatrixXd::Identity(m, m));
+    EXPECT_FALSE(rep.ok) << n;
+    EXPECT_EQ(kf.State(), Eigen::VectorXd::Ones(n)) << n;
+  }
 }
