@@ -330,6 +330,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.magnet_node = r.String("magnet_node", &pc.magnet_node);
       pc.rotor_node = r.String("rotor_node", &pc.rotor_node);
       pc.magnet_min_sd_K = r.Number("magnet_min_sd_K", pc.magnet_min_sd_K, 0.01, 100.0);
+      pc.magnet_max_winding_gain =
+          r.Number("magnet_max_winding_gain", pc.magnet_max_winding_gain, 0.0, 10.0);
       pc.frame_sensor_lag_s = r.Number("frame_sensor_lag_s", pc.frame_sensor_lag_s, 0.0, 3600.0);
       pc.disturbance_states = r.Bool("disturbance_states", pc.disturbance_states);
       pc.disturbance_states_explicit = t->get("disturbance_states") != nullptr;

@@ -108,6 +108,9 @@ struct PumpConfig {
   /// published: the identifier's covariance sees its noise, not the nameplate flux's error or
   /// the inverter's voltage error.
   double magnet_min_sd_K = 3.0;
+  /// The magnet temperature from the flux is used only while the winding's weight in it, |g|
+  /// (Pump::BackEmfMeasurement), is at most this (K of reading per K of winding).
+  double magnet_max_winding_gain = 0.15;
   double frame_sensor_lag_s = 0.0;  ///< first-order lag of the frame sensor (mismatch test)
   /// Publish the disturbance-state filter's estimates. Unless `disturbance_states_explicit`, the
   /// pump turns it off for a model whose boundary reaches the network through other nodes than

@@ -33,6 +33,10 @@ estimators::ResistanceIdentifierConfig IdentifierConfig(const estimators::MotorD
 /// nameplate (initialising) and not from invalid input. It is usable whatever the split between
 /// its two terms: at constant current a falling flux (a heating magnet) can move Rs out of its
 /// plausible band (implausible) or be held (held, not identifiable) while E still follows uq/w.
+/// The sd of a reading kept as a row without weight (1000 K: its gain is below 1e-6 of a
+/// kelvin-scale sd's).
+constexpr double kUninformativeSd_K = 1000.0;
+
 bool FluxUsable(estimators::ResistanceStatus s) {
   return s != estimators::ResistanceStatus::kInitialising &&
          s != estimators::ResistanceStatus::kInvalidInput;
@@ -160,6 +164,7 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
                     config_.name, config_.line, config_.rotor_node, model_->Name()));
   }
   const int n = model_->StateCount();
+  winding_cov_.resize(n);  // sized here: the magnet may first be published long after start
   snapshot_.node_degC.assign(static_cast<std::size_t>(n), kNaN);
   snapshot_.node_sd_K.assign(static_cast<std::size_t>(n), kNaN);
   alarm_values_.assign(static_cast<std::size_t>(n) + 1, kNaN);
@@ -476,6 +481,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
 // Its sd is E's (from the identifier's covariance of [Rs, psi_f]) over psi0 |beta|.
 void Pump::BackEmfMeasurement(std::int64_t end_us, double iq_A, double w) {
   magnet_z_degC_ = kNaN;
+  magnet_gated_ = false;
   const estimators::ResistanceEstimate& r = identifier_.estimate();
   const double age_s = static_cast<double>(end_us - flux_block_us_) * 1e-6;
   const bool fresh =
@@ -497,6 +503,12 @@ void Pump::BackEmfMeasurement(std::int64_t end_us, double iq_A, double w) {
   // A model without a winding cannot take the Rs term: then the flux alone (g = 0).
   const bool winding = model_->WindingWeights().sum() > 0.0;
   magnet_gain_ = winding ? cu.r0_ohm * cu.alpha_per_K * u / psi0_beta : 0.0;
+  // Under load the back-EMF reading is mostly the winding's resistive drop (|g| is the
+  // winding's weight in it: 0.14 at 5 A, 0.43 at 15 A on han2019-tmp), and the identifier's
+  // errors there (Rs held while the winding heats, the inverter's voltage error) made the
+  // filters move the winding, not the magnet: above the limit it is neither published nor given
+  // weight (the standard filter keeps the row, uninformative, so that its rows do not change).
+  magnet_gated_ = std::abs(magnet_gain_) > config_.magnet_max_winding_gain;
   const double drop = winding ? cu.r0_ohm * u : r.resistance_ohm * u;
   magnet_z_degC_ =
       motor_.magnet.t0_degC + (e - drop - motor_.flux_Wb) / psi0_beta + magnet_gain_ * cu.t0_degC;
@@ -506,7 +518,7 @@ void Pump::BackEmfMeasurement(std::int64_t end_us, double iq_A, double w) {
 estimators::DisturbanceReadings Pump::RobustReadings(double frame_degC) const {
   estimators::DisturbanceReadings rd;
   rd.frame_degC = frame_degC;
-  if (magnet_state_ >= 0 && std::isfinite(magnet_z_degC_)) {
+  if (magnet_state_ >= 0 && std::isfinite(magnet_z_degC_) && !magnet_gated_) {
     rd.magnet_degC = magnet_z_degC_;
     rd.magnet_sd_K = magnet_z_sd_K_;
     rd.magnet_winding_gain = magnet_gain_;
@@ -516,7 +528,7 @@ estimators::DisturbanceReadings Pump::RobustReadings(double frame_degC) const {
 
 void Pump::PublishMagnetTemperature() {
   snapshot_.magnet_flux_degC = snapshot_.magnet_flux_sd_K = kNaN;
-  if (!std::isfinite(magnet_z_degC_) || !snapshot_.initialised) return;
+  if (!std::isfinite(magnet_z_degC_) || magnet_gated_ || !snapshot_.initialised) return;
   // T_magnet = z - g T_winding at the filter's winding estimate, var = var_z + g^2 w^T S w,
   // with z's sd at least magnet_min_sd_K as in the filter (the identifier's covariance sees
   // its noise, not the nameplate's or the inverter's errors).
@@ -536,8 +548,9 @@ const estimators::NodeMeasurements& Pump::ExtraMeasurements(double winding_res_d
   if (config_.fuse_winding)
     extra_.Add(estimators::kWindingWeightsRow, winding_res_degC, winding_sd_K);
   if (magnet_state_ >= 0 && std::isfinite(magnet_z_degC_)) {
-    extra_.Add(magnet_state_, magnet_z_degC_, std::max(magnet_z_sd_K_, config_.magnet_min_sd_K),
-               magnet_gain_);
+    const double sd_K =
+        magnet_gated_ ? kUninformativeSd_K : std::max(magnet_z_sd_K_, config_.magnet_min_sd_K);
+    extra_.Add(magnet_state_, magnet_z_degC_, sd_K, magnet_gain_);
   }
   return extra_;
 }

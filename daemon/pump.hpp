@@ -6,6 +6,7 @@
 
 #include <Eigen/Dense>
 #include <cstdint>
+#include <cstdlib>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -216,6 +217,7 @@ class Pump {
   estimators::NodeMeasurements extra_;
   // This step's back-EMF measurement: z = T_magnet + gain T_winding, sd_K (NaN z: none).
   double magnet_z_degC_ = kNaN, magnet_gain_ = 0.0, magnet_z_sd_K_ = kNaN;
+  bool magnet_gated_ = false;      ///< |magnet_gain_| above magnet_max_winding_gain: not used
   Eigen::VectorXd winding_cov_;    // S w, for the winding estimate's variance
   std::vector<int> level_states_;  // state index of each alarm node (n states + winding)
   PumpCounters counters_;
