@@ -426,7 +426,8 @@ void Pump::ThermalStep(std::int64_t end_us) {
   // alone is stale telemetry (the estimate runs on with the last inputs), but it does not end a
   // blind stretch that began before it.
   const estimators::SensorFault fault_alarm = SensorFaultAlarm(fault, end_us);
-  const bool measured_again = fault == estimators::SensorFault::kNone || !std::isnan(winding_res);
+  const bool measured_again =
+      fault == estimators::SensorFault::kNone || !std::isnan(winding_res) || MagnetReadingUsed();
   const bool blind =
       !diverged && !measured_again &&
       (fault_alarm != estimators::SensorFault::kNone || blind_.bound_degC().size() > 0);
@@ -515,10 +516,14 @@ void Pump::BackEmfMeasurement(std::int64_t end_us, double iq_A, double w) {
   magnet_z_sd_K_ = std::sqrt(std::max(var_e, 0.0)) / std::abs(psi0_beta);
 }
 
+bool Pump::MagnetReadingUsed() const {
+  return magnet_state_ >= 0 && std::isfinite(magnet_z_degC_) && !magnet_gated_;
+}
+
 estimators::DisturbanceReadings Pump::RobustReadings(double frame_degC) const {
   estimators::DisturbanceReadings rd;
   rd.frame_degC = frame_degC;
-  if (magnet_state_ >= 0 && std::isfinite(magnet_z_degC_) && !magnet_gated_) {
+  if (MagnetReadingUsed()) {
     rd.magnet_degC = magnet_z_degC_;
     rd.magnet_sd_K = magnet_z_sd_K_;
     rd.magnet_winding_gain = magnet_gain_;

@@ -188,6 +188,8 @@ class Pump {
   /// without modelling its lag, else NaN) and the silence bound (`fresh_inputs`: this step had
   /// telemetry; `x` the estimate after it).
   void StepAlarmsWithoutEstimate(std::int64_t end_us, estimators::SensorFault fault);
+  /// This step's magnet temperature from the flux is fused (fresh, below the gain limit).
+  bool MagnetReadingUsed() const;
   void StepAlarmBounds(bool diverged, bool fresh_inputs, double lagging_degC,
                        const estimators::ThermalInputs& in, const Eigen::VectorXd& x);
   /// The value state `i`'s levels act on, from its estimate and the bounds.
