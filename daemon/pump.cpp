@@ -284,11 +284,16 @@ bool Pump::CheckNeverHeard(std::int64_t since_us, std::int64_t t_us) {
   estimators::AlarmInputs ai;
   ai.node_degC = alarm_values_.data();
   ai.telemetry_age_s = static_cast<double>(t_us - since_us) * 1e-6;
+  return StepAlarmsOnly(t_us, ai);
+}
+
+bool Pump::StepAlarmsOnly(std::int64_t t_us, const estimators::AlarmInputs& ai) {
   const estimators::AlarmState before = snapshot_.alarm;
   snapshot_.alarm = alarms_.Step(static_cast<double>(t_us) * 1e-6, ai);
   snapshot_.time_us = t_us;  // the alarm's time (LCM utime, CSV row)
-  if (!(snapshot_.alarm == before)) ++snapshot_.alarm_changes;
-  return !(snapshot_.alarm == before);
+  if (snapshot_.alarm == before) return false;
+  ++snapshot_.alarm_changes;
+  return true;
 }
 
 std::int64_t Pump::NextDueUs() const {
@@ -623,11 +628,8 @@ void Pump::StepAlarmsWithoutEstimate(std::int64_t end_us, estimators::SensorFaul
   ai.sensor_fault = SensorFaultAlarm(fault, end_us);
   ai.telemetry_age_s = TelemetryAge_s(end_us);
   ai.estimators_converged = false;
-  const estimators::AlarmState before = snapshot_.alarm;
-  snapshot_.alarm = alarms_.Step(static_cast<double>(end_us) * 1e-6, ai);
-  if (!(snapshot_.alarm == before)) ++snapshot_.alarm_changes;
-  snapshot_.time_us = end_us;  // the alarm's time (LCM utime, CSV row)
   snapshot_.sensor_fault = fault;
+  StepAlarmsOnly(end_us, ai);
 }
 
 double Pump::TelemetryAge_s(std::int64_t t_us) const {

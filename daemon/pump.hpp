@@ -188,6 +188,9 @@ class Pump {
   /// without modelling its lag, else NaN) and the silence bound (`fresh_inputs`: this step had
   /// telemetry; `x` the estimate after it).
   void StepAlarmsWithoutEstimate(std::int64_t end_us, estimators::SensorFault fault);
+  /// The alarms alone at `t_us` (no estimate): stamps the snapshot, counts a change; true if
+  /// the alarm state changed.
+  bool StepAlarmsOnly(std::int64_t t_us, const estimators::AlarmInputs& ai);
   /// This step's magnet temperature from the flux is fused (fresh, below the gain limit).
   bool MagnetReadingUsed() const;
   void StepAlarmBounds(bool diverged, bool fresh_inputs, double lagging_degC,

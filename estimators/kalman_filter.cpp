@@ -1,5 +1,7 @@
 #include "estimators/kalman_filter.hpp"
 
+#include <type_traits>
+
 namespace pumptherm::estimators {
 namespace {
 
@@ -114,6 +116,19 @@ bool UpdateFixedN(Eigen::Index m, const Eigen::MatrixXd& c, const Eigen::VectorX
   return m >= 1 && m <= 3;
 }
 
+/// Calls f(std::integral_constant<int, N>{}) when n is one of the fixed sizes N (4 to 11);
+/// false when it is not.
+template <int N = 4, class F>
+bool WithFixedSize(Eigen::Index n, F&& f) {
+  if constexpr (N > 11) {
+    return false;
+  } else {
+    if (n != N) return WithFixedSize<N + 1>(n, f);
+    f(std::integral_constant<int, N>{});
+    return true;
+  }
+}
+
 }  // namespace
 
 KalmanFilter::KalmanFilter(int n)
@@ -136,25 +151,9 @@ void KalmanFilter::Reset(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
 
 void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
                            const Eigen::MatrixXd& sp) {
-  switch (x_.size()) {
-    case 4:
-      return PredictFixed<4>(ad, bu, sp, x_, s_);
-    case 5:
-      return PredictFixed<5>(ad, bu, sp, x_, s_);
-    case 6:
-      return PredictFixed<6>(ad, bu, sp, x_, s_);
-    case 7:
-      return PredictFixed<7>(ad, bu, sp, x_, s_);
-    case 8:
-      return PredictFixed<8>(ad, bu, sp, x_, s_);
-    case 9:
-      return PredictFixed<9>(ad, bu, sp, x_, s_);
-    case 10:
-      return PredictFixed<10>(ad, bu, sp, x_, s_);
-    case 11:
-      return PredictFixed<11>(ad, bu, sp, x_, s_);
-    default:
-      break;
+  if (WithFixedSize(x_.size(),
+                    [&](auto size) { PredictFixed<decltype(size)::value>(ad, bu, sp, x_, s_); })) {
+    return;
   }
   xtmp_.noalias() = ad * x_;
   x_ = xtmp_ + bu;
@@ -175,38 +174,12 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
   if (m == 0) return report_;
   k_.resize(n, m);
   bool fixed = false;
-  switch (n) {
-    case 4:
-      fixed = UpdateFixedN<4>(m, c, y, sm, form, x_, s_, k_, report_);
-      break;
-    case 5:
-      fixed = UpdateFixedN<5>(m, c, y, sm, form, x_, s_, k_, report_);
-      break;
-    case 6:
-      fixed = UpdateFixedN<6>(m, c, y, sm, form, x_, s_, k_, report_);
-      break;
-    case 7:
-      fixed = UpdateFixedN<7>(m, c, y, sm, form, x_, s_, k_, report_);
-      break;
-    case 8:
-      fixed = UpdateFixedN<8>(m, c, y, sm, form, x_, s_, k_, report_);
-      break;
-    case 9:
-      fixed = UpdateFixedN<9>(m, c, y, sm, form, x_, s_, k_, report_);
-      break;
-    case 10:
-      fixed = UpdateFixedN<10>(m, c, y, sm, form, x_, s_, k_, report_);
-      break;
-    case 11:
-      fixed = UpdateFixedN<11>(m, c, y, sm, form, x_, s_, k_, report_);
-      break;
-    default:
-      break;
-  }
+  WithFixedSize(n, [&](auto size) {
+    fixed = UpdateFixedN<decltype(size)::value>(m, c, y, sm, form, x_, s_, k_, report_);
+  });
   if (fixed) return report_;
   sct_.resize(n, m);
   innov_cov_.resize(m, m);
-  k_.resize(n, m);
   kt_.resize(m, n);
   ksm_.resize(n, m);
   nu_.resize(m);
