@@ -316,6 +316,33 @@ TEST(Plant, StuckSensorHoldsItsValueWhileTheFrameHeats) {
   EXPECT_GT(*hi - *lo, 0.1);  // the healthy sensor moves (noise and heating)
 }
 
+TEST(Plant, SensorOffsetShiftsTheReadingWhileItLasts) {
+  const fs::path out = OutDir("offset");
+  RunScenario(ScenarioText(
+                  R"({ kind = "sensor_offset", start_s = 10, end_s = 15, offset_K = 3.0 })", "", 7),
+              out);
+  const auto frames = DecodeLog(out / "t.log");
+  // Pump 1's reading against pump 2's (same profile, same truth but for their sensors' noise
+  // and drawn calibration): 3 K higher while the fault lasts, not before or after.
+  auto mean_between = [&](std::uint32_t id, double a_s, double b_s) {
+    double sum = 0.0;
+    int n = 0;
+    for (const Decoded& d : Select(frames, "can0", id)) {
+      const double t_s = static_cast<double>(d.time_us - kEpochUs) / 1e6;
+      if (t_s > a_s && t_s < b_s) {
+        sum += d.values.at("FrameTemp_degC");
+        ++n;
+      }
+    }
+    return n > 0 ? sum / n : std::nan("");
+  };
+  const double before = mean_between(0x181, 5.0, 9.9) - mean_between(0x182, 5.0, 9.9);
+  const double during = mean_between(0x181, 10.1, 14.9) - mean_between(0x182, 10.1, 14.9);
+  const double after = mean_between(0x181, 15.1, 19.9) - mean_between(0x182, 15.1, 19.9);
+  EXPECT_NEAR(during - before, 3.0, 0.3);
+  EXPECT_NEAR(after - before, 0.0, 0.3);
+}
+
 TEST(Plant, BusOffSilencesEveryPumpOnTheInterface) {
   const fs::path out = OutDir("busoff");
   RunScenario(ScenarioText("", "[[bus_off]]\ninterface = \"can0\"\nstart_s = 14\nend_s = 16.5\n"),

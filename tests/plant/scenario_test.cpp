@@ -87,7 +87,8 @@ TEST(PlantScenario, FaultsParse) {
   { kind = "dropped_frames", start_s = 1, end_s = 2, probability = 0.5 },
   { kind = "stale_sensor", start_s = 3 },
   { kind = "stuck_sensor", start_s = 4, end_s = 5 },
-  { kind = "cooling_failure", start_s = 6, edge = "cooling", factor = 5 } ]
+  { kind = "cooling_failure", start_s = 6, edge = "cooling", factor = 5 },
+  { kind = "sensor_offset", start_s = 9, offset_K = -2.5 } ]
 [[bus_off]]
 interface = "can0"
 start_s = 7
@@ -95,7 +96,7 @@ end_s = 8
 )",
                                     "s.toml");
   const auto& f = sc.pumps[0].faults;
-  ASSERT_EQ(f.size(), 4u);
+  ASSERT_EQ(f.size(), 5u);
   EXPECT_EQ(f[0].kind, FaultKind::kDroppedFrames);
   EXPECT_DOUBLE_EQ(f[0].probability, 0.5);
   EXPECT_EQ(f[1].kind, FaultKind::kStaleSensor);
@@ -104,6 +105,8 @@ end_s = 8
   EXPECT_EQ(f[3].kind, FaultKind::kCoolingFailure);
   EXPECT_EQ(f[3].edge, "cooling");
   EXPECT_DOUBLE_EQ(f[3].factor, 5.0);
+  EXPECT_EQ(f[4].kind, FaultKind::kSensorOffset);
+  EXPECT_DOUBLE_EQ(f[4].offset_K, -2.5);
   ASSERT_EQ(sc.bus_offs.size(), 1u);
   EXPECT_DOUBLE_EQ(sc.bus_offs[0].end_s, 8.0);
 }
@@ -140,6 +143,12 @@ TEST(PlantScenario, ErrorsNameLineAndKey) {
 
   text = std::string(kMinimal) + "faults = [ { kind = \"melted\" } ]\n";
   EXPECT_NE(ErrorOf(text).find("pump[0].faults[0].kind"), std::string::npos) << ErrorOf(text);
+  text = std::string(kMinimal) + "faults = [ { kind = \"sensor_offset\", start_s = 1 } ]\n";
+  EXPECT_NE(ErrorOf(text).find("pump[0].faults[0].offset_K: missing"), std::string::npos)
+      << ErrorOf(text);
+  text = std::string(kMinimal) + "faults = [ { kind = \"stuck_sensor\", offset_K = 1 } ]\n";
+  EXPECT_NE(ErrorOf(text).find("only a sensor_offset has an offset_K"), std::string::npos)
+      << ErrorOf(text);
 
   text = std::string(kMinimal) + "[[pump]]\nname = \"b\"\nnode_id = 3\nprofile = \"p\"\n";
   EXPECT_NE(ErrorOf(text).find("node ID 3 on can0 is used by another pump"), std::string::npos)

@@ -458,12 +458,20 @@ double TrueFlux_Wb(const PumpState& p) {
          (1.0 + p.spec->drive.flux_temperature_coefficient_per_K * (p.x(p.magnet_state) - t0_degC));
 }
 
+/// The faults of a pump active at time `t` (cooling failures switch models at thermal steps).
+struct ActiveFaults {
+  bool dropped_window = false, stale = false, stuck = false;
+  double drop_probability = 0.0;
+  double sensor_offset_K = 0.0;
+};
+
 /// The frame and ambient sensors read `dt_s` after their last reading (0: the first); a stuck
-/// frame sensor holds the reading it had when it stuck.
-void SampleSensors(PumpState& p, const ThermalInputs& in, double ambient_degC, bool stuck_now,
-                   double dt_s) {
+/// frame sensor holds the reading it had when it stuck; a sensor offset fault shifts the reading.
+void SampleSensors(PumpState& p, const ThermalInputs& in, double ambient_degC,
+                   const ActiveFaults& faults, double dt_s) {
+  const bool stuck_now = faults.stuck;
   const double frame_true = p.model().AllTemperatures_degC(in, p.x)(p.frame_node);
-  const double reading = p.frame_sensor->Measure(frame_true, dt_s);
+  const double reading = p.frame_sensor->Measure(frame_true, dt_s) + faults.sensor_offset_K;
   p.frame_lagged_degC = p.frame_sensor->lagged();
   if (stuck_now && !p.stuck) p.stuck_degC = p.frame_reading_degC;
   p.stuck = stuck_now;
@@ -541,12 +549,6 @@ void WriteTruthRow(PumpState& p, const ThermalInputs& in, const SetPoint& sp, do
   p.truth->Row(row);
 }
 
-/// The faults of a pump active at time `t` (cooling failures switch models at thermal steps).
-struct ActiveFaults {
-  bool dropped_window = false, stale = false, stuck = false;
-  double drop_probability = 0.0;
-};
-
 ActiveFaults FaultsAt(const PumpSpec& spec, double t) {
   ActiveFaults a;
   for (const Fault& f : spec.faults) {
@@ -561,6 +563,9 @@ ActiveFaults FaultsAt(const PumpSpec& spec, double t) {
         break;
       case FaultKind::kStuckSensor:
         a.stuck = true;
+        break;
+      case FaultKind::kSensorOffset:
+        a.sensor_offset_K += f.offset_K;
         break;
       case FaultKind::kCoolingFailure:
         break;
@@ -831,7 +836,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
 
       // Sensors, sampled at the status rate (every thermal step in a thermal-only run).
       if (!electrical || k % status_every == 0) {
-        SampleSensors(p, in, sp.ambient_degC, faults.stuck,
+        SampleSensors(p, in, sp.ambient_degC, faults,
                       k == 0       ? 0.0
                       : electrical ? sc.status_period_s
                                    : step_s);

@@ -263,7 +263,8 @@ std::vector<Fault> ParseFaults(const toml::node& node, const std::string& source
     const toml::table* t = (*arr)[i].as_table();
     const std::string at = fmt::format("{}[{}].", where, i);
     if (t == nullptr) Fail(source, LineOf((*arr)[i]), at, "expected a table");
-    CheckKeys(*t, {"kind", "start_s", "end_s", "probability", "edge", "factor"}, source, at);
+    CheckKeys(*t, {"kind", "start_s", "end_s", "probability", "edge", "factor", "offset_K"}, source,
+              at);
     Reader r(t, nullptr, source, at, LineOf(*t));
     Fault f;
     f.line = LineOf(*t);
@@ -276,10 +277,12 @@ std::vector<Fault> ParseFaults(const toml::node& node, const std::string& source
       f.kind = FaultKind::kStuckSensor;
     } else if (kind == "cooling_failure") {
       f.kind = FaultKind::kCoolingFailure;
+    } else if (kind == "sensor_offset") {
+      f.kind = FaultKind::kSensorOffset;
     } else {
       Fail(source, f.line, at + "kind",
            fmt::format("'{}' is not one of dropped_frames, stale_sensor, stuck_sensor, "
-                       "cooling_failure",
+                       "cooling_failure, sensor_offset",
                        kind));
     }
     f.start_s = r.Number("start_s", 0.0, 0.0, 1e9);
@@ -293,6 +296,12 @@ std::vector<Fault> ParseFaults(const toml::node& node, const std::string& source
       f.factor = r.Positive("factor", 0.0);
     } else if (t->get("edge") || t->get("factor")) {
       Fail(source, f.line, at + "edge", "only a cooling_failure has an edge and a factor");
+    }
+    if (f.kind == FaultKind::kSensorOffset) {
+      f.offset_K = r.Number("offset_K", 0.0, -100.0, 100.0);
+      if (!t->get("offset_K")) Fail(source, f.line, at + "offset_K", "missing (the shift, K)");
+    } else if (t->get("offset_K")) {
+      Fail(source, f.line, at + "offset_K", "only a sensor_offset has an offset_K");
     }
     if (f.kind != FaultKind::kDroppedFrames && t->get("probability")) {
       Fail(source, f.line, at + "probability", "only dropped_frames has a probability");

@@ -72,6 +72,7 @@ enum class FaultKind {
   kStaleSensor,     ///< no PUMP_STATUS frames (the drive stops sending its status)
   kStuckSensor,     ///< the frame sensor value frozen at its value when the fault starts
   kCoolingFailure,  ///< the resistance of edge `edge` of the truth model times `factor`
+  kSensorOffset,    ///< `offset_K` added to the frame sensor's reading (a calibration shift)
 };
 
 struct Fault {
@@ -81,6 +82,7 @@ struct Fault {
   double probability = 1.0;  ///< dropped frames only
   std::string edge;          ///< cooling failure: edge name (`name` key, or "a-b" of `between`)
   double factor = 1.0;       ///< cooling failure: resistance multiplier
+  double offset_K = 0.0;     ///< sensor offset: added to the frame sensor's reading
   int line = 0;
 };
 
