@@ -254,6 +254,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     m.max_step_K = r.Number("max_step_K", m.max_step_K, 0.1, 1000.0);
     m.jump_recover_s = r.Number("jump_recover_s", m.jump_recover_s, 0.0, 86400.0);
     m.nis_limit = r.Number("nis_limit", m.nis_limit, 0.0, kInf);
+    m.max_sensor_offset_K = r.Number("max_sensor_offset_K", m.max_sensor_offset_K, 0.0, 100.0);
     m.disagree_hold_s = r.Number("disagree_hold_s", m.disagree_hold_s, 0.0, 86400.0);
     m.not_converged_grace_s =
         r.Number("not_converged_grace_s", m.not_converged_grace_s, 0.0, 86400.0);

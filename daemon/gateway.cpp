@@ -188,7 +188,8 @@ std::int64_t Gateway::PumpDueUs(std::size_t p) const {
   // A silent pump without an alarm sends nothing (AdvancePump): only its silence is timed.
   if (never_heard && pump.snapshot().alarm.level == estimators::AlarmLevel::kNone) return due;
   if (pump.snapshot().alarm_changes != io.alarm_changes_sent ||
-      pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
+      pump.snapshot().mismatch_changes != io.mismatch_changes_logged ||
+      pump.snapshot().sensor_steps != io.sensor_steps_logged) {
     return kDueNow;
   }
   for (const OutputPlan& plan : io.outputs) {
@@ -249,6 +250,13 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
   if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
     io.mismatch_changes_logged = pump.snapshot().mismatch_changes;
     LogMismatch(pump);
+  }
+  if (pump.snapshot().sensor_steps != io.sensor_steps_logged) {
+    io.sensor_steps_logged = pump.snapshot().sensor_steps;
+    Log(LogLevel::kWarning,
+        "pump {}: frame sensor reading stepped {:+.1f} K, faster than the frame can move: taken as "
+        "a step of the sensor's offset (now {:+.1f} K)",
+        name, pump.snapshot().last_sensor_step_K, pump.snapshot().sensor_offset_K);
   }
   if (now_us >= io.next_lcm_us) {
     FillTelemetry(p, io.telemetry_msg);

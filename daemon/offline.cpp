@@ -109,7 +109,7 @@ class CsvSink {
           "frame_measured_C,ambient_C,"
           "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s,alarm_active_reasons,"
           "sensor_fault,winding_resistance_sd_K,flux_sd_Wb,mismatch_state,mismatch_effect,mismatch_"
-          "value\n";
+          "value,frame_sensor_offset_K\n";
       std::fputs(header.c_str(), files_.back()->f);
       last_.push_back(-1);
     }
@@ -127,7 +127,7 @@ class CsvSink {
       const auto& r = s.resistance;
       row += fmt::format(
           ",{:.4f},{:.4f},{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f},{},{}"
-          ",{:.4f},{:.3g},{},{},{:.3f}\n",
+          ",{:.4f},{:.3g},{},{},{:.3f},{:.3f}\n",
           s.winding_resistance_degC, s.magnet_flux_degC, s.magnet_flux_sd_K, r.resistance_ohm,
           r.flux_Wb, static_cast<int>(r.status), s.frame_measured_degC, s.ambient_degC, s.speed_rpm,
           s.nis, static_cast<int>(s.alarm.level), static_cast<int>(s.alarm.reason), s.alarm.node,
@@ -135,7 +135,7 @@ class CsvSink {
           s.alarm.active_reasons, static_cast<int>(s.sensor_fault),
           std::isfinite(s.winding_resistance_degC) ? r.winding_sd_K : std::nan(""), r.flux_sd_Wb,
           estimators::MismatchStateName(s.mismatch.state),
-          estimators::MismatchEffectName(s.mismatch.effect), s.mismatch.value);
+          estimators::MismatchEffectName(s.mismatch.effect), s.mismatch.value, s.sensor_offset_K);
       std::fputs(row.c_str(), files_[i]->f);
     }
   }

@@ -371,11 +371,20 @@ void Pump::ThermalStep(std::int64_t end_us) {
     return;
   }
   if (config_.disturbance_states) {
+    // A sensor back from a jump beyond physics may read at a new offset: its first reading may
+    // open the offset (DisturbanceThermalSensor::ReopenSensorOffset).
+    if (last_fault_ == estimators::SensorFault::kJumping && fault == estimators::SensorFault::kNone)
+      robust_.ReopenSensorOffset();
     // The frame and the magnet from the flux; not the identified winding, whose errors on the
     // demo (7-9 K while tracking) are beyond its bias state (docs/virtual-sensor.md).
     robust_.Step(in, period_s_, RobustReadings(measured));
     robust_.Nodes(robust_x_, robust_sd_);
+    snapshot_.sensor_offset_K = robust_.SensorOffset_K();
+    snapshot_.sensor_steps = static_cast<std::uint64_t>(robust_.SensorSteps());
+    snapshot_.last_sensor_step_K = robust_.LastSensorStep_K();
+    snapshot_.stepped_offset_K = robust_.SteppedOffset_K();
   }
+  last_fault_ = fault;
   ++counters_.thermal_steps;
   CheckModel(in, measured, end_us);
 
@@ -457,6 +466,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const bool plant_blamed = ms == estimators::MismatchState::kPlantChange ||
                             ms == estimators::MismatchState::kUnexplained;
   ai.sensor_nis = plant_blamed ? kNaN : nis;
+  ai.sensor_offset_K = robust && !diverged ? snapshot_.stepped_offset_K : kNaN;
   ai.telemetry_age_s = TelemetryAge_s(end_us);
   // The alarms rest on the virtual sensor: it must have converged. The identifier's health is
   // published with its estimate (status) but is no alarm: the filter uses its winding

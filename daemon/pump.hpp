@@ -62,6 +62,13 @@ struct PumpSnapshot {
   double magnet_flux_sd_K = kNaN;
   double frame_measured_degC = kNaN;  ///< the frame sensor as fused (NaN: not fused)
   estimators::SensorFault sensor_fault = estimators::SensorFault::kNone;
+  /// The frame sensor's calibration offset as the disturbance-state filter estimates it, K (NaN
+  /// without that filter); how many steps of it the filter has found (a reading stepping faster
+  /// than the frame can move), the last one and their sum since the filter started, K.
+  double sensor_offset_K = kNaN;
+  std::uint64_t sensor_steps = 0;
+  double last_sensor_step_K = kNaN;
+  double stepped_offset_K = kNaN;
   double ambient_degC = kNaN;
   double speed_rpm = kNaN;
   double innovation_K = kNaN;
@@ -212,6 +219,7 @@ class Pump {
   estimators::VirtualThermalSensor sensor_;
   estimators::AlarmMonitor alarms_;
   estimators::SensorHealth sensor_health_;
+  estimators::SensorFault last_fault_ = estimators::SensorFault::kNone;  ///< at the last step
   estimators::MismatchDetector mismatch_;
   estimators::DisturbanceThermalSensor robust_;  // published when config_.disturbance_states
   Eigen::VectorXd robust_x_, robust_sd_;

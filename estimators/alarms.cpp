@@ -236,6 +236,11 @@ void AlarmMonitor::StepSensor(double now_s, const AlarmInputs& in) {
     Update(disagree_, in.sensor_nis > config_.nis_limit ? AlarmLevel::kWarning : AlarmLevel::kNone,
            in.sensor_nis, now_s, config_.disagree_hold_s);
   }
+  if (Known(in.sensor_offset_K) && config_.max_sensor_offset_K > 0.0) {
+    const bool off = std::abs(in.sensor_offset_K) > config_.max_sensor_offset_K;
+    Update(offset_, off ? AlarmLevel::kWarning : AlarmLevel::kNone, in.sensor_offset_K, now_s,
+           config_.hold_s);
+  }
 }
 
 void AlarmMonitor::Compose(double time_to_trip_s) {
@@ -308,6 +313,7 @@ void AlarmMonitor::ForEachActive(F&& f) const {
   add(stuck_, AlarmReason::kImplausibleSensor, "stuck", config_.sensor_node, std::nan(""));
   add(disagree_, AlarmReason::kImplausibleSensor, "disagrees with the model", config_.sensor_node,
       std::nan(""));
+  add(offset_, AlarmReason::kImplausibleSensor, "offset", config_.sensor_node, std::nan(""));
   add(converged_, AlarmReason::kEstimatorNotConverged, "", -1, std::nan(""));
   add(forecast_, AlarmReason::kForecast, "", forecast_node_, std::nan(""));
 }

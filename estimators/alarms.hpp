@@ -90,6 +90,11 @@ struct AlarmConfig {
   /// 0.1 % tail) for `disagree_hold_s`.
   double nis_limit = 10.83;
   double disagree_hold_s = 30.0;
+  /// Offset: the reading stepped away from the frame by more than this in total, K (the
+  /// disturbance-state filter takes a step of the reading faster than the frame can move as a
+  /// step of the sensor's offset, DisturbanceThermalSensor::SteppedOffset_K): implausible
+  /// sensor, "offset". A Class-A RTD is within 0.35 K at 100 degC (IEC 60751); 0 = off.
+  double max_sensor_offset_K = 1.0;
   double not_converged_grace_s = 600.0;  ///< after start, "not converged" is not yet an alarm
   double forecast_horizon_s = 600.0;     ///< warn when time to trip drops below this
   /// Off-delay of the forecast warning: it clears only after the forecast has stayed beyond the
@@ -117,6 +122,8 @@ struct AlarmInputs {
   double sensor_degC = std::numeric_limits<double>::quiet_NaN();        ///< the measured node
   double sensor_model_degC = std::numeric_limits<double>::quiet_NaN();  ///< model estimate there
   double sensor_nis = std::numeric_limits<double>::quiet_NaN();         ///< last innovation test
+  /// How far the sensor's reading stepped away from the frame, K (NaN: not estimated).
+  double sensor_offset_K = std::numeric_limits<double>::quiet_NaN();
   double telemetry_age_s = 0.0;                   ///< time since the last telemetry frame
   SensorFault sensor_fault = SensorFault::kNone;  ///< from SensorHealth
   double sensor_raw_degC =
@@ -229,6 +236,7 @@ class AlarmMonitor {
   SensorFault sensor_fault_kind_ = SensorFault::kNone;  // the fault that raised sensor_fault_
   Channel stuck_;
   Channel disagree_;
+  Channel offset_;
   Channel converged_;
   Channel forecast_;
   // Rate of rise: per node, the value at the start of the current window.

@@ -22,7 +22,7 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
       !(c.loss_scale_sd >= 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
       !(c.winding_bias_sd_K >= 0.0) || !(c.winding_bias_tau_s > 0.0) ||
       !(c.magnet_bias_sd_K >= 0.0) || !(c.magnet_bias_tau_s > 0.0) ||
-      !(c.magnet_min_white_sd_K > 0.0)) {
+      !(c.magnet_min_white_sd_K > 0.0) || !(c.sensor_step_gate_sd >= 0.0)) {
     throw std::invalid_argument(
         "disturbance sensor: standard deviations and times must be positive");
   }
@@ -127,6 +127,8 @@ void DisturbanceThermalSensor::Initialise(double x0_degC) {
   x.head(n_).setConstant(x0_degC);
   if (lag_ >= 0) x(lag_) = x0_degC;
   filter_.Reset(x, s);
+  frame_fused_last_ = reopen_offset_ = false;
+  stepped_offset_K_ = 0.0;
 }
 
 void DisturbanceThermalSensor::Initialise(const Eigen::VectorXd& x_degC,
@@ -226,6 +228,8 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
   if (mb_ >= 0) GaussMarkov(mb_, c.magnet_bias_sd_K, c.magnet_bias_tau_s, dt_s);
   filter_.Predict(ad_, bu_, sp_);
   const bool frame = std::isfinite(r.frame_degC);
+  if (frame) OpenOffsetOnStep(r.frame_degC);
+  frame_fused_last_ = frame;
   const bool winding = row_w_ >= 0 && std::isfinite(r.winding_degC);
   const bool magnet =
       row_m_ >= 0 && std::isfinite(r.magnet_degC) && std::isfinite(r.magnet_winding_gain);
@@ -262,6 +266,23 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
     }
   }
   return filter_.Update(c_all_, y_all_, sm_all_);
+}
+
+void DisturbanceThermalSensor::OpenOffsetOnStep(double frame_degC) {
+  const double gate = config_.sensor_step_gate_sd;
+  if (!(gate > 0.0) || !(frame_fused_last_ || reopen_offset_)) return;
+  reopen_offset_ = false;
+  // The frame row's innovation and its variance on the predicted state (c_ is that row).
+  const Eigen::VectorXd& x = filter_.State();
+  const Eigen::MatrixXd& p = filter_.Covariance();
+  const int s_idx = lag_ >= 0 ? lag_ : frame_;
+  const double nu = frame_degC - x(s_idx) - x(bias_);
+  const double var = p(s_idx, s_idx) + 2.0 * p(s_idx, bias_) + p(bias_, bias_) + sm_(0, 0);
+  if (!(nu * nu > gate * gate * var)) return;
+  filter_.AddVariance(bias_, nu * nu);
+  ++sensor_steps_;
+  last_sensor_step_K_ = nu;
+  stepped_offset_K_ += nu;
 }
 
 bool BoundaryOnlyThrough(const ThermalModel& model, const std::string& measured_node) {

@@ -20,6 +20,8 @@
 /// point moves allocates, as in VirtualThermalSensor).
 
 #include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
 #include <limits>
 #include <string>
 
@@ -42,6 +44,12 @@ struct DisturbanceSensorConfig {
   /// Random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s); 0 = no state.
   double loss_scale_sd = 0.002;
   double sd_floor_K = 1.0;  ///< added in quadrature to every reported node sd
+  /// A frame innovation beyond this many of its sds, between readings fused at consecutive steps
+  /// (or the first after ReopenSensorOffset()), is a step of the sensor's offset: the frame
+  /// cannot move that far in a step (its heat capacity; the frame-path heat's random walk is in
+  /// the sd), a connector or calibration can. The offset's variance then grows by the
+  /// innovation squared, so the update gives the step to the offset. 0 = off.
+  double sensor_step_gate_sd = 8.0;
   /// Whether the resistance-based winding temperature is fused: the update then has a winding
   /// row (and a bias state); without it a winding reading given to Step() is not used.
   bool winding_reading = false;
@@ -118,6 +126,19 @@ class DisturbanceThermalSensor {
   double FrameHeat_W() const { return filter_.State()(df_); }
   double RotorHeat_W() const { return dr_ >= 0 ? filter_.State()(dr_) : 0.0; }
   double SensorOffset_K() const { return filter_.State()(bias_); }
+  double SensorOffsetSd_K() const {
+    return std::sqrt(std::max(filter_.Covariance()(bias_, bias_), 0.0));
+  }
+  /// Steps of the sensor's offset found so far (sensor_step_gate_sd), the last one's size (the
+  /// innovation that opened it, K; 0 before any) and the sum of the steps since the last
+  /// Initialise (how far the reading stepped away from the frame, K: a slow drift of the offset
+  /// state is not in it).
+  int SensorSteps() const { return sensor_steps_; }
+  double LastSensorStep_K() const { return last_sensor_step_K_; }
+  double SteppedOffset_K() const { return stepped_offset_K_; }
+  /// The next fused frame reading may open a step of the offset even though the previous step
+  /// fused none (a sensor back from a fault that left it out, such as a jump beyond physics).
+  void ReopenSensorOffset() { reopen_offset_ = true; }
   /// The magnet reading's estimated bias, K (0 without a magnet reading).
   double MagnetBias_K() const { return mb_ >= 0 ? filter_.State()(mb_) : 0.0; }
   int StateCount() const { return n_aug_; }
@@ -128,11 +149,18 @@ class DisturbanceThermalSensor {
   DisturbanceSensorConfig config_;
   void BuildRows();
   void GaussMarkov(int state, double sd, double tau_s, double dt_s);
+  /// The sensor-offset step test on the predicted state (sensor_step_gate_sd).
+  void OpenOffsetOnStep(double frame_degC);
 
   int n_ = 0, lag_ = -1, df_ = 0, dr_ = -1, ls_ = -1, bias_ = 0, n_aug_ = 0, frame_ = 0,
       rotor_ = -1;
   int wb_ = -1, mb_ = -1, magnet_ = -1;  ///< winding and magnet reading biases, the magnet node
   int row_w_ = -1, row_m_ = -1;          ///< their rows in the update (-1: none)
+  bool frame_fused_last_ = false;        ///< the previous step fused a frame reading
+  bool reopen_offset_ = false;
+  int sensor_steps_ = 0;
+  double last_sensor_step_K_ = 0.0;
+  double stepped_offset_K_ = 0.0;
   ThermalLinearModel lin_, lin_block_, lin_idle_;
   ThermalDiscretiser discretiser_;
   KalmanFilter filter_;

@@ -1,5 +1,6 @@
 #include "estimators/kalman_filter.hpp"
 
+#include <cmath>
 #include <type_traits>
 
 namespace pumptherm::estimators {
@@ -147,6 +148,11 @@ void KalmanFilter::Reset(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
   ntmp_.resize(n, n);
   ntmp2_.resize(n, n);
   ikc_.resize(n, n);
+}
+
+void KalmanFilter::AddVariance(int i, double var) {
+  if (i < 0 || i >= x_.size() || !(var > 0.0) || !std::isfinite(var)) return;
+  s_(i, i) += var;
 }
 
 void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,

@@ -56,6 +56,10 @@ class KalmanFilter {
                                    const Eigen::MatrixXd& sm,
                                    CovarianceUpdate form = CovarianceUpdate::kJoseph);
 
+  /// Adds `var` to the variance of state `i` (a jump of that state, of that variance, between
+  /// the last prediction and the next update). Ignores an index out of range or a var <= 0.
+  void AddVariance(int i, double var);
+
   const Eigen::VectorXd& State() const { return x_; }
   const Eigen::MatrixXd& Covariance() const { return s_; }
   /// The gain of the last update (n x m).

@@ -158,6 +158,7 @@ struct CaseResult {
   std::vector<double> coverage;          ///< share of steps with |error| <= 2 sd, after 300 s
   std::vector<double> dist_max_error_K;  ///< the same for the disturbance-state filter
   std::vector<double> dist_coverage;
+  int dist_sensor_steps = 0;          ///< steps of the sensor's offset the disturbance filter found
   double detector_step_max_us = 0.0;  ///< not filled here (timed by the benchmark)
 };
 
@@ -375,6 +376,7 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
                     : 0.0;
   }
   r.at_end = det.Finding();
+  r.dist_sensor_steps = dist.SensorSteps();
   return r;
 }
 

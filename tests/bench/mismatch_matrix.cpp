@@ -79,6 +79,8 @@ int main(int argc, char** argv) {
       dc.sd_floor_K = std::atof(argv[++i]);
     else if (a == "--node-process-sd-K" && i + 1 < argc)
       dc.node_process_sd_K = std::atof(argv[++i]);
+    else if (a == "--sensor-step-gate-sd" && i + 1 < argc)
+      dc.sensor_step_gate_sd = std::atof(argv[++i]);
     else {
       fmt::print(
           stderr,
@@ -91,7 +93,8 @@ int main(int argc, char** argv) {
           "[--sd-floor-K K] [--node-process-sd-K K]\n"
           "  [--magnet-sd-K K (emulated rotor reading: white sd)] [--magnet-bias-K K (its slow "
           "bias, sd)]\n"
-          "  [--magnet-bias-sd-K K (the filter's bias state)] [--rotor-heat-tau-s S]\n");
+          "  [--magnet-bias-sd-K K (the filter's bias state)] [--rotor-heat-tau-s S]\n"
+          "  [--sensor-step-gate-sd G (0: off)]\n");
       return 2;
     }
   }
@@ -135,6 +138,7 @@ int main(int argc, char** argv) {
         nodes += fmt::format(" {} {:.2f}/{:.0f}%", r.nodes[i], r.dist_max_error_K[i],
                              100.0 * r.dist_coverage[i]);
       }
+      nodes += fmt::format(", sensor steps {}", r.dist_sensor_steps);
       if (json) {
         std::string jn;
         for (std::size_t i = 0; i < r.nodes.size(); ++i) {
@@ -150,7 +154,7 @@ int main(int argc, char** argv) {
             "\"name_delay_s\": {}, \"right_from_s\": {}, \"named_first\": \"{}\", "
             "\"named_at_end\": \"{}\", "
             "\"expected\": \"{}\", "
-            "\"false_alarms\": {}, \"nodes\": {{{}}}}}\n",
+            "\"false_alarms\": {}, \"sensor_steps\": {}, \"nodes\": {{{}}}}}\n",
             mc::FaultName(f), seed, duration_s, spec.fault_s,
             std::isnan(r.detect_delay_s) ? std::string("null")
                                          : fmt::format("{:.0f}", r.detect_delay_s),
@@ -159,7 +163,7 @@ int main(int argc, char** argv) {
             std::isnan(r.right_from_s) ? std::string("null")
                                        : fmt::format("{:.0f}", r.right_from_s),
             Named(r.at_naming), Named(r.at_end), pe::MismatchEffectName(mc::ExpectedEffect(f)),
-            r.false_alarms, jn);
+            r.false_alarms, r.dist_sensor_steps, jn);
       } else {
         fmt::print(
             "{:<36} {:>4} {:>9} {:>8} {:>8} {:<60} {:<60} {} | {}\n", mc::FaultName(f), seed,

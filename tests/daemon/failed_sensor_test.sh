@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
 # A failed frame sensor on a healthy pump (docs/robustness.md, "A failed sensor on a healthy
 # pump"): the plant's failed_sensor.toml (the RTD of one pump freezes at 10 min, another's status
-# frames stop; a third is the control) through `pumpthermd -r`, judged against the truth. Goals:
-# the sensor fault raised within 60 s; no trip (the truth stays near 60 degC, the trip level is
-# 120 degC); after the failure every node within 3 K of the truth and inside its +-2 sd at least
-# 90 % of the time (the estimate runs on the model and the magnet from the flux).
+# frames stop, two more step by +-3 K, one by +8 K and back; the sixth is the control) through
+# `pumpthermd -r`, judged against the truth. Goals: the sensor fault (frozen, missing, the jump
+# beyond max_step_K) or the implausible sensor "offset" (a step) raised within 60 s, neither on
+# the control, and none left at the end on the sensor that stepped back; no trip (the truth stays near 60 degC,
+# the trip level is 120 degC); after the failure every node within 3 K of the truth and inside
+# its +-2 sd at least 90 % of the time (the estimate runs on the model and the magnet from the
+# flux, or on the sensor less its stepped offset).
 # Usage: failed_sensor_test.sh PUMPTHERM PUMPTHERMD SRC_DIR  (KEEP_TMP=1 keeps the files)
 set -euo pipefail
 pumptherm=$1
@@ -22,13 +25,15 @@ import csv, sys
 tmp = sys.argv[1]
 failed_s = 600.0
 fail = False
-print("| pump | sensor fault s | trip | max error K (node) | lowest coverage (node) |")
+SENSOR_FAULT, IMPLAUSIBLE = 8, 5  # alarm reason bits
+print("| pump | sensor alarm s | trip | max error K (node) | lowest coverage (node) |")
 print("| --- | --- | --- | --- | --- |")
-for pump, fails in (("stuck", True), ("missing", True), ("control", False)):
+for pump, fails in (("stuck", SENSOR_FAULT), ("missing", SENSOR_FAULT), ("offset_up", IMPLAUSIBLE),
+                    ("offset_down", IMPLAUSIBLE), ("offset_big", SENSOR_FAULT), ("control", None)):
     est = list(csv.DictReader(open(f"{tmp}/est/{pump}.csv")))
     truth = {round(float(r["time_s"])): r for r in csv.DictReader(open(f"{tmp}/{pump}.truth.csv"))}
-    fault = next((float(r["time_s"]) for r in est
-                  if int(r["alarm_active_reasons"]) >> 8 & 1), None)
+    bits = (1 << SENSOR_FAULT) | (1 << IMPLAUSIBLE) if fails is None else 1 << fails
+    fault = next((float(r["time_s"]) for r in est if int(r["alarm_active_reasons"]) & bits), None)
     trip = next((float(r["time_s"]) for r in est if int(r["alarm_level"]) >= 2), None)
     worst_err, worst_cov = (0.0, "-"), (2.0, "-")
     for node in ("frame", "stator", "winding", "rotor"):
@@ -48,10 +53,12 @@ for pump, fails in (("stuck", True), ("missing", True), ("control", False)):
         worst_cov = min(worst_cov, (cov, node))
     print(f"| {pump} | {fault if fault is not None else 'none'} | {trip if trip is not None else 'none'} "
           f"| {worst_err[0]:.2f} ({worst_err[1]}) | {100 * worst_cov[0]:.0f} % ({worst_cov[1]}) |")
-    if fails and (fault is None or fault - failed_s > 60.0):
-        print(f"FAIL: {pump}: sensor fault at {fault}, not within 60 s of {failed_s} s"); fail = True
-    if not fails and fault is not None:
-        print(f"FAIL: {pump}: sensor fault at {fault} s, the sensor works"); fail = True
+    if fails is not None and (fault is None or fault - failed_s > 60.0 or fault < failed_s):
+        print(f"FAIL: {pump}: sensor alarm at {fault}, not within 60 s of {failed_s} s"); fail = True
+    if pump == "offset_big" and int(est[-1]["alarm_active_reasons"]) & (1 << SENSOR_FAULT | 1 << IMPLAUSIBLE):
+        print(f"FAIL: {pump}: a sensor alarm still active at the end, the reading is back"); fail = True
+    if fails is None and fault is not None:
+        print(f"FAIL: {pump}: sensor alarm at {fault} s, the sensor works"); fail = True
     if trip is not None:
         print(f"FAIL: {pump}: tripped at {trip} s, a healthy pump"); fail = True
     if worst_err[0] > 3.0 or worst_cov[0] < 0.9:

@@ -304,6 +304,31 @@ TEST(Alarms, SensorStuckAndDisagreeing) {
   EXPECT_EQ(f.At(160).reason, AlarmReason::kImplausibleSensor);
 }
 
+// A reading that stepped away from the frame (the disturbance-state filter's sum of offset steps)
+// by more than max_sensor_offset_K (1 K) is implausible, "offset", after the hold; a step back
+// clears it; a slow drift of the offset state is not an input here, and 0.6 K is within.
+TEST(Alarms, AReadingSteppedAwayFromTheFrameIsAnImplausibleOffset) {
+  Fixture f;
+  f.in.sensor_degC = f.in.sensor_raw_degC = 40.0;
+  f.in.sensor_offset_K = 0.6;
+  for (double t = 0; t <= 10; t += 1) EXPECT_EQ(f.At(t).level, AlarmLevel::kNone) << t;
+  f.in.sensor_offset_K = 3.0;
+  f.At(11);
+  EXPECT_EQ(f.At(12).level, AlarmLevel::kNone);
+  const AlarmState& s = f.At(13);
+  EXPECT_EQ(s.level, AlarmLevel::kWarning);
+  EXPECT_EQ(s.reason, AlarmReason::kImplausibleSensor);
+  EXPECT_DOUBLE_EQ(s.value, 3.0);
+  const auto c = f.m.ActiveConditions();
+  ASSERT_EQ(c.size(), 1U);
+  EXPECT_STREQ(c[0].detail, "offset");
+  f.in.sensor_offset_K = -2.0;  // stepped the other way past it: still implausible
+  EXPECT_EQ(f.At(20).level, AlarmLevel::kWarning);
+  f.in.sensor_offset_K = 0.1;  // back
+  f.At(21);
+  EXPECT_EQ(f.At(23).level, AlarmLevel::kNone);
+}
+
 // The hold counts time in a band or above: 110/125 alternating against 100/120 is a warning.
 TEST(Alarms, ValueMovingBetweenBandsKeepsTheWarningHold) {
   AlarmMonitor m(Config(), {{100.0, 120.0}}, {});

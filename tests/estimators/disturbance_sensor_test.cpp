@@ -157,3 +157,35 @@ TEST(DisturbanceSensor, LostCoolingOnTheSahebaMachineStaysCovered) {
 }
 
 }  // namespace
+
+TEST(DisturbanceSensor, AReadingThatStepsIsTakenAsAStepOfTheSensorsOffset) {
+  // The reading jumps +3 K between two readings: the frame cannot move that fast, so the offset
+  // takes the step and every node stays on the truth.
+  const mc::CaseResult r = RunFault(mc::Fault::kSensorOffset, 24);
+  for (std::size_t i = 0; i < r.nodes.size(); ++i) {
+    EXPECT_GE(r.dist_coverage[i], 0.9) << r.nodes[i];
+    EXPECT_LE(r.dist_max_error_K[i], 1.5) << r.nodes[i];
+  }
+}
+
+TEST(DisturbanceSensor, WithoutTheStepTestTheFrameFollowsTheSteppedReading) {
+  // The same run with the step test off: the lag state turns the step into a frame temperature
+  // step, and the frame estimate is confidently wrong (what the test above guards against).
+  pe::DisturbanceSensorConfig dc;
+  dc.sensor_step_gate_sd = 0.0;
+  const mc::CaseResult r = RunFault(mc::Fault::kSensorOffset, 24, 0.0, 0.0, dc);
+  const auto frame = static_cast<std::size_t>(std::find(r.nodes.begin(), r.nodes.end(), "frame") -
+                                              r.nodes.begin());
+  ASSERT_LT(frame, r.nodes.size());
+  EXPECT_GT(r.dist_max_error_K[frame], 5.0);
+  EXPECT_LT(r.dist_coverage[frame], 0.9);
+}
+
+TEST(DisturbanceSensor, HealthyAndLostCoolingRunsFindNoSensorStep) {
+  // The step test must not take a plant change for the sensor: lost cooling moves the frame fast,
+  // but no faster than the frame-path heat's random walk allows.
+  for (const mc::Fault f : {mc::Fault::kNone, mc::Fault::kCoolingLost, mc::Fault::kAmbientRise}) {
+    const mc::CaseResult r = RunFault(f, 25);
+    EXPECT_EQ(r.dist_sensor_steps, 0) << mc::FaultName(f);
+  }
+}

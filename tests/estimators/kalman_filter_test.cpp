@@ -49,6 +49,22 @@ TEST(KalmanFilter, OneStepGainMatchesFormula) {
   EXPECT_NEAR(kf.State()(1), 2.0 + 0.4, 1e-15);
 }
 
+TEST(KalmanFilter, AddVarianceWidensOneStateAndIgnoresBadInput) {
+  pe::KalmanFilter kf(2);
+  Eigen::Matrix2d s;
+  s << 4.0, 1.0, 1.0, 2.0;
+  kf.Reset(Eigen::Vector2d(1.0, 2.0), s);
+  kf.AddVariance(1, 3.0);
+  EXPECT_DOUBLE_EQ(kf.Covariance()(1, 1), 5.0);
+  EXPECT_DOUBLE_EQ(kf.Covariance()(0, 1), 1.0);  // a jump of that state alone
+  kf.AddVariance(2, 1.0);
+  kf.AddVariance(-1, 1.0);
+  kf.AddVariance(0, -1.0);
+  kf.AddVariance(0, std::nan(""));
+  EXPECT_DOUBLE_EQ(kf.Covariance()(0, 0), 4.0);
+  EXPECT_DOUBLE_EQ(kf.Covariance()(1, 1), 5.0);
+}
+
 TEST(KalmanFilter, JosephAndTextbookUpdatesAgree) {
   std::mt19937_64 rng(7);
   std::normal_distribution<double> nd;
