@@ -14,7 +14,8 @@ namespace {
 constexpr double kMaxResistanceScale = 20.0;
 
 /// Hypotheses of the naming fit, in column-block order.
-enum Hypothesis : int { kCooling = 0, kRotor, kLoss, kAmbient, kOffset, kHypotheses };
+/// kAmbientRamp is the unmeasured ambient reaching its size linearly over `ambient_ramp_s`.
+enum Hypothesis : int { kCooling = 0, kRotor, kLoss, kAmbient, kAmbientRamp, kOffset, kHypotheses };
 
 MismatchEffect EffectOf(int h) {
   switch (h) {
@@ -25,6 +26,7 @@ MismatchEffect EffectOf(int h) {
     case kLoss:
       return MismatchEffect::kLossScale;
     case kAmbient:
+    case kAmbientRamp:
       return MismatchEffect::kUnmeasuredAmbient;
     default:
       return MismatchEffect::kSensorOffset;
@@ -139,7 +141,7 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
       !(c.window_s > 0.0) ||
       !(c.false_alarm_probability > 0.0 && c.false_alarm_probability < 0.5) ||
       !(c.fit_window_s > c.window_s) || !(c.fit_onset_step_s > 0.0) || !(c.refit_period_s > 0.0) ||
-      c.stuck_samples < 2) {
+      !(c.ambient_ramp_s >= 0.0) || c.stuck_samples < 2) {
     throw std::invalid_argument(
         "mismatch detector: settings must be positive (window < fit window)");
   }
@@ -336,6 +338,11 @@ bool MismatchDetector::Stuck(int* first) const {
   return count >= config_.stuck_samples;
 }
 
+double MismatchDetector::AmbientRamp(double since_onset_s) const {
+  if (!(config_.ambient_ramp_s > 0.0)) return 0.0;
+  return std::clamp(since_onset_s / config_.ambient_ramp_s, 0.0, 1.0);
+}
+
 void MismatchDetector::EffectForcing(int h, const ThermalInputs& in, const Eigen::VectorXd& x_aug,
                                      double frame_degC, Eigen::VectorXd& u) {
   u.setZero();
@@ -359,6 +366,7 @@ void MismatchDetector::EffectForcing(int h, const ThermalInputs& in, const Eigen
       break;
     }
     case kAmbient:
+    case kAmbientRamp:  // scaled by the ramp per onset in FitOnsets
       u.head(n_) = boundary_K_per_s_per_K_;
       break;
     default:
@@ -404,6 +412,11 @@ void MismatchDetector::Fit(double now_s) {
     const int k = (oldest + fit_onsets_[static_cast<std::size_t>(o)]) % cap_;
     fit_onset_offset_K_(o) = h_xpre_(bias_, k);
   }
+  // The onset's time: the step before the onset's first step (its heat acts over that step).
+  auto onset_t_s = [&](int o) {
+    const int k = (oldest + fit_onsets_[static_cast<std::size_t>(o)]) % cap_;
+    return h_t_[static_cast<std::size_t>(k)] - h_dt_[static_cast<std::size_t>(k)];
+  };
   int active = 0;
   // The magnet channel: one sample per magnet_period_s, r = reading - the filter's estimate.
   const int magnet_every = std::max(
@@ -439,12 +452,18 @@ void MismatchDetector::Fit(double now_s) {
     while (active < onsets && fit_onsets_[static_cast<std::size_t>(active)] <= i) ++active;
     const bool measured = std::isfinite(h_nu_[ks]);
     for (int o = 0; o < active; ++o) {
+      const double ramp = AmbientRamp(h_t_[ks] - onset_t_s(o));
       for (int h = 0; h < kHypotheses; ++h) {
+        if (h == kAmbientRamp && !(config_.ambient_ramp_s > 0.0)) continue;  // not fitted
         const int col = o * kHypotheses + h;
         auto e = fit_e_.col(col);
         fit_tmp_ = e.head(nb);
         e.head(nb).noalias() = d.ad * fit_tmp_;
-        e += fit_phiu_.col(h);
+        if (h == kAmbientRamp) {
+          e += ramp * fit_phiu_.col(h);
+        } else {
+          e += fit_phiu_.col(h);
+        }
         if (h == kCooling) e += fit_onset_offset_K_(o) * fit_frame_unit_;
         double g = e(sensor_) + e(bias_);
         if (h == kOffset) g += 1.0;
@@ -513,17 +532,17 @@ void MismatchDetector::Choose(int onsets, int oldest) {
       col_per_h[h] = col;
     }
   }
-  int h = -1, second = -1;
+  int h = -1;
   for (int j = 0; j < kHypotheses; ++j) {
-    if (col_per_h[j] < 0) continue;
-    if (h < 0 || best_per_h[j] > best_per_h[h]) {
-      second = h;
-      h = j;
-    } else if (second < 0 || best_per_h[j] > best_per_h[second]) {
-      second = j;
-    }
+    if (col_per_h[j] >= 0 && (h < 0 || best_per_h[j] > best_per_h[h])) h = j;
   }
   if (h < 0) return;
+  // The runner-up is the best of the other effects (the ambient's two forms are one effect).
+  int second = -1;
+  for (int j = 0; j < kHypotheses; ++j) {
+    if (col_per_h[j] < 0 || EffectOf(j) == EffectOf(h)) continue;
+    if (second < 0 || best_per_h[j] > best_per_h[second]) second = j;
+  }
   const int best = col_per_h[h];
   const double theta = fit_a_(best) / fit_b_(best);
   finding_.effect = EffectOf(h);

@@ -94,9 +94,14 @@ struct MismatchDetectorConfig {
   double clear_after_s = 600.0;           ///< the test passing this long clears a finding
   double fit_window_s = 1200.0;           ///< history kept for naming
   double fit_onset_step_s = 20.0;         ///< onset grid of the naming fit
-  double refit_period_s = 60.0;           ///< refit while the test fails
-  double name_after_s = 60.0;             ///< data after the detection before the first naming fit
-  int stuck_samples = 60;                 ///< identical readings that make a stuck sensor
+  /// When positive, the unmeasured ambient is also fitted as a linear rise to its size over this
+  /// long. Off (0, the step only): a ramp names an ambient rise of about its own duration right
+  /// and no other, and makes extra rotor heat be named an ambient rise first (docs/
+  /// virtual-sensor.md, "Model mismatch").
+  double ambient_ramp_s = 0.0;
+  double refit_period_s = 60.0;  ///< refit while the test fails
+  double name_after_s = 60.0;    ///< data after the detection before the first naming fit
+  int stuck_samples = 60;        ///< identical readings that make a stuck sensor
   /// Node the magnet reading measures (empty or absent: no magnet channel in the naming fit).
   std::string magnet_node;
   /// Sd of one magnet sample about its window mean: the slow error of the flux (the demo's
@@ -162,6 +167,8 @@ class MismatchDetector {
   /// fit_veto_ the columns whose fitted size the magnet samples contradict.
   void AddMagnetChannel(int columns, double sum_r, double sum_rr, int samples);
   /// Heat per unit effect size of hypothesis h at `in`, with the pre-step state `x_aug`.
+  /// The ramp hypothesis's share of its size `since_onset_s` after its onset (0..1).
+  double AmbientRamp(double since_onset_s) const;
   void EffectForcing(int h, const ThermalInputs& in, const Eigen::VectorXd& x_aug,
                      double frame_degC, Eigen::VectorXd& u);
 

@@ -122,7 +122,9 @@ struct CaseSpec {
   /// scaled to it); 0 = the model's [operating_range] (its speed, its largest iq).
   double speed_rpm = 0.0;
   double iq_max_A = 0.0;
-  double rotor_loss_W = 6.0;  ///< the extra rotor loss at that speed (other models)
+  double rotor_loss_W = 6.0;        ///< the extra rotor loss at that speed (other models)
+  double ambient_ramp_s = 600.0;    ///< the unmeasured ambient's rise time (0: a step)
+  double fit_ambient_ramp_s = 0.0;  ///< the detector's ramp hypothesis (0: the step only)
   Fault fault = Fault::kNone;
   double fault_s = 3600.0;
   double duration_s = 10800.0;
@@ -253,6 +255,7 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   pe::VirtualThermalSensor vts(nominal, vts_config);
   pe::MismatchDetectorConfig detector_config = DetectorConfig(spec.sensor_lag_s);
   detector_config.measured_node = frame_node;
+  detector_config.ambient_ramp_s = spec.fit_ambient_ramp_s;
   if (spec.magnet_noise_sd_K > 0.0 && spec.magnet_to_detector)
     detector_config.magnet_node = rotor_node;
   pe::MismatchDetector det(nominal, detector_config);
@@ -296,7 +299,9 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     in.ambient_degC = in.coolant_degC = ambient;
     pe::ThermalInputs truth_in = in;
     if (faulted_now && spec.fault == Fault::kAmbientRise) {
-      const double ramp = std::min((t - spec.fault_s) / 600.0, 1.0);  // 8 K over 10 minutes
+      const double ramp = spec.ambient_ramp_s > 0.0  // 8 K over 10 minutes by default
+                              ? std::min((t - spec.fault_s) / spec.ambient_ramp_s, 1.0)
+                              : 1.0;
       truth_in.ambient_degC = truth_in.coolant_degC = ambient + 8.0 * ramp;
     }
     const Eigen::VectorXd& x = plant->Step(truth_in, spec.dt_s);

@@ -79,6 +79,10 @@ int main(int argc, char** argv) {
       dc.sd_floor_K = std::atof(argv[++i]);
     else if (a == "--node-process-sd-K" && i + 1 < argc)
       dc.node_process_sd_K = std::atof(argv[++i]);
+    else if (a == "--ambient-ramp-s" && i + 1 < argc)
+      base.ambient_ramp_s = std::atof(argv[++i]);
+    else if (a == "--fit-ambient-ramp-s" && i + 1 < argc)
+      base.fit_ambient_ramp_s = std::atof(argv[++i]);
     else if (a == "--sensor-step-gate-sd" && i + 1 < argc)
       dc.sensor_step_gate_sd = std::atof(argv[++i]);
     else {
@@ -94,7 +98,8 @@ int main(int argc, char** argv) {
           "  [--magnet-sd-K K (emulated rotor reading: white sd)] [--magnet-bias-K K (its slow "
           "bias, sd)]\n"
           "  [--magnet-bias-sd-K K (the filter's bias state)] [--rotor-heat-tau-s S]\n"
-          "  [--sensor-step-gate-sd G (0: off)]\n");
+          "  [--sensor-step-gate-sd G (0: off)] [--ambient-ramp-s S (the truth's; 0: a step)]\n"
+          "  [--fit-ambient-ramp-s S (the detector's ramp hypothesis; 0: the step only)]\n");
       return 2;
     }
   }

@@ -80,6 +80,27 @@ TEST(MismatchDetector, TheFluxReadingKeepsAnAmbientRiseOffTheRotor) {
   EXPECT_EQ(r.false_alarms, 0);
 }
 
+TEST(MismatchDetector, AnAmbientRampHypothesisNamesARampOfItsOwnDurationOnly) {
+  // The optional ramp form of the unmeasured ambient (off by default): a 10-minute hypothesis
+  // names the matrix's 10-minute rise right with its size, and a 30-minute rise still as rotor
+  // heat (slow boundary change and rotor heat look alike through the frame).
+  mc::CaseSpec spec;
+  spec.fault = mc::Fault::kAmbientRise;
+  spec.fault_s = 3600.0;
+  spec.duration_s = 3600.0 + 1500.0;
+  spec.seed = 7;
+  spec.fit_ambient_ramp_s = 600.0;
+  const mc::CaseResult r = mc::RunCase(spec, ModelDir());
+  EXPECT_EQ(r.at_end.effect, pe::MismatchEffect::kUnmeasuredAmbient)
+      << pe::DescribeFinding(r.at_end);
+  EXPECT_NEAR(r.at_end.value, 8.0, 0.5);
+  EXPECT_NE(r.at_end.runner_up, pe::MismatchEffect::kUnmeasuredAmbient);
+  spec.ambient_ramp_s = 1800.0;
+  spec.duration_s = 3600.0 + 2400.0;
+  const mc::CaseResult slow = mc::RunCase(spec, ModelDir());
+  EXPECT_EQ(slow.at_end.effect, pe::MismatchEffect::kRotorLoss) << pe::DescribeFinding(slow.at_end);
+}
+
 TEST(MismatchDetector, TheFluxReadingNamesRotorHeatAtFirst) {
   // Seed 2: from the frame alone the first name is loss_scale; with the rotor reading, rotor_loss.
   const mc::CaseResult frame_only = RunFault(mc::Fault::kRotorLoss, 2, 3600.0 + 600.0);
