@@ -40,6 +40,13 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
                                  {"iq_A", s.inputs.iq_A},
                                  {"ambient_degC", s.inputs.ambient_degC},
                                  {"coolant_degC", s.inputs.coolant_degC}});
+  // The disturbance-state filter's frame sensor offset, its sd and the sum of its steps (K):
+  // a sensor that stepped stays known as such; absent in older files and without that filter.
+  if (std::isfinite(s.sensor_offset_K) && std::isfinite(s.sensor_offset_sd_K) &&
+      std::isfinite(s.stepped_offset_K)) {
+    t.insert("frame_sensor_offset_K",
+             toml::array{s.sensor_offset_K, s.sensor_offset_sd_K, s.stepped_offset_K});
+  }
   // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
   // consecutive rejections.
   toml::array rx, rp, rprob, rrej, rm;
@@ -191,6 +198,14 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
       s.inputs.iq_A = (*t)["inputs"]["iq_A"].value_or(0.0);
       s.inputs.ambient_degC = (*t)["inputs"]["ambient_degC"].value_or(25.0);
       s.inputs.coolant_degC = (*t)["inputs"]["coolant_degC"].value_or(25.0);
+      std::vector<double> offset;
+      if (numbers("frame_sensor_offset_K", 3, offset)) {
+        s.sensor_offset_K = offset[0];
+        s.sensor_offset_sd_K = offset[1];
+        s.stepped_offset_K = offset[2];
+      } else if ((*t)["frame_sensor_offset_K"]) {
+        ok = false;  // present but damaged
+      }
       Eigen::Matrix3d moments;
       if (rm.size() == kMoments) {
         for (int i = 0; i < kMoments; ++i)

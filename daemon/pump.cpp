@@ -687,6 +687,11 @@ PumpSavedState Pump::Save() const {
   s.s_K2 = robust ? Eigen::MatrixXd(robust_.Filter().Covariance().topLeftCorner(n, n))
                   : sensor_.Covariance_K2();
   s.inputs = held_inputs_;
+  if (robust) {  // a sensor that stepped stays known as such across a restart
+    s.sensor_offset_K = robust_.SensorOffset_K();
+    s.sensor_offset_sd_K = robust_.SensorOffsetSd_K();
+    s.stepped_offset_K = robust_.SteppedOffset_K();
+  }
   s.resistance = identifier_.Save();
   s.trip_latched = snapshot_.alarm.trip_latched;
   const auto& names = model_->StateNames();
@@ -744,6 +749,14 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   // The disturbance-state filter is not saved: it goes on from the restored nodes, its
   // disturbances back at their priors, so that the published values do not jump at a restart.
   robust_.Initialise(x, s);
+  if (config_.disturbance_states && !std::isnan(state.sensor_offset_K)) {
+    try {
+      robust_.RestoreSensorOffset(state.sensor_offset_K, state.sensor_offset_sd_K,
+                                  state.stepped_offset_K);
+    } catch (const std::invalid_argument&) {
+      return false;  // damaged: the pump starts cold
+    }
+  }
   robust_.Nodes(robust_x_, robust_sd_);
   held_inputs_ = state.inputs;
   have_inputs_ = true;

@@ -96,6 +96,11 @@ struct PumpSavedState {
     double value_degC = kNaN;
   };
   std::vector<LatchedTrip> latched_trips;
+  /// The frame sensor's offset as the disturbance-state filter had it, its sd and the sum of its
+  /// steps, K (NaN: not saved; the offset then starts again from its prior).
+  double sensor_offset_K = kNaN;
+  double sensor_offset_sd_K = kNaN;
+  double stepped_offset_K = kNaN;
 };
 
 class Pump {

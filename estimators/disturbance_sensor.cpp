@@ -65,7 +65,8 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   sp_ = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
   bu_ = Eigen::VectorXd::Zero(n_aug_);
   c_ = Eigen::MatrixXd::Zero(1, n_aug_);
-  c_(0, lag_ >= 0 ? lag_ : frame_) = 1.0;
+  sensor_ = lag_ >= 0 ? lag_ : frame_;
+  c_(0, sensor_) = 1.0;
   c_(0, bias_) = 1.0;
   sm_ = Eigen::MatrixXd::Constant(1, 1, c.measurement_sd_K * c.measurement_sd_K);
   y_ = Eigen::VectorXd::Zero(1);
@@ -129,6 +130,7 @@ void DisturbanceThermalSensor::Initialise(double x0_degC) {
   filter_.Reset(x, s);
   frame_fused_last_ = reopen_offset_ = false;
   stepped_offset_K_ = 0.0;
+  last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
 }
 
 void DisturbanceThermalSensor::Initialise(const Eigen::VectorXd& x_degC,
@@ -150,6 +152,23 @@ void DisturbanceThermalSensor::Initialise(const Eigen::VectorXd& x_degC,
     s(lag_, lag_) = s_K2(frame_, frame_);
   }
   filter_.Reset(x, s);
+}
+
+void DisturbanceThermalSensor::RestoreSensorOffset(double offset_K, double sd_K, double stepped_K) {
+  if (!std::isfinite(offset_K) || !std::isfinite(stepped_K) || !(sd_K > 0.0) ||
+      !std::isfinite(sd_K)) {
+    throw std::invalid_argument(
+        "DisturbanceThermalSensor::RestoreSensorOffset: need a finite offset and step sum and a "
+        "positive sd");
+  }
+  Eigen::VectorXd x = filter_.State();
+  Eigen::MatrixXd s = filter_.Covariance();
+  x(bias_) = offset_K;
+  s.row(bias_).setZero();
+  s.col(bias_).setZero();
+  s(bias_, bias_) = sd_K * sd_K;
+  filter_.Reset(x, s);
+  stepped_offset_K_ = stepped_K;
 }
 
 double DisturbanceThermalSensor::NodeSd_K(int i) const {
@@ -265,24 +284,45 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
       y_all_(row_m_) = r.magnet_degC;
     }
   }
-  return filter_.Update(c_all_, y_all_, sm_all_);
+  const KalmanUpdateReport& report = filter_.Update(c_all_, y_all_, sm_all_);
+  if (frame) RememberReading(r.frame_degC);
+  return report;
 }
 
+double DisturbanceThermalSensor::PredictedReading_degC() const {
+  return filter_.State()(sensor_) + filter_.State()(bias_);
+}
+
+double DisturbanceThermalSensor::PredictedReadingVar_K2() const {
+  const Eigen::MatrixXd& p = filter_.Covariance();
+  return p(sensor_, sensor_) + 2.0 * p(sensor_, bias_) + p(bias_, bias_);
+}
+
+// The step between two readings against the step the filter predicted between them: the
+// reading's own increment, so a filter still far from a reading it has only begun to follow (a
+// restart, a cold start) sees no step where the sensor is steady.
 void DisturbanceThermalSensor::OpenOffsetOnStep(double frame_degC) {
   const double gate = config_.sensor_step_gate_sd;
-  if (!(gate > 0.0) || !(frame_fused_last_ || reopen_offset_)) return;
+  const bool comparable =
+      (frame_fused_last_ || reopen_offset_) && std::isfinite(last_reading_degC_);
   reopen_offset_ = false;
-  // The frame row's innovation and its variance on the predicted state (c_ is that row).
-  const Eigen::VectorXd& x = filter_.State();
-  const Eigen::MatrixXd& p = filter_.Covariance();
-  const int s_idx = lag_ >= 0 ? lag_ : frame_;
-  const double nu = frame_degC - x(s_idx) - x(bias_);
-  const double var = p(s_idx, s_idx) + 2.0 * p(s_idx, bias_) + p(bias_, bias_) + sm_(0, 0);
-  if (!(nu * nu > gate * gate * var)) return;
-  filter_.AddVariance(bias_, nu * nu);
+  if (!(gate > 0.0) || !comparable) return;
+  const double step =
+      (frame_degC - last_reading_degC_) - (PredictedReading_degC() - last_predicted_degC_);
+  // Two readings' noise, and what the prediction since the last update added to the uncertainty.
+  const double var =
+      2.0 * sm_(0, 0) + std::max(PredictedReadingVar_K2() - last_predicted_var_K2_, 0.0);
+  if (!(step * step > gate * gate * var)) return;
+  filter_.AddVariance(bias_, step * step);
   ++sensor_steps_;
-  last_sensor_step_K_ = nu;
-  stepped_offset_K_ += nu;
+  last_sensor_step_K_ = step;
+  stepped_offset_K_ += step;
+}
+
+void DisturbanceThermalSensor::RememberReading(double frame_degC) {
+  last_reading_degC_ = frame_degC;
+  last_predicted_degC_ = PredictedReading_degC();
+  last_predicted_var_K2_ = PredictedReadingVar_K2();
 }
 
 bool BoundaryOnlyThrough(const ThermalModel& model, const std::string& measured_node) {

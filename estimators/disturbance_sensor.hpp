@@ -44,11 +44,13 @@ struct DisturbanceSensorConfig {
   /// Random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s); 0 = no state.
   double loss_scale_sd = 0.002;
   double sd_floor_K = 1.0;  ///< added in quadrature to every reported node sd
-  /// A frame innovation beyond this many of its sds, between readings fused at consecutive steps
-  /// (or the first after ReopenSensorOffset()), is a step of the sensor's offset: the frame
-  /// cannot move that far in a step (its heat capacity; the frame-path heat's random walk is in
-  /// the sd), a connector or calibration can. The offset's variance then grows by the
-  /// innovation squared, so the update gives the step to the offset. 0 = off.
+  /// A step of the reading between readings fused at consecutive steps (or the last one before
+  /// a gap and the first after ReopenSensorOffset()) that differs from the step the filter
+  /// predicted between them by more than this many sds (two readings' noise and what the
+  /// prediction added) is a step of the sensor's offset: the frame cannot move that far in a
+  /// step (its heat capacity; the frame-path heat's random walk is in the prediction), a
+  /// connector or calibration can. The offset's variance then grows by that difference
+  /// squared, so the update gives the step to the offset. 0 = off.
   double sensor_step_gate_sd = 8.0;
   /// Whether the resistance-based winding temperature is fused: the update then has a winding
   /// row (and a bias state); without it a winding reading given to Step() is not used.
@@ -136,6 +138,10 @@ class DisturbanceThermalSensor {
   int SensorSteps() const { return sensor_steps_; }
   double LastSensorStep_K() const { return last_sensor_step_K_; }
   double SteppedOffset_K() const { return stepped_offset_K_; }
+  /// Sets the sensor's offset estimate (K), its sd (K, uncorrelated with the rest) and the sum of
+  /// its steps (SteppedOffset_K), as saved before a restart, after Initialise. Throws
+  /// std::invalid_argument for a non-finite value or an sd that is not positive.
+  void RestoreSensorOffset(double offset_K, double sd_K, double stepped_K);
   /// The next fused frame reading may open a step of the offset even though the previous step
   /// fused none (a sensor back from a fault that left it out, such as a jump beyond physics).
   void ReopenSensorOffset() { reopen_offset_ = true; }
@@ -151,12 +157,21 @@ class DisturbanceThermalSensor {
   void GaussMarkov(int state, double sd, double tau_s, double dt_s);
   /// The sensor-offset step test on the predicted state (sensor_step_gate_sd).
   void OpenOffsetOnStep(double frame_degC);
+  /// After an update with a frame reading: that reading and the filter's reading of it.
+  void RememberReading(double frame_degC);
+  double PredictedReading_degC() const;  ///< the sensor state plus its offset
+  double PredictedReadingVar_K2() const;
 
   int n_ = 0, lag_ = -1, df_ = 0, dr_ = -1, ls_ = -1, bias_ = 0, n_aug_ = 0, frame_ = 0,
       rotor_ = -1;
   int wb_ = -1, mb_ = -1, magnet_ = -1;  ///< winding and magnet reading biases, the magnet node
   int row_w_ = -1, row_m_ = -1;          ///< their rows in the update (-1: none)
   bool frame_fused_last_ = false;        ///< the previous step fused a frame reading
+  int sensor_ = 0;  ///< the state the frame sensor reads (its lag, or the frame)
+  /// The last fused frame reading, the filter's reading of it after that update and its variance.
+  double last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
+  double last_predicted_degC_ = 0.0;
+  double last_predicted_var_K2_ = 0.0;
   bool reopen_offset_ = false;
   int sensor_steps_ = 0;
   double last_sensor_step_K_ = 0.0;

@@ -97,7 +97,9 @@ pumptherm::alarm_clear_t SignedClear(std::int64_t utime, std::int64_t counter,
 /// `iq_A`, whose temperatures come from the improved Saheba model (the filter's own model).
 class Bench {
  public:
-  explicit Bench(const std::string& config_text)
+  /// `plant_degC`: the plant's start (empty: every node at 25 degC), e.g. another bench's truth
+  /// for a restart.
+  explicit Bench(const std::string& config_text, const Eigen::VectorXd& plant_degC = {})
       : config_(ParseConfig(config_text,
                             std::string(PUMPTHERM_SOURCE_DIR) + "/tests/daemon/pipeline.toml")),
         gateway_(config_),
@@ -107,8 +109,10 @@ class Bench {
         model_(estimators::ThermalModel::Parse(
             ReadTextFile(ResolveResource(ResourceKind::kModel, "saheba2010-improved")),
             "improved")),
-        plant_(model_, Eigen::VectorXd::Constant(model_.StateCount(), 25.0), {.process_sd_K = 0.0},
-               7) {
+        plant_(model_,
+               plant_degC.size() > 0 ? plant_degC
+                                     : Eigen::VectorXd::Constant(model_.StateCount(), 25.0),
+               {.process_sd_K = 0.0}, 7) {
     iface_ = gateway_.Interface("can0");
   }
 
@@ -437,6 +441,57 @@ TEST(Pipeline, AFrameSensorJumpIsASuspectedSensorFault) {
   EXPECT_NEAR(s.mismatch.value, 3.0, 0.5);
   EXPECT_EQ(LastAlarmOnLcm(b).mismatch_state, pumptherm::alarm_t::MISMATCH_SENSOR_FAULT_SUSPECTED);
   EXPECT_EQ(LastMismatchOnCan(b).first, 3.0);
+}
+
+// A frame reading that steps 3 K is an offset of the sensor: the published frame stays on the
+// truth, implausible_sensor "offset" is raised, and both outlive a restart (saved state).
+TEST(Pipeline, AFrameSensorStepIsAnOffsetThatOutlivesARestart) {
+  constexpr unsigned kImplausible =
+      1U << static_cast<unsigned>(estimators::AlarmReason::kImplausibleSensor);
+  Bench b(Config());
+  b.Run(900.0, 40.0);
+  EXPECT_EQ(b.gateway_.pumps()[0]->snapshot().sensor_steps, 0U);
+  EXPECT_EQ(b.gateway_.pumps()[0]->snapshot().alarm.active_reasons & kImplausible, 0U);
+  b.frame_offset_K = 3.0;
+  b.Run(30.0, 40.0);
+  const PumpSnapshot& s = b.gateway_.pumps()[0]->snapshot();
+  EXPECT_EQ(s.sensor_steps, 1U);
+  EXPECT_NEAR(s.stepped_offset_K, 3.0, 0.3);
+  EXPECT_NEAR(s.node_degC[0], b.truth_(0), 1.0) << "the published frame followed the step";
+  EXPECT_NE(s.alarm.active_reasons & kImplausible, 0U);
+  const std::string text = b.gateway_.SaveState();
+  EXPECT_NE(text.find("frame_sensor_offset_K"), std::string::npos) << text;
+
+  // Restored in a bench whose plant goes on from the same truth.
+  Bench r(Config(), b.truth_);
+  r.t_us_ = b.t_us_ + 5'000'000;
+  r.frame_offset_K = 3.0;
+  std::string warning;
+  ASSERT_EQ(r.gateway_.RestoreState(text, r.t_us_, &warning), 1) << warning;
+  r.Run(60.0, 40.0);
+  const PumpSnapshot& after = r.gateway_.pumps()[0]->snapshot();
+  EXPECT_EQ(after.sensor_steps, 0U);
+  EXPECT_NEAR(after.stepped_offset_K, 3.0, 0.3);
+  EXPECT_NEAR(after.sensor_offset_K, s.sensor_offset_K, 0.5);
+  EXPECT_NE(after.alarm.active_reasons & kImplausible, 0U);
+  EXPECT_NEAR(after.node_degC[0], r.truth_(0), 1.0);
+
+  // Restored against a plant that is not where the state says (started cold): the readings are
+  // far from the restored frame, a mismatch the filter follows; the steady readings are no step.
+  Bench cold(Config());
+  cold.t_us_ = b.t_us_ + 5'000'000;
+  cold.frame_offset_K = 3.0;
+  ASSERT_EQ(cold.gateway_.RestoreState(text, cold.t_us_, &warning), 1) << warning;
+  ASSERT_GT(std::abs(b.truth_(0) - 25.0), 5.0);
+  cold.Run(60.0, 40.0);
+  EXPECT_EQ(cold.gateway_.pumps()[0]->snapshot().sensor_steps, 0U);
+
+  // A damaged saved offset makes that pump start cold, with a warning.
+  std::string damaged = text;
+  damaged.replace(damaged.find("frame_sensor_offset_K"), 21, "frame_sensor_offset_K = [ 1.0 ]\nx");
+  Bench d(Config());
+  d.t_us_ = b.t_us_ + 5'000'000;
+  EXPECT_EQ(d.gateway_.RestoreState(damaged, d.t_us_, &warning), 0);
 }
 
 TEST(Pipeline, NothingIsPublishedAsATemperatureBeforeTheFirstEstimate) {
