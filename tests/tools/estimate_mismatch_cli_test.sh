@@ -4,7 +4,8 @@
 # filter (--disturbance-states). Truth from `pumptherm simulate` on tmp-generic, the frame as the
 # measurement: on the nominal model the verdict ends consistent; with the frame-to-ambient
 # resistance x4 (cooling lost) it ends a plant change, and the disturbance-state filter keeps the
-# rotor within its +-2 sd where the standard filter does not.
+# rotor within its +-2 sd where the standard filter does not; a reading that steps +3 K goes into
+# its sensor offset (frame_sensor_offset_K).
 set -euo pipefail
 exe=$1
 models=$2  # estimators/models of the source tree
@@ -47,6 +48,16 @@ echo "rotor at 3600 s: truth $truth; standard $r_std +- $sd_std; disturbance sta
 awk -v t="$truth" -v a="$r_std" -v sa="$sd_std" -v b="$r_dist" -v sb="$sd_dist" 'function abs(x) { return x < 0 ? -x : x }
   BEGIN { exit !(abs(b - t) <= 2 * sb && abs(a - t) > 2 * sa && abs(b - t) < abs(a - t)) }' ||
   fail "the disturbance-state filter does not cover the rotor where the standard filter fails"
+# A frame reading that steps +3 K at 1800 s: the disturbance filter takes it as the sensor's offset
+# (frame_sensor_offset_K, as the daemon's CSV) and its frame stays on the truth.
+awk -F, 'BEGIN { OFS = "," } NR > 1 && $1 >= 1800 { $NF = $NF + 3 } { print }' "$tmp/meas_healthy.csv" > "$tmp/meas_offset.csv"
+est offset dist --disturbance-states
+o=$(col "$tmp/est_offset_dist.csv" frame_sensor_offset_K)
+f=$(col "$tmp/est_offset_dist.csv" frame_C); ft=$(col "$tmp/truth_healthy.csv" frame_C)
+echo "reading +3 K from 1800 s: offset $o K at 3600 s; frame $f against $ft true"
+awk -v o="$o" -v f="$f" -v t="$ft" 'function abs(x) { return x < 0 ? -x : x }
+  BEGIN { exit !(abs(o - 3) <= 0.5 && abs(f - t) <= 1) }' ||
+  fail "the stepped reading was not taken as the sensor's offset"
 set +e
 "$exe" estimate --model tmp-generic --input "$tmp/meas_lost.csv" --measure frame,rotor --disturbance-states \
   --output "$tmp/bad.csv" 2> "$tmp/err.txt"

@@ -178,6 +178,7 @@ int RunEstimate(EstimateOptions& o) {
   if (!winding.empty()) columns.push_back("winding_innovation_K");
   if (!magnet.empty()) columns.push_back("magnet_innovation_K");
   columns.push_back("nis");
+  if (o.disturbance_states) columns.push_back("frame_sensor_offset_K");  // as the daemon's CSV
   const std::size_t numeric_columns = columns.size();
   if (detector) {
     for (const char* c : {"mismatch_state", "mismatch_effect", "mismatch_value"})
@@ -265,6 +266,7 @@ int RunEstimate(EstimateOptions& o) {
       row[c++] = valid ? rep.innovation(r++) : std::nan("");
     }
     row[c++] = k > 0 && rep.measurements > 0 ? rep.nis : std::nan("");
+    if (dist) row[c++] = dist->SensorOffset_K();
     if (detector) {
       const estimators::MismatchFinding& f = detector->Finding();
       text[0] = estimators::MismatchStateName(f.state);
@@ -296,7 +298,8 @@ const SubcommandRegistrar kRegistrar{
           "--output,-o", o->output,
           "CSV to write: <node>_C and <node>_sd_K per node, innovations (of the standard "
           "filter), nis and, with one --measure node, the mismatch detector's "
-          "mismatch_state, mismatch_effect, mismatch_value (as the daemon's CSV)");
+          "mismatch_state, mismatch_effect, mismatch_value (as the daemon's CSV; with "
+          "--disturbance-states also frame_sensor_offset_K)");
       app.add_option("--measure", o->measure, "Measured nodes, comma-separated")
           ->capture_default_str();
       app.add_option("--winding-column", o->winding_column,
