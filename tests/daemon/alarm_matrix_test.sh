@@ -31,7 +31,8 @@ outage_step_inside - 4 30
 outage_step_before - 4 30
 fast_rise - 2 30
 band - 2 30
-lossy_link 0 4 30"
+lossy_link 0 4 30
+offset_cooling - 2 30"
 
 # first CSV COLUMN THRESHOLD: first time_s where COLUMN >= THRESHOLD ("none" if never).
 first() {
