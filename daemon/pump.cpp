@@ -321,11 +321,10 @@ bool Pump::Advance(std::int64_t t_us) {
   return snapshot_.alarm_changes != before;
 }
 
-void Pump::ThermalStep(std::int64_t end_us) {
-  estimators::ThermalInputs in = held_inputs_;
-  double mean_iq_A = kNaN;
-  const bool fresh_inputs = n_inputs_ > 0;
-  if (fresh_inputs) {
+bool Pump::PeriodInputs(estimators::ThermalInputs& in, double& mean_iq_A) {
+  in = held_inputs_;
+  mean_iq_A = kNaN;
+  if (n_inputs_ > 0) {
     in.id_A = std::sqrt(sum_id2_ / n_inputs_);
     in.iq_A = std::sqrt(sum_iq2_ / n_inputs_);
     in.speed_rpm = sum_speed_ / n_inputs_;
@@ -339,7 +338,63 @@ void Pump::ThermalStep(std::int64_t end_us) {
     have_inputs_ = true;
   }
   if (std::isfinite(ambient_degC_)) in.ambient_degC = in.coolant_degC = ambient_degC_;
-  if (!have_inputs_) return;
+  return have_inputs_;
+}
+
+void Pump::StepRobust(const estimators::ThermalInputs& in, double measured,
+                      estimators::SensorFault fault) {
+  // A sensor back from a jump beyond physics may read at a new offset: its first reading may
+  // open the offset (DisturbanceThermalSensor::ReopenSensorOffset).
+  if (last_fault_ == estimators::SensorFault::kJumping && fault == estimators::SensorFault::kNone)
+    robust_.ReopenSensorOffset();
+  // The frame and the magnet from the flux; not the identified winding, whose errors on the
+  // demo (7-9 K while tracking) are beyond its bias state (docs/virtual-sensor.md).
+  robust_.Step(in, period_s_, RobustReadings(measured));
+  robust_.Nodes(robust_x_, robust_sd_);
+  snapshot_.sensor_offset_K = robust_.SensorOffset_K();
+  snapshot_.sensor_steps = static_cast<std::uint64_t>(robust_.SensorSteps());
+  snapshot_.last_sensor_step_K = robust_.LastSensorStep_K();
+  snapshot_.stepped_offset_K = robust_.SteppedOffset_K();
+}
+
+// A filter driven outside any physical range is no estimate. The copper loss grows with the
+// temperature (Saheba 2010 eqs. 12-16), so currents far above any rating, held while the frame
+// sensor is silent, make the linearised network unstable and the estimate runs away to Inf
+// within minutes. Then nothing is published as a temperature ("n/a", alarms see unknown nodes
+// and an unconverged filter, a latched trip stays), the state is not saved, and the next step
+// starts the filter again.
+bool Pump::ResetIfDiverged(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
+  const bool diverged =
+      !x.allFinite() || !s.diagonal().allFinite() ||
+      (config_.disturbance_states && !robust_sd_.allFinite()) ||
+      (x.size() > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC));
+  if (diverged) {
+    ++counters_.filter_resets;
+    initialised_ = false;
+  }
+  return diverged;
+}
+
+double Pump::PublishNodes(bool diverged, const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
+  const bool robust = config_.disturbance_states;
+  double max_sd = diverged ? kInf : 0.0;
+  for (int i = 0; i < x.size(); ++i) {
+    snapshot_.node_degC[static_cast<std::size_t>(i)] = diverged ? kNaN : x(i);
+    snapshot_.node_sd_K[static_cast<std::size_t>(i)] = diverged ? kNaN
+                                                       : robust ? robust_sd_(i)
+                                                                : std::sqrt(std::max(s(i, i), 0.0));
+    // Convergence is judged on the standard filter: the disturbance-state filter's rotor sd
+    // stays large by design (heat inside is barely seen), which is not a filter still settling.
+    if (!diverged) max_sd = std::max(max_sd, std::sqrt(std::max(s(i, i), 0.0)));
+  }
+  return max_sd;
+}
+
+void Pump::ThermalStep(std::int64_t end_us) {
+  const bool fresh_inputs = n_inputs_ > 0;
+  estimators::ThermalInputs in;
+  double mean_iq_A = kNaN;
+  if (!PeriodInputs(in, mean_iq_A)) return;
   // The frame sensor is fused only while SensorHealth finds no fault: a failed sensor is left
   // out and the filter runs on the model (and the winding resistance), its sd growing.
   const estimators::SensorFault fault = sensor_health_.Fault(static_cast<double>(end_us) * 1e-6);
@@ -370,20 +425,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
     ++counters_.rejected_values;
     return;
   }
-  if (config_.disturbance_states) {
-    // A sensor back from a jump beyond physics may read at a new offset: its first reading may
-    // open the offset (DisturbanceThermalSensor::ReopenSensorOffset).
-    if (last_fault_ == estimators::SensorFault::kJumping && fault == estimators::SensorFault::kNone)
-      robust_.ReopenSensorOffset();
-    // The frame and the magnet from the flux; not the identified winding, whose errors on the
-    // demo (7-9 K while tracking) are beyond its bias state (docs/virtual-sensor.md).
-    robust_.Step(in, period_s_, RobustReadings(measured));
-    robust_.Nodes(robust_x_, robust_sd_);
-    snapshot_.sensor_offset_K = robust_.SensorOffset_K();
-    snapshot_.sensor_steps = static_cast<std::uint64_t>(robust_.SensorSteps());
-    snapshot_.last_sensor_step_K = robust_.LastSensorStep_K();
-    snapshot_.stepped_offset_K = robust_.SteppedOffset_K();
-  }
+  if (config_.disturbance_states) StepRobust(in, measured, fault);
   last_fault_ = fault;
   ++counters_.thermal_steps;
   CheckModel(in, measured, end_us);
@@ -391,29 +433,8 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const bool robust = config_.disturbance_states;
   const Eigen::VectorXd& x = robust ? robust_x_ : sensor_.Estimate_degC();
   const Eigen::MatrixXd& s = sensor_.Covariance_K2();
-  // A filter driven outside any physical range is no estimate. The copper loss grows with the
-  // temperature (Saheba 2010 eqs. 12-16), so currents far above any rating, held while the
-  // frame sensor is silent, make the linearised network unstable and the estimate runs away
-  // to Inf within minutes. Then nothing is published as a
-  // temperature ("n/a", alarms see unknown nodes and an unconverged filter, a latched trip
-  // stays), the state is not saved, and the next step starts the filter again.
-  const bool diverged =
-      !x.allFinite() || !s.diagonal().allFinite() || (robust && !robust_sd_.allFinite()) ||
-      (x.size() > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC));
-  if (diverged) {
-    ++counters_.filter_resets;
-    initialised_ = false;
-  }
-  double max_sd = diverged ? kInf : 0.0;
-  for (int i = 0; i < x.size(); ++i) {
-    snapshot_.node_degC[static_cast<std::size_t>(i)] = diverged ? kNaN : x(i);
-    snapshot_.node_sd_K[static_cast<std::size_t>(i)] = diverged ? kNaN
-                                                       : robust ? robust_sd_(i)
-                                                                : std::sqrt(std::max(s(i, i), 0.0));
-    // Convergence is judged on the standard filter: the disturbance-state filter's rotor sd
-    // stays large by design (heat inside is barely seen), which is not a filter still settling.
-    if (!diverged) max_sd = std::max(max_sd, std::sqrt(std::max(s(i, i), 0.0)));
-  }
+  const bool diverged = ResetIfDiverged(x, s);
+  const double max_sd = PublishNodes(diverged, x, s);
   snapshot_.time_us = end_us;
   snapshot_.initialised = !diverged;
   snapshot_.resistance = r;
@@ -424,13 +445,11 @@ void Pump::ThermalStep(std::int64_t end_us) {
   snapshot_.ambient_degC = in.ambient_degC;
   snapshot_.speed_rpm = in.speed_rpm;
   // The frame sensor's own innovation test (its row comes first when it was measured).
-  double nis = kNaN;
-  snapshot_.innovation_K = kNaN;
+  snapshot_.innovation_K = snapshot_.nis = kNaN;
   if (std::isfinite(measured) && report->measurements > 0 && report->innovation_var(0) > 0.0) {
     snapshot_.innovation_K = report->innovation(0);
-    nis = report->innovation(0) * report->innovation(0) / report->innovation_var(0);
+    snapshot_.nis = report->innovation(0) * report->innovation(0) / report->innovation_var(0);
   }
-  snapshot_.nis = nis;
 
   int ttt_node = -1;
   const double ttt = diverged ? kNaN : TimeToTrip_s(in, &ttt_node);
@@ -453,28 +472,34 @@ void Pump::ThermalStep(std::int64_t end_us) {
   }
   alarm_values_.back() = winding_res;
   estimators::AlarmInputs ai;
-  ai.node_degC = alarm_values_.data();
-  ai.node_sd_K = alarm_sd_.data();
   ai.sensor_degC = measured;
   ai.sensor_raw_degC = raw;
   ai.sensor_fault = fault_alarm;
   ai.sensor_model_degC = measured_state_ >= 0 && !diverged ? x(measured_state_) : kNaN;
+  ai.sensor_nis = snapshot_.nis;
+  ai.sensor_offset_K = robust && !diverged ? snapshot_.stepped_offset_K : kNaN;
+  ai.estimators_converged = max_sd < kConvergedSd_K;
+  ai.time_to_trip_s = ttt;
+  ai.time_to_trip_node = ttt_node;
+  StepAlarms(end_us, ai);
+}
+
+void Pump::StepAlarms(std::int64_t end_us, estimators::AlarmInputs& ai) {
+  ai.node_degC = alarm_values_.data();
+  ai.node_sd_K = alarm_sd_.data();
   // A model the plant no longer follows makes the filter disagree with a sound sensor: the
   // disagreement test is held (neither raised nor cleared) while the mismatch test blames the
   // plant or has not named the cause yet.
   const auto ms = snapshot_.mismatch.state;
   const bool plant_blamed = ms == estimators::MismatchState::kPlantChange ||
                             ms == estimators::MismatchState::kUnexplained;
-  ai.sensor_nis = plant_blamed ? kNaN : nis;
-  ai.sensor_offset_K = robust && !diverged ? snapshot_.stepped_offset_K : kNaN;
+  if (plant_blamed) ai.sensor_nis = kNaN;
   ai.telemetry_age_s = TelemetryAge_s(end_us);
-  // The alarms rest on the virtual sensor: it must have converged. The identifier's health is
-  // published with its estimate (status) but is no alarm: the filter uses its winding
-  // temperature only while it is tracking, so an identifier still converging (a pump whose load
-  // has not changed yet) costs accuracy, not safety.
-  ai.estimators_converged = max_sd < kConvergedSd_K;
-  ai.time_to_trip_s = ttt;
-  ai.time_to_trip_node = ttt_node;
+  // The alarms rest on the virtual sensor: it must have converged (the caller's
+  // estimators_converged). The identifier's health is published with its estimate (status) but
+  // is no alarm: the filter uses its winding temperature only while it is tracking, so an
+  // identifier still converging (a pump whose load has not changed yet) costs accuracy, not
+  // safety.
   const estimators::AlarmState before = snapshot_.alarm;
   snapshot_.alarm = alarms_.Step(static_cast<double>(end_us) * 1e-6, ai);
   const auto& now = snapshot_.alarm;

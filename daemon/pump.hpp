@@ -169,6 +169,20 @@ class Pump {
 
  private:
   void ThermalStep(std::int64_t step_end_us);
+  /// The period's inputs into `in` (mean squared currents, mean speed, the latest ambient; held
+  /// when no fast frame came) and the mean iq; false while nothing is known to step on.
+  bool PeriodInputs(estimators::ThermalInputs& in, double& mean_iq_A);
+  /// One step of the disturbance-state filter, its nodes and its sensor offset into the snapshot.
+  void StepRobust(const estimators::ThermalInputs& in, double measured,
+                  estimators::SensorFault fault);
+  /// Whether the published filter left any physical range (it is then reset and counted).
+  bool ResetIfDiverged(const Eigen::VectorXd& x, const Eigen::MatrixXd& s);
+  /// The published nodes and sds into the snapshot (NaN when diverged); returns the standard
+  /// filter's largest node sd (convergence is judged on it).
+  double PublishNodes(bool diverged, const Eigen::VectorXd& x, const Eigen::MatrixXd& s);
+  /// The alarm step on `ai` (the caller's sensor, convergence and forecast inputs; the node
+  /// values, the telemetry age and the plant-blamed hold added here).
+  void StepAlarms(std::int64_t end_us, estimators::AlarmInputs& ai);
   /// This step's magnet measurement from the identifier's line at the period's mean iq and
   /// electrical speed `w_rad_per_s` (NaN value when unusable); see pump.cpp.
   void BackEmfMeasurement(std::int64_t step_end_us, double iq_A, double w_rad_per_s);
