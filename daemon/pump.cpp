@@ -746,6 +746,14 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
       !std::isfinite(in.coolant_degC)) {
     return false;
   }
+  // A saved sensor offset: all three numbers finite, its sd positive (checked before anything is
+  // restored, so that a refused state leaves the pump as it was).
+  const bool offset_saved = !std::isnan(state.sensor_offset_K);
+  if (offset_saved &&
+      (!std::isfinite(state.sensor_offset_K) || !std::isfinite(state.stepped_offset_K) ||
+       !std::isfinite(state.sensor_offset_sd_K) || !(state.sensor_offset_sd_K > 0.0))) {
+    return false;
+  }
   std::vector<estimators::AlarmMonitor::LatchedTrip> trips;
   if (!TripIndices(state, trips)) return false;
   Eigen::VectorXd x = state.x_degC;
@@ -774,13 +782,9 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   // The disturbance-state filter is not saved: it goes on from the restored nodes, its
   // disturbances back at their priors, so that the published values do not jump at a restart.
   robust_.Initialise(x, s);
-  if (config_.disturbance_states && !std::isnan(state.sensor_offset_K)) {
-    try {
-      robust_.RestoreSensorOffset(state.sensor_offset_K, state.sensor_offset_sd_K,
-                                  state.stepped_offset_K);
-    } catch (const std::invalid_argument&) {
-      return false;  // damaged: the pump starts cold
-    }
+  if (config_.disturbance_states && offset_saved) {
+    robust_.RestoreSensorOffset(state.sensor_offset_K, state.sensor_offset_sd_K,
+                                state.stepped_offset_K);
   }
   robust_.Nodes(robust_x_, robust_sd_);
   held_inputs_ = state.inputs;

@@ -492,6 +492,13 @@ TEST(Pipeline, AFrameSensorStepIsAnOffsetThatOutlivesARestart) {
   Bench d(Config());
   d.t_us_ = b.t_us_ + 5'000'000;
   EXPECT_EQ(d.gateway_.RestoreState(damaged, d.t_us_, &warning), 0);
+  // Three numbers, but an sd of zero: refused by the pump before anything is restored.
+  std::string zero_sd = text;
+  zero_sd.replace(zero_sd.find("frame_sensor_offset_K"), 21,
+                  "frame_sensor_offset_K = [ 3.0, 0.0, 3.0 ]\nx");
+  Bench z(Config());
+  z.t_us_ = b.t_us_ + 5'000'000;
+  EXPECT_EQ(z.gateway_.RestoreState(zero_sd, z.t_us_, &warning), 0);
 }
 
 TEST(Pipeline, NothingIsPublishedAsATemperatureBeforeTheFirstEstimate) {
