@@ -132,9 +132,9 @@ class DisturbanceThermalSensor {
     return std::sqrt(std::max(filter_.Covariance()(bias_, bias_), 0.0));
   }
   /// Steps of the sensor's offset found so far (sensor_step_gate_sd), the last one's size (the
-  /// innovation that opened it, K; 0 before any) and the sum of the steps since the last
-  /// Initialise (how far the reading stepped away from the frame, K: a slow drift of the offset
-  /// state is not in it).
+  /// reading's step less the predicted one, K; 0 before any) and the sum of the steps since the
+  /// last Initialise (how far the reading stepped away from the frame, K: a slow drift of the
+  /// offset state is not in it).
   int SensorSteps() const { return sensor_steps_; }
   double LastSensorStep_K() const { return last_sensor_step_K_; }
   double SteppedOffset_K() const { return stepped_offset_K_; }
