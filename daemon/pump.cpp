@@ -489,11 +489,12 @@ void Pump::StepAlarms(std::int64_t end_us, estimators::AlarmInputs& ai) {
   ai.node_sd_K = alarm_sd_.data();
   // A model the plant no longer follows makes the filter disagree with a sound sensor: the
   // disagreement test is held (neither raised nor cleared) while the mismatch test blames the
-  // plant or has not named the cause yet.
+  // plant, has not named the cause yet, or is still learning (it cannot tell them apart then).
   const auto ms = snapshot_.mismatch.state;
-  const bool plant_blamed = ms == estimators::MismatchState::kPlantChange ||
-                            ms == estimators::MismatchState::kUnexplained;
-  if (plant_blamed) ai.sensor_nis = kNaN;
+  const bool plant_may_be_blamed = ms == estimators::MismatchState::kPlantChange ||
+                                   ms == estimators::MismatchState::kUnexplained ||
+                                   ms == estimators::MismatchState::kLearning;
+  if (plant_may_be_blamed) ai.sensor_nis = kNaN;
   ai.telemetry_age_s = TelemetryAge_s(end_us);
   // The alarms rest on the virtual sensor: it must have converged (the caller's
   // estimators_converged). The identifier's health is published with its estimate (status) but

@@ -6,7 +6,8 @@
 # trip acts on x + 2 sd and on the bounds of a silent link or a blind filter, docs/daemon.md
 # "Alarm rule"; the table shows the truth at the trip); no trip where the truth
 # never crosses; the sensor-fault alarm within 60 s of the sensor failing and never on a pump
-# whose sensor works; no chatter (alarm level changes counted). Then the same recording with the
+# whose sensor works; implausible_sensor only where the RTD's reading goes wrong; no chatter
+# (alarm level changes counted). Then the same recording with the
 # clock stepped back and forward (offline: docs/daemon.md "Time").
 # Usage: alarm_matrix_test.sh PUMPTHERM PUMPTHERMD SRC_DIR [OUT_TABLE]  (KEEP_TMP=1 keeps the
 # recording, the truth and the daemon's CSV files, and names their directory on stderr)
@@ -22,17 +23,19 @@ log=$tmp/alarm-matrix.log
 origin=$(head -n 1 "$log" | sed 's/^(\([0-9]*\)\..*/\1/')
 
 # Pump, time the sensor failed (s, "-" = it does not), most alarm level changes allowed, latest
-# trip allowed after the truth's crossing (s): 30 s for every case, the goal.
-cases="healthy - 0 30
-frozen_cooling 60 2 30
-missing_cooling 60 2 30
-frozen_load 60 2 30
-outage_step_inside - 4 30
-outage_step_before - 4 30
-fast_rise - 2 30
-band - 2 30
-lossy_link 0 4 30
-offset_cooling - 2 30"
+# trip allowed after the truth's crossing (s): 30 s for every case, the goal; whether the RTD's
+# reading goes wrong (frozen, stepped: implausible_sensor allowed) or stays right however the
+# plant or the link behave ("-": implausible_sensor never, it is raised for the sensor only).
+cases="healthy - 0 30 -
+frozen_cooling 60 2 30 wrong
+missing_cooling 60 2 30 -
+frozen_load 60 2 30 wrong
+outage_step_inside - 4 30 -
+outage_step_before - 4 30 -
+fast_rise - 2 30 -
+band - 2 30 -
+lossy_link 0 4 30 -
+offset_cooling - 2 30 wrong"
 
 # first CSV COLUMN THRESHOLD: first time_s where COLUMN >= THRESHOLD ("none" if never).
 first() {
@@ -61,7 +64,7 @@ run() {
     --csv-time-origin "$origin" >"$tmp/out-$name.txt" 2>"$tmp/err-$name.txt"
   echo "| run | pump | true trip crossing s | trip s | delay s | truth at trip degC | sensor fault s | level changes |"
   echo "| --- | --- | --- | --- | --- | --- | --- | --- |"
-  while read -r pump failed_s max_changes max_delay; do
+  while read -r pump failed_s max_changes max_delay reading; do
     max_changes=$((max_changes + extra))
     local truth=$tmp/$pump.truth.csv csv=$est/$pump.csv
     local tt at sf ch tat
@@ -94,6 +97,10 @@ run() {
         { echo "FAIL: $name/$pump: sensor fault at $sf s, not within 60 s of $failed_s s"; fail=1; }
     fi
     ((ch <= max_changes)) || { echo "FAIL: $name/$pump: alarm level changed $ch times (at most $max_changes)"; fail=1; }
+    local imp
+    imp=$(first_bit "$csv" alarm_active_reasons 5)
+    [[ $reading == wrong || $imp == none ]] ||
+      { echo "FAIL: $name/$pump: implausible_sensor at $imp s, the RTD reads right"; fail=1; }
   done <<<"$cases"
 }
 
