@@ -29,14 +29,14 @@ estimators::ResistanceIdentifierConfig IdentifierConfig(const estimators::MotorD
   return c;
 }
 
-/// Whether the identifier's back-EMF line E = psi_f + Rs iq/w is fitted to data: not the
-/// nameplate (initialising) and not from invalid input. It is usable whatever the split between
-/// its two terms: at constant current a falling flux (a heating magnet) can move Rs out of its
-/// plausible band (implausible) or be held (held, not identifiable) while E still follows uq/w.
 /// The sd of a reading kept as a row without weight (1000 K: its gain is below 1e-6 of a
 /// kelvin-scale sd's).
 constexpr double kUninformativeSd_K = 1000.0;
 
+/// Whether the identifier's back-EMF line E = psi_f + Rs iq/w is fitted to data: not the
+/// nameplate (initialising) and not from invalid input. It is usable whatever the split between
+/// its two terms: at constant current a falling flux (a heating magnet) can move Rs out of its
+/// plausible band (implausible) or be held (held, not identifiable) while E still follows uq/w.
 bool FluxUsable(estimators::ResistanceStatus s) {
   return s != estimators::ResistanceStatus::kInitialising &&
          s != estimators::ResistanceStatus::kInvalidInput;

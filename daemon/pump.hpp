@@ -6,7 +6,6 @@
 
 #include <Eigen/Dense>
 #include <cstdint>
-#include <cstdlib>
 #include <limits>
 #include <memory>
 #include <optional>

@@ -459,11 +459,7 @@ void MismatchDetector::Fit(double now_s) {
         auto e = fit_e_.col(col);
         fit_tmp_ = e.head(nb);
         e.head(nb).noalias() = d.ad * fit_tmp_;
-        if (h == kAmbientRamp) {
-          e += ramp * fit_phiu_.col(h);
-        } else {
-          e += fit_phiu_.col(h);
-        }
+        e += (h == kAmbientRamp ? ramp : 1.0) * fit_phiu_.col(h);
         if (h == kCooling) e += fit_onset_offset_K_(o) * fit_frame_unit_;
         double g = e(sensor_) + e(bias_);
         if (h == kOffset) g += 1.0;

@@ -166,9 +166,9 @@ class MismatchDetector {
   /// Adds the magnet channel's sums (de-meaned over the window) to fit_a_, fit_b_, and marks in
   /// fit_veto_ the columns whose fitted size the magnet samples contradict.
   void AddMagnetChannel(int columns, double sum_r, double sum_rr, int samples);
-  /// Heat per unit effect size of hypothesis h at `in`, with the pre-step state `x_aug`.
   /// The ramp hypothesis's share of its size `since_onset_s` after its onset (0..1).
   double AmbientRamp(double since_onset_s) const;
+  /// Heat per unit effect size of hypothesis h at `in`, with the pre-step state `x_aug`.
   void EffectForcing(int h, const ThermalInputs& in, const Eigen::VectorXd& x_aug,
                      double frame_degC, Eigen::VectorXd& u);
 
