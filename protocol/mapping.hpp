@@ -78,7 +78,7 @@ enum class MappingOutput {
   kNodeIndex,
   kNodeCount,       ///< node_count: how many nodes the pump's model has
   kNodeTempDegC,    ///< node_temp_degC: that node's estimated temperature
-  kNodeSdK,         ///< node_sd_K: its standard deviation (Kalman covariance), K
+  kNodeSdK,         ///< node_sd_K: its published standard deviation, K
   kWindingResSdK,   ///< winding_resistance_sd_K: 1-sigma of the resistance-based temperature, K
   kMagnetFluxSdK,   ///< magnet_flux_sd_K: 1-sigma of the magnet temperature from the flux, K
   kMismatchState,   ///< mismatch_state: estimators::MismatchState

@@ -25,17 +25,24 @@ origin=$(head -n 1 "$log" | sed 's/^(\([0-9]*\)\..*/\1/')
 # Pump, time the sensor failed (s, "-" = it does not), most alarm level changes allowed, latest
 # trip allowed after the truth's crossing (s): 30 s for every case, the goal; whether the RTD's
 # reading goes wrong (frozen, stepped: implausible_sensor allowed) or stays right however the
-# plant or the link behave ("-": implausible_sensor never, it is raised for the sensor only).
-cases="healthy - 0 30 -
-frozen_cooling 60 2 30 wrong
-missing_cooling 60 2 30 -
-frozen_load 60 2 30 wrong
-outage_step_inside - 4 30 -
-outage_step_before - 4 30 -
-fast_rise - 2 30 -
-band - 2 30 -
-lossy_link 0 4 30 -
-offset_cooling - 2 30 wrong"
+# plant or the link behave ("-": implausible_sensor never, it is raised for the sensor only);
+# the least share of the recording (%) in which every node's truth lies at or below the
+# published estimate + 2 sd: a published band never confidently low, also while the pump runs
+# blind or after a silence (the band then reaches the bound the levels act on). frozen_cooling
+# has none ("-"): its frozen reading is fused until the stuck sensor is found (32 s), so the
+# estimate and the worst case started from it are low by then (31-61 % over plant seeds);
+# lossy_link's first reading may come a minute in, on a pump already hot inside, which the
+# filter's start does not know (81-100 % over plant seeds).
+cases="healthy - 0 30 - 85
+frozen_cooling 60 2 30 wrong -
+missing_cooling 60 2 30 - 85
+frozen_load 60 2 30 wrong 85
+outage_step_inside - 4 30 - 85
+outage_step_before - 4 30 - 85
+fast_rise - 2 30 - 85
+band - 2 30 - 85
+lossy_link 0 4 30 - 75
+offset_cooling - 2 30 wrong 85"
 
 # first CSV COLUMN THRESHOLD: first time_s where COLUMN >= THRESHOLD ("none" if never).
 first() {
@@ -46,6 +53,20 @@ first() {
 first_bit() {
   awk -F, -v col="$2" -v bit="$3" 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == col) c = i; next }
     int($c / 2 ^ bit) % 2 == 1 { print $1; found = 1; exit } END { if (!found) print "none" }' "$1"
+}
+# above CSV TRUTH FROM_S: the share (%) of the CSV's rows from FROM_S on in which the truth of
+# every node lies at or below the published estimate + 2 sd (truth rows at whole seconds).
+above() {
+  awk -F, -v from="$3" 'BEGIN { split("frame stator winding rotor", nodes, " ") }
+    FNR == 1 { for (i = 1; i <= NF; i++) col[FILENAME, $i] = i; next }
+    FILENAME == ARGV[1] { truth[$1 + 0] = $0; next }
+    $1 + 0 >= from { t = sprintf("%.0f", $1); if (!(t in truth)) next
+      split(truth[t], tr, ","); ok = 1
+      for (k in nodes) { n = nodes[k]
+        v = tr[col[ARGV[1], n "_C"]]; x = $col[ARGV[2], n "_C"]; sd = $col[ARGV[2], n "_sd_K"]
+        if (!(v + 0 <= x + 2 * sd)) ok = 0 }
+      rows++; good += ok }
+    END { printf "%.0f", rows ? 100 * good / rows : 0 }' "$2" "$1"
 }
 changes() {
   awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == "alarm_level") c = i; next }
@@ -62,9 +83,9 @@ run() {
   mkdir -p "$est"
   "$pumpthermd" --config "$src/tests/daemon/alarm_matrix.toml" -r "$in" --csv-dir "$est" \
     --csv-time-origin "$origin" >"$tmp/out-$name.txt" 2>"$tmp/err-$name.txt"
-  echo "| run | pump | true trip crossing s | trip s | delay s | truth at trip degC | sensor fault s | level changes |"
-  echo "| --- | --- | --- | --- | --- | --- | --- | --- |"
-  while read -r pump failed_s max_changes max_delay reading; do
+  echo "| run | pump | true trip crossing s | trip s | delay s | truth at trip degC | sensor fault s | level changes | truth <= x + 2 sd % |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+  while read -r pump failed_s max_changes max_delay reading least_above; do
     max_changes=$((max_changes + extra))
     local truth=$tmp/$pump.truth.csv csv=$est/$pump.csv
     local tt at sf ch tat
@@ -80,7 +101,9 @@ run() {
     ch=$(changes "$csv")
     local delay=-
     [[ $tt != none && $at != none ]] && delay=$(awk -v a="$at" -v t="$tt" 'BEGIN { printf "%.1f", a - t }')
-    echo "| $name | $pump | $tt | $at | $delay | $tat | $sf | $ch |"
+    local share=-
+    [[ $name == recorded ]] && share=$(above "$csv" "$truth" 0)
+    echo "| $name | $pump | $tt | $at | $delay | $tat | $sf | $ch | $share |"
     if [[ $tt == none ]]; then
       [[ $at == none ]] || { echo "FAIL: $name/$pump: false trip at $at s"; fail=1; }
     elif [[ $at == none ]]; then
@@ -101,6 +124,10 @@ run() {
     imp=$(first_bit "$csv" alarm_active_reasons 5)
     [[ $reading == wrong || $imp == none ]] ||
       { echo "FAIL: $name/$pump: implausible_sensor at $imp s, the RTD reads right"; fail=1; }
+    if [[ $share != - && $least_above != - ]]; then
+      ((share >= least_above)) ||
+        { echo "FAIL: $name/$pump: truth above the published estimate + 2 sd in $((100 - share)) % of the rows (at most $((100 - least_above)) %)"; fail=1; }
+    fi
   done <<<"$cases"
 }
 
