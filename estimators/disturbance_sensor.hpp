@@ -38,11 +38,11 @@ struct DisturbanceSensorConfig {
   double sensor_lag_s = 0.0;         ///< 0: no lag state
   double sensor_offset_sd_K = 0.5;   ///< a priori calibration offset
   double node_process_sd_K = 0.005;  ///< per sqrt(s), every node
-  double frame_heat_sd_W = 1.0;      ///< random walk of d_f, W per sqrt(s)
+  double frame_heat_sd_W = 3.0;      ///< random walk of d_f, W per sqrt(s)
   double rotor_heat_sd_W = 5.0;      ///< stationary sd of d_r, W
   double rotor_heat_tau_s = 1800.0;  ///< its correlation time
   /// Random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s); 0 = no state.
-  double loss_scale_sd = 0.002;
+  double loss_scale_sd = 0.003;
   double sd_floor_K = 1.0;  ///< added in quadrature to every reported node sd
   /// A step of the reading between readings fused at consecutive steps (or the last one before
   /// a gap and the first after ReopenSensorOffset()) that differs from the step the filter

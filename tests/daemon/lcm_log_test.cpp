@@ -115,14 +115,15 @@ TEST(LcmLog, OfflineLogReadsBackWithLcmsReaderAndDecodesByChannel) {
           << pump << " " << kind;
     }
     // The last TEMPS in the log carries the gateway's final frame estimate (published at the
-    // thermal period, so it is at most one step older: the frame moves far less than 0.2 K).
+    // thermal period, so it is at most one step older: in these first seconds, while the filter
+    // settles, the frame estimate moves a few tenths of a kelvin per step at most).
     const auto& pumps = gateway.pumps();
     for (const auto& p : pumps) {
       if (p->config().name != pump) continue;
       const auto& names = p->model().StateNames();
       for (std::size_t k = 0; k < names.size(); ++k) {
         if (names[k] == "frame") {
-          EXPECT_NEAR(last_frame_degC[pump], p->snapshot().node_degC[k], 0.2) << pump;
+          EXPECT_NEAR(last_frame_degC[pump], p->snapshot().node_degC[k], 0.5) << pump;
         }
       }
     }
