@@ -19,10 +19,11 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   if (!(c.measurement_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) || !(c.sensor_offset_sd_K > 0.0) ||
       !(c.node_process_sd_K > 0.0) || !(c.frame_heat_sd_W > 0.0) || !(c.rotor_heat_sd_W > 0.0) ||
       !(c.rotor_heat_tau_s > 0.0) || !(c.winding_measurement_sd_K > 0.0) ||
-      !(c.loss_scale_sd >= 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
-      !(c.winding_bias_sd_K >= 0.0) || !(c.winding_bias_tau_s > 0.0) ||
-      !(c.magnet_bias_sd_K >= 0.0) || !(c.magnet_bias_tau_s > 0.0) ||
-      !(c.magnet_min_white_sd_K > 0.0) || !(c.sensor_step_gate_sd >= 0.0)) {
+      !(c.loss_scale_sd >= 0.0) || !(c.loss_scale_max_sd > 0.0) || !(c.sd_floor_K >= 0.0) ||
+      !(c.initial_spread_sd_K > 0.0) || !(c.winding_bias_sd_K >= 0.0) ||
+      !(c.winding_bias_tau_s > 0.0) || !(c.magnet_bias_sd_K >= 0.0) ||
+      !(c.magnet_bias_tau_s > 0.0) || !(c.magnet_min_white_sd_K > 0.0) ||
+      !(c.sensor_step_gate_sd >= 0.0)) {
     throw std::invalid_argument(
         "disturbance sensor: standard deviations and times must be positive");
   }
@@ -242,7 +243,10 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
   if (dr_ >= 0) {  // Gauss-Markov: variance 2 sigma^2 dt / tau per step keeps sigma stationary
     sp_(dr_, dr_) = 2.0 * c.rotor_heat_sd_W * c.rotor_heat_sd_W * dt_s / c.rotor_heat_tau_s;
   }
-  if (ls_ >= 0) sp_(ls_, ls_) = c.loss_scale_sd * c.loss_scale_sd * dt_s;
+  if (ls_ >= 0) {  // its walk near zero is loss_scale_sd: 2 sigma^2 / tau = loss_scale_sd^2
+    const double sigma = c.loss_scale_max_sd;
+    GaussMarkov(ls_, sigma, 2.0 * sigma * sigma / (c.loss_scale_sd * c.loss_scale_sd), dt_s);
+  }
   if (wb_ >= 0) GaussMarkov(wb_, c.winding_bias_sd_K, c.winding_bias_tau_s, dt_s);
   if (mb_ >= 0) GaussMarkov(mb_, c.magnet_bias_sd_K, c.magnet_bias_tau_s, dt_s);
   filter_.Predict(ad_, bu_, sp_);

@@ -6,7 +6,8 @@
 ///  - the sensor's constant calibration offset b, y = s + b,
 ///  - a frame-path disturbance heat d_f (W, a random walk): lost or changed cooling, an
 ///    unmeasured ambient, anything that heats or cools the frame from outside the model,
-///  - optionally a relative loss scale s (every loss times 1 + s, a random walk),
+///  - optionally a relative loss scale s (every loss times 1 + s, first-order Gauss-Markov:
+///    a short-term random walk with a stationary sd),
 ///  - a rotor disturbance heat d_r (W, first-order Gauss-Markov with a stationary sd): heat inside
 ///    that the frame barely sees, so its sd (and the rotor's) says how little is known,
 ///  - for each slow reading fused besides the frame (the winding from resistance, the magnet
@@ -41,8 +42,15 @@ struct DisturbanceSensorConfig {
   double frame_heat_sd_W = 3.0;      ///< random walk of d_f, W per sqrt(s)
   double rotor_heat_sd_W = 5.0;      ///< stationary sd of d_r, W
   double rotor_heat_tau_s = 1800.0;  ///< its correlation time
-  /// Random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s); 0 = no state.
+  /// Short-term random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s);
+  /// 0 = no state.
   double loss_scale_sd = 0.003;
+  /// Stationary sd of s (a first-order Gauss-Markov state whose short-term walk is
+  /// loss_scale_sd): how far the model's losses may be off. As a pure random walk, a load that
+  /// never changes (the frame cannot tell the losses' scale from frame-path heat then) would let
+  /// s, and the interior's sd with it, grow without bound, and x + 2 sd reach a trip level on a
+  /// healthy pump.
+  double loss_scale_max_sd = 0.3;
   double sd_floor_K = 1.0;  ///< added in quadrature to every reported node sd
   /// A step of the reading between readings fused at consecutive steps (or the last one before
   /// a gap and the first after ReopenSensorOffset()) that differs from the step the filter

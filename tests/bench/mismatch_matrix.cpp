@@ -55,6 +55,8 @@ int main(int argc, char** argv) {
       base.speed_rpm = std::atof(argv[++i]);
     else if (a == "--iq-max-A" && i + 1 < argc)
       base.iq_max_A = std::atof(argv[++i]);
+    else if (a == "--constant-iq-A" && i + 1 < argc)
+      base.constant_iq_A = std::atof(argv[++i]);
     else if (a == "--rotor-loss-W" && i + 1 < argc)
       base.rotor_loss_W = std::atof(argv[++i]);
     else if (a == "--cases" && i + 1 < argc)
@@ -75,6 +77,8 @@ int main(int argc, char** argv) {
       dc.rotor_heat_tau_s = std::atof(argv[++i]);
     else if (a == "--loss-scale-sd" && i + 1 < argc)
       dc.loss_scale_sd = std::atof(argv[++i]);
+    else if (a == "--loss-scale-max-sd" && i + 1 < argc)
+      dc.loss_scale_max_sd = std::atof(argv[++i]);
     else if (a == "--sd-floor-K" && i + 1 < argc)
       dc.sd_floor_K = std::atof(argv[++i]);
     else if (a == "--node-process-sd-K" && i + 1 < argc)
@@ -92,8 +96,10 @@ int main(int argc, char** argv) {
           "  [--model NAME (a file NAME.toml of estimators/models)] [--tables-dir DIR (its tables' "
           "relative paths from)]\n"
           "  [--speed-rpm R] [--iq-max-A A] [--rotor-loss-W W (models other than tmp-generic)]\n"
+          "  [--constant-iq-A A (one load after the run-up; 0: steps every 10 min)]\n"
           "  [--cases none,cooling,rotor,losses,ambient,offset,stuck]\n"
-          "  [--frame-heat-sd-W W] [--rotor-heat-sd-W W] [--loss-scale-sd S] [--winding-sd-K K] "
+          "  [--frame-heat-sd-W W] [--rotor-heat-sd-W W] [--loss-scale-sd S] [--loss-scale-max-sd "
+          "S] [--winding-sd-K K] "
           "[--sd-floor-K K] [--node-process-sd-K K]\n"
           "  [--magnet-sd-K K (emulated rotor reading: white sd)] [--magnet-bias-K K (its slow "
           "bias, sd)]\n"
@@ -143,15 +149,18 @@ int main(int argc, char** argv) {
         nodes += fmt::format(" {} {:.2f}/{:.0f}%", r.nodes[i], r.dist_max_error_K[i],
                              100.0 * r.dist_coverage[i]);
       }
-      nodes += fmt::format(", sensor steps {}", r.dist_sensor_steps);
+      nodes += fmt::format(", sensor steps {}, largest sd K:", r.dist_sensor_steps);
+      for (std::size_t i = 0; i < r.nodes.size(); ++i)
+        nodes += fmt::format(" {} {:.2f}", r.nodes[i], r.dist_max_sd_K[i]);
       if (json) {
         std::string jn;
         for (std::size_t i = 0; i < r.nodes.size(); ++i) {
           jn += fmt::format(
               "{}\"{}\": {{\"max_error_K\": {:.3f}, \"coverage\": {:.4f}, "
-              "\"disturbance_max_error_K\": {:.3f}, \"disturbance_coverage\": {:.4f}}}",
+              "\"disturbance_max_error_K\": {:.3f}, \"disturbance_coverage\": {:.4f}, "
+              "\"disturbance_max_sd_K\": {:.3f}}}",
               i ? ", " : "", r.nodes[i], r.max_error_K[i], r.coverage[i], r.dist_max_error_K[i],
-              r.dist_coverage[i]);
+              r.dist_coverage[i], r.dist_max_sd_K[i]);
         }
         fmt::print(
             "{{\"case\": \"{}\", \"seed\": {}, \"duration_s\": {}, \"fault_s\": {}, "

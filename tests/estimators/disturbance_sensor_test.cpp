@@ -76,6 +76,35 @@ TEST(DisturbanceSensor, HeatInsideTheRotorShowsInItsSd) {
   EXPECT_GE(r.dist_coverage[rotor], 0.9);
 }
 
+TEST(DisturbanceSensor, MoreLossesStayCovered) {
+  // The frame puts most of the losses' heat on the frame path (the winding is 8-9 K low), but the
+  // loss scale's sd says so.
+  const mc::CaseResult r = RunFault(mc::Fault::kLosses40, 26);
+  for (std::size_t i = 0; i < r.nodes.size(); ++i) EXPECT_GE(r.dist_coverage[i], 0.9) << r.nodes[i];
+}
+
+TEST(DisturbanceSensor, TheInteriorSdStaysBoundedAtAConstantLoad) {
+  // A load that never changes does not tell the losses' scale from frame-path heat: as a random
+  // walk the scale's sd, and the winding's with it, grew as sqrt(t) (21.7 K after a day at 4.5 A,
+  // a healthy pump's x + 2 sd at a trip level), the estimate within 0.3 K all along.
+  auto largest_winding_sd_K = [](double duration_s) {
+    mc::CaseSpec spec;
+    spec.constant_iq_A = 4.5;
+    spec.duration_s = duration_s;
+    spec.fault_s = duration_s + 1.0;
+    spec.seed = 27;
+    const mc::CaseResult r = mc::RunCase(spec, ModelDir());
+    const std::size_t w = NodeIndex(r, "winding");
+    EXPECT_GE(r.dist_coverage[w], 0.9);
+    EXPECT_LE(r.dist_max_error_K[w], 1.0);
+    return r.dist_max_sd_K[w];
+  };
+  const double half_day = largest_winding_sd_K(43200.0);
+  const double day = largest_winding_sd_K(86400.0);
+  EXPECT_LT(day, 1.05 * half_day) << "half a day " << half_day << " K, a day " << day << " K";
+  EXPECT_LT(day, 10.0);
+}
+
 TEST(DisturbanceSensor, TheFluxReadingsSlowBiasIsNotAveragedAway) {
   // A reading with a 2 K slow bias, fused every second: with the bias state every node stays
   // covered; taken as white noise (no bias state), the filter averages it and the rotor's sd
