@@ -75,6 +75,8 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   BuildRows();
   x_nodes_ = Eigen::VectorXd::Zero(n_);
   filter_ = KalmanFilter(n_aug_);
+  gauss_markov_.assign(static_cast<std::size_t>(n_aug_),
+                       {std::numeric_limits<double>::quiet_NaN(), 1.0});
   Initialise(25.0);
 }
 
@@ -104,8 +106,13 @@ void DisturbanceThermalSensor::BuildRows() {
 
 void DisturbanceThermalSensor::GaussMarkov(int state, double sd, double tau_s, double dt_s) {
   // Exact discretisation of db/dt = -b/tau + w with stationary sd: a = e^(-dt/tau), q = sd^2 (1 -
-  // a^2).
-  const double a = std::exp(-dt_s / tau_s);
+  // a^2). tau is the state's own setting, so a changes only with the period.
+  auto& [dt_last_s, a_last] = gauss_markov_[static_cast<std::size_t>(state)];
+  if (dt_s != dt_last_s) {
+    dt_last_s = dt_s;
+    a_last = std::exp(-dt_s / tau_s);
+  }
+  const double a = a_last;
   ad_(state, state) = a;
   sp_(state, state) = sd * sd * (1.0 - a * a);
 }

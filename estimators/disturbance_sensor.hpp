@@ -25,6 +25,8 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "estimators/kalman_filter.hpp"
 #include "estimators/thermal_discretisation.hpp"
@@ -196,6 +198,8 @@ class DisturbanceThermalSensor {
   Eigen::MatrixXd c_all_, sm_all_;      ///< every reading's row (m x n_aug, m x m)
   Eigen::MatrixXd cw_row_, cm_row_;  ///< the winding and magnet rows (1 x n_aug), magnet without g
   Eigen::VectorXd y_all_;
+  /// Per state, the period of the last GaussMarkov() call and its e^(-dt/tau).
+  std::vector<std::pair<double, double>> gauss_markov_;
 };
 
 }  // namespace pumptherm::estimators
