@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -173,6 +174,13 @@ Pump::Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
   alarm_sd_.assign(static_cast<std::size_t>(n) + 1, kNaN);
   robust_x_.resize(n);
   robust_sd_.resize(n);
+  // The ring reaches back over the stuck test's flat time and the fault's hold, plus a margin.
+  const double reach_s =
+      config_.alarms.monitor.flat_after_s + config_.alarms.monitor.hold_s + 2.0 * period_s_;
+  const auto ring = static_cast<std::size_t>(std::ceil(reach_s / period_s_)) + 1;
+  recent_degC_ = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(ring));
+  recent_us_.assign(ring, -1);
+  blind_start_degC_ = Eigen::VectorXd::Zero(n);
   // Trip levels per node for the forecast (infinity: none).
   for (const auto& name : model_->StateNames()) {
     auto it = config_.alarms.levels.find(name);
@@ -466,7 +474,8 @@ void Pump::ThermalStep(std::int64_t end_us) {
   const bool blind =
       !diverged && !measured_again &&
       (fault_alarm != estimators::SensorFault::kNone || blind_.bound_degC().size() > 0);
-  StepBlindBound(blind, in);
+  StepBlindBound(blind, fault, in, end_us);
+  RememberEstimate(end_us, !diverged);
   StepAlarmBounds(diverged, fresh_inputs, robust ? kNaN : measured, in, x);
   for (int i = 0; i < x.size(); ++i) {
     const auto k = static_cast<std::size_t>(i);
@@ -605,12 +614,44 @@ const estimators::NodeMeasurements& Pump::ExtraMeasurements(double winding_res_d
   return extra_;
 }
 
-void Pump::StepBlindBound(bool blind, const estimators::ThermalInputs& in) {
+void Pump::StepBlindBound(bool blind, estimators::SensorFault fault,
+                          const estimators::ThermalInputs& in, std::int64_t end_us) {
   if (!blind) {
     blind_.Reset();
     return;
   }
+  if (blind_.bound_degC().size() == 0 && fault == estimators::SensorFault::kStuck) {
+    // A stuck reading is fused until the stuck test finds it (flat_after_s): the estimate has
+    // followed a frozen value since, low if the pump warmed. The worst case starts from the
+    // estimate of the step that fused the reading's last change, run to now in one step.
+    const auto changed_us =
+        static_cast<std::int64_t>(std::llround(sensor_health_.changed_s() * 1e6));
+    std::int64_t from_us = -1;
+    Eigen::Index from = -1;
+    for (std::size_t k = 0; k < recent_us_.size(); ++k) {
+      const std::int64_t t = recent_us_[k];
+      if (t >= changed_us && t < end_us && (from_us < 0 || t < from_us)) {
+        from_us = t;
+        from = static_cast<Eigen::Index>(k);
+      }
+    }
+    if (from >= 0) {
+      blind_start_degC_ = recent_degC_.col(from);  // sized at construction: no allocation
+      blind_.Step(*model_, in, static_cast<double>(end_us - from_us) * 1e-6, blind_start_degC_);
+      return;
+    }
+  }
   blind_.Step(*model_, in, period_s_, sensor_.Estimate_degC());
+}
+
+void Pump::RememberEstimate(std::int64_t end_us, bool valid) {
+  if (!valid) {
+    std::fill(recent_us_.begin(), recent_us_.end(), -1);
+    return;
+  }
+  recent_degC_.col(static_cast<Eigen::Index>(recent_next_)) = sensor_.Estimate_degC();
+  recent_us_[recent_next_] = end_us;
+  recent_next_ = (recent_next_ + 1) % recent_us_.size();
 }
 
 void Pump::StepAlarmBounds(bool diverged, bool fresh_inputs, double lagging_degC,

@@ -207,8 +207,12 @@ class Pump {
   /// at most `stale_after_s` old at `t_us`, else NaN.
   double FreshWindingResistance_degC(std::int64_t t_us) const;
   /// Advances (or, when not `blind`, drops) the worst-case bound used for the levels while no
-  /// temperature is measured.
-  void StepBlindBound(bool blind, const estimators::ThermalInputs& in);
+  /// temperature is measured; `fault` the frame sensor's, `end_us` the step's end.
+  void StepBlindBound(bool blind, estimators::SensorFault fault,
+                      const estimators::ThermalInputs& in, std::int64_t end_us);
+  /// Keeps the estimate the blind bound starts from, after the step ending at `end_us`, in the
+  /// ring of recent ones; `valid` false forgets them all (the filter was reset).
+  void RememberEstimate(std::int64_t end_us, bool valid);
   /// Steps the lagging reading's bias (`lagging_degC`: the fused reading the estimate follows
   /// without modelling its lag, else NaN) and the silence bound (`fresh_inputs`: this step had
   /// telemetry; `x` the estimate after it).
@@ -292,7 +296,13 @@ class Pump {
   estimators::TripForecast forecast_{model_->StateCount()};
   std::vector<double> trip_degC_;  // per node, for the forecast (infinity: no trip level)
   std::vector<double> alarm_values_;
-  estimators::BlindBound blind_;      // worst-case bound while blind
+  estimators::BlindBound blind_;  // worst-case bound while blind
+  // The blind bound's starting estimates of the last steps (columns, a ring; time -1: none), long
+  // enough to reach back to before a reading that was found stuck.
+  Eigen::MatrixXd recent_degC_;
+  std::vector<std::int64_t> recent_us_;
+  std::size_t recent_next_ = 0;
+  Eigen::VectorXd blind_start_degC_;  // the one of them a blind bound starts from
   std::vector<double> alarm_sd_;      // their standard deviations (the winding's: none, NaN)
   estimators::LagBias lag_bias_;      // the frame reading's lag, added to the levels' values
   estimators::SilenceBound silence_;  // the load that may have risen in a telemetry silence

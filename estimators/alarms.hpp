@@ -272,6 +272,9 @@ class SensorHealth {
   double last_degC() const { return last_degC_; }
   /// Time of the last reading (NaN before any).
   double last_s() const { return last_s_; }
+  /// Time the reading last changed (NaN before any): a stuck sensor's reading has been flat
+  /// since then.
+  double changed_s() const { return changed_s_; }
 
  private:
   AlarmConfig config_;

@@ -28,13 +28,11 @@ origin=$(head -n 1 "$log" | sed 's/^(\([0-9]*\)\..*/\1/')
 # plant or the link behave ("-": implausible_sensor never, it is raised for the sensor only);
 # the least share of the recording (%) in which every node's truth lies at or below the
 # published estimate + 2 sd: a published band never confidently low, also while the pump runs
-# blind or after a silence (the band then reaches the bound the levels act on). frozen_cooling
-# has none ("-"): its frozen reading is fused until the stuck sensor is found (32 s), so the
-# estimate and the worst case started from it are low by then (31-61 % over plant seeds);
-# lossy_link's first reading may come a minute in, on a pump already hot inside, which the
-# filter's start does not know (81-100 % over plant seeds).
+# blind or after a silence (the band then reaches the bound the levels act on; a stuck reading's
+# worst case starts from before it froze); lossy_link's first reading may come a minute in, on
+# a pump already hot inside, which the filter's start does not know (81-100 % over plant seeds).
 cases="healthy - 0 30 - 85
-frozen_cooling 60 2 30 wrong -
+frozen_cooling 60 2 30 wrong 85
 missing_cooling 60 2 30 - 85
 frozen_load 60 2 30 wrong 85
 outage_step_inside - 4 30 - 85
