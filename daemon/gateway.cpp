@@ -23,8 +23,9 @@ using protocol::MappingInput;
 
 /// The journal's line for an alarm change: the worst level with its reason, node and value, every
 /// active reason, and which reasons were raised and cleared since `logged_reasons` (the set the
-/// previous line showed), e.g. "alarm trip (estimated_over_temperature, winding, value 121.30);
-/// active: estimated_over_temperature, forecast; raised: estimated_over_temperature".
+/// previous line showed), e.g. "alarm trip (estimated_over_temperature, winding, value 114.55,
+/// bound 120.25); active: estimated_over_temperature, forecast; raised:
+/// estimated_over_temperature" (bound: the estimate + k sd that crossed the level).
 std::string AlarmChangeText(const estimators::AlarmState& a, std::uint16_t logged_reasons,
                             const std::vector<std::string>& node_names) {
   std::string out = fmt::format("alarm {} ({}", estimators::AlarmLevelName(a.level),
@@ -35,6 +36,8 @@ std::string AlarmChangeText(const estimators::AlarmState& a, std::uint16_t logge
     out += ", winding_resistance";  // the alarm inputs' last entry: the winding from resistance
   }
   if (std::isfinite(a.value)) out += fmt::format(", value {:.2f}", a.value);
+  // The rule's upper bound (x + k sd), when it is not the value itself.
+  if (std::isfinite(a.bound) && a.bound > a.value) out += fmt::format(", bound {:.2f}", a.bound);
   out += ")";
   auto list = [](std::uint16_t bits) {
     std::string s;

@@ -157,7 +157,9 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
     if (Known(t)) {
       const double w = UpperBound(t, in.node_sd_K, i, config_.warning_sd_factor);
       const double u = UpperBound(t, in.node_sd_K, i, config_.trip_sd_factor);
+      const AlarmLevel before = over_[i].level;
       Update(over_[i], OverLevel(over_[i], w, u, limits_[i]), t, now_s, hold);
+      if (over_[i].level > before) over_[i].bound = over_[i].level == AlarmLevel::kTrip ? u : w;
     }
     // Rate of rise over consecutive windows of rate_window_s.
     if (Known(t)) {
@@ -256,6 +258,7 @@ void AlarmMonitor::Compose(double time_to_trip_s) {
       st.reason = reason;
       st.node = node;
       st.value = ch.value;
+      st.bound = ch.bound;
       best_raised_s = ch.raised_at_s;
     }
   });
@@ -284,6 +287,7 @@ bool AlarmMonitor::RestoreLatchedTrip(const LatchedTrip& trip, double now_s) {
   ch.band_since_s.fill(std::nan(""));
   ch.below_since_s = std::nan("");
   ch.value = trip.value;
+  ch.bound = std::nan("");
   ch.raised_at_s = now_s;
   ch.latched = true;
   Compose(state_.time_to_trip_s);

@@ -17,6 +17,7 @@
 ///   one raised first), plus a bit set of every active reason.
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <string>
@@ -140,10 +141,19 @@ struct AlarmState {
   int node = -1;  ///< node index (-1: the pump as a whole)
   double value =
       std::numeric_limits<double>::quiet_NaN();  ///< value that raised it (unit per reason)
-  std::uint16_t active_reasons = 0;              ///< bit (1 << reason) for every active alarm
+  /// For an estimated over-temperature: the upper bound of the estimate, value + k sd, that
+  /// crossed the level when it was raised (degC); NaN otherwise.
+  double bound = std::numeric_limits<double>::quiet_NaN();
+  std::uint16_t active_reasons = 0;  ///< bit (1 << reason) for every active alarm
   bool trip_latched = false;
   double time_to_trip_s = std::numeric_limits<double>::infinity();
-  bool operator==(const AlarmState&) const = default;
+  /// Field by field, a NaN value equal to a NaN value (nothing changed).
+  bool operator==(const AlarmState& o) const {
+    auto same = [](double a, double b) { return a == b || (std::isnan(a) && std::isnan(b)); };
+    return level == o.level && reason == o.reason && node == o.node && same(value, o.value) &&
+           same(bound, o.bound) && active_reasons == o.active_reasons &&
+           trip_latched == o.trip_latched && same(time_to_trip_s, o.time_to_trip_s);
+  }
 };
 
 /// One active alarm condition.
@@ -206,6 +216,7 @@ class AlarmMonitor {
     /// Start of the present run below the asserted level (NaN: not below it).
     double below_since_s = std::numeric_limits<double>::quiet_NaN();
     double value = std::numeric_limits<double>::quiet_NaN();
+    double bound = std::numeric_limits<double>::quiet_NaN();  ///< see AlarmState::bound
     double raised_at_s = 0.0;
     bool latched = false;
   };

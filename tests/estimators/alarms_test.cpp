@@ -35,10 +35,14 @@ TEST(Alarms, TripActsOnMeanPlusTwoSdWarningOnTheMean) {
   f.nodes[0] = 91.0;  // mean below the trip level 100, mean + 2 sd = 99: a warning only
   for (double t = 0; t <= 5; t += 1) f.At(t);
   EXPECT_EQ(f.At(6).level, AlarmLevel::kWarning);
+  EXPECT_TRUE(std::isnan(f.At(6).bound) || f.At(6).bound == 91.0) << "k_w = 0: the mean itself";
   f.nodes[0] = 92.5;  // mean + 2 sd = 100.5 >= 100: trip, though the mean is 7.5 K below
   for (double t = 7; t <= 12; t += 1) f.At(t);
   EXPECT_EQ(f.At(13).level, AlarmLevel::kTrip);
   EXPECT_EQ(f.At(13).reason, AlarmReason::kEstimatedOverTemperature);
+  // The published state says which bound crossed the level: the value and the value + 2 sd.
+  EXPECT_DOUBLE_EQ(f.At(13).value, 92.5);
+  EXPECT_DOUBLE_EQ(f.At(13).bound, 100.5);
 }
 
 TEST(Alarms, SdFactorsAreSettings) {
