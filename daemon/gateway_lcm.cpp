@@ -48,11 +48,9 @@ void Gateway::FillTemperatures(const Pump& pump, pumptherm::temperatures_t& m) c
   m.node_degC = s.node_degC;
   m.node_sd_K = s.node_sd_K;
   m.nis = s.nis;
-  double max_sd = 0.0;
-  for (double sd : s.node_sd_K) max_sd = std::max(max_sd, sd);
   if (!s.initialised) {
     m.filter_status = pumptherm::temperatures_t::FILTER_NOT_STARTED;
-  } else if (max_sd > 5.0) {
+  } else if (!s.filter_converged) {
     m.filter_status = pumptherm::temperatures_t::FILTER_CONVERGING;
   } else if (std::isfinite(s.nis) && s.nis > pump.config().alarms.monitor.nis_limit) {
     m.filter_status = pumptherm::temperatures_t::FILTER_REJECTING;

@@ -491,7 +491,7 @@ void Pump::ThermalStep(std::int64_t end_us) {
   ai.sensor_model_degC = measured_state_ >= 0 && !diverged ? x(measured_state_) : kNaN;
   ai.sensor_nis = snapshot_.nis;
   ai.sensor_offset_K = robust && !diverged ? snapshot_.stepped_offset_K : kNaN;
-  ai.estimators_converged = max_sd < kConvergedSd_K;
+  ai.estimators_converged = snapshot_.filter_converged = max_sd < kConvergedSd_K;
   ai.time_to_trip_s = ttt;
   ai.time_to_trip_node = ttt_node;
   StepAlarms(end_us, ai);
@@ -852,6 +852,7 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
         config_.disturbance_states ? robust_sd_(i) : std::sqrt(std::max(s(i, i), 0.0));
   }
   snapshot_.initialised = true;
+  snapshot_.filter_converged = std::sqrt(std::max(s.diagonal().maxCoeff(), 0.0)) < kConvergedSd_K;
   snapshot_.time_us = now_us;
   Relatch(trips, now_us);
   return true;

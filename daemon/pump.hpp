@@ -52,6 +52,10 @@ struct PumpSnapshot {
                                   ///< filter reset: publish "n/a"
   std::vector<double> node_degC;  ///< per thermal state (model order); NaN before init
   std::vector<double> node_sd_K;
+  /// The filter has converged since its (re)start, judged as the alarms judge it (the standard
+  /// filter's largest sd below 5 K): the published sds may stay larger by design (a rotor the
+  /// frame barely sees, a worst case while running blind) without the filter still settling.
+  bool filter_converged = false;
   estimators::ResistanceEstimate resistance;
   double winding_resistance_degC = kNaN;  ///< NaN unless the identifier is tracking
   /// Magnet temperature from the identified back-EMF (Pump::BackEmfMeasurement) at the

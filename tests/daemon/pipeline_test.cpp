@@ -305,6 +305,22 @@ TEST(Pipeline, EveryNodeOfTheDefaultModelReachesCanWithItsSd) {
   EXPECT_EQ(seen.size(), 4u);
 }
 
+// The disturbance-state filter keeps a large sd on a node the frame barely sees (the rotor,
+// without the flux) by design: LCM's filter_status says whether the filter has converged, as the
+// alarms judge it, not whether every published sd is small.
+TEST(Pipeline, ALargeRotorSdIsNotAFilterStillConverging) {
+  Bench b(GenericConfig());
+  b.Run(300.0, 5.0);
+  const auto& s = b.gateway_.pumps()[0]->snapshot();
+  ASSERT_TRUE(s.initialised);
+  ASSERT_GT(s.node_sd_K[3], 5.0) << "this test needs a rotor sd above the converged limit";
+  EXPECT_TRUE(s.filter_converged);
+  const auto& bytes = std::prev(b.sink.lcm.upper_bound("PUMPTHERM/tmp1/TEMPS"))->second;
+  pumptherm::temperatures_t m;
+  ASSERT_GT(m.decode(bytes.data(), 0, static_cast<int>(bytes.size())), 0);
+  EXPECT_EQ(m.filter_status, pumptherm::temperatures_t::FILTER_TRACKING);
+}
+
 // The resistance-based winding temperature's sd goes out only with the temperature: while the
 // identifier runs but publishes no winding temperature (held, converging), GW_IDENT_SD says "not
 // available", not a saturated 65.534 K.
