@@ -58,6 +58,15 @@ echo "reading +3 K from 1800 s: offset $o K at 3600 s; frame $f against $ft true
 awk -v o="$o" -v f="$f" -v t="$ft" 'function abs(x) { return x < 0 ? -x : x }
   BEGIN { exit !(abs(o - 3) <= 0.5 && abs(f - t) <= 1) }' ||
   fail "the stepped reading was not taken as the sensor's offset"
+# The same with the 5 s rows split into 1 s steps (--max-step-s): the readings are 5 steps apart.
+"$exe" estimate --model tmp-generic --initial-C 22 --input "$tmp/meas_offset.csv" \
+  --output "$tmp/est_offset_split.csv" --disturbance-states --max-step-s 1
+o=$(col "$tmp/est_offset_split.csv" frame_sensor_offset_K)
+f=$(col "$tmp/est_offset_split.csv" frame_C)
+echo "the same in 1 s steps: offset $o K; frame $f against $ft true"
+awk -v o="$o" -v f="$f" -v t="$ft" 'function abs(x) { return x < 0 ? -x : x }
+  BEGIN { exit !(abs(o - 3) <= 0.5 && abs(f - t) <= 1) }' ||
+  fail "in 1 s steps the stepped reading was not taken as the sensor's offset"
 set +e
 "$exe" estimate --model tmp-generic --input "$tmp/meas_lost.csv" --measure frame,rotor --disturbance-states \
   --output "$tmp/bad.csv" 2> "$tmp/err.txt"

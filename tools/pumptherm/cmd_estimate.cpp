@@ -227,6 +227,10 @@ int RunEstimate(EstimateOptions& o) {
                         k + 1, t[k]));
       }
       if (dist) {
+        // Readings on consecutive rows of a split row are consecutive readings: the step test
+        // of the sensor's offset compares them over the steps between (the daemon's steps have
+        // a reading each).
+        if (steps > 1 && std::isfinite(measured[0][k - 1])) dist->ReopenSensorOffset();
         readings.frame_degC = measured[0][k];
         readings.magnet_degC = mag;  // no sd of its own: the filter's least white sd
         dist->Step(held, dt_s / steps, readings);
