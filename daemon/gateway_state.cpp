@@ -47,6 +47,17 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
     t.insert("frame_sensor_offset_K",
              toml::array{s.sensor_offset_K, s.sensor_offset_sd_K, s.stepped_offset_K});
   }
+  // The disturbance-state filter's whole state and covariance (row-major): what it found about
+  // the plant outlives a restart; absent in older files and without that filter.
+  if (s.disturbance_x.size() > 0) {
+    toml::array dx, ds;
+    for (int i = 0; i < s.disturbance_x.size(); ++i) dx.push_back(s.disturbance_x(i));
+    for (int i = 0; i < s.disturbance_s.rows(); ++i) {
+      for (int j = 0; j < s.disturbance_s.cols(); ++j) ds.push_back(s.disturbance_s(i, j));
+    }
+    t.insert("disturbance_x", dx);
+    t.insert("disturbance_s", ds);
+  }
   // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
   // consecutive rejections.
   toml::array rx, rp, rprob, rrej, rm;
@@ -91,6 +102,29 @@ bool ReadLatchedTrips(const toml::table& t, std::vector<PumpSavedState::LatchedT
     if (!node || !value || !std::isfinite(*value)) return false;
     out.push_back({*node, *value});
   }
+  return true;
+}
+
+/// The disturbance-state filter's saved state into `s` when its size fits `count` states (another
+/// size: saved by another configuration, left out; the nodes are restored alone). False when it
+/// fits but is damaged (a value that is not a finite number).
+bool ReadDisturbances(const toml::table& t, int count, PumpSavedState& s) {
+  const toml::array* x = t["disturbance_x"].as_array();
+  const toml::array* c = t["disturbance_s"].as_array();
+  const auto n = static_cast<std::size_t>(count);
+  if (!x || !c || count <= 0 || x->size() != n || c->size() != n * n) return true;
+  std::vector<double> v;
+  for (const toml::array* a : {x, c}) {
+    for (const auto& e : *a) {
+      const auto d = e.value<double>();
+      if (!d || !std::isfinite(*d)) return false;
+      v.push_back(*d);
+    }
+  }
+  s.disturbance_x = Eigen::Map<const Eigen::VectorXd>(v.data(), count);
+  s.disturbance_s =
+      Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+          v.data() + n, count, count);
   return true;
 }
 
@@ -206,6 +240,7 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
       } else if ((*t)["frame_sensor_offset_K"]) {
         ok = false;  // present but damaged
       }
+      ok = ok && ReadDisturbances(*t, pump->DisturbanceStateCount(), s);
       Eigen::Matrix3d moments;
       if (rm.size() == kMoments) {
         for (int i = 0; i < kMoments; ++i)

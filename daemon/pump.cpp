@@ -772,6 +772,10 @@ PumpSavedState Pump::Save() const {
     s.sensor_offset_K = robust_.SensorOffset_K();
     s.sensor_offset_sd_K = robust_.SensorOffsetSd_K();
     s.stepped_offset_K = robust_.SteppedOffset_K();
+    // And what the filter found about the plant (lost cooling, heat inside): restarted at its
+    // priors, the interior took the slack of a fault for minutes (docs/daemon.md, "State").
+    s.disturbance_x = robust_.Filter().State();
+    s.disturbance_s = robust_.Filter().Covariance();
   }
   s.resistance = identifier_.Save();
   s.trip_latched = snapshot_.alarm.trip_latched;
@@ -810,6 +814,15 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
        !std::isfinite(state.sensor_offset_sd_K) || !(state.sensor_offset_sd_K > 0.0))) {
     return false;
   }
+  // The disturbance-state filter's whole state: taken when it fits this configuration (another
+  // count of states is another configuration: the nodes alone are restored); damaged, refused.
+  const int n_aug = DisturbanceStateCount();
+  const bool whole = n_aug > 0 && state.disturbance_x.size() == n_aug &&
+                     state.disturbance_s.rows() == n_aug && state.disturbance_s.cols() == n_aug;
+  if (whole && (!robust_.CanRestore(state.disturbance_x, state.disturbance_s) ||
+                (offset_saved && !std::isfinite(state.stepped_offset_K)))) {
+    return false;
+  }
   std::vector<estimators::AlarmMonitor::LatchedTrip> trips;
   if (!TripIndices(state, trips)) return false;
   Eigen::VectorXd x = state.x_degC;
@@ -835,19 +848,14 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   // The mismatch test starts afresh (learning) from the restored level.
   mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0,
                        static_cast<double>(now_us) * 1e-6);
-  // The disturbance-state filter is not saved: it goes on from the restored nodes, its
-  // disturbances back at their priors, so that the published values do not jump at a restart.
-  robust_.Initialise(x, s);
-  if (config_.disturbance_states && offset_saved) {
-    robust_.RestoreSensorOffset(state.sensor_offset_K, state.sensor_offset_sd_K,
-                                state.stepped_offset_K);
-  }
+  RestoreDisturbanceFilter(state, whole, gap_s, x, s);
   robust_.Nodes(robust_x_, robust_sd_);
   held_inputs_ = state.inputs;
   have_inputs_ = true;
   initialised_ = true;
   for (int i = 0; i < n; ++i) {
-    snapshot_.node_degC[static_cast<std::size_t>(i)] = x(i);
+    snapshot_.node_degC[static_cast<std::size_t>(i)] =
+        config_.disturbance_states ? robust_x_(i) : x(i);
     snapshot_.node_sd_K[static_cast<std::size_t>(i)] =
         config_.disturbance_states ? robust_sd_(i) : std::sqrt(std::max(s(i, i), 0.0));
   }
@@ -856,6 +864,32 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   snapshot_.time_us = now_us;
   Relatch(trips, now_us);
   return true;
+}
+
+void Pump::RestoreDisturbanceFilter(const PumpSavedState& state, bool whole, double gap_s,
+                                    const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
+  const bool offset_saved = !std::isnan(state.sensor_offset_K);
+  if (whole) {
+    // Aged over the time down with what it had found (the frame-path heat of lost cooling goes
+    // on heating), the inputs held; no reading, so no step test against the saved one.
+    robust_.Restore(state.disturbance_x, state.disturbance_s,
+                    offset_saved ? state.stepped_offset_K : 0.0);
+    if (gap_s <= 0.0) return;
+    const auto& report = robust_.Step(state.inputs, gap_s, estimators::DisturbanceReadings{});
+    const Eigen::VectorXd nodes = robust_.Filter().State().head(model_->StateCount());
+    const bool believable = !report.refused && robust_.Filter().State().allFinite() &&
+                            robust_.Filter().Covariance().allFinite() &&
+                            (nodes.size() == 0 || (nodes.maxCoeff() <= kMaxEstimate_degC &&
+                                                   nodes.minCoeff() >= kMinEstimate_degC));
+    if (believable) return;
+  }
+  // From the restored nodes, the disturbances back at their priors (an older file, another
+  // configuration, a state that aged out of range).
+  robust_.Initialise(x, s);
+  if (config_.disturbance_states && offset_saved) {
+    robust_.RestoreSensorOffset(state.sensor_offset_K, state.sensor_offset_sd_K,
+                                state.stepped_offset_K);
+  }
 }
 
 bool Pump::TripIndices(const PumpSavedState& state,

@@ -104,6 +104,12 @@ struct PumpSavedState {
   double sensor_offset_K = kNaN;
   double sensor_offset_sd_K = kNaN;
   double stepped_offset_K = kNaN;
+  /// The disturbance-state filter's whole state and covariance (the nodes, the sensor's lag and
+  /// offset, the disturbances and biases); empty: not saved (no such filter, an older file, or
+  /// one of another configuration), and the filter restarts from the nodes with its disturbances
+  /// at their priors.
+  Eigen::VectorXd disturbance_x;
+  Eigen::MatrixXd disturbance_s;
 };
 
 class Pump {
@@ -112,6 +118,11 @@ class Pump {
   /// level for a node the model lacks, bad estimator settings).
   Pump(const PumpConfig& config, const estimators::MotorDescription& motor,
        std::shared_ptr<const estimators::ThermalModel> model, double thermal_period_s);
+  /// How many numbers the disturbance-state filter's saved state has (0: the pump publishes the
+  /// standard filter, none are saved).
+  int DisturbanceStateCount() const {
+    return config_.disturbance_states ? robust_.StateCount() : 0;
+  }
 
   const PumpConfig& config() const { return config_; }
   const estimators::ResistanceIdentifier& identifier() const { return identifier_; }
@@ -203,6 +214,11 @@ class Pump {
   /// The latest of two frame times (`last_us`, the one before it `previous_us`) not after `t_us`.
   static std::int64_t LastAtOrBefore(std::int64_t last_us, std::int64_t previous_us,
                                      std::int64_t t_us);
+  /// The disturbance-state filter from `state`: its whole saved state aged over `gap_s` when
+  /// `whole` (checked by the caller), else the restored nodes `x`, `s` with the disturbances at
+  /// their priors and the saved sensor offset.
+  void RestoreDisturbanceFilter(const PumpSavedState& state, bool whole, double gap_s,
+                                const Eigen::VectorXd& x, const Eigen::MatrixXd& s);
   bool TripIndices(const PumpSavedState& state,
                    std::vector<estimators::AlarmMonitor::LatchedTrip>& out) const;
   void Relatch(const std::vector<estimators::AlarmMonitor::LatchedTrip>& trips,

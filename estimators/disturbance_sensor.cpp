@@ -179,6 +179,24 @@ void DisturbanceThermalSensor::RestoreSensorOffset(double offset_K, double sd_K,
   stepped_offset_K_ = stepped_K;
 }
 
+bool DisturbanceThermalSensor::CanRestore(const Eigen::VectorXd& x,
+                                          const Eigen::MatrixXd& s) const {
+  return x.size() == n_aug_ && s.rows() == n_aug_ && s.cols() == n_aug_ && x.allFinite() &&
+         s.allFinite() && (n_aug_ == 0 || s.diagonal().minCoeff() >= 0.0);
+}
+
+void DisturbanceThermalSensor::Restore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s,
+                                       double stepped_K) {
+  if (!CanRestore(x, s) || !std::isfinite(stepped_K)) {
+    throw std::invalid_argument(
+        "DisturbanceThermalSensor::Restore: need the filter's finite state and covariance (its "
+        "state count) and a finite step sum");
+  }
+  Initialise(x(frame_));  // forgets the last reading: no step test against a reading before
+  filter_.Reset(x, 0.5 * (s + s.transpose()));
+  stepped_offset_K_ = stepped_K;
+}
+
 double DisturbanceThermalSensor::NodeSd_K(int i) const {
   const double v = std::max(filter_.Covariance()(i, i), 0.0);
   return std::sqrt(v + config_.sd_floor_K * config_.sd_floor_K);

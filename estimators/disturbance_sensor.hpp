@@ -152,6 +152,15 @@ class DisturbanceThermalSensor {
   /// its steps (SteppedOffset_K), as saved before a restart, after Initialise. Throws
   /// std::invalid_argument for a non-finite value or an sd that is not positive.
   void RestoreSensorOffset(double offset_K, double sd_K, double stepped_K);
+  /// Whether `x` (StateCount()) and `s` (StateCount() square) can be restored: finite, the
+  /// variances not negative. A filter of another configuration (another count) cannot.
+  bool CanRestore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) const;
+  /// Takes the whole state as saved before a restart (Filter().State(), Filter().Covariance():
+  /// the nodes, the sensor's lag and offset, the disturbances and biases, with their
+  /// correlations) and the sum of the offset's steps (SteppedOffset_K), so that what the filter
+  /// had found (lost cooling, heat inside, a stepped sensor) outlives the restart. Throws
+  /// std::invalid_argument when !CanRestore(x, s) or `stepped_K` is not finite.
+  void Restore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s, double stepped_K);
   /// The next fused frame reading may open a step of the offset even though the previous step
   /// fused none (a sensor back from a fault that left it out, such as a jump beyond physics).
   void ReopenSensorOffset() { reopen_offset_ = true; }

@@ -126,6 +126,10 @@ struct CaseSpec {
   /// A constant gas-load current after the run-up instead of LoadCurrent_A's steps (scaled as
   /// they are), A; 0 = the steps. Without load changes the losses' scale is hardly seen.
   double constant_iq_A = 0.0;
+  /// A restart at this time (0: none) from the nodes alone: the disturbance-state filter starts
+  /// again from its own node estimate and covariance with its disturbances at their priors, as
+  /// Pump::Restore does with a state file that lacks them (no time down).
+  double restart_s = 0.0;
   double ambient_ramp_s = 600.0;    ///< the unmeasured ambient's rise time (0: a step)
   double fit_ambient_ramp_s = 0.0;  ///< the detector's ramp hypothesis (0: the step only)
   Fault fault = Fault::kNone;
@@ -337,6 +341,11 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
       readings.magnet_degC =
           x(rotor) + magnet_bias_K + spec.magnet_noise_sd_K * magnet_normal(magnet_rng);
       readings.magnet_sd_K = spec.magnet_noise_sd_K;
+    }
+    if (spec.restart_s > 0.0 && t >= spec.restart_s && t < spec.restart_s + spec.dt_s) {
+      const Eigen::VectorXd xn = dist.Filter().State().head(n);
+      const Eigen::MatrixXd sn = dist.Filter().Covariance().topLeftCorner(n, n);
+      dist.Initialise(xn, sn);
     }
     dist.Step(in, spec.dt_s, readings);
     const pe::MismatchFinding& f = det.Step(in, spec.dt_s, y, t, readings.magnet_degC);

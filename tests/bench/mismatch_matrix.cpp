@@ -55,6 +55,8 @@ int main(int argc, char** argv) {
       base.speed_rpm = std::atof(argv[++i]);
     else if (a == "--iq-max-A" && i + 1 < argc)
       base.iq_max_A = std::atof(argv[++i]);
+    else if (a == "--restart-s" && i + 1 < argc)
+      base.restart_s = std::atof(argv[++i]);
     else if (a == "--constant-iq-A" && i + 1 < argc)
       base.constant_iq_A = std::atof(argv[++i]);
     else if (a == "--rotor-loss-W" && i + 1 < argc)
@@ -97,6 +99,7 @@ int main(int argc, char** argv) {
           "relative paths from)]\n"
           "  [--speed-rpm R] [--iq-max-A A] [--rotor-loss-W W (models other than tmp-generic)]\n"
           "  [--constant-iq-A A (one load after the run-up; 0: steps every 10 min)]\n"
+          "  [--restart-s S (restart the disturbance filter from its nodes alone at S)]\n"
           "  [--cases none,cooling,rotor,losses,ambient,offset,stuck]\n"
           "  [--frame-heat-sd-W W] [--rotor-heat-sd-W W] [--loss-scale-sd S] [--loss-scale-max-sd "
           "S] [--winding-sd-K K] "

@@ -517,6 +517,69 @@ TEST(Pipeline, AFrameSensorStepIsAnOffsetThatOutlivesARestart) {
   EXPECT_EQ(z.gateway_.RestoreState(zero_sd, z.t_us_, &warning), 0);
 }
 
+// What the disturbance-state filter found about the plant outlives a restart: an unmeasured
+// ambient 15 K above the one reported, taken as frame-path heat. Restarted from the nodes alone
+// with that heat back at its prior, the filter re-learned it through the interior.
+TEST(Pipeline, WhatTheFilterFoundAboutThePlantOutlivesARestart) {
+  Bench b(Config());
+  b.Run(900.0, 40.0);
+  b.truth_ambient_degC = 40.0;  // the status frames still say 25 degC
+  b.Run(1800.0, 40.0);
+  const std::string text = b.gateway_.SaveState();
+  ASSERT_NE(text.find("disturbance_x"), std::string::npos);
+  // worst_error RESTART_TEXT: the largest |published - truth| over nodes and the first 10 minutes
+  // after a restart 5 s later, in a bench whose plant goes on from the same truth.
+  auto worst_error = [&](const std::string& saved) {
+    Bench r(Config(), b.truth_);
+    r.truth_ambient_degC = 40.0;
+    r.t_us_ = b.t_us_ + 5'000'000;
+    std::string warning;
+    EXPECT_EQ(r.gateway_.RestoreState(saved, r.t_us_, &warning), 1) << warning;
+    double worst = 0.0;
+    for (int k = 0; k < 60; ++k) {
+      r.Run(10.0, 40.0);
+      const PumpSnapshot& s = r.gateway_.pumps()[0]->snapshot();
+      for (std::size_t i = 0; i < s.node_degC.size(); ++i)
+        worst = std::max(worst, std::abs(s.node_degC[i] - r.truth_(static_cast<Eigen::Index>(i))));
+    }
+    return worst;
+  };
+  // The same file without them (as written before they were saved).
+  toml::table root = toml::parse(text);
+  for (auto& [name, pump] : *root["pump"].as_table()) {
+    pump.as_table()->erase("disturbance_x");
+    pump.as_table()->erase("disturbance_s");
+  }
+  std::ostringstream nodes_only;
+  nodes_only << root;
+  const double whole = worst_error(text);
+  const double priors = worst_error(nodes_only.str());
+  std::cout << "largest error in 10 min after a restart: whole state " << whole
+            << " K, disturbances at their priors " << priors << " K\n";
+  EXPECT_LT(whole, 1.0);
+  EXPECT_GT(priors, 2.0 * whole) << "the test no longer shows what the saved disturbances do";
+
+  // Saved by another configuration (another count of states): the nodes alone are restored.
+  // Damaged (a negative variance): that pump starts cold.
+  auto edited = [&](double first_variance, bool shorter) {
+    toml::table t = toml::parse(text);
+    for (auto& [name, pump] : *t["pump"].as_table()) {
+      if (shorter) pump.as_table()->get_as<toml::array>("disturbance_x")->pop_back();
+      toml::array& s = *pump.as_table()->get_as<toml::array>("disturbance_s");
+      s.erase(s.begin());
+      s.insert(s.begin(), first_variance);
+    }
+    std::ostringstream out;
+    out << t;
+    Bench r(Config(), b.truth_);
+    r.t_us_ = b.t_us_ + 5'000'000;
+    std::string warning;
+    return r.gateway_.RestoreState(out.str(), r.t_us_, &warning);
+  };
+  EXPECT_EQ(edited(1.0, true), 1);
+  EXPECT_EQ(edited(-1.0, false), 0);
+}
+
 TEST(Pipeline, NothingIsPublishedAsATemperatureBeforeTheFirstEstimate) {
   Bench b(Config());
   b.Run(0.5, 40.0);  // less than one thermal period
