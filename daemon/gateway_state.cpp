@@ -105,6 +105,96 @@ bool ReadLatchedTrips(const toml::table& t, std::vector<PumpSavedState::LatchedT
   return true;
 }
 
+/// The array `key` of `t` as `n` finite numbers in `out`; false when absent, of another size or
+/// not all finite numbers.
+bool Numbers(const toml::table& t, const char* key, std::size_t n, std::vector<double>& out) {
+  const toml::array* a = t[key].as_array();
+  if (!a || a->size() != n) return false;
+  out.clear();
+  for (const auto& e : *a) {
+    auto v = e.value<double>();
+    if (!v || !std::isfinite(*v)) return false;
+    out.push_back(*v);
+  }
+  return true;
+}
+
+/// The identifier's saved arrays of one pump (read by Numbers: x, P, moments, probabilities,
+/// rejections) and its other keys.
+struct IdentifierArrays {
+  const std::vector<double>& rx;
+  const std::vector<double>& rp;
+  const std::vector<double>& rm;
+  const std::vector<double>& rprob;
+  const std::vector<double>& rrej;
+};
+
+/// The resistance identifier's saved state from its arrays (version 1: one filter, version 2:
+/// one per magnet hypothesis) into `out`. False for damage the identifier's Restore would not
+/// see (a rejection count that is not a small integer).
+bool ReadIdentifierState(const toml::table& t, std::int64_t version, const IdentifierArrays& a,
+                         const estimators::ResistanceIdentifierConfig& config,
+                         estimators::ResistanceIdentifierState& out) {
+  const std::size_t hypotheses_count = version == 1 ? 1 : estimators::kMagnetHypotheses;
+  const auto& rx = a.rx;
+  const auto& rp = a.rp;
+  const auto& rm = a.rm;
+  const auto& rprob = a.rprob;
+  const auto& rrej = a.rrej;
+  bool ok = true;
+  Eigen::Matrix3d moments;
+  if (rm.size() == kMoments) {
+    for (int i = 0; i < kMoments; ++i)
+      moments(i / kMomentsSide, i % kMomentsSide) = rm[static_cast<std::size_t>(i)];
+  } else {
+    Eigen::Matrix2d two;
+    for (int i = 0; i < kOldMoments; ++i)
+      two(i / kOldMomentsSide, i % kOldMomentsSide) = rm[static_cast<std::size_t>(i)];
+    moments = estimators::MomentsFromTwoRegressors(two);
+  }
+  const auto blocks = static_cast<std::uint64_t>(t["resistance_blocks"].value_or<std::int64_t>(0));
+  const auto hx = [&](std::size_t j) {
+    Eigen::Vector4d v;
+    for (std::size_t i = 0; i < kIdentStates; ++i)
+      v(static_cast<Eigen::Index>(i)) = rx[kIdentStates * j + i];
+    return v;
+  };
+  const auto hp = [&](std::size_t j) {
+    Eigen::Matrix4d m;
+    for (std::size_t i = 0; i < kIdentCovariance; ++i) {
+      m(static_cast<Eigen::Index>(i / kIdentStates), static_cast<Eigen::Index>(i % kIdentStates)) =
+          rp[kIdentCovariance * j + i];
+    }
+    return m;
+  };
+  if (version == 1) {
+    out = estimators::StateFromSingleFilter(hx(0), hp(0), moments, blocks,
+                                            t["resistance_rejections"].value_or(0), config);
+  } else {
+    for (std::size_t j = 0; j < hypotheses_count; ++j) {
+      auto& h = out.hypotheses[j];
+      h.x = hx(j);
+      h.p = hp(j);
+      h.probability = rprob[j];
+      // Rejection counts are small integers; anything else is damage.
+      const double rej = rrej[j];
+      ok = ok && rej >= 0.0 && rej <= 1e6 && rej == std::floor(rej);
+      h.consecutive_rejections = ok ? static_cast<int>(rej) : 0;
+    }
+    out.moments = moments;
+    out.blocks = blocks;
+    std::vector<double> anchor;
+    if (Numbers(t, "resistance_anchor", kIdentStates, anchor)) {
+      out.anchor = Eigen::Map<const Eigen::Vector4d>(anchor.data());
+      out.anchor_valid = true;
+      // Damaged values are refused by the identifier's Restore (finite, drift_ohm >= 0).
+      out.drift_V = t["resistance_drift_V"].value_or(kNaN);
+      out.drift_ohm = t["resistance_drift_ohm"].value_or(kNaN);
+    }
+  }
+  return ok;
+}
+
 /// The disturbance-state filter's saved state into `s` when its size fits `count` states (another
 /// size: saved by another configuration, left out; the nodes are restored alone). False when it
 /// fits but is damaged (a value that is not a finite number).
@@ -189,15 +279,7 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
     const toml::table* t = pumps ? (*pumps)[pump->config().name].as_table() : nullptr;
     if (!t) continue;
     auto numbers = [&](const char* key, std::size_t n, std::vector<double>& out) {
-      const toml::array* a = (*t)[key].as_array();
-      if (!a || a->size() != n) return false;
-      out.clear();
-      for (const auto& e : *a) {
-        auto v = e.value<double>();
-        if (!v || !std::isfinite(*v)) return false;
-        out.push_back(*v);
-      }
-      return true;
+      return Numbers(*t, key, n, out);
     };
     const int n = pump->model().StateCount();
     PumpSavedState s;
@@ -241,58 +323,8 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
         ok = false;  // present but damaged
       }
       ok = ok && ReadDisturbances(*t, pump->DisturbanceStateCount(), s);
-      Eigen::Matrix3d moments;
-      if (rm.size() == kMoments) {
-        for (int i = 0; i < kMoments; ++i)
-          moments(i / kMomentsSide, i % kMomentsSide) = rm[static_cast<std::size_t>(i)];
-      } else {
-        Eigen::Matrix2d two;
-        for (int i = 0; i < kOldMoments; ++i)
-          two(i / kOldMomentsSide, i % kOldMomentsSide) = rm[static_cast<std::size_t>(i)];
-        moments = estimators::MomentsFromTwoRegressors(two);
-      }
-      const auto blocks =
-          static_cast<std::uint64_t>((*t)["resistance_blocks"].value_or<std::int64_t>(0));
-      const auto hx = [&](std::size_t j) {
-        Eigen::Vector4d v;
-        for (std::size_t i = 0; i < kIdentStates; ++i)
-          v(static_cast<Eigen::Index>(i)) = rx[kIdentStates * j + i];
-        return v;
-      };
-      const auto hp = [&](std::size_t j) {
-        Eigen::Matrix4d m;
-        for (std::size_t i = 0; i < kIdentCovariance; ++i) {
-          m(static_cast<Eigen::Index>(i / kIdentStates),
-            static_cast<Eigen::Index>(i % kIdentStates)) = rp[kIdentCovariance * j + i];
-        }
-        return m;
-      };
-      if (version == 1) {
-        s.resistance = estimators::StateFromSingleFilter(hx(0), hp(0), moments, blocks,
-                                                         (*t)["resistance_rejections"].value_or(0),
-                                                         pump->identifier().config());
-      } else {
-        for (std::size_t j = 0; j < hypotheses; ++j) {
-          auto& h = s.resistance.hypotheses[j];
-          h.x = hx(j);
-          h.p = hp(j);
-          h.probability = rprob[j];
-          // Rejection counts are small integers; anything else is damage.
-          const double rej = rrej[j];
-          ok = ok && rej >= 0.0 && rej <= 1e6 && rej == std::floor(rej);
-          h.consecutive_rejections = ok ? static_cast<int>(rej) : 0;
-        }
-        s.resistance.moments = moments;
-        s.resistance.blocks = blocks;
-        std::vector<double> anchor;
-        if (numbers("resistance_anchor", kIdentStates, anchor)) {
-          s.resistance.anchor = Eigen::Map<const Eigen::Vector4d>(anchor.data());
-          s.resistance.anchor_valid = true;
-          // Damaged values are refused by the identifier's Restore (finite, drift_ohm >= 0).
-          s.resistance.drift_V = (*t)["resistance_drift_V"].value_or(kNaN);
-          s.resistance.drift_ohm = (*t)["resistance_drift_ohm"].value_or(kNaN);
-        }
-      }
+      ok = ok && ReadIdentifierState(*t, version, {rx, rp, rm, rprob, rrej},
+                                     pump->identifier().config(), s.resistance);
       ok = ok && pump->Restore(s, std::max(now_us, s.time_us));
     }
     if (ok) {
