@@ -37,7 +37,11 @@ namespace pumptherm::estimators {
 struct DisturbanceSensorConfig {
   std::string measured_node = "frame";
   std::string rotor_node = "rotor";  ///< absent from the model: no rotor heat state
-  double measurement_sd_K = 0.058;   ///< noise and 0.1 K quantisation
+  /// The reading's sd: 0.05 K of noise on 0.1 K steps is 0.058 K as white noise, but on a slowly
+  /// moving frame the step error dwells and flips (correlated), and taken as white each flip
+  /// moves the frame estimate through the inverted lag; twice that sd keeps the estimate
+  /// smoother than the reading (docs/virtual-sensor.md, "The reading's sd").
+  double measurement_sd_K = 0.12;
   double sensor_lag_s = 0.0;         ///< 0: no lag state
   double sensor_offset_sd_K = 0.5;   ///< a priori calibration offset
   double node_process_sd_K = 0.005;  ///< per sqrt(s), every node
