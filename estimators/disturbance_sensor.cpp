@@ -16,14 +16,14 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
         "disturbance sensor: measured node '{}' is not a node with heat capacity of model '{}'",
         c.measured_node, model_.Name()));
   }
-  if (!(c.measurement_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) || !(c.sensor_offset_sd_K > 0.0) ||
-      !(c.node_process_sd_K > 0.0) || !(c.frame_heat_sd_W > 0.0) || !(c.rotor_heat_sd_W > 0.0) ||
-      !(c.rotor_heat_tau_s > 0.0) || !(c.winding_measurement_sd_K > 0.0) ||
-      !(c.loss_scale_sd >= 0.0) || !(c.loss_scale_max_sd > 0.0) || !(c.sd_floor_K >= 0.0) ||
-      !(c.initial_spread_sd_K > 0.0) || !(c.winding_bias_sd_K >= 0.0) ||
-      !(c.winding_bias_tau_s > 0.0) || !(c.magnet_bias_sd_K >= 0.0) ||
-      !(c.magnet_bias_tau_s > 0.0) || !(c.magnet_min_white_sd_K > 0.0) ||
-      !(c.sensor_step_gate_sd >= 0.0)) {
+  if (!(c.measurement_sd_K > 0.0) || !(c.sensor_step_noise_sd_K > 0.0) ||
+      !(c.sensor_lag_s >= 0.0) || !(c.sensor_offset_sd_K > 0.0) || !(c.node_process_sd_K > 0.0) ||
+      !(c.frame_heat_sd_W > 0.0) || !(c.rotor_heat_sd_W > 0.0) || !(c.rotor_heat_tau_s > 0.0) ||
+      !(c.winding_measurement_sd_K > 0.0) || !(c.loss_scale_sd >= 0.0) ||
+      !(c.loss_scale_max_sd > 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
+      !(c.winding_bias_sd_K >= 0.0) || !(c.winding_bias_tau_s > 0.0) ||
+      !(c.magnet_bias_sd_K >= 0.0) || !(c.magnet_bias_tau_s > 0.0) ||
+      !(c.magnet_min_white_sd_K > 0.0) || !(c.sensor_step_gate_sd >= 0.0)) {
     throw std::invalid_argument(
         "disturbance sensor: standard deviations and times must be positive");
   }
@@ -338,9 +338,11 @@ void DisturbanceThermalSensor::OpenOffsetOnStep(double frame_degC) {
   if (!(gate > 0.0) || !comparable) return;
   const double step =
       (frame_degC - last_reading_degC_) - (PredictedReading_degC() - last_predicted_degC_);
-  // Two readings' noise, and what the prediction since the last update added to the uncertainty.
+  // Two readings' white noise, and what the prediction since the last update added to the
+  // uncertainty.
+  const double noise = config_.sensor_step_noise_sd_K;
   const double var =
-      2.0 * sm_(0, 0) + std::max(PredictedReadingVar_K2() - last_predicted_var_K2_, 0.0);
+      2.0 * noise * noise + std::max(PredictedReadingVar_K2() - last_predicted_var_K2_, 0.0);
   if (!(step * step > gate * gate * var)) return;
   filter_.AddVariance(bias_, step * step);
   ++sensor_steps_;

@@ -42,6 +42,10 @@ struct DisturbanceSensorConfig {
   /// moves the frame estimate through the inverted lag; twice that sd keeps the estimate
   /// smoother than the reading (docs/virtual-sensor.md, "The reading's sd").
   double measurement_sd_K = 0.12;
+  /// The reading's white sd (0.05 K of noise, 0.1 K steps) for the step test below: two
+  /// consecutive readings differ by their noise and at most a step's flip, not by the slow
+  /// correlated error measurement_sd_K allows for.
+  double sensor_step_noise_sd_K = 0.058;
   double sensor_lag_s = 0.0;         ///< 0: no lag state
   double sensor_offset_sd_K = 0.5;   ///< a priori calibration offset
   double node_process_sd_K = 0.005;  ///< per sqrt(s), every node

@@ -126,6 +126,7 @@ struct CaseSpec {
   /// A constant gas-load current after the run-up instead of LoadCurrent_A's steps (scaled as
   /// they are), A; 0 = the steps. Without load changes the losses' scale is hardly seen.
   double constant_iq_A = 0.0;
+  double sensor_offset_K = 3.0;  ///< the reading's step in the sensor-offset case
   /// A restart at this time (0: none) from the nodes alone: the disturbance-state filter starts
   /// again from its own node estimate and covariance with its disturbances at their priors, as
   /// Pump::Restore does with a state file that lacks them (no time down).
@@ -316,7 +317,7 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     }
     const Eigen::VectorXd& x = plant->Step(truth_in, spec.dt_s);
     double y = sensor.Measure(x(frame), spec.dt_s);
-    if (faulted_now && spec.fault == Fault::kSensorOffset) y += 3.0;
+    if (faulted_now && spec.fault == Fault::kSensorOffset) y += spec.sensor_offset_K;
     if (faulted_now && spec.fault == Fault::kSensorStuck) {
       if (std::isnan(stuck_value)) stuck_value = y;
       y = stuck_value;

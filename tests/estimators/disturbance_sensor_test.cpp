@@ -197,6 +197,21 @@ TEST(DisturbanceSensor, AReadingThatStepsIsTakenAsAStepOfTheSensorsOffset) {
   ExpectEveryNodeCoveredWithin(RunFault(mc::Fault::kSensorOffset, 24), 1.5);
 }
 
+TEST(DisturbanceSensor, ASmallerStepIsFoundToo) {
+  // 1.2 K, above the offset alarm's 1 K: the test's noise is the reading's white noise (two
+  // consecutive readings), not the larger sd the filter gives a reading for its correlated
+  // quantisation error (with that, 0.12 K, this step is missed).
+  mc::CaseSpec spec;
+  spec.fault = mc::Fault::kSensorOffset;
+  spec.sensor_offset_K = 1.2;
+  spec.duration_s = 3600.0 + 2400.0;
+  spec.fault_s = 3600.0;
+  spec.seed = 28;
+  const mc::CaseResult r = mc::RunCase(spec, ModelDir());
+  EXPECT_EQ(r.dist_sensor_steps, 1);
+  ExpectEveryNodeCoveredWithin(r, 1.5);
+}
+
 TEST(DisturbanceSensor, WithoutTheStepTestTheFrameFollowsTheSteppedReading) {
   // The same run with the step test off: the lag state turns the step into a frame temperature
   // step, and the frame estimate is confidently wrong (what the test above guards against).
