@@ -25,16 +25,20 @@ constexpr int kMoments = kMomentsSide * kMomentsSide;
 constexpr int kOldMomentsSide = 2;
 constexpr int kOldMoments = kOldMomentsSide * kOldMomentsSide;
 
+/// `m` row by row (a vector: its elements) as a TOML array.
+toml::array Flattened(const Eigen::Ref<const Eigen::MatrixXd>& m) {
+  toml::array a;
+  for (Eigen::Index i = 0; i < m.rows(); ++i) {
+    for (Eigen::Index j = 0; j < m.cols(); ++j) a.push_back(m(i, j));
+  }
+  return a;
+}
+
 /// The filter's and the identifier's state of one pump into its saved table.
 void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::table& t) {
   t.insert("time_us", s.time_us + wall_offset_us);
-  toml::array x, cov;
-  for (int i = 0; i < s.x_degC.size(); ++i) x.push_back(s.x_degC(i));
-  for (int i = 0; i < s.s_K2.rows(); ++i) {
-    for (int j = 0; j < s.s_K2.cols(); ++j) cov.push_back(s.s_K2(i, j));
-  }
-  t.insert("x_degC", x);
-  t.insert("s_K2", cov);
+  t.insert("x_degC", Flattened(s.x_degC));
+  t.insert("s_K2", Flattened(s.s_K2));
   t.insert("inputs", toml::table{{"speed_rpm", s.inputs.speed_rpm},
                                  {"id_A", s.inputs.id_A},
                                  {"iq_A", s.inputs.iq_A},
@@ -50,13 +54,8 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
   // The disturbance-state filter's whole state and covariance (row-major): what it found about
   // the plant outlives a restart; absent in older files and without that filter.
   if (s.disturbance_x.size() > 0) {
-    toml::array dx, ds;
-    for (int i = 0; i < s.disturbance_x.size(); ++i) dx.push_back(s.disturbance_x(i));
-    for (int i = 0; i < s.disturbance_s.rows(); ++i) {
-      for (int j = 0; j < s.disturbance_s.cols(); ++j) ds.push_back(s.disturbance_s(i, j));
-    }
-    t.insert("disturbance_x", dx);
-    t.insert("disturbance_s", ds);
+    t.insert("disturbance_x", Flattened(s.disturbance_x));
+    t.insert("disturbance_s", Flattened(s.disturbance_s));
   }
   // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
   // consecutive rejections.
@@ -203,18 +202,12 @@ bool ReadDisturbances(const toml::table& t, int count, PumpSavedState& s) {
   const toml::array* c = t["disturbance_s"].as_array();
   const auto n = static_cast<std::size_t>(count);
   if (!x || !c || count <= 0 || x->size() != n || c->size() != n * n) return true;
-  std::vector<double> v;
-  for (const toml::array* a : {x, c}) {
-    for (const auto& e : *a) {
-      const auto d = e.value<double>();
-      if (!d || !std::isfinite(*d)) return false;
-      v.push_back(*d);
-    }
-  }
-  s.disturbance_x = Eigen::Map<const Eigen::VectorXd>(v.data(), count);
+  std::vector<double> vx, vs;
+  if (!Numbers(t, "disturbance_x", n, vx) || !Numbers(t, "disturbance_s", n * n, vs)) return false;
+  s.disturbance_x = Eigen::Map<const Eigen::VectorXd>(vx.data(), count);
   s.disturbance_s =
       Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
-          v.data() + n, count, count);
+          vs.data(), count, count);
   return true;
 }
 

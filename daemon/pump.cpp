@@ -19,6 +19,12 @@ constexpr std::int64_t kPairWindowUs = 50'000;
 constexpr const char* kWindingResistanceNode = "winding_resistance";
 /// Largest node standard deviation of a converged virtual sensor.
 constexpr double kConvergedSd_K = 5.0;
+/// Whether every temperature of `x_degC` lies in the range an estimate may take
+/// [kMinEstimate_degC, kMaxEstimate_degC] (NaN values are for the caller's finiteness test).
+bool InEstimateRange(const Eigen::Ref<const Eigen::VectorXd>& x_degC) {
+  return x_degC.size() == 0 ||
+         (x_degC.maxCoeff() <= kMaxEstimate_degC && x_degC.minCoeff() >= kMinEstimate_degC);
+}
 /// Standard deviations on either side of a published estimate that its band spans (the "+-2 sd"
 /// the docs and the judges state coverage for).
 constexpr double kPublishedBandSds = 2.0;
@@ -374,10 +380,9 @@ void Pump::StepRobust(const estimators::ThermalInputs& in, double measured,
 // and an unconverged filter, a latched trip stays), the state is not saved, and the next step
 // starts the filter again.
 bool Pump::ResetIfDiverged(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
-  const bool diverged =
-      !x.allFinite() || !s.diagonal().allFinite() ||
-      (config_.disturbance_states && !robust_sd_.allFinite()) ||
-      (x.size() > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC));
+  const bool diverged = !x.allFinite() || !s.diagonal().allFinite() ||
+                        (config_.disturbance_states && !robust_sd_.allFinite()) ||
+                        !InEstimateRange(x);
   if (diverged) {
     ++counters_.filter_resets;
     initialised_ = false;
@@ -799,11 +804,9 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   // A damaged or forged file must not become a published estimate: temperatures in the
   // believable range, variances not negative, inputs finite (they are held while down).
   const auto& in = state.inputs;
-  if ((n > 0 && (state.x_degC.maxCoeff() > kMaxEstimate_degC ||
-                 state.x_degC.minCoeff() < kMinEstimate_degC)) ||
-      (n > 0 && state.s_K2.diagonal().minCoeff() < 0.0) || !std::isfinite(in.speed_rpm) ||
-      !std::isfinite(in.id_A) || !std::isfinite(in.iq_A) || !std::isfinite(in.ambient_degC) ||
-      !std::isfinite(in.coolant_degC)) {
+  if (!InEstimateRange(state.x_degC) || (n > 0 && state.s_K2.diagonal().minCoeff() < 0.0) ||
+      !std::isfinite(in.speed_rpm) || !std::isfinite(in.id_A) || !std::isfinite(in.iq_A) ||
+      !std::isfinite(in.ambient_degC) || !std::isfinite(in.coolant_degC)) {
     return false;
   }
   // A saved sensor offset: all three numbers finite, its sd positive (checked before anything is
@@ -819,10 +822,7 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
   const int n_aug = DisturbanceStateCount();
   const bool whole = n_aug > 0 && state.disturbance_x.size() == n_aug &&
                      state.disturbance_s.rows() == n_aug && state.disturbance_s.cols() == n_aug;
-  if (whole && (!robust_.CanRestore(state.disturbance_x, state.disturbance_s) ||
-                (offset_saved && !std::isfinite(state.stepped_offset_K)))) {
-    return false;
-  }
+  if (whole && !robust_.CanRestore(state.disturbance_x, state.disturbance_s)) return false;
   std::vector<estimators::AlarmMonitor::LatchedTrip> trips;
   if (!TripIndices(state, trips)) return false;
   Eigen::VectorXd x = state.x_degC;
@@ -834,10 +834,7 @@ bool Pump::Restore(const PumpSavedState& state, std::int64_t now_us) {
                                                  estimators::VirtualSensorConfig{}, x, s)) {
     return false;
   }
-  if (!x.allFinite() || !s.allFinite() ||
-      (n > 0 && (x.maxCoeff() > kMaxEstimate_degC || x.minCoeff() < kMinEstimate_degC))) {
-    return false;
-  }
+  if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
   if (!identifier_.Restore(state.resistance)) return false;
   // Published at once: the first GW_IDENT after a restart may go out before the first thermal
   // step (seen in the system test: Rs "not available" right after kill -9).
@@ -876,12 +873,11 @@ void Pump::RestoreDisturbanceFilter(const PumpSavedState& state, bool whole, dou
                     offset_saved ? state.stepped_offset_K : 0.0);
     if (gap_s <= 0.0) return;
     const auto& report = robust_.Step(state.inputs, gap_s, estimators::DisturbanceReadings{});
-    const Eigen::VectorXd nodes = robust_.Filter().State().head(model_->StateCount());
-    const bool believable = !report.refused && robust_.Filter().State().allFinite() &&
-                            robust_.Filter().Covariance().allFinite() &&
-                            (nodes.size() == 0 || (nodes.maxCoeff() <= kMaxEstimate_degC &&
-                                                   nodes.minCoeff() >= kMinEstimate_degC));
-    if (believable) return;
+    const Eigen::VectorXd& aged = robust_.Filter().State();
+    if (!report.refused && aged.allFinite() && robust_.Filter().Covariance().allFinite() &&
+        InEstimateRange(aged.head(model_->StateCount()))) {
+      return;
+    }
   }
   // From the restored nodes, the disturbances back at their priors (an older file, another
   // configuration, a state that aged out of range).
