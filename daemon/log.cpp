@@ -1,15 +1,77 @@
 #include "daemon/log.hpp"
 
+#include <sys/uio.h>
+#include <systemd/sd-journal.h>
+
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <stdexcept>
+#include <vector>
 
 namespace pumptherm::daemon {
+namespace {
 
-void LogLine(LogLevel level, std::string_view message) {
+bool IsControl(char c) {
+  const auto u = static_cast<unsigned char>(c);
+  return u < 0x20 || u == 0x7f;
+}
+
+/// The journal's native protocol: one entry of MESSAGE=, PRIORITY=, SYSLOG_IDENTIFIER= and the
+/// caller's fields. Returns false when journald did not take it.
+bool SendToJournal(LogLevel level, std::string_view message, std::span<const LogField> fields) {
+  std::vector<std::string> items;
+  items.reserve(fields.size() + 3);
+  items.push_back(fmt::format("MESSAGE={}", message));
+  items.push_back(fmt::format("PRIORITY={}", static_cast<int>(level)));
+  items.emplace_back("SYSLOG_IDENTIFIER=pumpthermd");
+  for (const LogField& f : fields)
+    items.push_back(fmt::format("{}={}", f.key, EscapeControl(f.value)));
+  std::vector<iovec> iov(items.size());
+  for (std::size_t i = 0; i < items.size(); ++i) {
+    iov[i].iov_base = items[i].data();
+    iov[i].iov_len = items[i].size();
+  }
+  return sd_journal_sendv(iov.data(), static_cast<int>(iov.size())) >= 0;
+}
+
+}  // namespace
+
+std::string EscapeControl(std::string_view text) {
+  std::string out;
+  out.reserve(text.size());
+  for (const char c : text) {
+    if (c == '\\') {
+      out += "\\\\";
+    } else if (!IsControl(c)) {
+      out += c;
+    } else if (c == '\n') {
+      out += "\\n";
+    } else if (c == '\r') {
+      out += "\\r";
+    } else if (c == '\t') {
+      out += "\\t";
+    } else {
+      out += fmt::format("\\x{:02x}", static_cast<unsigned>(static_cast<unsigned char>(c)));
+    }
+  }
+  return out;
+}
+
+void LogLine(LogLevel level, std::string_view raw, std::span<const LogField> fields) {
   static const bool journal = std::getenv("JOURNAL_STREAM") != nullptr;
+  // Only what needs it is copied: most lines have no control character and no backslash.
+  std::string escaped;
+  std::string_view message = raw;
+  for (const char c : raw) {
+    if (IsControl(c) || c == '\\') {
+      escaped = EscapeControl(raw);
+      message = escaped;
+      break;
+    }
+  }
   if (journal) {
+    if (!fields.empty() && SendToJournal(level, message, fields)) return;
     fmt::print(stderr, "<{}>{}\n", static_cast<int>(level), message);
     return;
   }

@@ -6,18 +6,46 @@
 #include <fmt/format.h>
 
 #include <cstdint>
+#include <initializer_list>
+#include <span>
+#include <string>
 #include <string_view>
 
 namespace pumptherm::daemon {
 
 enum class LogLevel { kError = 3, kWarning = 4, kNotice = 5, kInfo = 6, kDebug = 7 };
 
-/// Writes one line (no trailing newline needed) at `level`.
-void LogLine(LogLevel level, std::string_view message);
+/// One structured journal field: `key` in journald's form (upper case letters, digits and '_',
+/// not starting with '_', e.g. "PUMP"), `value` any text (control characters are escaped).
+struct LogField {
+  std::string_view key;
+  std::string value;
+};
+
+/// `text` with every control character (below 0x20, and 0x7f) written as a visible escape:
+/// "\n", "\r", "\t", else "\xNN"; a backslash is doubled. A logged string that came from
+/// outside (a command's source, a comment, a file name) cannot then start a line of its own or
+/// forge a priority prefix.
+std::string EscapeControl(std::string_view text);
+
+/// Writes one line (no trailing newline needed) at `level`; control characters in `message`
+/// are escaped (EscapeControl). Under journald (JOURNAL_STREAM set) with `fields`, the line goes
+/// through the journal's native protocol with MESSAGE=, PRIORITY=, SYSLOG_IDENTIFIER=pumpthermd
+/// and the fields, so that `journalctl PUMP=pump3` finds it (if the journal socket refuses it,
+/// the line goes to stderr as without fields). Elsewhere the fields are not written.
+void LogLine(LogLevel level, std::string_view message, std::span<const LogField> fields = {});
 
 template <typename... Args>
 void Log(LogLevel level, fmt::format_string<Args...> format, Args&&... args) {
   LogLine(level, fmt::format(format, std::forward<Args>(args)...));
+}
+
+/// Log with structured journal fields: LogFields(kWarning, {{"PUMP", name}}, "pump {}: ...", ...).
+template <typename... Args>
+void LogFields(LogLevel level, std::initializer_list<LogField> fields,
+               fmt::format_string<Args...> format, Args&&... args) {
+  LogLine(level, fmt::format(format, std::forward<Args>(args)...),
+          std::span<const LogField>(fields.begin(), fields.size()));
 }
 
 /// Rate limit for one kind of log line that outsiders can trigger at will (refused commands):
