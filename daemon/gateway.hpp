@@ -16,6 +16,7 @@
 #include "daemon/config.hpp"
 #include "daemon/frame_counter.hpp"
 #include "daemon/log.hpp"
+#include "daemon/published_fields.hpp"
 #include "daemon/pump.hpp"
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
@@ -129,6 +130,10 @@ class Gateway {
   /// A terminal table of the pumps: temperatures, resistance, alarm.
   std::string PumpTable() const;
 
+  /// What pump `pump`'s published fields are read from, with what the pump alone knows (its
+  /// estimate, its settings, the wall clock): for the LCM messages and the offline CSV.
+  FieldSource Source(const Pump& pump) const;
+
   /// Encodes one LCM message of each kind for pump `p` (used by Advance and by tests).
   std::vector<std::uint8_t> EncodeTemperatures(const Pump& p) const;
   std::vector<std::uint8_t> EncodeTelemetry(std::size_t pump_index) const;
@@ -150,12 +155,12 @@ class Gateway {
     std::vector<InputSignal> signals;
     bool currents = false, voltages = false, status = false, clear = false;
   };
-  enum class OutputSource : std::uint8_t { kMapped, kNode, kRollingCounter };
+  enum class OutputSource : std::uint8_t { kField, kNode, kRollingCounter };
   struct OutputSignal {
     int signal_index;
     OutputSource source;
-    protocol::MappingOutput output;  // kMapped
-    int state;                       // kNode
+    const PublishedField* field;  // kField
+    int state;                    // kNode
     double scale, offset;
   };
   struct OutputPlan {
@@ -203,9 +208,6 @@ class Gateway {
   };
   /// The route of frame `f` on interface `iface`; pump kNoPump when no pump uses it.
   Route FindRoute(std::size_t iface, const protocol::CanFrame& f) const;
-
-  /// alarm_node's value for the winding temperature from resistance; the next value is "none".
-  static constexpr std::size_t kAlarmNodeWindingRes = 14;
 
   /// Advance's work for pump `p`: its thermal steps or silence check, then its due outputs.
   void AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink);
@@ -259,8 +261,9 @@ class Gateway {
   /// Journal line for a new mismatch verdict (state, effect, onset).
   void LogMismatch(const Pump& pump) const;
   void FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) const;
-  /// `node`: the model node of a node-indexed frame, else -1.
-  double OutputValue(std::size_t pump, protocol::MappingOutput output, int node) const;
+  /// What the published fields of pump `p` are read from; `node` the model node of a
+  /// node-indexed frame, else -1.
+  FieldSource Source(std::size_t p, int node) const;
 
   DaemonConfig config_;
   protocol::Dbc dbc_;

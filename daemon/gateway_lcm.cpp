@@ -30,33 +30,12 @@ void Gateway::FillTemperatures(const Pump& pump, pumptherm::temperatures_t& m) c
   const PumpSnapshot& s = pump.snapshot();
   m.utime = s.time_us + wall_offset_us_;
   m.pump = pump.config().name;
-  const auto& r = s.resistance;
-  const bool ident = r.status != estimators::ResistanceStatus::kInitialising;
-  m.resistance_ohm = ident ? r.resistance_ohm : kNaN;
-  m.resistance_sd_ohm = ident ? r.resistance_sigma_ohm : kNaN;
-  m.flux_Wb = ident ? r.flux_Wb : kNaN;
-  m.flux_sd_Wb = ident ? r.flux_sd_Wb : kNaN;
-  m.magnet_flux_degC = s.magnet_flux_degC;
-  m.magnet_flux_sd_K = s.magnet_flux_sd_K;
-  m.resistance_winding_degC = s.winding_resistance_degC;
-  // The identifier's 1-sigma of eq. 3's temperature (covariance and voltage-error allowance).
-  m.resistance_winding_sd_K = std::isfinite(s.winding_resistance_degC) ? r.winding_sd_K : kNaN;
-  m.ident_status = static_cast<std::int8_t>(r.status);
+  FillLcm(Source(pump), m);
   const auto& names = pump.model().StateNames();
   m.num_nodes = static_cast<std::int32_t>(names.size());
   m.node_names = names;
   m.node_degC = s.node_degC;
   m.node_sd_K = s.node_sd_K;
-  m.nis = s.nis;
-  if (!s.initialised) {
-    m.filter_status = pumptherm::temperatures_t::FILTER_NOT_STARTED;
-  } else if (!s.filter_converged) {
-    m.filter_status = pumptherm::temperatures_t::FILTER_CONVERGING;
-  } else if (std::isfinite(s.nis) && s.nis > pump.config().alarms.monitor.nis_limit) {
-    m.filter_status = pumptherm::temperatures_t::FILTER_REJECTING;
-  } else {
-    m.filter_status = pumptherm::temperatures_t::FILTER_TRACKING;
-  }
 }
 
 std::vector<std::uint8_t> Gateway::EncodeTelemetry(std::size_t p) const {
@@ -117,8 +96,7 @@ void Gateway::FillAlarm(const Pump& pump, pumptherm::alarm_t& m) const {
   const PumpSnapshot& s = pump.snapshot();
   m.utime = s.time_us + wall_offset_us_;
   m.pump = pump.config().name;
-  m.level = static_cast<std::int8_t>(s.alarm.level);
-  m.time_to_trip_s = s.alarm.time_to_trip_s;
+  FillLcm(Source(pump), m);
   const auto& names = pump.model().StateNames();
   // Assigned in place (no temporary strings): no allocation once the strings have held as much.
   auto set_node_name = [&](std::string& out, int node) {
@@ -160,11 +138,6 @@ void Gateway::FillAlarm(const Pump& pump, pumptherm::alarm_t& m) const {
     ac.latched = c.latched;
   }
   m.num_conditions = static_cast<std::int32_t>(m.conditions.size());
-  m.mismatch_state = static_cast<std::int8_t>(s.mismatch.state);
-  m.mismatch_effect = static_cast<std::int8_t>(s.mismatch.effect);
-  m.mismatch_value = s.mismatch.value;
-  m.mismatch_since_utime =
-      std::isfinite(s.mismatch.onset_s) ? static_cast<std::int64_t>(s.mismatch.onset_s * 1e6) : 0;
 }
 
 std::vector<std::uint8_t> Gateway::EncodeHealth(std::int64_t now_us) const {

@@ -18,7 +18,6 @@ namespace {
 
 using gateway_detail::RouteKey;
 using protocol::MappingInput;
-using protocol::MappingOutput;
 
 bool IsCurrentInput(MappingInput i) { return i == MappingInput::kIdA || i == MappingInput::kIqA; }
 bool IsVoltageInput(MappingInput i) { return i == MappingInput::kUdV || i == MappingInput::kUqV; }
@@ -74,7 +73,7 @@ void Gateway::LoadFrameLayout() {
   try {
     const std::string path =
         ResolveResource(ResourceKind::kDbc, config_.dbc.mapping, config_.dbc.base_dir);
-    mapping_ = protocol::ParseMapping(ReadTextFile(path), path, dbc_);
+    mapping_ = protocol::ParseMapping(ReadTextFile(path), path, dbc_, MappingOutputs());
   } catch (const std::exception& e) {
     throw KeyError(config_, 0, "dbc.mapping", e.what());
   }
@@ -127,7 +126,7 @@ void Gateway::AddPump(std::size_t p, ModelCache& models) {
   } catch (const std::exception& e) {
     throw KeyError(config_, pc.line, key, e.what());
   }
-  if (!pc.disturbance_states_explicit && !pumps_.back()->config().disturbance_states) {
+  if (!pc.disturbance_states_explicit && !pumps_.back()->disturbance_states()) {
     Log(LogLevel::kNotice,
         "pump {}: standard filter published: the boundary of model {} reaches other nodes than "
         "'{}' "
@@ -201,21 +200,18 @@ void Gateway::BuildOutputPlans(PumpIo& io, const estimators::ThermalModel& model
     io.outputs.push_back(std::move(plan));
     return io.outputs.back();
   };
-  for (std::size_t o = 0; o < protocol::kMappingOutputCount; ++o) {
-    const auto& ref = mapping_.outputs[o];
-    if (!ref) continue;
-    OutputPlan& plan = plan_for(ref->message_index);
-    plan.signals.push_back({ref->signal_index, OutputSource::kMapped, static_cast<MappingOutput>(o),
-                            -1, ref->scale, ref->offset});
-    plan.alarm = plan.alarm || static_cast<MappingOutput>(o) == MappingOutput::kAlarmLevel;
-    plan.node_table = plan.node_table || static_cast<MappingOutput>(o) == MappingOutput::kNodeIndex;
+  for (const auto& [key, ref] : mapping_.outputs) {
+    OutputPlan& plan = plan_for(ref.message_index);
+    plan.signals.push_back({ref.signal_index, OutputSource::kField, FindPublishedField(key), -1,
+                            ref.scale, ref.offset});
+    plan.alarm = plan.alarm || key == kAlarmLevelKey;
+    plan.node_table = plan.node_table || key == protocol::kNodeIndexKey;
   }
   for (const auto& [node, ref] : mapping_.node_temperatures) {
     OutputPlan& plan = plan_for(ref.message_index);
     // A node this pump's model does not have stays "not available" in the frame.
-    plan.signals.push_back({ref.signal_index, OutputSource::kNode,
-                            MappingOutput::kWindingResTempDegC, model.StateIndex(node), ref.scale,
-                            ref.offset});
+    plan.signals.push_back({ref.signal_index, OutputSource::kNode, nullptr, model.StateIndex(node),
+                            ref.scale, ref.offset});
   }
   for (auto& plan : io.outputs) {
     // A node-indexed message sends its nodes one after another, spread over the period: each
@@ -228,8 +224,7 @@ void Gateway::BuildOutputPlans(PumpIo& io, const estimators::ThermalModel& model
     const bool mapped = std::any_of(plan.signals.begin(), plan.signals.end(),
                                     [&](const OutputSignal& s) { return s.signal_index == rc; });
     if (rc >= 0 && !mapped)
-      plan.signals.push_back(
-          {rc, OutputSource::kRollingCounter, MappingOutput::kUptimeS, -1, 1.0, 0.0});
+      plan.signals.push_back({rc, OutputSource::kRollingCounter, nullptr, -1, 1.0, 0.0});
   }
 }
 
@@ -257,7 +252,7 @@ void Gateway::AddRoutes(const PumpIo& io, std::size_t p, const std::string& key)
 void Gateway::CheckNodeOutputs(const PumpConfig& pc, const std::string& key,
                                const estimators::ThermalModel& model) const {
   const auto& names = model.StateNames();
-  const bool node_table = mapping_.output(MappingOutput::kNodeIndex).has_value();
+  const bool node_table = mapping_.output(protocol::kNodeIndexKey) != nullptr;
   for (std::size_t i = 0; i < names.size(); ++i) {
     if (!node_table && !mapping_.node_temperatures.contains(names[i])) {
       throw ConfigError(fmt::format(
@@ -266,7 +261,7 @@ void Gateway::CheckNodeOutputs(const PumpConfig& pc, const std::string& key,
           "and node_temp_degC (a node-indexed message such as GW_NODE_TEMP) or outputs.nodes.{}",
           config_.source, pc.line, key, names[i], pc.thermal_model, names[i]));
     }
-    if (mapping_.output(MappingOutput::kAlarmNode) && i >= kAlarmNodeWindingRes) {
+    if (mapping_.output("alarm_node") && i >= kAlarmNodeWindingRes) {
       throw ConfigError(fmt::format(
           "{}:{}: key '{}.thermal_model': node '{}' of {} cannot be named by alarm_node: indices "
           "0 to {} name model nodes ({} the winding from resistance, {} none)",

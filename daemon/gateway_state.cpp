@@ -53,9 +53,9 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
   }
   // The disturbance-state filter's whole state and covariance (row-major): what it found about
   // the plant outlives a restart; absent in older files and without that filter.
-  if (s.disturbance_x.size() > 0) {
-    t.insert("disturbance_x", Flattened(s.disturbance_x));
-    t.insert("disturbance_s", Flattened(s.disturbance_s));
+  if (s.observer_x.size() > 0) {
+    t.insert("disturbance_x", Flattened(s.observer_x));
+    t.insert("disturbance_s", Flattened(s.observer_s));
   }
   // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
   // consecutive rejections.
@@ -204,8 +204,8 @@ bool ReadDisturbances(const toml::table& t, int count, PumpSavedState& s) {
   if (!x || !c || count <= 0 || x->size() != n || c->size() != n * n) return true;
   std::vector<double> vx, vs;
   if (!Numbers(t, "disturbance_x", n, vx) || !Numbers(t, "disturbance_s", n * n, vs)) return false;
-  s.disturbance_x = Eigen::Map<const Eigen::VectorXd>(vx.data(), count);
-  s.disturbance_s =
+  s.observer_x = Eigen::Map<const Eigen::VectorXd>(vx.data(), count);
+  s.observer_s =
       Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
           vs.data(), count, count);
   return true;
@@ -315,7 +315,7 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
       } else if ((*t)["frame_sensor_offset_K"]) {
         ok = false;  // present but damaged
       }
-      ok = ok && ReadDisturbances(*t, pump->DisturbanceStateCount(), s);
+      ok = ok && ReadDisturbances(*t, pump->ObserverStateCount(), s);
       ok = ok && ReadIdentifierState(*t, version, {rx, rp, rm, rprob, rrej},
                                      pump->identifier().config(), s.resistance);
       ok = ok && pump->Restore(s, std::max(now_us, s.time_us));

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <iterator>
 #include <lcm/lcm-cpp.hpp>
 #include <stdexcept>
 #include <string_view>
@@ -18,28 +19,30 @@
 
 #include "daemon/gateway_detail.hpp"
 #include "daemon/log.hpp"
+#include "daemon/published_fields.hpp"
 #include "protocol/candump_log.hpp"
 
 namespace pumptherm::daemon {
 namespace {
 
+/// An output file ("-": standard output, left open).
 struct File {
   std::FILE* f = nullptr;
   std::string path;
   File(const std::string& p, const char* mode) : path(p) {
     if (p.empty()) return;
-    f = std::fopen(p.c_str(), mode);
+    f = p == "-" ? stdout : std::fopen(p.c_str(), mode);
     if (!f) throw std::runtime_error(fmt::format("{}: cannot create: {}", p, std::strerror(errno)));
   }
   ~File() {
-    if (f) std::fclose(f);
+    if (f && f != stdout) std::fclose(f);
   }
   File(const File&) = delete;
   File& operator=(const File&) = delete;
   void Close() {
     if (!f) return;
     const bool bad = std::fflush(f) != 0 || std::ferror(f);
-    std::fclose(f);
+    if (f != stdout) std::fclose(f);
     f = nullptr;
     if (bad) throw std::runtime_error(fmt::format("{}: write error", path));
   }
@@ -93,25 +96,21 @@ class LogSink : public OutputSink {
 /// One CSV per pump, a row per thermal step.
 class CsvSink {
  public:
-  CsvSink(const std::string& dir, double origin_s, const Gateway& g) : origin_s_(origin_s) {
-    if (dir.empty()) return;
+  CsvSink(const OfflineOptions& o, const Gateway& g) : origin_s_(o.csv_time_origin_s) {
+    const std::string& dir = o.csv_dir;
+    if (dir.empty() && o.csv_file.empty()) return;
     std::error_code ec;
-    std::filesystem::create_directories(dir, ec);  // like the tools' --out
+    if (!dir.empty()) std::filesystem::create_directories(dir, ec);  // like the tools' --out
     if (ec) throw std::system_error(ec, "--csv-dir: cannot create '" + dir + "'");
     for (const auto& p : g.pumps()) {
-      files_.push_back(
-          std::make_unique<File>(fmt::format("{}/{}.csv", dir, p->config().name), "w"));
+      files_.push_back(std::make_unique<File>(
+          dir.empty() ? o.csv_file : fmt::format("{}/{}.csv", dir, p->config().name), "w"));
       std::string header = "time_s";
       for (const auto& n : p->model().StateNames()) header += fmt::format(",{}_C,{}_sd_K", n, n);
-      header +=
-          ",winding_resistance_C,magnet_flux_C,magnet_flux_sd_K,resistance_ohm,flux_Wb,ident_"
-          "status,"
-          "frame_measured_C,ambient_C,"
-          "speed_rpm,nis,alarm_level,alarm_reason,alarm_node,time_to_trip_s,alarm_active_reasons,"
-          "sensor_fault,winding_resistance_sd_K,flux_sd_Wb,mismatch_state,mismatch_effect,mismatch_"
-          "value,frame_sensor_offset_K\n";
+      header += CsvHeader() + "\n";
       std::fputs(header.c_str(), files_.back()->f);
       last_.push_back(-1);
+      if (dir.empty()) break;  // csv_file: the first pump's
     }
   }
   void Write(const Gateway& g) {
@@ -121,22 +120,12 @@ class CsvSink {
       // temperatures NaN): the CSV shows what went out on CAN.
       if (!gateway_detail::AlarmKnown(s) || s.time_us == last_[i]) continue;
       last_[i] = s.time_us;
-      std::string row = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6 - origin_s_);
+      row_ = fmt::format("{:.3f}", static_cast<double>(s.time_us) * 1e-6 - origin_s_);
       for (std::size_t k = 0; k < s.node_degC.size(); ++k)
-        row += fmt::format(",{:.4f},{:.4f}", s.node_degC[k], s.node_sd_K[k]);
-      const auto& r = s.resistance;
-      row += fmt::format(
-          ",{:.4f},{:.4f},{:.4f},{:.6f},{:.7f},{},{:.2f},{:.2f},{:.1f},{:.3f},{},{},{},{:.0f},{},{}"
-          ",{:.4f},{:.3g},{},{},{:.3f},{:.3f}\n",
-          s.winding_resistance_degC, s.magnet_flux_degC, s.magnet_flux_sd_K, r.resistance_ohm,
-          r.flux_Wb, static_cast<int>(r.status), s.frame_measured_degC, s.ambient_degC, s.speed_rpm,
-          s.nis, static_cast<int>(s.alarm.level), static_cast<int>(s.alarm.reason), s.alarm.node,
-          std::isfinite(s.alarm.time_to_trip_s) ? s.alarm.time_to_trip_s : -1.0,
-          s.alarm.active_reasons, static_cast<int>(s.sensor_fault),
-          std::isfinite(s.winding_resistance_degC) ? r.winding_sd_K : std::nan(""), r.flux_sd_Wb,
-          estimators::MismatchStateName(s.mismatch.state),
-          estimators::MismatchEffectName(s.mismatch.effect), s.mismatch.value, s.sensor_offset_K);
-      std::fputs(row.c_str(), files_[i]->f);
+        fmt::format_to(std::back_inserter(row_), ",{:.4f},{:.4f}", s.node_degC[k], s.node_sd_K[k]);
+      AppendCsvRow(g.Source(*g.pumps()[i]), row_);
+      row_ += '\n';
+      std::fputs(row_.c_str(), files_[i]->f);
     }
   }
   void Close() {
@@ -145,6 +134,7 @@ class CsvSink {
 
  private:
   double origin_s_;
+  std::string row_;  ///< the row being written, its capacity kept
   std::vector<std::unique_ptr<File>> files_;
   std::vector<std::int64_t> last_;
 };
@@ -257,7 +247,7 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
                          const OfflineOptions& options) {
   OfflineResult r;
   LogSink sink(options, gateway);
-  CsvSink csv(options.csv_dir, options.csv_time_origin_s, gateway);
+  CsvSink csv(options, gateway);
   LineReader reader(in);
   std::string_view line;
   InterfaceCache interfaces(gateway);

@@ -15,9 +15,11 @@
 namespace pumptherm::daemon {
 
 struct OfflineOptions {
-  std::string output_log;           ///< candump log of the frames the gateway sends ("" = none)
-  std::string lcm_log;              ///< LCM log file of the messages it publishes ("" = none)
-  std::string csv_dir;              ///< per-pump CSV of every thermal step ("" = none)
+  std::string output_log;  ///< candump log of the frames the gateway sends ("" = none)
+  std::string lcm_log;     ///< LCM log file of the messages it publishes ("" = none)
+  std::string csv_dir;     ///< per-pump CSV of every thermal step ("" = none)
+  /// The CSV of the first pump into this file instead ("-": standard output; "" = none).
+  std::string csv_file;
   double csv_time_origin_s = 0.0;   ///< subtracted from the Unix time in the CSV's time_s
   bool table = false;               ///< print the pump table while running
   double table_period_s = 60.0;     ///< of log time between tables

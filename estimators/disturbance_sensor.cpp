@@ -3,22 +3,21 @@
 #include <fmt/core.h>
 
 #include <cmath>
+#include <exception>
 #include <stdexcept>
 
 namespace pumptherm::estimators {
 DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
                                                    DisturbanceSensorConfig config)
-    : model_(model), config_(std::move(config)), discretiser_(1e-3), filter_(0) {
+    : model_(model),
+      config_(std::move(config)),
+      sensor_model_(model, config_.measured_node, config_.sensor_lag_s, "disturbance sensor"),
+      discretiser_(1e-3),
+      filter_(0) {
   const auto& c = config_;
-  frame_ = model_.StateIndex(c.measured_node);
-  if (frame_ < 0) {
-    throw std::invalid_argument(fmt::format(
-        "disturbance sensor: measured node '{}' is not a node with heat capacity of model '{}'",
-        c.measured_node, model_.Name()));
-  }
   if (!(c.measurement_sd_K > 0.0) || !(c.sensor_step_noise_sd_K > 0.0) ||
-      !(c.sensor_lag_s >= 0.0) || !(c.sensor_offset_sd_K > 0.0) || !(c.node_process_sd_K > 0.0) ||
-      !(c.frame_heat_sd_W > 0.0) || !(c.rotor_heat_sd_W > 0.0) || !(c.rotor_heat_tau_s > 0.0) ||
+      !(c.sensor_offset_sd_K > 0.0) || !(c.node_process_sd_K > 0.0) || !(c.frame_heat_sd_W > 0.0) ||
+      !(c.rotor_heat_sd_W > 0.0) || !(c.rotor_heat_tau_s > 0.0) ||
       !(c.winding_measurement_sd_K > 0.0) || !(c.loss_scale_sd >= 0.0) ||
       !(c.loss_scale_max_sd > 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
       !(c.winding_bias_sd_K >= 0.0) || !(c.winding_bias_tau_s > 0.0) ||
@@ -38,42 +37,39 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   }
   const bool has_winding = c.winding_reading && model_.WindingWeights().sum() > 0.0;
   n_ = model_.StateCount();
-  int k = n_;
-  if (c.sensor_lag_s > 0.0) lag_ = k++;
+  const int frame = sensor_model_.node();
+  int k = sensor_model_.TemperatureStates();
   df_ = k++;
   if (rotor_ >= 0) dr_ = k++;
   if (c.loss_scale_sd > 0.0) ls_ = k++;
-  bias_ = k++;
+  sensor_model_.PlaceOffset(k++);
   if (has_winding && c.winding_bias_sd_K > 0.0) wb_ = k++;
   if (magnet_ >= 0 && c.magnet_bias_sd_K > 0.0) mb_ = k++;
   n_aug_ = k;
   // The nodes and the sensor lag are discretised together (exact ZOH); the disturbances are held
   // over a step and enter through that discretisation's Phi (Step()), so the matrix exponential is
   // redone only when the network moves, as in VirtualThermalSensor.
-  const int nb = lag_ >= 0 ? n_ + 1 : n_;
+  const int nb = sensor_model_.TemperatureStates();
   lin_block_.a_per_s = Eigen::MatrixXd::Zero(nb, nb);
   lin_block_.f_K_per_s = Eigen::VectorXd::Zero(nb);
+  sensor_model_.AddLagRow(lin_block_.a_per_s);
   const Eigen::VectorXd& cap = model_.Capacities_J_per_K();
   heat_in_ = Eigen::MatrixXd::Zero(nb, 3);  // K/s per unit of d_f, d_r, s
   phi_heat_ = Eigen::MatrixXd::Zero(nb, 3);
-  heat_in_(frame_, 0) = 1.0 / cap(frame_);
+  heat_in_(frame, 0) = 1.0 / cap(frame);
   if (dr_ >= 0) heat_in_(rotor_, 1) = 1.0 / cap(rotor_);
-  if (lag_ >= 0) {
-    lin_block_.a_per_s(lag_, frame_) = 1.0 / c.sensor_lag_s;
-    lin_block_.a_per_s(lag_, lag_) = -1.0 / c.sensor_lag_s;
-  }
   ad_ = Eigen::MatrixXd::Identity(n_aug_, n_aug_);
   sp_ = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
   bu_ = Eigen::VectorXd::Zero(n_aug_);
-  c_ = Eigen::MatrixXd::Zero(1, n_aug_);
-  sensor_ = lag_ >= 0 ? lag_ : frame_;
-  c_(0, sensor_) = 1.0;
-  c_(0, bias_) = 1.0;
-  sm_ = Eigen::MatrixXd::Constant(1, 1, c.measurement_sd_K * c.measurement_sd_K);
-  y_ = Eigen::VectorXd::Zero(1);
   c0_ = Eigen::MatrixXd::Zero(0, n_aug_);
   BuildRows();
   x_nodes_ = Eigen::VectorXd::Zero(n_);
+  sw_ = Eigen::VectorXd::Zero(n_);
+  const int aux = n_aug_ - nb;
+  aux_cov_ = Eigen::MatrixXd::Zero(aux, aux);
+  aux_cross_ = Eigen::MatrixXd::Zero(aux, n_);
+  aux_solved_ = Eigen::MatrixXd::Zero(aux, n_);
+  aux_ldlt_ = Eigen::LDLT<Eigen::MatrixXd>(aux);
   filter_ = KalmanFilter(n_aug_);
   gauss_markov_.assign(static_cast<std::size_t>(n_aug_),
                        {std::numeric_limits<double>::quiet_NaN(), 1.0});
@@ -119,45 +115,41 @@ void DisturbanceThermalSensor::GaussMarkov(int state, double sd, double tau_s, d
 
 void DisturbanceThermalSensor::Initialise(double x0_degC) {
   const auto& c = config_;
-  const int temps = lag_ >= 0 ? n_ + 1 : n_;  // nodes and the lag: one common level
   Eigen::MatrixXd s = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
-  for (int i = 0; i < temps; ++i) {
-    const int ii = i < n_ ? i : lag_;
-    for (int j = 0; j < temps; ++j) s(ii, j < n_ ? j : lag_) = c.initial_sd_K * c.initial_sd_K;
-    s(ii, ii) += c.initial_spread_sd_K * c.initial_spread_sd_K;
-  }
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(n_aug_);
+  sensor_model_.SetInitial(x0_degC, c.initial_sd_K, c.initial_spread_sd_K, c.sensor_offset_sd_K, x,
+                           s);
   s(df_, df_) = 1.0;  // W^2: a watt either way at the start
   if (dr_ >= 0) s(dr_, dr_) = c.rotor_heat_sd_W * c.rotor_heat_sd_W;
   if (ls_ >= 0) s(ls_, ls_) = 0.01;  // 10 % either way at the start
-  s(bias_, bias_) = c.sensor_offset_sd_K * c.sensor_offset_sd_K;
   if (wb_ >= 0) s(wb_, wb_) = c.winding_bias_sd_K * c.winding_bias_sd_K;
   if (mb_ >= 0) s(mb_, mb_) = c.magnet_bias_sd_K * c.magnet_bias_sd_K;
-  Eigen::VectorXd x = Eigen::VectorXd::Zero(n_aug_);
-  x.head(n_).setConstant(x0_degC);
-  if (lag_ >= 0) x(lag_) = x0_degC;
   filter_.Reset(x, s);
   frame_fused_last_ = reopen_offset_ = false;
   stepped_offset_K_ = 0.0;
   last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
 }
 
-void DisturbanceThermalSensor::Initialise(const Eigen::VectorXd& x_degC,
-                                          const Eigen::MatrixXd& s_K2) {
+void DisturbanceThermalSensor::InitialiseNodes(const Eigen::VectorXd& x_degC,
+                                               const Eigen::MatrixXd& s_K2) {
   if (x_degC.size() != n_ || s_K2.rows() != n_ || s_K2.cols() != n_ || !x_degC.allFinite() ||
       !s_K2.allFinite()) {
     throw std::invalid_argument(
-        "DisturbanceThermalSensor::Initialise: need n finite temperatures and an n x n covariance");
+        "DisturbanceThermalSensor::InitialiseNodes: need n finite temperatures and an n x n "
+        "covariance");
   }
-  Initialise(x_degC(frame_));  // the disturbances' and biases' priors
+  const int frame = sensor_model_.node();
+  Initialise(x_degC(frame));  // the disturbances' and biases' priors
   Eigen::VectorXd x = filter_.State();
   Eigen::MatrixXd s = filter_.Covariance();
   x.head(n_) = x_degC;
   s.topLeftCorner(n_, n_) = s_K2;
-  if (lag_ >= 0) {
-    x(lag_) = x_degC(frame_);
-    s.block(lag_, 0, 1, n_) = s_K2.row(frame_);
-    s.block(0, lag_, n_, 1) = s_K2.col(frame_);
-    s(lag_, lag_) = s_K2(frame_, frame_);
+  if (sensor_model_.has_lag()) {
+    const int lag = sensor_model_.lag();
+    x(lag) = x_degC(frame);
+    s.block(lag, 0, 1, n_) = s_K2.row(frame);
+    s.block(0, lag, n_, 1) = s_K2.col(frame);
+    s(lag, lag) = s_K2(frame, frame);
   }
   filter_.Reset(x, s);
 }
@@ -169,12 +161,13 @@ void DisturbanceThermalSensor::RestoreSensorOffset(double offset_K, double sd_K,
         "DisturbanceThermalSensor::RestoreSensorOffset: need a finite offset and step sum and a "
         "positive sd");
   }
+  const int b = sensor_model_.offset();
   Eigen::VectorXd x = filter_.State();
   Eigen::MatrixXd s = filter_.Covariance();
-  x(bias_) = offset_K;
-  s.row(bias_).setZero();
-  s.col(bias_).setZero();
-  s(bias_, bias_) = sd_K * sd_K;
+  x(b) = offset_K;
+  s.row(b).setZero();
+  s.col(b).setZero();
+  s(b, b) = sd_K * sd_K;
   filter_.Reset(x, s);
   stepped_offset_K_ = stepped_K;
 }
@@ -185,15 +178,20 @@ bool DisturbanceThermalSensor::CanRestore(const Eigen::VectorXd& x,
          s.allFinite() && (n_aug_ == 0 || s.diagonal().minCoeff() >= 0.0);
 }
 
-void DisturbanceThermalSensor::Restore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s,
-                                       double stepped_K) {
-  if (!CanRestore(x, s) || !std::isfinite(stepped_K)) {
+void DisturbanceThermalSensor::Restore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
+  if (!CanRestore(x, s)) {
     throw std::invalid_argument(
         "DisturbanceThermalSensor::Restore: need the filter's finite state and covariance (its "
-        "state count) and a finite step sum");
+        "state count)");
   }
-  Initialise(x(frame_));  // forgets the last reading: no step test against a reading before
+  Initialise(x(sensor_model_.node()));  // forgets the last reading: no step test against it
   filter_.Reset(x, 0.5 * (s + s.transpose()));
+}
+
+void DisturbanceThermalSensor::RestoreSteppedOffset(double stepped_K) {
+  if (!std::isfinite(stepped_K)) {
+    throw std::invalid_argument("DisturbanceThermalSensor: the offset's step sum must be finite");
+  }
   stepped_offset_K_ = stepped_K;
 }
 
@@ -209,41 +207,53 @@ void DisturbanceThermalSensor::Nodes(Eigen::VectorXd& x_degC, Eigen::VectorXd& s
   }
 }
 
-void DisturbanceThermalSensor::AddDisturbanceForcing(ThermalLinearModel& lin) const {
+double DisturbanceThermalSensor::WeightedVariance_K2(const Eigen::VectorXd& w) const {
+  sw_.noalias() = filter_.Covariance().topLeftCorner(n_, n_) * w;
+  return std::max(w.dot(sw_), 0.0);
+}
+
+double DisturbanceThermalSensor::SettlingSd_K() const {
+  // S_nn - S_na S_aa^-1 S_an over the nodes n and the states a past the temperatures.
+  const int nb = sensor_model_.TemperatureStates();
+  const int aux = n_aug_ - nb;
+  const Eigen::MatrixXd& p = filter_.Covariance();
+  aux_cov_ = p.block(nb, nb, aux, aux);
+  aux_cross_ = p.block(nb, 0, aux, n_);
+  aux_ldlt_.compute(aux_cov_);
+  aux_solved_ = aux_ldlt_.solve(aux_cross_);
+  double largest = 0.0;
+  for (int i = 0; i < n_; ++i) {
+    const double v = p(i, i) - aux_cross_.col(i).dot(aux_solved_.col(i));
+    largest = std::max(largest, std::max(v, 0.0));
+  }
+  return std::sqrt(largest + config_.sd_floor_K * config_.sd_floor_K);
+}
+
+void DisturbanceThermalSensor::AddFoundHeat(ThermalLinearModel& lin) const {
   const Eigen::VectorXd& cap = model_.Capacities_J_per_K();
-  lin.f_K_per_s(frame_) += filter_.State()(df_) / cap(frame_);
+  const int frame = sensor_model_.node();
+  lin.f_K_per_s(frame) += filter_.State()(df_) / cap(frame);
   if (dr_ >= 0) lin.f_K_per_s(rotor_) += filter_.State()(dr_) / cap(rotor_);
 }
 
-const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
-                                                         double measured_degC,
-                                                         double winding_degC) {
-  DisturbanceReadings r;
-  r.frame_degC = measured_degC;
-  r.winding_degC = winding_degC;
-  return Step(in, dt_s, r);
-}
-
-const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
-                                                         const DisturbanceReadings& r) {
-  // Health is data: a period or inputs the model cannot take refuse the step (nothing changes).
-  if (!(dt_s > 0.0) || !std::isfinite(dt_s) || !model_.AcceptsInputs(in)) {
-    refused_.measurements = 0;
-    refused_.ok = false;
-    refused_.refused = true;
-    return refused_;
-  }
+bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   const auto& c = config_;
   const int nb = static_cast<int>(lin_block_.f_K_per_s.size());
   x_nodes_ = filter_.State().head(n_);
-  model_.Linearise(in, x_nodes_, lin_);
+  try {
+    model_.Linearise(in, x_nodes_, lin_);
+    if (ls_ >= 0) {
+      ThermalInputs idle = in;
+      idle.speed_rpm = idle.id_A = idle.iq_A = 0.0;
+      model_.Linearise(idle, x_nodes_, lin_idle_);
+    }
+  } catch (const std::exception&) {
+    return false;  // a massless sub-network singular at this operating point
+  }
   lin_block_.a_per_s.topLeftCorner(n_, n_) = lin_.a_per_s;
   lin_block_.f_K_per_s.head(n_) = lin_.f_K_per_s;
   if (ls_ >= 0) {
     // The losses' share of dx/dt at the estimate: (a x + f) under load minus at rest.
-    ThermalInputs idle = in;
-    idle.speed_rpm = idle.id_A = idle.iq_A = 0.0;
-    model_.Linearise(idle, x_nodes_, lin_idle_);
     auto col = heat_in_.col(2).head(n_);
     col.noalias() = lin_.a_per_s * x_nodes_;
     col += lin_.f_K_per_s;
@@ -275,21 +285,49 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
   if (wb_ >= 0) GaussMarkov(wb_, c.winding_bias_sd_K, c.winding_bias_tau_s, dt_s);
   if (mb_ >= 0) GaussMarkov(mb_, c.magnet_bias_sd_K, c.magnet_bias_tau_s, dt_s);
   filter_.Predict(ad_, bu_, sp_);
+  return true;
+}
+
+const ObserverReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, double dt_s,
+                                                     const ThermalReadings& r) {
+  report_ = ObserverReport{};
+  // Health is data: a period or inputs the model cannot take refuse the step (nothing changes).
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s) || !model_.AcceptsInputs(in) || !Predict(in, dt_s)) {
+    refused_.measurements = 0;
+    refused_.ok = false;
+    refused_.refused = true;
+    report_.update = &refused_;
+    report_.refused = true;
+    return report_;
+  }
   const bool frame = std::isfinite(r.frame_degC);
   if (frame) OpenOffsetOnStep(r.frame_degC);
   frame_fused_last_ = frame;
   const bool winding = row_w_ >= 0 && std::isfinite(r.winding_degC);
   const bool magnet =
       row_m_ >= 0 && std::isfinite(r.magnet_degC) && std::isfinite(r.magnet_winding_gain);
-  if (!frame && !winding && !magnet) return filter_.Update(c0_, y0_, sm0_);
+  if (!frame && !winding && !magnet) {
+    report_.update = &filter_.Update(c0_, y0_, sm0_);
+    return report_;
+  }
+  FillRows(r, frame, winding, magnet);
+  const KalmanUpdateReport& update = filter_.Update(c_all_, y_all_, sm_all_);
+  if (frame) RememberReading(r.frame_degC);
+  ReportRows(update, frame, winding, magnet);
+  return report_;
+}
+
+void DisturbanceThermalSensor::FillRows(const ThermalReadings& r, bool frame, bool winding,
+                                        bool magnet) {
+  const auto& c = config_;
   // A missing reading: a zero row, zero innovation, unit variance (no gain, no effect).
   c_all_.setZero();
   sm_all_.setZero();
   y_all_.setZero();
   sm_all_(0, 0) = 1.0;
   if (frame) {
-    c_all_.row(0) = c_.row(0);
-    sm_all_(0, 0) = sm_(0, 0);
+    sensor_model_.SetReadingRow(c_all_, 0);
+    sm_all_(0, 0) = c.measurement_sd_K * c.measurement_sd_K;
     y_all_(0) = r.frame_degC;
   }
   if (row_w_ >= 0) {
@@ -313,18 +351,20 @@ const KalmanUpdateReport& DisturbanceThermalSensor::Step(const ThermalInputs& in
       y_all_(row_m_) = r.magnet_degC;
     }
   }
-  const KalmanUpdateReport& report = filter_.Update(c_all_, y_all_, sm_all_);
-  if (frame) RememberReading(r.frame_degC);
-  return report;
 }
 
-double DisturbanceThermalSensor::PredictedReading_degC() const {
-  return filter_.State()(sensor_) + filter_.State()(bias_);
-}
-
-double DisturbanceThermalSensor::PredictedReadingVar_K2() const {
-  const Eigen::MatrixXd& p = filter_.Covariance();
-  return p(sensor_, sensor_) + 2.0 * p(sensor_, bias_) + p(bias_, bias_);
+void DisturbanceThermalSensor::ReportRows(const KalmanUpdateReport& update, bool frame,
+                                          bool winding, bool magnet) {
+  report_.update = &update;
+  if (!update.ok) return;
+  auto row = [&](ReadingRow& out, int i) {
+    out.fused = true;
+    out.innovation_K = update.innovation(i);
+    out.innovation_var_K2 = update.innovation_var(i);
+  };
+  if (frame) row(report_.frame, 0);
+  if (winding) row(report_.winding, row_w_);
+  if (magnet) row(report_.magnet, row_m_);
 }
 
 // The step between two readings against the step the filter predicted between them: the
@@ -336,15 +376,17 @@ void DisturbanceThermalSensor::OpenOffsetOnStep(double frame_degC) {
       (frame_fused_last_ || reopen_offset_) && std::isfinite(last_reading_degC_);
   reopen_offset_ = false;
   if (!(gate > 0.0) || !comparable) return;
-  const double step =
-      (frame_degC - last_reading_degC_) - (PredictedReading_degC() - last_predicted_degC_);
+  const double predicted = sensor_model_.PredictedReading_degC(filter_.State());
+  const double step = (frame_degC - last_reading_degC_) - (predicted - last_predicted_degC_);
   // Two readings' white noise, and what the prediction since the last update added to the
   // uncertainty.
   const double noise = config_.sensor_step_noise_sd_K;
   const double var =
-      2.0 * noise * noise + std::max(PredictedReadingVar_K2() - last_predicted_var_K2_, 0.0);
+      2.0 * noise * noise +
+      std::max(sensor_model_.PredictedReadingVar_K2(filter_.Covariance()) - last_predicted_var_K2_,
+               0.0);
   if (!(step * step > gate * gate * var)) return;
-  filter_.AddVariance(bias_, step * step);
+  filter_.AddVariance(sensor_model_.offset(), step * step);
   ++sensor_steps_;
   last_sensor_step_K_ = step;
   stepped_offset_K_ += step;
@@ -352,8 +394,8 @@ void DisturbanceThermalSensor::OpenOffsetOnStep(double frame_degC) {
 
 void DisturbanceThermalSensor::RememberReading(double frame_degC) {
   last_reading_degC_ = frame_degC;
-  last_predicted_degC_ = PredictedReading_degC();
-  last_predicted_var_K2_ = PredictedReadingVar_K2();
+  last_predicted_degC_ = sensor_model_.PredictedReading_degC(filter_.State());
+  last_predicted_var_K2_ = sensor_model_.PredictedReadingVar_K2(filter_.Covariance());
 }
 
 bool BoundaryOnlyThrough(const ThermalModel& model, const std::string& measured_node) {

@@ -28,9 +28,11 @@
 #include <utility>
 #include <vector>
 
+#include "estimators/frame_sensor_model.hpp"
 #include "estimators/kalman_filter.hpp"
 #include "estimators/thermal_discretisation.hpp"
 #include "estimators/thermal_model.hpp"
+#include "estimators/thermal_observer.hpp"
 
 namespace pumptherm::estimators {
 
@@ -90,17 +92,8 @@ struct DisturbanceSensorConfig {
   double initial_spread_sd_K = 5.0;
 };
 
-/// The readings of one period; NaN = not read this period.
-struct DisturbanceReadings {
-  double frame_degC = std::numeric_limits<double>::quiet_NaN();  ///< the frame sensor
-  /// The resistance-based winding temperature (Han et al. 2019 eq. 3).
-  double winding_degC = std::numeric_limits<double>::quiet_NaN();
-  /// The magnet reading z = T_magnet + g T_winding (the back-EMF row, docs/virtual-sensor.md,
-  /// "Magnet temperature from the flux"), its white sd and g (dimensionless).
-  double magnet_degC = std::numeric_limits<double>::quiet_NaN();
-  double magnet_sd_K = std::numeric_limits<double>::quiet_NaN();
-  double magnet_winding_gain = 0.0;
-};
+/// The readings of one period (the observer interface's).
+using DisturbanceReadings = ThermalReadings;
 
 /// Whether the boundary (ambient and coolant) reaches the network through `measured_node` alone:
 /// after the massless nodes are reduced, a change of the boundary temperature moves no other
@@ -112,89 +105,98 @@ struct DisturbanceReadings {
 /// model cannot be linearised at standstill.
 bool BoundaryOnlyThrough(const ThermalModel& model, const std::string& measured_node);
 
-class DisturbanceThermalSensor {
+class DisturbanceThermalSensor : public ThermalObserver {
  public:
   /// Throws std::invalid_argument naming an unknown measured node or a bad setting.
   DisturbanceThermalSensor(const ThermalModel& model, DisturbanceSensorConfig config);
 
-  void Initialise(double x0_degC);
-  /// Starts from node temperatures `x_degC` (n) with their covariance `s_K2` (n x n, K^2), as a
-  /// restored standard filter gives them: the sensor's lag state at the measured node (its row
-  /// of `s_K2`), every disturbance and bias at zero with its prior sd as Initialise(double).
-  /// Throws std::invalid_argument for wrong sizes or non-finite values.
-  void Initialise(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2);
-  /// One period; `measured_degC` NaN = no reading; `winding_degC` (the resistance-based winding
-  /// temperature, Han et al. 2019 eq. 3) fused when finite and `winding_reading` is set. A period
-  /// that is not positive and finite, or non-finite inputs, refuse the step (report.refused).
-  const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,
-                                 double winding_degC = std::numeric_limits<double>::quiet_NaN());
+  int NodeCount() const override { return n_; }
+  int StateCount() const override { return n_aug_; }
+  void Initialise(double x0_degC) override;
+  /// The sensor's lag state at the measured node (its row of `s_K2`), every disturbance and
+  /// bias at zero with its prior sd as Initialise(double).
+  void InitialiseNodes(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) override;
   /// One period with every reading. The update has one row per reading the filter has a state
   /// for (frame, winding, magnet, in this order) whenever any is finite; a missing reading's row
-  /// is zero (no effect). A period that is not positive and finite, or non-finite inputs, refuse
-  /// the step (report.refused; nothing changes).
-  const KalmanUpdateReport& Step(const ThermalInputs& inputs, double dt_s,
-                                 const DisturbanceReadings& readings);
+  /// is zero (no effect). The winding's own sd in `readings` is not used (the filter's
+  /// winding_measurement_sd_K is, with the reading's bias state). A refused step changes
+  /// nothing.
+  const ObserverReport& Step(const ThermalInputs& inputs, double dt_s,
+                             const ThermalReadings& readings) override;
 
-  /// Node temperature estimate i (state order of the model) and its reported sd (with the floor).
-  double Node_degC(int i) const { return filter_.State()(i); }
-  double NodeSd_K(int i) const;
+  const Eigen::VectorXd& State() const override { return filter_.State(); }
+  const Eigen::MatrixXd& Covariance() const override { return filter_.Covariance(); }
+  /// Node i's sd with the floor (sd_floor_K in quadrature).
+  double NodeSd_K(int i) const override;
+  double WeightedVariance_K2(const Eigen::VectorXd& w) const override;
+  /// The largest node sd the filter would have if its disturbances, biases and the sensor's
+  /// offset were known (the node block's Schur complement, floor included): what a start or a
+  /// restart leaves to settle. The rotor's large sd without a magnet reading comes from the rotor
+  /// heat state and is not counted.
+  double SettlingSd_K() const override;
   /// Every node's estimate and reported sd into `x_degC`, `sd_K` (sized n; no allocation).
   void Nodes(Eigen::VectorXd& x_degC, Eigen::VectorXd& sd_K) const;
   /// Adds the disturbance heats (frame path, rotor) to the forcing of `lin` (n nodes), so that a
   /// forecast with the nominal model carries the heat the filter has found.
-  void AddDisturbanceForcing(ThermalLinearModel& lin) const;
+  void AddFoundHeat(ThermalLinearModel& lin) const override;
+  bool ModelsSensorLag() const override { return sensor_model_.has_lag(); }
   double FrameHeat_W() const { return filter_.State()(df_); }
   double RotorHeat_W() const { return dr_ >= 0 ? filter_.State()(dr_) : 0.0; }
-  double SensorOffset_K() const { return filter_.State()(bias_); }
-  double SensorOffsetSd_K() const {
-    return std::sqrt(std::max(filter_.Covariance()(bias_, bias_), 0.0));
+  bool EstimatesSensorOffset() const override { return true; }
+  double SensorOffset_K() const override { return filter_.State()(sensor_model_.offset()); }
+  double SensorOffsetSd_K() const override {
+    const int b = sensor_model_.offset();
+    return std::sqrt(std::max(filter_.Covariance()(b, b), 0.0));
   }
   /// Steps of the sensor's offset found so far (sensor_step_gate_sd), the last one's size (the
   /// reading's step less the predicted one, K; 0 before any) and the sum of the steps since the
   /// last Initialise (how far the reading stepped away from the frame, K: a slow drift of the
   /// offset state is not in it).
-  int SensorSteps() const { return sensor_steps_; }
-  double LastSensorStep_K() const { return last_sensor_step_K_; }
-  double SteppedOffset_K() const { return stepped_offset_K_; }
+  int SensorSteps() const override { return sensor_steps_; }
+  double LastSensorStep_K() const override { return last_sensor_step_K_; }
+  double SteppedOffset_K() const override { return stepped_offset_K_; }
   /// Sets the sensor's offset estimate (K), its sd (K, uncorrelated with the rest) and the sum of
   /// its steps (SteppedOffset_K), as saved before a restart, after Initialise. Throws
   /// std::invalid_argument for a non-finite value or an sd that is not positive.
-  void RestoreSensorOffset(double offset_K, double sd_K, double stepped_K);
-  /// Whether `x` (StateCount()) and `s` (StateCount() square) can be restored: finite, the
-  /// variances not negative. A filter of another configuration (another count) cannot.
-  bool CanRestore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) const;
-  /// Takes the whole state as saved before a restart (Filter().State(), Filter().Covariance():
-  /// the nodes, the sensor's lag and offset, the disturbances and biases, with their
-  /// correlations) and the sum of the offset's steps (SteppedOffset_K), so that what the filter
-  /// had found (lost cooling, heat inside, a stepped sensor) outlives the restart. Throws
-  /// std::invalid_argument when !CanRestore(x, s) or `stepped_K` is not finite.
-  void Restore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s, double stepped_K);
+  void RestoreSensorOffset(double offset_K, double sd_K, double stepped_K) override;
+  bool CanRestore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) const override;
+  /// Takes the whole state as saved before a restart (State(), Covariance(): the nodes, the
+  /// sensor's lag and offset, the disturbances and biases, with their correlations), so that
+  /// what the filter had found (lost cooling, heat inside, a stepped sensor) outlives the
+  /// restart; the last reading is forgotten (no step test against a reading before it). Throws
+  /// std::invalid_argument when !CanRestore(x, s).
+  void Restore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) override;
+  /// The sum of the offset's steps as saved (after Restore). Throws std::invalid_argument when
+  /// it is not finite.
+  void RestoreSteppedOffset(double stepped_K) override;
   /// The next fused frame reading may open a step of the offset even though the previous step
   /// fused none (a sensor back from a fault that left it out, such as a jump beyond physics).
-  void ReopenSensorOffset() { reopen_offset_ = true; }
+  void ReopenSensorOffset() override { reopen_offset_ = true; }
   /// The magnet reading's estimated bias, K (0 without a magnet reading).
   double MagnetBias_K() const { return mb_ >= 0 ? filter_.State()(mb_) : 0.0; }
-  int StateCount() const { return n_aug_; }
   const KalmanFilter& Filter() const { return filter_; }
 
  private:
   const ThermalModel& model_;
   DisturbanceSensorConfig config_;
+  FrameSensorModel sensor_model_;
   void BuildRows();
   void GaussMarkov(int state, double sd, double tau_s, double dt_s);
+  /// The time update of one period (false: refused, nothing changed).
+  bool Predict(const ThermalInputs& in, double dt_s);
+  /// The update rows of this step's readings into c_all_, y_all_, sm_all_; which were finite.
+  void FillRows(const ThermalReadings& r, bool frame, bool winding, bool magnet);
+  /// The report's rows from the update.
+  void ReportRows(const KalmanUpdateReport& update, bool frame, bool winding, bool magnet);
   /// The sensor-offset step test on the predicted state (sensor_step_gate_sd).
   void OpenOffsetOnStep(double frame_degC);
   /// After an update with a frame reading: that reading and the filter's reading of it.
   void RememberReading(double frame_degC);
-  double PredictedReading_degC() const;  ///< the sensor state plus its offset
-  double PredictedReadingVar_K2() const;
 
-  int n_ = 0, lag_ = -1, df_ = 0, dr_ = -1, ls_ = -1, bias_ = 0, n_aug_ = 0, frame_ = 0,
-      rotor_ = -1;
+  int n_ = 0, df_ = 0, dr_ = -1, ls_ = -1, n_aug_ = 0, rotor_ = -1;
   int wb_ = -1, mb_ = -1, magnet_ = -1;  ///< winding and magnet reading biases, the magnet node
   int row_w_ = -1, row_m_ = -1;          ///< their rows in the update (-1: none)
   bool frame_fused_last_ = false;        ///< the previous step fused a frame reading
-  int sensor_ = 0;  ///< the state the frame sensor reads (its lag, or the frame)
   /// The last fused frame reading, the filter's reading of it after that update and its variance.
   double last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
   double last_predicted_degC_ = 0.0;
@@ -206,15 +208,20 @@ class DisturbanceThermalSensor {
   ThermalLinearModel lin_, lin_block_, lin_idle_;
   ThermalDiscretiser discretiser_;
   KalmanFilter filter_;
-  KalmanUpdateReport refused_;  // the report of a refused step
-  Eigen::MatrixXd ad_, sp_, c_, sm_;
-  Eigen::VectorXd bu_, y_, x_nodes_;
+  ObserverReport report_;
+  KalmanUpdateReport refused_;  // the update report of a refused step
+  Eigen::MatrixXd ad_, sp_;
+  Eigen::VectorXd bu_, x_nodes_;
   Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows
   Eigen::VectorXd y0_;
   Eigen::MatrixXd heat_in_, phi_heat_;  ///< d_f, d_r, s into the nodes (K/s per unit); Phi times it
   Eigen::MatrixXd c_all_, sm_all_;      ///< every reading's row (m x n_aug, m x m)
   Eigen::MatrixXd cw_row_, cm_row_;  ///< the winding and magnet rows (1 x n_aug), magnet without g
   Eigen::VectorXd y_all_;
+  /// Workspaces of WeightedVariance_K2 and SettlingSd_K (const queries, no allocation).
+  mutable Eigen::VectorXd sw_;
+  mutable Eigen::MatrixXd aux_cov_, aux_cross_, aux_solved_;
+  mutable Eigen::LDLT<Eigen::MatrixXd> aux_ldlt_;
   /// Per state, the period of the last GaussMarkov() call and its e^(-dt/tau).
   std::vector<std::pair<double, double>> gauss_markov_;
 };

@@ -11,7 +11,9 @@
 /// with whatever was measured at the end of the period (NaN = not measured this time).
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <limits>
 #include <string>
 #include <vector>
@@ -19,6 +21,7 @@
 #include "estimators/kalman_filter.hpp"
 #include "estimators/thermal_discretisation.hpp"
 #include "estimators/thermal_model.hpp"
+#include "estimators/thermal_observer.hpp"
 
 namespace pumptherm::estimators {
 
@@ -79,21 +82,52 @@ struct VirtualSensorConfig {
   /// Relative change of the continuous system matrix that triggers a new discretisation.
   double relinearise_tolerance = 1e-3;
   CovarianceUpdate covariance_update = CovarianceUpdate::kJoseph;
+  /// As a ThermalObserver: the node the magnet reading measures (empty: no magnet row) and
+  /// whether the winding reading has a row (the model must have a winding). The frame reading
+  /// reads the first of `measured_nodes`.
+  std::string magnet_node;
+  bool winding_reading = true;
+  /// Least sd of the magnet reading, K (the identifier's covariance sees its noise, not its slow
+  /// error: without a bias state that error is taken as white noise of this sd).
+  double magnet_min_sd_K = 0.0;
 };
 
-class VirtualThermalSensor {
+class VirtualThermalSensor : public ThermalObserver {
  public:
-  /// Throws std::invalid_argument naming a measured node that is not a node with capacity, or
-  /// a non-positive standard deviation. Keeps a reference to `model`, which must outlive it.
+  /// Throws std::invalid_argument naming a measured node or a magnet node that is not a node
+  /// with capacity, or a non-positive standard deviation. Keeps a reference to `model`, which
+  /// must outlive it.
   VirtualThermalSensor(const ThermalModel& model, VirtualSensorConfig config);
 
   /// Starts from `x0_degC` (n) with the configured initial covariance.
   void Initialise(const Eigen::VectorXd& x0_degC);
   /// Continues from a saved estimate `x_degC` (n) and covariance `s_K2` (n x n), e.g. restored
-  /// by the daemon after a restart.
-  void Restore(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) {
-    filter_.Reset(x_degC, s_K2);
+  /// by the daemon after a restart. Throws std::invalid_argument when !CanRestore.
+  void Restore(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) override;
+
+  // As a ThermalObserver: its state is the nodes alone.
+  int NodeCount() const override { return model_.StateCount(); }
+  int StateCount() const override { return model_.StateCount(); }
+  void Initialise(double x0_degC) override;
+  void InitialiseNodes(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) override {
+    Restore(x_degC, s_K2);
   }
+  /// One period with the readings as rows: the frame (the first measured node), the winding
+  /// (the winding weights, with the reading's sd, else winding_measurement_sd_K) and the magnet
+  /// (its node plus g times the winding); every row is in every update once any reading is, a
+  /// missing one as a zero row (no effect, no allocation). An invalid reading (an sd that is
+  /// not positive and finite, a non-finite gain) is left out and counted.
+  const ObserverReport& Step(const ThermalInputs& inputs, double dt_s,
+                             const ThermalReadings& readings) override;
+  const Eigen::VectorXd& State() const override { return filter_.State(); }
+  const Eigen::MatrixXd& Covariance() const override { return filter_.Covariance(); }
+  bool CanRestore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) const override;
+  double NodeSd_K(int i) const override {
+    return std::sqrt(std::max(filter_.Covariance()(i, i), 0.0));
+  }
+  double WeightedVariance_K2(const Eigen::VectorXd& w) const override;
+  /// The largest node sd.
+  double SettlingSd_K() const override;
 
   /// Advances one period of `dt_s` with `inputs` held over it, then corrects with
   /// `measured_degC` (one per configured measured node, NaN = not measured; these rows come
@@ -123,10 +157,12 @@ class VirtualThermalSensor {
   const std::vector<int>& MeasuredStates() const { return measured_states_; }
 
  private:
-  /// Whether `e` enters this step's update (finite value, a winding row only when the model has
-  /// a winding); throws std::invalid_argument for a state out of range or a bad sd.
   /// Whether extra measurement `e` enters the update; `rejected` is set when it is invalid.
   bool Uses(const NodeMeasurement& e, bool* rejected = nullptr) const;
+  /// The time update of one period; false when the model cannot be linearised there.
+  bool Predict(const ThermalInputs& inputs, double dt_s);
+  /// The observer's rows (frame, winding, magnet) sized once.
+  void BuildObserverRows();
 
   const ThermalModel& model_;
   VirtualSensorConfig config_;
@@ -142,6 +178,13 @@ class VirtualThermalSensor {
   Eigen::MatrixXd sm_;
   NodeMeasurements winding_only_;
   double sp_dt_s_ = -1.0;
+  // As a ThermalObserver: fixed rows (frame, then winding, then magnet) and their report.
+  int magnet_state_ = -1;
+  int row_w_ = -1, row_m_ = -1;
+  Eigen::MatrixXd obs_c_, obs_sm_, obs_c0_, obs_sm0_;
+  Eigen::VectorXd obs_y_, obs_y0_;
+  ObserverReport obs_report_;
+  mutable Eigen::VectorXd sw_;
 };
 
 /// The estimate `x` (degC) and its covariance `s` (K^2) carried over `gap_s` with the inputs `in`

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <stdexcept>
 
 namespace pumptherm::estimators {
@@ -122,23 +123,21 @@ double ChiSquareQuantile(double dof, double p_upper) {
 }
 
 MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorConfig config)
-    : model_(model), config_(std::move(config)), discretiser_(1e-3), filter_(0), fit_disc_(1e-3) {
+    : model_(model),
+      config_(std::move(config)),
+      sensor_model_(model, config_.measured_node, config_.sensor_lag_s, "mismatch detector"),
+      discretiser_(1e-3),
+      filter_(0),
+      fit_disc_(1e-3) {
   const auto& c = config_;
-  frame_ = model_.StateIndex(c.measured_node);
-  if (frame_ < 0) {
-    throw std::invalid_argument(fmt::format(
-        "mismatch detector: measured node '{}' is not a node with heat capacity of model '{}'",
-        c.measured_node, model_.Name()));
-  }
   rotor_ = c.rotor_node.empty() ? -1 : model_.StateIndex(c.rotor_node);
   magnet_ = c.magnet_node.empty() ? -1 : model_.StateIndex(c.magnet_node);
   if (!(c.magnet_sd_K > 0.0) || !(c.magnet_period_s > 0.0)) {
     throw std::invalid_argument(
         "mismatch detector: magnet_sd_K and magnet_period_s must be positive");
   }
-  if (!(c.measurement_sd_K > 0.0) || !(c.process_sd_K > 0.0) || !(c.sensor_lag_s >= 0.0) ||
-      !(c.sensor_offset_sd_K > 0.0) || !(c.initial_sd_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
-      !(c.window_s > 0.0) ||
+  if (!(c.measurement_sd_K > 0.0) || !(c.process_sd_K > 0.0) || !(c.sensor_offset_sd_K > 0.0) ||
+      !(c.initial_sd_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) || !(c.window_s > 0.0) ||
       !(c.false_alarm_probability > 0.0 && c.false_alarm_probability < 0.5) ||
       !(c.fit_window_s > c.window_s) || !(c.fit_onset_step_s > 0.0) || !(c.refit_period_s > 0.0) ||
       !(c.ambient_ramp_s >= 0.0) || c.stuck_samples < 2) {
@@ -146,9 +145,12 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
         "mismatch detector: settings must be positive (window < fit window)");
   }
   n_ = model_.StateCount();
-  lag_ = c.sensor_lag_s > 0.0 ? n_ : -1;
-  bias_ = lag_ >= 0 ? n_ + 1 : n_;
-  sensor_ = lag_ >= 0 ? lag_ : frame_;
+  // The nodes, the sensor's lag and its offset (FrameSensorModel): the offset right after them.
+  sensor_model_.PlaceOffset(sensor_model_.TemperatureStates());
+  frame_ = sensor_model_.node();
+  lag_ = sensor_model_.lag();
+  bias_ = sensor_model_.offset();
+  sensor_ = sensor_model_.sensor();
   n_aug_ = bias_ + 1;
   // d f / d T_boundary: how one kelvin more on every boundary heats each node (K/s per K).
   ThermalInputs a;
@@ -163,12 +165,12 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
   const int nb = n_aug_ - 1;
   lin_block_.a_per_s = Eigen::MatrixXd::Zero(nb, nb);
   lin_block_.f_K_per_s = Eigen::VectorXd::Zero(nb);
+  sensor_model_.AddLagRow(lin_block_.a_per_s);
   ad_ = Eigen::MatrixXd::Identity(n_aug_, n_aug_);
   sp_ = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
   bu_ = Eigen::VectorXd::Zero(n_aug_);
   c_ = Eigen::MatrixXd::Zero(1, n_aug_);
-  c_(0, sensor_) = 1.0;
-  c_(0, bias_) = 1.0;
+  sensor_model_.SetReadingRow(c_, 0);
   sm_ = Eigen::MatrixXd::Constant(1, 1, c.measurement_sd_K * c.measurement_sd_K);
   y_ = Eigen::VectorXd::Zero(1);
   x_nodes_ = Eigen::VectorXd::Zero(n_);
@@ -177,15 +179,10 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
 }
 
 void MismatchDetector::Initialise(double x0_degC, double now_s) {
-  const int nb = n_aug_ - 1;
-  const double common = config_.initial_sd_K * config_.initial_sd_K;
-  const double spread = config_.initial_spread_sd_K * config_.initial_spread_sd_K;
   Eigen::MatrixXd s = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
-  s.topLeftCorner(nb, nb).setConstant(common);
-  s.topLeftCorner(nb, nb).diagonal().array() += spread;
-  s(bias_, bias_) = config_.sensor_offset_sd_K * config_.sensor_offset_sd_K;
-  Eigen::VectorXd x = Eigen::VectorXd::Constant(n_aug_, x0_degC);
-  x(bias_) = 0.0;
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(n_aug_);
+  sensor_model_.SetInitial(x0_degC, config_.initial_sd_K, config_.initial_spread_sd_K,
+                           config_.sensor_offset_sd_K, x, s);
   filter_.Reset(x, s);
   start_s_ = now_s;
   passing_since_s_ = now_s;
@@ -201,17 +198,17 @@ void MismatchDetector::Linearise(const ThermalInputs& in, const Eigen::VectorXd&
   model_.Linearise(in, x_nodes_, lin_);
   lin_block_.a_per_s.topLeftCorner(n_, n_) = lin_.a_per_s;
   lin_block_.f_K_per_s.head(n_) = lin_.f_K_per_s;
-  if (lag_ >= 0) {
-    lin_block_.a_per_s(lag_, frame_) = 1.0 / config_.sensor_lag_s;
-    lin_block_.a_per_s(lag_, lag_) = -1.0 / config_.sensor_lag_s;
-  }
 }
 
 const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt_s,
                                               double measured_degC, double now_s,
                                               double magnet_degC) {
-  if (!(dt_s > 0.0) || !std::isfinite(dt_s)) {
-    throw std::domain_error("mismatch detector: the period must be positive and finite");
+  // Health is data: a period, inputs or a state the model cannot take refuse the step (counted,
+  // nothing changes).
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s) || !model_.AcceptsInputs(in) ||
+      !filter_.State().allFinite()) {
+    ++refused_steps_;
+    return finding_;
   }
   const int window = std::max(1, static_cast<int>(std::lround(config_.window_s / dt_s)));
   if (static_cast<int>(nis_.size()) != window) {
@@ -246,8 +243,13 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
   const int nb = n_aug_ - 1;
   // History: the state before the step, which the naming fit linearises at.
   const int slot = head_;
+  try {
+    Linearise(in, filter_.State());
+  } catch (const std::exception&) {
+    ++refused_steps_;  // a massless sub-network singular at this operating point
+    return finding_;
+  }
   h_xpre_.col(slot) = filter_.State();
-  Linearise(in, filter_.State());
   discretiser_.Update(lin_block_, dt_s);
   const ThermalDiscreteModel& d = discretiser_.Current();
   ad_.topLeftCorner(nb, nb) = d.ad;
@@ -387,6 +389,15 @@ void MismatchDetector::FitOnsets(int window) {
 }
 
 void MismatchDetector::Fit(double now_s) {
+  try {
+    FitNow(now_s);
+  } catch (const std::exception&) {
+    ++refused_steps_;  // the history met an operating point the model cannot linearise: no name
+    last_fit_s_ = now_s;
+  }
+}
+
+void MismatchDetector::FitNow(double now_s) {
   last_fit_s_ = now_s;
   int stuck_first = -1;
   if (Stuck(&stuck_first)) {

@@ -45,6 +45,7 @@
 #include <string>
 #include <vector>
 
+#include "estimators/frame_sensor_model.hpp"
 #include "estimators/kalman_filter.hpp"
 #include "estimators/thermal_discretisation.hpp"
 #include "estimators/thermal_model.hpp"
@@ -144,7 +145,8 @@ class MismatchDetector {
 
   /// One period `dt_s` with `inputs` held, ending at `now_s`, reading `measured_degC` (NaN = no
   /// reading) and, for the naming fit only, the magnet reading `magnet_degC` of `magnet_node`
-  /// (NaN = none). Throws std::domain_error like VirtualThermalSensor::Step.
+  /// (NaN = none). A period that is not positive and finite, or inputs the model cannot take,
+  /// refuse the step: nothing changes, it is counted (refused_steps()), nothing is thrown.
   const MismatchFinding& Step(const ThermalInputs& inputs, double dt_s, double measured_degC,
                               double now_s,
                               double magnet_degC = std::numeric_limits<double>::quiet_NaN());
@@ -154,11 +156,15 @@ class MismatchDetector {
   Eigen::VectorXd Nodes_degC() const { return filter_.State().head(n_); }
   double SensorOffset_K() const { return filter_.State()(bias_); }
   int StateCount() const { return n_aug_; }
+  /// Steps refused so far (Step()).
+  std::uint64_t refused_steps() const { return refused_steps_; }
 
  private:
   void Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_aug);
   void Record(const ThermalInputs& in, double y, double now_s);
+  /// The naming fit; never throws (FitNow() is the fit itself).
   void Fit(double now_s);
+  void FitNow(double now_s);
   void FitOnsets(int window);
   /// Names the effect of largest likelihood ratio over the fit's `onsets` columns.
   void Choose(int onsets, int oldest);
@@ -174,6 +180,8 @@ class MismatchDetector {
 
   const ThermalModel& model_;
   MismatchDetectorConfig config_;
+  FrameSensorModel sensor_model_;
+  std::uint64_t refused_steps_ = 0;
   int n_ = 0, n_aug_ = 0, lag_ = -1, bias_ = 0, sensor_ = 0, frame_ = 0, rotor_ = -1, magnet_ = -1;
   double threshold_ = 0.0;
   Eigen::VectorXd boundary_K_per_s_per_K_;  ///< d f / d T_boundary (n)

@@ -267,6 +267,10 @@ double ElectricalSpeed_rad_per_s(const MotorDescription& motor, double speed_rpm
   return speed_rpm * (2.0 * std::numbers::pi / 60.0) * motor.pole_pairs;
 }
 
+double MechanicalSpeed_rpm(const MotorDescription& motor, double w_rad_per_s) noexcept {
+  return w_rad_per_s / (motor.pole_pairs * (2.0 * std::numbers::pi / 60.0));
+}
+
 double VoltageErrorQ_V(const MotorDescription& motor, double id_A, double iq_A) noexcept {
   const double mag = std::hypot(id_A, iq_A);
   if (!(motor.voltage_error_V > 0.0) || !(mag > 0.0)) return 0.0;

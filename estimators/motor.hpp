@@ -98,6 +98,8 @@ MotorDescription MotorPreset(std::string_view name);
 
 /// Electrical angular speed w_r in rad/s from a mechanical speed in r/min.
 double ElectricalSpeed_rad_per_s(const MotorDescription& motor, double speed_rpm) noexcept;
+/// The inverse: mechanical speed, r/min, of an electrical angular speed `w_rad_per_s`.
+double MechanicalSpeed_rpm(const MotorDescription& motor, double w_rad_per_s) noexcept;
 
 /// Resistance band [R(plausible_min_degC), R(plausible_max_degC)] (Han 2019 eq. 2), ohm.
 double PlausibleMinResistance_ohm(const MotorDescription& motor) noexcept;

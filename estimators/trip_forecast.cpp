@@ -16,7 +16,7 @@ TripForecast::TripForecast(int states) : x_(states), next_(states), steady_(stat
 double TripForecast::TimeToTrip_s(const ThermalModel& model, const ThermalInputs& in,
                                   const Eigen::VectorXd& x_degC,
                                   const std::vector<double>& trip_degC,
-                                  const DisturbanceThermalSensor* disturbances, int* node) {
+                                  const ThermalObserver* observer, int* node) {
   *node = -1;
   const auto n = static_cast<std::size_t>(x_degC.size());
   if (trip_degC.size() < n ||
@@ -34,7 +34,7 @@ double TripForecast::TimeToTrip_s(const ThermalModel& model, const ThermalInputs
     // The steady state at these inputs, A x + f = 0 (ThermalModel::SteadyState_degC), into
     // members: no allocation per call. A singular A gives non-finite values: no forecast.
     model.Linearise(in, lin_);
-    if (disturbances) disturbances->AddDisturbanceForcing(lin_);
+    if (observer) observer->AddFoundHeat(lin_);
     lu_.compute(lin_.a_per_s);
     steady_.noalias() = lu_.solve(lin_.f_K_per_s);
     steady_ = -steady_;
@@ -44,7 +44,7 @@ double TripForecast::TimeToTrip_s(const ThermalModel& model, const ThermalInputs
       reaches = reaches || steady_(static_cast<Eigen::Index>(i)) >= trip_degC[i];
     if (!reaches) return kInf;
     model.Linearise(in, x_, lin_);
-    if (disturbances) disturbances->AddDisturbanceForcing(lin_);
+    if (observer) observer->AddFoundHeat(lin_);
     disc_.Update(lin_, kStep_s);
   } catch (const std::exception&) {
     return kInf;

@@ -7,9 +7,9 @@
 #include <Eigen/Dense>
 #include <vector>
 
-#include "estimators/disturbance_sensor.hpp"
 #include "estimators/thermal_discretisation.hpp"
 #include "estimators/thermal_model.hpp"
+#include "estimators/thermal_observer.hpp"
 
 namespace pumptherm::estimators {
 
@@ -26,11 +26,12 @@ class TripForecast {
   /// infinity: no trip level) with the inputs `in` held; 0 when one is already there, infinity
   /// when none gets there within kLimit_s (first the steady state is checked: a network whose
   /// steady state stays below every level never trips). `node` gets the node that trips first
-  /// (-1: none). With `disturbances`, the disturbance-state filter's heat (frame path, rotor)
-  /// is held too. A model that cannot be linearised or solved at these inputs: infinity.
+  /// (-1: none). With `observer`, the heat it has found (ThermalObserver::AddFoundHeat: the
+  /// disturbance-state filter's frame path and rotor) is held too. A model that cannot be
+  /// linearised or solved at these inputs: infinity.
   double TimeToTrip_s(const ThermalModel& model, const ThermalInputs& in,
                       const Eigen::VectorXd& x_degC, const std::vector<double>& trip_degC,
-                      const DisturbanceThermalSensor* disturbances, int* node);
+                      const ThermalObserver* observer, int* node);
 
  private:
   ThermalLinearModel lin_;

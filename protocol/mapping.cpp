@@ -24,65 +24,18 @@ constexpr std::array<std::string_view, kMappingInputCount> kInputNames = {"id_A"
                                                                           "dc_link_V",
                                                                           "alarm_clear"};
 
-constexpr std::array<std::string_view, kMappingOutputCount> kOutputNames = {
-    "winding_resistance_degC",
-    "rs_ohm",
-    "flux_Wb",
-    "rs_status",
-    "flux_status",
-    "alarm_level",
-    "alarm_reason",
-    "alarm_node",
-    "alarm_value_degC",
-    "time_to_trip_s",
-    "uptime_s",
-    "frame_rate_Hz",
-    "drops",
-    "bus_state",
-    "magnet_flux_degC",
-    "node_index",
-    "node_count",
-    "node_temp_degC",
-    "node_sd_K",
-    "winding_resistance_sd_K",
-    "magnet_flux_sd_K",
-    "mismatch_state",
-    "mismatch_effect"};
-
 std::string Where(const toml::source_region& r) {
   const std::string file = r.path ? *r.path : std::string("<mapping>");
   return fmt::format("{}:{}:{}", file, r.begin.line, r.begin.column);
 }
 
-/// Output keys renamed to one name per quantity (docs/daemon.md, "Names"): old -> current.
-/// Mapping files in the field keep working; the old key is reported as deprecated.
-struct RenamedKey {
-  std::string_view old_name;
-  MappingOutput output;
-};
-constexpr std::array<RenamedKey, 3> kRenamedOutputs = {{
-    {"winding_res_temp_degC", MappingOutput::kWindingResTempDegC},
-    {"winding_res_sd_K", MappingOutput::kWindingResSdK},
-    {"magnet_flux_temp_degC", MappingOutput::kMagnetFluxTempDegC},
-}};
-
-/// Index into `names` of key `k` in `section`, or of the current name of a renamed output key
-/// (recorded in `deprecations`); nullopt when unknown.
+/// Index into `names` of input key `k`; nullopt when unknown.
 template <std::size_t N>
-std::optional<std::size_t> KeyIndex(std::string_view section, std::string_view k,
-                                    const std::array<std::string_view, N>& names,
-                                    const toml::node& at, std::vector<std::string>* deprecations) {
+std::optional<std::size_t> KeyIndex(std::string_view k,
+                                    const std::array<std::string_view, N>& names) {
   const auto it = std::find(names.begin(), names.end(), k);
-  if (it != names.end()) return static_cast<std::size_t>(it - names.begin());
-  if (section != "outputs") return std::nullopt;
-  for (const RenamedKey& r : kRenamedOutputs) {
-    if (r.old_name != k) continue;
-    const auto index = static_cast<std::size_t>(r.output);
-    deprecations->push_back(fmt::format("{}: key outputs.{} is deprecated: it is now outputs.{}",
-                                        Where(at.source()), k, kOutputNames[index]));
-    return index;
-  }
-  return std::nullopt;
+  if (it == names.end()) return std::nullopt;
+  return static_cast<std::size_t>(it - names.begin());
 }
 
 [[noreturn]] void Fail(const toml::node& at, const std::string& key, const std::string& what) {
@@ -135,54 +88,109 @@ SignalRef Resolve(const toml::node& node, const std::string& key, const Dbc& dbc
 }
 
 template <std::size_t N, typename Slot>
-void ResolveSection(const toml::table& root, std::string_view section,
-                    const std::array<std::string_view, N>& names, std::array<Slot, N>& out,
-                    const Dbc& dbc, const toml::table** nested_nodes,
-                    std::vector<std::string>* deprecations) {
-  const toml::node* n = root.get(section);
+void ResolveInputs(const toml::table& root, const std::array<std::string_view, N>& names,
+                   std::array<Slot, N>& out, const Dbc& dbc) {
+  const toml::node* n = root.get("inputs");
   if (n == nullptr) return;
   const toml::table* t = n->as_table();
-  if (t == nullptr) Fail(*n, std::string(section), "expected a table");
+  if (t == nullptr) Fail(*n, "inputs", "expected a table");
   for (const auto& [k, v] : *t) {
-    const std::string key = fmt::format("{}.{}", section, k.str());
-    if (nested_nodes != nullptr && k == "nodes") {
+    const std::string key = fmt::format("inputs.{}", k.str());
+    const std::optional<std::size_t> index = KeyIndex(k.str(), names);
+    if (!index) {
+      std::string known;
+      for (auto name : names) known += fmt::format("{}{}", known.empty() ? "" : ", ", name);
+      Fail(v, key, fmt::format("unknown inputs (known: {})", known));
+    }
+    out[*index] = Resolve(v, key, dbc);
+  }
+}
+
+/// The output spec of key `k` (its current key, or an old one, recorded in `deprecations`);
+/// nullptr when unknown.
+const OutputSpec* FindOutput(std::string_view k, std::span<const OutputSpec> outputs,
+                             const toml::node& at, std::vector<std::string>* deprecations) {
+  for (const OutputSpec& o : outputs) {
+    if (o.key == k) return &o;
+  }
+  for (const OutputSpec& o : outputs) {
+    if (o.old_key.empty() || o.old_key != k) continue;
+    deprecations->push_back(fmt::format("{}: key outputs.{} is deprecated: it is now outputs.{}",
+                                        Where(at.source()), k, o.key));
+    return &o;
+  }
+  return nullptr;
+}
+
+/// The [outputs] table: named outputs, the nested `nodes` table (into `nested_nodes`), and the
+/// `defaults` switch (into `defaults`).
+void ResolveOutputs(const toml::table& root, std::span<const OutputSpec> outputs,
+                    SignalMapping& mapping, const Dbc& dbc, const toml::table** nested_nodes,
+                    bool* defaults) {
+  const toml::node* n = root.get("outputs");
+  if (n == nullptr || outputs.empty()) return;  // a reader of the inputs alone
+  const toml::table* t = n->as_table();
+  if (t == nullptr) Fail(*n, "outputs", "expected a table");
+  for (const auto& [k, v] : *t) {
+    const std::string key = fmt::format("outputs.{}", k.str());
+    if (k == "nodes") {
       *nested_nodes = v.as_table();
       if (*nested_nodes == nullptr)
         Fail(v, key, "expected a table of node name = { message, signal }");
       continue;
     }
-    const std::optional<std::size_t> index = KeyIndex(section, k.str(), names, v, deprecations);
-    if (!index) {
-      std::string known;
-      for (auto name : names) known += fmt::format("{}{}", known.empty() ? "" : ", ", name);
-      Fail(v, key,
-           fmt::format("unknown {} (known: {}{})", section, known,
-                       nested_nodes != nullptr ? ", nodes" : ""));
+    if (k == "defaults") {
+      if (!v.is_boolean()) Fail(v, key, "expected true or false");
+      *defaults = **v.as_boolean();
+      continue;
     }
-    if (out[*index])
-      Fail(v, key,
-           fmt::format("{}.{} is given twice (under its old and its current name)", section,
-                       names[*index]));
-    out[*index] = Resolve(v, key, dbc);
+    const OutputSpec* spec = FindOutput(k.str(), outputs, v, &mapping.deprecations);
+    if (spec == nullptr) {
+      std::string known;
+      for (const OutputSpec& o : outputs)
+        known += fmt::format("{}{}", known.empty() ? "" : ", ", o.key);
+      Fail(v, key, fmt::format("unknown outputs (known: {}, nodes, defaults)", known));
+    }
+    if (mapping.outputs.contains(spec->key))
+      Fail(
+          v, key,
+          fmt::format("outputs.{} is given twice (under its old and its current name)", spec->key));
+    mapping.outputs.emplace(std::string(spec->key), Resolve(v, key, dbc));
+  }
+}
+
+/// The declared default binding of every output the mapping does not name, where the DBC has
+/// that message and signal.
+void BindDefaults(std::span<const OutputSpec> outputs, const Dbc& dbc, SignalMapping& mapping) {
+  for (const OutputSpec& o : outputs) {
+    if (o.default_message.empty() || mapping.outputs.contains(o.key)) continue;
+    const DbcMessage* m = dbc.FindMessage(std::string(o.default_message));
+    if (m == nullptr) continue;
+    const int signal = m->FindSignal(std::string(o.default_signal));
+    if (signal < 0) continue;
+    SignalRef ref;
+    ref.message = std::string(o.default_message);
+    ref.signal = std::string(o.default_signal);
+    ref.message_index = static_cast<int>(m - dbc.messages.data());
+    ref.signal_index = signal;
+    mapping.outputs.emplace(std::string(o.key), ref);
   }
 }
 
 /// The node-indexed message: node_index with node_temp_degC, node_sd_K and node_count in the
 /// same message, so one frame says which node its temperature belongs to.
 void CheckNodeTable(const toml::table& table, const SignalMapping& mapping) {
-  const auto& index = mapping.output(MappingOutput::kNodeIndex);
-  const auto& temp = mapping.output(MappingOutput::kNodeTempDegC);
+  const SignalRef* index = mapping.output(kNodeIndexKey);
+  const SignalRef* temp = mapping.output(kNodeTempKey);
   const toml::node* outputs = table.get("outputs");
   const toml::node& where = outputs != nullptr ? *outputs : static_cast<const toml::node&>(table);
-  if (index.has_value() != temp.has_value()) {
+  if ((index != nullptr) != (temp != nullptr)) {
     Fail(where, "outputs", "node_index and node_temp_degC go together (a node-indexed message)");
   }
-  for (MappingOutput o :
-       {MappingOutput::kNodeTempDegC, MappingOutput::kNodeSdK, MappingOutput::kNodeCount}) {
-    const auto& r = mapping.output(o);
+  for (std::string_view o : {kNodeTempKey, kNodeSdKey, kNodeCountKey}) {
+    const SignalRef* r = mapping.output(o);
     if (r && (!index || r->message_index != index->message_index)) {
-      Fail(where, fmt::format("outputs.{}", MappingOutputName(o)),
-           "must be in the message of outputs.node_index");
+      Fail(where, fmt::format("outputs.{}", o), "must be in the message of outputs.node_index");
     }
   }
 }
@@ -193,10 +201,6 @@ std::string_view MappingInputName(MappingInput input) noexcept {
   return kInputNames[static_cast<std::size_t>(input)];
 }
 
-std::string_view MappingOutputName(MappingOutput output) noexcept {
-  return kOutputNames[static_cast<std::size_t>(output)];
-}
-
 std::uint32_t SignalMapping::CanId(const Dbc& dbc, int message_index, std::uint32_t node_id) const {
   if (node_id >= node_id_limit) {
     throw std::out_of_range(
@@ -205,7 +209,8 @@ std::uint32_t SignalMapping::CanId(const Dbc& dbc, int message_index, std::uint3
   return dbc.messages.at(static_cast<std::size_t>(message_index)).id + node_id;
 }
 
-SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
+SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc,
+                               std::span<const OutputSpec> outputs) {
   SignalMapping mapping;
   for (const auto& [k, v] : table) {
     if (k != "node_id_limit" && k != "inputs" && k != "outputs") {
@@ -218,10 +223,11 @@ SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
       Fail(*n, "node_id_limit", "expected an integer from 1 to 65536");
     mapping.node_id_limit = static_cast<std::uint32_t>(*v);
   }
-  ResolveSection(table, "inputs", kInputNames, mapping.inputs, dbc, nullptr, &mapping.deprecations);
+  ResolveInputs(table, kInputNames, mapping.inputs, dbc);
   const toml::table* nodes = nullptr;
-  ResolveSection(table, "outputs", kOutputNames, mapping.outputs, dbc, &nodes,
-                 &mapping.deprecations);
+  bool defaults = true;
+  ResolveOutputs(table, outputs, mapping, dbc, &nodes, &defaults);
+  if (defaults) BindDefaults(outputs, dbc, mapping);
   if (nodes != nullptr) {
     for (const auto& [k, v] : *nodes) {
       mapping.node_temperatures.emplace(std::string(k.str()),
@@ -251,13 +257,15 @@ SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
 
   // Every mapped message owns IDs [id, id + node_id_limit); they must fit and not overlap.
   std::vector<int> used;
-  const auto note = [&](const std::optional<SignalRef>& r) {
-    if (r && std::find(used.begin(), used.end(), r->message_index) == used.end()) {
-      used.push_back(r->message_index);
+  const auto note = [&](const SignalRef& r) {
+    if (std::find(used.begin(), used.end(), r.message_index) == used.end()) {
+      used.push_back(r.message_index);
     }
   };
-  for (const auto& r : mapping.inputs) note(r);
-  for (const auto& r : mapping.outputs) note(r);
+  for (const auto& r : mapping.inputs) {
+    if (r) note(*r);
+  }
+  for (const auto& [key, r] : mapping.outputs) note(r);
   for (const auto& [name, r] : mapping.node_temperatures) note(r);
   for (std::size_t a = 0; a < used.size(); ++a) {
     const DbcMessage& ma = dbc.messages[static_cast<std::size_t>(used[a])];
@@ -283,15 +291,15 @@ SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc) {
   return mapping;
 }
 
-SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name,
-                           const Dbc& dbc) {
+SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name, const Dbc& dbc,
+                           std::span<const OutputSpec> outputs) {
   toml::table table;
   try {
     table = toml::parse(toml_text, source_name);
   } catch (const toml::parse_error& e) {
     throw MappingError(fmt::format("{}: {}", Where(e.source()), e.description()));
   }
-  return MappingFromTable(table, dbc);
+  return MappingFromTable(table, dbc, outputs);
 }
 
 }  // namespace pumptherm::protocol

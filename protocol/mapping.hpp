@@ -28,6 +28,7 @@
 #include <cstdint>
 #include <map>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -54,41 +55,28 @@ enum class MappingInput {
 };
 inline constexpr std::size_t kMappingInputCount = 12;
 
-/// What the daemon writes per pump (besides the node temperatures, which are named by the
-/// thermal model and listed in SignalMapping::node_temperatures).
-enum class MappingOutput {
-  kWindingResTempDegC,  ///< winding_resistance_degC: resistance-based winding temperature
-  kRsOhm,               ///< rs_ohm: identified stator resistance
-  kFluxWb,              ///< flux_Wb: identified magnet flux linkage
-  kRsStatus,            ///< rs_status
-  kFluxStatus,          ///< flux_status
-  kAlarmLevel,          ///< alarm_level
-  kAlarmReason,         ///< alarm_reason
-  kAlarmNode,           ///< alarm_node: index of the node that set the level
-  kAlarmValueDegC,      ///< alarm_value_degC
-  kTimeToTripS,         ///< time_to_trip_s
-  kUptimeS,             ///< uptime_s: gateway health
-  kFrameRateHz,         ///< frame_rate_Hz
-  kDrops,               ///< drops
-  kBusState,            ///< bus_state
-  kMagnetFluxTempDegC,  ///< magnet_flux_degC: magnet temperature from the identified flux
-  /// node_index: the multiplexer of a node-indexed message; the frame carries the thermal
-  /// model's node with this index (model order), so any model's nodes reach the bus. The
-  /// gateway sends the nodes in turn, each once per period.
-  kNodeIndex,
-  kNodeCount,       ///< node_count: how many nodes the pump's model has
-  kNodeTempDegC,    ///< node_temp_degC: that node's estimated temperature
-  kNodeSdK,         ///< node_sd_K: its published standard deviation, K
-  kWindingResSdK,   ///< winding_resistance_sd_K: 1-sigma of the resistance-based temperature, K
-  kMagnetFluxSdK,   ///< magnet_flux_sd_K: 1-sigma of the magnet temperature from the flux, K
-  kMismatchState,   ///< mismatch_state: estimators::MismatchState
-  kMismatchEffect,  ///< mismatch_effect: estimators::MismatchEffect
+/// An output its user publishes (the daemon declares them in daemon/published_fields.cpp): its
+/// mapping key, the DBC message and signal it goes to when the mapping names none (taken only
+/// where the DBC has both; empty: none), and a key it had before (still read, reported as
+/// deprecated; empty: none).
+struct OutputSpec {
+  std::string_view key;
+  std::string_view default_message;
+  std::string_view default_signal;
+  std::string_view old_key;
 };
-inline constexpr std::size_t kMappingOutputCount = 23;
 
-/// The TOML key of an input or output.
+/// The node-indexed message's keys: node_index is its multiplexer (the frame carries the
+/// thermal model's node with this index, model order, so any model's nodes reach the bus; the
+/// nodes are sent in turn, each once per period); node_temp_degC, node_sd_K and node_count go
+/// in the same message.
+inline constexpr std::string_view kNodeIndexKey = "node_index";
+inline constexpr std::string_view kNodeTempKey = "node_temp_degC";
+inline constexpr std::string_view kNodeSdKey = "node_sd_K";
+inline constexpr std::string_view kNodeCountKey = "node_count";
+
+/// The TOML key of an input.
 std::string_view MappingInputName(MappingInput input) noexcept;
-std::string_view MappingOutputName(MappingOutput output) noexcept;
 
 /// One binding, resolved against the DBC.
 struct SignalRef {
@@ -103,7 +91,9 @@ struct SignalRef {
 /// A validated mapping.
 struct SignalMapping {
   std::array<std::optional<SignalRef>, kMappingInputCount> inputs;
-  std::array<std::optional<SignalRef>, kMappingOutputCount> outputs;
+  /// Output key -> signal: every output the mapping names, and every declared default the DBC
+  /// has (OutputSpec).
+  std::map<std::string, SignalRef, std::less<>> outputs;
   std::map<std::string, SignalRef, std::less<>> node_temperatures;  ///< node name -> signal, degC
   std::uint32_t node_id_limit = 16;
   /// One line per deprecated key the file used (source:line:column, old and current name); the
@@ -113,8 +103,10 @@ struct SignalMapping {
   const std::optional<SignalRef>& input(MappingInput i) const noexcept {
     return inputs[static_cast<std::size_t>(i)];
   }
-  const std::optional<SignalRef>& output(MappingOutput o) const noexcept {
-    return outputs[static_cast<std::size_t>(o)];
+  /// The signal of output `key`, or nullptr.
+  const SignalRef* output(std::string_view key) const noexcept {
+    auto it = outputs.find(key);
+    return it == outputs.end() ? nullptr : &it->second;
   }
   /// CAN ID of DBC message `message_index` for the pump with `node_id` (DBC ID + node_id).
   /// Throws std::out_of_range if node_id >= node_id_limit.
@@ -127,16 +119,19 @@ class MappingError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-/// Parses and validates a mapping from TOML text. `source_name` labels errors.
-/// Throws MappingError for a TOML syntax error, an unknown key, a missing message/signal key,
-/// a message or signal the DBC does not have, a missing required input (id_A, iq_A, ud_V, uq_V
-/// and one speed), node_index without node_temp_degC (or the reverse) or node outputs outside
-/// node_index's message, a node_id_limit outside 1..65536, or ID blocks that overflow or overlap.
-SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name,
-                           const Dbc& dbc);
+/// Parses and validates a mapping from TOML text; `outputs` are the output keys its user knows
+/// (empty: a reader of the inputs alone; the [outputs] table is then not read).
+/// `source_name` labels errors. Throws MappingError for a TOML syntax error, an unknown key, a
+/// missing message/signal key, a message or signal the DBC does not have, a missing required
+/// input (id_A, iq_A, ud_V, uq_V and one speed), node_index without node_temp_degC (or the
+/// reverse) or node outputs outside node_index's message, a node_id_limit outside 1..65536, or
+/// ID blocks that overflow or overlap.
+SignalMapping ParseMapping(std::string_view toml_text, std::string_view source_name, const Dbc& dbc,
+                           std::span<const OutputSpec> outputs);
 
 /// The same, from a table already parsed (e.g. the `[mapping]` table of the daemon config);
 /// errors name the table's source file, line and column.
-SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc);
+SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc,
+                               std::span<const OutputSpec> outputs);
 
 }  // namespace pumptherm::protocol

@@ -1,9 +1,10 @@
 #pragma once
 // The fault cases of the mismatch figures (tests/bench/mismatch_matrix.cpp) and of the detector's
-// unit test: tmp-generic as the truth, a turbo pump's load (run-up, then gas-load steps every
-// 10 min), the frame RTD with lag, noise, quantisation and a calibration offset; from
-// `fault_s` on, the truth is changed by one fault. The published virtual sensor (daemon
-// settings) and the mismatch detector run on the same data.
+// and the disturbance filter's unit tests: tmp-generic as the truth, a turbo pump's load
+// (run-up, then gas-load steps every 10 min), the frame RTD with lag, noise, quantisation and a
+// calibration offset; from `fault_s` on, the truth is changed by one fault. The daemon's pump
+// estimator (estimators/pump_estimator.hpp, its settings for such a pump) runs on the same data,
+// once with each observer.
 #include <Eigen/Dense>
 #include <cmath>
 #include <fstream>
@@ -18,6 +19,8 @@
 #include "estimators/kalman_virtual_sensor.hpp"
 #include "estimators/mismatch_detector.hpp"
 #include "estimators/model_effects.hpp"
+#include "estimators/motor.hpp"
+#include "estimators/pump_estimator.hpp"
 #include "estimators/thermal_model.hpp"
 #include "tools/sim/sensor.hpp"
 #include "tools/sim/thermal_plant.hpp"
@@ -151,6 +154,9 @@ struct CaseSpec {
   double magnet_bias_sd_K = 2.0;
   double magnet_bias_tau_s = 1800.0;
   bool magnet_to_detector = true;  ///< the magnet reading also in the detector's naming fit
+  /// The frame sensor's health test for a frozen reading (AlarmConfig::flat_after_s; 0: off, the
+  /// frozen reading is fused and left to the mismatch test).
+  double flat_after_s = 30.0;
 };
 
 struct CaseResult {
@@ -210,7 +216,65 @@ inline std::string FaultedModelTextByEffects(const std::string& nominal, const s
   return pe::ApplyModelEffects(nominal, source, effects, tables_dir);
 }
 
-/// Runs one case. `model_dir` holds `<spec.model>.toml`.
+/// The pump estimator of a case: the daemon's settings for a pump whose frame sensor sits on
+/// `frame_node` with the case's lag, the magnet reading fused into `rotor_node` when the case
+/// emulates one, the observer forced to `disturbance`.
+inline pe::PumpEstimatorConfig EstimatorConfig(const CaseSpec& spec, const std::string& frame_node,
+                                               const std::string& rotor_node, bool disturbance,
+                                               const pe::VirtualSensorConfig& vts_config,
+                                               const pe::DisturbanceSensorConfig& dc) {
+  pe::PumpEstimatorConfig c;
+  c.measured_node = frame_node;
+  c.frame_sensor_lag_s = spec.sensor_lag_s;
+  c.rotor_node = rotor_node;
+  c.disturbance_states = disturbance;
+  if (spec.magnet_noise_sd_K > 0.0) c.magnet.magnet_node = rotor_node;
+  c.winding.fuse = spec.winding_noise_sd_K > 0.0;
+  if (spec.winding_noise_sd_K > 0.0) c.winding.model_sd_K = spec.winding_noise_sd_K;
+  c.standard = vts_config;
+  c.disturbance = dc;
+  // The pump sets the magnet reading's bias sd from its least sd (magnet_min_sd_K).
+  c.magnet.min_sd_K = dc.magnet_bias_sd_K;
+  c.alarms.flat_after_s = spec.flat_after_s;
+  c.mismatch.ambient_ramp_s = spec.fit_ambient_ramp_s;
+  if (!spec.magnet_to_detector) c.mismatch_magnet = false;
+  return c;
+}
+
+/// The identifier's outputs that give the case's emulated readings: the winding from
+/// resistance (tracking, the truth's winding plus white noise of `winding_sd_K`; NaN: none) and
+/// the back-EMF line whose magnet reading (estimators/readings/magnet_flux_reading.hpp) is
+/// `magnet_degC` with white sd `magnet_sd_K` (NaN: none), at mean q current `iq_A` and
+/// electrical speed `w_rad_per_s`.
+inline pe::IdentifierOutput EmulatedIdentifier(const pe::MotorDescription& motor,
+                                               double winding_degC, double winding_sd_K,
+                                               double magnet_degC, double magnet_sd_K,
+                                               double winding_true_degC) {
+  pe::IdentifierOutput id;
+  id.sample_age_s = id.block_age_s = 0.0;
+  id.estimate.status =
+      std::isfinite(winding_degC) ? pe::ResistanceStatus::kTracking : pe::ResistanceStatus::kHeld;
+  id.estimate.winding_degC = winding_degC;
+  id.estimate.winding_sd_K = std::isfinite(winding_degC) ? winding_sd_K : 0.0;
+  // E = psi_f + Rs iq/w with psi_f at the magnet reading and Rs at the true winding: the
+  // reading z = Tm + g Tw of the back-EMF row then is the magnet reading plus g times the
+  // winding, as a real identifier's line would give it.
+  const auto& cu = motor.copper;
+  const double psi0_beta = motor.flux_Wb * motor.magnet.flux_temperature_coefficient_per_K;
+  id.estimate.resistance_ohm =
+      cu.r0_ohm * (1.0 + cu.alpha_per_K * (winding_true_degC - cu.t0_degC));
+  id.estimate.flux_Wb = std::isfinite(magnet_degC)
+                            ? motor.flux_Wb + psi0_beta * (magnet_degC - motor.magnet.t0_degC)
+                            : std::nan("");
+  const double sd_Wb = magnet_sd_K * std::abs(psi0_beta);
+  id.p(pe::kStateFlux, pe::kStateFlux) = sd_Wb * sd_Wb;
+  if (!std::isfinite(magnet_degC)) id.block_age_s = std::nan("");  // no line: no reading
+  return id;
+}
+
+/// Runs one case. `model_dir` holds `<spec.model>.toml`. Two pump estimators run on the same
+/// data: the standard filter's (CaseResult::max_error_K, coverage) and the disturbance-state
+/// filter's (dist_*, and the mismatch test's verdicts).
 inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
                           pe::VirtualSensorConfig vts_config = {},
                           pe::DisturbanceSensorConfig dc = {}) {
@@ -245,7 +309,6 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
           : FaultedModelTextByEffects(nominal_text, source, spec.fault, spec.rotor_loss_W,
                                       speed_rpm, tables_dir),
       spec.model + "+fault", files);
-  vts_config.measured_nodes = {frame_node};
   const int n = nominal.StateCount();
   const double ambient = 22.0;
   pumptherm::sim::ThermalPlantConfig pc;
@@ -261,28 +324,17 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   pumptherm::sim::Sensor sensor(sc, spec.seed * 31 + 5);
   std::normal_distribution<double> normal(0.0, 1.0);
 
-  pe::VirtualThermalSensor vts(nominal, vts_config);
-  pe::MismatchDetectorConfig detector_config = DetectorConfig(spec.sensor_lag_s);
-  detector_config.measured_node = frame_node;
-  detector_config.ambient_ramp_s = spec.fit_ambient_ramp_s;
-  if (spec.magnet_noise_sd_K > 0.0 && spec.magnet_to_detector)
-    detector_config.magnet_node = rotor_node;
-  pe::MismatchDetector det(nominal, detector_config);
-  dc.sensor_lag_s = spec.sensor_lag_s;
-  dc.measured_node = frame_node;
-  dc.rotor_node = rotor_node;
-  if (spec.winding_noise_sd_K > 0.0) {
-    dc.winding_reading = true;
-    dc.winding_measurement_sd_K = spec.winding_noise_sd_K;
-  }
-  if (spec.magnet_noise_sd_K > 0.0) dc.magnet_node = rotor_node;
+  const pe::MotorDescription motor = pe::MotorPreset("han2019-tmp");
+  pe::PumpEstimator standard(EstimatorConfig(spec, frame_node, rotor_node, false, vts_config, dc),
+                             motor, nominal);
+  pe::PumpEstimator dist(EstimatorConfig(spec, frame_node, rotor_node, true, vts_config, dc), motor,
+                         nominal);
   const int rotor = nominal.StateIndex(rotor_node);
   const int frame = nominal.StateIndex(frame_node);
   std::mt19937_64 magnet_rng(spec.seed * 104729 +
                              3);  // its own: the other cases' draws stay as they were
   std::normal_distribution<double> magnet_normal(0.0, 1.0);
   double magnet_bias_K = spec.magnet_bias_sd_K * magnet_normal(magnet_rng);
-  pe::DisturbanceThermalSensor dist(nominal, dc);
   CaseResult r;
   r.nodes = nominal.StateNames();
   r.max_error_K.assign(static_cast<std::size_t>(n), 0.0);
@@ -296,7 +348,6 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   bool faulted_now = false;
   double stuck_value = std::numeric_limits<double>::quiet_NaN();
   bool was_fault_state = false;
-  Eigen::VectorXd meas(1);
   for (double t = spec.dt_s; t <= spec.duration_s + 1e-9; t += spec.dt_s) {
     if (!faulted_now && t > spec.fault_s) {
       faulted_now = true;
@@ -322,34 +373,42 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
       if (std::isnan(stuck_value)) stuck_value = y;
       y = stuck_value;
     }
-    if (t <= spec.dt_s + 1e-9) {
-      vts.Initialise(Eigen::VectorXd::Constant(n, y));
-      det.Initialise(y, t);
-      dist.Initialise(y);
-    }
-    meas(0) = y;
-    vts.Step(in, spec.dt_s, meas, std::numeric_limits<double>::quiet_NaN());
-    const double winding = spec.winding_noise_sd_K > 0.0 ? nominal.WindingWeights().dot(x) +
-                                                               spec.winding_noise_sd_K * normal(rng)
-                                                         : std::numeric_limits<double>::quiet_NaN();
-    pe::DisturbanceReadings readings;
-    readings.frame_degC = y;
-    readings.winding_degC = winding;
+    const double winding_true = nominal.WindingWeights().dot(x);
+    const double winding = spec.winding_noise_sd_K > 0.0
+                               ? winding_true + spec.winding_noise_sd_K * normal(rng)
+                               : std::numeric_limits<double>::quiet_NaN();
+    double magnet = std::numeric_limits<double>::quiet_NaN();
     if (spec.magnet_noise_sd_K > 0.0) {
       const double a = std::exp(-spec.dt_s / spec.magnet_bias_tau_s);
       magnet_bias_K = a * magnet_bias_K +
                       spec.magnet_bias_sd_K * std::sqrt(1.0 - a * a) * magnet_normal(magnet_rng);
-      readings.magnet_degC =
-          x(rotor) + magnet_bias_K + spec.magnet_noise_sd_K * magnet_normal(magnet_rng);
-      readings.magnet_sd_K = spec.magnet_noise_sd_K;
+      magnet = x(rotor) + magnet_bias_K + spec.magnet_noise_sd_K * magnet_normal(magnet_rng);
     }
+    pe::PumpPeriod p;
+    p.end_us = static_cast<std::int64_t>(std::llround(t * 1e6));
+    p.dt_s = spec.dt_s;
+    p.inputs = in;
+    p.fresh_inputs = true;
+    p.mean_iq_A = in.iq_A;
+    p.ambient_degC = ambient;
+    p.fast_age_s = 0.0;
+    p.identifier = EmulatedIdentifier(motor, winding, spec.winding_noise_sd_K, magnet,
+                                      spec.magnet_noise_sd_K, winding_true);
     if (spec.restart_s > 0.0 && t >= spec.restart_s && t < spec.restart_s + spec.dt_s) {
-      const Eigen::VectorXd xn = dist.Filter().State().head(n);
-      const Eigen::MatrixXd sn = dist.Filter().Covariance().topLeftCorner(n, n);
-      dist.Initialise(xn, sn);
+      // A restart from the nodes alone (a state file without the filter's whole state).
+      for (pe::PumpEstimator* e : {&standard, &dist}) {
+        pe::PumpEstimatorState saved = e->Save();
+        saved.observer_x.resize(0);
+        saved.observer_s.resize(0, 0);
+        saved.sensor_offset_K = std::numeric_limits<double>::quiet_NaN();
+        e->Restore(saved, saved.time_us);
+      }
     }
-    dist.Step(in, spec.dt_s, readings);
-    const pe::MismatchFinding& f = det.Step(in, spec.dt_s, y, t, readings.magnet_degC);
+    for (pe::PumpEstimator* e : {&standard, &dist}) {
+      e->OnFrameReading(p.end_us, y);
+      e->Step(p);
+    }
+    const pe::MismatchFinding& f = dist.estimate().mismatch;
     const bool named = f.state == pe::MismatchState::kPlantChange ||
                        f.state == pe::MismatchState::kSensorFaultSuspected;
     const bool fault_state = named || f.state == pe::MismatchState::kUnexplained;
@@ -377,30 +436,29 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     if (t > 300.0) {
       ++counted;
       for (int i = 0; i < n; ++i) {
-        const double err = vts.Estimate_degC()(i) - x(i);
-        const double sd = std::sqrt(vts.Covariance_K2()(i, i));
-        auto& m = r.max_error_K[static_cast<std::size_t>(i)];
+        const auto k = static_cast<std::size_t>(i);
+        const auto& se = standard.estimate();
+        const double err = se.node_degC[k] - x(i);
+        auto& m = r.max_error_K[k];
         m = std::max(m, std::abs(err));
-        if (std::abs(err) <= 2.0 * sd) ++covered[static_cast<std::size_t>(i)];
-        const double derr = dist.Node_degC(i) - x(i);
-        auto& dm = r.dist_max_error_K[static_cast<std::size_t>(i)];
+        if (std::abs(err) <= 2.0 * se.node_sd_K[k]) ++covered[k];
+        const auto& de = dist.estimate();
+        const double derr = de.node_degC[k] - x(i);
+        auto& dm = r.dist_max_error_K[k];
         dm = std::max(dm, std::abs(derr));
-        const double dsd = dist.NodeSd_K(i);
-        if (std::abs(derr) <= 2.0 * dsd) ++dist_covered[static_cast<std::size_t>(i)];
-        auto& ms = r.dist_max_sd_K[static_cast<std::size_t>(i)];
-        ms = std::max(ms, dsd);
+        if (std::abs(derr) <= 2.0 * de.node_sd_K[k]) ++dist_covered[k];
+        auto& ms = r.dist_max_sd_K[k];
+        ms = std::max(ms, de.node_sd_K[k]);
       }
     }
   }
   for (int i = 0; i < n; ++i) {
-    r.coverage[static_cast<std::size_t>(i)] =
-        counted > 0 ? static_cast<double>(covered[static_cast<std::size_t>(i)]) / counted : 0.0;
-    r.dist_coverage[static_cast<std::size_t>(i)] =
-        counted > 0 ? static_cast<double>(dist_covered[static_cast<std::size_t>(i)]) / counted
-                    : 0.0;
+    const auto k = static_cast<std::size_t>(i);
+    r.coverage[k] = counted > 0 ? static_cast<double>(covered[k]) / counted : 0.0;
+    r.dist_coverage[k] = counted > 0 ? static_cast<double>(dist_covered[k]) / counted : 0.0;
   }
-  r.at_end = det.Finding();
-  r.dist_sensor_steps = dist.SensorSteps();
+  r.at_end = dist.estimate().mismatch;
+  r.dist_sensor_steps = static_cast<int>(dist.estimate().sensor_steps);
   return r;
 }
 

@@ -130,7 +130,7 @@ void BM_DisturbanceStep(benchmark::State& state) {
   long steps = 0;
   for (auto _ : state) {
     r.frame_degC = 30.0 + 1e-3 * static_cast<double>(steps & 7);
-    benchmark::DoNotOptimize(f.Step(in, 1.0, r).nis);
+    benchmark::DoNotOptimize(f.Step(in, 1.0, r).update->nis);
     ++steps;
   }
   state.counters["allocs_per_step"] =

@@ -130,6 +130,15 @@ run() {
 }
 
 run recorded "$log" 0 0 0 | tee "$tmp/table.md"
+# `pumptherm estimate` on a pump of the daemon's configuration is the daemon's estimate, row for
+# row (the same pump estimator; docs/architecture.md).
+while read -r pump _; do
+  "$pumptherm" estimate --config "$src/tests/daemon/alarm_matrix.toml" --pump "$pump" --log "$log" \
+    --csv-time-origin "$origin" -o "$tmp/estimate-$pump.csv" 2>/dev/null
+  cmp -s "$tmp/estimate-$pump.csv" "$tmp/est-recorded/$pump.csv" ||
+    { echo "FAIL: estimate --config --pump $pump differs from pumpthermd -r:"; \
+      diff "$tmp/estimate-$pump.csv" "$tmp/est-recorded/$pump.csv" | head -n 4; fail=1; }
+done <<<"$cases"
 # The recording host's clock stepped back by 100 s and, in another run, forward by 30 s, at 100 s
 # of recording (whole seconds moved: the stamps' fractions stay as written). Offline, a backward
 # step is held (the daemon's time stays the recording's); a forward step is elapsed time

@@ -29,6 +29,15 @@ first_time() {
     $c + 0 >= thr + 0 { print $1; found = 1; exit } END { if (!found) print "none" }' "$1"
 }
 fail=0
+# `pumptherm estimate` on a pump of the daemon's configuration is the daemon's estimate, row for
+# row (the same pump estimator; docs/architecture.md).
+for p in pump1 pump2 pump3; do
+  "$pumptherm" estimate --config "$src/tools/demo/pumpthermd-demo.toml" --pump "$p" \
+    --log "$tmp/demo.log" --csv-time-origin "$origin" -o "$tmp/estimate-$p.csv" 2>/dev/null
+  cmp -s "$tmp/estimate-$p.csv" "$tmp/est/$p.csv" ||
+    { echo "FAIL: estimate --config --pump $p differs from pumpthermd -r:"; \
+      diff "$tmp/estimate-$p.csv" "$tmp/est/$p.csv" | head -n 4; fail=1; }
+done
 for p in pump1 pump2; do
   a=$(first_time "$tmp/est/$p.csv" alarm_level 1)
   w=$(first_time "$tmp/$p.truth.csv" winding_C 100)

@@ -338,13 +338,15 @@ TEST(Pipeline, WindingResistanceSdIsNotAvailableWithoutItsTemperature) {
 }
 
 TEST(Pipeline, ANodeWithoutCanOutputIsAConfigurationErrorNamingIt) {
-  // The shipped mapping without the node-indexed message: tmp-generic's stator has no signal.
+  // The shipped mapping without the default outputs (so without the node-indexed message):
+  // tmp-generic's stator has no signal.
   std::string mapping =
       ReadTextFile(std::string(PUMPTHERM_SOURCE_DIR) + "/protocol/mapping_pumptherm.toml");
   std::istringstream in(mapping);
   std::string line, kept;
   while (std::getline(in, line)) {
-    if (line.rfind("node_", 0) != 0) kept += line + "\n";
+    kept += line + "\n";
+    if (line == "[outputs]") kept += "defaults = false\n";
   }
   const std::string path = ::testing::TempDir() + "pumptherm_mapping_no_node_table.toml";
   std::ofstream(path) << kept;
@@ -408,7 +410,7 @@ TEST(Pipeline, DisturbanceStatesPublishAndTheModelIsFoundConsistent) {
 // Unset, disturbance_states follows the model (estimators::BoundaryOnlyThrough): the Saheba
 // machine's boundary reaches it through the frame alone, so it is on; a written value stands.
 TEST(Pipeline, DisturbanceStatesDefaultFollowsTheModel) {
-  EXPECT_TRUE(Bench(Config()).gateway_.pumps()[0]->config().disturbance_states);
+  EXPECT_TRUE(Bench(Config()).gateway_.pumps()[0]->disturbance_states());
   EXPECT_FALSE(Bench(Config("disturbance_states = false\n"))
                    .gateway_.pumps()[0]
                    ->config()
@@ -416,7 +418,7 @@ TEST(Pipeline, DisturbanceStatesDefaultFollowsTheModel) {
   // Measured on the rotor, the boundary (at the frame) reaches another node: off unless written.
   const std::string rotor = std::regex_replace(Config(), std::regex("measured_node = \"frame\""),
                                                "measured_node = \"rotor\"");
-  EXPECT_FALSE(Bench(rotor).gateway_.pumps()[0]->config().disturbance_states);
+  EXPECT_FALSE(Bench(rotor).gateway_.pumps()[0]->disturbance_states());
   EXPECT_TRUE(Bench(rotor + "disturbance_states = true\n")
                   .gateway_.pumps()[0]
                   ->config()

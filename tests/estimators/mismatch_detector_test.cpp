@@ -120,7 +120,15 @@ TEST(MismatchDetector, TellsASensorOffsetFromAPlantChange) {
 }
 
 TEST(MismatchDetector, TellsAStuckSensor) {
-  const mc::CaseResult r = RunFault(mc::Fault::kSensorStuck, 6, 3600.0 + 600.0);
+  // The pump's sensor-health test finds a frozen reading first (30 s flat) and leaves it out;
+  // without it the reading is fused and the mismatch test names it.
+  mc::CaseSpec spec;
+  spec.fault = mc::Fault::kSensorStuck;
+  spec.fault_s = 3600.0;
+  spec.duration_s = 3600.0 + 600.0;
+  spec.seed = 6;
+  spec.flat_after_s = 0.0;
+  const mc::CaseResult r = mc::RunCase(spec, ModelDir());
   ASSERT_FALSE(std::isnan(r.name_delay_s));
   EXPECT_EQ(r.at_naming.state, pe::MismatchState::kSensorFaultSuspected);
   EXPECT_EQ(r.at_naming.effect, pe::MismatchEffect::kSensorStuck);

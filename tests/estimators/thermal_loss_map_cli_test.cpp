@@ -95,7 +95,7 @@ TEST(LossMapCli, EstimateWithTheYokeMeasuredRuns) {
   std::string why;
   if (!DataPresent(why)) GTEST_SKIP() << why;
   const std::string out = TempPath("est.csv");
-  const Result r = RunCli("estimate --model '" + kModel +
+  const Result r = RunCli("estimate --paper-filter --model '" + kModel +
                               "' --columns paderborn --initial first-row "
                               "--measure stator_yoke --input '" +
                               kData + "' --output '" + out + "'",

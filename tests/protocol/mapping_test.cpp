@@ -21,6 +21,25 @@ ud_V = { message = "PUMP_FAST_U", signal = "Ud_V" }
 uq_V = { message = "PUMP_FAST_U", signal = "Uq_V" }
 )";
 
+/// Outputs as a daemon declares them (daemon/published_fields.cpp has the daemon's own): a key,
+/// its default message and signal, an old key.
+constexpr OutputSpec kOutputs[] = {
+    {"winding_resistance_degC", "GW_TEMPS_A", "WindingRes_degC", "winding_res_temp_degC"},
+    {"winding_resistance_sd_K", "GW_IDENT_SD", "WindingResSd_K", "winding_res_sd_K"},
+    {"magnet_flux_degC", "GW_IDENT", "MagnetFlux_degC", "magnet_flux_temp_degC"},
+    {"alarm_level", "GW_ALARM", "AlarmLevel", ""},
+    {"node_index", "GW_NODE_TEMP", "NodeIndex", ""},
+    {"node_temp_degC", "GW_NODE_TEMP", "NodeTemp_degC", ""},
+    {"node_sd_K", "GW_NODE_TEMP", "NodeSd_K", ""},
+    {"node_count", "GW_NODE_TEMP", "NodeCount", ""},
+    {"not_in_this_dbc", "GW_ELSEWHERE", "Nothing", ""},
+    {"no_default", "", "", ""},
+};
+
+SignalMapping ParseMapping(std::string_view text, std::string_view source, const Dbc& dbc) {
+  return protocol::ParseMapping(text, source, dbc, kOutputs);
+}
+
 /// Expects ParseMapping(text) to throw a MappingError whose text contains every needle.
 void ExpectMappingError(const std::string& text, const Dbc& dbc,
                         std::initializer_list<const char*> needles) {
@@ -42,8 +61,10 @@ TEST(MappingTest, ShippedMappingResolvesEverySignal) {
   for (std::size_t i = 0; i < kMappingInputCount; ++i) {
     EXPECT_TRUE(m.inputs[i].has_value()) << MappingInputName(static_cast<MappingInput>(i));
   }
-  for (std::size_t i = 0; i < kMappingOutputCount; ++i) {
-    EXPECT_TRUE(m.outputs[i].has_value()) << MappingOutputName(static_cast<MappingOutput>(i));
+  // Every declared default the DBC has is bound; one it lacks and one without a default are not.
+  for (const OutputSpec& o : kOutputs) {
+    const bool expected = !o.default_message.empty() && o.key != "not_in_this_dbc";
+    EXPECT_EQ(m.output(o.key) != nullptr, expected) << o.key;
   }
   EXPECT_EQ(m.node_temperatures.size(), 7u);
   EXPECT_TRUE(m.deprecations.empty()) << m.deprecations.front();
@@ -86,9 +107,9 @@ TEST(MappingTest, OldOutputKeysStillWorkAndAreReportedDeprecated) {
           "winding_res_sd_K = { message = \"GW_IDENT_SD\", signal = \"WindingResSd_K\" }\n"
           "magnet_flux_temp_degC = { message = \"GW_IDENT\", signal = \"MagnetFlux_degC\" }\n",
       "m.toml", dbc);
-  EXPECT_TRUE(m.output(MappingOutput::kWindingResTempDegC).has_value());
-  EXPECT_TRUE(m.output(MappingOutput::kWindingResSdK).has_value());
-  EXPECT_TRUE(m.output(MappingOutput::kMagnetFluxTempDegC).has_value());
+  EXPECT_NE(m.output("winding_resistance_degC"), nullptr);
+  EXPECT_NE(m.output("winding_resistance_sd_K"), nullptr);
+  EXPECT_NE(m.output("magnet_flux_degC"), nullptr);
   ASSERT_EQ(m.deprecations.size(), 3u);
   std::string all;
   for (const auto& d : m.deprecations) all += d + "\n";
@@ -118,6 +139,35 @@ TEST(MappingTest, OldOutputKeysStillWorkAndAreReportedDeprecated) {
           "winding_resistance_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n"
           "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
       dbc, {"outputs.winding_resistance_degC is given twice"});
+}
+
+TEST(MappingTest, DefaultsCanBeTurnedOffAndOverridden) {
+  const Dbc dbc = PumpthermDbc();
+  const std::string with_speed =
+      std::string(kMinimal) +
+      "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
+  // Only what is named, with `defaults = false`.
+  const SignalMapping only =
+      ParseMapping(with_speed +
+                       "[outputs]\ndefaults = false\n"
+                       "no_default = { message = \"GW_IDENT\", signal = \"Rs_ohm\", scale = 2 }\n",
+                   "m.toml", dbc);
+  ASSERT_EQ(only.outputs.size(), 1u);
+  EXPECT_EQ(only.output("no_default")->signal, "Rs_ohm");
+  EXPECT_EQ(only.output("no_default")->scale, 2.0);
+  // A named output wins over its default.
+  const SignalMapping over = ParseMapping(
+      with_speed +
+          "[outputs]\nalarm_level = { message = \"GW_ALARM\", signal = \"AlarmReason\" }\n",
+      "m.toml", dbc);
+  EXPECT_EQ(over.output("alarm_level")->signal, "AlarmReason");
+  EXPECT_NE(over.output("node_index"), nullptr);
+  ExpectMappingError(with_speed + "[outputs]\ndefaults = 1\n", dbc,
+                     {"outputs.defaults", "expected true or false"});
+  // A reader of the inputs alone (no outputs declared) does not read [outputs].
+  const SignalMapping inputs =
+      protocol::ParseMapping(with_speed + "[outputs]\nwhatever = 3\n", "m.toml", dbc, {});
+  EXPECT_TRUE(inputs.outputs.empty());
 }
 
 TEST(MappingTest, UnknownMessageOrSignalIsNamed) {

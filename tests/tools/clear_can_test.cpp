@@ -12,6 +12,7 @@
 #include <span>
 #include <string>
 
+#include "daemon/published_fields.hpp"
 #include "protocol/codec.hpp"
 #include "tests/protocol/dbc_files.hpp"
 #include "tools/pumptherm/subcommand.hpp"
@@ -85,7 +86,7 @@ FrameSet Shipped() {
   const auto dir = protocol::test::SourceDir() / "protocol";
   f.dbc = protocol::ParseDbc(protocol::test::ReadFile(dir / "pumptherm.dbc"), "pumptherm.dbc");
   f.mapping = protocol::ParseMapping(protocol::test::ReadFile(dir / "mapping_pumptherm.toml"),
-                                     "mapping_pumptherm.toml", f.dbc);
+                                     "mapping_pumptherm.toml", f.dbc, daemon::MappingOutputs());
   return f;
 }
 

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# `pumptherm estimate` with what the daemon has: the mismatch detector's verdict as columns
-# (mismatch_state, mismatch_effect, mismatch_value, as the daemon's CSV) and the disturbance-state
-# filter (--disturbance-states). Truth from `pumptherm simulate` on tmp-generic, the frame as the
-# measurement: on the nominal model the verdict ends consistent; with the frame-to-ambient
-# resistance x4 (cooling lost) it ends a plant change, and the disturbance-state filter keeps the
-# rotor within its +-2 sd where the standard filter does not; a reading that steps +3 K goes into
-# its sensor offset (frame_sensor_offset_K).
+# `pumptherm estimate` on a CSV is the daemon's pump estimator: the daemon's CSV with the
+# mismatch test's verdict (mismatch_state, mismatch_effect, mismatch_value) and, by default on
+# tmp-generic, the disturbance-state filter (--filter standard: the standard one). Truth from
+# `pumptherm simulate` on tmp-generic, the frame as the measurement: on the nominal model the
+# verdict ends consistent; with the frame-to-ambient resistance x4 (cooling lost) it ends a plant
+# change, and the default filter keeps the rotor within its +-2 sd where the standard filter does
+# not; a reading that steps +3 K goes into its sensor offset (frame_sensor_offset_K).
 set -euo pipefail
 exe=$1
 models=$2  # estimators/models of the source tree
@@ -25,10 +25,10 @@ measured() {
 }
 measured healthy "$models/tmp-generic.toml"
 measured lost "$tmp/cooling-lost.toml"
-est() { "$exe" estimate --model tmp-generic --initial-C 22 --input "$tmp/meas_$1.csv" --output "$tmp/est_$1_$2.csv" "${@:3}"; }
-est healthy std
-est lost std
-est lost dist --disturbance-states
+est() { "$exe" estimate --model tmp-generic --input "$tmp/meas_$1.csv" --output "$tmp/est_$1_$2.csv" "${@:3}"; }
+est healthy std --filter standard
+est lost std --filter standard
+est lost dist
 # col FILE NAME: the last row's value of column NAME.
 col() { awk -F, -v n="$2" 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == n) c = i; next } { v = $c } END { print v }' "$1"; }
 for c in mismatch_state mismatch_effect mismatch_value; do
@@ -51,7 +51,7 @@ awk -v t="$truth" -v a="$r_std" -v sa="$sd_std" -v b="$r_dist" -v sb="$sd_dist" 
 # A frame reading that steps +3 K at 1800 s: the disturbance filter takes it as the sensor's offset
 # (frame_sensor_offset_K, as the daemon's CSV) and its frame stays on the truth.
 awk -F, 'BEGIN { OFS = "," } NR > 1 && $1 >= 1800 { $NF = $NF + 3 } { print }' "$tmp/meas_healthy.csv" > "$tmp/meas_offset.csv"
-est offset dist --disturbance-states
+est offset dist
 o=$(col "$tmp/est_offset_dist.csv" frame_sensor_offset_K)
 f=$(col "$tmp/est_offset_dist.csv" frame_C); ft=$(col "$tmp/truth_healthy.csv" frame_C)
 echo "reading +3 K from 1800 s: offset $o K at 3600 s; frame $f against $ft true"
@@ -59,8 +59,8 @@ awk -v o="$o" -v f="$f" -v t="$ft" 'function abs(x) { return x < 0 ? -x : x }
   BEGIN { exit !(abs(o - 3) <= 0.5 && abs(f - t) <= 1) }' ||
   fail "the stepped reading was not taken as the sensor's offset"
 # The same with the 5 s rows split into 1 s steps (--max-step-s): the readings are 5 steps apart.
-"$exe" estimate --model tmp-generic --initial-C 22 --input "$tmp/meas_offset.csv" \
-  --output "$tmp/est_offset_split.csv" --disturbance-states --max-step-s 1
+"$exe" estimate --model tmp-generic --input "$tmp/meas_offset.csv" \
+  --output "$tmp/est_offset_split.csv" --max-step-s 1
 o=$(col "$tmp/est_offset_split.csv" frame_sensor_offset_K)
 f=$(col "$tmp/est_offset_split.csv" frame_C)
 echo "the same in 1 s steps: offset $o K; frame $f against $ft true"
@@ -68,9 +68,9 @@ awk -v o="$o" -v f="$f" -v t="$ft" 'function abs(x) { return x < 0 ? -x : x }
   BEGIN { exit !(abs(o - 3) <= 0.5 && abs(f - t) <= 1) }' ||
   fail "in 1 s steps the stepped reading was not taken as the sensor's offset"
 set +e
-"$exe" estimate --model tmp-generic --input "$tmp/meas_lost.csv" --measure frame,rotor --disturbance-states \
+"$exe" estimate --model tmp-generic --input "$tmp/meas_lost.csv" --measure frame,rotor \
   --output "$tmp/bad.csv" 2> "$tmp/err.txt"
 rc=$?
 set -e
-[[ $rc == 2 ]] || fail "--disturbance-states with two measured nodes exited $rc, not 2"
+[[ $rc == 2 ]] || fail "the pump estimator with two measured nodes exited $rc, not 2"
 echo PASS

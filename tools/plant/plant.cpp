@@ -203,7 +203,7 @@ void LoadFrameLayout(const PlantResources& res, FrameLayout& layout) {
   auto& slots = layout.slots;
   try {
     dbc = protocol::ParseDbc(res.dbc.text, res.dbc.source);
-    mapping = protocol::ParseMapping(res.mapping.text, res.mapping.source, *dbc);
+    mapping = protocol::ParseMapping(res.mapping.text, res.mapping.source, *dbc, {});
   } catch (const std::exception& e) {
     throw ScenarioError(e.what());
   }

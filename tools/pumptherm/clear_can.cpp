@@ -7,6 +7,7 @@
 #include <span>
 #include <vector>
 
+#include "daemon/published_fields.hpp"
 #include "protocol/codec.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
@@ -89,7 +90,7 @@ std::optional<GatewayAlarmLevel> AlarmLevelOf(const protocol::Dbc& dbc,
                                               const protocol::SignalMapping& mapping,
                                               std::uint32_t node_id,
                                               const protocol::CanFrame& frame) {
-  const auto& ref = mapping.output(protocol::MappingOutput::kAlarmLevel);
+  const protocol::SignalRef* ref = mapping.output(daemon::kAlarmLevelKey);
   if (!ref || node_id >= mapping.node_id_limit) return std::nullopt;
   const protocol::DbcMessage& m = dbc.messages[static_cast<std::size_t>(ref->message_index)];
   if (frame.id != mapping.CanId(dbc, ref->message_index, node_id) || frame.extended != m.extended) {

@@ -17,6 +17,7 @@
 #include "daemon/alarm_clear_auth.hpp"
 #include "daemon/can_socket.hpp"
 #include "daemon/config.hpp"
+#include "daemon/published_fields.hpp"
 #include "daemon/resources.hpp"
 #include "tools/pumptherm/clear_can.hpp"
 #include "tools/pumptherm/subcommand.hpp"
@@ -157,8 +158,8 @@ std::pair<protocol::Dbc, protocol::SignalMapping> LoadFrameSet(const daemon::Dae
     protocol::Dbc dbc = protocol::ParseDbc(daemon::ReadTextFile(dbc_path), dbc_path);
     const std::string map_path =
         daemon::ResolveResource(daemon::ResourceKind::kDbc, c.dbc.mapping, c.dbc.base_dir);
-    protocol::SignalMapping mapping =
-        protocol::ParseMapping(daemon::ReadTextFile(map_path), map_path, dbc);
+    protocol::SignalMapping mapping = protocol::ParseMapping(
+        daemon::ReadTextFile(map_path), map_path, dbc, daemon::MappingOutputs());
     return {std::move(dbc), std::move(mapping)};
   } catch (const std::exception& e) {
     throw InputError(fmt::format("{}: {}", c.source, e.what()));

@@ -13,6 +13,7 @@
 #include "protocol/candump_log.hpp"
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
+#include "protocol/dq_pairing.hpp"
 #include "protocol/mapping.hpp"
 #include "shipped/shipped_files.hpp"
 #include "tools/pumptherm/model_files.hpp"
@@ -22,17 +23,9 @@ namespace pumptherm::tools {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-constexpr std::int64_t kPairWindow_us = 50'000;
-constexpr double kRadPerSPerRpm = 2.0 * 3.14159265358979323846 / 60.0;
 constexpr std::uint64_t kWarnedLines = 5;
 
 using protocol::MappingInput;
-
-/// One half of a dq sample: a current frame (a = id, b = iq) or a voltage frame (a = ud, b = uq).
-struct Half {
-  std::int64_t t_us = -1;
-  double a = kNaN, b = kNaN, counter = kNaN;
-};
 
 std::string Load(shipped::FileKind kind, const std::string& reference, const char* what) {
   try {
@@ -42,12 +35,14 @@ std::string Load(shipped::FileKind kind, const std::string& reference, const cha
   }
 }
 
-/// Decoding state of one pump's telemetry: the latest halves, speed and status values.
+/// Decoding state of one pump's telemetry: the halves paired as the daemon pairs them
+/// (protocol::DqPairing), the latest speed and status values.
 class Assembler {
  public:
   /// `status_mapped`: the mapping has the status message's temperatures (rows wait for them).
-  Assembler(int pole_pairs, bool status_mapped, std::ostringstream& csv, RecordingCounts& counts)
-      : pole_pairs_(pole_pairs), status_mapped_(status_mapped), csv_(csv), counts_(counts) {}
+  Assembler(const estimators::MotorDescription& motor, bool status_mapped, std::ostringstream& csv,
+            RecordingCounts& counts)
+      : motor_(motor), status_mapped_(status_mapped), csv_(csv), counts_(counts) {}
 
   /// `v` holds this frame's mapped inputs (NaN where the frame has none).
   void OnFrame(std::int64_t t_us, const double* v, bool currents, bool voltages, bool status) {
@@ -61,52 +56,46 @@ class Assembler {
         ambient_C_ = at(MappingInput::kAmbientTempDegC);
     }
     const double counter = at(MappingInput::kRollingCounter);
+    protocol::DqPair pair;
+    bool paired = false;
     if (currents) {
-      if (std::isfinite(at(MappingInput::kSpeedElecRadPerS))) {
-        speed_rpm_ = at(MappingInput::kSpeedElecRadPerS) / (pole_pairs_ * kRadPerSPerRpm);
-      }
-      if (currents_.t_us >= 0) ++counts_.unpaired;
-      currents_ = Half{t_us, at(MappingInput::kIdA), at(MappingInput::kIqA), counter};
+      if (std::isfinite(at(MappingInput::kSpeedElecRadPerS)))
+        speed_rpm_ = estimators::MechanicalSpeed_rpm(motor_, at(MappingInput::kSpeedElecRadPerS));
+      paired = pairing_.OnCurrents(t_us, at(MappingInput::kIdA), at(MappingInput::kIqA), counter,
+                                   pair) ||
+               paired;
     }
     if (voltages) {
-      if (voltages_.t_us >= 0) ++counts_.unpaired;
-      voltages_ = Half{t_us, at(MappingInput::kUdV), at(MappingInput::kUqV), counter};
+      paired = pairing_.OnVoltages(t_us, at(MappingInput::kUdV), at(MappingInput::kUqV), counter,
+                                   pair) ||
+               paired;
     }
-    TryPair();
+    counts_.unpaired = pairing_.unpaired();
+    if (paired) Row(pair);
   }
 
  private:
-  void TryPair() {
-    if (currents_.t_us < 0 || voltages_.t_us < 0) return;
-    const bool near = std::abs(currents_.t_us - voltages_.t_us) <= kPairWindow_us;
-    const bool same = currents_.counter == voltages_.counter || std::isnan(currents_.counter) ||
-                      std::isnan(voltages_.counter);
-    if (!near || !same) return;  // the older half waits to be replaced (and counted unpaired)
-    const std::int64_t t = std::max(currents_.t_us, voltages_.t_us);
-    const bool finite = std::isfinite(currents_.a) && std::isfinite(currents_.b) &&
-                        std::isfinite(voltages_.a) && std::isfinite(voltages_.b) &&
-                        std::isfinite(speed_rpm_);
+  void Row(const protocol::DqPair& p) {
+    const bool finite = std::isfinite(p.id_A) && std::isfinite(p.iq_A) && std::isfinite(p.ud_V) &&
+                        std::isfinite(p.uq_V) && std::isfinite(speed_rpm_);
     // Rows start once the status frame has given the temperatures, so that every cell is a number.
     const bool temperatures =
         !status_mapped_ || (std::isfinite(frame_C_) && std::isfinite(ambient_C_));
-    if (finite && temperatures) {
-      if (counts_.first_us < 0) counts_.first_us = t;
-      // Ten significant digits: a decoded value is raw * factor + offset, whose last binary
-      // digits (21.700000000000003 for 217 * 0.1) are not information; time to the microsecond.
-      csv_ << fmt::format("{:.12g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g}\n",
-                          static_cast<double>(t - counts_.first_us) * 1e-6, currents_.a,
-                          currents_.b, voltages_.a, voltages_.b, speed_rpm_, frame_C_, ambient_C_);
-      ++counts_.rows;
-    }
-    currents_ = Half{};
-    voltages_ = Half{};
+    if (!finite || !temperatures) return;
+    if (counts_.first_us < 0) counts_.first_us = p.t_us;
+    // Ten significant digits: a decoded value is raw * factor + offset, whose last binary
+    // digits (21.700000000000003 for 217 * 0.1) are not information; time to the microsecond.
+    csv_ << fmt::format("{:.12g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g}\n",
+                        static_cast<double>(p.t_us - counts_.first_us) * 1e-6, p.id_A, p.iq_A,
+                        p.ud_V, p.uq_V, speed_rpm_, frame_C_, ambient_C_);
+    ++counts_.rows;
   }
 
-  int pole_pairs_;
+  const estimators::MotorDescription& motor_;
   bool status_mapped_;
   std::ostringstream& csv_;
   RecordingCounts& counts_;
-  Half currents_, voltages_;
+  protocol::DqPairing pairing_;
   double speed_rpm_ = kNaN, frame_C_ = kNaN, ambient_C_ = kNaN;
 };
 
@@ -132,8 +121,8 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
   protocol::SignalMapping mapping;
   try {
     dbc = protocol::ParseDbc(Load(shipped::FileKind::kDbc, s.dbc, "dbc"), s.dbc);
-    mapping =
-        protocol::ParseMapping(Load(shipped::FileKind::kDbc, s.mapping, "mapping"), s.mapping, dbc);
+    mapping = protocol::ParseMapping(Load(shipped::FileKind::kDbc, s.mapping, "mapping"), s.mapping,
+                                     dbc, {});
   } catch (const std::exception& e) {
     throw InputError(e.what());
   }
@@ -168,7 +157,7 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
   csv << "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm,frame_C,ambient_C\n";
   const bool status_mapped = mapping.input(MappingInput::kFrameTempDegC).has_value() &&
                              mapping.input(MappingInput::kAmbientTempDegC).has_value();
-  Assembler assembler(motor.pole_pairs, status_mapped, csv, counts);
+  Assembler assembler(motor, status_mapped, csv, counts);
   std::vector<double> values(64);
   std::string line;
   while (std::getline(in, line)) {

@@ -1,0 +1,264 @@
+// The published fields (daemon/published_fields.hpp): one row each; the CAN encoder, the LCM
+// messages and the offline CSV read them from here.
+#include "daemon/published_fields.hpp"
+
+#include <fmt/format.h>
+
+#include <array>
+#include <cmath>
+#include <iterator>
+#include <type_traits>
+#include <vector>
+
+namespace pumptherm::daemon {
+namespace {
+
+using estimators::AlarmReason;
+using estimators::PumpEstimate;
+using estimators::ResistanceStatus;
+using Kind = CsvFormat::Kind;
+using T = pumptherm::temperatures_t;
+using A = pumptherm::alarm_t;
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+const PumpEstimate& E(const FieldSource& s) { return *s.estimate; }
+
+/// The identifier has a line fitted to data (not the nameplate, not from invalid input).
+bool Identified(const FieldSource& s) {
+  const auto st = E(s).resistance.status;
+  return st != ResistanceStatus::kInitialising && st != ResistanceStatus::kInvalidInput;
+}
+/// Whether the alarm state is worth sending: with an estimate, with a latched trip (also while
+/// the filter has none), or with any condition raised (a pump never heard from is stale).
+bool AlarmKnown(const FieldSource& s) {
+  const PumpEstimate& e = E(s);
+  return e.initialised || e.alarm.trip_latched ||
+         e.alarm.level != estimators::AlarmLevel::kNone;
+}
+
+double Code(auto v) { return static_cast<double>(v); }
+
+double NodeValue(const FieldSource& s, const std::vector<double>& values) {
+  return E(s).initialised && s.node >= 0 && static_cast<std::size_t>(s.node) < values.size()
+             ? values[static_cast<std::size_t>(s.node)]
+             : kNaN;
+}
+
+double AlarmNode(const FieldSource& s) {
+  // The model's node index (as node_index), or the winding temperature from resistance.
+  const PumpEstimate& e = E(s);
+  if (!e.initialised ||
+      (e.alarm.node < 0 && e.alarm.reason != AlarmReason::kEstimatedOverTemperature))
+    return kNaN;
+  const auto count = static_cast<int>(e.node_degC.size());
+  return e.alarm.node >= 0 && e.alarm.node < count ? Code(e.alarm.node)
+                                                   : Code(kAlarmNodeWindingRes);
+}
+
+double AlarmValue(const FieldSource& s) {
+  const auto r = E(s).alarm.reason;
+  const bool temp = r == AlarmReason::kEstimatedOverTemperature ||
+                    r == AlarmReason::kMeasuredOverTemperature;
+  return E(s).initialised && temp ? E(s).alarm.value : kNaN;
+}
+
+double FilterStatus(const FieldSource& s) {
+  const PumpEstimate& e = E(s);
+  if (!e.initialised) return T::FILTER_NOT_STARTED;
+  if (!e.filter_converged) return T::FILTER_CONVERGING;
+  if (std::isfinite(e.nis) && e.nis > s.nis_limit) return T::FILTER_REJECTING;
+  return T::FILTER_TRACKING;
+}
+
+// clang-format off
+/// The fields, in the CSV's column order. Columns: name (mapping key), unit, default DBC
+/// message and signal, LCM field, CSV column and format, value, CSV word, old key.
+const std::array kFields = std::to_array<PublishedField>({
+  {"winding_resistance_degC", "degC", "GW_TEMPS_A", "WindingRes_degC", &T::resistance_winding_degC,
+   "winding_resistance_C", {Kind::kFixed, 4},
+   [](const FieldSource& s) { return E(s).winding_resistance_degC; }, nullptr,
+   "winding_res_temp_degC"},
+  {"magnet_flux_degC", "degC", "GW_IDENT", "MagnetFlux_degC", &T::magnet_flux_degC,
+   "magnet_flux_C", {Kind::kFixed, 4},
+   [](const FieldSource& s) { return E(s).magnet_flux_degC; }, nullptr, "magnet_flux_temp_degC"},
+  {"magnet_flux_sd_K", "K", "GW_IDENT_SD", "MagnetFluxSd_K", &T::magnet_flux_sd_K,
+   "magnet_flux_sd_K", {Kind::kFixed, 4},
+   [](const FieldSource& s) { return E(s).magnet_flux_sd_K; }},
+  {"rs_ohm", "ohm", "GW_IDENT", "Rs_ohm", &T::resistance_ohm, "resistance_ohm",
+   {Kind::kFixed, 6},
+   [](const FieldSource& s) { return Identified(s) ? E(s).resistance.resistance_ohm : kNaN; }},
+  {"resistance_sd_ohm", "ohm", "", "", &T::resistance_sd_ohm, "", {},
+   [](const FieldSource& s) {
+     return Identified(s) ? E(s).resistance.resistance_sigma_ohm : kNaN;
+   }},
+  {"flux_Wb", "Wb", "GW_IDENT", "Flux_Wb", &T::flux_Wb, "flux_Wb", {Kind::kFixed, 7},
+   [](const FieldSource& s) { return Identified(s) ? E(s).resistance.flux_Wb : kNaN; }},
+  {"rs_status", "", "GW_IDENT", "RsStatus", &T::ident_status, "ident_status", {Kind::kInteger, 0},
+   [](const FieldSource& s) { return Code(E(s).resistance.status); }},
+  {"frame_measured_degC", "degC", "", "", {}, "frame_measured_C", {Kind::kFixed, 2},
+   [](const FieldSource& s) { return E(s).frame_measured_degC; }},
+  {"ambient_degC", "degC", "", "", {}, "ambient_C", {Kind::kFixed, 2},
+   [](const FieldSource& s) { return E(s).ambient_degC; }},
+  {"speed_rpm", "rpm", "", "", {}, "speed_rpm", {Kind::kFixed, 1},
+   [](const FieldSource& s) { return E(s).speed_rpm; }},
+  {"nis", "", "", "", &T::nis, "nis", {Kind::kFixed, 3},
+   [](const FieldSource& s) { return E(s).nis; }},
+  {"alarm_level", "", "GW_ALARM", "AlarmLevel", &A::level, "alarm_level", {Kind::kInteger, 0},
+   [](const FieldSource& s) { return AlarmKnown(s) ? Code(E(s).alarm.level) : kNaN; }},
+  {"alarm_reason", "", "GW_ALARM", "AlarmReason", {}, "alarm_reason", {Kind::kInteger, 0},
+   [](const FieldSource& s) { return AlarmKnown(s) ? Code(E(s).alarm.reason) : kNaN; }},
+  {"alarm_node", "", "GW_ALARM", "AlarmNode", {}, "alarm_node", {Kind::kInteger, 0},
+   AlarmNode},
+  {"alarm_value_degC", "degC", "GW_ALARM", "AlarmValue_degC", {}, "", {}, AlarmValue},
+  {"time_to_trip_s", "s", "GW_ALARM", "TimeToTrip_s", &A::time_to_trip_s, "time_to_trip_s",
+   {Kind::kFixed, 0},
+   [](const FieldSource& s) { return E(s).alarm.time_to_trip_s; }},
+  {"alarm_active_reasons", "", "", "", {}, "alarm_active_reasons", {Kind::kInteger, 0},
+   [](const FieldSource& s) { return Code(E(s).alarm.active_reasons); }},
+  {"sensor_fault", "", "", "", {}, "sensor_fault", {Kind::kInteger, 0},
+   [](const FieldSource& s) { return Code(E(s).sensor_fault); }},
+  {"winding_resistance_sd_K", "K", "GW_IDENT_SD", "WindingResSd_K", &T::resistance_winding_sd_K,
+   "winding_resistance_sd_K", {Kind::kFixed, 4},
+   // Only with the temperature it belongs to.
+   [](const FieldSource& s) {
+     return std::isfinite(E(s).winding_resistance_degC) ? E(s).winding_resistance_sd_K : kNaN;
+   },
+   nullptr, "winding_res_sd_K"},
+  {"flux_sd_Wb", "Wb", "", "", &T::flux_sd_Wb, "flux_sd_Wb", {Kind::kGeneral, 3},
+   [](const FieldSource& s) { return Identified(s) ? E(s).resistance.flux_sd_Wb : kNaN; }},
+  {"mismatch_state", "", "GW_ALARM", "MismatchState", &A::mismatch_state, "mismatch_state",
+   {Kind::kWord, 0},
+   [](const FieldSource& s) { return E(s).initialised ? Code(E(s).mismatch.state) : kNaN; },
+   [](const FieldSource& s) { return estimators::MismatchStateName(E(s).mismatch.state); }},
+  {"mismatch_effect", "", "GW_ALARM", "MismatchEffect", &A::mismatch_effect, "mismatch_effect",
+   {Kind::kWord, 0},
+   [](const FieldSource& s) { return E(s).initialised ? Code(E(s).mismatch.effect) : kNaN; },
+   [](const FieldSource& s) { return estimators::MismatchEffectName(E(s).mismatch.effect); }},
+  {"mismatch_value", "", "", "", &A::mismatch_value, "mismatch_value", {Kind::kFixed, 3},
+   [](const FieldSource& s) { return E(s).mismatch.value; }},
+  {"frame_sensor_offset_K", "K", "", "", {}, "frame_sensor_offset_K", {Kind::kFixed, 3},
+   [](const FieldSource& s) { return E(s).sensor_offset_K; }},
+  {"flux_status", "", "GW_IDENT", "FluxStatus", {}, "", {},
+   // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
+   [](const FieldSource& s) {
+     const auto st = E(s).resistance.status;
+     return Code(st == ResistanceStatus::kNotIdentifiable ? ResistanceStatus::kTracking : st);
+   }},
+  {"mismatch_since_us", "us", "", "", &A::mismatch_since_utime, "", {},
+   // Since the Unix epoch (the pipeline's clock is monotonic live); 0: none.
+   [](const FieldSource& s) {
+     const double onset_s = E(s).mismatch.onset_s;
+     return std::isfinite(onset_s) ? std::floor(onset_s * 1e6) + s.wall_offset_us : 0.0;
+   }},
+  {"filter_status", "", "", "", &T::filter_status, "", {}, FilterStatus},
+  {"uptime_s", "s", "GW_HEALTH", "Uptime_s", {}, "", {},
+   [](const FieldSource& s) { return s.uptime_s; }},
+  {"frame_rate_Hz", "Hz", "GW_HEALTH", "FrameRate_Hz", {}, "", {},
+   [](const FieldSource& s) { return s.frame_rate_Hz; }},
+  {"drops", "", "GW_HEALTH", "Drops", {}, "", {},
+   [](const FieldSource& s) { return s.lost_frames; }},
+  {"bus_state", "", "GW_HEALTH", "BusState", {}, "", {},
+   [](const FieldSource& s) { return s.bus_state; }},
+  {protocol::kNodeIndexKey, "", "GW_NODE_TEMP", "NodeIndex", {}, "", {},
+   [](const FieldSource& s) { return s.node >= 0 ? Code(s.node) : kNaN; }},
+  {protocol::kNodeCountKey, "", "GW_NODE_TEMP", "NodeCount", {}, "", {},
+   [](const FieldSource& s) { return Code(E(s).node_degC.size()); }},
+  {protocol::kNodeTempKey, "degC", "GW_NODE_TEMP", "NodeTemp_degC", {}, "", {},
+   [](const FieldSource& s) { return NodeValue(s, E(s).node_degC); }},
+  {protocol::kNodeSdKey, "K", "GW_NODE_TEMP", "NodeSd_K", {}, "", {},
+   [](const FieldSource& s) { return NodeValue(s, E(s).node_sd_K); }},
+});
+// clang-format on
+
+std::vector<protocol::OutputSpec> MakeMappingOutputs() {
+  // Every field may be mapped to a signal; those with a default go where the DBC has it.
+  std::vector<protocol::OutputSpec> out;
+  for (const PublishedField& f : kFields)
+    out.push_back({f.name, f.dbc_message, f.dbc_signal, f.old_key});
+  return out;
+}
+
+void AppendCell(const PublishedField& f, const FieldSource& s, std::string& out) {
+  out += ',';
+  if (f.csv.kind == Kind::kWord) {
+    out += f.word(s);
+    return;
+  }
+  const double v = f.value(s);
+  if (!std::isfinite(v) && f.csv.kind == Kind::kInteger) {
+    fmt::format_to(std::back_inserter(out), "{}", v);  // nan, inf
+    return;
+  }
+  switch (f.csv.kind) {
+    case Kind::kFixed:
+      fmt::format_to(std::back_inserter(out), "{:.{}f}", v, f.csv.digits);
+      break;
+    case Kind::kGeneral:
+      fmt::format_to(std::back_inserter(out), "{:.{}g}", v, f.csv.digits);
+      break;
+    case Kind::kInteger:
+      fmt::format_to(std::back_inserter(out), "{}", static_cast<long long>(v));
+      break;
+    default:
+      break;
+  }
+}
+
+template <typename Message>
+void Fill(const FieldSource& source, Message& m) {
+  for (const PublishedField& f : kFields) {
+    std::visit(
+        [&](auto member) {
+          using M = decltype(member);
+          if constexpr (std::is_same_v<M, double Message::*>) {
+            m.*member = f.value(source);
+          } else if constexpr (std::is_same_v<M, std::int8_t Message::*>) {
+            // A code that is not available: -1 (LCM integers have no NaN; docs/lcm.md).
+            const double v = f.value(source);
+            m.*member = std::isfinite(v) ? static_cast<std::int8_t>(v) : std::int8_t{-1};
+          } else if constexpr (std::is_same_v<M, std::int64_t Message::*>) {
+            const double v = f.value(source);
+            m.*member = std::isfinite(v) ? static_cast<std::int64_t>(v) : std::int64_t{0};
+          }
+        },
+        f.lcm);
+  }
+}
+
+}  // namespace
+
+std::span<const PublishedField> PublishedFields() { return kFields; }
+
+const PublishedField* FindPublishedField(std::string_view name) {
+  for (const PublishedField& f : kFields) {
+    if (f.name == name) return &f;
+  }
+  return nullptr;
+}
+
+std::span<const protocol::OutputSpec> MappingOutputs() {
+  static const std::vector<protocol::OutputSpec> outputs = MakeMappingOutputs();
+  return outputs;
+}
+
+void FillLcm(const FieldSource& source, pumptherm::temperatures_t& m) { Fill(source, m); }
+void FillLcm(const FieldSource& source, pumptherm::alarm_t& m) { Fill(source, m); }
+
+std::string CsvHeader() {
+  std::string out;
+  for (const PublishedField& f : kFields) {
+    if (f.csv.kind == Kind::kNone) continue;
+    out += ',';
+    out += f.csv_column;
+  }
+  return out;
+}
+
+void AppendCsvRow(const FieldSource& source, std::string& out) {
+  for (const PublishedField& f : kFields) {
+    if (f.csv.kind != Kind::kNone) AppendCell(f, source, out);
+  }
+}
+
+}  // namespace pumptherm::daemon

@@ -1,0 +1,101 @@
+#include "estimators/alarm_values.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace pumptherm::estimators {
+namespace {
+
+/// Standard deviations on either side of a published estimate that its band spans (the "+-2 sd"
+/// the docs and the judges state coverage for).
+constexpr double kPublishedBandSds = 2.0;
+
+}  // namespace
+
+AlarmValues::AlarmValues(const ThermalModel& model, const AlarmConfig& config, double lag_s,
+                         double period_s)
+    : model_(model), lag_bias_(lag_s, period_s) {
+  const int n = model.StateCount();
+  // The ring reaches back over the stuck test's flat time and the fault's hold, plus a margin.
+  const double reach_s = config.flat_after_s + config.hold_s + 2.0 * period_s;
+  const auto ring = static_cast<std::size_t>(std::ceil(reach_s / period_s)) + 1;
+  recent_degC_ = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(ring));
+  recent_us_.assign(ring, -1);
+  blind_start_degC_ = Eigen::VectorXd::Zero(n);
+}
+
+void AlarmValues::Step(const AlarmValuesStep& s) {
+  StepBlind(s);
+  Remember(s.end_us, s.valid, *s.x_degC);
+  // A filter that models the sensor's lag gets no bias (lagging_degC NaN).
+  lag_bias_.Step(s.lagging_degC);
+  if (!s.valid) {
+    silence_.Reset();
+    return;
+  }
+  silence_.Step(model_, *s.inputs, s.fresh_inputs, *s.x_degC, *s.sd_K,
+                static_cast<double>(s.end_us) * 1e-6, s.period_s, s.stale_after_s,
+                s.trip_sd_factor);
+}
+
+void AlarmValues::StepBlind(const AlarmValuesStep& s) {
+  if (!s.blind) {
+    blind_.Reset();
+    return;
+  }
+  if (!Blind() && s.fault == SensorFault::kStuck) {
+    // A stuck reading is fused until the stuck test finds it (flat_after_s): the estimate has
+    // followed a frozen value since, low if the pump warmed. The worst case starts from the
+    // estimate of the step that fused the reading's last change, run to now in one step.
+    const auto changed_us = static_cast<std::int64_t>(std::llround(s.reading_changed_s * 1e6));
+    std::int64_t from_us = -1;
+    Eigen::Index from = -1;
+    for (std::size_t k = 0; k < recent_us_.size(); ++k) {
+      const std::int64_t t = recent_us_[k];
+      if (t >= changed_us && t < s.end_us && (from_us < 0 || t < from_us)) {
+        from_us = t;
+        from = static_cast<Eigen::Index>(k);
+      }
+    }
+    if (from >= 0) {
+      blind_start_degC_ = recent_degC_.col(from);  // sized at construction: no allocation
+      blind_.Step(model_, *s.inputs, static_cast<double>(s.end_us - from_us) * 1e-6,
+                  blind_start_degC_);
+      return;
+    }
+  }
+  blind_.Step(model_, *s.inputs, s.period_s, *s.x_degC);
+}
+
+void AlarmValues::Remember(std::int64_t end_us, bool valid, const Eigen::VectorXd& x_degC) {
+  if (!valid) {
+    std::fill(recent_us_.begin(), recent_us_.end(), -1);
+    return;
+  }
+  recent_degC_.col(static_cast<Eigen::Index>(recent_next_)) = x_degC;
+  recent_us_[recent_next_] = end_us;
+  recent_next_ = (recent_next_ + 1) % recent_us_.size();
+}
+
+double AlarmValues::Value_degC(int i, double estimate_degC) const {
+  // The highest of: the estimate raised by the lagging reading's bias, the worst case while
+  // running blind, the worst case of a telemetry silence.
+  double v = estimate_degC + lag_bias_.bias_K();
+  for (const Eigen::VectorXd* b : {&blind_.bound_degC(), &silence_.bound_degC()}) {
+    if (b->size() > i && !std::isnan((*b)(i))) v = std::max(v, (*b)(i));
+  }
+  return v;
+}
+
+double AlarmValues::PublishedSd_K(double filter_sd_K, double above_K) {
+  // Where the levels act on a bound above the estimate (running blind, after a silence, behind
+  // a lagging sensor), the truth may lie up to that bound: the published band reaches it, so
+  // that a node that cannot be seen says so through its sd. The estimate itself stays the
+  // model's most likely value, and the alarms keep the filter's own sd (the bound already
+  // stands for the worst case).
+  if (!(above_K > 0.0)) return filter_sd_K;
+  return std::max(filter_sd_K, above_K / kPublishedBandSds);
+}
+
+}  // namespace pumptherm::estimators

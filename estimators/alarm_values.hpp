@@ -1,0 +1,83 @@
+#pragma once
+/// The value each node's alarm levels act on, and the sd published with the node (docs/daemon.md,
+/// "Alarm rule"): the estimate, raised to the highest of the bounds that say where the
+/// estimate is known to run low:
+///  - while running blind (no temperature measured: the frame sensor failed and no other
+///    reading stands in), the worst case of a cooling failure nothing could see (BlindBound),
+///    started from the estimate when the measurements stopped (for a stuck sensor, from the
+///    step that fused the reading's last change: it was fused until the stuck test found it);
+///  - after a telemetry silence, the load that may have risen unseen (SilenceBound);
+///  - with a filter that fuses a lagging reading as the node itself, the reading's rise over
+///    its lag (LagBias).
+/// Where a bound lies above the estimate, the published sd is widened so that the band
+/// x +- 2 sd reaches it. Pure library: time enters as arguments; no allocation per step.
+
+#include <Eigen/Dense>
+#include <cstdint>
+#include <vector>
+
+#include "estimators/alarm_bounds.hpp"
+#include "estimators/alarms.hpp"
+#include "estimators/thermal_model.hpp"
+
+namespace pumptherm::estimators {
+
+/// One step's facts for AlarmValues::Step.
+struct AlarmValuesStep {
+  std::int64_t end_us = 0;
+  double period_s = 1.0;
+  const ThermalInputs* inputs = nullptr;  ///< the step's inputs (held ones when not fresh)
+  bool fresh_inputs = false;              ///< this step had telemetry
+  /// No temperature measured this step (the frame sensor's fault is raised, or a blind stretch
+  /// goes on) and the estimate is valid.
+  bool blind = false;
+  SensorFault fault = SensorFault::kNone;  ///< the frame sensor's, this step
+  double reading_changed_s = 0.0;          ///< when its reading last changed (SensorHealth)
+  /// The estimate after the step and the filter's own sd of each node (n); `valid` false: the
+  /// filter left every physical range (the bounds are dropped).
+  const Eigen::VectorXd* x_degC = nullptr;
+  const Eigen::VectorXd* sd_K = nullptr;
+  bool valid = true;
+  /// The fused reading the estimate follows without modelling its lag (NaN: none).
+  double lagging_degC = 0.0;
+  double stale_after_s = 2.0;  ///< a silence is longer than this
+  double trip_sd_factor = 2.0;  ///< the upper bound x + k sd that ends a silence's bound
+};
+
+class AlarmValues {
+ public:
+  /// For a network of `model`'s nodes; `lag_s` the lag of a reading the filter does not model
+  /// (0: none); the ring of recent estimates reaches over the stuck test's flat time and the
+  /// fault's hold (`config`). Throws std::invalid_argument for a period that is not positive.
+  AlarmValues(const ThermalModel& model, const AlarmConfig& config, double lag_s,
+              double period_s);
+
+  void Step(const AlarmValuesStep& step);
+  /// The value node i's levels act on, for its estimate `estimate_degC`.
+  double Value_degC(int i, double estimate_degC) const;
+  /// The sd published for a node whose filter sd is `filter_sd_K` and whose alarm value lies
+  /// `above_K` above its estimate (NaN or <= 0: none): at least above_K / 2.
+  static double PublishedSd_K(double filter_sd_K, double above_K);
+  /// A blind bound is running (the previous step was blind).
+  bool Blind() const { return blind_.bound_degC().size() > 0; }
+  /// A silence from `start_s` (a restart: the time down), from the saved estimate and inputs.
+  void BeginSilence(const Eigen::VectorXd& x_degC, const ThermalInputs& in, double start_s) {
+    silence_.Begin(x_degC, in, start_s);
+  }
+
+ private:
+  void StepBlind(const AlarmValuesStep& s);
+  void Remember(std::int64_t end_us, bool valid, const Eigen::VectorXd& x_degC);
+
+  const ThermalModel& model_;
+  BlindBound blind_;
+  LagBias lag_bias_;
+  SilenceBound silence_;
+  // The blind bound's starting estimates of the last steps (columns, a ring; time -1: none).
+  Eigen::MatrixXd recent_degC_;
+  std::vector<std::int64_t> recent_us_;
+  std::size_t recent_next_ = 0;
+  Eigen::VectorXd blind_start_degC_;
+};
+
+}  // namespace pumptherm::estimators

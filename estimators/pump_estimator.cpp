@@ -1,0 +1,553 @@
+#include "estimators/pump_estimator.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace pumptherm::estimators {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+/// Largest settling sd of a converged observer (ThermalObserver::SettlingSd_K).
+constexpr double kConvergedSd_K = 5.0;
+
+/// The node where heat inside the rotor appears: as configured, else the magnet's node (the
+/// magnet sits on the rotor), else the estimators' default ("rotor", absent: no rotor heat).
+std::string RotorNode(const PumpEstimatorConfig& c) {
+  if (!c.rotor_node.empty()) return c.rotor_node;
+  if (!c.magnet.magnet_node.empty()) return c.magnet.magnet_node;
+  return DisturbanceSensorConfig{}.rotor_node;
+}
+
+/// The magnet node where the model has it (else none: the reading is published, not fused).
+std::string MagnetNodeIn(const PumpEstimatorConfig& c, const ThermalModel& model) {
+  return model.StateIndex(c.magnet.magnet_node) >= 0 ? c.magnet.magnet_node : std::string();
+}
+
+std::unique_ptr<ThermalObserver> MakeObserver(const PumpEstimatorConfig& c,
+                                              const ThermalModel& model, bool disturbance) {
+  if (disturbance) {
+    DisturbanceSensorConfig d = c.disturbance;
+    d.measured_node = c.measured_node;
+    d.sensor_lag_s = c.frame_sensor_lag_s;
+    d.rotor_node = RotorNode(c);
+    d.winding_measurement_sd_K = c.winding.model_sd_K;
+    // The identified winding is not fused here: its errors while tracking (7-9 K on the demo)
+    // are beyond a bias state (docs/virtual-sensor.md). The magnet reading's error is mostly a
+    // slow bias (nameplate flux, inverter voltage error): the least sd of the published magnet
+    // becomes the stationary sd of a bias state.
+    d.winding_reading = false;
+    d.magnet_node = MagnetNodeIn(c, model);
+    d.magnet_bias_sd_K = c.magnet.min_sd_K;
+    return std::make_unique<DisturbanceThermalSensor>(model, d);
+  }
+  VirtualSensorConfig v = c.standard;
+  v.measured_nodes = {c.measured_node};
+  v.winding_measurement_sd_K = c.winding.model_sd_K;
+  v.winding_reading = c.winding.fuse;
+  v.magnet_node = MagnetNodeIn(c, model);
+  v.magnet_min_sd_K = c.magnet.min_sd_K;
+  return std::make_unique<VirtualThermalSensor>(model, v);
+}
+
+MismatchDetectorConfig MismatchConfig(const PumpEstimatorConfig& c, const ThermalModel& model) {
+  MismatchDetectorConfig m = c.mismatch;
+  m.measured_node = c.measured_node;
+  m.sensor_lag_s = c.frame_sensor_lag_s;
+  m.rotor_node = RotorNode(c);
+  // The magnet from the flux helps name an effect (heat inside the rotor or not).
+  m.magnet_node = c.mismatch_magnet ? MagnetNodeIn(c, model) : std::string();
+  return m;
+}
+
+MagnetFluxReadingConfig MagnetConfig(const PumpEstimatorConfig& c) {
+  MagnetFluxReadingConfig m = c.magnet;
+  m.stale_after_s = c.alarms.stale_after_s;
+  m.period_s = c.period_s;
+  return m;
+}
+
+WindingResistanceReadingConfig WindingConfig(const PumpEstimatorConfig& c) {
+  WindingResistanceReadingConfig w = c.winding;
+  w.stale_after_s = c.alarms.stale_after_s;
+  return w;
+}
+
+bool ResolveDisturbance(const PumpEstimatorConfig& c, const ThermalModel& model) {
+  // By default only where its frame-path heat can stand for every change on the cooling path
+  // (docs/virtual-sensor.md, "Disturbance states", per model).
+  if (c.disturbance_states) return *c.disturbance_states;
+  return BoundaryOnlyThrough(model, c.measured_node);
+}
+
+/// Whether a finding changed enough to be announced: its state or effect (refits that only move
+/// the size or the fitted start are published, not announced).
+bool NewVerdict(const MismatchFinding& a, const MismatchFinding& b) {
+  return a.state != b.state || a.effect != b.effect;
+}
+
+}  // namespace
+
+bool InEstimateRange(const Eigen::Ref<const Eigen::VectorXd>& x_degC) {
+  return x_degC.size() == 0 ||
+         (x_degC.maxCoeff() <= kMaxEstimate_degC && x_degC.minCoeff() >= kMinEstimate_degC);
+}
+
+std::string UnknownLevelNode(const ThermalModel& model, const std::string& node) {
+  if (node == kSensorLevelsNode || node == kWindingResistanceNode || model.StateIndex(node) >= 0)
+    return {};
+  std::string list;
+  for (const auto& n : model.StateNames()) list += (list.empty() ? "" : ", ") + n;
+  return fmt::format(
+      "node '{}', which model '{}' does not have as a node with heat capacity (it has: {}; "
+      "also '{}' and '{}')",
+      node, model.Name(), list, kSensorLevelsNode, kWindingResistanceNode);
+}
+
+PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescription& motor,
+                             const ThermalModel& model)
+    : config_(config),
+      motor_(motor),
+      model_(model),
+      disturbance_states_(ResolveDisturbance(config, model)),
+      observer_(MakeObserver(config, model, disturbance_states_)),
+      frame_(config.alarms),
+      magnet_(motor, model, MagnetConfig(config)),
+      winding_(WindingConfig(config)),
+      mismatch_(model, MismatchConfig(config, model)),
+      alarms_(MakeAlarms()),
+      values_(model, config.alarms, observer_->ModelsSensorLag() ? 0.0 : config.frame_sensor_lag_s,
+              config.period_s),
+      forecast_(model.StateCount()) {
+  if (!(config_.period_s > 0.0)) throw std::invalid_argument("thermal period must be positive");
+  if (!config_.rotor_node.empty() && model_.StateIndex(config_.rotor_node) < 0) {
+    throw std::invalid_argument(
+        fmt::format("rotor_node '{}' is not a node with heat capacity of model '{}'",
+                    config_.rotor_node, model_.Name()));
+  }
+  measured_state_ = model_.StateIndex(config_.measured_node);
+  const int n = model_.StateCount();
+  const auto nn = static_cast<std::size_t>(n);
+  x_degC_ = Eigen::VectorXd::Zero(n);
+  sd_K_ = Eigen::VectorXd::Zero(n);
+  estimate_.node_degC.assign(nn, kNaN);
+  estimate_.node_sd_K.assign(nn, kNaN);
+  estimate_.node_filter_sd_K.assign(nn, kNaN);
+  alarm_values_.assign(nn + 1, kNaN);
+  alarm_sd_.assign(nn + 1, kNaN);
+  for (const auto& name : model_.StateNames()) {
+    auto it = config_.levels.find(name);
+    trip_degC_.push_back(it == config_.levels.end() ? kInf : it->second.trip_degC);
+  }
+}
+
+AlarmMonitor PumpEstimator::MakeAlarms() const {
+  for (const auto& [node, limits] : config_.levels) {
+    const std::string problem = UnknownLevelNode(model_, node);
+    if (!problem.empty()) throw std::invalid_argument("alarm levels for " + problem);
+  }
+  AlarmConfig ac = config_.alarms;
+  ac.sensor_node = model_.StateIndex(config_.measured_node);
+  auto limits_of = [&](const std::string& node) {
+    auto it = config_.levels.find(node);
+    return it == config_.levels.end() ? TemperatureLimits{} : it->second;
+  };
+  std::vector<TemperatureLimits> limits;
+  for (const auto& n : model_.StateNames()) limits.push_back(limits_of(n));
+  limits.push_back(limits_of(kWindingResistanceNode));
+  return AlarmMonitor(ac, limits, limits_of(kSensorLevelsNode));
+}
+
+bool PumpEstimator::StartIfNeeded(const PumpPeriod& p) {
+  if (initialised_) return true;
+  const double measured = frame_.offered_degC();
+  const double x0 = std::isfinite(measured) ? measured : p.ambient_degC;
+  if (!std::isfinite(x0)) return false;  // no temperature at all yet: nothing to estimate
+  observer_->Initialise(x0);
+  mismatch_.Initialise(x0, static_cast<double>(p.end_us) * 1e-6);
+  initialised_ = true;
+  return true;
+}
+
+void PumpEstimator::PrepareReadings(const PumpPeriod& p) {
+  readings_ = ThermalReadings{};
+  frame_.Offer(readings_);
+  winding_.Prepare(p.identifier);
+  winding_.Offer(readings_);
+  magnet_.Prepare(p.identifier, p.mean_iq_A,
+                  ElectricalSpeed_rad_per_s(motor_, p.inputs.speed_rpm));
+  magnet_.Offer(readings_);
+}
+
+void PumpEstimator::RecordReadings(const ObserverReport& report) {
+  frame_.Record(report.frame);
+  winding_.Record(report.winding);
+  magnet_.Record(report.magnet);
+  estimate_.frame_reading = frame_.status();
+  estimate_.winding_reading = winding_.status();
+  estimate_.magnet_reading = magnet_.status();
+}
+
+bool PumpEstimator::Step(const PumpPeriod& p) {
+  const std::uint64_t before = estimate_.alarm_changes;
+  const bool link_silent = !(p.fast_age_s <= config_.alarms.stale_after_s);
+  frame_.Prepare(static_cast<double>(p.end_us) * 1e-6, link_silent);
+  last_inputs_ = p.inputs;
+  estimate_.resistance = p.identifier.estimate;
+  if (!StartIfNeeded(p)) {
+    StepWithoutEstimate(p);
+    return estimate_.alarm_changes != before;
+  }
+  PrepareReadings(p);
+  // A sensor back from a jump beyond physics may read at a new offset.
+  if (frame_.BackFromJump()) observer_->ReopenSensorOffset();
+  const ObserverReport& report = observer_->Step(p.inputs, p.dt_s, readings_);
+  counters_.rejected_readings += static_cast<std::uint64_t>(report.rejected_readings);
+  if (report.refused) {
+    ++counters_.refused_steps;
+    return false;
+  }
+  RecordReadings(report);
+  ++counters_.steps;
+  CheckModel(p, frame_.offered_degC());
+  const bool diverged = Diverged();
+  PublishNodes(diverged);
+  PublishReadings(p, report);
+  StepBounds(p, diverged);
+  StepAlarms(p, diverged);
+  return estimate_.alarm_changes != before;
+}
+
+void PumpEstimator::CheckModel(const PumpPeriod& p, double measured_degC) {
+  // The magnet temperature of this step's back-EMF row at the filter's winding estimate.
+  double winding_degC = 0.0;
+  const Eigen::VectorXd& w = model_.WindingWeights();
+  for (int i = 0; i < w.size(); ++i) winding_degC += w(i) * observer_->Node_degC(i);
+  const std::uint64_t refused = mismatch_.refused_steps();
+  const MismatchFinding& f =
+      mismatch_.Step(p.inputs, p.dt_s, measured_degC, static_cast<double>(p.end_us) * 1e-6,
+                     magnet_.MagnetAt_degC(winding_degC));
+  counters_.mismatch_refused += mismatch_.refused_steps() - refused;
+  if (NewVerdict(f, estimate_.mismatch)) ++estimate_.mismatch_changes;
+  estimate_.mismatch = f;
+}
+
+// A filter driven outside any physical range is no estimate. The copper loss grows with the
+// temperature (Saheba 2010 eqs. 12-16), so currents far above any rating, held while the frame
+// sensor is silent, make the linearised network unstable and the estimate runs away to Inf
+// within minutes. Then nothing is published as a temperature ("n/a", alarms see unknown nodes
+// and an unconverged filter, a latched trip stays), the state is not saved, and the next step
+// starts the filter again.
+bool PumpEstimator::Diverged() {
+  const int n = model_.StateCount();
+  for (int i = 0; i < n; ++i) {
+    x_degC_(i) = observer_->Node_degC(i);
+    sd_K_(i) = observer_->NodeSd_K(i);
+  }
+  const bool diverged =
+      !x_degC_.allFinite() || !sd_K_.allFinite() || !InEstimateRange(x_degC_);
+  if (diverged) {
+    ++counters_.filter_resets;
+    initialised_ = false;
+  }
+  return diverged;
+}
+
+void PumpEstimator::PublishNodes(bool diverged) {
+  for (int i = 0; i < x_degC_.size(); ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    estimate_.node_degC[k] = diverged ? kNaN : x_degC_(i);
+    estimate_.node_filter_sd_K[k] = estimate_.node_sd_K[k] = diverged ? kNaN : sd_K_(i);
+  }
+  estimate_.initialised = !diverged;
+  estimate_.filter_converged = !diverged && observer_->SettlingSd_K() < kConvergedSd_K;
+}
+
+void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& report) {
+  estimate_.time_us = p.end_us;
+  estimate_.winding_resistance_degC = winding_.degC();
+  estimate_.winding_resistance_sd_K = winding_.sd_K();
+  estimate_.magnet_flux_degC = estimate_.magnet_flux_sd_K = kNaN;
+  if (estimate_.initialised)
+    magnet_.Publish(*observer_, estimate_.magnet_flux_degC, estimate_.magnet_flux_sd_K);
+  estimate_.frame_measured_degC = frame_.offered_degC();
+  estimate_.sensor_fault = frame_.fault();
+  estimate_.ambient_degC = p.inputs.ambient_degC;
+  estimate_.speed_rpm = p.inputs.speed_rpm;
+  const ReadingRow& row = report.frame;
+  const bool frame_row = row.fused && row.innovation_var_K2 > 0.0;
+  estimate_.innovation_K = frame_row ? row.innovation_K : kNaN;
+  estimate_.nis = frame_row ? row.Nis() : kNaN;
+  estimate_.sensor_offset_K = observer_->SensorOffset_K();
+  estimate_.sensor_steps = static_cast<std::uint64_t>(observer_->SensorSteps());
+  estimate_.last_sensor_step_K = observer_->LastSensorStep_K();
+  estimate_.stepped_offset_K = observer_->SteppedOffset_K();
+}
+
+void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
+  // Blind: the sensor itself failed and no other reading stands in. A silent link alone is
+  // stale telemetry (the estimate runs on with the last inputs), but it does not end a blind
+  // stretch that began before it.
+  const bool measured_again = frame_.fault() == SensorFault::kNone ||
+                              std::isfinite(winding_.degC()) || magnet_.Offered();
+  AlarmValuesStep s;
+  s.end_us = p.end_us;
+  s.period_s = config_.period_s;
+  s.inputs = &p.inputs;
+  s.fresh_inputs = p.fresh_inputs;
+  s.blind = !diverged && !measured_again &&
+            (frame_.alarm_fault() != SensorFault::kNone || values_.Blind());
+  s.fault = frame_.fault();
+  s.reading_changed_s = frame_.health().changed_s();
+  s.x_degC = &x_degC_;
+  s.sd_K = &sd_K_;
+  s.valid = !diverged;
+  s.lagging_degC = observer_->ModelsSensorLag() ? kNaN : frame_.offered_degC();
+  s.stale_after_s = config_.alarms.stale_after_s;
+  s.trip_sd_factor = config_.alarms.trip_sd_factor;
+  values_.Step(s);
+  for (int i = 0; i < x_degC_.size(); ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    alarm_values_[k] = diverged ? kNaN : values_.Value_degC(i, x_degC_(i));
+    alarm_sd_[k] = estimate_.node_sd_K[k];
+    estimate_.node_sd_K[k] =
+        AlarmValues::PublishedSd_K(alarm_sd_[k], alarm_values_[k] - x_degC_(i));
+  }
+  alarm_values_.back() = winding_.degC();
+}
+
+void PumpEstimator::StepAlarms(const PumpPeriod& p, bool diverged) {
+  int ttt_node = -1;
+  const double ttt =
+      diverged ? kNaN
+               : forecast_.TimeToTrip_s(model_, p.inputs, x_degC_, trip_degC_, observer_.get(),
+                                        &ttt_node);
+  estimate_.time_to_trip_node = ttt_node;
+  AlarmInputs ai;
+  ai.sensor_degC = frame_.offered_degC();
+  ai.sensor_raw_degC = frame_.raw_degC();
+  ai.sensor_fault = frame_.alarm_fault();
+  ai.sensor_model_degC = measured_state_ >= 0 && !diverged ? x_degC_(measured_state_) : kNaN;
+  ai.sensor_nis = estimate_.nis;
+  ai.sensor_offset_K =
+      observer_->EstimatesSensorOffset() && !diverged ? estimate_.stepped_offset_K : kNaN;
+  ai.estimators_converged = estimate_.filter_converged;
+  ai.time_to_trip_s = ttt;
+  ai.time_to_trip_node = ttt_node;
+  ai.telemetry_age_s = p.telemetry_age_s;
+  ai.node_degC = alarm_values_.data();
+  ai.node_sd_K = alarm_sd_.data();
+  // A model the plant no longer follows makes the filter disagree with a sound sensor: the
+  // disagreement test is held (neither raised nor cleared) while the mismatch test blames the
+  // plant, has not named the cause yet, or is still learning (it cannot tell them apart then).
+  const auto ms = estimate_.mismatch.state;
+  if (ms == MismatchState::kPlantChange || ms == MismatchState::kUnexplained ||
+      ms == MismatchState::kLearning) {
+    ai.sensor_nis = kNaN;
+  }
+  // The identifier's health is published with its estimate (status) but is no alarm: its
+  // winding is fused only while it is tracking, so an identifier still converging costs
+  // accuracy, not safety.
+  const AlarmState before = estimate_.alarm;
+  estimate_.alarm = alarms_.Step(static_cast<double>(p.end_us) * 1e-6, ai);
+  const auto& now = estimate_.alarm;
+  // A change worth publishing at once: level, reason, node, the set of active reasons, latch.
+  if (now.level != before.level || now.reason != before.reason || now.node != before.node ||
+      now.active_reasons != before.active_reasons || now.trip_latched != before.trip_latched) {
+    ++estimate_.alarm_changes;
+  }
+}
+
+// The drive's frames arrive but no temperature has yet (no status frame: neither the frame
+// sensor nor the ambient), so the filter cannot start. The sensor's absence while the drive
+// speaks is still a sensor fault, and it goes out with the pump's other conditions; no node is
+// known.
+void PumpEstimator::StepWithoutEstimate(const PumpPeriod& p) {
+  std::fill(alarm_values_.begin(), alarm_values_.end(), kNaN);
+  AlarmInputs ai;
+  ai.node_degC = alarm_values_.data();
+  ai.sensor_fault = frame_.alarm_fault();
+  ai.telemetry_age_s = p.telemetry_age_s;
+  ai.estimators_converged = false;
+  estimate_.sensor_fault = frame_.fault();
+  RunAlarmsOnly(p.end_us, ai);
+}
+
+bool PumpEstimator::StepNeverHeard(std::int64_t t_us, double silence_s) {
+  std::fill(alarm_values_.begin(), alarm_values_.end(), kNaN);  // nothing known of any node
+  AlarmInputs ai;
+  ai.node_degC = alarm_values_.data();
+  ai.telemetry_age_s = silence_s;
+  return RunAlarmsOnly(t_us, ai);
+}
+
+bool PumpEstimator::RunAlarmsOnly(std::int64_t t_us, const AlarmInputs& ai) {
+  const AlarmState before = estimate_.alarm;
+  estimate_.alarm = alarms_.Step(static_cast<double>(t_us) * 1e-6, ai);
+  estimate_.time_us = t_us;  // the alarm's time (LCM utime, CSV row)
+  if (estimate_.alarm == before) return false;
+  ++estimate_.alarm_changes;
+  return true;
+}
+
+PumpEstimatorState PumpEstimator::Save() const {
+  PumpEstimatorState s;
+  s.model_name = model_.Name();
+  s.time_us = estimate_.time_us;
+  // A restart goes on from what was published.
+  const int n = model_.StateCount();
+  s.x_degC = observer_->State().head(n);
+  s.s_K2 = observer_->Covariance().topLeftCorner(n, n);
+  s.inputs = last_inputs_;
+  if (observer_->EstimatesSensorOffset() && initialised_) {
+    // A sensor that stepped stays known as such across a restart.
+    s.sensor_offset_K = observer_->SensorOffset_K();
+    s.sensor_offset_sd_K = observer_->SensorOffsetSd_K();
+    s.stepped_offset_K = observer_->SteppedOffset_K();
+  }
+  if (observer_->StateCount() > n && initialised_) {
+    // And what the filter found about the plant (lost cooling, heat inside): restarted at its
+    // priors, the interior took the slack of a fault for minutes (docs/daemon.md, "State").
+    s.observer_x = observer_->State();
+    s.observer_s = observer_->Covariance();
+  }
+  const auto& names = model_.StateNames();
+  for (const auto& t : alarms_.LatchedTrips()) {
+    const std::string node = t.node == AlarmMonitor::kSensorTrip ? std::string(kSensorLevelsNode)
+                             : t.node < static_cast<int>(names.size())
+                                 ? names[static_cast<std::size_t>(t.node)]
+                                 : std::string(kWindingResistanceNode);
+    s.latched_trips.push_back({node, t.value});
+  }
+  return s;
+}
+
+namespace {
+
+/// A damaged or forged file must not become a published estimate: temperatures in the
+/// believable range, variances not negative, inputs finite (they are held while down), a saved
+/// sensor offset whole (all three finite, its sd positive).
+bool PlausibleState(const PumpEstimatorState& state, const ThermalModel& model) {
+  const int n = model.StateCount();
+  if (state.model_name != model.Name() || state.x_degC.size() != n || state.s_K2.rows() != n ||
+      state.s_K2.cols() != n || !state.x_degC.allFinite() || !state.s_K2.allFinite()) {
+    return false;
+  }
+  const auto& in = state.inputs;
+  if (!InEstimateRange(state.x_degC) || (n > 0 && state.s_K2.diagonal().minCoeff() < 0.0) ||
+      !std::isfinite(in.speed_rpm) || !std::isfinite(in.id_A) || !std::isfinite(in.iq_A) ||
+      !std::isfinite(in.ambient_degC) || !std::isfinite(in.coolant_degC)) {
+    return false;
+  }
+  const bool offset_saved = !std::isnan(state.sensor_offset_K);
+  return !offset_saved ||
+         (std::isfinite(state.sensor_offset_K) && std::isfinite(state.stepped_offset_K) &&
+          std::isfinite(state.sensor_offset_sd_K) && state.sensor_offset_sd_K > 0.0);
+}
+
+}  // namespace
+
+bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us) {
+  if (!PlausibleState(state, model_)) return false;
+  const int n = model_.StateCount();
+  // The observer's whole state: taken when it fits this configuration (another count of states
+  // is another configuration: the nodes alone are restored); damaged, refused.
+  const bool whole = observer_->StateCount() > n &&
+                     state.observer_x.size() == observer_->StateCount() &&
+                     state.observer_s.rows() == observer_->StateCount() &&
+                     state.observer_s.cols() == observer_->StateCount();
+  if (whole && !observer_->CanRestore(state.observer_x, state.observer_s)) return false;
+  std::vector<AlarmMonitor::LatchedTrip> trips;
+  if (!TripIndices(state, trips)) return false;
+  Eigen::VectorXd x = state.x_degC;
+  Eigen::MatrixXd s = state.s_K2;
+  const double gap_s = static_cast<double>(now_us - state.time_us) * 1e-6;
+  // The time the daemon was down, the inputs then held, with the standard filter's process
+  // noise over it (the nodes, for an observer restored from them).
+  if (gap_s > 0.0 && !PredictOverGap(model_, state.inputs, gap_s, config_.standard, x, s)) {
+    return false;
+  }
+  if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
+  RestoreObserver(state, whole, gap_s, x, s);
+  // The time the daemon was down is a telemetry silence: the load may have risen in it.
+  values_.BeginSilence(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6);
+  // The mismatch test starts afresh (learning) from the restored level.
+  mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0,
+                       static_cast<double>(now_us) * 1e-6);
+  last_inputs_ = state.inputs;
+  initialised_ = true;
+  for (int i = 0; i < n; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    estimate_.node_degC[k] = observer_->Node_degC(i);
+    estimate_.node_filter_sd_K[k] = estimate_.node_sd_K[k] = observer_->NodeSd_K(i);
+  }
+  estimate_.initialised = true;
+  estimate_.filter_converged = observer_->SettlingSd_K() < kConvergedSd_K;
+  estimate_.time_us = now_us;
+  Relatch(trips, now_us);
+  return true;
+}
+
+void PumpEstimator::RestoreObserver(const PumpEstimatorState& state, bool whole, double gap_s,
+                                    const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
+  const bool offset_saved = !std::isnan(state.sensor_offset_K);
+  if (whole) {
+    // Aged over the time down with what it had found (the frame-path heat of lost cooling goes
+    // on heating), the inputs held; no reading, so no step test against the saved one.
+    observer_->Restore(state.observer_x, state.observer_s);
+    observer_->RestoreSteppedOffset(offset_saved ? state.stepped_offset_K : 0.0);
+    if (gap_s <= 0.0) return;
+    const ObserverReport& report = observer_->Step(state.inputs, gap_s, ThermalReadings{});
+    const int n = model_.StateCount();
+    if (!report.refused && observer_->State().allFinite() &&
+        observer_->Covariance().allFinite() && InEstimateRange(observer_->State().head(n))) {
+      return;
+    }
+  }
+  // From the restored nodes, the rest at its prior (an older file, another configuration, a
+  // state that aged out of range).
+  observer_->InitialiseNodes(x, s);
+  if (offset_saved) {
+    observer_->RestoreSensorOffset(state.sensor_offset_K, state.sensor_offset_sd_K,
+                                   state.stepped_offset_K);
+  }
+}
+
+bool PumpEstimator::TripIndices(const PumpEstimatorState& state,
+                                std::vector<AlarmMonitor::LatchedTrip>& out) const {
+  // Alarm node names -> the monitor's indices (model nodes, then the winding resistance).
+  out.clear();
+  for (const auto& t : state.latched_trips) {
+    int node = AlarmMonitor::kSensorTrip;
+    if (t.node == kWindingResistanceNode) {
+      node = model_.StateCount();
+    } else if (t.node != kSensorLevelsNode) {
+      node = model_.StateIndex(t.node);
+      if (node < 0) return false;
+    }
+    if (!std::isfinite(t.value_degC)) return false;
+    out.push_back({node, t.value_degC});
+  }
+  return true;
+}
+
+void PumpEstimator::Relatch(const std::vector<AlarmMonitor::LatchedTrip>& trips,
+                            std::int64_t now_us) {
+  for (const auto& t : trips) alarms_.RestoreLatchedTrip(t, static_cast<double>(now_us) * 1e-6);
+  if (!trips.empty()) {
+    estimate_.alarm = alarms_.state();
+    ++estimate_.alarm_changes;
+  }
+}
+
+bool PumpEstimator::RestoreLatchedTrips(const PumpEstimatorState& state, std::int64_t now_us) {
+  std::vector<AlarmMonitor::LatchedTrip> trips;
+  if (!TripIndices(state, trips)) return false;
+  Relatch(trips, now_us);
+  return true;
+}
+
+}  // namespace pumptherm::estimators

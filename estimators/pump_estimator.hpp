@@ -1,0 +1,260 @@
+#pragma once
+/// One pump's estimation, from one thermal period's inputs to one result (docs/architecture.md,
+/// "The pump estimator"): the readings (the frame sensor, the magnet from the identified flux,
+/// the winding from the identified resistance; one file each under estimators/readings/), one
+/// thermal observer (the virtual thermal sensor of Saheba et al. 2010, or the same network with
+/// its model error in states made for it), the model-mismatch test, the bounds the alarm levels
+/// act on, the alarms and the time-to-trip forecast. The daemon (daemon/pump.cpp) pairs and
+/// averages the frames, runs the resistance identifier at telemetry rate and calls Step() once
+/// per period; `pumptherm estimate` and the benchmarks call the same.
+///
+/// Pure library: no I/O, no clock (time enters in PumpPeriod), no configuration parsing. No
+/// allocation per step once the operating point is steady (the naming fit of the mismatch test
+/// and a re-discretisation may allocate).
+
+#include <Eigen/Dense>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "estimators/alarm_values.hpp"
+#include "estimators/alarms.hpp"
+#include "estimators/disturbance_sensor.hpp"
+#include "estimators/kalman_virtual_sensor.hpp"
+#include "estimators/mismatch_detector.hpp"
+#include "estimators/motor.hpp"
+#include "estimators/pump_period.hpp"
+#include "estimators/readings/frame_reading.hpp"
+#include "estimators/readings/magnet_flux_reading.hpp"
+#include "estimators/readings/winding_resistance_reading.hpp"
+#include "estimators/thermal_model.hpp"
+#include "estimators/thermal_observer.hpp"
+#include "estimators/trip_forecast.hpp"
+
+namespace pumptherm::estimators {
+
+/// Range of a believable node estimate: absolute zero to well above where copper melts
+/// (1085 degC). Outside it (or non-finite) the filter is reset, never published.
+inline constexpr double kMinEstimate_degC = -273.15;
+inline constexpr double kMaxEstimate_degC = 1000.0;
+/// Name of the alarm pseudo-node of the resistance-based winding temperature.
+inline constexpr const char* kWindingResistanceNode = "winding_resistance";
+/// Name of the alarm levels of the measured sensor itself.
+inline constexpr const char* kSensorLevelsNode = "sensor";
+
+struct PumpEstimatorConfig {
+  std::string measured_node = "frame";  ///< the node the frame sensor measures
+  double frame_sensor_lag_s = 0.0;      ///< its first-order lag
+  /// The observer: the disturbance-state filter (true), the standard one (false), or (unset)
+  /// the disturbance-state filter where its frame-path heat can stand for every change on the
+  /// cooling path (BoundaryOnlyThrough), else the standard one.
+  std::optional<bool> disturbance_states;
+  WindingResistanceReadingConfig winding;  ///< fuse, model_sd_K (stale_after_s from `alarms`)
+  MagnetFluxReadingConfig magnet;  ///< magnet_node, min_sd_K, max_winding_gain (the rest set here)
+  /// The node of the rotor-heat state and of the rotor-loss hypothesis; empty: the magnet's
+  /// node, else "rotor" where the model has it.
+  std::string rotor_node;
+  AlarmConfig alarms;
+  /// Levels per model node name, kSensorLevelsNode and kWindingResistanceNode.
+  std::map<std::string, TemperatureLimits> levels;
+  double period_s = 1.0;  ///< the thermal period (the steps' nominal length)
+  /// Tuning of the two observers beyond what the pump sets (nodes, lag, readings): the
+  /// defaults are what the daemon ships; benchmarks and tests vary them.
+  VirtualSensorConfig standard;
+  DisturbanceSensorConfig disturbance;
+  MismatchDetectorConfig mismatch;
+  /// The magnet reading also enters the mismatch test's naming fit (a second channel).
+  bool mismatch_magnet = true;
+};
+
+/// Everything published about one pump at one moment (fields declared for CAN, LCM, CSV and
+/// state in daemon/published_fields.cpp).
+struct PumpEstimate {
+  std::int64_t time_us = 0;
+  /// False until the first step and after a filter reset: publish "not available".
+  bool initialised = false;
+  std::vector<double> node_degC;         ///< per state (model order); NaN before init
+  std::vector<double> node_sd_K;         ///< published: widened to the bounds the levels act on
+  std::vector<double> node_filter_sd_K;  ///< the observer's own
+  /// The filter has converged since its (re)start, judged as the alarms judge it
+  /// (ThermalObserver::SettlingSd_K below 5 K).
+  bool filter_converged = false;
+  ResistanceEstimate resistance;  ///< the identifier's at the period's end
+  /// The winding from the identified resistance (NaN unless the identifier tracks, fresh) and
+  /// the identifier's sd of it.
+  double winding_resistance_degC = std::numeric_limits<double>::quiet_NaN();
+  double winding_resistance_sd_K = std::numeric_limits<double>::quiet_NaN();
+  /// The magnet from the identified back-EMF at the filter's winding estimate, and its sd.
+  double magnet_flux_degC = std::numeric_limits<double>::quiet_NaN();
+  double magnet_flux_sd_K = std::numeric_limits<double>::quiet_NaN();
+  double frame_measured_degC = std::numeric_limits<double>::quiet_NaN();  ///< as fused
+  SensorFault sensor_fault = SensorFault::kNone;
+  /// The frame sensor's offset as the filter estimates it, K (NaN without it), the steps of it
+  /// found, the last one and their sum since the filter started, K.
+  double sensor_offset_K = std::numeric_limits<double>::quiet_NaN();
+  std::uint64_t sensor_steps = 0;
+  double last_sensor_step_K = std::numeric_limits<double>::quiet_NaN();
+  double stepped_offset_K = std::numeric_limits<double>::quiet_NaN();
+  double ambient_degC = std::numeric_limits<double>::quiet_NaN();
+  double speed_rpm = std::numeric_limits<double>::quiet_NaN();
+  double innovation_K = std::numeric_limits<double>::quiet_NaN();  ///< the frame row's
+  double nis = std::numeric_limits<double>::quiet_NaN();           ///< the frame row's
+  ReadingStatus frame_reading, winding_reading, magnet_reading;
+  AlarmState alarm;
+  int time_to_trip_node = -1;            ///< state index the forecast is about (-1: none)
+  std::uint64_t alarm_changes = 0;       ///< increments whenever `alarm` changes
+  MismatchFinding mismatch;              ///< is the model right? (docs/daemon.md)
+  std::uint64_t mismatch_changes = 0;    ///< increments when its state or effect changes
+};
+
+/// Counters of what the estimator refused (never silent).
+struct PumpEstimatorCounters {
+  std::uint64_t steps = 0;             ///< thermal steps run
+  std::uint64_t refused_steps = 0;     ///< inputs or a period the model cannot take
+  std::uint64_t rejected_readings = 0;  ///< readings left out as invalid
+  std::uint64_t mismatch_refused = 0;  ///< steps the mismatch test refused
+  std::uint64_t filter_resets = 0;     ///< the estimate left [kMinEstimate_degC, kMaxEstimate_degC]
+};
+
+/// The estimator's saved state (the daemon writes it; docs/daemon.md "State").
+struct PumpEstimatorState {
+  std::string model_name;
+  std::int64_t time_us = 0;
+  Eigen::VectorXd x_degC;  ///< the nodes
+  Eigen::MatrixXd s_K2;    ///< their covariance
+  ThermalInputs inputs;    ///< the last inputs (held while the daemon is down)
+  /// Latched trips: the alarm node's name (a model node, kWindingResistanceNode or
+  /// kSensorLevelsNode) and the value that raised it, degC.
+  struct LatchedTrip {
+    std::string node;
+    double value_degC = std::numeric_limits<double>::quiet_NaN();
+  };
+  std::vector<LatchedTrip> latched_trips;
+  /// The frame sensor's offset, its sd and the sum of its steps, K (NaN: not saved).
+  double sensor_offset_K = std::numeric_limits<double>::quiet_NaN();
+  double sensor_offset_sd_K = std::numeric_limits<double>::quiet_NaN();
+  double stepped_offset_K = std::numeric_limits<double>::quiet_NaN();
+  /// The observer's whole state and covariance when it holds more than the nodes (the
+  /// disturbance-state filter); empty: not saved (an older file, another configuration).
+  Eigen::VectorXd observer_x;
+  Eigen::MatrixXd observer_s;
+};
+
+class PumpEstimator {
+ public:
+  /// Keeps references to `motor` and `model`, which must outlive it. Throws
+  /// std::invalid_argument naming the problem (an unknown node, a level for a node the model
+  /// lacks, a motor without the magnet law a magnet node needs, bad settings).
+  PumpEstimator(const PumpEstimatorConfig& config, const MotorDescription& motor,
+                const ThermalModel& model);
+  PumpEstimator(const PumpEstimator&) = delete;
+  PumpEstimator& operator=(const PumpEstimator&) = delete;
+
+  /// A frame sensor reading received at `t_us` (NaN: its "not available").
+  void OnFrameReading(std::int64_t t_us, double degC) {
+    frame_.OnReading(static_cast<double>(t_us) * 1e-6, degC);
+  }
+  /// One thermal period. Returns whether the alarm state changed.
+  bool Step(const PumpPeriod& period);
+  /// The alarms alone at `t_us` for a pump never heard from, its inputs `silence_s` old: after
+  /// stale_after_s it raises stale telemetry like a pump that fell silent. Returns whether the
+  /// alarm state changed.
+  bool StepNeverHeard(std::int64_t t_us, double silence_s);
+  /// Clears latched trips. Returns true if one was latched.
+  bool ClearTrips() { return alarms_.Clear(); }
+  /// The identifier's estimate published between steps (after a restart, before the first).
+  void NoteIdentifier(const ResistanceEstimate& resistance) { estimate_.resistance = resistance; }
+
+  const PumpEstimate& estimate() const { return estimate_; }
+  const PumpEstimatorCounters& counters() const { return counters_; }
+  /// The observer the estimate is published from (whichever it is).
+  const ThermalObserver& observer() const { return *observer_; }
+  /// Whether it is the disturbance-state filter (the configuration's choice, resolved).
+  bool disturbance_states() const { return disturbance_states_; }
+  const ThermalModel& model() const { return model_; }
+  const PumpEstimatorConfig& config() const { return config_; }
+  /// Every active alarm condition, most severe first, into `out` (no allocation once `out`
+  /// has held as many).
+  void ActiveConditions(std::vector<AlarmCondition>& out) const {
+    alarms_.ActiveConditions(out);
+  }
+
+  PumpEstimatorState Save() const;
+  /// Continues from `state` saved at state.time_us, aged to `now_us` by the observer with the
+  /// last inputs held (a motor that kept running stays hot; the disturbances it had found go
+  /// on); latched trips latch again. Returns false (nothing changes) when the state does not
+  /// fit this pump or is damaged.
+  bool Restore(const PumpEstimatorState& state, std::int64_t now_us);
+  /// Latches again only the trips of `state` (when its filter state cannot be used). Returns
+  /// false (nothing changes) when a trip names an alarm node this pump lacks or has a
+  /// non-finite value.
+  bool RestoreLatchedTrips(const PumpEstimatorState& state, std::int64_t now_us);
+
+ private:
+  void CheckLevels() const;
+  AlarmMonitor MakeAlarms() const;
+  /// Starts the observer and the mismatch test when they have not (false: nothing to start
+  /// from yet).
+  bool StartIfNeeded(const PumpPeriod& period);
+  void PrepareReadings(const PumpPeriod& period);
+  void RecordReadings(const ObserverReport& report);
+  /// The mismatch test on this step; counts a changed verdict.
+  void CheckModel(const PumpPeriod& period, double measured_degC);
+  /// Whether the estimate left every physical range (the filter is then reset and counted).
+  bool Diverged();
+  void PublishNodes(bool diverged);
+  void PublishReadings(const PumpPeriod& period, const ObserverReport& report);
+  /// The bounds the levels act on, the alarm values and the published sds.
+  void StepBounds(const PumpPeriod& period, bool diverged);
+  /// The forecast and the alarms; counts a change worth publishing.
+  void StepAlarms(const PumpPeriod& period, bool diverged);
+  /// A period with telemetry but no temperature to start the filter from: the alarms alone.
+  void StepWithoutEstimate(const PumpPeriod& period);
+  /// The alarms alone with `ai` at `t_us` (no estimate); true if the alarm state changed.
+  bool RunAlarmsOnly(std::int64_t t_us, const AlarmInputs& ai);
+  bool TripIndices(const PumpEstimatorState& state,
+                   std::vector<AlarmMonitor::LatchedTrip>& out) const;
+  void Relatch(const std::vector<AlarmMonitor::LatchedTrip>& trips, std::int64_t now_us);
+  /// The observer from `state`: its whole state when `whole` (saved and fitting), aged over
+  /// `gap_s`; else (or when that ages out of range) from the restored nodes `x`, `s` with the
+  /// saved sensor offset.
+  void RestoreObserver(const PumpEstimatorState& state, bool whole, double gap_s,
+                       const Eigen::VectorXd& x, const Eigen::MatrixXd& s);
+
+  PumpEstimatorConfig config_;
+  const MotorDescription& motor_;
+  const ThermalModel& model_;
+  bool disturbance_states_ = false;
+  std::unique_ptr<ThermalObserver> observer_;
+  FrameReading frame_;
+  MagnetFluxReading magnet_;
+  WindingResistanceReading winding_;
+  MismatchDetector mismatch_;
+  AlarmMonitor alarms_;
+  AlarmValues values_;
+  TripForecast forecast_;
+  std::vector<double> trip_degC_;  ///< per node, for the forecast (infinity: no trip level)
+  int measured_state_ = -1;
+  bool initialised_ = false;
+  ThermalInputs last_inputs_;  ///< the last step's (saved: held while the daemon is down)
+  ThermalReadings readings_;
+  Eigen::VectorXd x_degC_, sd_K_;        ///< the observer's nodes and sds this step
+  std::vector<double> alarm_values_;     ///< per alarm node (n states + the winding)
+  std::vector<double> alarm_sd_;
+  PumpEstimate estimate_;
+  PumpEstimatorCounters counters_;
+};
+
+/// Whether every temperature of `x_degC` lies in [kMinEstimate_degC, kMaxEstimate_degC] (NaN
+/// values are for the caller's finiteness test).
+bool InEstimateRange(const Eigen::Ref<const Eigen::VectorXd>& x_degC);
+
+/// Why alarm levels cannot be set for `node` of `model` (empty: they can): a model node with
+/// heat capacity, kSensorLevelsNode or kWindingResistanceNode.
+std::string UnknownLevelNode(const ThermalModel& model, const std::string& node);
+
+}  // namespace pumptherm::estimators

@@ -1,0 +1,148 @@
+// The declaration of the published fields (daemon/published_fields.hpp): every row's default
+// signal is in the shipped DBC, names and columns are unique, the shipped mapping binds every
+// default, and one estimate reaches LCM and the CSV with the same values.
+#include "daemon/published_fields.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "daemon/resources.hpp"
+#include "protocol/dbc.hpp"
+
+namespace pumptherm::daemon {
+namespace {
+
+protocol::Dbc ShippedDbc() {
+  const std::string path = ResolveResource(ResourceKind::kDbc, "pumptherm.dbc");
+  return protocol::ParseDbc(ReadTextFile(path), path);
+}
+
+std::vector<std::string> Split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string cell;
+  while (std::getline(ss, cell, ',')) out.push_back(cell);
+  return out;
+}
+
+TEST(PublishedFields, EveryDefaultSignalIsInTheShippedDbc) {
+  const protocol::Dbc dbc = ShippedDbc();
+  for (const PublishedField& f : PublishedFields()) {
+    if (f.dbc_message.empty()) continue;
+    const protocol::DbcMessage* m = dbc.FindMessage(std::string(f.dbc_message));
+    ASSERT_NE(m, nullptr) << f.name << ": no message " << f.dbc_message;
+    EXPECT_GE(m->FindSignal(std::string(f.dbc_signal)), 0)
+        << f.name << ": no signal " << f.dbc_message << "." << f.dbc_signal;
+  }
+}
+
+TEST(PublishedFields, NamesColumnsAndLcmFieldsAreEachUsedOnce) {
+  std::set<std::string> names, columns, signals;
+  std::vector<LcmField> members;
+  for (const PublishedField& f : PublishedFields()) {
+    EXPECT_TRUE(names.insert(std::string(f.name)).second) << f.name;
+    if (!f.old_key.empty()) {
+      EXPECT_TRUE(names.insert(std::string(f.old_key)).second) << f.old_key;
+    }
+    if (f.csv.kind != CsvFormat::Kind::kNone) {
+      EXPECT_TRUE(columns.insert(std::string(f.csv_column)).second) << f.csv_column;
+    }
+    if (!f.dbc_message.empty()) {
+      EXPECT_TRUE(
+          signals.insert(std::string(f.dbc_message) + "." + std::string(f.dbc_signal)).second)
+          << f.name;
+    }
+    if (!std::holds_alternative<std::monostate>(f.lcm)) {
+      for (const LcmField& m : members) EXPECT_FALSE(m == f.lcm) << f.name << ": LCM field twice";
+      members.push_back(f.lcm);
+    }
+    EXPECT_NE(f.value, nullptr) << f.name;
+    if (f.csv.kind == CsvFormat::Kind::kWord) {
+      EXPECT_NE(f.word, nullptr) << f.name;
+    }
+  }
+}
+
+TEST(PublishedFields, TheShippedMappingSendsEveryDefault) {
+  const protocol::Dbc dbc = ShippedDbc();
+  const std::string path = ResolveResource(ResourceKind::kDbc, "mapping_pumptherm.toml");
+  const protocol::SignalMapping m =
+      protocol::ParseMapping(ReadTextFile(path), path, dbc, MappingOutputs());
+  for (const PublishedField& f : PublishedFields()) {
+    if (f.dbc_message.empty()) continue;
+    const protocol::SignalRef* ref = m.output(f.name);
+    ASSERT_NE(ref, nullptr) << f.name;
+    EXPECT_EQ(ref->message, f.dbc_message);
+    EXPECT_EQ(ref->signal, f.dbc_signal);
+  }
+  EXPECT_TRUE(m.deprecations.empty());
+}
+
+TEST(PublishedFields, OneEstimateReachesLcmAndTheCsvAlike) {
+  estimators::PumpEstimate e;
+  e.initialised = true;
+  e.node_degC = {40.0, 50.0};
+  e.node_sd_K = {1.0, 2.0};
+  e.winding_resistance_degC = 81.25;
+  e.winding_resistance_sd_K = 1.5;
+  e.magnet_flux_degC = 61.5;
+  e.magnet_flux_sd_K = 3.25;
+  e.resistance.status = estimators::ResistanceStatus::kTracking;
+  e.resistance.resistance_ohm = 0.3125;
+  e.alarm.level = estimators::AlarmLevel::kWarning;
+  e.alarm.time_to_trip_s = std::numeric_limits<double>::infinity();
+  e.mismatch.state = estimators::MismatchState::kPlantChange;
+  e.mismatch.effect = estimators::MismatchEffect::kRotorLoss;
+  e.mismatch.onset_s = 100.0;
+  FieldSource s;
+  s.estimate = &e;
+  s.wall_offset_us = 1e12;
+  pumptherm::temperatures_t t{};
+  pumptherm::alarm_t a{};
+  FillLcm(s, t);
+  FillLcm(s, a);
+  EXPECT_EQ(t.resistance_winding_degC, 81.25);
+  EXPECT_EQ(t.resistance_winding_sd_K, 1.5);
+  EXPECT_EQ(t.magnet_flux_sd_K, 3.25);
+  EXPECT_EQ(t.resistance_ohm, 0.3125);
+  EXPECT_EQ(t.ident_status, 2);
+  EXPECT_EQ(a.level, 1);
+  EXPECT_EQ(a.mismatch_state, 2);
+  EXPECT_EQ(a.mismatch_effect, 2);
+  EXPECT_EQ(a.mismatch_since_utime, 100'000'000 + 1'000'000'000'000);
+  EXPECT_TRUE(std::isinf(a.time_to_trip_s));
+  // The CSV: as many cells as columns, the same values.
+  const std::vector<std::string> header = Split(CsvHeader().substr(1));
+  std::string row;
+  AppendCsvRow(s, row);
+  const std::vector<std::string> cells = Split(row.substr(1));
+  ASSERT_EQ(cells.size(), header.size());
+  auto cell = [&](const std::string& column) {
+    for (std::size_t i = 0; i < header.size(); ++i) {
+      if (header[i] == column) return cells[i];
+    }
+    return std::string("(no column)");
+  };
+  EXPECT_EQ(cell("winding_resistance_C"), "81.2500");
+  EXPECT_EQ(cell("magnet_flux_sd_K"), "3.2500");
+  EXPECT_EQ(cell("alarm_level"), "1");
+  EXPECT_EQ(cell("time_to_trip_s"), "inf");
+  EXPECT_EQ(cell("mismatch_state"), "plant_change");
+  EXPECT_EQ(cell("mismatch_effect"), "rotor_loss");
+  // Not available: NaN in LCM doubles and the CSV, -1 in LCM codes.
+  estimators::PumpEstimate none;
+  FieldSource n;
+  n.estimate = &none;
+  FillLcm(n, a);
+  EXPECT_EQ(a.level, -1);
+  FillLcm(n, t);
+  EXPECT_TRUE(std::isnan(t.resistance_winding_degC));
+}
+
+}  // namespace
+}  // namespace pumptherm::daemon
