@@ -2,7 +2,7 @@
 /// The gateway: frames in, per-pump estimation, frames and LCM messages out. It does not know
 /// where frames come from or go (live sockets or log files: OutputSink) nor what time it is
 /// (frame timestamps and Advance(now) bring time in), which is what makes an offline run of a
-/// recording equal a live run of it (docs/architecture.md, "Data flow of the daemon").
+/// recording equal a live run of it (docs/architecture.md, "Data flow, from a frame to an alarm").
 
 #include <cstdint>
 #include <limits>

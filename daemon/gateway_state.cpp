@@ -1,5 +1,6 @@
-// The gateway's saved state (docs/daemon.md, "Saved state"): every pump's estimate, identifier
-// state and latched trips in TOML, written and restored, with the older version still read.
+// The gateway's saved state (docs/daemon.md, "State across restarts"): every pump's estimate,
+// identifier state and latched trips in TOML, written and restored, with the older version still
+// read.
 #include <fmt/format.h>
 #include <toml++/toml.h>
 

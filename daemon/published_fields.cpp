@@ -33,8 +33,7 @@ bool Identified(const FieldSource& s) {
 /// the filter has none), or with any condition raised (a pump never heard from is stale).
 bool AlarmKnown(const FieldSource& s) {
   const PumpEstimate& e = E(s);
-  return e.initialised || e.alarm.trip_latched ||
-         e.alarm.level != estimators::AlarmLevel::kNone;
+  return e.initialised || e.alarm.trip_latched || e.alarm.level != estimators::AlarmLevel::kNone;
 }
 
 double Code(auto v) { return static_cast<double>(v); }
@@ -58,8 +57,8 @@ double AlarmNode(const FieldSource& s) {
 
 double AlarmValue(const FieldSource& s) {
   const auto r = E(s).alarm.reason;
-  const bool temp = r == AlarmReason::kEstimatedOverTemperature ||
-                    r == AlarmReason::kMeasuredOverTemperature;
+  const bool temp =
+      r == AlarmReason::kEstimatedOverTemperature || r == AlarmReason::kMeasuredOverTemperature;
   return E(s).initialised && temp ? E(s).alarm.value : kNaN;
 }
 

@@ -4,7 +4,7 @@
 /// signal mapping's output key), unit, where it goes on CAN by default (the shipped
 /// protocol/pumptherm.dbc), its LCM field, its CSV column and how the CSV writes it, and how
 /// its value is read from the pump's estimate. The CAN encoder, the LCM messages and the
-/// offline CSV are filled from this list (docs/architecture.md, "Adding a published quantity").
+/// offline CSV are filled from this list (docs/architecture.md, "Published values").
 ///
 /// Not here: the node temperatures and sds (one per model node: LCM arrays, CSV columns
 /// `<node>_C`, CAN through outputs.nodes or the node-indexed message, whose per-node fields are
@@ -57,8 +57,7 @@ struct PublishedField {
   using Word = const char* (*)(const FieldSource&);
   PublishedField(std::string_view name_, std::string_view unit_, std::string_view dbc_message_,
                  std::string_view dbc_signal_, LcmField lcm_, std::string_view csv_column_,
-                 CsvFormat csv_, Value value_, Word word_ = nullptr,
-                 std::string_view old_key_ = {})
+                 CsvFormat csv_, Value value_, Word word_ = nullptr, std::string_view old_key_ = {})
       : name(name_),
         unit(unit_),
         dbc_message(dbc_message_),

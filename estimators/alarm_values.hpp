@@ -40,7 +40,7 @@ struct AlarmValuesStep {
   bool valid = true;
   /// The fused reading the estimate follows without modelling its lag (NaN: none).
   double lagging_degC = 0.0;
-  double stale_after_s = 2.0;  ///< a silence is longer than this
+  double stale_after_s = 2.0;   ///< a silence is longer than this
   double trip_sd_factor = 2.0;  ///< the upper bound x + k sd that ends a silence's bound
 };
 
@@ -49,8 +49,7 @@ class AlarmValues {
   /// For a network of `model`'s nodes; `lag_s` the lag of a reading the filter does not model
   /// (0: none); the ring of recent estimates reaches over the stuck test's flat time and the
   /// fault's hold (`config`). Throws std::invalid_argument for a period that is not positive.
-  AlarmValues(const ThermalModel& model, const AlarmConfig& config, double lag_s,
-              double period_s);
+  AlarmValues(const ThermalModel& model, const AlarmConfig& config, double lag_s, double period_s);
 
   void Step(const AlarmValuesStep& step);
   /// The value node i's levels act on, for its estimate `estimate_degC`.

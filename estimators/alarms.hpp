@@ -4,7 +4,7 @@
 /// sensor (out of range, stuck, disagreeing with the model), estimator not converged, and the
 /// time-to-trip forecast. Pure logic: time enters as an argument, nothing is logged.
 ///
-/// Semantics (docs/alarms.md):
+/// Semantics (docs/daemon.md, "The pipeline, per pump" and "Alarm rule"):
 /// - A condition must hold continuously for `hold_s` before its alarm asserts (a single noisy
 ///   sample never trips). The hold counts the time spent in a level's band or above: a value
 ///   moving between the warning and the trip band keeps the warning's hold running. A warning

@@ -6,15 +6,16 @@
 
 namespace pumptherm::estimators {
 
-FrameSensorModel::FrameSensorModel(const ThermalModel& model, const std::string& node,
-                                   double lag_s, const char* who)
+FrameSensorModel::FrameSensorModel(const ThermalModel& model, const std::string& node, double lag_s,
+                                   const char* who)
     : nodes_(model.StateCount()), node_(model.StateIndex(node)), lag_s_(lag_s) {
   if (node_ < 0) {
     throw std::invalid_argument(
         fmt::format("{}: measured node '{}' is not a node with heat capacity of model '{}'", who,
                     node, model.Name()));
   }
-  if (!(lag_s >= 0.0)) throw std::invalid_argument(fmt::format("{}: the sensor lag must be >= 0 s", who));
+  if (!(lag_s >= 0.0))
+    throw std::invalid_argument(fmt::format("{}: the sensor lag must be >= 0 s", who));
   if (lag_s > 0.0) lag_ = nodes_;
   sensor_ = lag_ >= 0 ? lag_ : node_;
 }

@@ -21,10 +21,10 @@ class FrameSensorModel {
   FrameSensorModel(const ThermalModel& model, const std::string& node, double lag_s,
                    const char* who);
 
-  int node() const { return node_; }        ///< the node the sensor sits on
-  int lag() const { return lag_; }          ///< the lag state (n), -1 without a lag
-  int sensor() const { return sensor_; }    ///< the state the reading follows: lag or node
-  int offset() const { return offset_; }    ///< the offset state, once placed (-1 before)
+  int node() const { return node_; }      ///< the node the sensor sits on
+  int lag() const { return lag_; }        ///< the lag state (n), -1 without a lag
+  int sensor() const { return sensor_; }  ///< the state the reading follows: lag or node
+  int offset() const { return offset_; }  ///< the offset state, once placed (-1 before)
   bool has_lag() const { return lag_ >= 0; }
   /// The nodes and the lag: the block discretised together (the lag is part of the ZOH).
   int TemperatureStates() const { return lag_ >= 0 ? nodes_ + 1 : nodes_; }

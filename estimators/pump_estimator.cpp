@@ -177,8 +177,7 @@ void PumpEstimator::PrepareReadings(const PumpPeriod& p) {
   frame_.Offer(readings_);
   winding_.Prepare(p.identifier);
   winding_.Offer(readings_);
-  magnet_.Prepare(p.identifier, p.mean_iq_A,
-                  ElectricalSpeed_rad_per_s(motor_, p.inputs.speed_rpm));
+  magnet_.Prepare(p.identifier, p.mean_iq_A, ElectricalSpeed_rad_per_s(motor_, p.inputs.speed_rpm));
   magnet_.Offer(readings_);
 }
 
@@ -247,8 +246,7 @@ bool PumpEstimator::Diverged() {
     x_degC_(i) = observer_->Node_degC(i);
     sd_K_(i) = observer_->NodeSd_K(i);
   }
-  const bool diverged =
-      !x_degC_.allFinite() || !sd_K_.allFinite() || !InEstimateRange(x_degC_);
+  const bool diverged = !x_degC_.allFinite() || !sd_K_.allFinite() || !InEstimateRange(x_degC_);
   if (diverged) {
     ++counters_.filter_resets;
     initialised_ = false;
@@ -291,8 +289,8 @@ void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
   // Blind: the sensor itself failed and no other reading stands in. A silent link alone is
   // stale telemetry (the estimate runs on with the last inputs), but it does not end a blind
   // stretch that began before it.
-  const bool measured_again = frame_.fault() == SensorFault::kNone ||
-                              std::isfinite(winding_.degC()) || magnet_.Offered();
+  const bool measured_again =
+      frame_.fault() == SensorFault::kNone || std::isfinite(winding_.degC()) || magnet_.Offered();
   AlarmValuesStep s;
   s.end_us = p.end_us;
   s.period_s = config_.period_s;
@@ -321,10 +319,9 @@ void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
 
 void PumpEstimator::StepAlarms(const PumpPeriod& p, bool diverged) {
   int ttt_node = -1;
-  const double ttt =
-      diverged ? kNaN
-               : forecast_.TimeToTrip_s(model_, p.inputs, x_degC_, trip_degC_, observer_.get(),
-                                        &ttt_node);
+  const double ttt = diverged ? kNaN
+                              : forecast_.TimeToTrip_s(model_, p.inputs, x_degC_, trip_degC_,
+                                                       observer_.get(), &ttt_node);
   estimate_.time_to_trip_node = ttt_node;
   AlarmInputs ai;
   ai.sensor_degC = frame_.offered_degC();
@@ -502,8 +499,8 @@ void PumpEstimator::RestoreObserver(const PumpEstimatorState& state, bool whole,
     if (gap_s <= 0.0) return;
     const ObserverReport& report = observer_->Step(state.inputs, gap_s, ThermalReadings{});
     const int n = model_.StateCount();
-    if (!report.refused && observer_->State().allFinite() &&
-        observer_->Covariance().allFinite() && InEstimateRange(observer_->State().head(n))) {
+    if (!report.refused && observer_->State().allFinite() && observer_->Covariance().allFinite() &&
+        InEstimateRange(observer_->State().head(n))) {
       return;
     }
   }

@@ -105,19 +105,19 @@ struct PumpEstimate {
   double nis = std::numeric_limits<double>::quiet_NaN();           ///< the frame row's
   ReadingStatus frame_reading, winding_reading, magnet_reading;
   AlarmState alarm;
-  int time_to_trip_node = -1;            ///< state index the forecast is about (-1: none)
-  std::uint64_t alarm_changes = 0;       ///< increments whenever `alarm` changes
-  MismatchFinding mismatch;              ///< is the model right? (docs/daemon.md)
-  std::uint64_t mismatch_changes = 0;    ///< increments when its state or effect changes
+  int time_to_trip_node = -1;          ///< state index the forecast is about (-1: none)
+  std::uint64_t alarm_changes = 0;     ///< increments whenever `alarm` changes
+  MismatchFinding mismatch;            ///< is the model right? (docs/daemon.md)
+  std::uint64_t mismatch_changes = 0;  ///< increments when its state or effect changes
 };
 
 /// Counters of what the estimator refused (never silent).
 struct PumpEstimatorCounters {
-  std::uint64_t steps = 0;             ///< thermal steps run
-  std::uint64_t refused_steps = 0;     ///< inputs or a period the model cannot take
+  std::uint64_t steps = 0;              ///< thermal steps run
+  std::uint64_t refused_steps = 0;      ///< inputs or a period the model cannot take
   std::uint64_t rejected_readings = 0;  ///< readings left out as invalid
-  std::uint64_t mismatch_refused = 0;  ///< steps the mismatch test refused
-  std::uint64_t filter_resets = 0;     ///< the estimate left [kMinEstimate_degC, kMaxEstimate_degC]
+  std::uint64_t mismatch_refused = 0;   ///< steps the mismatch test refused
+  std::uint64_t filter_resets = 0;  ///< the estimate left [kMinEstimate_degC, kMaxEstimate_degC]
 };
 
 /// The estimator's saved state (the daemon writes it; docs/daemon.md "State").
@@ -179,9 +179,7 @@ class PumpEstimator {
   const PumpEstimatorConfig& config() const { return config_; }
   /// Every active alarm condition, most severe first, into `out` (no allocation once `out`
   /// has held as many).
-  void ActiveConditions(std::vector<AlarmCondition>& out) const {
-    alarms_.ActiveConditions(out);
-  }
+  void ActiveConditions(std::vector<AlarmCondition>& out) const { alarms_.ActiveConditions(out); }
 
   PumpEstimatorState Save() const;
   /// Continues from `state` saved at state.time_us, aged to `now_us` by the observer with the
@@ -242,8 +240,8 @@ class PumpEstimator {
   bool initialised_ = false;
   ThermalInputs last_inputs_;  ///< the last step's (saved: held while the daemon is down)
   ThermalReadings readings_;
-  Eigen::VectorXd x_degC_, sd_K_;        ///< the observer's nodes and sds this step
-  std::vector<double> alarm_values_;     ///< per alarm node (n states + the winding)
+  Eigen::VectorXd x_degC_, sd_K_;     ///< the observer's nodes and sds this step
+  std::vector<double> alarm_values_;  ///< per alarm node (n states + the winding)
   std::vector<double> alarm_sd_;
   PumpEstimate estimate_;
   PumpEstimatorCounters counters_;

@@ -15,7 +15,7 @@ namespace pumptherm::estimators {
 /// The resistance identifier (ResistanceIdentifier, Han et al. 2019) as the readings see it at
 /// the end of a period.
 struct IdentifierOutput {
-  ResistanceEstimate estimate;                ///< status, Rs, psi_f, the winding from eq. 3
+  ResistanceEstimate estimate;                  ///< status, Rs, psi_f, the winding from eq. 3
   Eigen::Matrix4d p = Eigen::Matrix4d::Zero();  ///< covariance of [Rs, dRs/dt, psi_f, dpsi_f/dt]
   /// Time since its last sample and since its last block update, s (NaN: none yet).
   double sample_age_s = std::numeric_limits<double>::quiet_NaN();

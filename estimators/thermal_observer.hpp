@@ -109,7 +109,8 @@ class ThermalObserver {
   virtual void AddFoundHeat(ThermalLinearModel& lin) const { (void)lin; }
 
   /// The frame sensor's offset as the filter estimates it, K, its sd, the steps of it found and
-  /// their sum (docs/daemon.md, "A sensor that steps"); NaN and 0 for a filter without it.
+  /// their sum (docs/daemon.md, "The pipeline, per pump": a sensor that steps); NaN and 0 for a
+  /// filter without it.
   virtual double SensorOffset_K() const { return std::numeric_limits<double>::quiet_NaN(); }
   virtual double SensorOffsetSd_K() const { return std::numeric_limits<double>::quiet_NaN(); }
   virtual int SensorSteps() const { return 0; }

@@ -55,7 +55,8 @@ class DqPairing {
     if (currents_.t_us < 0 || voltages_.t_us < 0) return false;
     const std::int64_t gap_us = currents_.t_us - voltages_.t_us;
     const bool near = (gap_us < 0 ? -gap_us : gap_us) <= window_us_;
-    const bool same = currents_.counter == voltages_.counter || currents_.counter != currents_.counter ||
+    const bool same = currents_.counter == voltages_.counter ||
+                      currents_.counter != currents_.counter ||
                       voltages_.counter != voltages_.counter;  // NaN: no counter
     if (!near || !same) return false;  // the older half waits to be replaced (counted unpaired)
     out.t_us = currents_.t_us > voltages_.t_us ? currents_.t_us : voltages_.t_us;

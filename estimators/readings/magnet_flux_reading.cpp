@@ -30,10 +30,10 @@ MagnetFluxReading::MagnetFluxReading(const MotorDescription& motor, const Therma
                     config_.magnet_node, model_.Name()));
   }
   if (!motor_.magnet.Given()) {
-    throw std::invalid_argument(fmt::format(
-        "magnet_node '{}' is set but motor '{}' states no [magnet] table (t0_degC, "
-        "flux_temperature_coefficient_per_K) to turn the flux into a temperature",
-        config_.magnet_node, motor_.name));
+    throw std::invalid_argument(
+        fmt::format("magnet_node '{}' is set but motor '{}' states no [magnet] table (t0_degC, "
+                    "flux_temperature_coefficient_per_K) to turn the flux into a temperature",
+                    config_.magnet_node, motor_.name));
   }
 }
 
@@ -75,7 +75,7 @@ void MagnetFluxReading::Prepare(const IdentifierOutput& id, double iq_A, double 
   status_.observation = z_degC_;
   status_.sd_K = z_sd_K_;
   offered_ = magnet_state_ >= 0 && std::isfinite(z_degC_) && !gated_;
-  status_.state = gated_ ? ReadingState::kGated
+  status_.state = gated_     ? ReadingState::kGated
                   : offered_ ? ReadingState::kRejected  // until the update says it was fused
                              : ReadingState::kNotFused;
 }
@@ -96,8 +96,7 @@ double MagnetFluxReading::MagnetAt_degC(double winding_degC) const {
   return z_degC_ - gain_ * winding_degC;
 }
 
-void MagnetFluxReading::Publish(const ThermalObserver& observer, double& degC,
-                                double& sd_K) const {
+void MagnetFluxReading::Publish(const ThermalObserver& observer, double& degC, double& sd_K) const {
   degC = sd_K = std::nan("");
   if (!std::isfinite(z_degC_) || gated_) return;
   const Eigen::VectorXd& w = model_.WindingWeights();

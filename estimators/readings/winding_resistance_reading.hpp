@@ -13,8 +13,8 @@
 namespace pumptherm::estimators {
 
 struct WindingResistanceReadingConfig {
-  bool fuse = true;           ///< offered to the filter
-  double model_sd_K = 3.0;    ///< the model's own error, in quadrature with the identifier's sd
+  bool fuse = true;         ///< offered to the filter
+  double model_sd_K = 3.0;  ///< the model's own error, in quadrature with the identifier's sd
   double stale_after_s = 2.0;
 };
 

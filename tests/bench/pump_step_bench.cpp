@@ -32,10 +32,10 @@ namespace {
 
 std::shared_ptr<const pe::ThermalModel> TmpGeneric() {
   const std::string path = pumptherm::test_files::ModelPath("tmp-generic");
-  return std::make_shared<const pe::ThermalModel>(pe::ThermalModel::Parse(
-      pumptherm::test_files::ReadFile(path), "tmp-generic",
-      pe::ThermalModelFiles{pumptherm::test_files::DirectoryOf(path),
-                            &pumptherm::test_files::ReadFile}));
+  return std::make_shared<const pe::ThermalModel>(
+      pe::ThermalModel::Parse(pumptherm::test_files::ReadFile(path), "tmp-generic",
+                              pe::ThermalModelFiles{pumptherm::test_files::DirectoryOf(path),
+                                                    &pumptherm::test_files::ReadFile}));
 }
 
 /// One period's frames ending at `t_us`, then Advance to it.

@@ -193,8 +193,8 @@ TEST_F(PumpEstimatorTest, ASavedStateRestoredAtOnceGivesTheSameEstimate) {
   for (int k = 1; k <= 600; ++k) {
     a.OnFrameReading(static_cast<std::int64_t>(k) * 1'000'000 - 1, 25.0 + 0.02 * k);
     pe::PumpPeriod p = Period(k);
-    p.identifier = mc::EmulatedIdentifier(motor_, std::nan(""), 0.0, 30.0 + 0.03 * k, 0.5,
-                                          40.0 + 0.05 * k);
+    p.identifier =
+        mc::EmulatedIdentifier(motor_, std::nan(""), 0.0, 30.0 + 0.03 * k, 0.5, 40.0 + 0.05 * k);
     a.Step(p);
   }
   const pe::PumpEstimatorState s = a.Save();

@@ -1,6 +1,6 @@
 #pragma once
-/// Numeric CSV tables for the tools (docs/architecture.md, "data for tools"): a header row,
-/// then one row of numbers per line; units in the column names (`time_s`, `iq_A`, `frame_C`).
+/// Numeric CSV tables for the tools (docs/architecture.md, "Files people write or read"): a header
+/// row, then one row of numbers per line; units in the column names (`time_s`, `iq_A`, `frame_C`).
 ///
 /// Reading checks every cell as it is asked for and throws `CsvError` naming the file, the row
 /// (1-based line number in the file) and the column name. Nothing is silently converted.

@@ -464,6 +464,14 @@ void AddPaperOptions(CLI::App& app, EstimateOptions& o) {
   o.paper_only.push_back(app.add_option("--winding-sd-K", o.paper.winding_measurement_sd_K,
                                         "with --paper-filter: noise of the winding column")
                              ->capture_default_str());
+  o.paper_only.push_back(app.add_option("--initial-sd-K", o.paper.initial_sd_K,
+                                        "with --paper-filter: initial uncertainty common to all "
+                                        "nodes")
+                             ->capture_default_str());
+  o.paper_only.push_back(app.add_option("--initial-spread-sd-K", o.paper.initial_spread_sd_K,
+                                        "with --paper-filter: initial uncertainty of each node "
+                                        "on its own")
+                             ->capture_default_str());
   o.paper_only.push_back(app.add_option(
       "--initial-C", o.initial_degC, "with --paper-filter: initial estimate of every node, degC"));
   o.paper_only.push_back(
