@@ -128,7 +128,9 @@ std::string ReasonList(std::uint16_t bits) {
 /// " since 2026-01-01 00:04:01 UTC" (the fitted start), " (found 2026-...)" when only the
 /// detection is known, "" when neither.
 std::string SinceText(const MismatchFinding& f, std::int64_t wall_offset_us) {
-  auto unix_us = [&](double s) { return static_cast<std::int64_t>(std::floor(s * 1e6)) + wall_offset_us; };
+  auto unix_us = [&](double s) {
+    return static_cast<std::int64_t>(std::floor(s * 1e6)) + wall_offset_us;
+  };
   if (std::isfinite(f.onset_s)) return " since " + LocalTimeText(unix_us(f.onset_s));
   if (std::isfinite(f.detected_s)) return " (found " + LocalTimeText(unix_us(f.detected_s)) + ")";
   // (A finding without a fitted start says when it was found, not when its cause began.)
@@ -152,8 +154,8 @@ JournalEntry AlarmEntry(const AlarmLineInputs& in) {
   const estimators::AlarmConfig& k = *in.config;
   JournalEntry e;
   e.level = a.level == AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning;
-  const std::string level = a.level == AlarmLevel::kNone ? "normal"
-                                                         : estimators::AlarmLevelName(a.level);
+  const std::string level =
+      a.level == AlarmLevel::kNone ? "normal" : estimators::AlarmLevelName(a.level);
   e.fields.push_back({"PUMP", std::string(in.pump)});
   e.fields.push_back({"LEVEL", level});
   e.fields.push_back({"REASON", estimators::AlarmReasonName(a.reason)});
@@ -170,8 +172,7 @@ JournalEntry AlarmEntry(const AlarmLineInputs& in) {
     const double value = c.reason == AlarmReason::kEstimatedOverTemperature ? a.value : c.value;
     if (IsTemperature(c) && std::isfinite(value))
       e.fields.push_back({"VALUE_DEGC", fmt::format("{:.2f}", value)});
-    if (std::isfinite(c.threshold))
-      e.fields.push_back({"THRESHOLD_DEGC", Short(c.threshold)});
+    if (std::isfinite(c.threshold)) e.fields.push_back({"THRESHOLD_DEGC", Short(c.threshold)});
   }
   if (in.mismatch != nullptr && DiagnosisBlames(in.mismatch->state)) {
     e.text += "; cause: " + CauseText(*in.mismatch, in.measured_node) +
@@ -209,9 +210,9 @@ JournalEntry DiagnosisEntry(std::string_view pump, const MismatchFinding& f,
     e.fields.push_back({"CAUSE", CauseField(f)});
   } else if (DiagnosisBlames(f.state)) {
     e.level = LogLevel::kWarning;
-    e.text = fmt::format("{}: diagnosis: {}{}; the model no longer explains the {} sensor ({})",
-                         pump, CauseText(f, measured_node), SinceText(f, wall_offset_us),
-                         measured_node, test);
+    e.text =
+        fmt::format("{}: diagnosis: {}{}; the model no longer explains the {} sensor ({})", pump,
+                    CauseText(f, measured_node), SinceText(f, wall_offset_us), measured_node, test);
     e.fields.push_back({"CAUSE", CauseField(f)});
   } else if (f.state == MismatchState::kLearning) {
     e.text = fmt::format(

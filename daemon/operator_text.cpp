@@ -65,14 +65,14 @@ bool DiagnosisBlames(estimators::MismatchState state) {
   return state == S::kPlantChange || state == S::kSensorFaultSuspected || state == S::kUnexplained;
 }
 
-std::string CauseText(estimators::MismatchState state, estimators::MismatchEffect effect,
-                      double v, std::string_view measured_node) {
+std::string CauseText(estimators::MismatchState state, estimators::MismatchEffect effect, double v,
+                      std::string_view measured_node) {
   using E = estimators::MismatchEffect;
   if (!DiagnosisBlames(state)) return "";
   switch (effect) {
     case E::kFrameAmbientResistance:
       return fmt::format("{} (frame-to-ambient resistance x{:.3g}{})",
-                         v >= 2.0   ? "cooling lost"
+                         v >= 2.0  ? "cooling lost"
                          : v > 1.0 ? "cooling reduced"
                                    : "cooling better than modelled",
                          v, v >= kResistanceScaleCap ? " or more" : "");
@@ -84,8 +84,8 @@ std::string CauseText(estimators::MismatchState state, estimators::MismatchEffec
       return fmt::format("surroundings {} than the ambient sensor reads ({:+.1f} K)",
                          v >= 0.0 ? "warmer" : "cooler", v);
     case E::kSensorOffset:
-      return fmt::format("{} sensor reads {:+.1f} K off (the sensor, not the plant)",
-                         measured_node, v);
+      return fmt::format("{} sensor reads {:+.1f} K off (the sensor, not the plant)", measured_node,
+                         v);
     case E::kSensorStuck:
       return fmt::format("{} sensor stuck at {:.1f} degC (the sensor, not the plant)",
                          measured_node, v);

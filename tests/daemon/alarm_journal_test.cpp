@@ -110,7 +110,8 @@ TEST_F(AlarmJournal, SecondsAreSecondsNeverDegC) {
   a.node = -1;
   a.value = 4.0;
   a.active_reasons = Bit(AlarmReason::kStaleTelemetry);
-  e = Entry(a, {{AlarmLevel::kWarning, AlarmReason::kStaleTelemetry, "", -1, 4.0, NAN, 0.0, false}});
+  e = Entry(a,
+            {{AlarmLevel::kWarning, AlarmReason::kStaleTelemetry, "", -1, 4.0, NAN, 0.0, false}});
   EXPECT_EQ(e.text, "pump3: warning: no telemetry for 4.0 s (limit 2 s); raised: stale telemetry");
   EXPECT_EQ(Fields(e).count("VALUE_DEGC"), 0u);
   EXPECT_EQ(Fields(e).count("NODE"), 0u);
@@ -127,10 +128,11 @@ TEST_F(AlarmJournal, SensorFaultsNameTheirKind) {
            {"stuck", "stuck (unchanged to the last bit for 30 s)"},
            {"out of range", "out of range (-40 to 250 degC)"},
            {"jumping", "jumping (a step above 5 K between readings)"}}) {
-    const JournalEntry e = Entry(
-        a, {{AlarmLevel::kWarning, AlarmReason::kSensorFault, kind.c_str(), 0, 31.5, NAN, 0, false}});
-    EXPECT_EQ(e.text, "pump3: warning: frame sensor fault: " + words +
-                          ", last reading 31.5 degC; left out of the estimate; raised: sensor fault");
+    const JournalEntry e = Entry(a, {{AlarmLevel::kWarning, AlarmReason::kSensorFault, kind.c_str(),
+                                      0, 31.5, NAN, 0, false}});
+    EXPECT_EQ(e.text,
+              "pump3: warning: frame sensor fault: " + words +
+                  ", last reading 31.5 degC; left out of the estimate; raised: sensor fault");
     EXPECT_EQ(Fields(e).at("VALUE_DEGC"), "31.50");
     EXPECT_EQ(Fields(e).at("NODE"), "frame");
   }
@@ -154,9 +156,10 @@ TEST_F(AlarmJournal, TheWindingFromResistanceHasItsName) {
   a.active_reasons = Bit(AlarmReason::kEstimatedOverTemperature);
   const JournalEntry e = Entry(a, {{AlarmLevel::kWarning, AlarmReason::kEstimatedOverTemperature,
                                     "", 4, 101.0, 100.0, 0, false}});
-  EXPECT_EQ(e.text,
-            "pump3: warning: winding from resistance 101.0 degC >= 100 degC; raised: estimated over "
-            "temperature");
+  EXPECT_EQ(
+      e.text,
+      "pump3: warning: winding from resistance 101.0 degC >= 100 degC; raised: estimated over "
+      "temperature");
   EXPECT_EQ(Fields(e).at("NODE"), "winding_resistance");
 }
 
@@ -206,9 +209,9 @@ TEST(OperatorText, DurationsAndCauses) {
   EXPECT_EQ(CauseText(MismatchState::kPlantChange, MismatchEffect::kFrameAmbientResistance, 1.81,
                       "frame"),
             "cooling reduced (frame-to-ambient resistance x1.81)");
-  EXPECT_EQ(CauseText(MismatchState::kSensorFaultSuspected, MismatchEffect::kSensorOffset, 3.04,
-                      "frame"),
-            "frame sensor reads +3.0 K off (the sensor, not the plant)");
+  EXPECT_EQ(
+      CauseText(MismatchState::kSensorFaultSuspected, MismatchEffect::kSensorOffset, 3.04, "frame"),
+      "frame sensor reads +3.0 K off (the sensor, not the plant)");
   EXPECT_EQ(CauseText(MismatchState::kUnexplained, MismatchEffect::kNone, NAN, "frame"),
             "the model no longer explains the frame sensor, cause not named yet");
   EXPECT_EQ(CauseText(MismatchState::kConsistent, MismatchEffect::kNone, NAN, "frame"), "");
