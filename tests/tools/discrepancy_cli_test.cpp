@@ -89,6 +89,43 @@ TEST(DiscrepancyCli, GuidesCaseNamesTheCoolingThenTheSensorsLag) {
   std::filesystem::remove_all(dir);
 }
 
+// One name per quantity (docs/daemon.md, "Names"): the same data with `_degC` and a node's
+// measurement as `<node>_sensor_degC` give the same report as with `_C`.
+TEST(DiscrepancyCli, ReadsTheNamesOfTheNamesTable) {
+  auto [train, validate] = pumptherm::tests::HiddenCase(
+      "saheba2010-baseline", {{"iron_loss_scale", {2.0}, {}}}, 4.0, 60.0);
+  const std::string dir = Dir() + "/names";
+  std::filesystem::create_directories(dir);
+  for (const auto& [name, data] : {std::pair{"train", &train}, std::pair{"validate", &validate}}) {
+    pd::WriteData(dir + "/" + name + "_C.csv", *data, false);
+    std::string text = ReadFile(dir + "/" + name + "_C.csv");
+    std::string header = text.substr(0, text.find('\n'));
+    const std::string rest = text.substr(text.find('\n'));
+    for (const auto& [from, to] :
+         {std::pair{"ambient_C", "ambient_degC"}, std::pair{"frame_C", "frame_sensor_degC"},
+          std::pair{"rotor_C", "rotor_degC"}}) {
+      const std::size_t at = header.find(from);
+      ASSERT_NE(at, std::string::npos) << header;
+      header.replace(at, std::string(from).size(), to);
+    }
+    std::ofstream(dir + "/" + name + "_degC.csv") << header << rest;
+  }
+  std::string reports[2];
+  for (int k = 0; k < 2; ++k) {
+    const std::string suffix = k == 0 ? "_C" : "_degC";
+    const CliRun r =
+        Discrepancy("--model saheba2010-baseline --train " + dir + "/train" + suffix +
+                    ".csv --validate " + dir + "/validate" + suffix + ".csv --out " + dir + "/out" +
+                    suffix + " --max-effects 1 --effects iron_loss_scale");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    reports[k] = ReadFile(dir + "/out" + suffix + "/report.json");
+    reports[k] = reports[k].substr(reports[k].find("\"verdict\""));
+    reports[k] = reports[k].substr(0, reports[k].find("\"run_time_s\""));
+  }
+  EXPECT_EQ(reports[0], reports[1]);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(DiscrepancyCli, BadCellIsExit2NamingRowAndColumn) {
   std::ofstream(Dir() + "/bad.csv")
       << "time_s,speed_rpm,id_A,iq_A,ambient_C,frame_C\n"
