@@ -108,10 +108,15 @@ std::string OverTemperatureText(const estimators::AlarmState& a, const AlarmCond
                                 const std::vector<std::string>& names,
                                 const estimators::AlarmConfig& k) {
   std::string out = NodeWords(c.node, names);
+  const double factor = a.level == AlarmLevel::kTrip ? k.trip_sd_factor : k.warning_sd_factor;
   if (std::isfinite(a.value)) out += fmt::format(" {:.1f} degC", a.value);
   if (std::isfinite(a.bound) && a.bound > a.value) {
-    const double factor = a.level == AlarmLevel::kTrip ? k.trip_sd_factor : k.warning_sd_factor;
     out += fmt::format(" (bound {:.1f} = estimate + {} sd)", a.bound, Short(factor));
+  } else if (std::isfinite(a.value) && std::isfinite(c.threshold) && a.value < c.threshold) {
+    // The bound is not known (a trip latched again after a restart keeps only its value), but
+    // it reached the level: say so rather than "116.8 degC >= 120 degC".
+    return out +
+           fmt::format(" with estimate + {} sd >= {} degC", Short(factor), Short(c.threshold));
   }
   if (std::isfinite(c.threshold)) out += fmt::format(" >= {} degC", Short(c.threshold));
   return out;

@@ -91,6 +91,22 @@ TEST_F(AlarmJournal, TripSaysTheBoundTheLevelAndTheCauseWithItsDate) {
   EXPECT_EQ(m.at("CAUSE"), "frame_ambient_resistance");
 }
 
+TEST_F(AlarmJournal, ATripLatchedAgainAfterARestartSaysItsBoundReachedTheLevel) {
+  // RestoreLatchedTrip keeps the value that raised the trip (the estimate), not its bound.
+  AlarmState a;
+  a.level = AlarmLevel::kTrip;
+  a.reason = AlarmReason::kEstimatedOverTemperature;
+  a.node = 2;
+  a.value = 116.8;
+  a.active_reasons = Bit(AlarmReason::kEstimatedOverTemperature);
+  a.trip_latched = true;
+  const JournalEntry e = Entry(a, {{AlarmLevel::kTrip, AlarmReason::kEstimatedOverTemperature, "",
+                                    2, 116.8, 120.0, 0.0, true}});
+  EXPECT_EQ(e.text,
+            "pump3: trip: winding 116.8 degC with estimate + 2 sd >= 120 degC; raised: estimated "
+            "over temperature; trip latched until cleared");
+}
+
 TEST_F(AlarmJournal, SecondsAreSecondsNeverDegC) {
   AlarmState a;
   a.level = AlarmLevel::kWarning;
