@@ -11,6 +11,7 @@
 #include <cmath>
 #include <limits>
 
+#include "daemon/alarm_journal.hpp"
 #include "daemon/gateway_detail.hpp"
 #include "daemon/log.hpp"
 
@@ -20,43 +21,6 @@ namespace {
 using gateway_detail::EncodeInto;
 using gateway_detail::RouteKey;
 using protocol::MappingInput;
-
-/// The journal's line for an alarm change: the worst level with its reason, node and value, every
-/// active reason, and which reasons were raised and cleared since `logged_reasons` (the set the
-/// previous line showed), e.g. "alarm trip (estimated_over_temperature, winding, value 114.55,
-/// bound 120.25); active: estimated_over_temperature, forecast; raised:
-/// estimated_over_temperature" (bound: the estimate + k sd that crossed the level).
-std::string AlarmChangeText(const estimators::AlarmState& a, std::uint16_t logged_reasons,
-                            const std::vector<std::string>& node_names) {
-  std::string out = fmt::format("alarm {} ({}", estimators::AlarmLevelName(a.level),
-                                estimators::AlarmReasonName(a.reason));
-  if (a.node >= 0 && static_cast<std::size_t>(a.node) < node_names.size()) {
-    out += ", " + node_names[static_cast<std::size_t>(a.node)];
-  } else if (a.node >= 0 && static_cast<std::size_t>(a.node) == node_names.size()) {
-    out += ", winding_resistance";  // the alarm inputs' last entry: the winding from resistance
-  }
-  if (std::isfinite(a.value)) out += fmt::format(", value {:.2f}", a.value);
-  // The rule's upper bound (x + k sd), when it is not the value itself.
-  if (std::isfinite(a.bound) && a.bound > a.value) out += fmt::format(", bound {:.2f}", a.bound);
-  out += ")";
-  auto list = [](std::uint16_t bits) {
-    std::string s;
-    for (std::size_t r = 1; r < estimators::kAlarmReasonCount; ++r) {
-      if (bits & (1u << r)) {
-        s += (s.empty() ? "" : ", ") +
-             std::string(estimators::AlarmReasonName(static_cast<estimators::AlarmReason>(r)));
-      }
-    }
-    return s;
-  };
-  const std::uint16_t raised = a.active_reasons & static_cast<std::uint16_t>(~logged_reasons);
-  const std::uint16_t cleared = logged_reasons & static_cast<std::uint16_t>(~a.active_reasons);
-  if (a.active_reasons) out += "; active: " + list(a.active_reasons);
-  if (raised) out += "; raised: " + list(raised);
-  if (cleared) out += "; cleared: " + list(cleared);
-  if (a.trip_latched) out += "; trip latched";
-  return out;
-}
 
 }  // namespace
 
@@ -245,9 +209,12 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
     io.alarm_changes_sent = pump.snapshot().alarm_changes;
     publish_alarm();
     const auto& a = pump.snapshot().alarm;
-    Log(a.level == estimators::AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning,
-        "pump {}: {}", name,
-        AlarmChangeText(a, io.logged_active_reasons, pump.model().StateNames()));
+    pump.ActiveConditions(conditions_);
+    const JournalEntry entry =
+        AlarmEntry({name, &a, conditions_, &pump.model().StateNames(), io.logged_active_reasons,
+                    &pump.config().alarms.monitor, pump.config().measured_node,
+                    &pump.snapshot().mismatch, wall_offset_us_});
+    LogLine(entry.level, entry.text, entry.fields);
     io.logged_active_reasons = a.active_reasons;
   }
   if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
@@ -256,10 +223,12 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
   }
   if (pump.snapshot().sensor_steps != io.sensor_steps_logged) {
     io.sensor_steps_logged = pump.snapshot().sensor_steps;
-    Log(LogLevel::kWarning,
-        "pump {}: frame sensor reading stepped {:+.1f} K, faster than the frame can move: taken as "
-        "a step of the sensor's offset (now {:+.1f} K)",
-        name, pump.snapshot().last_sensor_step_K, pump.snapshot().sensor_offset_K);
+    const std::string& sensor = pump.config().measured_node;
+    LogFields(LogLevel::kWarning, {{"PUMP", name}, {"NODE", sensor}},
+              "{}: {} sensor reading stepped {:+.1f} K, faster than the {} can move: taken as a "
+              "step of the sensor's offset (now {:+.1f} K)",
+              name, sensor, pump.snapshot().last_sensor_step_K, sensor,
+              pump.snapshot().sensor_offset_K);
   }
   if (now_us >= io.next_lcm_us) {
     FillTelemetry(p, io.telemetry_msg);

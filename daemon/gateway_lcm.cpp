@@ -7,6 +7,7 @@
 #include <ctime>
 #include <limits>
 
+#include "daemon/alarm_journal.hpp"
 #include "daemon/gateway.hpp"
 #include "daemon/gateway_detail.hpp"
 #include "daemon/log.hpp"
@@ -69,21 +70,9 @@ void Gateway::FillTelemetry(std::size_t p, pumptherm::telemetry_t& m) const {
 }
 
 void Gateway::LogMismatch(const Pump& pump) const {
-  const estimators::MismatchFinding& f = pump.snapshot().mismatch;
-  const bool fault = f.state == estimators::MismatchState::kPlantChange ||
-                     f.state == estimators::MismatchState::kSensorFaultSuspected ||
-                     f.state == estimators::MismatchState::kUnexplained;
-  std::string since;
-  if (std::isfinite(f.onset_s)) {
-    const auto t = static_cast<std::time_t>(std::floor(f.onset_s));
-    std::tm tm{};
-    gmtime_r(&t, &tm);
-    since = fmt::format(" since {:02}:{:02}:{:02} UTC", tm.tm_hour, tm.tm_min, tm.tm_sec);
-  }
-  Log(fault ? LogLevel::kWarning : LogLevel::kNotice,
-      "pump {}: model {}: {}{} (window NIS {:.0f}, limit {:.0f})", pump.config().name,
-      estimators::MismatchStateName(f.state), estimators::DescribeFinding(f), since, f.window_nis,
-      f.threshold);
+  const JournalEntry entry = DiagnosisEntry(pump.config().name, pump.snapshot().mismatch,
+                                            pump.config().measured_node, wall_offset_us_);
+  LogLine(entry.level, entry.text, entry.fields);
 }
 
 std::vector<std::uint8_t> Gateway::EncodeAlarm(const Pump& pump) const {

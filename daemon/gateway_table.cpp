@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "daemon/gateway.hpp"
+#include "daemon/operator_text.hpp"
 
 namespace pumptherm::daemon {
 
@@ -51,9 +52,12 @@ std::string TableAlarmCell(const Pump& p, const std::string& alarm) {
 
 }  // namespace
 
+// Columns named as docs/daemon.md "Names" says them to people: the frame sensor's reading (the
+// measured node's sensor), the hottest node's estimate, the winding from resistance.
 std::string Gateway::PumpTable() const {
-  std::string out = fmt::format("{:<12} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8}  {}\n", "pump", "speed",
-                                "frame_C", "hottest", "at_C", "wind_R_C", "Rs_ohm", "alarm");
+  std::string out =
+      fmt::format("{:<12} {:>7} {:>13} {:>20} {:>14} {:>8}  {}\n", "pump", "r/min", "sensor, degC",
+                  "hottest node, degC", "winding from R", "Rs, ohm", "alarm; cause");
   for (const auto& p : pumps_) {
     const PumpSnapshot& s = p->snapshot();
     int hottest = -1;
@@ -66,17 +70,27 @@ std::string Gateway::PumpTable() const {
     auto num = [](double v, int prec) {
       return std::isfinite(v) ? fmt::format("{:.{}f}", v, prec) : std::string("-");
     };
-    std::string alarm = estimators::AlarmLevelName(s.alarm.level);
+    std::string alarm = s.alarm.level == estimators::AlarmLevel::kNone
+                            ? std::string("normal")
+                            : estimators::AlarmLevelName(s.alarm.level);
     if (s.alarm.level != estimators::AlarmLevel::kNone) {
-      alarm += fmt::format(" ({})", estimators::AlarmReasonName(s.alarm.reason));
+      const std::string node = NodeWords(AlarmNodeName(s.alarm.node, p->model().StateNames()));
+      alarm += fmt::format(" ({}{})", ReasonWords(s.alarm.reason), node.empty() ? "" : ", " + node);
     }
-    if (s.alarm.trip_latched) alarm += " LATCHED";
-    out += fmt::format(
-        "{:<12} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8}  {}\n", p->config().name, num(s.speed_rpm, 0),
-        num(s.frame_measured_degC, 1),
-        hottest >= 0 ? p->model().StateNames()[static_cast<std::size_t>(hottest)] : "-",
-        hottest >= 0 ? num(s.node_degC[static_cast<std::size_t>(hottest)], 1) : "-",
-        num(s.winding_resistance_degC, 1), RsCell(s.resistance, num), TableAlarmCell(*p, alarm));
+    if (s.alarm.trip_latched) alarm += " latched";
+    const std::string cause =
+        CauseText(s.mismatch.state, s.mismatch.effect, s.mismatch.value, p->config().measured_node);
+    if (!cause.empty()) alarm += "; " + cause.substr(0, cause.find(" ("));
+    const std::string sensor =
+        fmt::format("{} {}", p->config().measured_node, num(s.frame_measured_degC, 1));
+    const std::string hot =
+        hottest >= 0
+            ? fmt::format("{} {}", p->model().StateNames()[static_cast<std::size_t>(hottest)],
+                          num(s.node_degC[static_cast<std::size_t>(hottest)], 1))
+            : "-";
+    out += fmt::format("{:<12} {:>7} {:>13} {:>20} {:>14} {:>8}  {}\n", p->config().name,
+                       num(s.speed_rpm, 0), sensor, hot, num(s.winding_resistance_degC, 1),
+                       RsCell(s.resistance, num), TableAlarmCell(*p, alarm));
   }
   return out;
 }

@@ -3,14 +3,32 @@
 #include <sys/uio.h>
 #include <systemd/sd-journal.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <stdexcept>
 #include <vector>
 
+#include "daemon/operator_text.hpp"
+
 namespace pumptherm::daemon {
 namespace {
+
+/// The time lines are stamped with (SetLogTime); kWallClock: the wall clock when written.
+constexpr std::int64_t kWallClock = INT64_MIN + 1;
+std::int64_t g_log_time_us = kWallClock;
+
+/// "2026-01-01 00:04:01.250 UTC " for the line written now; "" with kNoLogTime.
+std::string LinePrefixTime() {
+  if (g_log_time_us == kNoLogTime) return "";
+  const std::int64_t t = g_log_time_us != kWallClock
+                             ? g_log_time_us
+                             : std::chrono::duration_cast<std::chrono::microseconds>(
+                                   std::chrono::system_clock::now().time_since_epoch())
+                                   .count();
+  return LocalTimeText(t, true) + " ";
+}
 
 bool IsControl(char c) {
   const auto u = static_cast<unsigned char>(c);
@@ -36,6 +54,8 @@ bool SendToJournal(LogLevel level, std::string_view message, std::span<const Log
 }
 
 }  // namespace
+
+void SetLogTime(std::int64_t unix_us) { g_log_time_us = unix_us; }
 
 std::string EscapeControl(std::string_view text) {
   std::string out;
@@ -86,7 +106,7 @@ void LogLine(LogLevel level, std::string_view raw, std::span<const LogField> fie
     default:
       break;
   }
-  fmt::print(stderr, "pumpthermd: {}{}\n", tag, message);
+  fmt::print(stderr, "{}pumpthermd: {}{}\n", LinePrefixTime(), tag, message);
 }
 
 LogRateLimiter::LogRateLimiter(int burst, double window_s)

@@ -1,7 +1,9 @@
 #pragma once
 /// Logging to stderr. Under systemd (JOURNAL_STREAM set) each line carries the sd-daemon
-/// priority prefix ("<4>") so journald records its level; on a terminal it reads
-/// "pumpthermd: warning: ...".
+/// priority prefix ("<4>") so journald records its level (journald stamps the time); elsewhere it
+/// reads "2026-01-01 00:04:01.250 UTC pumpthermd: warning: ...", stamped with the log time:
+/// the wall clock, or the pipeline's time once SetLogTime() was called (offline: the
+/// recording's).
 
 #include <fmt/format.h>
 
@@ -34,6 +36,15 @@ std::string EscapeControl(std::string_view text);
 /// and the fields, so that `journalctl PUMP=pump3` finds it (if the journal socket refuses it,
 /// the line goes to stderr as without fields). Elsewhere the fields are not written.
 void LogLine(LogLevel level, std::string_view message, std::span<const LogField> fields = {});
+
+/// SetLogTime's "no time": the lines carry none (an offline run before its recording's first
+/// frame: they are about the run, not about a moment of the recording).
+inline constexpr std::int64_t kNoLogTime = INT64_MIN;
+
+/// Stamps the lines written from now on with `unix_us` (microseconds since the Unix epoch):
+/// offline runs call it with the pipeline's time before each frame, so a line says when in the
+/// recording it happened. Until the first call, lines carry the wall clock.
+void SetLogTime(std::int64_t unix_us);
 
 template <typename... Args>
 void Log(LogLevel level, fmt::format_string<Args...> format, Args&&... args) {

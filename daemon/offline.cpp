@@ -285,6 +285,7 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
     }
     const std::size_t iface = interfaces.Index(p.record.interface);
     const std::int64_t now = clock.Now(p.record.time_us);
+    SetLogTime(now);  // offline the pipeline's time is the recording's (Unix time)
     if (clock.steps_back() > r.time_steps_back) {
       r.time_steps_back = clock.steps_back();
       if (r.time_steps_back <= options.max_reported) {

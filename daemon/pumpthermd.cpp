@@ -100,6 +100,8 @@ int main(int argc, char** argv) {
   }
 
   if (!log_path.empty()) {
+    // Lines carry the recording's time from its first frame on (RunOffline), none before it.
+    SetLogTime(kNoLogTime);
     std::unique_ptr<Gateway> gateway;
     try {
       gateway = std::make_unique<Gateway>(config);

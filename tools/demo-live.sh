@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The demo live on vcan0 (tools/demo.sh --live calls this after simulating): canplayer replays
 # the recording onto vcan0 in real time (20 minutes), pumpthermd listens on vcan0 with LCM on and
-# shows its pump table every 5 s, candump records what the gateway sends, and `pumptherm-spy`
-# (in another terminal) shows its LCM messages. Needs a kernel with vcan (`sudo modprobe vcan`);
+# shows its pump table every 5 s, candump records what the gateway sends, and `pumptherm watch`
+# or `pumptherm-spy` (in another terminal) show its LCM messages. Needs a kernel with vcan (`sudo modprobe vcan`);
 # this script creates vcan0 if it can. The vcan test vcan.daemon_live_demo runs it in the guest.
 #   tools/demo-live.sh [DEMO_DIR]     (default demo-out, as written by tools/demo.sh)
 # Writes DEMO_DIR/gateway-live.log (the gateway's frames, candump format) and
@@ -34,7 +34,9 @@ trap stop EXIT
 sed -e 's/^interface = "can0"/interface = "vcan0"/' tools/demo/pumpthermd-demo.toml >"$config"
 frames=$(wc -l <"$out/demo.log")
 echo "demo-live: pumpthermd on vcan0, LCM on udpm://239.255.76.67:7667?ttl=0"
-echo "demo-live: watch with:  tools/pumptherm-spy    or:  candump -L vcan0,200:700"
+echo "demo-live: watch in another terminal with:  $build/tools/pumptherm watch --url 'udpm://239.255.76.67:7667?ttl=0'"
+echo "demo-live:   or the LCM viewer:  $build/tools/pumptherm-spy --url='udpm://239.255.76.67:7667?ttl=0'"
+echo "demo-live:   or the CAN frames:  candump -L vcan0,200:700"
 candump -L vcan0,200:700,400:700,600:700 >"$out/gateway-live.log" &
 capture=$!
 "$build"/daemon/pumpthermd --config "$config" --table --table-period 5 >"$out/pumpthermd-live.txt" &

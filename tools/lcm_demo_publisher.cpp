@@ -253,11 +253,12 @@ int main(int argc, char** argv) {
   CLI::App app{"Publish every pumptherm LCM type with made-up values (a demo, not estimates)"};
   app.footer(
       "Example (multicast on loopback only; run it in a network namespace, see docs/lcm.md):\n"
-      "  pumptherm-lcm-demo --lcm-url 'udpm://239.255.76.67:7667?ttl=0' --duration-s 30\n"
+      "  pumptherm-lcm-demo --url 'udpm://239.255.76.67:7667?ttl=0' --duration-s 30\n"
       "Channels: PREFIX/<pump>/TELEMETRY, TEMPS, ALARM, ALARM_CLEAR; PREFIX/GATEWAY/HEALTH.\n"
       "Prints the number of messages per channel at the end.");
   Options options;
-  app.add_option("--lcm-url", options.lcm_url,
+  // --url as in `pumptherm watch` and `clear-trip`; --lcm-url, its earlier name, still works.
+  app.add_option("--url,--lcm-url", options.lcm_url,
                  "LCM URL (default: LCM_DEFAULT_URL or LCM's default)");
   app.add_option("--prefix", options.prefix, "channel prefix")->capture_default_str();
   app.add_option("--pumps", options.pumps, "pump names")->delimiter(',')->capture_default_str();

@@ -575,7 +575,7 @@ TEST(NeverHeardPump, RaisesStaleTelemetryOnCanAndInTheStatusLine) {
   EXPECT_EQ(a.level, estimators::AlarmLevel::kWarning);
   EXPECT_EQ(a.reason, estimators::AlarmReason::kStaleTelemetry);
   EXPECT_NE(g.StatusLine().find("1 warning"), std::string::npos) << g.StatusLine();
-  EXPECT_NE(g.PumpTable().find("never heard; warning (stale_telemetry)"), std::string::npos)
+  EXPECT_NE(g.PumpTable().find("never heard; warning (stale telemetry)"), std::string::npos)
       << g.PumpTable();
   bool alarm_frame = false;
   for (const auto& f : sink.sent) {

@@ -31,7 +31,7 @@ run() {
   ln -s "$log" "$tmp/$name/in.log"
   local origin
   origin=$(head -n 1 "$log" | sed 's/^(\([0-9]*\)\..*/\1/')
-  (cd "$tmp/$name" && env -u JOURNAL_STREAM "$pumpthermd" --config config.toml -r in.log \
+  (cd "$tmp/$name" && env -u JOURNAL_STREAM TZ=UTC "$pumpthermd" --config config.toml -r in.log \
      --output-log out.log --lcm-log out.lcm --csv-dir csv --csv-time-origin "$origin" \
      >stdout.txt 2>stderr.txt) || { echo "FAIL: pumpthermd on $name:"; cat "$tmp/$name/stderr.txt"; exit 1; }
   rm "$tmp/$name/config.toml" "$tmp/$name/in.log"

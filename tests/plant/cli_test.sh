@@ -47,6 +47,27 @@ printf 'time_s,alarm_level,alarm_reason\n0,0,0\n8,1,1\n15,2,1\n' > "$tmp/events.
   || { cat "$tmp/out.txt"; fail "plot png"; }
 [ "$(head -c 4 "$tmp/p.png" | od -An -c | tr -d ' ')" = "211PNG" ] || fail "not a PNG"
 grep -q "alarm warning     8 s  trip    15 s" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "alarm moments not reported"; }
+# Codes written as words (docs/daemon.md, "Names") read as the numbers.
+printf 'time_s,alarm_level\n0,normal\n8,warning\n15,trip\n' > "$tmp/word_events.csv"
+"$exe" plot --truth "$tmp/a/pump3.truth.csv" --nodes frame --events "$tmp/word_events.csv" \
+  --out "$tmp/w.png" > "$tmp/out.txt" 2>&1 || { cat "$tmp/out.txt"; fail "plot with word events"; }
+grep -q "alarm warning     8 s  trip    15 s" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "word-coded alarm levels not read"; }
+# An estimate with its sd and a diagnosis: an error panel, the diagnosis marked, one legend that
+# names only what is drawn (magnet_flux_C has no value: "not available", no legend entry).
+awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == "frame_C") c = i; print "time_s,frame_C,frame_sd_K,magnet_flux_C,mismatch_state,mismatch_effect,mismatch_value"; next }
+         { s = NR > 5 ? "plant_change" : "consistent"; e = NR > 10 ? "frame_ambient_resistance" : "none"
+           print $1 "," $c + 0.3 ",0.2,nan," s "," e ",3.0" }' "$tmp/a/pump3.truth.csv" > "$tmp/est3.csv"
+"$exe" plot --truth "$tmp/a/pump3.truth.csv" --estimate "$tmp/est3.csv" --nodes frame \
+  --extra magnet_flux_C=frame --mark 5=test --keep-script --out "$tmp/e.png" > "$tmp/out.txt" 2>&1 ||
+  { cat "$tmp/out.txt"; fail "plot with an error panel"; }
+script=$(sed -n 's/^gnuplot script and data kept in //p' "$tmp/out.txt")/plot.gp
+grep -q "estimate minus truth" "$script" || fail "no error panel"
+grep -q "diagnosis: cooling lost (frame-to-ambient resistance x3)" "$script" || fail "diagnosis not marked"
+grep -q "min test" "$script" || fail "--mark not listed"
+grep -q "magnet from flux: not available" "$script" || fail "an absent extra not said"
+grep -q "keyentry.*magnet from flux" "$script" && fail "a legend entry for a curve not drawn"
+[ "$(grep -c "^set key center" "$script")" = 1 ] || fail "not exactly one legend"
+rm -rf "$(dirname "$script")"
 # Alarm events in Unix time (the daemon's CSV) against the plant's relative truth: put on the
 # truth's axis by --time-origin (the plant's start_epoch_s), else by their own first second; the
 # choice is said on stderr.

@@ -36,6 +36,7 @@ public final class SpyPluginCheck {
     t.ident_status = pumptherm.temperatures_t.IDENT_CONVERGED;
     t.filter_status = 9;  // no FILTER_ constant has this value
     t.nis = Double.NaN;
+    t.magnet_flux_degC = Double.NaN;
     t.num_nodes = 2;
     t.node_names = new String[] {"frame", "rotor"};
     t.node_degC = new double[] {41.24, Double.NaN};
@@ -47,10 +48,12 @@ public final class SpyPluginCheck {
     expect(h.contains("NIS -"), "NaN as '-': " + h);
     expect(tv.model.getRowCount() == 2, "two node rows: " + tv.model.getRowCount());
     expect("frame".equals(tv.model.getValueAt(0, 0)) && "41.2".equals(tv.model.getValueAt(0, 1))
-               && "0.50".equals(tv.model.getValueAt(0, 2)),
-           "row frame 41.2 0.50: " + tv.model.getValueAt(0, 0) + " " + tv.model.getValueAt(0, 1));
+               && "1.0".equals(tv.model.getValueAt(0, 2)),
+           "row frame 41.2 and its +-2 sd 1.0: " + tv.model.getValueAt(0, 0) + " "
+               + tv.model.getValueAt(0, 1) + " " + tv.model.getValueAt(0, 2));
     expect("-".equals(tv.model.getValueAt(1, 1)), "NaN node temperature as '-'");
     expect(h.contains("alarm: <b>no ALARM message yet</b>"), "no alarm_t yet: " + h);
+    expect(h.contains("magnet from flux: not available"), "no magnet from flux: " + h);
 
     pumptherm.alarm_t a = new pumptherm.alarm_t();
     a.pump = "p2";
@@ -68,6 +71,7 @@ public final class SpyPluginCheck {
     a.conditions[1].node = "rotor";
     PumpthermSpyPlugin.View av = view("PUMPTHERM/p2/ALARM", a);
     expect(av.header.getText().contains("alarm: <b>trip</b>"), "alarm level by name: " + av.header.getText());
+    expect(!av.header.getText().contains("time to trip"), "no time to trip when there is none: " + av.header.getText());
     expect(av.model.getRowCount() == 2, "two condition rows");
     expect("measured over temperature".equals(av.model.getValueAt(0, 1)), "reason by name: " + av.model.getValueAt(0, 1));
     expect("code 42".equals(av.model.getValueAt(1, 1)), "unknown reason as its number: " + av.model.getValueAt(1, 1));
@@ -100,11 +104,62 @@ public final class SpyPluginCheck {
     expect("-".equals(tv.model.getValueAt(0, 3)), "no condition on frame: " + tv.model.getValueAt(0, 3));
     expect(PumpthermSpyPlugin.alarmChannelOf("PUMPTHERM/GATEWAY/HEALTH") == null, "ALARM channel of a non-TEMPS channel");
 
+    // A forecast with a time to trip, and the diagnosis in the journal's words.
+    pumptherm.alarm_t w = new pumptherm.alarm_t();
+    w.pump = "p3";
+    w.level = pumptherm.alarm_t.LEVEL_WARNING;
+    w.time_to_trip_s = 276.2;
+    w.forecast_node = "winding";
+    w.conditions = new pumptherm.alarm_condition_t[0];
+    w.mismatch_state = pumptherm.alarm_t.MISMATCH_PLANT_CHANGE;
+    w.mismatch_effect = pumptherm.alarm_t.EFFECT_FRAME_AMBIENT_RESISTANCE;
+    w.mismatch_value = 20.0;
+    w.mismatch_since_utime = 1767225841000000L;  // 2026-01-01 00:04:01 UTC
+    java.util.TimeZone.setDefault(java.util.TimeZone.getTimeZone("UTC"));
+    h = view("PUMPTHERM/p3/ALARM", w).header.getText();
+    expect(h.contains("time to trip 4 min 36 s (winding)"), "time to trip in minutes: " + h);
+    expect(h.contains("diagnosis: cooling lost (frame-to-ambient resistance x20 or more) since 2026-01-01 00:04:01 UTC"),
+           "diagnosis in words with its date: " + h);
+
+    // Telemetry with the digits a reader needs (lcm-spy's structure view prints 100.70000000000002).
+    pumptherm.telemetry_t m = new pumptherm.telemetry_t();
+    m.pump = "p1";
+    m.frame_degC = 100.70000000000002;
+    m.ambient_degC = 22.2;
+    m.coolant_degC = Double.NaN;
+    m.drive_state = pumptherm.telemetry_t.DRIVE_STATE_STEADY;
+    PumpthermSpyPlugin.View mv = view("PUMPTHERM/p1/TELEMETRY", m);
+    expect("100.7".equals(mv.model.getValueAt(0, 1)), "frame sensor to 0.1 K: " + mv.model.getValueAt(0, 1));
+    expect(mv.header.getText().contains("drive: <b>steady</b>"), "drive state by name: " + mv.header.getText());
+
+    // Health: frame rates from the counts of two messages when the message carries none.
+    pumptherm.gateway_health_t g = new pumptherm.gateway_health_t();
+    g.utime = 1000000L;
+    g.num_interfaces = 1;
+    g.interfaces = new pumptherm.interface_health_t[] {new pumptherm.interface_health_t()};
+    g.interfaces[0].name = "can0";
+    g.interfaces[0].rx_frames_per_s = Double.NaN;
+    g.interfaces[0].tx_frames_per_s = Double.NaN;
+    g.interfaces[0].rx_frames = 1000;
+    ChannelData hd = new ChannelData();
+    hd.name = "PUMPTHERM/GATEWAY/HEALTH";
+    hd.last = g;
+    PumpthermSpyPlugin.View hv = new PumpthermSpyPlugin.View(hd, alarms);
+    expect("-".equals(hv.model.getValueAt(0, 2)), "no rate from one message: " + hv.model.getValueAt(0, 2));
+    pumptherm.gateway_health_t g2 = g.copy();
+    g2.utime = 6000000L;
+    g2.interfaces[0].rx_frames = 6000;
+    hd.last = g2;
+    hv.refresh();
+    expect("1000".equals(hv.model.getValueAt(0, 2)), "rx frames/s from the counts: " + hv.model.getValueAt(0, 2));
+
     expect(PumpthermSpyPlugin.get(t, "no_such_field_degC") == null, "a field the type lacks reads as absent");
     PumpthermSpyPlugin plugin = new PumpthermSpyPlugin();
     expect(plugin.canHandle(pumptherm.temperatures_t.LCM_FINGERPRINT), "takes temperatures_t");
     expect(plugin.canHandle(pumptherm.alarm_t.LCM_FINGERPRINT), "takes alarm_t");
-    expect(!plugin.canHandle(pumptherm.telemetry_t.LCM_FINGERPRINT), "leaves telemetry_t to lcm-spy");
+    expect(plugin.canHandle(pumptherm.telemetry_t.LCM_FINGERPRINT), "takes telemetry_t");
+    expect(plugin.canHandle(pumptherm.gateway_health_t.LCM_FINGERPRINT), "takes gateway_health_t");
+    expect(!plugin.canHandle(pumptherm.alarm_clear_t.LCM_FINGERPRINT), "leaves alarm_clear_t to lcm-spy");
     System.out.println(failures == 0 ? "pumptherm view: all checks passed" : failures + " checks failed");
     System.exit(failures == 0 ? 0 : 1);  // also stops the views' timers
   }

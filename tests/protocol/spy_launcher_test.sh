@@ -50,6 +50,16 @@ grep -q -x -- '-Dpumptherm.spy.lcm_url=udpm://239.255.76.67:7667?ttl=0' "$work/a
   fail "URL not handed to the plugin: $(cat "$work/args")"
 "$build_dir/tools/pumptherm-spy" -l 'udpm://239.255.76.67:7668?ttl=0'
 grep -q -x -- '-Dpumptherm.spy.lcm_url=udpm://239.255.76.67:7668?ttl=0' "$work/args" || fail "-l URL not handed to the plugin"
+# --url (the name `pumptherm watch` and `clear-trip` use) becomes lcm-spy's --lcm-url=URL.
+for form in "--url udpm://239.255.76.67:7669?ttl=0" "--url=udpm://239.255.76.67:7669?ttl=0"; do
+  # shellcheck disable=SC2086  # the form is two words or one, on purpose
+  "$build_dir/tools/pumptherm-spy" $form "two words"
+  tail -n 3 "$work/args" > "$work/tail"
+  printf '%s\n' lcm.spy.Spy '--lcm-url=udpm://239.255.76.67:7669?ttl=0' 'two words' | cmp -s - "$work/tail" ||
+    fail "$form not passed as --lcm-url: $(cat "$work/tail")"
+  grep -q -x -- '-Dpumptherm.spy.lcm_url=udpm://239.255.76.67:7669?ttl=0' "$work/args" ||
+    fail "$form not handed to the plugin"
+done
 
 # 2. Installed layout: <prefix>/bin/pumptherm-spy and <prefix>/share/pumptherm/java/<jar>.
 mkdir -p "$work/prefix/bin" "$work/prefix/share/pumptherm/java"

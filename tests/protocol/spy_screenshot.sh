@@ -4,8 +4,13 @@
 #
 #   spy_screenshot.sh BUILD_DIR [OUT.png]   screenshot of the spy with decoded messages open
 #                                           (default docs/img/pumptherm-spy.png)
+#   spy_screenshot.sh --lcm-log FILE BUILD_DIR [OUT.png]
+#                                           the same fed by lcm-logplayer playing FILE at 20x
+#                                           (the demo's gateway.lcm: pumps pump1..3; the views
+#                                           of pump3), the screenshot at its end
 #   spy_screenshot.sh --check BUILD_DIR     smoke test: the spy finds every type of
-#                                           protocol/lcm and opens a decoded view per type,
+#                                           protocol/lcm and opens a view per type (a
+#                                           double click: the pumptherm view of ours),
 #                                           and the pumptherm view of a TEMPS and an ALARM
 #                                           channel names their statuses
 #
@@ -14,12 +19,17 @@
 set -eu
 
 mode=shot
+lcm_log=""
 if [ "${1:-}" = "--check" ]; then
   mode=check
   shift
 fi
+if [ "${1:-}" = "--lcm-log" ]; then
+  lcm_log=$(CDPATH= cd -- "$(dirname -- "$2")" && pwd)/$(basename -- "$2")
+  shift 2
+fi
 if [ $# -lt 1 ]; then
-  echo "usage: $0 [--check] BUILD_DIR [OUT.png]" >&2
+  echo "usage: $0 [--check] [--lcm-log FILE] BUILD_DIR [OUT.png]" >&2
   exit 2
 fi
 source_dir=$(CDPATH= cd -- "$(dirname -- "$0")/../.." && pwd)
@@ -126,11 +136,29 @@ for _ in $(seq 50); do
 done
 grep -q "Found $types LCM types" "$work/spy.log" || fail "lcm-spy did not find the $types pumptherm types"
 
+if [ -n "$lcm_log" ]; then
+  # The demo's LCM log at 20x: the first second of it brings every channel.
+  ip netns exec "$ns" lcm-logplayer --speed=20 -l "$url" "$lcm_log" > "$work/demo.log" 2>&1 &
+  player=$!
+  pids="$player $pids"
+  channels="PUMPTHERM/GATEWAY/HEALTH
+PUMPTHERM/pump1/ALARM
+PUMPTHERM/pump1/TELEMETRY
+PUMPTHERM/pump1/TEMPS
+PUMPTHERM/pump2/ALARM
+PUMPTHERM/pump2/TELEMETRY
+PUMPTHERM/pump2/TEMPS
+PUMPTHERM/pump3/ALARM
+PUMPTHERM/pump3/TELEMETRY
+PUMPTHERM/pump3/TEMPS"
+  views="PUMPTHERM/pump3/TEMPS PUMPTHERM/pump3/ALARM PUMPTHERM/pump3/TELEMETRY"
+else
 # The publisher starts once the spy listens: its first tick carries every channel (the clear
 # command included), so all nine rows are there from the start and stay in place.
-ip netns exec "$ns" "$demo" --lcm-url "$url" --pumps tmp1,tmp2 --clear-period-s 2 \
+ip netns exec "$ns" "$demo" --url "$url" --pumps tmp1,tmp2 --clear-period-s 2 \
   --duration-s 600 > "$work/demo.log" 2>&1 &
 pids="$! $pids"
+views="PUMPTHERM/tmp2/TEMPS PUMPTHERM/tmp2/ALARM PUMPTHERM/tmp1/TELEMETRY"
 
 # The spy lists channels sorted by name, one table row each.
 channels="PUMPTHERM/GATEWAY/HEALTH
@@ -142,11 +170,12 @@ PUMPTHERM/tmp2/ALARM
 PUMPTHERM/tmp2/ALARM_CLEAR
 PUMPTHERM/tmp2/TELEMETRY
 PUMPTHERM/tmp2/TEMPS"
+fi
 sleep 4
 xdo windowmove "$main" 0 0 windowsize "$main" 940 240
 sleep 1
 
-# Opens the decoded view of CHANNEL (double click on its row) and places it at X Y W H.
+# Opens the view of CHANNEL (double click on its row) and places it at X Y W H.
 row_top_px=19  # height of the table header
 row_px=16      # height of a row
 open_view() {
@@ -161,7 +190,9 @@ open_view() {
     xdo windowraise "$main"
     sleep 0.3
     xdo mousemove 90 "$y" click --repeat 2 --delay 100 1
-    view=$(wait_window "^$channel\$" 25) && break
+    # A double click opens the pumptherm view of the pumptherm types (its title becomes
+    # "CHANNEL: summary" once a message is shown), lcm-spy's structure view of the others.
+    view=$(wait_window "^$channel(: .*)?\$" 25) && break
     for stray in $(xdo search --name '^PUMPTHERM/' 2> /dev/null); do
       case " $placed " in
         *" $stray "*) ;;
@@ -193,9 +224,10 @@ apply_layout() {
 }
 placed=""
 layout=""
-open_view PUMPTHERM/tmp2/TEMPS 945 0 975 640
-open_view PUMPTHERM/tmp2/ALARM 0 245 940 470
-open_view PUMPTHERM/tmp1/TELEMETRY 945 645 975 555
+set -- $views
+open_view "$1" 945 0 975 640
+open_view "$2" 0 245 940 470
+open_view "$3" 945 645 975 555
 open_view PUMPTHERM/GATEWAY/HEALTH 0 720 940 480
 sleep 3
 xdo windowraise "$main"
@@ -240,6 +272,10 @@ fi
 if [ "$mode" = check ]; then
   echo "pumptherm-spy found $types types, opened decoded views of 4 channels and 2 pumptherm views"
   exit 0
+fi
+if [ -n "$lcm_log" ]; then
+  wait "$player" 2> /dev/null || true  # the log's end: pump3 tripped
+  sleep 1.5
 fi
 mkdir -p "$(dirname "$out")"
 ip netns exec "$ns" xwd -root -silent | convert xwd:- "png:$out"

@@ -53,7 +53,15 @@ grep -q 'OK (1 interface, 3 pumps)' "$WORK_DIR"/block_*.out || fail "no --check-
 awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) c[$i] = i; next }
          { v = $c["winding_C"] } END { exit !(v + 0 > 20 && v + 0 < 200) }' estimates/pump1.csv ||
   fail "estimates/pump1.csv: the last winding_C is not a plausible temperature"
-journalctl -u "$unit" --no-pager | grep -q "pump pump3: alarm trip" || fail "pump3 never tripped live"
+journalctl -u "$unit" --no-pager | grep -q "pump3: trip: " || fail "pump3 never tripped live"
+# The alarm lines carry structured journal fields (daemon/log.hpp LogFields): the trip is found
+# by its fields alone, and its VALUE_DEGC is a temperature (the sensor's, over 85 degC).
+journalctl -u "$unit" --no-pager -o cat PUMP=pump3 LEVEL=trip | grep -q "^pump3: trip: " ||
+  fail "journalctl PUMP=pump3 LEVEL=trip finds no trip line"
+journalctl -u "$unit" --no-pager -o export PUMP=pump3 LEVEL=trip |
+  awk -F= '$1 == "VALUE_DEGC" { v = $2 } END { exit !(v + 0 > 85 && v + 0 < 200) }' ||
+  fail "the trip line's VALUE_DEGC is not the sensor's temperature over its trip level"
+echo "$T: journalctl PUMP=pump3 LEVEL=trip: $(journalctl -u "$unit" --no-pager -o cat PUMP=pump3 LEVEL=trip | tail -n 1)"
 journalctl -u "$unit" --no-pager | grep -q "alarm clear from 'can:can0' accepted (latched trip cleared)" ||
   fail "the PUMP_CLEAR frame did not clear pump3's latched trip"
 grep -q 'pump3: PUMP_CLEAR sent on can0' "$WORK_DIR"/block_*.out ||

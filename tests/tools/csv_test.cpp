@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <string_view>
 
 namespace pumptherm::tools {
 namespace {
@@ -41,6 +43,33 @@ TEST(Csv, OldColumnNamesAreReadUnderTheCurrentOneWithAWarning) {
   EXPECT_EQ(both.Column("winding_resistance_C"), std::vector<double>{2.0});
   EXPECT_TRUE(
       CsvTable::Parse("time_s,winding_resistance_C\n0,1\n", "n.csv").deprecations().empty());
+}
+
+TEST(Csv, ATemperatureIsReadUnderEitherUnitSuffix) {
+  // docs/daemon.md, "Names": _degC, the files written before _C; the same quantity.
+  const auto old_file = CsvTable::Parse("time_s,frame_C\n0,40.5\n", "old.csv");
+  EXPECT_TRUE(old_file.Has("frame_degC"));
+  EXPECT_EQ(old_file.Column("frame_degC"), std::vector<double>{40.5});
+  const auto new_file = CsvTable::Parse("time_s,frame_degC,speed_rpm\n0,41.5,7\n", "new.csv");
+  EXPECT_EQ(new_file.Column("frame_C"), std::vector<double>{41.5});
+  EXPECT_FALSE(new_file.Has("speed_C")) << "only temperatures have two spellings";
+  EXPECT_TRUE(old_file.deprecations().empty()) << "a suffix is no deprecated name";
+}
+
+TEST(Csv, CodesAreReadAsWordsOrNumbers) {
+  constexpr std::array<std::string_view, 3> kLevels{"normal", "warning", "trip"};
+  const auto t = CsvTable::Parse("time_s,level\n0,normal\n1,2\n2,trip\n3,nan\n4,\n", "c.csv");
+  const auto v = t.Codes("level", kLevels);
+  ASSERT_EQ(v.size(), 5U);
+  EXPECT_EQ(v[0], 0.0);
+  EXPECT_EQ(v[1], 2.0);
+  EXPECT_EQ(v[2], 2.0);
+  EXPECT_TRUE(std::isnan(v[3]) && std::isnan(v[4]));
+  const auto bad = CsvTable::Parse("time_s,level\n0,tripped\n", "bad.csv");
+  EXPECT_EQ(ErrorOf([&] { bad.Codes("level", kLevels); }),
+            "bad.csv: row 2, column 'level': 'tripped' is neither a number nor one of normal, "
+            "warning, trip");
+  EXPECT_EQ(t.Text("level")[0], "normal");
 }
 
 TEST(Csv, ErrorsNameFileRowAndColumn) {

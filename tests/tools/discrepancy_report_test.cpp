@@ -2,9 +2,11 @@
 // digits of an interval, units, the why-not-named column, the model edit and the plots' ticks.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <string>
 
 #include "tools/discrepancy/report.hpp"
+#include "tools/discrepancy/workflow.hpp"
 
 namespace pd = pumptherm::tools::discrepancy;
 
@@ -95,4 +97,79 @@ TEST(DiscrepancyReport, AmbiguityInItsRoundIntervalDigitsUnitsAndWhyNot) {
   EXPECT_NE(h.find(">0.5</text>"), std::string::npos);
   EXPECT_NE(h.find(">2.0</text>"), std::string::npos);
   EXPECT_NE(h.find("stroke='#000' stroke-width='0.8'"), std::string::npos);
+}
+
+TEST(DiscrepancyReport, ModelFilesInShortestRoundTripForm) {
+  const std::string toml =
+      "[parameters]\nalpha_cu_per_K = 0.0041000000000000003\nke_W_s2 = 9.0000000000000006e-05\n"
+      "rated_rpm = 21000\nspeed = 21000.0\nr1 = -0.34999999999999998 # a comment "
+      "0.10000000000000001\n"
+      "name = '0.10000000000000001'\nlist = [ 1.0, 2.5000000000000004 ]\n";
+  EXPECT_EQ(pd::ShortestFloats(toml),
+            "[parameters]\nalpha_cu_per_K = 0.0041\nke_W_s2 = 9e-05\nrated_rpm = 21000\n"
+            "speed = 21000.0\nr1 = -0.35 # a comment 0.10000000000000001\n"
+            "name = '0.10000000000000001'\nlist = [ 1.0, 2.5000000000000004 ]\n");
+}
+
+TEST(DiscrepancyReport, IntervalsClippedOrUnidentifiableAndRoundingThatAgreesWithTheRule) {
+  pd::Result r = TwoRounds();
+  // The case: a lag whose interval spans more than its whole range (0 to 3600 s).
+  r.rounds[0].candidates.push_back(
+      Tried("sensor_lag", "sensor_lag_s", 0.0, -2203.77, 2203.77, 1.995, 0.7, false, false));
+  // An interval past the scale's lower bound (0.05): clipped to it.
+  r.rounds[0].candidates.push_back(Tried("frame_ambient_resistance", "frame_resistance_scale", 0.4,
+                                         -0.1, 0.9, 1.8008, -12, true, false));
+  r.rounds[0].candidates.back().label = "frame_ambient_resistance (another fit)";
+  const std::string h = pd::ReportHtml(r, "m.toml", "t.csv", "v.csv", {});
+  EXPECT_NE(h.find("sensor_lag_s = 0 s (unidentifiable: the data do not determine it)"),
+            std::string::npos)
+      << h;
+  EXPECT_NE(h.find("0.400 (95 % 0.050 to 0.900, clipped to the physical range)"), std::string::npos)
+      << h;
+  // A gain of 9.96 % is not printed as 10.0 % against its 10 % threshold.
+  EXPECT_NE(h.find("validation gain 9.96 % &lt; 10 %"), std::string::npos) << h;
+}
+
+TEST(DiscrepancyReport, ResidualTestsBeforeAndAfterWithTheirLags) {
+  // Two hours at 10 s: the "before" residual is the current (a missed loss the input drives),
+  // the "after" residual a small deterministic wobble the current does not drive.
+  pd::Result r = TwoRounds();
+  pd::Data d;
+  pd::PlotSeries& v = r.validate_plot;
+  v.time_s.clear();
+  v.measured = v.before = v.after = {{}};
+  for (int k = 0; k < 720; ++k) {
+    const double t = 10.0 * k;
+    const double current = (k / 90) % 2 == 0 ? 1.0 : 4.0;
+    const double noise = 0.05 * std::sin(12.9898 * k) * std::cos(78.233 * k);
+    v.time_s.push_back(t);
+    v.measured[0].push_back(40.0 + 2.0 * current);
+    v.before[0].push_back(40.0 + 2.0 * current - 0.5 * current);
+    v.after[0].push_back(40.0 + 2.0 * current + noise);
+    d.time_s.push_back(t);
+    d.speed_rpm.push_back(21000.0 + (k % 7));
+    d.id_A.push_back(0.0);
+    d.iq_A.push_back(current);
+    d.ambient_degC.push_back(22.0);
+    d.coolant_degC.push_back(22.0);
+  }
+  pd::ReportContext ctx;
+  ctx.validate = &d;
+  const std::string h = pd::ReportHtml(r, "m.toml", "t.csv", "v.csv", ctx);
+  const std::size_t tests = h.find("Is the model right now?");
+  ASSERT_NE(tests, std::string::npos);
+  const std::string table = h.substr(tests, h.find("</table>", tests) - tests);
+  EXPECT_NE(table.find("<td>x current</td><td class='why fail'>FAILS at lags"), std::string::npos)
+      << table;
+  EXPECT_NE(table.find("99.2 %, 0.025 K"), std::string::npos) << "the after fit:\n" << table;
+  EXPECT_NE(table.find("<td>x current</td><td class='why fail'>FAILS at lags -4.7 to 4.7 min (peak "
+                       "1.00 at 0.0 min, band 0.41)</td><td class='why pass'>passes"),
+            std::string::npos)
+      << table;
+  EXPECT_EQ(table.find("x ambient"), std::string::npos) << "a constant ambient is not tested";
+  // The inputs are shown, the ambient included; the legend gives each curve's fit and RMSE.
+  EXPECT_NE(h.find(">input: ambient</text>"), std::string::npos);
+  EXPECT_NE(h.find("after: fit 99.2 %, RMSE 0.03 K"), std::string::npos);
+  EXPECT_NE(h.find("frame before: residual x current"), std::string::npos);
+  EXPECT_NE(h.find("frame after: residual autocorrelation"), std::string::npos);
 }

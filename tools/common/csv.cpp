@@ -122,7 +122,61 @@ std::optional<std::size_t> CsvTable::Index(std::string_view column) const {
   for (std::size_t i = 0; i < columns_.size(); ++i) {
     if (columns_[i] == column) return i;
   }
+  // The other spelling of a temperature's unit: `_C` and `_degC` name the same quantity.
+  std::string other;
+  if (column.ends_with("_degC")) {
+    other = std::string(column.substr(0, column.size() - 5)) + "_C";
+  } else if (column.ends_with("_C")) {
+    other = std::string(column.substr(0, column.size() - 2)) + "_degC";
+  } else {
+    return std::nullopt;
+  }
+  for (std::size_t i = 0; i < columns_.size(); ++i) {
+    if (columns_[i] == other) return i;
+  }
   return std::nullopt;
+}
+
+std::vector<std::string> CsvTable::Text(std::string_view column) const {
+  const auto index = Index(column);
+  if (!index) {
+    throw CsvError(fmt::format("{}: missing column '{}' (the header has: {})", source_, column,
+                               fmt::join(columns_, ", ")));
+  }
+  std::vector<std::string> out;
+  out.reserve(rows_.size());
+  for (const auto& row : rows_) out.push_back(row[*index]);
+  return out;
+}
+
+std::vector<double> CsvTable::Codes(std::string_view column,
+                                    std::span<const std::string_view> words) const {
+  const std::vector<std::string> cells = Text(column);
+  std::vector<double> out;
+  out.reserve(cells.size());
+  for (std::size_t r = 0; r < cells.size(); ++r) {
+    const std::string& cell = cells[r];
+    if (cell.empty() || cell == "nan" || cell == "NaN" || cell == "NAN") {
+      out.push_back(std::nan(""));
+      continue;
+    }
+    bool found = false;
+    for (std::size_t k = 0; k < words.size() && !found; ++k) {
+      if (cell == words[k]) {
+        out.push_back(static_cast<double>(k));
+        found = true;
+      }
+    }
+    if (found) continue;
+    double v = 0.0;
+    const auto [ptr, ec] = std::from_chars(cell.data(), cell.data() + cell.size(), v);
+    if (ec != std::errc() || ptr != cell.data() + cell.size() || !std::isfinite(v)) {
+      throw CsvError(fmt::format("{}: row {}, column '{}': '{}' is neither a number nor one of {}",
+                                 source_, lines_[r], column, cell, fmt::join(words, ", ")));
+    }
+    out.push_back(v);
+  }
+  return out;
 }
 
 std::vector<double> CsvTable::Numbers(std::string_view column, bool allow_nan) const {

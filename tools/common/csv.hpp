@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <cstdio>
 #include <optional>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -36,6 +37,8 @@ class CsvTable {
   const std::string& source() const { return source_; }
   const std::vector<std::string>& columns() const { return columns_; }
   std::size_t rows() const { return rows_.size(); }
+  /// Whether the column is there. A temperature column is found under either unit suffix,
+  /// `_degC` or `_C` (`frame_degC` finds `frame_C` and the reverse): the same quantity.
   bool Has(std::string_view column) const { return Index(column).has_value(); }
 
   /// Every value of a required numeric column. Throws CsvError when the column is missing, or a
@@ -45,6 +48,15 @@ class CsvTable {
   /// Like Column(), but an empty or "nan" cell gives NaN ("not measured"); still rejects text
   /// that is not a number and infinities.
   std::vector<double> ColumnAllowingNaN(std::string_view column) const;
+
+  /// Every cell of a column as written (trimmed), e.g. a column of words. Throws CsvError when
+  /// the column is missing.
+  std::vector<std::string> Text(std::string_view column) const;
+
+  /// A column of codes written as numbers or as words (docs/daemon.md, "Names": CSV files write
+  /// codes as words): a cell equal to `words[k]` gives k, a number gives itself, an empty or
+  /// "nan" cell gives NaN. Throws CsvError naming the row and column for any other text.
+  std::vector<double> Codes(std::string_view column, std::span<const std::string_view> words) const;
 
   /// The `time_s` column (or `column`), checked to be strictly increasing; throws CsvError
   /// naming the first row where time does not advance.

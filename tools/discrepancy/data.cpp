@@ -18,11 +18,19 @@ Data ReadData(const std::string& path, const estimators::ThermalModel& model) {
   columns.rms_current = true;
   static_cast<ThermalInputSeries&>(d) = ReadThermalInputs(csv, columns);
   d.source = path;
-  for (const auto& node : model.Nodes())
-    if (csv.Has(node.name + "_C")) d.measured.push_back({node.name, csv.Column(node.name + "_C")});
+  // A node's measurement: `<node>_sensor_degC` (docs/daemon.md, "Names"), or `<node>_degC` /
+  // `<node>_C` as measured CSV files have written it.
+  for (const auto& node : model.Nodes()) {
+    for (const std::string& column : {node.name + "_sensor_degC", node.name + "_C"}) {
+      if (!csv.Has(column)) continue;
+      d.measured.push_back({node.name, csv.Column(column)});
+      break;
+    }
+  }
   if (d.measured.empty()) {
     std::string names;
-    for (const auto& node : model.Nodes()) names += (names.empty() ? "" : ", ") + node.name + "_C";
+    for (const auto& node : model.Nodes())
+      names += (names.empty() ? "" : ", ") + node.name + "_sensor_degC";
     throw CsvError(
         fmt::format("{}: no measured temperature column (the model's nodes: {})", path, names));
   }

@@ -3,6 +3,7 @@
 #include <fmt/core.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <filesystem>
@@ -121,9 +122,11 @@ struct Frame {
 struct Axes {
   Frame f;
   std::vector<double> xt, yt;
-  double X(double x) const {
-    return f.l + (f.w - f.l - f.r) * (x - xt.front()) / (xt.back() - xt.front());
-  }
+  /// The x range drawn; NaN: the ticks' ends.
+  double x_lo = std::nan(""), x_hi = std::nan("");
+  double Lo() const { return std::isfinite(x_lo) ? x_lo : xt.front(); }
+  double Hi() const { return std::isfinite(x_hi) ? x_hi : xt.back(); }
+  double X(double x) const { return f.l + (f.w - f.l - f.r) * (x - Lo()) / (Hi() - Lo()); }
   double Y(double y) const {
     return f.top + (f.h - f.top - f.b) * (yt.back() - y) / (yt.back() - yt.front());
   }
@@ -145,10 +148,11 @@ std::string AxesSvg(const Axes& a, const std::string& title, const std::string& 
         "text-anchor='end'>{}</text>",
         f.l, f.w - f.r, a.Y(y), a.Y(y), f.l - 4, a.Y(y) + 4, TickLabel(y, a.yt));
   for (double x : a.xt)
-    s += fmt::format(
-        "<line x1='{:.1f}' x2='{:.1f}' y1='{}' y2='{}' stroke='#e4e4e4'/><text x='{:.1f}' y='{}' "
-        "text-anchor='middle'>{}</text>",
-        a.X(x), a.X(x), f.top, f.h - f.b, a.X(x), f.h - f.b + 15, TickLabel(x, a.xt));
+    if (x >= a.Lo() - 1e-9 && x <= a.Hi() + 1e-9)
+      s += fmt::format(
+          "<line x1='{:.1f}' x2='{:.1f}' y1='{}' y2='{}' stroke='#e4e4e4'/><text x='{:.1f}' y='{}' "
+          "text-anchor='middle'>{}</text>",
+          a.X(x), a.X(x), f.top, f.h - f.b, a.X(x), f.h - f.b + 15, TickLabel(x, a.xt));
   if (zero_line && a.yt.front() < 0.0 && a.yt.back() > 0.0)
     s += fmt::format(
         "<line x1='{}' x2='{}' y1='{:.1f}' y2='{:.1f}' stroke='#000' stroke-width='0.8'/>", f.l,
@@ -181,6 +185,11 @@ std::string Svg(const std::string& title, const std::vector<double>& t_s,
   }
   Axes a;
   a.f.h = height;
+  // The legend right of the plot, wide enough for "before: fit -31.3 %, RMSE 9.97 K" (about 7
+  // units a character), the same for every time plot so that their time axes line up.
+  std::size_t longest = 0;
+  for (const Line& ln : lines) longest = std::max(longest, ln.name.size());
+  a.f.r = std::max(270.0, 40.0 + 7.0 * static_cast<double>(longest));
   a.yt = NiceTicks(ymin, ymax, height < 200 ? 3 : 6);
   a.xt = NiceTicks(t_s.front() / 3600.0, std::max(t_s.back(), t_s.front() + 1.0) / 3600.0, 8);
   std::string s = AxesSvg(a, title, "time, h", ylabel, zero_line);
@@ -213,6 +222,8 @@ std::string CorrSvg(const std::string& title, const std::vector<double>& lag,
   a.f = Frame{320, 220, 46, 10, 24, 38};
   a.yt = NiceTicks(-1.0, 1.0, 4);
   a.xt = NiceTicks(lag.front(), lag.back(), 4);
+  a.x_lo = lag.front();  // the axis spans the lags computed, no further
+  a.x_hi = lag.back();
   std::string s = AxesSvg(a, title, xlabel, "correlation", true);
   for (double b : {band, -band})
     s += fmt::format(
@@ -254,33 +265,36 @@ std::vector<double> CrossCorrelation(const std::vector<double>& x, const std::ve
   return r;
 }
 
-/// The validation inputs averaged over each plot grid step (t_{k-1}, t_k]: speed, and the
-/// current amplitude as rms of sqrt(id^2 + iq^2) (so its square keeps the copper loss).
+/// The validation inputs averaged over each plot grid step (t_{k-1}, t_k]: speed, the current
+/// amplitude as rms of sqrt(id^2 + iq^2) (so its square keeps the copper loss), the ambient and
+/// the coolant temperatures.
 void InputsOnGrid(const Data& d, const std::vector<double>& grid_s, std::vector<double>& speed_rpm,
-                  std::vector<double>& current_A) {
-  speed_rpm.assign(grid_s.size(), std::nan(""));
-  current_A.assign(grid_s.size(), std::nan(""));
+                  std::vector<double>& current_A, std::vector<double>& ambient_degC,
+                  std::vector<double>& coolant_degC) {
+  std::array<std::vector<double>*, 4> out{&speed_rpm, &current_A, &ambient_degC, &coolant_degC};
+  for (auto* v : out) v->assign(grid_s.size(), std::nan(""));
   std::size_t j = 0;
   for (std::size_t k = 0; k < grid_s.size(); ++k) {
-    double n = 0, sp = 0, i2 = 0;
+    double n = 0, sp = 0, i2 = 0, amb = 0, cool = 0;
     for (; j < d.size() && d.time_s[j] <= grid_s[k]; ++j) {
       sp += d.speed_rpm[j];
       i2 += d.id_A[j] * d.id_A[j] + d.iq_A[j] * d.iq_A[j];
+      amb += d.ambient_degC[j];
+      cool += d.coolant_degC[j];
       ++n;
     }
     if (n > 0) {
       speed_rpm[k] = sp / n;
       current_A[k] = std::sqrt(i2 / n);
+      ambient_degC[k] = amb / n;
+      coolant_degC[k] = cool / n;
     } else if (k > 0) {
-      speed_rpm[k] = speed_rpm[k - 1];
-      current_A[k] = current_A[k - 1];
+      for (auto* v : out) (*v)[k] = (*v)[k - 1];
     }
   }
   for (std::size_t k = grid_s.size(); k-- > 1;)  // grid points before the first sample
-    if (std::isnan(speed_rpm[k - 1])) {
-      speed_rpm[k - 1] = speed_rpm[k];
-      current_A[k - 1] = current_A[k];
-    }
+    if (std::isnan(speed_rpm[k - 1]))
+      for (auto* v : out) (*v)[k - 1] = (*v)[k];
 }
 
 /// The unit of an effect parameter, read from its name's suffix ("" = dimensionless).
@@ -300,16 +314,56 @@ std::string UnitOf(const std::string& name) {
   return "1 (a factor)";
 }
 
+/// The parameter's physical range (the effect vocabulary's bounds), or nullptr when not known.
+const estimators::EffectParameterSpec* SpecOf(const FittedParameter& p) {
+  for (const estimators::EffectSpec& e : estimators::EffectVocabulary())
+    for (const estimators::EffectParameterSpec& ps : e.parameters)
+      if (p.name == ps.name || p.name.rfind(ps.name + "__", 0) == 0) return &ps;
+  return nullptr;
+}
+
+/// Whether the data determine the parameter: its 95 % interval is known and narrower than its
+/// whole physical range (wider, the data say nothing about it: it is unidentifiable).
+bool Identifiable(const FittedParameter& p) {
+  if (!std::isfinite(p.low95) || !std::isfinite(p.high95)) return false;
+  const estimators::EffectParameterSpec* ps = SpecOf(p);
+  return ps == nullptr || p.high95 - p.low95 < ps->upper - ps->lower;
+}
+
 /// "value (95 % low to high) unit" with the decimals that show the interval's width to three
-/// significant figures (four significant figures of the value when the width is 0 or unknown).
+/// significant figures (four significant figures of the value when the width is 0 or unknown);
+/// the interval clipped to the parameter's physical range (said so), or "unidentifiable" when
+/// it is wider than that range.
 std::string ValueWithInterval(const FittedParameter& p) {
-  const double width = std::abs(p.high95 - p.low95);
-  const double scale = width > 0 && std::isfinite(width) ? width : std::abs(p.value);
+  const estimators::EffectParameterSpec* ps = SpecOf(p);
+  double lo = p.low95, hi = p.high95;
+  const bool identifiable = Identifiable(p);
+  bool clipped = false;
+  if (identifiable && ps != nullptr) {
+    clipped = lo < ps->lower || hi > ps->upper;
+    lo = std::max(lo, ps->lower);
+    hi = std::min(hi, ps->upper);
+  }
+  const double width = std::abs(hi - lo);
+  const double scale =
+      identifiable && width > 0 && std::isfinite(width) ? width : std::abs(p.value);
   const int dec =
       std::clamp(scale > 0 ? 2 - static_cast<int>(std::floor(std::log10(scale))) : 3, 0, 12);
   const std::string unit = UnitOf(p.name);
-  return fmt::format("{:.{}f} (95 % {:.{}f} to {:.{}f}){}", p.value, dec, p.low95, dec, p.high95,
-                     dec, unit.rfind("1 ", 0) == 0 ? "" : " " + unit);
+  const std::string u = unit.rfind("1 ", 0) == 0 ? "" : " " + unit;
+  if (!identifiable)
+    return fmt::format("{:.4g}{} (unidentifiable: the data do not determine it)", p.value, u);
+  return fmt::format("{:.{}f} (95 % {:.{}f} to {:.{}f}{}){}", p.value, dec, lo, dec, hi, dec,
+                     clipped ? ", clipped to the physical range" : "", u);
+}
+
+/// `value` and `threshold` with `unit`, to as many decimals (from `decimals`) as it takes for the
+/// printed value to differ from the printed threshold, so that "9.96 % < 10 %" never reads
+/// "10.0 % < 10 %".
+std::string Against(double value, double threshold, int decimals) {
+  int d = decimals;
+  while (d < 6 && fmt::format("{:.{}f}", value, d) == fmt::format("{:.{}f}", threshold, d)) ++d;
+  return fmt::format("{:.{}f}", value, d);
 }
 
 /// Why a tried candidate was not named in its round: every test of the decision rule it
@@ -322,10 +376,12 @@ std::string WhyNot(const Candidate& c, const Round& rd, const Options& o,
     why.push_back(
         fmt::format("not significant (interval includes {})", Num(c.parameters[0].neutral)));
   if (!(c.delta_ic <= -o.ic_threshold))
-    why.push_back(fmt::format("dIC {:.1f} > -{}", c.delta_ic, o.ic_threshold));
+    why.push_back(
+        fmt::format("dIC {} > -{}", Against(c.delta_ic, -o.ic_threshold, 1), o.ic_threshold));
   const double gain = 1.0 - c.validate_rmse_K / rd.base_validate_rmse_K;
   if (!(gain >= o.min_validation_gain))
-    why.push_back(fmt::format("validation gain {:.1f} % < {:.0f} %", 100 * gain,
+    why.push_back(fmt::format("validation gain {} % < {:.0f} %",
+                              Against(100 * gain, 100 * o.min_validation_gain, 1),
                               100 * o.min_validation_gain));
   if (const estimators::EffectSpec* spec = estimators::FindEffect(c.effect); spec != nullptr) {
     const auto& ps = spec->parameters.front();
@@ -334,12 +390,18 @@ std::string WhyNot(const Candidate& c, const Round& rd, const Options& o,
       why.push_back(fmt::format("at its physical bound ({})",
                                 Num(v <= ps.lower + tol ? ps.lower : ps.upper)));
   }
+  const bool tied = std::find(rd.tied.begin(), rd.tied.end(), c.label) != rd.tied.end();
   if (!why.empty()) {
     std::string out;
     for (const auto& w : why) out += (out.empty() ? "" : "; ") + w;
+    if (tied)
+      out += fmt::format(
+          "; within the {:.0f} % margin of a best that is not clearly better than the current "
+          "model: cannot tell apart",
+          100 * o.margin);
     return out;
   }
-  if (std::find(rd.tied.begin(), rd.tied.end(), c.label) != rd.tied.end())
+  if (tied)
     return fmt::format("eligible; within the {:.0f} % margin of the best: cannot tell apart",
                        100 * o.margin);
   return named.empty() ? "eligible; not the best"
@@ -498,68 +560,240 @@ std::string RoundHtml(std::size_t index, const Round& rd, const Options& o) {
 std::string CriterionHtml(const Options& o) {
   return fmt::format(
       "<p class='crit'>A candidate is <i>eligible</i> when all three hold: its information "
-      "criterion "
-      "dIC = n_eff ln(SSR/SSR<sub>current</sub>) + ln(n_eff) is at most -{} (lower is better; BIC "
-      "at the "
-      "effective sample size n_eff = n (1 - rho)/(1 + rho)); its 95 % interval excludes the "
-      "neutral value "
-      "(significant); and it cuts the current model's validation RMSE by at least {:.0f} %. Values "
-      "at a "
-      "physical bound are flagged. The best eligible one is <i>named</i> when every other "
-      "candidate's "
-      "validation RMSE is at least {:.2f} x its own, else the round is ambiguous "
-      "(docs/discrepancy.md, How it decides).</p>",
-      o.ic_threshold, 100 * o.min_validation_gain, 1.0 + o.margin);
+      "criterion dIC = n_eff ln(SSR/SSR<sub>current</sub>) + ln(n_eff) is at most -{1} (lower is "
+      "better; BIC at the effective sample size n_eff = n (1 - rho)/(1 + rho)); its 95 % interval "
+      "excludes the neutral value (significant); and it cuts the current model's validation RMSE "
+      "by at least {2:.0f} %. Values at a physical bound are flagged. The best eligible one is "
+      "<i>named</i> unless a rival has a validation RMSE below {0:.2f} x its own and is eligible "
+      "too, or the best is not {0:.2f} times better than the current model either; then the "
+      "round is ambiguous. An ineligible rival cannot block a best that is clearly better than "
+      "the current model (docs/discrepancy.md, How it decides).</p>",
+      1.0 + o.margin, o.ic_threshold, 100 * o.min_validation_gain);
 }
 
-/// Residual autocorrelation and cross-correlation with the inputs (speed, current), as
-/// MATLAB's resid shows them. Bands: +/- 1.96/sqrt(N) for the autocorrelation (white residuals);
-/// for the cross-correlation 1.96 sqrt(var), var = (1/N) sum_j r_ee(j) r_uu(j) over the plotted
-/// lags: Bartlett's variance of a sample cross-correlation (Bartlett 1978, An Introduction to
+/// One residual test over every lag it plots (MATLAB's `resid` reading): a lag fails when its
+/// correlation lies outside the 95 % band; the test passes when none does.
+struct LagTest {
+  std::string input;  ///< "" for the whiteness test (the autocorrelation), else the input
+  double band = 0.0;
+  double peak = 0.0, peak_lag_min = 0.0;  ///< the largest |correlation| and its lag
+  std::vector<double> failing_lags_min;
+  bool pass() const { return failing_lags_min.empty(); }
+};
+
+/// The residuals of one node against the inputs: correlations, bands and tests.
+struct ResidualCheck {
+  std::vector<double> lag_min;           ///< -M..M grid steps, min
+  std::vector<double> ree;               ///< autocorrelation, lags -M..M
+  std::vector<std::vector<double>> reu;  ///< per input, lags -M..M
+  std::vector<LagTest> tests;            ///< whiteness, then one per input
+};
+
+/// The validation inputs on the plot grid, each with its name and unit.
+struct InputStrip {
+  std::string name, unit, colour;
+  std::vector<double> values;
+  /// Whether the residuals are tested against it: the speed and the current always; a boundary
+  /// temperature only when it moves by more than 1 K (a constant one drives nothing, and its
+  /// sensor's noise would only add lags failed by chance).
+  bool tested = true;
+};
+
+/// Residual autocorrelation and cross-correlation with the inputs, as MATLAB's resid shows them.
+/// Bands: +/- 1.96/sqrt(N) for the autocorrelation (white residuals) at lags 1..M; for the
+/// cross-correlation 1.96 sqrt(var), var = (1/N) sum_j r_ee(j) r_uu(j) over the plotted lags:
+/// Bartlett's variance of a sample cross-correlation (Bartlett 1978, An Introduction to
 /// Stochastic Processes, 3rd ed., p. 352) with the true cross-correlation zero, 1/(N - k) taken
-/// as 1/N (lags at most N/4).
-std::string CorrelationHtml(
-    const std::string& node, const std::vector<double>& t_s, const std::vector<double>& res,
-    const std::vector<std::pair<std::string, const std::vector<double>*>>& inputs) {
+/// as 1/N (lags at most N/4). M = min(40, N/4) grid steps. Empty with fewer than 8 points.
+ResidualCheck CheckResiduals(const std::vector<double>& t_s, const std::vector<double>& res,
+                             const std::vector<InputStrip>& inputs) {
+  ResidualCheck rc;
   const std::size_t n = res.size();
-  if (n < 8) return "";
+  if (n < 8) return rc;
   const int max_lag = static_cast<int>(std::min<std::size_t>(40, n / 4));
   const double step_min = (t_s.back() - t_s.front()) / static_cast<double>(n - 1) / 60.0;
-  std::vector<double> lag;
-  for (int k = -max_lag; k <= max_lag; ++k) lag.push_back(k * step_min);
-  const std::vector<double> ree = CrossCorrelation(res, res, max_lag);
-  const std::vector<double> pos_lag(lag.begin() + max_lag, lag.end()),
-      pos_ree(ree.begin() + max_lag, ree.end());
+  for (int k = -max_lag; k <= max_lag; ++k) rc.lag_min.push_back(k * step_min);
+  rc.ree = CrossCorrelation(res, res, max_lag);
   const double sqrt_n = std::sqrt(static_cast<double>(n));
-  std::string h = "<div class='row'>" + CorrSvg(node + ": residual autocorrelation", pos_lag,
-                                                pos_ree, 1.96 / sqrt_n, "lag, min");
-  for (const auto& [name, u] : inputs) {
-    const std::vector<double> ruu = CrossCorrelation(*u, *u, max_lag);
+  auto test = [&](const std::string& input, const std::vector<double>& r, double band, int from) {
+    LagTest t;
+    t.input = input;
+    t.band = band;
+    for (int k = from; k < static_cast<int>(r.size()); ++k) {
+      const double a = std::abs(r[static_cast<std::size_t>(k)]);
+      if (a > t.peak) {
+        t.peak = a;
+        t.peak_lag_min = rc.lag_min[static_cast<std::size_t>(k)];
+      }
+      if (a > band) t.failing_lags_min.push_back(rc.lag_min[static_cast<std::size_t>(k)]);
+    }
+    rc.tests.push_back(t);
+  };
+  test("", rc.ree, 1.96 / sqrt_n, max_lag + 1);  // lags 1..M
+  for (const InputStrip& u : inputs) {
+    const std::vector<double> ruu = CrossCorrelation(u.values, u.values, max_lag);
     double var = 0;
-    for (int k = 0; k < 2 * max_lag + 1; ++k) var += ree[k] * ruu[k];
-    h += CorrSvg(node + ": residual x " + name, lag, CrossCorrelation(res, *u, max_lag),
-                 1.96 * std::sqrt(std::max(var, 1.0)) / sqrt_n, "lag, min (input leads at +)");
+    for (int k = 0; k < 2 * max_lag + 1; ++k) var += rc.ree[k] * ruu[k];
+    rc.reu.push_back(CrossCorrelation(res, u.values, max_lag));
+    test(u.name, rc.reu.back(), 1.96 * std::sqrt(std::max(var, 1.0)) / sqrt_n, 0);
   }
+  return rc;
+}
+
+/// "fails at lags 0.5 to 3.0, 5.0 min (peak 0.72 at 1.0 min, band 0.55)", "passes (peak 0.31
+/// at 2.0 min, band 0.55)".
+std::string LagTestText(const LagTest& t) {
+  if (t.pass())
+    return fmt::format("passes (peak {:.2f} at {:.1f} min, band {:.2f})", t.peak, t.peak_lag_min,
+                       t.band);
+  std::string lags;
+  const std::vector<double>& f = t.failing_lags_min;
+  const double step = f.size() > 1 ? std::abs(f[1] - f[0]) : 0.0;
+  for (std::size_t i = 0; i < f.size();) {
+    std::size_t j = i;
+    while (j + 1 < f.size() && std::abs(f[j + 1] - f[j] - step) < 1e-6 * (1 + step) && step > 0)
+      ++j;
+    lags += (lags.empty() ? "" : ", ") +
+            (j > i ? fmt::format("{:.1f} to {:.1f}", f[i], f[j]) : fmt::format("{:.1f}", f[i]));
+    i = j + 1;
+  }
+  return fmt::format("FAILS at lags {} min (peak {:.2f} at {:.1f} min, band {:.2f})", lags, t.peak,
+                     t.peak_lag_min, t.band);
+}
+
+/// MATLAB compare's fit: 100 (1 - |y - yhat| / |y - mean(y)|), %, grid points 1.. (point 0 is
+/// the start, as in the gap table).
+double FitPercent(const std::vector<double>& measured, const std::vector<double>& simulated) {
+  double mean = 0.0;
+  const std::size_t n = measured.size();
+  if (n < 2) return std::nan("");
+  for (std::size_t j = 1; j < n; ++j) mean += measured[j] / static_cast<double>(n - 1);
+  double err = 0.0, spread = 0.0;
+  for (std::size_t j = 1; j < n; ++j) {
+    err += (measured[j] - simulated[j]) * (measured[j] - simulated[j]);
+    spread += (measured[j] - mean) * (measured[j] - mean);
+  }
+  return spread > 0.0 ? 100.0 * (1.0 - std::sqrt(err / spread)) : std::nan("");
+}
+
+double Rmse(const std::vector<double>& measured, const std::vector<double>& simulated) {
+  double ss = 0.0;
+  for (std::size_t j = 1; j < measured.size(); ++j)
+    ss += (measured[j] - simulated[j]) * (measured[j] - simulated[j]);
+  return measured.size() > 1 ? std::sqrt(ss / static_cast<double>(measured.size() - 1))
+                             : std::nan("");
+}
+
+/// What the report says about one node's model, before and after the effects.
+struct NodeVerdict {
+  std::string node;
+  double fit_before = 0.0, fit_after = 0.0, rmse_before = 0.0, rmse_after = 0.0;
+  ResidualCheck before, after;
+};
+
+std::vector<InputStrip> Inputs(const PlotSeries& v, const Data* data) {
+  std::vector<InputStrip> out;
+  if (data == nullptr || data->size() == 0 || v.time_s.empty()) return out;
+  std::vector<double> speed, current, ambient, coolant;
+  InputsOnGrid(*data, v.time_s, speed, current, ambient, coolant);
+  auto moves = [](const std::vector<double>& series) {
+    const auto [lo, hi] = std::minmax_element(series.begin(), series.end());
+    return lo != series.end() && *hi - *lo > 1.0;
+  };
+  out.push_back({"speed", "r/min", "#2ca02c", speed});
+  out.push_back({"current", "A", "#9467bd", current});
+  out.push_back({"ambient", "degC", "#8c564b", ambient, moves(ambient)});
+  bool own_coolant = false;
+  for (std::size_t k = 0; k < data->size(); ++k)
+    own_coolant = own_coolant || data->coolant_degC[k] != data->ambient_degC[k];
+  if (own_coolant) out.push_back({"coolant", "degC", "#17becf", coolant, moves(coolant)});
+  return out;
+}
+
+std::vector<NodeVerdict> Verdicts(const PlotSeries& v, const std::vector<InputStrip>& inputs) {
+  std::vector<NodeVerdict> out;
+  for (std::size_t i = 0; i < v.nodes.size(); ++i) {
+    NodeVerdict nv;
+    nv.node = v.nodes[i];
+    nv.fit_before = FitPercent(v.measured[i], v.before[i]);
+    nv.fit_after = FitPercent(v.measured[i], v.after[i]);
+    nv.rmse_before = Rmse(v.measured[i], v.before[i]);
+    nv.rmse_after = Rmse(v.measured[i], v.after[i]);
+    std::vector<double> rb(v.time_s.size()), ra(v.time_s.size());
+    for (std::size_t j = 0; j < v.time_s.size(); ++j) {
+      rb[j] = v.before[i][j] - v.measured[i][j];
+      ra[j] = v.after[i][j] - v.measured[i][j];
+    }
+    nv.before = CheckResiduals(v.time_s, rb, inputs);
+    nv.after = CheckResiduals(v.time_s, ra, inputs);
+    out.push_back(std::move(nv));
+  }
+  return out;
+}
+
+/// "Is the model right now?": per node the fit and every residual test, before and after.
+std::string TestsHtml(const std::vector<NodeVerdict>& verdicts) {
+  std::string h =
+      "<h2>Is the model right now? Residual tests on the validation data</h2>"
+      "<p class='crit'>As MATLAB's <i>compare</i> and <i>resid</i> read them: the fit is 100 (1 - "
+      "|measured - simulated| / |measured - its mean|) %; the <b>whiteness</b> test asks whether "
+      "the residuals (simulated - measured) are uncorrelated with themselves at lags 1 to M, the "
+      "<b>cross-correlation</b> tests whether they are uncorrelated with each input at lags -M "
+      "to M (an input leads at positive lags). A lag fails when its correlation lies outside the "
+      "95 % band; a test passes when no lag fails. A residual the inputs still drive means an "
+      "effect the model misses (docs/discrepancy.md, \"Residual tests\").</p>"
+      "<table><tr><th>node</th><th>test</th><th>before</th><th>after</th></tr>";
+  for (const NodeVerdict& v : verdicts) {
+    const std::size_t tests = v.after.tests.size();
+    h += fmt::format(
+        "<tr><td rowspan='{}'>{}</td><td>fit, RMSE</td><td class='why'>{:.1f} %, {:.3f} K</td>"
+        "<td class='why'>{:.1f} %, {:.3f} K</td></tr>",
+        tests + 1, Html(v.node), v.fit_before, v.rmse_before, v.fit_after, v.rmse_after);
+    for (std::size_t k = 0; k < tests; ++k) {
+      const LagTest& a = v.after.tests[k];
+      const LagTest& b = v.before.tests[k];
+      auto cell = [](const LagTest& t) {
+        return fmt::format("<td class='why {}'>{}</td>", t.pass() ? "pass" : "fail",
+                           Html(LagTestText(t)));
+      };
+      h += fmt::format("<tr><td>{}</td>{}{}</tr>",
+                       a.input.empty() ? "whiteness" : "x " + Html(a.input), cell(b), cell(a));
+    }
+  }
+  return h + "</table>";
+}
+
+/// The correlation plots of one node's residuals (its autocorrelation, then one per input).
+std::string CorrelationRow(const std::string& title, const ResidualCheck& rc,
+                           const std::vector<InputStrip>& inputs) {
+  if (rc.tests.empty()) return "";
+  const std::size_t m = (rc.lag_min.size() - 1) / 2;
+  const std::vector<double> pos_lag(rc.lag_min.begin() + static_cast<long>(m), rc.lag_min.end()),
+      pos_ree(rc.ree.begin() + static_cast<long>(m), rc.ree.end());
+  std::string h = "<div class='row'>" + CorrSvg(title + ": residual autocorrelation", pos_lag,
+                                                pos_ree, rc.tests[0].band, "lag, min");
+  for (std::size_t k = 0; k < inputs.size() && k < rc.reu.size(); ++k)
+    h += CorrSvg(title + ": residual x " + inputs[k].name, rc.lag_min, rc.reu[k],
+                 rc.tests[k + 1].band, "lag, min (input leads at +)");
   return h + "</div>";
 }
 
-std::string PlotsHtml(const PlotSeries& v, const Data* data) {
+std::string PlotsHtml(const PlotSeries& v, const std::vector<InputStrip>& inputs,
+                      const std::vector<InputStrip>& tested,
+                      const std::vector<NodeVerdict>& verdicts) {
   std::string h = "<h2>Validation data: measured against simulated</h2>";
-  std::vector<double> speed, current;
-  if (data != nullptr && data->size() > 0 && !v.time_s.empty())
-    InputsOnGrid(*data, v.time_s, speed, current);
   for (std::size_t i = 0; i < v.nodes.size(); ++i) {
+    const NodeVerdict& nv = verdicts[i];
     h += "<h3>" + Html(v.nodes[i]) + "</h3>";
     h += Svg(v.nodes[i] + ": temperature", v.time_s,
-             {{"before", "#d62728", &v.before[i], true, 1.4},
-              {"after", "#1f77b4", &v.after[i], false, 2.4},
+             {{fmt::format("before: fit {:.1f} %, RMSE {:.2f} K", nv.fit_before, nv.rmse_before),
+               "#d62728", &v.before[i], true, 1.4},
+              {fmt::format("after: fit {:.1f} %, RMSE {:.2f} K", nv.fit_after, nv.rmse_after),
+               "#1f77b4", &v.after[i], false, 2.4},
               {"measured", "#000", &v.measured[i], false, 1.0}},
              "degC");
-    if (!speed.empty()) {
-      h += Svg("input: speed", v.time_s, {{"speed", "#2ca02c", &speed}}, "r/min", false, 140);
-      h += Svg("input: current amplitude (rms)", v.time_s, {{"current", "#9467bd", &current}}, "A",
-               false, 140);
-    }
+    for (const InputStrip& u : inputs)
+      h += Svg("input: " + u.name, v.time_s, {{u.name, u.colour, &u.values}}, u.unit, false, 140);
     std::vector<double> rb(v.time_s.size()), ra(v.time_s.size());
     for (std::size_t j = 0; j < v.time_s.size(); ++j) {
       rb[j] = v.before[i][j] - v.measured[i][j];
@@ -568,9 +802,8 @@ std::string PlotsHtml(const PlotSeries& v, const Data* data) {
     h += Svg(v.nodes[i] + ": residual (simulated - measured)", v.time_s,
              {{"before", "#d62728", &rb, true, 1.4}, {"after", "#1f77b4", &ra, false, 1.4}}, "K",
              true);
-    std::vector<std::pair<std::string, const std::vector<double>*>> inputs;
-    if (!speed.empty()) inputs = {{"speed", &speed}, {"current", &current}};
-    h += CorrelationHtml(v.nodes[i] + " after", v.time_s, ra, inputs);
+    h += CorrelationRow(v.nodes[i] + " before", nv.before, tested);
+    h += CorrelationRow(v.nodes[i] + " after", nv.after, tested);
   }
   return h;
 }
@@ -619,7 +852,8 @@ std::string ReportHtml(const Result& r, const std::string& model, const std::str
       "block;margin:4px 0}.row{display:flex;gap:4px}.row svg{flex:1;min-width:0}"
       "pre.diff{background:#f7f7f7;padding:6px;overflow-x:auto}.add{color:#1a7f37}.del{color:#"
       "c62828}"
-      ".ctx{color:#555}.gap{color:#999}.crit{font-size:90%;color:#333}</style></head><body>";
+      ".ctx{color:#555}.gap{color:#999}.crit{font-size:90%;color:#333}td.pass{color:#1a7f37}"
+      "td.fail{color:#c62828}</style></head><body>";
   h += fmt::format(
       "<h1>Model discrepancy: {}</h1><p>Train: {}<br>Validate: {}<br>Files: <a href='model.toml'>"
       "model.toml</a> (the model with the effects added), <a "
@@ -649,10 +883,15 @@ std::string ReportHtml(const Result& r, const std::string& model, const std::str
         Html(r.validate_before[i].node), r.train_before[i].rmse_K, r.train_after[i].rmse_K,
         r.validate_before[i].rmse_K, r.validate_after[i].rmse_K, r.validate_before[i].max_abs_K,
         r.validate_after[i].max_abs_K);
-  h += "</table>" + CriterionHtml(context.options);
+  const std::vector<InputStrip> inputs = Inputs(r.validate_plot, context.validate);
+  std::vector<InputStrip> tested;
+  for (const InputStrip& u : inputs)
+    if (u.tested) tested.push_back(u);
+  const std::vector<NodeVerdict> verdicts = Verdicts(r.validate_plot, tested);
+  h += "</table>" + TestsHtml(verdicts) + CriterionHtml(context.options);
   for (std::size_t ri = 0; ri < r.rounds.size(); ++ri)
     h += RoundHtml(ri, r.rounds[ri], context.options);
-  h += PlotsHtml(r.validate_plot, context.validate);
+  h += PlotsHtml(r.validate_plot, inputs, tested, verdicts);
   if (!r.rounds.empty()) h += RankingHtml(r.rounds[0]);
   return h + "</body></html>\n";
 }

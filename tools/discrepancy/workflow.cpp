@@ -4,6 +4,8 @@
 #include <fmt/core.h>
 
 #include <algorithm>
+#include <cctype>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -415,6 +417,53 @@ Simulated SimulateModel(const pe::ThermalModel& model, const Data& data, const O
   return {g.t_s, g.nodes, Simulate(model, g), g.averaged};
 }
 
+std::string ShortestFloats(std::string_view toml) {
+  std::string out;
+  out.reserve(toml.size());
+  auto word_char = [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.' ||
+           c == '+';
+  };
+  std::size_t i = 0;
+  while (i < toml.size()) {
+    const char c = toml[i];
+    if (c == '#') {  // a comment, to the end of the line
+      const std::size_t e = toml.find('\n', i);
+      const std::size_t end = e == std::string_view::npos ? toml.size() : e;
+      out.append(toml.substr(i, end - i));
+      i = end;
+    } else if (c == '"' || c == '\'') {  // a string (basic strings may escape their quote)
+      std::size_t j = i + 1;
+      while (j < toml.size() && toml[j] != c) j += (c == '"' && toml[j] == '\\') ? 2 : 1;
+      j = std::min(j + 1, toml.size());
+      out.append(toml.substr(i, j - i));
+      i = j;
+    } else if (word_char(c)) {  // a bare key, a number, a boolean: one token
+      std::size_t j = i;
+      while (j < toml.size() && word_char(toml[j])) ++j;
+      const std::string_view token = toml.substr(i, j - i);
+      double v = 0.0;
+      const char* first = token.data() + (token.front() == '+' ? 1 : 0);
+      const auto [ptr, ec] = std::from_chars(first, token.data() + token.size(), v);
+      const bool numeric = std::isdigit(static_cast<unsigned char>(c)) || c == '-' || c == '+';
+      const bool is_float = token.find_first_of(".eE") != std::string_view::npos;
+      if (numeric && is_float && ec == std::errc() && ptr == token.data() + token.size() &&
+          std::isfinite(v)) {
+        std::string shortest = fmt::format("{}", v);
+        if (shortest.find_first_of(".eE") == std::string::npos) shortest += ".0";
+        out += shortest;
+      } else {
+        out.append(token);
+      }
+      i = j;
+    } else {
+      out += c;
+      ++i;
+    }
+  }
+  return out;
+}
+
 std::string SeparatingExperiment(const std::vector<std::string>& effects) {
   static const std::map<std::string, std::string> kHow{
       {"frame_thermal_mass",
@@ -575,10 +624,19 @@ Result Run(const std::string& text, const std::string& source, const Data& train
     if (best == order.size()) {
       rd.verdict = "none";
     } else {
-      const double limit = (1.0 + o.margin) * rd.candidates[best].validate_rmse_K;
-      for (std::size_t i : order)
-        if (i != best && rd.candidates[i].validate_rmse_K < limit)
-          rd.tied.push_back(rd.candidates[i].label);
+      // A rival within the validation margin blocks the name when it is eligible itself (two
+      // credible explanations), or when the best is not clearly better than the current model
+      // either (its validation RMSE not below the current one by the margin: the validation data
+      // then tell nothing apart). An ineligible rival cannot block a best that is clearly
+      // better than the current model (docs/discrepancy.md, "How it decides").
+      const Candidate& b = rd.candidates[best];
+      const double limit = (1.0 + o.margin) * b.validate_rmse_K;
+      const bool clearly_better = current_val_rmse >= limit;
+      for (std::size_t i : order) {
+        const Candidate& c = rd.candidates[i];
+        if (i != best && c.validate_rmse_K < limit && (c.eligible || !clearly_better))
+          rd.tied.push_back(c.label);
+      }
       if (rd.tied.empty()) {
         rd.verdict = "named";
       } else {
@@ -628,7 +686,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
   res.train_after = Gaps(after_train, gt);
   res.validate_before = Gaps(before_val, gv);
   res.validate_after = Gaps(after_val, gv);
-  res.model_toml = pe::ApplyModelEffects(text, source, added, files.directory);
+  res.model_toml = ShortestFloats(pe::ApplyModelEffects(text, source, added, files.directory));
   res.validate_plot = {gv.t_s, gv.nodes, gv.measured, before_val, after_val};
   res.train_plot = {gt.t_s, gt.nodes, gt.measured, before_train, after_train};
   res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -28,7 +28,10 @@ struct Options {
   // Decision rule (docs/discrepancy.md).
   double ic_threshold = 10.0;         ///< delta IC at least this far below the current model
   double min_validation_gain = 0.10;  ///< validation RMSE cut by at least this fraction
-  double margin = 0.20;               ///< runner-up's validation RMSE at least (1 + margin) x best
+  /// The best eligible candidate is named unless a rival has a validation RMSE below
+  /// (1 + margin) x the best's and is eligible itself, or the best's is not below the current
+  /// model's by that margin either.
+  double margin = 0.20;
   int max_fit_iterations = 30;
   /// Called with one line of progress (the command prints it on a terminal).
   std::function<void(const std::string&)> progress;
@@ -113,6 +116,11 @@ Simulated SimulateModel(const estimators::ThermalModel& model, const Data& data,
 Result Run(const std::string& model_text, const std::string& source, const Data& train,
            const Data& validate, const Options& options,
            const estimators::ThermalModelFiles& files = {});
+
+/// `toml` with every float value written in its shortest round-trip form (fmt's `{}`:
+/// "0.00393", not toml++'s 17 digits "0.0039300000000000003"), still a float (".0" kept);
+/// strings, comments, keys and integers unchanged. The same values, read back bit for bit.
+std::string ShortestFloats(std::string_view toml);
 
 /// What experiment separates these effects (one sentence per effect).
 std::string SeparatingExperiment(const std::vector<std::string>& effects);

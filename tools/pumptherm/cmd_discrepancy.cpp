@@ -63,8 +63,8 @@ int RunDiscrepancy(const DiscrepancyOptions& o) {
     throw InputError(e.what());
   }
   discrepancy::ReportContext context;
-  context.input_model_toml =
-      estimators::ApplyModelEffects(text, path, {}, shipped::DirectoryOf(path));
+  context.input_model_toml = discrepancy::ShortestFloats(
+      estimators::ApplyModelEffects(text, path, {}, shipped::DirectoryOf(path)));
   context.options = opt;
   context.validate = &validate;
   discrepancy::WriteReport(o.out, r, o.model, o.train, o.validate, context);

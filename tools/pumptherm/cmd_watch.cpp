@@ -1,11 +1,15 @@
-// pumptherm watch: the live table of every pump from the gateway's LCM messages, from any host
-// that receives the LCM group (the daemon's lcm.url with ttl=1 reaches the LAN segment).
+// pumptherm watch: the live view of every pump from the gateway's LCM messages, from any host
+// that receives the LCM group (the daemon's lcm.url with ttl=1 reaches the LAN segment): one line
+// per pump, or `watch PUMP` for everything known of one pump. The URL and channel prefix come
+// from the gateway's configuration, as for `pumptherm clear-trip`.
 #include <fmt/core.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
 #include <lcm/lcm-cpp.hpp>
 
+#include "daemon/config.hpp"
 #include "protocol/lcm/channels.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 #include "tools/pumptherm/watch.hpp"
@@ -14,12 +18,43 @@ namespace pumptherm::tools {
 namespace {
 
 struct WatchOptions {
-  std::string lcm_url;
-  std::string prefix{lcm_channels::kDefaultPrefix};
+  std::string pump;  ///< empty: every pump, one line each
+  std::string config = "/etc/pumptherm/pumpthermd.toml";
+  std::string url;
+  std::string old_url;  ///< --lcm-url, the earlier name of --url
+  std::string prefix;
   double period_s = 5.0;
   int count = 0;
   double stale_after_s = 15.0;
 };
+
+/// Where to listen: from the options, over the gateway's configuration when it can be read.
+struct WatchSettings {
+  std::string url, prefix{lcm_channels::kDefaultPrefix};
+  std::map<std::string, std::string> measured_nodes;  ///< pump -> the node its sensor measures
+};
+
+WatchSettings Resolve(const WatchOptions& o) {
+  WatchSettings s;
+  s.url = o.url;
+  // A host without the gateway's configuration: the URL given is enough.
+  if (!o.url.empty() && ::access(o.config.c_str(), F_OK) != 0) {
+    if (!o.prefix.empty()) s.prefix = o.prefix;
+    return s;
+  }
+  daemon::DaemonConfig c;
+  try {
+    c = daemon::LoadConfig(o.config);
+  } catch (const daemon::ConfigError& e) {
+    throw InputError(fmt::format("{} (without the configuration, give --url)", e.what()));
+  }
+  if (s.url.empty()) s.url = c.lcm.url;
+  if (s.url.empty())
+    throw InputError(fmt::format("{}: LCM is off (lcm.url is empty); give --url", o.config));
+  s.prefix = o.prefix.empty() ? c.lcm.channel_prefix : o.prefix;
+  for (const auto& p : c.pumps) s.measured_nodes[p.name] = p.measured_node;
+  return s;
+}
 
 std::int64_t NowUs() {
   return std::chrono::duration_cast<std::chrono::microseconds>(
@@ -35,21 +70,34 @@ struct Receiver {
   void OnAlarm(const lcm::ReceiveBuffer*, const std::string&, const pumptherm::alarm_t* m) {
     watch.OnAlarm(*m, NowUs());
   }
+  void OnTelemetry(const lcm::ReceiveBuffer*, const std::string&, const pumptherm::telemetry_t* m) {
+    watch.OnTelemetry(*m, NowUs());
+  }
 };
 
-int RunWatch(const WatchOptions& o) {
+int RunWatch(WatchOptions o) {
   if (!(o.period_s > 0.0)) throw InputError("--period-s must be positive");
-  if (!lcm_channels::IsValidPrefix(o.prefix))
-    throw InputError("--prefix: invalid channel prefix '" + o.prefix + "'");
-  lcm::LCM lcm(o.lcm_url);
-  if (!lcm.good()) throw std::runtime_error("LCM: cannot start with URL '" + o.lcm_url + "'");
+  if (!o.old_url.empty()) {
+    fmt::print(stderr, "watch: --lcm-url is now called --url (as in clear-trip)\n");
+    if (o.url.empty()) o.url = o.old_url;
+  }
+  const WatchSettings s = Resolve(o);
+  if (!lcm_channels::IsValidPrefix(s.prefix))
+    throw InputError("--prefix: invalid channel prefix '" + s.prefix + "'");
+  lcm::LCM lcm(s.url);
+  if (!lcm.good()) throw std::runtime_error("LCM: cannot start with URL '" + s.url + "'");
   Receiver rx;
-  lcm.subscribe(lcm_channels::AllPumpsPattern(o.prefix, lcm_channels::PumpChannel::kTemperatures),
+  for (const auto& [pump, node] : s.measured_nodes) rx.watch.SetMeasuredNode(pump, node);
+  using lcm_channels::PumpChannel;
+  lcm.subscribe(lcm_channels::AllPumpsPattern(s.prefix, PumpChannel::kTemperatures),
                 &Receiver::OnTemps, &rx);
-  lcm.subscribe(lcm_channels::AllPumpsPattern(o.prefix, lcm_channels::PumpChannel::kAlarm),
-                &Receiver::OnAlarm, &rx);
-  fmt::print("watching {} on {} (a table every {} s; Ctrl-C ends)\n", o.prefix,
-             o.lcm_url.empty() ? "LCM's default URL" : o.lcm_url, o.period_s);
+  lcm.subscribe(lcm_channels::AllPumpsPattern(s.prefix, PumpChannel::kAlarm), &Receiver::OnAlarm,
+                &rx);
+  lcm.subscribe(lcm_channels::AllPumpsPattern(s.prefix, PumpChannel::kTelemetry),
+                &Receiver::OnTelemetry, &rx);
+  fmt::print("watching {}{} on {} (every {} s; Ctrl-C ends)\n", s.prefix,
+             o.pump.empty() ? "" : "/" + o.pump, s.url.empty() ? "LCM's default URL" : s.url,
+             o.period_s);
   std::fflush(stdout);
   const auto period_us = static_cast<std::int64_t>(o.period_s * 1e6);
   std::int64_t next_us = NowUs() + period_us;
@@ -63,34 +111,48 @@ int RunWatch(const WatchOptions& o) {
     }
     const std::int64_t now = NowUs();
     if (rx.watch.PumpCount() == 0) {
-      fmt::print("no pumptherm messages yet under {}/<pump>/TEMPS or ALARM\n", o.prefix);
-    } else {
+      fmt::print("no pumptherm messages yet under {}/<pump>/TEMPS, ALARM or TELEMETRY\n", s.prefix);
+    } else if (o.pump.empty()) {
       fmt::print("\n{}", rx.watch.Table(now, o.stale_after_s));
+    } else {
+      fmt::print("\n{}", rx.watch.Detail(o.pump, now, o.stale_after_s));
     }
     std::fflush(stdout);
     ++shown;
     next_us += period_us;
   }
-  return rx.watch.PumpCount() > 0 ? 0 : 1;
+  return (o.pump.empty() ? rx.watch.PumpCount() > 0 : rx.watch.Has(o.pump)) ? 0 : 1;
 }
 
 const SubcommandRegistrar kRegistrar{
-    "watch", "live table of every pump from the gateway's LCM messages (any host on the LAN)",
+    "watch",
+    "live view of every pump (or of one) from the gateway's LCM messages (any host on the LAN)",
     [](CLI::App& app) {
       auto o = std::make_shared<WatchOptions>();
-      app.add_option("--lcm-url", o->lcm_url,
-                     "LCM URL, as the gateway's lcm.url (default: LCM's default, LCM_DEFAULT_URL)");
-      app.add_option("--prefix", o->prefix, "channel prefix, as the gateway's lcm.channel_prefix")
+      app.add_option("pump", o->pump,
+                     "show everything known of this pump (default: one line per pump)");
+      app.add_option("-c,--config", o->config,
+                     "the gateway's configuration: LCM URL, channel prefix, measured nodes")
           ->capture_default_str();
-      app.add_option("--period-s", o->period_s, "seconds between tables")->capture_default_str();
-      app.add_option("--count", o->count, "tables to print, then exit (0: until interrupted)")
+      app.add_option("--url", o->url, "LCM URL (default: lcm.url of the configuration)");
+      app.add_option("--lcm-url", o->old_url, "the earlier name of --url")->group("");
+      app.add_option("--prefix", o->prefix,
+                     "channel prefix (default: lcm.channel_prefix of the configuration, or "
+                     "PUMPTHERM)");
+      app.add_option("--period-s", o->period_s, "seconds between views")->capture_default_str();
+      app.add_option("--count", o->count, "views to print, then exit (0: until interrupted)")
           ->capture_default_str();
       app.add_option("--stale-after-s", o->stale_after_s,
                      "mark a pump STALE after this long silent")
           ->capture_default_str();
       app.footer(
-          "Example: pumptherm watch --lcm-url 'udpm://239.255.76.67:7667?ttl=1' --period-s 2\n"
-          "Exit status: 0 after --count tables with at least one pump heard, 1 if none was heard.");
+          "Examples:\n"
+          "  pumptherm watch                  (on the gateway: its configuration's URL)\n"
+          "  pumptherm watch pump3 --period-s 2\n"
+          "  pumptherm watch --url 'udpm://239.255.76.67:7667?ttl=1'   (another host)\n"
+          "Without the configuration file, --url is needed.\n"
+          "Exit status: 0 after --count views with a pump (the pump) heard, 1 if none was, 2 bad "
+          "input.");
       return [o] { return RunWatch(*o); };
     }};
 

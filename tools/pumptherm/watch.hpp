@@ -1,16 +1,21 @@
 #pragma once
 /// The operator's live view of every pump from the gateway's LCM messages (`pumptherm watch`):
-/// the last TEMPS and ALARM message of each pump, kept by pump name, and the table printed from
-/// them. No I/O here: the command feeds messages in and prints the table.
+/// the last TEMPS, ALARM and TELEMETRY message of each pump, kept by pump name, and the views
+/// printed from them: one line per pump within 100 columns, or the detail of one pump. No I/O
+/// here: the command feeds messages in and prints the views. docs/lcm.md, "pumptherm watch".
 
 #include <cstdint>
 #include <map>
 #include <string>
 
 #include "pumptherm/alarm_t.hpp"
+#include "pumptherm/telemetry_t.hpp"
 #include "pumptherm/temperatures_t.hpp"
 
 namespace pumptherm::tools {
+
+/// The widest line Table() writes (a terminal's 100 columns).
+inline constexpr std::size_t kWatchColumns = 100;
 
 class PumpWatch {
  public:
@@ -19,29 +24,43 @@ class PumpWatch {
   void OnTemperatures(const pumptherm::temperatures_t& m, std::int64_t now_us);
   /// Keeps `m` as pump `m.pump`'s latest alarm state, received at `now_us`.
   void OnAlarm(const pumptherm::alarm_t& m, std::int64_t now_us);
+  /// Keeps `m` as pump `m.pump`'s latest telemetry (the direct readings), received at `now_us`.
+  void OnTelemetry(const pumptherm::telemetry_t& m, std::int64_t now_us);
+  /// The node pump `pump`'s sensor measures (from the gateway's configuration; "frame" when not
+  /// told): the diagnosis speaks of it.
+  void SetMeasuredNode(const std::string& pump, const std::string& node);
 
   /// Pumps heard from so far.
   std::size_t PumpCount() const { return pumps_.size(); }
+  bool Has(const std::string& pump) const { return pumps_.count(pump) > 0; }
 
-  /// One line per pump, sorted by name: age of the last message, every node's estimate with its
-  /// standard deviation, the winding from resistance with its status, the filter's status and
-  /// NIS, the alarm level with every active condition (reason and node) and the forecast.
-  /// A pump silent for more than `stale_after_s` is marked STALE.
+  /// One line per pump, sorted by name, none wider than kWatchColumns: the age of its last
+  /// message (STALE after `stale_after_s` of silence), the alarm level with what raised it, the
+  /// hottest node's estimate with its +-2 sd band, and the model diagnosis with since when.
   std::string Table(std::int64_t now_us, double stale_after_s) const;
+
+  /// Everything known of one pump: every node with its band, the direct readings (frame sensor,
+  /// ambient, winding from resistance, magnet from flux), the diagnosis and since when, every
+  /// alarm condition with its cause, and the time to trip when there is one.
+  std::string Detail(const std::string& pump, std::int64_t now_us, double stale_after_s) const;
 
  private:
   struct Entry {
     pumptherm::temperatures_t temps;
     pumptherm::alarm_t alarm;
+    pumptherm::telemetry_t telemetry;
     std::int64_t temps_rx_us = -1;
     std::int64_t alarm_rx_us = -1;
+    std::int64_t telemetry_rx_us = -1;
+    std::string measured_node = "frame";
   };
   std::map<std::string, Entry> pumps_;
+  std::map<std::string, std::string> measured_nodes_;
 };
 
 /// Name of an identifier status as the LCM message carries it ("tracking", ...).
 std::string IdentStatusName(int status);
-/// Name of an alarm reason as the LCM message carries it ("forecast", ...).
+/// Name of an alarm reason as the LCM message carries it, in words ("stale telemetry", ...).
 std::string AlarmReasonLabel(int reason);
 
 }  // namespace pumptherm::tools

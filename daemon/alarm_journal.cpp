@@ -1,0 +1,232 @@
+#include "daemon/alarm_journal.hpp"
+
+#include <fmt/format.h>
+
+#include <cmath>
+
+namespace pumptherm::daemon {
+namespace {
+
+using estimators::AlarmCondition;
+using estimators::AlarmLevel;
+using estimators::AlarmReason;
+using estimators::MismatchEffect;
+using estimators::MismatchFinding;
+using estimators::MismatchState;
+
+/// A number with the digits a reader needs: "120", "0.5", "2.5" (shortest, at most 4 figures).
+std::string Short(double v) { return fmt::format("{:.4g}", v); }
+
+/// A node as a person reads it: the model's name, or "winding from resistance".
+std::string NodeWords(int node, const std::vector<std::string>& names) {
+  return daemon::NodeWords(AlarmNodeName(node, names));
+}
+
+bool IsTemperature(const AlarmCondition& c) {
+  switch (c.reason) {
+    case AlarmReason::kEstimatedOverTemperature:
+    case AlarmReason::kMeasuredOverTemperature:
+    case AlarmReason::kSensorFault:
+      return true;
+    case AlarmReason::kImplausibleSensor:
+      return std::string_view(c.detail) == "stuck";
+    default:
+      return false;
+  }
+}
+
+std::string SensorFaultText(const AlarmCondition& c, const std::string& sensor,
+                            const estimators::AlarmConfig& k) {
+  const std::string_view kind = c.detail;
+  std::string why;
+  if (kind == "missing") {
+    why = fmt::format("missing (no reading for {} s)", Short(k.stale_after_s));
+  } else if (kind == "stuck") {
+    why = fmt::format("stuck (unchanged to the last bit for {} s)", Short(k.flat_after_s));
+  } else if (kind == "out of range") {
+    why = fmt::format("out of range ({} to {} degC)", Short(k.sensor_min_degC),
+                      Short(k.sensor_max_degC));
+  } else if (kind == "jumping") {
+    why = fmt::format("jumping (a step above {} K between readings)", Short(k.max_step_K));
+  } else {
+    why = std::string(kind);
+  }
+  std::string out = fmt::format("{} sensor fault: {}", sensor, why);
+  if (std::isfinite(c.value)) out += fmt::format(", last reading {:.1f} degC", c.value);
+  return out + "; left out of the estimate";
+}
+
+std::string ImplausibleText(const AlarmCondition& c, const std::string& sensor,
+                            const estimators::AlarmConfig& k) {
+  const std::string_view kind = c.detail;
+  if (kind == "stuck") {
+    return fmt::format("{} sensor stuck at {:.1f} degC for {} s while the model moved over {} K",
+                       sensor, c.value, Short(k.stuck_after_s), Short(k.stuck_model_move_K));
+  }
+  if (kind == "offset") {
+    return fmt::format(
+        "{} sensor offset {:+.1f} K (limit {} K): its reading stepped faster than the {} can move",
+        sensor, c.value, Short(k.max_sensor_offset_K), sensor);
+  }
+  return fmt::format("{} sensor disagrees with the model for {} s (NIS {:.1f} > {})", sensor,
+                     Short(k.disagree_hold_s), c.value, Short(k.nis_limit));
+}
+
+/// What the condition says, with its value in its unit.
+std::string ConditionText(const AlarmCondition& c, const std::vector<std::string>& names,
+                          const estimators::AlarmConfig& k) {
+  const std::string node = NodeWords(c.node, names);
+  const std::string sensor = c.node >= 0 ? node : std::string("frame");
+  switch (c.reason) {
+    case AlarmReason::kMeasuredOverTemperature:
+      return fmt::format("{} sensor {:.1f} degC >= {} degC", sensor, c.value, Short(c.threshold));
+    case AlarmReason::kRateOfRise:
+      return fmt::format("{} rising {:.1f} K/min (limit {} K/min)", node, c.value,
+                         Short(k.max_rise_K_per_min));
+    case AlarmReason::kStaleTelemetry:
+      return fmt::format("no telemetry for {:.1f} s (limit {} s)", c.value, Short(k.stale_after_s));
+    case AlarmReason::kImplausibleSensor:
+      return ImplausibleText(c, sensor, k);
+    case AlarmReason::kEstimatorNotConverged:
+      return "the estimate has not converged (a node's sd above 5 K)";
+    case AlarmReason::kForecast:
+      return fmt::format("{} reaches its trip level in {} at the present load (horizon {})",
+                         node.empty() ? "a node" : node, DurationText(c.value),
+                         DurationText(k.forecast_horizon_s));
+    case AlarmReason::kSensorFault:
+      return SensorFaultText(c, sensor, k);
+    case AlarmReason::kEstimatedOverTemperature:
+    case AlarmReason::kNone:
+      break;
+  }
+  return "";
+}
+
+/// The estimated over-temperature: "winding 121.3 degC (bound 126.1 = estimate + 2 sd) >= 120
+/// degC"; the bound shown when the rule's estimate + k sd lies above the value.
+std::string OverTemperatureText(const estimators::AlarmState& a, const AlarmCondition& c,
+                                const std::vector<std::string>& names,
+                                const estimators::AlarmConfig& k) {
+  std::string out = NodeWords(c.node, names);
+  const double factor = a.level == AlarmLevel::kTrip ? k.trip_sd_factor : k.warning_sd_factor;
+  if (std::isfinite(a.value)) out += fmt::format(" {:.1f} degC", a.value);
+  if (std::isfinite(a.bound) && a.bound > a.value) {
+    out += fmt::format(" (bound {:.1f} = estimate + {} sd)", a.bound, Short(factor));
+  } else if (std::isfinite(a.value) && std::isfinite(c.threshold) && a.value < c.threshold) {
+    // The bound is not known (a trip latched again after a restart keeps only its value), but
+    // it reached the level: say so rather than "116.8 degC >= 120 degC".
+    return out +
+           fmt::format(" with estimate + {} sd >= {} degC", Short(factor), Short(c.threshold));
+  }
+  if (std::isfinite(c.threshold)) out += fmt::format(" >= {} degC", Short(c.threshold));
+  return out;
+}
+
+std::string ReasonList(std::uint16_t bits) {
+  std::string s;
+  for (std::size_t r = 1; r < estimators::kAlarmReasonCount; ++r) {
+    if (bits & (1u << r)) s += (s.empty() ? "" : ", ") + ReasonWords(static_cast<AlarmReason>(r));
+  }
+  return s;
+}
+
+/// " since 2026-01-01 00:04:01 UTC" (the fitted start), " (found 2026-...)" when only the
+/// detection is known, "" when neither.
+std::string SinceText(const MismatchFinding& f, std::int64_t wall_offset_us) {
+  auto unix_us = [&](double s) {
+    return static_cast<std::int64_t>(std::floor(s * 1e6)) + wall_offset_us;
+  };
+  if (std::isfinite(f.onset_s)) return " since " + LocalTimeText(unix_us(f.onset_s));
+  if (std::isfinite(f.detected_s)) return " (found " + LocalTimeText(unix_us(f.detected_s)) + ")";
+  // (A finding without a fitted start says when it was found, not when its cause began.)
+  return "";
+}
+
+std::string CauseField(const MismatchFinding& f) {
+  return f.effect != MismatchEffect::kNone ? estimators::MismatchEffectName(f.effect)
+                                           : estimators::MismatchStateName(f.state);
+}
+
+std::string CauseText(const MismatchFinding& f, std::string_view measured_node) {
+  return daemon::CauseText(f.state, f.effect, f.value, measured_node);
+}
+
+}  // namespace
+
+JournalEntry AlarmEntry(const AlarmLineInputs& in) {
+  const estimators::AlarmState& a = *in.state;
+  const std::vector<std::string>& names = *in.node_names;
+  const estimators::AlarmConfig& k = *in.config;
+  JournalEntry e;
+  e.level = a.level == AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning;
+  const std::string level =
+      a.level == AlarmLevel::kNone ? "normal" : estimators::AlarmLevelName(a.level);
+  e.fields.push_back({"PUMP", std::string(in.pump)});
+  e.fields.push_back({"LEVEL", level});
+  e.fields.push_back({"REASON", estimators::AlarmReasonName(a.reason)});
+  e.text = fmt::format("{}: {}: ", in.pump, level);
+  if (a.level == AlarmLevel::kNone || in.conditions.empty()) {
+    e.text += "no alarm";
+  } else {
+    const AlarmCondition& c = in.conditions.front();
+    e.text += c.reason == AlarmReason::kEstimatedOverTemperature
+                  ? OverTemperatureText(a, c, names, k)
+                  : ConditionText(c, names, k);
+    if (const std::string node = AlarmNodeName(c.node, names); !node.empty())
+      e.fields.push_back({"NODE", node});
+    const double value = c.reason == AlarmReason::kEstimatedOverTemperature ? a.value : c.value;
+    if (IsTemperature(c) && std::isfinite(value))
+      e.fields.push_back({"VALUE_DEGC", fmt::format("{:.2f}", value)});
+    if (std::isfinite(c.threshold)) e.fields.push_back({"THRESHOLD_DEGC", Short(c.threshold)});
+  }
+  if (in.mismatch != nullptr && DiagnosisBlames(in.mismatch->state)) {
+    e.text += "; cause: " + CauseText(*in.mismatch, in.measured_node) +
+              SinceText(*in.mismatch, in.wall_offset_us);
+    e.fields.push_back({"CAUSE", CauseField(*in.mismatch)});
+  }
+  const auto worst_bit = static_cast<std::uint16_t>(1u << static_cast<unsigned>(a.reason));
+  const std::uint16_t others = a.active_reasons & static_cast<std::uint16_t>(~worst_bit);
+  const std::uint16_t raised = a.active_reasons & static_cast<std::uint16_t>(~in.logged_reasons);
+  const std::uint16_t cleared = in.logged_reasons & static_cast<std::uint16_t>(~a.active_reasons);
+  if (others) e.text += "; also active: " + ReasonList(others);
+  if (raised) e.text += "; raised: " + ReasonList(raised);
+  if (cleared) e.text += "; cleared: " + ReasonList(cleared);
+  if (a.trip_latched) e.text += "; trip latched until cleared";
+  return e;
+}
+
+JournalEntry DiagnosisEntry(std::string_view pump, const MismatchFinding& f,
+                            std::string_view measured_node, std::int64_t wall_offset_us) {
+  JournalEntry e;
+  e.fields.push_back({"PUMP", std::string(pump)});
+  e.fields.push_back({"DIAGNOSIS", estimators::MismatchStateName(f.state)});
+  const std::string test = fmt::format("window NIS {:.0f} {} {:.0f}", f.window_nis,
+                                       f.window_nis > f.threshold ? ">" : "<=", f.threshold);
+  if (DiagnosisBlames(f.state) && f.effect == MismatchEffect::kNone) {
+    e.level = LogLevel::kWarning;
+    const std::string found =
+        std::isfinite(f.detected_s)
+            ? ", found " + LocalTimeText(static_cast<std::int64_t>(std::floor(f.detected_s * 1e6)) +
+                                         wall_offset_us)
+            : "";
+    e.text = fmt::format(
+        "{}: diagnosis: the model no longer explains the {} sensor ({}){}; cause not named yet",
+        pump, measured_node, test, found);
+    e.fields.push_back({"CAUSE", CauseField(f)});
+  } else if (DiagnosisBlames(f.state)) {
+    e.level = LogLevel::kWarning;
+    e.text =
+        fmt::format("{}: diagnosis: {}{}; the model no longer explains the {} sensor ({})", pump,
+                    CauseText(f, measured_node), SinceText(f, wall_offset_us), measured_node, test);
+    e.fields.push_back({"CAUSE", CauseField(f)});
+  } else if (f.state == MismatchState::kLearning) {
+    e.text = fmt::format(
+        "{}: diagnosis: learning (the model test judges after its first minutes of data)", pump);
+  } else {
+    e.text = fmt::format("{}: diagnosis: the model explains the {} sensor ({})", pump,
+                         measured_node, test);
+  }
+  return e;
+}
+
+}  // namespace pumptherm::daemon

@@ -1,0 +1,63 @@
+#pragma once
+/// The journal's words for a pump's alarm changes and model diagnoses: one line an operator
+/// reads ("pump3: trip: winding 121.3 degC (bound 126.1 = estimate + 2 sd) >= 120 degC; cause:
+/// cooling lost (frame-to-ambient resistance x20 or more) since 2026-01-01 00:04:01 UTC"), with
+/// every number in its unit, and the structured journal fields that find it
+/// (`journalctl PUMP=pump3 LEVEL=trip`). docs/daemon.md, "The journal". Text only: the gateway
+/// writes the entries.
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "daemon/log.hpp"
+#include "daemon/operator_text.hpp"
+#include "estimators/alarms.hpp"
+#include "estimators/mismatch_detector.hpp"
+
+namespace pumptherm::daemon {
+
+/// One journal entry: its priority, its text and its fields (keys are string literals).
+struct JournalEntry {
+  LogLevel level = LogLevel::kNotice;
+  std::string text;
+  std::vector<LogField> fields;
+};
+
+/// What an alarm line is made of.
+struct AlarmLineInputs {
+  std::string_view pump;
+  const estimators::AlarmState* state = nullptr;
+  /// The active conditions, worst first (Pump::ActiveConditions): the first is the one `state`
+  /// names, with its detail and threshold.
+  std::span<const estimators::AlarmCondition> conditions;
+  /// The model's node names; the index one past them is the winding from resistance.
+  const std::vector<std::string>* node_names = nullptr;
+  /// The active reasons the previous line showed (bit 1 << reason): what was raised and cleared.
+  std::uint16_t logged_reasons = 0;
+  const estimators::AlarmConfig* config = nullptr;
+  /// The node the pump's sensor measures (the diagnosis speaks of "the frame sensor").
+  std::string_view measured_node = "frame";
+  /// The model diagnosis at the same moment: its cause is named on the line while it blames the
+  /// plant or the sensor.
+  const estimators::MismatchFinding* mismatch = nullptr;
+  /// Unix time minus the pipeline's time, us (Gateway::SetWallClockOffset; 0 offline).
+  std::int64_t wall_offset_us = 0;
+};
+
+/// The line for an alarm change, e.g. "pump3: warning: no telemetry for 4.0 s (limit 2 s)";
+/// warning priority unless back to normal (notice). Fields: PUMP, LEVEL (normal, warning, trip),
+/// REASON (the reason's name, "none" back to normal), and when they apply NODE, VALUE_DEGC (a
+/// temperature), THRESHOLD_DEGC, CAUSE (the diagnosis' effect name, or "unexplained").
+JournalEntry AlarmEntry(const AlarmLineInputs& in);
+
+/// The line for a new model diagnosis, e.g. "pump3: diagnosis: cooling lost (frame-to-ambient
+/// resistance x20 or more) since 2026-01-01 00:04:01 UTC; the model no longer explains the frame
+/// sensor (window NIS 9712 > 136)"; warning while it blames the plant or the sensor. Fields: PUMP,
+/// DIAGNOSIS (the state's name), CAUSE (the effect's name, when one is named).
+JournalEntry DiagnosisEntry(std::string_view pump, const estimators::MismatchFinding& f,
+                            std::string_view measured_node, std::int64_t wall_offset_us);
+
+}  // namespace pumptherm::daemon

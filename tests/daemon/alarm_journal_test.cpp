@@ -1,0 +1,237 @@
+// The journal's words for alarm changes and diagnoses: every number in its unit, seconds never
+// read as degC, the sensor fault's kind, the cause named with its date, and the structured fields
+// that find the line (journalctl PUMP=pump3 LEVEL=trip).
+#include "daemon/alarm_journal.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <ctime>
+#include <map>
+
+namespace pumptherm::daemon {
+namespace {
+
+using estimators::AlarmCondition;
+using estimators::AlarmLevel;
+using estimators::AlarmReason;
+using estimators::AlarmState;
+
+const std::vector<std::string> kNodes{"frame", "stator", "winding", "rotor"};
+
+/// 2026-01-01 00:04:01 UTC in the pipeline's seconds, with the wall offset 0 (offline).
+constexpr double kOnset_s = 1767225841.0;
+
+class AlarmJournal : public testing::Test {
+ protected:
+  void SetUp() override {
+    setenv("TZ", "UTC", 1);
+    tzset();
+    config_.sensor_node = 0;
+    config_.stale_after_s = 2.0;
+    config_.trip_sd_factor = 2.0;
+  }
+  JournalEntry Entry(const AlarmState& a, std::vector<AlarmCondition> conditions,
+                     std::uint16_t logged = 0, const estimators::MismatchFinding* f = nullptr) {
+    conditions_ = std::move(conditions);
+    return AlarmEntry({"pump3", &a, conditions_, &kNodes, logged, &config_, "frame", f, 0});
+  }
+  static std::map<std::string, std::string> Fields(const JournalEntry& e) {
+    std::map<std::string, std::string> m;
+    for (const LogField& f : e.fields) m[std::string(f.key)] = f.value;
+    return m;
+  }
+  estimators::AlarmConfig config_;
+  std::vector<AlarmCondition> conditions_;
+};
+
+constexpr std::uint16_t Bit(AlarmReason r) {
+  return static_cast<std::uint16_t>(1u << static_cast<unsigned>(r));
+}
+
+estimators::MismatchFinding CoolingLost() {
+  estimators::MismatchFinding f;
+  f.state = estimators::MismatchState::kPlantChange;
+  f.effect = estimators::MismatchEffect::kFrameAmbientResistance;
+  f.value = 20.0;
+  f.onset_s = kOnset_s;
+  f.window_nis = 9712.4;
+  f.threshold = 135.7;
+  return f;
+}
+
+TEST_F(AlarmJournal, TripSaysTheBoundTheLevelAndTheCauseWithItsDate) {
+  AlarmState a;
+  a.level = AlarmLevel::kTrip;
+  a.reason = AlarmReason::kEstimatedOverTemperature;
+  a.node = 2;
+  a.value = 121.34;
+  a.bound = 126.12;
+  a.active_reasons = Bit(AlarmReason::kEstimatedOverTemperature) | Bit(AlarmReason::kForecast);
+  a.trip_latched = true;
+  const auto f = CoolingLost();
+  const JournalEntry e =
+      Entry(a,
+            {{AlarmLevel::kTrip, AlarmReason::kEstimatedOverTemperature, "", 2, 121.34, 120.0,
+              1767226700.0, true},
+             {AlarmLevel::kWarning, AlarmReason::kForecast, "", 2, 0.0, NAN, 1767226500.0, false}},
+            Bit(AlarmReason::kEstimatedOverTemperature) | Bit(AlarmReason::kForecast), &f);
+  EXPECT_EQ(e.text,
+            "pump3: trip: winding 121.3 degC (bound 126.1 = estimate + 2 sd) >= 120 degC; cause: "
+            "cooling lost (frame-to-ambient resistance x20 or more) since 2026-01-01 00:04:01 UTC; "
+            "also active: forecast; trip latched until cleared");
+  EXPECT_EQ(e.level, LogLevel::kWarning);
+  const auto m = Fields(e);
+  EXPECT_EQ(m.at("PUMP"), "pump3");
+  EXPECT_EQ(m.at("LEVEL"), "trip");
+  EXPECT_EQ(m.at("REASON"), "estimated_over_temperature");
+  EXPECT_EQ(m.at("NODE"), "winding");
+  EXPECT_EQ(m.at("VALUE_DEGC"), "121.34");
+  EXPECT_EQ(m.at("THRESHOLD_DEGC"), "120");
+  EXPECT_EQ(m.at("CAUSE"), "frame_ambient_resistance");
+}
+
+TEST_F(AlarmJournal, ATripLatchedAgainAfterARestartSaysItsBoundReachedTheLevel) {
+  // RestoreLatchedTrip keeps the value that raised the trip (the estimate), not its bound.
+  AlarmState a;
+  a.level = AlarmLevel::kTrip;
+  a.reason = AlarmReason::kEstimatedOverTemperature;
+  a.node = 2;
+  a.value = 116.8;
+  a.active_reasons = Bit(AlarmReason::kEstimatedOverTemperature);
+  a.trip_latched = true;
+  const JournalEntry e = Entry(a, {{AlarmLevel::kTrip, AlarmReason::kEstimatedOverTemperature, "",
+                                    2, 116.8, 120.0, 0.0, true}});
+  EXPECT_EQ(e.text,
+            "pump3: trip: winding 116.8 degC with estimate + 2 sd >= 120 degC; raised: estimated "
+            "over temperature; trip latched until cleared");
+}
+
+TEST_F(AlarmJournal, SecondsAreSecondsNeverDegC) {
+  AlarmState a;
+  a.level = AlarmLevel::kWarning;
+  a.reason = AlarmReason::kForecast;
+  a.node = 2;
+  a.value = 276.21;
+  a.active_reasons = Bit(AlarmReason::kForecast);
+  config_.forecast_horizon_s = 300.0;
+  JournalEntry e =
+      Entry(a, {{AlarmLevel::kWarning, AlarmReason::kForecast, "", 2, 276.21, NAN, 0.0, false}});
+  EXPECT_EQ(e.text,
+            "pump3: warning: winding reaches its trip level in 4 min 36 s at the present load "
+            "(horizon 5 min); raised: forecast");
+  EXPECT_EQ(Fields(e).count("VALUE_DEGC"), 0u) << "a time to trip is no temperature";
+
+  a.reason = AlarmReason::kStaleTelemetry;
+  a.node = -1;
+  a.value = 4.0;
+  a.active_reasons = Bit(AlarmReason::kStaleTelemetry);
+  e = Entry(a,
+            {{AlarmLevel::kWarning, AlarmReason::kStaleTelemetry, "", -1, 4.0, NAN, 0.0, false}});
+  EXPECT_EQ(e.text, "pump3: warning: no telemetry for 4.0 s (limit 2 s); raised: stale telemetry");
+  EXPECT_EQ(Fields(e).count("VALUE_DEGC"), 0u);
+  EXPECT_EQ(Fields(e).count("NODE"), 0u);
+}
+
+TEST_F(AlarmJournal, SensorFaultsNameTheirKind) {
+  AlarmState a;
+  a.level = AlarmLevel::kWarning;
+  a.reason = AlarmReason::kSensorFault;
+  a.node = 0;
+  a.active_reasons = Bit(AlarmReason::kSensorFault);
+  for (const auto& [kind, words] : std::map<std::string, std::string>{
+           {"missing", "missing (no reading for 2 s)"},
+           {"stuck", "stuck (unchanged to the last bit for 30 s)"},
+           {"out of range", "out of range (-40 to 250 degC)"},
+           {"jumping", "jumping (a step above 5 K between readings)"}}) {
+    const JournalEntry e = Entry(a, {{AlarmLevel::kWarning, AlarmReason::kSensorFault, kind.c_str(),
+                                      0, 31.5, NAN, 0, false}});
+    EXPECT_EQ(e.text,
+              "pump3: warning: frame sensor fault: " + words +
+                  ", last reading 31.5 degC; left out of the estimate; raised: sensor fault");
+    EXPECT_EQ(Fields(e).at("VALUE_DEGC"), "31.50");
+    EXPECT_EQ(Fields(e).at("NODE"), "frame");
+  }
+}
+
+TEST_F(AlarmJournal, BackToNormalSaysWhatCleared) {
+  AlarmState a;
+  const JournalEntry e = Entry(a, {}, Bit(AlarmReason::kStaleTelemetry));
+  EXPECT_EQ(e.text, "pump3: normal: no alarm; cleared: stale telemetry");
+  EXPECT_EQ(e.level, LogLevel::kNotice);
+  EXPECT_EQ(Fields(e).at("LEVEL"), "normal");
+  EXPECT_EQ(Fields(e).at("REASON"), "none");
+}
+
+TEST_F(AlarmJournal, TheWindingFromResistanceHasItsName) {
+  AlarmState a;
+  a.level = AlarmLevel::kWarning;
+  a.reason = AlarmReason::kEstimatedOverTemperature;
+  a.node = 4;  // one past the model's nodes
+  a.value = 101.0;
+  a.active_reasons = Bit(AlarmReason::kEstimatedOverTemperature);
+  const JournalEntry e = Entry(a, {{AlarmLevel::kWarning, AlarmReason::kEstimatedOverTemperature,
+                                    "", 4, 101.0, 100.0, 0, false}});
+  EXPECT_EQ(
+      e.text,
+      "pump3: warning: winding from resistance 101.0 degC >= 100 degC; raised: estimated over "
+      "temperature");
+  EXPECT_EQ(Fields(e).at("NODE"), "winding_resistance");
+}
+
+TEST_F(AlarmJournal, DiagnosisSaysTheCauseFirstAndTheTestLast) {
+  JournalEntry e = DiagnosisEntry("pump3", CoolingLost(), "frame", 0);
+  EXPECT_EQ(e.text,
+            "pump3: diagnosis: cooling lost (frame-to-ambient resistance x20 or more) since "
+            "2026-01-01 00:04:01 UTC; the model no longer explains the frame sensor (window NIS "
+            "9712 > 136)");
+  EXPECT_EQ(e.level, LogLevel::kWarning);
+  EXPECT_EQ(Fields(e).at("CAUSE"), "frame_ambient_resistance");
+  EXPECT_EQ(Fields(e).at("DIAGNOSIS"), "plant_change");
+  // Live, the pipeline's clock is monotonic: the wall offset makes the date right.
+  auto f = CoolingLost();
+  f.onset_s = 100.0;
+  e = DiagnosisEntry("pump3", f, "frame", static_cast<std::int64_t>((kOnset_s - 100.0) * 1e6));
+  EXPECT_NE(e.text.find("since 2026-01-01 00:04:01 UTC"), std::string::npos) << e.text;
+
+  f = CoolingLost();
+  f.state = estimators::MismatchState::kUnexplained;
+  f.effect = estimators::MismatchEffect::kNone;
+  f.onset_s = NAN;
+  f.detected_s = kOnset_s + 60.0;
+  e = DiagnosisEntry("pump3", f, "frame", 0);
+  EXPECT_EQ(e.text,
+            "pump3: diagnosis: the model no longer explains the frame sensor (window NIS 9712 > "
+            "136), found 2026-01-01 00:05:01 UTC; cause not named yet");
+  EXPECT_EQ(Fields(e).at("CAUSE"), "unexplained");
+
+  estimators::MismatchFinding ok;
+  ok.state = estimators::MismatchState::kConsistent;
+  ok.window_nis = 61;
+  ok.threshold = 135.7;
+  e = DiagnosisEntry("pump1", ok, "frame", 0);
+  EXPECT_EQ(e.text, "pump1: diagnosis: the model explains the frame sensor (window NIS 61 <= 136)");
+  EXPECT_EQ(e.level, LogLevel::kNotice);
+  EXPECT_EQ(Fields(e).count("CAUSE"), 0u);
+}
+
+TEST(OperatorText, DurationsAndCauses) {
+  EXPECT_EQ(DurationText(45.4), "45 s");
+  EXPECT_EQ(DurationText(276.2), "4 min 36 s");
+  EXPECT_EQ(DurationText(7500.0), "2 h 05 min");
+  EXPECT_EQ(DurationText(INFINITY), "never");
+  using estimators::MismatchEffect;
+  using estimators::MismatchState;
+  EXPECT_EQ(CauseText(MismatchState::kPlantChange, MismatchEffect::kFrameAmbientResistance, 1.81,
+                      "frame"),
+            "cooling reduced (frame-to-ambient resistance x1.81)");
+  EXPECT_EQ(
+      CauseText(MismatchState::kSensorFaultSuspected, MismatchEffect::kSensorOffset, 3.04, "frame"),
+      "frame sensor reads +3.0 K off (the sensor, not the plant)");
+  EXPECT_EQ(CauseText(MismatchState::kUnexplained, MismatchEffect::kNone, NAN, "frame"),
+            "the model no longer explains the frame sensor, cause not named yet");
+  EXPECT_EQ(CauseText(MismatchState::kConsistent, MismatchEffect::kNone, NAN, "frame"), "");
+}
+
+}  // namespace
+}  // namespace pumptherm::daemon
