@@ -17,6 +17,7 @@ constexpr double kRadPerSPerRpm = 2.0 * std::numbers::pi / 60.0;
 constexpr std::int64_t kPairWindowUs = 50'000;
 /// Name of the pseudo-node for the resistance-based winding temperature in alarm levels.
 constexpr const char* kWindingResistanceNode = "winding_resistance";
+constexpr const char* kStateLostNode = "safety_state_lost";
 /// Largest node standard deviation of a converged virtual sensor.
 constexpr double kConvergedSd_K = 5.0;
 /// Whether every temperature of `x_degC` lies in the range an estimate may take
@@ -786,10 +787,11 @@ PumpSavedState Pump::Save() const {
   s.trip_latched = snapshot_.alarm.trip_latched;
   const auto& names = model_->StateNames();
   for (const auto& t : alarms_.LatchedTrips()) {
-    const std::string node = t.node == estimators::AlarmMonitor::kSensorTrip ? std::string("sensor")
-                             : t.node < static_cast<int>(names.size())
-                                 ? names[static_cast<std::size_t>(t.node)]
-                                 : std::string(kWindingResistanceNode);
+    const std::string node =
+        t.node == estimators::AlarmMonitor::kSensorTrip      ? std::string("sensor")
+        : t.node == estimators::AlarmMonitor::kStateLostTrip ? std::string(kStateLostNode)
+        : t.node < static_cast<int>(names.size()) ? names[static_cast<std::size_t>(t.node)]
+                                                  : std::string(kWindingResistanceNode);
     s.latched_trips.push_back({node, t.value});
   }
   return s;
@@ -893,17 +895,33 @@ bool Pump::TripIndices(const PumpSavedState& state,
   // Alarm node names -> the monitor's indices (model nodes, then the winding resistance).
   out.clear();
   for (const auto& t : state.latched_trips) {
-    int node = estimators::AlarmMonitor::kSensorTrip;
-    if (t.node == kWindingResistanceNode) {
-      node = model_->StateCount();
-    } else if (t.node != "sensor") {
-      node = model_->StateIndex(t.node);
-      if (node < 0) return false;
-    }
-    if (!std::isfinite(t.value_degC)) return false;
-    out.push_back({node, t.value_degC});
+    const std::optional<int> node = LatchIndex(t.node);
+    if (!node || !std::isfinite(t.value_degC)) return false;
+    out.push_back({*node, t.value_degC});
   }
   return true;
+}
+
+std::optional<int> Pump::LatchIndex(const std::string& name) const {
+  if (name == kWindingResistanceNode) return model_->StateCount();
+  if (name == "sensor") return estimators::AlarmMonitor::kSensorTrip;
+  if (name == kStateLostNode) return estimators::AlarmMonitor::kStateLostTrip;
+  const int node = model_->StateIndex(name);
+  return node < 0 ? std::nullopt : std::optional<int>(node);
+}
+
+void Pump::LatchStateLost(std::int64_t now_us) {
+  alarms_.LatchStateLost(static_cast<double>(now_us) * 1e-6);
+  snapshot_.alarm = alarms_.state();
+  ++snapshot_.alarm_changes;
+}
+
+void Pump::RaiseSecondSender(std::int64_t now_us) {
+  const estimators::AlarmState before = alarms_.state();
+  alarms_.RaiseSecondSender(static_cast<double>(now_us) * 1e-6);
+  if (alarms_.state() == before) return;
+  snapshot_.alarm = alarms_.state();
+  ++snapshot_.alarm_changes;
 }
 
 void Pump::Relatch(const std::vector<estimators::AlarmMonitor::LatchedTrip>& trips,
