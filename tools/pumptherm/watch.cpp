@@ -101,7 +101,14 @@ void PumpWatch::OnAlarm(const pumptherm::alarm_t& m, std::int64_t now_us) {
   e.alarm_rx_us = now_us;
 }
 
-std::string PumpWatch::Table(std::int64_t now_us, double stale_after_s) const {
+std::vector<std::string> PumpWatch::Pumps() const {
+  std::vector<std::string> out;
+  for (const auto& [name, e] : pumps_) out.push_back(name);
+  return out;
+}
+
+std::string PumpWatch::Table(std::int64_t now_us, double stale_after_s,
+                             const std::map<std::string, std::string>& marks) const {
   std::string out = fmt::format("{:<12} {:>6} {:<26} {:<16} {}\n", "pump", "age",
                                 "winding_R_C±2sd (status)", "filter (NIS)", "alarm");
   for (const auto& [name, e] : pumps_) {
@@ -116,8 +123,10 @@ std::string PumpWatch::Table(std::int64_t now_us, double stale_after_s) const {
     const std::string filter =
         temps ? fmt::format("{} ({})", FilterStatusName(e.temps.filter_status), Num(e.temps.nis, 1))
               : "-";
-    out += fmt::format("{:<12} {:>6} {:<26} {:<16} {}{}\n", name, Age(now_us, last), winding,
-                       filter, Alarm(e.alarm, e.alarm_rx_us >= 0), stale ? "  STALE (silent)" : "");
+    const auto mark = marks.find(name);
+    out += fmt::format("{:<12} {:>6} {:<26} {:<16} {}{}{}\n", name, Age(now_us, last), winding,
+                       filter, Alarm(e.alarm, e.alarm_rx_us >= 0), stale ? "  STALE (silent)" : "",
+                       mark == marks.end() ? "" : "  " + mark->second);
     if (temps) out += fmt::format("{:<12} nodes degC±2sd: {}\n", "", Nodes(e.temps));
   }
   return out;

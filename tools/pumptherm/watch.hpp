@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <map>
 #include <string>
+#include <vector>
 
 #include "pumptherm/alarm_t.hpp"
 #include "pumptherm/temperatures_t.hpp"
@@ -26,8 +27,12 @@ class PumpWatch {
   /// One line per pump, sorted by name: age of the last message, every node's estimate with its
   /// standard deviation, the winding from resistance with its status, the filter's status and
   /// NIS, the alarm level with every active condition (reason and node) and the forecast.
-  /// A pump silent for more than `stale_after_s` is marked STALE.
-  std::string Table(std::int64_t now_us, double stale_after_s) const;
+  /// A pump silent for more than `stale_after_s` is marked STALE; `marks` adds a pump's text
+  /// (whether the gateway signed its messages, `--gateway-key`).
+  std::string Table(std::int64_t now_us, double stale_after_s,
+                    const std::map<std::string, std::string>& marks = {}) const;
+  /// The names of the pumps heard from, sorted.
+  std::vector<std::string> Pumps() const;
 
  private:
   struct Entry {
