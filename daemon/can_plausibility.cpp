@@ -29,7 +29,8 @@ RateCheck::RateCheck(double cycle_s) : cycle_s_(cycle_s) {
   const double window_s = std::max(kCyclesPerWindow * cycle_s, kMinWindowUs * 1e-6);
   window_us_ = std::llround(window_s * 1e6);
   const double expected = window_s / cycle_s;
-  limit_ = static_cast<std::uint64_t>(std::ceil(1.5 * expected)) + 2;
+  nominal_ = static_cast<std::uint64_t>(std::ceil(expected)) + 2;
+  limit_ = static_cast<std::uint64_t>(std::ceil(3.0 * expected)) + 2;
 }
 
 bool RateCheck::OnFrame(std::int64_t t_us) {
@@ -38,12 +39,16 @@ bool RateCheck::OnFrame(std::int64_t t_us) {
   if (window_start_us_ < 0 || t_us < window_start_us_) {
     window_start_us_ = t_us;
     count_ = 0;
+    previous_ = 0;
   }
   bool too_fast = false;
   if (t_us - window_start_us_ >= window_us_) {
     const double span_s = static_cast<double>(t_us - window_start_us_) * 1e-6;
     last_rate_Hz_ = static_cast<double>(count_) / span_s;
-    too_fast = count_ > limit_ && t_us - window_start_us_ < 2 * window_us_;
+    // A window stretched by a silence holds fewer frames per second: it counts as a full one.
+    const bool full = t_us - window_start_us_ < 2 * window_us_;
+    too_fast = full && count_ > nominal_ && previous_ > nominal_ && count_ + previous_ > limit_;
+    previous_ = full ? count_ : 0;
     window_start_us_ = t_us;
     count_ = 0;
   }

@@ -16,14 +16,16 @@ inline constexpr int kSecondSenderKinds = 3;
 const char* SecondSenderKindName(SecondSenderKind kind);
 
 /// A message faster than its cycle: frames are counted over windows of 20 cycles (at least
-/// 1 s, so timer jitter and frames queued in a burst do not matter); a window with more than
-/// 1.5 times the frames the cycle allows, plus 2, is evidence. A drive whose clock runs a few
-/// percent fast stays far below that; a forger who adds one frame per real one doubles it.
+/// 1 s, so timer jitter and frames queued in a burst do not matter). Evidence is two windows in
+/// a row each above the cycle's count (plus 2) and together above 1.5 times it (plus 2). A
+/// drive whose clock runs a few percent fast stays far below that; a forger who adds one frame
+/// per real one doubles it. A sender that stalled and caught up (a replay tool on a loaded
+/// machine) fills one window with what the one before it lacked, never two.
 class RateCheck {
  public:
   /// `cycle_s`: the message's cycle (the DBC's GenMsgCycleTime); 0 or less: not checked.
   explicit RateCheck(double cycle_s = 0.0);
-  /// A frame at `t_us`. Returns true when a window just ended with too many frames.
+  /// A frame at `t_us`. Returns true when a window just ended making the evidence above.
   bool OnFrame(std::int64_t t_us);
   /// The rate of the last window that ended (Hz; 0 before one did).
   double last_rate_Hz() const { return last_rate_Hz_; }
@@ -32,9 +34,11 @@ class RateCheck {
  private:
   double cycle_s_;
   std::int64_t window_us_ = 0;
-  std::uint64_t limit_ = 0;
+  std::uint64_t nominal_ = 0;  // frames per window at the cycle, plus 2
+  std::uint64_t limit_ = 0;    // frames per two windows at 1.5 times the cycle, plus 2
   std::int64_t window_start_us_ = -1;
   std::uint64_t count_ = 0;
+  std::uint64_t previous_ = 0;  // the last full window's count (0: none)
   double last_rate_Hz_ = 0.0;
 };
 

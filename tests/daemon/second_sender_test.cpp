@@ -32,8 +32,17 @@ TEST(RateCheck, CountsOverWindowsOfTwentyCycles) {
   for (int k = 0; k < 100 && first < 0; ++k) {
     if (doubled.OnFrame(kT0 + k * 50'000)) first = k;
   }
-  EXPECT_EQ(first, 40) << "2 s of frames at 20 Hz";
+  EXPECT_EQ(first, 80) << "two windows (4 s) of frames at 20 Hz";
   EXPECT_NEAR(doubled.last_rate_Hz(), 20.0, 0.6);
+  // A sender that stalled 3 s and caught up at once (canplayer behind on a loaded machine): one
+  // window holds what the one before it lacked; never evidence.
+  RateCheck caught_up(0.1);
+  for (int k = 0; k < 200; ++k) {
+    const std::int64_t due = kT0 + k * 100'000;
+    const std::int64_t stall_end = kT0 + 8'000'000;
+    const std::int64_t sent = due > kT0 + 5'000'000 && due < stall_end ? stall_end : due;
+    EXPECT_FALSE(caught_up.OnFrame(sent)) << k;
+  }
   RateCheck off(0.0);  // no cycle time: not checked
   for (int k = 0; k < 1000; ++k) EXPECT_FALSE(off.OnFrame(kT0 + k));
 }
