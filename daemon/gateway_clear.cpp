@@ -39,6 +39,18 @@ std::string CommentText(const std::string& comment) {
   return comment.empty() ? "" : ": " + comment;
 }
 
+/// One journal line per source of refusals held back, with its fields.
+void LogSummaries(const std::vector<ClearAudit::Summary>& summaries) {
+  for (const auto& s : summaries) {
+    LogFields(LogLevel::kWarning,
+              {{"SOURCE", s.source},
+               {"RESULT", "refused"},
+               {"REASON", s.reasons},
+               {"COUNT", std::to_string(s.count)}},
+              "{}", s.text);
+  }
+}
+
 }  // namespace
 
 void Gateway::LoadClearKeys(const std::string& credentials_dir) {
@@ -259,14 +271,7 @@ void Gateway::LogRefusedClear(const std::string& pump, const std::string& source
   // On the pipeline's clock (the last Advance): monotonic live, the log's time offline.
   std::vector<ClearAudit::Summary> before;
   const bool log = clear_audit_.Refused(last_now_us_, source, reason, &before);
-  for (const auto& s : before) {
-    LogFields(LogLevel::kWarning,
-              {{"SOURCE", s.source},
-               {"RESULT", "refused"},
-               {"REASON", s.reasons},
-               {"COUNT", std::to_string(s.count)}},
-              "{}", s.text);
-  }
+  LogSummaries(before);
   if (!log) return;
   LogFields(LogLevel::kWarning,
             {{"PUMP", pump}, {"SOURCE", source}, {"RESULT", "refused"}, {"REASON", reason}}, "{}",
@@ -274,25 +279,9 @@ void Gateway::LogRefusedClear(const std::string& pump, const std::string& source
 }
 
 void Gateway::ReportRefusedClearsHeldBack(std::int64_t now_us) {
-  for (const auto& s : clear_audit_.TakeSummaries(now_us, false)) {
-    LogFields(LogLevel::kWarning,
-              {{"SOURCE", s.source},
-               {"RESULT", "refused"},
-               {"REASON", s.reasons},
-               {"COUNT", std::to_string(s.count)}},
-              "{}", s.text);
-  }
+  LogSummaries(clear_audit_.TakeSummaries(now_us, false));
 }
 
-void Gateway::FlushClearAudit() {
-  for (const auto& s : clear_audit_.TakeSummaries(last_now_us_, true)) {
-    LogFields(LogLevel::kWarning,
-              {{"SOURCE", s.source},
-               {"RESULT", "refused"},
-               {"REASON", s.reasons},
-               {"COUNT", std::to_string(s.count)}},
-              "{}", s.text);
-  }
-}
+void Gateway::FlushClearAudit() { LogSummaries(clear_audit_.TakeSummaries(last_now_us_, true)); }
 
 }  // namespace pumptherm::daemon
