@@ -95,6 +95,11 @@ std::string ConditionText(const AlarmCondition& c, const std::vector<std::string
                          DurationText(k.forecast_horizon_s));
     case AlarmReason::kSensorFault:
       return SensorFaultText(c, sensor, k);
+    case AlarmReason::kSafetyStateLost:
+      return "the saved latched trips and clear counters were lost at start: latched until an "
+             "operator clears it";
+    case AlarmReason::kSecondSender:
+      return "frames on this pump's IDs that neither its drive nor the gateway sent";
     case AlarmReason::kEstimatedOverTemperature:
     case AlarmReason::kNone:
       break;

@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <toml++/toml.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -126,9 +127,48 @@ class TableReader {
   std::vector<std::string> used_;
 };
 
-/// alarms.clear_key_file (relative to `base_dir`), clear_key_group and clear_window_s.
-void ReadClearAuth(TableReader& r, const std::string& base_dir, ClearAuthConfig& c) {
+/// alarms.clear_operators: an array of tables { name, public_key, revoked }.
+void ReadClearOperators(TableReader& r, const std::string& source, ClearAuthConfig& c) {
+  const toml::node* n = r.Get("clear_operators");
+  if (!n) return;
+  const toml::array* arr = n->as_array();
+  if (!arr) r.Fail(n, "clear_operators", "expected an array of tables [[alarms.clear_operators]]");
+  for (std::size_t i = 0; i < arr->size(); ++i) {
+    const toml::table* t = (*arr)[i].as_table();
+    if (!t) r.Fail(&(*arr)[i], "clear_operators", "expected a table { name, public_key }");
+    TableReader opr(*t, r.Join(fmt::format("clear_operators[{}]", i)), source);
+    ClearOperatorConfig op;
+    op.line = static_cast<int>(t->source().begin.line);
+    op.name = opr.String("name", nullptr);
+    const bool printable = std::all_of(op.name.begin(), op.name.end(), [](char ch) {
+      return static_cast<unsigned char>(ch) >= 0x20 && ch != 0x7f;
+    });
+    if (op.name.empty() || op.name.size() > 64 || !printable) {
+      opr.Fail(t->get("name"), "name", "1 to 64 printable characters (who holds the key)");
+    }
+    std::string problem;
+    const auto key = ParsePublicKey(opr.String("public_key", nullptr), &problem);
+    if (!key) opr.Fail(t->get("public_key"), "public_key", problem);
+    op.public_key = *key;
+    op.revoked = opr.Bool("revoked", false);
+    for (const auto& other : c.operators) {
+      if (other.public_key == op.public_key) {
+        opr.Fail(t->get("public_key"), "public_key",
+                 fmt::format("the same key as '{}' (line {})", other.name, other.line));
+      }
+    }
+    opr.RejectUnknown();
+    c.operators.push_back(std::move(op));
+  }
+}
+
+/// alarms.clear_operators, clear_window_s, and the shared key of the earlier scheme:
+/// clear_key_file (relative to `base_dir`), clear_key_group, clear_allow_shared_key.
+void ReadClearAuth(TableReader& r, const std::string& base_dir, const std::string& source,
+                   ClearAuthConfig& c) {
   const std::string empty;
+  ReadClearOperators(r, source, c);
+  c.allow_shared_key = r.Bool("clear_allow_shared_key", false);
   c.key_file = r.String("clear_key_file", &empty);
   c.key_group = r.String("clear_key_group", &empty);
   c.window_s = r.Number("clear_window_s", c.window_s, 1.0, 3600.0);
@@ -200,6 +240,19 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     g.state_save_period_s = r.Number("state_save_period_s", g.state_save_period_s, 1.0, 86400.0);
     g.test_hang_switch = r.Bool("test_hang_switch", false);
     g.test_state_write_pause_s = r.Number("test_state_write_pause_s", 0.0, 0.0, 5.0);
+    g.test_safety_write_pause_s = r.Number("test_safety_write_pause_s", 0.0, 0.0, 5.0);
+    g.signing_key_file = r.String("signing_key_file", &empty);
+    if (const toml::node* n = t->get("signing_key_file"))
+      g.signing_key_line = static_cast<int>(n->source().begin.line);
+    if (!g.signing_key_file.empty() && g.signing_key_file[0] != '/')
+      g.signing_key_file = config.dbc.base_dir + "/" + g.signing_key_file;
+    const std::string latch = "latch";
+    const std::string lost = r.String("lost_safety_state", &latch);
+    if (lost != "latch" && lost != "warn") {
+      r.Fail(t->get("lost_safety_state"), "lost_safety_state",
+             fmt::format("'{}': expected \"latch\" or \"warn\"", lost));
+    }
+    g.lost_safety_state = lost == "warn" ? LostSafetyState::kWarn : LostSafetyState::kLatch;
     r.RejectUnknown();
   }
 
@@ -223,6 +276,13 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     config.lcm.period_s = r.Number("period_s", config.lcm.period_s, 0.01, 3600.0);
     config.lcm.health_period_s =
         r.Number("health_period_s", config.lcm.health_period_s, 0.1, 3600.0);
+    config.lcm.receive_interfaces = r.Strings("receive_interfaces");
+    for (const std::string& name : config.lcm.receive_interfaces) {
+      if (name.empty() || name.size() > 15 || name.find_first_of("/ \t") != std::string::npos) {
+        r.Fail(t->get("receive_interfaces"), "receive_interfaces",
+               fmt::format("'{}' is not an interface name", name));
+      }
+    }
     r.RejectUnknown();
   }
 
@@ -265,7 +325,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     m.warning_sd_factor = r.Number("warning_sd_factor", m.warning_sd_factor, 0.0, 10.0);
     a.clear_can_interfaces = r.Strings("clear_can_interfaces");
     a.clear_lcm_sources = r.Strings("clear_lcm_sources");
-    ReadClearAuth(r, config.dbc.base_dir, config.clear_auth);
+    ReadClearAuth(r, config.dbc.base_dir, source, config.clear_auth);
     read_levels(r, a);
     r.RejectUnknown();
     config.alarms = a;

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "daemon/clear_keys.hpp"
 #include "estimators/alarms.hpp"
 
 namespace toml {
@@ -43,6 +44,13 @@ struct InterfaceConfig {
   std::int64_t rx_buffer_bytes = kDefaultRxBufferBytes;
 };
 
+/// What a damaged or missing safety state (latched trips and clear counters, docs/daemon.md
+/// "State across restarts") does at start.
+enum class LostSafetyState {
+  kLatch,  ///< every pump starts with a latched trip "safety_state_lost" (the default)
+  kWarn,   ///< a warning only; the pumps start unlatched
+};
+
 struct GatewayConfig {
   std::string name = "pumptherm";         ///< shown in the status line and logs
   std::uint32_t heartbeat_id = 0x7F0;     ///< 11-bit CAN ID of the heartbeat frame
@@ -53,6 +61,13 @@ struct GatewayConfig {
   double state_save_period_s = 60.0;      ///< how often estimator state is saved
   bool test_hang_switch = false;          ///< tests only: SIGUSR1 makes the loop hang
   double test_state_write_pause_s = 0.0;  ///< tests only: pause in the middle of each state write
+  /// tests only: pause in the middle of each safety state write (a kill -9 lands in it)
+  double test_safety_write_pause_s = 0.0;
+  /// The gateway's Ed25519 key (`pumptherm keygen`): signs answers to clears; LCM clears need
+  /// it. Empty: none (every LCM clear is refused).
+  std::string signing_key_file;
+  int signing_key_line = 0;  ///< line of gateway.signing_key_file, for messages
+  LostSafetyState lost_safety_state = LostSafetyState::kLatch;
 };
 
 /// Where the frame layout comes from.
@@ -67,6 +82,9 @@ struct LcmConfig {
   std::string channel_prefix = "PUMPTHERM";
   double period_s = 1.0;  ///< temperatures/identification publishing period
   double health_period_s = 5.0;
+  /// Interfaces besides this host from which LCM messages are taken (the rest are dropped in the
+  /// kernel, docs/threat-model.md "The network boundary"); empty: this host only.
+  std::vector<std::string> receive_interfaces;
 };
 
 /// Alarm levels of one node (or of the measured sensor, key "sensor").
@@ -79,15 +97,28 @@ struct AlarmsConfig {
   estimators::AlarmConfig monitor;  ///< timing and plausibility (sensor_node set per pump)
   std::map<std::string, LevelsConfig> levels;     ///< node name (or "sensor") -> levels
   std::vector<std::string> clear_can_interfaces;  ///< clear command frames accepted from these
-  std::vector<std::string> clear_lcm_sources;     ///< alarm_clear_t.source values accepted
+  /// Sources a shared-key command may claim (the earlier scheme; migration only).
+  std::vector<std::string> clear_lcm_sources;
 };
 
-/// Authenticated LCM clears (docs/threat-model.md): the key file and the replay window.
+/// One operator's public key (alarms.clear_operators).
+struct ClearOperatorConfig {
+  std::string name;  ///< who holds the key: the source logged for what it signs
+  PublicKey public_key{};
+  bool revoked = false;  ///< listed, but refused (logged as a revoked key)
+  int line = 0;
+};
+
+/// Signed LCM clears (docs/threat-model.md): the operators' keys, the replay window, and the
+/// shared key of the earlier scheme.
 struct ClearAuthConfig {
-  std::string key_file;    ///< empty: no key, every LCM clear is refused
-  std::string key_group;   ///< group that owns the key file (the operators)
+  std::vector<ClearOperatorConfig> operators;  ///< whose signed clears are taken
   double window_s = 30.0;  ///< a command's time may be this far from the gateway's clock
-  int line = 0;            ///< line of alarms.clear_key_file, for messages
+  /// The earlier scheme's shared key (migration path): used only with allow_shared_key.
+  std::string key_file;
+  std::string key_group;          ///< group that owns the shared key file (the operators)
+  bool allow_shared_key = false;  ///< alarms.clear_allow_shared_key
+  int line = 0;                   ///< line of alarms.clear_key_file, for messages
 };
 
 struct PumpConfig {
@@ -127,7 +158,7 @@ struct DaemonConfig {
   DbcConfig dbc;
   LcmConfig lcm;
   AlarmsConfig alarms;         ///< defaults for every pump
-  ClearAuthConfig clear_auth;  ///< from [alarms]: clear_key_file, clear_key_group, clear_window_s
+  ClearAuthConfig clear_auth;  ///< from [alarms]: clear_operators, clear_window_s, shared key
   std::map<std::string, double> output_periods_s;  ///< DBC message name -> period override
   std::vector<InterfaceConfig> interfaces;
   std::vector<PumpConfig> pumps;

@@ -43,6 +43,7 @@ struct InterfaceCounters {
   std::uint64_t tx_frames = 0;
   std::uint64_t tx_dropped = 0;  ///< ENOBUFS/EAGAIN/ENETDOWN on send: counted, not fatal
   std::uint64_t reopens = 0;     ///< times the socket was reopened after the interface vanished
+  std::uint64_t rx_second_sender = 0;       ///< frames another sender must have sent (Gateway)
   BusState bus_state = BusState::kUnknown;  ///< from error frames; see NextBusState
   bool up = true;
 };

@@ -31,6 +31,13 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
   if (tf.frame.error || tf.frame.remote) return;
   const Route r = FindRoute(iface, tf.frame);
   if (r.pump == kNoPump) {
+    // The gateway never receives the frames it sends: one of its own IDs is someone else's.
+    if (const auto own = own_ids_.find(RouteKey(iface, tf.frame.extended, tf.frame.id));
+        own != own_ids_.end()) {
+      SecondSender(iface, own->second, SecondSenderKind::kOwnId, tf,
+                   "a frame of the gateway's own output ID, which it did not send");
+      return;
+    }
     ++counters_.rx_unknown_id;
     WarnUnconfiguredNode(iface, tf);
     return;
@@ -51,6 +58,7 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
     io.inputs[static_cast<std::size_t>(s.input)] = x;
   }
   io.inputs_us = tf.time_us;
+  CheckSecondSender(iface, r, tf, v);
   Pump& pump = *pumps_[r.pump];
   auto at = [&](MappingInput i) { return v[static_cast<std::size_t>(i)]; };
   if (im.currents) {

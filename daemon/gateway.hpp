@@ -5,6 +5,7 @@
 /// recording equal a live run of it (docs/architecture.md, "Data flow, from a frame to an alarm").
 
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -13,11 +14,14 @@
 #include <vector>
 
 #include "daemon/alarm_clear_auth.hpp"
+#include "daemon/can_plausibility.hpp"
+#include "daemon/clear_audit.hpp"
 #include "daemon/config.hpp"
 #include "daemon/frame_counter.hpp"
 #include "daemon/log.hpp"
 #include "daemon/published_fields.hpp"
 #include "daemon/pump.hpp"
+#include "daemon/safety_state.hpp"
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
 #include "protocol/mapping.hpp"
@@ -56,6 +60,9 @@ struct GatewayCounters {
       0;  ///< of those: LCM clears without a valid code (or undecodable)
   std::uint64_t clears_rate_limited = 0;  ///< PUMP_CLEAR repeats within 2 s: ignored
   std::uint64_t trip_latches = 0;         ///< trips latched (the live loop saves the state at once)
+  /// Frames that a second sender on the bus must have sent (CanPlausibility): the gateway's own
+  /// output IDs from elsewhere, a pump's message too fast, a broken rolling counter.
+  std::uint64_t rx_second_sender = 0;
 };
 
 class Gateway {
@@ -90,19 +97,50 @@ class Gateway {
   bool Clear(const std::string& pump, const std::string& source, const std::string& comment);
 
   /// An LCM alarm_clear_t received at gateway time `now_us` (us since the Unix epoch); nullptr
-  /// when the bytes did not decode as one. Accepted only with a valid authentication code,
-  /// inside the time window, with a new counter and from a configured source
-  /// (ClearAuthenticator::Check); every attempt is logged and counted, and a command for a
-  /// configured pump is answered on <prefix>/<pump>/ALARM_CLEAR_REPLY through `sink`.
-  /// Returns true when accepted (the caller saves the state: the counter must survive a crash).
+  /// when the bytes did not decode as one. Accepted only for this gateway, signed by a listed
+  /// operator key that is not revoked, inside the time window, with a new counter
+  /// (ClearAuthenticator::Check), and for a node that is latched (or every latched trip); the
+  /// new counter and latches are made durable (SetSafetyCommit) before the trip is cleared and
+  /// the answer sent. Every attempt is logged (rate-limited, with structured fields) and
+  /// counted; only a command whose signature holds is answered, on
+  /// <prefix>/<pump>/ALARM_CLEAR_REPLY through `sink`. Returns true when accepted.
   bool ClearFromLcm(const pumptherm::alarm_clear_t* m, std::int64_t now_us, OutputSink& sink);
 
-  /// Loads the clear key named by the configuration (LoadConfiguredClearKey); without one,
-  /// every LCM clear is refused (a warning when LCM sources are configured). Throws ConfigError.
-  void LoadClearKey(const std::string& credentials_dir);
-  /// Sets the clear key directly (tests; LoadClearKey reads it from the configured file).
-  void SetClearKey(const ClearKey& key) { clear_auth_.SetKey(key); }
+  /// Loads the gateway's signing key, the operators' public keys and (migration only) the
+  /// shared key named by the configuration; without a signing key every LCM clear is refused
+  /// (a warning when operators are listed). Throws ConfigError.
+  void LoadClearKeys(const std::string& credentials_dir);
+  /// Sets the gateway's signing key directly (tests; LoadClearKeys reads the configured file).
+  void SetGatewayKey(const SigningKey& key) { clear_auth_.SetGatewayKey(key); }
+  /// Sets the shared key of the earlier scheme directly (tests).
+  void SetSharedKey(const ClearKey& key) {
+    clear_auth_.SetSharedKey(key, config_.alarms.clear_lcm_sources);
+  }
   const ClearAuthenticator& clear_auth() const { return clear_auth_; }
+
+  /// Makes a safety state durable: `text` (FormatSafetyState) written and synced before the
+  /// call returns true; false with the reason in `*error`. The live loop writes safety.toml;
+  /// without one (offline, tests) nothing is written and every commit succeeds.
+  using SafetyCommit = std::function<bool(const std::string& text, std::string* error)>;
+  void SetSafetyCommit(SafetyCommit commit) { safety_commit_ = std::move(commit); }
+  /// The safety state now: every pump's latched trips and the clear counters.
+  SafetyState CollectSafetyState() const;
+  /// Commits CollectSafetyState() (after a trip latched). Returns false when it failed (logged).
+  bool CommitSafetyState();
+  /// Takes the safety state read at start (after RestoreState): each pump's latched trips become
+  /// exactly those saved (a clear after the last estimator save stays cleared), the counters
+  /// are merged. A pump whose saved latches name a node it lacks latches "safety state lost"
+  /// instead (warned about). `now_us`: pipeline time.
+  void ApplySafetyState(const SafetyState& s, std::int64_t now_us);
+  /// The safety state could not be read at start (`why`: damaged, missing): no command signed
+  /// up to `wall_now_us` (the start) is accepted, so a command recorded before cannot replay; with
+  /// gateway.lost_safety_state = "latch" every pump latches the trip "safety state lost". Logs
+  /// why. `now_us`: pipeline time.
+  void SafetyStateLost(const std::string& why, std::int64_t now_us, std::int64_t wall_now_us);
+  /// No clear command signed up to `wall_us` is accepted (a start without saved counters).
+  void RefuseClearsSignedUpTo(std::int64_t wall_us) { clear_auth_.RefuseSignedUpTo(wall_us); }
+  /// Writes the summary lines of refused clears not logged yet, one per source (at stop).
+  void FlushClearAudit();
 
   FrameCounter& counter() { return counter_; }
   const FrameCounter& counter() const { return counter_; }
@@ -154,6 +192,13 @@ class Gateway {
     int message_index;
     std::vector<InputSignal> signals;
     bool currents = false, voltages = false, status = false, clear = false;
+    double cycle_s = 0.0;          ///< the DBC's cycle time (0: none; not rate-checked)
+    bool rolling_counter = false;  ///< carries the mapped rolling counter
+  };
+  /// The second-sender checks of one input message of one pump.
+  struct InputChecks {
+    RateCheck rate;
+    CounterCheck counter;
   };
   enum class OutputSource : std::uint8_t { kField, kNode, kRollingCounter };
   struct OutputSignal {
@@ -195,6 +240,9 @@ class Gateway {
     std::uint16_t logged_active_reasons = 0;  // the active reasons the last alarm line showed
     bool clear_repeat_logged = false;         // a rate-limited repeat of it was logged
     bool trip_latched = false;                // the pump's trip latch at the last Advance
+    std::vector<InputChecks> checks;          // per input message (inputs_)
+    /// Per SecondSenderKind: when evidence of that kind was last seen (us; -1: never).
+    std::int64_t second_sender_seen_us[kSecondSenderKinds] = {-1, -1, -1};
     // LCM publishing without allocation in steady state: channel names made once, messages
     // filled in place (their strings and vectors keep their capacity).
     std::string channel_telemetry, channel_temperatures, channel_alarm;
@@ -208,6 +256,17 @@ class Gateway {
   };
   /// The route of frame `f` on interface `iface`; pump kNoPump when no pump uses it.
   Route FindRoute(std::size_t iface, const protocol::CanFrame& f) const;
+  /// Evidence of a second sender in frame `tf` on interface `iface` for pump `pump` (kNoPump:
+  /// the gateway's heartbeat ID, every pump of that interface): counted, the pumps' second-sender
+  /// warning raised, and named in the journal once (again after a quiet second_sender_clear_s).
+  /// `what`: the evidence in words.
+  void SecondSender(std::size_t iface, std::uint32_t pump, SecondSenderKind kind,
+                    const protocol::TimedFrame& tf, const std::string& what);
+  /// The second-sender checks of input frame `tf` of the route `r`; `inputs`: its decoded inputs.
+  void CheckSecondSender(std::size_t iface, const Route& r, const protocol::TimedFrame& tf,
+                         const double* inputs);
+  /// own_ids_ for pump `p`'s output messages, and the heartbeat on every configured interface.
+  void AddOwnIds(const PumpIo& io, std::size_t p);
 
   /// Advance's work for pump `p`: its thermal steps or silence check, then its due outputs.
   void AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink);
@@ -224,11 +283,23 @@ class Gateway {
   }
   void MarkAllDue();
   void RateLimitedClear(PumpIo& io, const std::string& pump, const std::string& iface);
-  /// Whether a refused clear may be logged now (refused_clear_log_); `note` gets what to append
-  /// (the count of refusals not logged before it, or nothing).
-  bool AllowRefusedClearLog(std::string* note);
-  /// A summary line for refusals not logged, once their window has ended.
+  /// A refused clear (counted by the caller) from `source`: a warning with structured fields
+  /// (PUMP=, SOURCE=, RESULT=refused, REASON=) unless the audit's rate limit holds it back; the
+  /// lines held back are summarised per source.
+  void LogRefusedClear(const std::string& pump, const std::string& source,
+                       const std::string& reason, const std::string& text);
+  /// The summary lines for refused clears not logged, once their window has ended.
   void ReportRefusedClearsHeldBack(std::int64_t now_us);
+  /// The pump named `name`, or pumps_.size().
+  std::size_t PumpIndex(const std::string& name) const;
+  /// Makes the clear of pump `p` durable before it acts: the safety state with its latch of
+  /// `node` (every latch: empty) removed and, for an LCM command `m`, its counter taken.
+  bool CommitClear(std::size_t p, const std::string& node, const pumptherm::alarm_clear_t* m,
+                   std::string* error);
+  /// The rest of ClearFromLcm once the signature held: the node, durability, the clear, the
+  /// answer. Returns true when accepted.
+  bool ActOnSignedClear(std::size_t p, const pumptherm::alarm_clear_t& m,
+                        const ClearCheckResult& check, std::int64_t now_us, OutputSink& sink);
   void Emit(std::size_t pump, OutputPlan& plan, std::int64_t time_us, OutputSink& sink);
   void PublishClearReply(const pumptherm::alarm_clear_reply_t& reply, std::int64_t now_us,
                          OutputSink& sink);
@@ -281,17 +352,22 @@ class Gateway {
   static constexpr std::size_t kStandardIds = 2048;
   static constexpr std::uint32_t kNoPump = std::numeric_limits<std::uint32_t>::max();
   std::vector<Route> standard_routes_;
+  /// The gateway's own output IDs (RouteKey) -> the pump they belong to (kNoPump: the
+  /// heartbeat): a frame of one received is another sender's.
+  std::unordered_map<std::uint64_t, std::uint32_t> own_ids_;
   std::vector<double> values_;  // decode/encode buffer (largest message)
   std::string channel_health_;
   pumptherm::gateway_health_t health_msg_;
   std::vector<std::uint8_t> lcm_bytes_;  // LCM encoding buffer (largest message)
   mutable std::vector<estimators::AlarmCondition> conditions_;  // FillAlarm's buffer
   ClearAuthenticator clear_auth_;
+  SafetyCommit safety_commit_;
   /// Refused clears can come as fast as anyone sends them: at most kRefusedClearLogBurst lines
-  /// per kRefusedClearLogWindow_s (every one is counted in clears_refused).
+  /// per kRefusedClearLogWindow_s, the rest summarised per source (every one is counted in
+  /// clears_refused).
   static constexpr int kRefusedClearLogBurst = 5;
   static constexpr double kRefusedClearLogWindow_s = 60.0;
-  LogRateLimiter refused_clear_log_{kRefusedClearLogBurst, kRefusedClearLogWindow_s};
+  ClearAudit clear_audit_{kRefusedClearLogBurst, kRefusedClearLogWindow_s};
   std::int64_t start_us_ = -1;
   std::int64_t next_health_us_ = -1;
   std::int64_t last_now_us_ = -1;

@@ -159,6 +159,9 @@ void Gateway::FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) co
   m.uptime_s = static_cast<double>(now_us - start_us_) * 1e-6;
   m.num_pumps = static_cast<std::int32_t>(pumps_.size());
   m.lcm_publish_failures = static_cast<std::int64_t>(counters_.lcm_failed);
+  m.clears_accepted = static_cast<std::int64_t>(counters_.clears_accepted);
+  m.clears_refused = static_cast<std::int64_t>(counters_.clears_refused);
+  m.clears_unauthenticated = static_cast<std::int64_t>(counters_.clears_unauthenticated);
   const auto& interfaces = counter_.interfaces();
   m.interfaces.resize(interfaces.size());
   for (std::size_t k = 0; k < interfaces.size(); ++k) {
@@ -175,6 +178,7 @@ void Gateway::FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) co
     h.rx_rejected = static_cast<std::int64_t>(counters_.rx_bad_length + counters_.rx_unknown_id);
     h.error_frames = static_cast<std::int64_t>(c.rx_error_frames);
     h.reopens = static_cast<std::int64_t>(c.reopens);
+    h.rx_second_sender = static_cast<std::int64_t>(c.rx_second_sender);
   }
   m.num_interfaces = static_cast<std::int32_t>(m.interfaces.size());
 }

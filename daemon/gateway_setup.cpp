@@ -43,7 +43,9 @@ ConfigError KeyError(const DaemonConfig& config, int line, const std::string& ke
 }  // namespace
 
 Gateway::Gateway(const DaemonConfig& config)
-    : config_(config), counter_(config.gateway), clear_auth_(config.clear_auth.window_s) {
+    : config_(config),
+      counter_(config.gateway),
+      clear_auth_(config.gateway.name, config.lcm.channel_prefix, config.clear_auth.window_s) {
   // Without pumps the gateway only counts frames: no frame layout is needed.
   if (config_.pumps.empty()) return;
   LoadFrameLayout();
@@ -101,6 +103,13 @@ void Gateway::IndexInputMessages() {
     it->voltages = it->voltages || IsVoltageInput(input);
     it->status = it->status || IsStatusInput(input);
     it->clear = it->clear || input == MappingInput::kAlarmClear;
+    it->rolling_counter = it->rolling_counter || input == MappingInput::kRollingCounter;
+  }
+  for (InputMessage& m : inputs_) {
+    const auto& msg = dbc_.messages[static_cast<std::size_t>(m.message_index)];
+    // A command (PUMP_CLEAR) has a cycle time in the DBC but is sent when a button is pressed.
+    if (!m.clear && msg.cycle_time_ms && *msg.cycle_time_ms > 0)
+      m.cycle_s = *msg.cycle_time_ms / 1e3;
   }
 }
 
@@ -139,6 +148,9 @@ void Gateway::AddPump(std::size_t p, ModelCache& models) {
   for (double& v : io.inputs) v = kNaN;
   BuildOutputPlans(io, *model);
   AddRoutes(io, p, key);
+  for (const InputMessage& m : inputs_)
+    io.checks.push_back({RateCheck(m.cycle_s), CounterCheck(16, m.cycle_s)});
+  AddOwnIds(io, p);
   const std::string& prefix = config_.lcm.channel_prefix;
   io.channel_telemetry =
       lcm_channels::PumpChannelName(prefix, pc.name, lcm_channels::PumpChannel::kTelemetry);

@@ -238,9 +238,9 @@ std::string Gateway::SaveState() const {
     pumps.insert(p->config().name, std::move(t));
   }
   root.insert("pump", std::move(pumps));
-  clear_auth_.Save(root);
   std::ostringstream ss;
-  ss << "# pumpthermd saved state: written atomically; safe to delete (the daemon starts cold).\n"
+  ss << "# pumpthermd saved state: written atomically; safe to delete (the daemon starts cold;\n"
+     << "# latched trips and clear counters are kept in safety.toml).\n"
      << root << "\n";
   return ss.str();
 }
@@ -255,8 +255,6 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
                            e.source().begin.line, e.description());
     return 0;
   }
-  // The clear counters have their own version: taken whatever the pumps' state holds.
-  std::string clear_warning = clear_auth_.Restore(root);
   // Version 1 (before the identifier's magnet hypotheses) is read too: its one filter
   // becomes both hypotheses, with the prior probabilities.
   const std::int64_t version = root["version"].value_or<std::int64_t>(0);
@@ -340,7 +338,6 @@ int Gateway::RestoreState(const std::string& text, std::int64_t now_us, std::str
         ignored);
     if (!relatched.empty()) *warning += fmt::format("; latched again: {}", relatched);
   }
-  if (!clear_warning.empty()) *warning += (warning->empty() ? "" : "; ") + clear_warning;
   return restored;
 }
 

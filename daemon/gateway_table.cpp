@@ -29,6 +29,13 @@ std::string Gateway::StatusLine() const {
   if (!config_.lcm.url.empty()) {
     line += fmt::format("; lcm {} sent, {} failed", counters_.lcm_published, counters_.lcm_failed);
   }
+  const GatewayCounters& c = counters_;
+  if (c.clears_accepted + c.clears_refused + c.clears_rate_limited > 0) {
+    line += fmt::format("; clears {} accepted, {} refused ({} unsigned or forged)",
+                        c.clears_accepted, c.clears_refused, c.clears_unauthenticated);
+  }
+  if (c.rx_second_sender > 0)
+    line += fmt::format("; {} frames from a second sender", c.rx_second_sender);
   return line;
 }
 

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -45,10 +46,22 @@ class LcmBridge {
   /// errno of the last failed Publish (0 when LCM gave none).
   int last_errno() const { return last_errno_; }
 
+  /// Restricts what LCM receives to this host and the interfaces named (lcm_boundary.hpp):
+  /// returns what was done, in words, for the journal. A URL of another provider than udpm://
+  /// (memq:// in tests) has no socket to restrict: says so. An interface that does not exist is
+  /// left out, with a warning in the text. Throws std::runtime_error when LCM's receiving socket
+  /// cannot be found or filtered (the daemon then does not start: it never listens unguarded).
+  std::string RestrictToThisHost(const std::vector<std::string>& interfaces);
+  /// Datagrams the kernel dropped on LCM's receiving socket (from outside the boundary, or a
+  /// full buffer); nullopt before RestrictToThisHost or without a udpm socket.
+  std::optional<std::uint64_t> ReceiveDrops() const;
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
   int last_errno_ = 0;
+  std::string url_;
+  int receive_fd_ = -1;  // LCM's own receiving socket (LCM owns and closes it)
 };
 
 }  // namespace pumptherm::daemon

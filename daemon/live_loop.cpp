@@ -16,6 +16,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <string_view>
 #include <system_error>
 #include <vector>
@@ -25,9 +26,12 @@
 #include "daemon/gateway.hpp"
 #include "daemon/lcm_bridge.hpp"
 #include "daemon/log.hpp"
+#include "daemon/publish_digest.hpp"
+#include "daemon/safety_state.hpp"
 #include "daemon/state_store.hpp"
 #include "daemon/systemd_notify.hpp"
 #include "daemon/unique_fd.hpp"
+#include "protocol/lcm/channels.hpp"
 #include "pumptherm/alarm_clear_t.hpp"
 
 namespace pumptherm::daemon {
@@ -87,7 +91,11 @@ struct LiveLoop::Impl : OutputSink {
   std::int64_t armed_us = 0;  // the time the timer is armed for (ArmTimer)
   std::int64_t next_save_us = 0;
   std::int64_t next_table_us = std::numeric_limits<std::int64_t>::max();  // no table: never
+  // The signed digest of what went out on LCM (docs/threat-model.md, "Readers misled").
+  PublishDigest digest;
+  std::int64_t next_digest_us = std::numeric_limits<std::int64_t>::max();  // none: never
   std::string state_path;
+  std::string safety_path;  // the safety state (latched trips, clear counters); empty: none
   FailureReport lcm_report{kFailureReminderUs};
   FailureReport save_report{kFailureReminderUs};
   bool stop = false;
@@ -122,6 +130,7 @@ struct LiveLoop::Impl : OutputSink {
     if (!lcm) return true;
     const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
     if (lcm->Publish(channel, bytes)) {
+      if (gateway->clear_auth().gateway_key() != nullptr) digest.Add(channel, bytes);
       const FailureReport::Report r = lcm_report.Success(mono);
       if (r.kind == FailureReport::Kind::kRecovered) {
         Log(LogLevel::kNotice, "LCM: sending works again, after {} failed messages in {:.1f} s",
@@ -209,11 +218,12 @@ struct LiveLoop::Impl : OutputSink {
     lcm =
         std::make_unique<LcmBridge>(config.lcm.url, config.lcm.channel_prefix,
                                     [this](const std::string&, const pumptherm::alarm_clear_t* m) {
-                                      // An accepted counter is saved at once: after a crash,
-                                      // the same command must not clear again.
+                                      // The counter and the latches left are in safety.toml
+                                      // before the clear acts; the estimator state follows.
                                       if (gateway->ClearFromLcm(m, ClockUs(CLOCK_REALTIME), *this))
                                         SaveState();
                                     });
+    Log(LogLevel::kNotice, "{}", lcm->RestrictToThisHost(config.lcm.receive_interfaces));
     Watch(lcm->fd(), kLcmTag);
   }
 
@@ -334,13 +344,78 @@ struct LiveLoop::Impl : OutputSink {
     SaveIfTripLatched();
   }
 
-  /// A trip that latched is written to the state at once, not at the next period: a restart
-  /// (kill -9, watchdog, power loss) right after it must find it latched.
+  /// A trip that latched is written at once (the safety state first, then the estimator
+  /// state), not at the next period: a restart (kill -9, watchdog, power loss) right after it
+  /// must find it latched.
   void SaveIfTripLatched() {
     const std::uint64_t latches = gateway->counters().trip_latches;
     if (latches == saved_trip_latches) return;
     saved_trip_latches = latches;
+    gateway->CommitSafetyState();
     SaveState();
+  }
+
+  /// The gateway commits the safety state through this before a clear acts.
+  void InstallSafetyCommit() {
+    if (safety_path.empty()) return;
+    gateway->SetSafetyCommit([this](const std::string& text, std::string* error) {
+      try {
+        WriteFileAtomically(safety_path, text, 0600, config.gateway.test_safety_write_pause_s);
+        return true;
+      } catch (const std::exception& e) {
+        *error = e.what();
+        return false;
+      }
+    });
+  }
+
+  /// Reads safety.toml after the estimator state (whose latches it overrides). `state_found`:
+  /// there was a state.toml; `state_before_safety_file`: written by a version without
+  /// safety.toml (its latches are the safety state then).
+  void RestoreSafetyState(bool state_found, bool state_before_safety_file) {
+    const std::int64_t wall = ClockUs(CLOCK_REALTIME);
+    const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
+    const std::string tmp = TemporaryPathOf(safety_path);
+    if (::unlink(tmp.c_str()) == 0) {
+      Log(LogLevel::kNotice,
+          "removed {}, an unfinished safety state write (nothing was acted on after it)", tmp);
+    }
+    std::optional<std::string> text;
+    std::string problem;
+    try {
+      text = ReadFileIfExists(safety_path);
+    } catch (const std::exception& e) {
+      problem = e.what();
+    }
+    if (text) {
+      if (const auto s = ParseSafetyState(*text, &problem)) {
+        gateway->ApplySafetyState(*s, mono);
+        std::size_t latched = 0;
+        for (const auto& [pump, l] : s->latched) latched += l.size();
+        Log(LogLevel::kNotice, "restored the safety state from {}: {} latched trip(s)", safety_path,
+            latched);
+        return;
+      }
+      const std::string kept = safety_path + ".damaged";
+      ::rename(safety_path.c_str(), kept.c_str());
+      problem = fmt::format("{} is damaged: {} (kept as {})", safety_path, problem, kept);
+    } else if (problem.empty() && !state_found) {
+      Log(LogLevel::kNotice, "no safety state in {}: a first start", safety_path);
+      gateway->RefuseClearsSignedUpTo(wall);
+      gateway->CommitSafetyState();
+      return;
+    } else if (problem.empty() && state_before_safety_file) {
+      Log(LogLevel::kNotice,
+          "no {} yet: the latched trips of {} (an earlier version's) are the safety state",
+          safety_path, state_path);
+      gateway->RefuseClearsSignedUpTo(wall);
+      gateway->CommitSafetyState();
+      return;
+    } else if (problem.empty()) {
+      problem = fmt::format("{} is missing, while {} is there", safety_path, state_path);
+    }
+    gateway->SafetyStateLost(problem, mono, wall);
+    gateway->CommitSafetyState();
   }
 
   void SaveState() {
@@ -385,6 +460,9 @@ struct LiveLoop::Impl : OutputSink {
     if (!state_path.empty())
       s += fmt::format("; state {} saved, {} failed", save_report.successes(),
                        save_report.failures());
+    if (const auto drops = lcm ? lcm->ReceiveDrops() : std::nullopt; drops && *drops > 0)
+      s +=
+          fmt::format("; lcm {} received dropped (outside the boundary, or a full buffer)", *drops);
     return s;
   }
 
@@ -398,9 +476,14 @@ struct LiveLoop::Impl : OutputSink {
     }
     if (dir.empty()) {
       state_path.clear();
+      safety_path.clear();
+      // No counters kept: at least a command recorded before this start cannot replay.
+      gateway->RefuseClearsSignedUpTo(ClockUs(CLOCK_REALTIME));
       return;
     }
     state_path = dir + "/state.toml";
+    safety_path = dir + "/" + kSafetyStateFile;
+    InstallSafetyCommit();
     // A temporary left by a write that was cut short (kill -9, power loss): never read, removed.
     const std::string tmp = TemporaryPathOf(state_path);
     if (::unlink(tmp.c_str()) == 0) {
@@ -408,20 +491,26 @@ struct LiveLoop::Impl : OutputSink {
           "removed {}, the unfinished state write of an earlier run (the saved state is {})", tmp,
           state_path);
     }
+    bool found = false;
+    bool before_safety_file = false;
     try {
       const auto text = ReadFileIfExists(state_path);
+      found = text.has_value();
       if (!text) {
         Log(LogLevel::kNotice, "no saved state in {}; starting cold", state_path);
-        return;
+      } else {
+        before_safety_file = WrittenBeforeSafetyFile(*text);
+        std::string warning;
+        gateway->SetWallClockOffset(WallMinusMonotonicUs());
+        const int n = gateway->RestoreState(*text, ClockUs(CLOCK_MONOTONIC), &warning);
+        if (!warning.empty()) Log(LogLevel::kWarning, "{}: {}", state_path, warning);
+        Log(LogLevel::kNotice, "restored the state of {} pump(s) from {}", n, state_path);
       }
-      std::string warning;
-      gateway->SetWallClockOffset(WallMinusMonotonicUs());
-      const int n = gateway->RestoreState(*text, ClockUs(CLOCK_MONOTONIC), &warning);
-      if (!warning.empty()) Log(LogLevel::kWarning, "{}: {}", state_path, warning);
-      Log(LogLevel::kNotice, "restored the state of {} pump(s) from {}", n, state_path);
     } catch (const std::exception& e) {
+      found = true;
       Log(LogLevel::kWarning, "saved state ignored: {}", e.what());
     }
+    RestoreSafetyState(found, before_safety_file);
   }
 
   void Reload() {
@@ -430,7 +519,7 @@ struct LiveLoop::Impl : OutputSink {
     try {
       next = LoadConfig(config_path);
       next_gateway = std::make_unique<Gateway>(next);
-      next_gateway->LoadClearKey(CredentialsDirectory());
+      next_gateway->LoadClearKeys(CredentialsDirectory());
     } catch (const std::exception& e) {
       Log(LogLevel::kError, "reload refused, the running configuration stays: {}", e.what());
       return;
@@ -460,11 +549,14 @@ struct LiveLoop::Impl : OutputSink {
     next_gateway->SetWallClockOffset(WallMinusMonotonicUs());
     const int carried =
         next_gateway->RestoreState(gateway->SaveState(), ClockUs(CLOCK_MONOTONIC), &warning);
+    // The latches and the clear counters too: a reload must not reopen a replay.
+    next_gateway->ApplySafetyState(gateway->CollectSafetyState(), ClockUs(CLOCK_MONOTONIC));
     const bool lcm_changed =
         next.lcm.url != config.lcm.url || next.lcm.channel_prefix != config.lcm.channel_prefix;
     config = std::move(next);
     gateway = std::move(next_gateway);
     saved_trip_latches = 0;  // the new gateway counts from zero
+    InstallSafetyCommit();
     if (!same_interfaces) {
       sockets = std::move(new_sockets);
       last_drop_total.assign(sockets.size(), 0);
@@ -483,10 +575,23 @@ struct LiveLoop::Impl : OutputSink {
         gateway->pumps().size(), carried);
   }
 
+  /// Publishes the signed digest of what went out since the last one (with a gateway key).
+  void PublishDigestNow(std::int64_t mono) {
+    next_digest_us = mono + static_cast<std::int64_t>(config.lcm.period_s * 1e6);
+    const SigningKey* key = gateway->clear_auth().gateway_key();
+    if (!lcm || key == nullptr) return;
+    const pumptherm::gateway_digest_t d =
+        digest.Take(config.gateway.name, config.lcm.channel_prefix, ClockUs(CLOCK_REALTIME), *key);
+    std::vector<std::uint8_t> bytes(static_cast<std::size_t>(d.getEncodedSize()));
+    d.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+    // Counted and reported with the other LCM sends; not listed in a digest itself.
+    (void)lcm->Publish(lcm_channels::GatewayDigestChannelName(config.lcm.channel_prefix), bytes);
+  }
+
   void ArmTimer(std::int64_t mono_now) {
-    std::int64_t next =
-        std::min({gateway->NextDueUs(), gateway->counter().NextHeartbeatUs(), next_status_us,
-                  next_reopen_us, next_save_us, next_table_us, mono_now + kMaxTickUs});
+    std::int64_t next = std::min({gateway->NextDueUs(), gateway->counter().NextHeartbeatUs(),
+                                  next_status_us, next_reopen_us, next_save_us, next_table_us,
+                                  next_digest_us, mono_now + kMaxTickUs});
     const std::int64_t wd = notifier.watchdog_half_period_us();
     if (wd > 0) next = std::min(next, mono_now + wd);
     next = std::max(next, mono_now + 1000);  // at least 1 ms ahead
@@ -518,6 +623,7 @@ struct LiveLoop::Impl : OutputSink {
       SaveState();
       next_save_us = mono + static_cast<std::int64_t>(config.gateway.state_save_period_s * 1e6);
     }
+    if (mono >= next_digest_us) PublishDigestNow(mono);
     if (mono >= next_table_us) {
       ShowTable();
       next_table_us = mono + static_cast<std::int64_t>(options.table_period_s * 1e6);
@@ -573,7 +679,7 @@ LiveLoop::LiveLoop(const DaemonConfig& config, std::string config_path, LiveOpti
         config.source + ": no [[can]] interface configured (use -r LOG for a log)");
   }
   m.gateway = std::make_unique<Gateway>(m.config);
-  m.gateway->LoadClearKey(CredentialsDirectory());
+  m.gateway->LoadClearKeys(CredentialsDirectory());
   m.epoll = UniqueFd(epoll_create1(EPOLL_CLOEXEC));
   if (!m.epoll.valid()) ThrowErrno("epoll_create1");
 
@@ -609,6 +715,7 @@ int LiveLoop::Run() {
   m.next_save_us = start + static_cast<std::int64_t>(m.config.gateway.state_save_period_s * 1e6);
   if (m.options.table)
     m.next_table_us = start + static_cast<std::int64_t>(m.options.table_period_s * 1e6);
+  if (m.lcm) m.next_digest_us = start + static_cast<std::int64_t>(m.config.lcm.period_s * 1e6);
   std::string names;
   for (const auto& s : m.sockets) names += (names.empty() ? "" : ", ") + s.name();
   Log(LogLevel::kNotice, "listening on {} for {} pump(s){}", names, m.gateway->pumps().size(),
@@ -651,6 +758,8 @@ int LiveLoop::Run() {
     if (m.gateway->NextDueUs() < m.armed_us) m.ArmTimer(mono);
   }
   m.notifier.Stopping();
+  m.gateway->FlushClearAudit();
+  m.gateway->CommitSafetyState();
   m.SaveState();
   return 0;
 }

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -91,6 +92,18 @@ class Pump {
 
   /// Clears latched trips (from an accepted clear command). Returns true if one was latched.
   bool ClearTrips() { return estimator_->ClearTrips(); }
+  /// Clears the latched trip of one alarm node (LatchIndex()). Returns true if it was latched.
+  bool ClearTrip(int node) { return estimator_->ClearTrip(node); }
+  /// The alarm monitor's index of alarm node `name` (a model node, "sensor",
+  /// "winding_resistance", "safety_state_lost"), or nullopt for a name this pump lacks.
+  std::optional<int> LatchIndex(const std::string& name) const {
+    return estimator_->LatchIndex(name);
+  }
+  /// Latches the trip "safety state lost" at `now_us` (the gateway, at start, when the latched
+  /// trips and clear counters saved could not be read); published at once.
+  void LatchStateLost(std::int64_t now_us) { estimator_->LatchStateLost(now_us); }
+  /// Evidence of a second sender on this pump's CAN IDs at `now_us`: a warning, published at once.
+  void RaiseSecondSender(std::int64_t now_us) { estimator_->RaiseSecondSender(now_us); }
 
   const PumpSnapshot& snapshot() const { return estimator_->estimate(); }
   const PumpCounters& counters() const { return counters_; }

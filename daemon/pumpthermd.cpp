@@ -76,7 +76,7 @@ int main(int argc, char** argv) {
       if (const std::string w = ConfigPermissionWarning(check_path); !w.empty())
         Log(LogLevel::kWarning, "{}", w);
       Gateway g(c);  // also checks the DBC, mapping, motors and models it names
-      g.LoadClearKey(CredentialsDirectory());  // and the clear key file's permissions
+      g.LoadClearKeys(CredentialsDirectory());  // and the key files' permissions
       fmt::print("{}: OK ({} interface{}, {} pump{})\n", check_path, c.interfaces.size(),
                  c.interfaces.size() == 1 ? "" : "s", c.pumps.size(),
                  c.pumps.size() == 1 ? "" : "s");

@@ -31,6 +31,10 @@ const char* AlarmReasonName(AlarmReason reason) {
       return "forecast";
     case AlarmReason::kSensorFault:
       return "sensor_fault";
+    case AlarmReason::kSafetyStateLost:
+      return "safety_state_lost";
+    case AlarmReason::kSecondSender:
+      return "second_sender";
   }
   return "unknown";
 }
@@ -204,6 +208,10 @@ const AlarmState& AlarmMonitor::Step(double now_s, const AlarmInputs& in) {
     if (forecast_.level != AlarmLevel::kNone && in.time_to_trip_node >= 0)
       forecast_node_ = in.time_to_trip_node;
   }
+  if (second_sender_.level != AlarmLevel::kNone &&
+      !(now_s - second_sender_last_s_ < config_.second_sender_clear_s)) {
+    second_sender_.level = AlarmLevel::kNone;
+  }
 
   Compose(in.time_to_trip_s);
   return state_;
@@ -262,7 +270,7 @@ void AlarmMonitor::Compose(double time_to_trip_s) {
       best_raised_s = ch.raised_at_s;
     }
   });
-  st.trip_latched = sensor_over_.latched;
+  st.trip_latched = sensor_over_.latched || state_lost_.latched;
   for (const auto& ch : over_) st.trip_latched = st.trip_latched || ch.latched;
   state_ = st;
 }
@@ -273,10 +281,15 @@ std::vector<AlarmMonitor::LatchedTrip> AlarmMonitor::LatchedTrips() const {
     if (over_[i].latched) out.push_back({static_cast<int>(i), over_[i].value});
   }
   if (sensor_over_.latched) out.push_back({kSensorTrip, sensor_over_.value});
+  if (state_lost_.latched) out.push_back({kStateLostTrip, 0.0});
   return out;
 }
 
 bool AlarmMonitor::RestoreLatchedTrip(const LatchedTrip& trip, double now_s) {
+  if (trip.node == kStateLostTrip) {
+    LatchStateLost(now_s);
+    return true;
+  }
   if (!std::isfinite(trip.value) || trip.node < kSensorTrip ||
       trip.node >= static_cast<int>(over_.size())) {
     return false;
@@ -320,6 +333,8 @@ void AlarmMonitor::ForEachActive(F&& f) const {
   add(offset_, AlarmReason::kImplausibleSensor, "offset", config_.sensor_node, std::nan(""));
   add(converged_, AlarmReason::kEstimatorNotConverged, "", -1, std::nan(""));
   add(forecast_, AlarmReason::kForecast, "", forecast_node_, std::nan(""));
+  add(state_lost_, AlarmReason::kSafetyStateLost, "", -1, std::nan(""));
+  add(second_sender_, AlarmReason::kSecondSender, "", -1, std::nan(""));
 }
 
 std::vector<AlarmCondition> AlarmMonitor::ActiveConditions() const {
@@ -357,8 +372,40 @@ bool AlarmMonitor::Clear() {
   };
   for (auto& ch : over_) clear(ch);
   clear(sensor_over_);
-  state_.trip_latched = false;
+  clear(state_lost_);
+  state_lost_.level = AlarmLevel::kNone;  // no condition keeps it: it goes with its latch
+  Compose(state_.time_to_trip_s);
   return any;
+}
+
+bool AlarmMonitor::Clear(int node) {
+  Channel* ch = node == kSensorTrip      ? &sensor_over_
+                : node == kStateLostTrip ? &state_lost_
+                : node >= 0 && node < static_cast<int>(over_.size())
+                    ? &over_[static_cast<std::size_t>(node)]
+                    : nullptr;
+  if (ch == nullptr || !ch->latched) return false;
+  ch->latched = false;
+  if (ch == &state_lost_) ch->level = AlarmLevel::kNone;
+  Compose(state_.time_to_trip_s);
+  return true;
+}
+
+void AlarmMonitor::LatchStateLost(double now_s) {
+  state_lost_.level = AlarmLevel::kTrip;
+  state_lost_.value = std::nan("");
+  state_lost_.raised_at_s = now_s;
+  state_lost_.latched = true;
+  Compose(state_.time_to_trip_s);
+}
+
+void AlarmMonitor::RaiseSecondSender(double now_s) {
+  second_sender_last_s_ = now_s;
+  if (second_sender_.level != AlarmLevel::kNone) return;
+  second_sender_.level = AlarmLevel::kWarning;
+  second_sender_.value = std::nan("");
+  second_sender_.raised_at_s = now_s;
+  Compose(state_.time_to_trip_s);
 }
 
 SensorHealth::SensorHealth(const AlarmConfig& config) : config_(config) {}

@@ -41,8 +41,12 @@ enum class AlarmReason : std::uint8_t {
   kSensorFault = 8,               ///< the measured sensor failed (missing, stuck, out of range,
                                   ///< jumping), found without trusting its readings; it is
                                   ///< left out of the filter meanwhile
+  kSafetyStateLost = 9,  ///< the saved latched trips and clear counters were damaged or missing
+                         ///< at start: latched until an operator clears it
+  kSecondSender = 10,    ///< frames of this pump's IDs that its drive (or the gateway) did not
+                         ///< send: its own IDs from elsewhere, too fast, a broken rolling counter
 };
-inline constexpr std::size_t kAlarmReasonCount = 9;
+inline constexpr std::size_t kAlarmReasonCount = 11;
 
 /// What is wrong with the measured sensor, judged from evidence that does not rest on its
 /// reading being right (its frame's age, its noise, physics' bounds on its value and steps).
@@ -106,6 +110,8 @@ struct AlarmConfig {
   /// reading well this long (one status frame through a lossy link is no recovery). The filter
   /// takes the sensor back at once; this is the alarm only.
   double sensor_fault_clear_s = 30.0;
+  /// A second-sender warning clears after this long without new evidence of one (s).
+  double second_sender_clear_s = 600.0;
   int sensor_node = -1;  ///< node index the measured sensor sits on (reports)
   /// Levels act on an upper bound of each estimate, mean + k sd (docs/daemon.md, "Alarm rule"):
   /// k for the trip and for the warning level.
@@ -179,15 +185,26 @@ class AlarmMonitor {
   /// Evaluates at time `now_s` (monotonic, s). Returns the new state.
   const AlarmState& Step(double now_s, const AlarmInputs& in);
 
-  /// Clears a latched trip. The trip re-asserts (after hold) if its condition is still there.
+  /// Clears every latched trip. A trip re-asserts (after hold) if its condition is still there.
   /// Returns true when a trip was latched.
   bool Clear();
+  /// Clears the latched trip of one node (`node` as in LatchedTrip: a node index, kSensorTrip or
+  /// kStateLostTrip). Returns false (nothing changes) when that one was not latched.
+  bool Clear(int node);
+
+  /// Latches the trip "the safety state was lost" (reason kSafetyStateLost, the pump as a
+  /// whole) at `now_s`; it stays until cleared.
+  void LatchStateLost(double now_s);
+  /// Evidence of a second sender on this pump's CAN IDs at `now_s`: a warning (reason
+  /// kSecondSender) at once, which clears `second_sender_clear_s` after the last evidence.
+  void RaiseSecondSender(double now_s);
 
   const AlarmState& state() const { return state_; }
 
   /// Latched trips, for saving across a restart: `node` is the node index (as in the
   /// constructor's `limits`) or kSensorTrip for the measured sensor's own level.
   static constexpr int kSensorTrip = -1;
+  static constexpr int kStateLostTrip = -2;  ///< the safety state was lost (LatchStateLost)
   struct LatchedTrip {
     int node = kSensorTrip;
     double value = std::numeric_limits<double>::quiet_NaN();  ///< degC that raised it
@@ -250,6 +267,9 @@ class AlarmMonitor {
   Channel offset_;
   Channel converged_;
   Channel forecast_;
+  Channel state_lost_;     // latched trip: the safety state was lost
+  Channel second_sender_;  // warning: another sender on this pump's IDs
+  double second_sender_last_s_ = std::numeric_limits<double>::quiet_NaN();
   // Rate of rise: per node, the value at the start of the current window.
   std::vector<double> window_start_degC_;
   std::vector<double> window_start_s_;

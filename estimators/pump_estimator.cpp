@@ -414,6 +414,7 @@ PumpEstimatorState PumpEstimator::Save() const {
   const auto& names = model_.StateNames();
   for (const auto& t : alarms_.LatchedTrips()) {
     const std::string node = t.node == AlarmMonitor::kSensorTrip ? std::string(kSensorLevelsNode)
+                             : t.node == AlarmMonitor::kStateLostTrip ? std::string(kStateLostNode)
                              : t.node < static_cast<int>(names.size())
                                  ? names[static_cast<std::size_t>(t.node)]
                                  : std::string(kWindingResistanceNode);
@@ -518,17 +519,33 @@ bool PumpEstimator::TripIndices(const PumpEstimatorState& state,
   // Alarm node names -> the monitor's indices (model nodes, then the winding resistance).
   out.clear();
   for (const auto& t : state.latched_trips) {
-    int node = AlarmMonitor::kSensorTrip;
-    if (t.node == kWindingResistanceNode) {
-      node = model_.StateCount();
-    } else if (t.node != kSensorLevelsNode) {
-      node = model_.StateIndex(t.node);
-      if (node < 0) return false;
-    }
-    if (!std::isfinite(t.value_degC)) return false;
-    out.push_back({node, t.value_degC});
+    const std::optional<int> node = LatchIndex(t.node);
+    if (!node || !std::isfinite(t.value_degC)) return false;
+    out.push_back({*node, t.value_degC});
   }
   return true;
+}
+
+std::optional<int> PumpEstimator::LatchIndex(const std::string& name) const {
+  if (name == kWindingResistanceNode) return model_.StateCount();
+  if (name == kSensorLevelsNode) return AlarmMonitor::kSensorTrip;
+  if (name == kStateLostNode) return AlarmMonitor::kStateLostTrip;
+  const int node = model_.StateIndex(name);
+  return node < 0 ? std::nullopt : std::optional<int>(node);
+}
+
+void PumpEstimator::LatchStateLost(std::int64_t t_us) {
+  alarms_.LatchStateLost(static_cast<double>(t_us) * 1e-6);
+  estimate_.alarm = alarms_.state();
+  ++estimate_.alarm_changes;
+}
+
+void PumpEstimator::RaiseSecondSender(std::int64_t t_us) {
+  const AlarmState before = alarms_.state();
+  alarms_.RaiseSecondSender(static_cast<double>(t_us) * 1e-6);
+  if (alarms_.state() == before) return;
+  estimate_.alarm = alarms_.state();
+  ++estimate_.alarm_changes;
 }
 
 void PumpEstimator::Relatch(const std::vector<AlarmMonitor::LatchedTrip>& trips,

@@ -45,6 +45,8 @@ inline constexpr double kMaxEstimate_degC = 1000.0;
 inline constexpr const char* kWindingResistanceNode = "winding_resistance";
 /// Name of the alarm levels of the measured sensor itself.
 inline constexpr const char* kSensorLevelsNode = "sensor";
+/// Name of the latched trip "the safety state was lost" (AlarmMonitor::kStateLostTrip).
+inline constexpr const char* kStateLostNode = "safety_state_lost";
 
 struct PumpEstimatorConfig {
   std::string measured_node = "frame";  ///< the node the frame sensor measures
@@ -166,6 +168,16 @@ class PumpEstimator {
   bool StepNeverHeard(std::int64_t t_us, double silence_s);
   /// Clears latched trips. Returns true if one was latched.
   bool ClearTrips() { return alarms_.Clear(); }
+  /// Clears the latched trip of one alarm node (LatchIndex()). Returns true if it was latched.
+  bool ClearTrip(int node) { return alarms_.Clear(node); }
+  /// The alarm monitor's index of alarm node `name` (a model node, kSensorLevelsNode,
+  /// kWindingResistanceNode, kStateLostNode), or nullopt for a name this pump lacks.
+  std::optional<int> LatchIndex(const std::string& name) const;
+  /// Latches the trip "safety state lost" at `t_us` (at start, when the latched trips and clear
+  /// counters saved could not be read); published at once.
+  void LatchStateLost(std::int64_t t_us);
+  /// Evidence of a second sender on this pump's CAN IDs at `t_us`: a warning, published at once.
+  void RaiseSecondSender(std::int64_t t_us);
   /// The identifier's estimate published between steps (after a restart, before the first).
   void NoteIdentifier(const ResistanceEstimate& resistance) { estimate_.resistance = resistance; }
 

@@ -199,12 +199,14 @@ int Run(const Options& options) {
         pumptherm::alarm_clear_t clear;
         clear.utime = utime;
         clear.pump = pump;
+        clear.gateway = "pumptherm";
         clear.node = "";
-        clear.source = "pumptherm-lcm-demo";
+        clear.key_id = "pumptherm-lcm-demo";
         clear.comment = "demo clear command";
         // Not signed (the demo holds no key): a gateway refuses it and counts it.
         clear.counter = tick;
-        std::fill(std::begin(clear.mac), std::end(clear.mac), std::uint8_t{0});
+        std::fill(std::begin(clear.tag), std::end(clear.tag), std::uint8_t{0});
+        std::fill(std::begin(clear.signature), std::end(clear.signature), std::uint8_t{0});
         Publish(lcm, PumpChannelName(options.prefix, pump, PumpChannel::kAlarmClear), clear, sent,
                 failures);
       }

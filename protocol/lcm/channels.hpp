@@ -8,6 +8,7 @@
 ///   <prefix>/<pump>/ALARM_CLEAR   pumptherm::alarm_clear_t (command to the gateway)
 ///   <prefix>/<pump>/ALARM_CLEAR_REPLY   pumptherm::alarm_clear_reply_t (the gateway's answer)
 ///   <prefix>/GATEWAY/HEALTH       pumptherm::gateway_health_t
+///   <prefix>/GATEWAY/DIGEST       pumptherm::gateway_digest_t (signed list of what was published)
 ///
 /// Pure string handling: no I/O. Names are restricted to ASCII letters, digits, '_', '-' and
 /// '.', because they are part of channel names and regular expressions, and because LCM 1.3's
@@ -107,6 +108,15 @@ inline std::string GatewayHealthChannelName(std::string_view prefix) {
     throw std::invalid_argument("invalid LCM channel prefix '" + std::string(prefix) + "'");
   }
   return std::string(prefix) + "/GATEWAY/HEALTH";
+}
+
+/// `<prefix>/GATEWAY/DIGEST`: the gateway's signed digest of what it published. Throws
+/// std::invalid_argument for a bad prefix.
+inline std::string GatewayDigestChannelName(std::string_view prefix) {
+  if (!IsValidPrefix(prefix)) {
+    throw std::invalid_argument("invalid LCM channel prefix '" + std::string(prefix) + "'");
+  }
+  return std::string(prefix) + "/GATEWAY/DIGEST";
 }
 
 /// Regular expression (as lcm::LCM::subscribe takes it) for `channel` of every pump under

@@ -1,7 +1,8 @@
-// Authenticated LCM alarm clears (docs/threat-model.md): a latched trip clears only with a
-// command signed with the clear key, inside the time window, with a new counter; spoofed and
-// replayed commands are refused and counted, also after a restart; the key file's permissions
-// are checked when the key is loaded.
+// Signed LCM alarm clears (docs/threat-model.md): a latched trip clears only with a command
+// signed by a listed operator key for this gateway and prefix, inside the time window, with a
+// new counter, for a node that is latched; forged, replayed, revoked, cross-gateway commands are
+// refused, counted and not answered; the clear is durable before it acts; the refusals' journal
+// lines carry structured fields, escape what came from outside and are summarised per source.
 #include "daemon/alarm_clear_auth.hpp"
 
 #include <grp.h>
@@ -21,31 +22,21 @@
 #include "daemon/state_store.hpp"
 #include "protocol/lcm/channels.hpp"
 #include "pumptherm/alarm_clear_reply_t.hpp"
+#include "tests/common/test_temp_dir.hpp"
 
 namespace pumptherm::daemon {
 namespace {
 
 using Reply = pumptherm::alarm_clear_reply_t;
 constexpr std::int64_t kNowUs = 1'763'776'803'000'000;
+constexpr const char* kPrefix = "PUMPTHERM";
 
-ClearKey Key(std::uint8_t first) {
-  ClearKey k{};
-  for (std::size_t i = 0; i < k.size(); ++i) k[i] = static_cast<std::uint8_t>(first + i);
-  return k;
+Seed SeedOf(std::uint8_t first) {
+  Seed s{};
+  for (std::size_t i = 0; i < s.size(); ++i) s[i] = static_cast<std::uint8_t>(first + i);
+  return s;
 }
-
-pumptherm::alarm_clear_t Command(std::int64_t utime, std::int64_t counter,
-                                 const std::string& source = "operator") {
-  pumptherm::alarm_clear_t m;
-  m.utime = utime;
-  m.pump = "tmp1";
-  m.node = "";
-  m.source = source;
-  m.comment = "checked";
-  m.counter = counter;
-  std::fill(std::begin(m.mac), std::end(m.mac), std::uint8_t{0});
-  return m;
-}
+SigningKey KeyOf(std::uint8_t first) { return SigningKey(SeedOf(first)); }
 
 std::string Hex(const std::uint8_t* p, std::size_t n) {
   std::string out;
@@ -57,16 +48,62 @@ std::string Hex(const std::uint8_t* p, std::size_t n) {
   return out;
 }
 
-// The layout of docs/lcm.md ("Authentication code"), checked against an independent HMAC:
-// Python's hmac.new(bytes(range(32)), layout, hashlib.sha512).digest()[:32] over the same
-// command gives d28746c3...5fe6 (crypto_auth is HMAC-SHA-512 truncated to 256 bits).
-TEST(ClearAuth, CodeFollowsTheDocumentedLayout) {
+/// A command for pump tmp1 of gateway "pumptherm", unsigned.
+pumptherm::alarm_clear_t Command(std::int64_t utime, std::int64_t counter,
+                                 const std::string& node = "") {
+  pumptherm::alarm_clear_t m;
+  m.utime = utime;
+  m.gateway = "pumptherm";
+  m.pump = "tmp1";
+  m.node = node;
+  m.key_id = "";
+  m.comment = "checked";
+  m.counter = counter;
+  std::fill(std::begin(m.tag), std::end(m.tag), std::uint8_t{0});
+  std::fill(std::begin(m.signature), std::end(m.signature), std::uint8_t{0});
+  return m;
+}
+
+// The signed bytes of docs/lcm.md ("Signed bytes"), written out by hand, and the signature an
+// independent Ed25519 gives over them: python3-cryptography 48's
+// Ed25519PrivateKey.from_private_bytes(bytes(range(1, 33))).sign(layout) (Ed25519 signatures
+// are deterministic, RFC 8032).
+TEST(ClearAuth, SignedBytesFollowTheDocumentedLayout) {
+  pumptherm::alarm_clear_t m = Command(kNowUs, kNowUs + 17, "winding");
+  m.key_id = "00112233445566aa";
+  m.comment = "ok";
+  auto text = [](const std::string& s) {
+    char len[9];
+    std::snprintf(len, sizeof len, "%08zx", s.size());
+    std::string hex = len;
+    for (unsigned char c : s) {
+      char b[3];
+      std::snprintf(b, sizeof b, "%02x", c);
+      hex += b;
+    }
+    return hex;
+  };
+  const std::string want =
+      Hex(reinterpret_cast<const std::uint8_t*>("pumptherm.alarm_clear_t.2"), 25) + "00" +
+      text(kPrefix) + text("pumptherm") + text("tmp1") + text("winding") +
+      text("00112233445566aa") + text("ok") + "0006442549ce4ec0" + "0006442549ce4ed1";
+  const auto bytes = SignedBytes(m, kPrefix);
+  EXPECT_EQ(Hex(bytes.data(), bytes.size()), want);
+  const Signature sig = KeyOf(1).Sign(bytes);
+  EXPECT_EQ(Hex(sig.data(), sig.size()),
+            "0e87a21202ca9801679123b05244c531e585e0b24faadf1694e8f58197b9c1a0"
+            "cbff0b957530d0bf2750a91da7a60b7ab2a2cc4e0794e1cae3bc9ad290d10d02");
+}
+
+TEST(ClearAuth, EveryFieldAndThePrefixAreCovered) {
+  const SigningKey op = KeyOf(1), gw = KeyOf(100);
   pumptherm::alarm_clear_t m = Command(kNowUs, kNowUs);
-  Sign(Key(0), m);
-  EXPECT_EQ(Hex(m.mac, 32), "d28746c3727f08964495c7d20fa1a2b859f25ecdfdd588f63d330cec72125fe6");
-  EXPECT_TRUE(Verify(Key(0), m));
-  // Every field is covered.
-  for (int field = 0; field < 6; ++field) {
+  SignCommand(op, gw.public_key(), kPrefix, m);
+  ClearAuthenticator a("pumptherm", kPrefix, 30.0);
+  a.SetGatewayKey(gw);
+  a.AddOperator({"alice", op.public_key(), false});
+  EXPECT_EQ(a.Check(m, kNowUs).check, ClearCheck::kPassed);
+  for (int field = 0; field < 7; ++field) {
     pumptherm::alarm_clear_t t = m;
     switch (field) {
       case 0:
@@ -79,57 +116,150 @@ TEST(ClearAuth, CodeFollowsTheDocumentedLayout) {
         t.node = "winding";
         break;
       case 3:
-        t.source = "operatorx";
-        break;
-      case 4:
         t.comment += ".";
         break;
-      default:
+      case 4:
         ++t.counter;
         break;
+      case 5:
+        t.tag[3] ^= 1;
+        break;
+      default:
+        t.signature[3] ^= 1;
+        break;
     }
-    EXPECT_FALSE(Verify(Key(0), t)) << "field " << field;
+    const ClearCheck c = a.Check(t, kNowUs).check;
+    EXPECT_TRUE(c == ClearCheck::kBadTag || c == ClearCheck::kBadSignature) << "field " << field;
   }
-  EXPECT_FALSE(Verify(Key(1), m));
+  // Another prefix (a second gateway of the same name on another prefix).
+  ClearAuthenticator other_prefix("pumptherm", "HALL2", 30.0);
+  other_prefix.SetGatewayKey(gw);
+  other_prefix.AddOperator({"alice", op.public_key(), false});
+  EXPECT_EQ(other_prefix.Check(m, kNowUs).check, ClearCheck::kBadTag);
 }
 
-/// A gateway with one pump whose trip is latched (restored from a saved state with one), keyed
-/// with Key(1); replies land in `replies`.
+TEST(ClearKeys, PublicKeysKeyIdsAndTheSharedTagKey) {
+  const SigningKey op = KeyOf(1), gw = KeyOf(100), other = KeyOf(150);
+  const std::string text = FormatPublicKey(op.public_key());
+  EXPECT_EQ(text.rfind("ed25519:", 0), 0U);
+  EXPECT_EQ(text.size(), 8U + 44U);
+  std::string problem;
+  EXPECT_EQ(ParsePublicKey("  " + text + "\n", &problem), op.public_key());
+  EXPECT_FALSE(ParsePublicKey("ssh-ed25519 AAAA", &problem));
+  EXPECT_NE(problem.find("ed25519:"), std::string::npos);
+  EXPECT_FALSE(ParsePublicKey("ed25519:AAAA", &problem));
+  EXPECT_EQ(op.key_id().size(), 16U);
+  EXPECT_NE(op.key_id(), gw.key_id());
+  // Both ends derive the same tag key; another gateway's differs.
+  EXPECT_EQ(op.OperatorTagKey(gw.public_key()), gw.GatewayTagKey(op.public_key()));
+  EXPECT_NE(op.OperatorTagKey(other.public_key()), gw.GatewayTagKey(op.public_key()));
+  EXPECT_THROW(SigningKey(Seed{}), std::invalid_argument);  // all zero: no key
+}
+
+TEST(ClearKeys, KeyFilesAreCheckedForOwnerModeFolderAndZeros) {
+  const std::string dir = test_files::TestTempDir("keys");
+  ::chmod(dir.c_str(), 0700);
+  const std::string path = dir + "/operator.key";
+  ::unlink(path.c_str());
+  ::unlink(PublicKeyPathOf(path).c_str());
+  const SigningKey k = KeyOf(7);
+  WriteKeyFiles(path, k, "alice");
+  EXPECT_EQ(SecretKeyFileProblem(path, KeyOwner::kCaller), "");
+  EXPECT_EQ(ReadSecretKeyFile(path).public_key(), k.public_key());
+  EXPECT_EQ(ReadPublicKeyFile(PublicKeyPathOf(path)), k.public_key());
+  EXPECT_THROW(WriteKeyFiles(path, KeyOf(8), "bob"), std::system_error);  // never replaced
+  EXPECT_EQ(ReadSecretKeyFile(path).public_key(), k.public_key());
+  ASSERT_EQ(::chmod(path.c_str(), 0640), 0);
+  EXPECT_NE(SecretKeyFileProblem(path, KeyOwner::kCaller).find("open to its group or others"),
+            std::string::npos);
+  ASSERT_EQ(::chmod(path.c_str(), 0600), 0);
+  ASSERT_EQ(::chmod(dir.c_str(), 0777), 0);  // a folder others may write: the key can be swapped
+  EXPECT_NE(SecretKeyFileProblem(path, KeyOwner::kCaller).find("which others may write"),
+            std::string::npos);
+  ASSERT_EQ(::chmod(dir.c_str(), 0700), 0);
+  if (::geteuid() == 0) {  // only root can give a file away
+    ASSERT_EQ(::chown(path.c_str(), 65534, 65534), 0);
+    EXPECT_NE(SecretKeyFileProblem(path, KeyOwner::kCaller).find("belongs to uid 65534"),
+              std::string::npos);
+    ASSERT_EQ(::chown(path.c_str(), 0, 0), 0);
+  }
+  WriteFileAtomically(path, std::string(32, '\0'), 0600);
+  try {
+    ReadSecretKeyFile(path);
+    ADD_FAILURE() << "an all-zero key was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("all zero"), std::string::npos) << e.what();
+  }
+  WriteFileAtomically(path, "short", 0600);
+  EXPECT_THROW(ReadSecretKeyFile(path), std::runtime_error);
+  ::unlink(path.c_str());
+  ::unlink(PublicKeyPathOf(path).c_str());
+}
+
+/// A gateway "pumptherm" with one pump whose trip on `winding` is latched (restored from a
+/// saved state), with gateway key KeyOf(100) and operators alice (KeyOf(1)), bob (KeyOf(2))
+/// and revoked eve (KeyOf(3)); replies land in `replies_`, committed safety states in
+/// `commits_`.
 class ClearGateway : public ::testing::Test, public OutputSink {
  protected:
-  static constexpr const char* kConfig = R"(
+  static std::string ConfigText() {
+    return fmt::format(R"(
 [gateway]
 heartbeat_period_s = 0
 [[can]]
 interface = "can0"
 [alarms]
-clear_lcm_sources = ["operator"]
-clear_key_file = "clear.key"
-clear_key_group = "root"
+[[alarms.clear_operators]]
+name = "alice"
+public_key = "{}"
+[[alarms.clear_operators]]
+name = "bob"
+public_key = "{}"
+[[alarms.clear_operators]]
+name = "eve"
+public_key = "{}"
+revoked = true
 [[pump]]
 name = "tmp1"
 node_id = 1
 thermal_model = "tmp-generic"
-)";
-
+)",
+                       FormatPublicKey(KeyOf(1).public_key()),
+                       FormatPublicKey(KeyOf(2).public_key()),
+                       FormatPublicKey(KeyOf(3).public_key()));
+  }
   static DaemonConfig Config() {
-    return ParseConfig(kConfig, std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml");
+    return ParseConfig(ConfigText(), std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml");
+  }
+  static void Keyed(Gateway& g) {
+    g.SetGatewayKey(KeyOf(100));
+    g.LoadClearKeys("");
   }
 
-  ClearGateway() : gateway_(Config()) { gateway_.SetClearKey(Key(1)); }
+  ClearGateway() : gateway_(Config()) {
+    Keyed(gateway_);
+    gateway_.SetSafetyCommit([this](const std::string& text, std::string* error) {
+      // Durable before it acts: the pump is still latched while its clear is committed.
+      latched_at_commit_.push_back(Latched());
+      commits_.push_back(text);
+      if (fail_commits_) *error = "No space left on device";
+      return !fail_commits_;
+    });
+  }
 
   void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
   bool PublishLcm(const std::string& channel, std::int64_t,
                   const std::vector<std::uint8_t>& b) override {
+    if (channel != "PUMPTHERM/tmp1/ALARM_CLEAR_REPLY") return true;  // outputs of an Advance
     Reply r;
-    EXPECT_EQ(channel, "PUMPTHERM/tmp1/ALARM_CLEAR_REPLY");
     EXPECT_GT(r.decode(b.data(), 0, static_cast<int>(b.size())), 0);
     replies_.push_back(r);
     return true;
   }
 
-  /// Latches a trip on the pump through a saved state (the path a restart takes).
-  static void Latch(Gateway& g) {
+  /// Latches trips on the pump through a saved state (the path a restart takes).
+  static void Latch(Gateway& g, const std::string& nodes = "'winding'",
+                    const std::string& values = "130.0") {
     const std::string text = R"(version = 2
 [pump.tmp1]
 model = 'tmp-generic'
@@ -143,102 +273,199 @@ resistance_probability = [ 0.5, 0.5 ]
 resistance_rejections = [ 0, 0 ]
 resistance_moments = [ 0.0, 0.0, 0.0, 0.0 ]
 resistance_blocks = 0
-latched_trip_nodes = [ 'winding' ]
-latched_trip_values_degC = [ 130.0 ]
+latched_trip_nodes = [ )" + nodes +
+                             R"( ]
+latched_trip_values_degC = [ )" +
+                             values + R"( ]
 )";
     std::string warning;
     ASSERT_EQ(g.RestoreState(text, kNowUs, &warning), 1) << warning;
     ASSERT_TRUE(Latched(g));
   }
 
+  /// alice's command, signed for this gateway (or `gateway`, `prefix`).
+  static pumptherm::alarm_clear_t Signed(std::int64_t utime, std::int64_t counter,
+                                         const std::string& node = "", std::uint8_t key = 1,
+                                         const std::string& gateway = "pumptherm",
+                                         const std::string& prefix = kPrefix) {
+    pumptherm::alarm_clear_t m = Command(utime, counter, node);
+    m.gateway = gateway;
+    SignCommand(KeyOf(key), KeyOf(100).public_key(), prefix, m);
+    return m;
+  }
+
   bool Send(const pumptherm::alarm_clear_t& m) { return gateway_.ClearFromLcm(&m, kNowUs, *this); }
-  static bool Latched(const Gateway& g) { return !g.pumps()[0]->Save().latched_trips.empty(); }
+  static std::vector<std::string> LatchedNodes(const Gateway& g) {
+    std::vector<std::string> out;
+    for (const auto& t : g.pumps()[0]->Save().latched_trips) out.push_back(t.node);
+    return out;
+  }
+  static bool Latched(const Gateway& g) { return !LatchedNodes(g).empty(); }
   bool Latched() const { return Latched(gateway_); }
 
   Gateway gateway_;
   std::vector<Reply> replies_;
+  std::vector<std::string> commits_;
+  std::vector<bool> latched_at_commit_;
+  bool fail_commits_ = false;
 };
 
-TEST_F(ClearGateway, SpoofedClearsFromAnAcceptedSourceAreRefusedAndCounted) {
+TEST_F(ClearGateway, ForgedClearsAreRefusedCountedAndNotAnswered) {
   Latch(gateway_);
-  pumptherm::alarm_clear_t none = Command(kNowUs, 10);  // no code at all
-  pumptherm::alarm_clear_t wrong = Command(kNowUs, 11);
-  Sign(Key(2), wrong);  // a code made with another key
+  pumptherm::alarm_clear_t none = Command(kNowUs, kNowUs);  // no tag, no signature
+  none.key_id = KeyOf(1).key_id();
+  pumptherm::alarm_clear_t stranger = Signed(kNowUs, kNowUs, "", 50);  // a key not listed
+  // alice's key ID with mallory's tag and signature: the tag fails.
+  pumptherm::alarm_clear_t claimed = Signed(kNowUs, kNowUs, "", 50);
+  claimed.key_id = KeyOf(1).key_id();
+  // A valid tag with a broken signature (only the gateway's key could make that tag).
+  pumptherm::alarm_clear_t bad_sig = Signed(kNowUs, kNowUs + 1);
+  bad_sig.signature[10] ^= 0x40;
   EXPECT_FALSE(Send(none));
-  EXPECT_FALSE(Send(wrong));
-  EXPECT_FALSE(gateway_.ClearFromLcm(nullptr, kNowUs, *this));  // does not decode
-  EXPECT_FALSE(gateway_.Clear("tmp1", "operator", "no code"));  // a source name alone
+  EXPECT_FALSE(Send(stranger));
+  EXPECT_FALSE(Send(claimed));
+  EXPECT_FALSE(Send(bad_sig));
+  EXPECT_FALSE(gateway_.ClearFromLcm(nullptr, kNowUs, *this));    // does not decode
+  EXPECT_FALSE(gateway_.Clear("tmp1", "alice", "no signature"));  // a name alone
   EXPECT_TRUE(Latched());
-  EXPECT_EQ(gateway_.counters().clears_refused, 4U);
-  EXPECT_EQ(gateway_.counters().clears_unauthenticated, 4U);
+  EXPECT_EQ(gateway_.counters().clears_refused, 6U);
+  EXPECT_EQ(gateway_.counters().clears_unauthenticated, 6U);
   EXPECT_EQ(gateway_.counters().clears_accepted, 0U);
-  ASSERT_EQ(replies_.size(), 2U);
-  for (const Reply& r : replies_) {
-    EXPECT_EQ(r.result, Reply::RESULT_BAD_MAC);
-    EXPECT_TRUE(r.trip_latched);
-    EXPECT_TRUE(Verify(Key(1), r));  // a client can trust the answer
-  }
-  EXPECT_EQ(gateway_.clear_auth().last_counter("tmp1"), 0);  // refused counters are not taken
+  EXPECT_TRUE(replies_.empty());  // a forger learns nothing and costs no reply
+  EXPECT_TRUE(commits_.empty());
+  EXPECT_EQ(gateway_.clear_auth().last_counter("tmp1", KeyOf(1).key_id()), 0);
 }
 
-TEST_F(ClearGateway, ValidClearClearsAndItsReplayIsRefusedAlsoAfterARestart) {
+TEST_F(ClearGateway, ValidClearIsDurableBeforeItActsAndItsReplayIsRefusedAfterARestart) {
   Latch(gateway_);
-  pumptherm::alarm_clear_t m = Command(kNowUs - 2'000'000, 100);
-  Sign(Key(1), m);
+  const pumptherm::alarm_clear_t m = Signed(kNowUs - 2'000'000, 100);
   EXPECT_TRUE(Send(m));
   EXPECT_FALSE(Latched());
+  ASSERT_EQ(commits_.size(), 1U);
+  EXPECT_TRUE(latched_at_commit_[0]);  // committed while still latched: nothing acted before
+  std::string problem;
+  const auto committed = ParseSafetyState(commits_[0], &problem);
+  ASSERT_TRUE(committed) << problem;
+  EXPECT_TRUE(committed->latched.at("tmp1").empty());
+  EXPECT_EQ(committed->counters.at("tmp1").at(KeyOf(1).key_id()), 100);
   ASSERT_EQ(replies_.size(), 1U);
   EXPECT_EQ(replies_[0].result, Reply::RESULT_ACCEPTED);
   EXPECT_EQ(replies_[0].reason, "latched trip cleared");
-  EXPECT_EQ(replies_[0].counter, 100);
+  EXPECT_EQ(replies_[0].gateway, "pumptherm");
+  EXPECT_EQ(replies_[0].key_id, KeyOf(1).key_id());
   EXPECT_FALSE(replies_[0].trip_latched);
-  EXPECT_TRUE(Verify(Key(1), replies_[0]));
+  EXPECT_TRUE(VerifyReply(KeyOf(100).public_key(), kPrefix, replies_[0]));
+  EXPECT_FALSE(VerifyReply(KeyOf(101).public_key(), kPrefix, replies_[0]));
 
-  // The same bytes again: refused, the reply names the counter to exceed.
+  // The same bytes again: refused, no answer, no signature check spent on it.
   Latch(gateway_);
   EXPECT_FALSE(Send(m));
   EXPECT_TRUE(Latched());
-  ASSERT_EQ(replies_.size(), 2U);
-  EXPECT_EQ(replies_[1].result, Reply::RESULT_REPLAYED);
-  EXPECT_EQ(replies_[1].last_counter, 100);
+  EXPECT_EQ(replies_.size(), 1U);
 
-  // After a restart (the saved state carries the counter) still refused; a new counter clears.
-  const std::string saved = gateway_.SaveState();
-  EXPECT_NE(saved.find("[clear_auth]"), std::string::npos) << saved;
+  // After a restart with the committed safety state: still refused; a new counter clears.
   Gateway restarted(Config());
-  restarted.SetClearKey(Key(1));
-  std::string warning;
-  restarted.RestoreState(saved, kNowUs, &warning);
-  EXPECT_EQ(warning, "");
+  Keyed(restarted);
+  Latch(restarted);
+  restarted.ApplySafetyState(*committed, kNowUs);
+  EXPECT_FALSE(Latched(restarted));  // the committed state says cleared
   Latch(restarted);
   EXPECT_FALSE(restarted.ClearFromLcm(&m, kNowUs, *this));
-  EXPECT_EQ(replies_.back().result, Reply::RESULT_REPLAYED);
-  pumptherm::alarm_clear_t next = Command(kNowUs, 101);
-  Sign(Key(1), next);
-  EXPECT_TRUE(restarted.ClearFromLcm(&next, kNowUs, *this));
+  EXPECT_TRUE(Latched(restarted));
+  // bob's counters are his own: his first command is fresh.
+  const pumptherm::alarm_clear_t bobs = Signed(kNowUs, 50, "", 2);
+  EXPECT_TRUE(restarted.ClearFromLcm(&bobs, kNowUs, *this));
   EXPECT_FALSE(Latched(restarted));
 }
 
-TEST_F(ClearGateway, ValidCodeOutsideTheWindowOrFromAnotherSourceIsRefused) {
+TEST_F(ClearGateway, ACommandForAnotherGatewayOrPrefixClearsNothingHere) {
   Latch(gateway_);
-  pumptherm::alarm_clear_t late = Command(kNowUs - 31'000'000, 1);  // window 30 s
-  pumptherm::alarm_clear_t early = Command(kNowUs + 31'000'000, 2);
-  pumptherm::alarm_clear_t other = Command(kNowUs, 3, "intruder");
-  for (auto* m : {&late, &early, &other}) Sign(Key(1), *m);
-  EXPECT_FALSE(Send(late));
-  EXPECT_FALSE(Send(early));
+  // Signed for gateway "hall2" (same operator key, same pump name): refused by name.
+  const pumptherm::alarm_clear_t other = Signed(kNowUs, 10, "", 1, "hall2");
   EXPECT_FALSE(Send(other));
+  // The same command with the gateway's name changed to this one: the tag no longer holds.
+  pumptherm::alarm_clear_t renamed = other;
+  renamed.gateway = "pumptherm";
+  EXPECT_FALSE(Send(renamed));
+  // Signed for this gateway's name under another channel prefix (replayed onto ours).
+  const pumptherm::alarm_clear_t prefixed = Signed(kNowUs, 11, "", 1, "pumptherm", "HALL2");
+  EXPECT_FALSE(Send(prefixed));
   EXPECT_TRUE(Latched());
-  ASSERT_EQ(replies_.size(), 3U);
+  EXPECT_TRUE(replies_.empty());
+  EXPECT_EQ(gateway_.counters().clears_refused, 3U);
+}
+
+TEST_F(ClearGateway, TheNodeIsHonoured) {
+  Latch(gateway_, "'winding', 'sensor'", "130.0, 90.0");
+  // A node that is not latched: refused (answered), nothing cleared, its counter not taken.
+  EXPECT_FALSE(Send(Signed(kNowUs, 1, "frame")));
+  ASSERT_EQ(replies_.size(), 1U);
+  EXPECT_EQ(replies_[0].result, Reply::RESULT_NODE_NOT_LATCHED);
+  EXPECT_EQ(LatchedNodes(gateway_), (std::vector<std::string>{"winding", "sensor"}));
+  EXPECT_TRUE(commits_.empty());
+  // The winding only: the sensor's trip stays latched.
+  EXPECT_TRUE(Send(Signed(kNowUs, 2, "winding")));
+  EXPECT_EQ(LatchedNodes(gateway_), std::vector<std::string>{"sensor"});
+  EXPECT_EQ(replies_.back().result, Reply::RESULT_ACCEPTED);
+  EXPECT_EQ(replies_.back().reason, "latched trip of winding cleared");
+  EXPECT_TRUE(replies_.back().trip_latched);
+  std::string problem;
+  const auto committed = ParseSafetyState(commits_.back(), &problem);
+  ASSERT_TRUE(committed) << problem;
+  ASSERT_EQ(committed->latched.at("tmp1").size(), 1U);
+  EXPECT_EQ(committed->latched.at("tmp1")[0].node, "sensor");
+  // Empty: every latch.
+  EXPECT_TRUE(Send(Signed(kNowUs, 3)));
+  EXPECT_FALSE(Latched());
+}
+
+TEST_F(ClearGateway, RevokedKeysOutsideTheWindowAndUnsavedClearsAreRefused) {
+  Latch(gateway_);
+  EXPECT_FALSE(Send(Signed(kNowUs, 1, "", 3)));  // eve's key is revoked: no answer
+  EXPECT_TRUE(replies_.empty());
+  EXPECT_FALSE(Send(Signed(kNowUs - 31'000'000, 2)));  // window 30 s: answered, signed
+  EXPECT_FALSE(Send(Signed(kNowUs + 31'000'000, 3)));
+  ASSERT_EQ(replies_.size(), 2U);
   EXPECT_EQ(replies_[0].result, Reply::RESULT_OUTSIDE_WINDOW);
   EXPECT_EQ(replies_[1].result, Reply::RESULT_OUTSIDE_WINDOW);
-  EXPECT_EQ(replies_[2].result, Reply::RESULT_SOURCE_REFUSED);
+  fail_commits_ = true;  // a full disk: the clear must not act
+  EXPECT_FALSE(Send(Signed(kNowUs, 4)));
+  EXPECT_TRUE(Latched());
+  EXPECT_EQ(replies_.back().result, Reply::RESULT_NOT_SAVED);
+  EXPECT_NE(replies_.back().reason.find("No space left on device"), std::string::npos);
+  EXPECT_EQ(gateway_.clear_auth().last_counter("tmp1", KeyOf(1).key_id()), 0);
+  fail_commits_ = false;
+  EXPECT_TRUE(Send(Signed(kNowUs, 4)));  // the same command once the disk has room
+  EXPECT_FALSE(Latched());
   EXPECT_EQ(gateway_.counters().clears_unauthenticated, 0U);
+}
+
+TEST_F(ClearGateway, TheSharedKeyIsAMigrationPathOffByDefault) {
+  Latch(gateway_);
+  ClearKey shared{};
+  shared.fill(0x5a);
+  pumptherm::alarm_clear_t m = Command(kNowUs, 9);
+  SignCommandShared(shared, "operator", kPrefix, m);
+  EXPECT_FALSE(Send(m));  // off: refused as an unknown key
+  EXPECT_TRUE(replies_.empty());
+  DaemonConfig c = Config();
+  c.alarms.clear_lcm_sources = {"operator"};
+  Gateway allowed(c);
+  Keyed(allowed);
+  allowed.SetSharedKey(shared);
+  Latch(allowed);
+  EXPECT_TRUE(allowed.ClearFromLcm(&m, kNowUs, *this));
+  EXPECT_FALSE(Latched(allowed));
+  ASSERT_EQ(replies_.size(), 1U);
+  EXPECT_TRUE(VerifyReply(KeyOf(100).public_key(), kPrefix, replies_[0]));
+  pumptherm::alarm_clear_t intruder = Command(kNowUs, 10);
+  SignCommandShared(shared, "intruder", kPrefix, intruder);
+  EXPECT_FALSE(allowed.ClearFromLcm(&intruder, kNowUs, *this));
 }
 
 // The client's exchange (pumptherm clear-trip) against a gateway over one memq:// LCM: the
 // command goes out on ALARM_CLEAR, the gateway answers on ALARM_CLEAR_REPLY, the client trusts
-// only answers signed with its key.
+// only answers signed by the gateway's key.
 TEST_F(ClearGateway, ClientSeesTheGatewaysSignedAnswer) {
   lcm::LCM lcm("memq://");
   ASSERT_TRUE(lcm.good());
@@ -258,45 +485,102 @@ TEST_F(ClearGateway, ClientSeesTheGatewaysSignedAnswer) {
       gateway.ClearFromLcm(ok ? &m : nullptr, kNowUs, *this);
     }
   } responder(lcm, gateway_);
-  lcm.subscribe(lcm_channels::AllPumpsPattern("PUMPTHERM", lcm_channels::PumpChannel::kAlarmClear),
+  lcm.subscribe(lcm_channels::AllPumpsPattern(kPrefix, lcm_channels::PumpChannel::kAlarmClear),
                 &Responder::On, &responder);
   Latch(gateway_);
-  const ClearExchange ok = SendClear(lcm, "PUMPTHERM", Key(1), Command(kNowUs, 7), 2.0);
+  const ClearExchange ok = SendClear(lcm, kPrefix, KeyOf(100).public_key(), Signed(kNowUs, 7), 2.0);
   ASSERT_TRUE(ok.reply.has_value());
   EXPECT_EQ(ok.reply->result, Reply::RESULT_ACCEPTED);
   EXPECT_FALSE(Latched());
-  const ClearExchange again = SendClear(lcm, "PUMPTHERM", Key(1), Command(kNowUs, 7), 2.0);
-  ASSERT_TRUE(again.reply.has_value());
-  EXPECT_EQ(again.reply->result, Reply::RESULT_REPLAYED);
-  EXPECT_EQ(again.reply->last_counter, 7);
-  // Signed with another key: the gateway refuses, and its answer is not trusted by the client.
+  // A client holding another gateway's public key trusts nothing it hears.
   Latch(gateway_);
-  const ClearExchange other = SendClear(lcm, "PUMPTHERM", Key(2), Command(kNowUs, 8), 0.5);
-  EXPECT_FALSE(other.reply.has_value());
-  EXPECT_EQ(other.untrusted_replies, 1);
-  EXPECT_EQ(other.untrusted_reason, "no or a wrong authentication code");
-  EXPECT_TRUE(Latched());
+  const ClearExchange wrong =
+      SendClear(lcm, kPrefix, KeyOf(101).public_key(), Signed(kNowUs, 8), 0.5);
+  EXPECT_FALSE(wrong.reply.has_value());
+  EXPECT_EQ(wrong.untrusted_replies, 1);
+  // A replay gets no answer at all.
+  const ClearExchange replay =
+      SendClear(lcm, kPrefix, KeyOf(100).public_key(), Signed(kNowUs, 7), 0.3);
+  EXPECT_FALSE(replay.reply.has_value());
+  EXPECT_EQ(replay.untrusted_replies, 0);
 }
 
-TEST(ClearAuth, GatewayWithoutAKeyRefusesEveryLcmClear) {
-  Gateway g(
-      ParseConfig("[alarms]\nclear_lcm_sources = [\"operator\"]\n[[can]]\ninterface = \"can0\"\n"
-                  "[[pump]]\nname = \"tmp1\"\nnode_id = 1\n",
-                  std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml"));
-  g.LoadClearKey("");  // no key file configured: a warning, no error
+// An outsider's strings (key ID, comment, gateway) cannot start a journal line of their own.
+TEST_F(ClearGateway, WhatCameFromOutsideIsEscapedInTheJournal) {
+  Latch(gateway_);
+  pumptherm::alarm_clear_t m = Signed(kNowUs, 5);
+  m.comment = "ok\n<2>pumpthermd: alarm clear from 'boss' accepted\r";
+  SignCommand(KeyOf(1), KeyOf(100).public_key(), kPrefix, m);
+  pumptherm::alarm_clear_t forged = Command(kNowUs, 6);
+  forged.key_id = "x\n<3>forged line";
+  testing::internal::CaptureStderr();
+  EXPECT_TRUE(Send(m));
+  EXPECT_FALSE(Send(forged));
+  const std::string out = testing::internal::GetCapturedStderr();
+  std::size_t lines = 0;
+  for (char c : out) lines += c == '\n';
+  EXPECT_EQ(lines, 2U) << out;
+  EXPECT_NE(out.find("ok\\n<2>pumpthermd: alarm clear from 'boss' accepted\\r"), std::string::npos)
+      << out;
+  EXPECT_NE(out.find("key x\\n<3>forged line (unknown)"), std::string::npos) << out;
+}
+
+TEST_F(ClearGateway, AFloodIsLoggedInABurstThenSummarisedOncePerSource) {
+  Latch(gateway_);
+  auto count = [](const std::string& text, const std::string& what) {
+    std::size_t n = 0;
+    for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1))
+      ++n;
+    return n;
+  };
+  gateway_.Advance(kNowUs, *this);
+  testing::internal::CaptureStderr();
+  for (int i = 0; i < 1000; ++i) {
+    pumptherm::alarm_clear_t m = Command(kNowUs, kNowUs + i);
+    m.key_id = i % 2 ? KeyOf(1).key_id() : "mallory";
+    EXPECT_FALSE(Send(m));
+  }
+  const pumptherm::alarm_clear_t legit = Signed(kNowUs, kNowUs + 5000);
+  EXPECT_TRUE(Send(legit));  // inside the flood
+  const std::string flood = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(gateway_.counters().clears_refused, 1000U);
+  EXPECT_EQ(count(flood, "refused: "), 5U) << flood;
+  EXPECT_EQ(count(flood, "accepted"), 1U) << flood;
+  testing::internal::CaptureStderr();
+  gateway_.FlushClearAudit();  // at stop: one line per source
+  const std::string stop = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(count(stop, "\n"), 2U) << stop;
+  EXPECT_NE(
+      stop.find("refused alarm clear(s) from alice (key " + KeyOf(1).key_id() + ") not logged"),
+      std::string::npos)
+      << stop;
+  EXPECT_NE(stop.find("from key mallory (unknown) not logged"), std::string::npos) << stop;
+  EXPECT_NE(stop.find("bad tag"), std::string::npos) << stop;
+}
+
+TEST(ClearAuth, GatewayWithoutASigningKeyRefusesEveryLcmClear) {
+  const SigningKey op = KeyOf(1);
+  Gateway g(ParseConfig("[alarms]\n[[alarms.clear_operators]]\nname = \"alice\"\npublic_key = \"" +
+                            FormatPublicKey(op.public_key()) +
+                            "\"\n[[can]]\ninterface = \"can0\"\n[[pump]]\nname = \"tmp1\"\n"
+                            "node_id = 1\n",
+                        std::string(PUMPTHERM_SOURCE_DIR) + "/c.toml"));
+  testing::internal::CaptureStderr();
+  g.LoadClearKeys("");  // no signing key configured: a warning, no error
+  EXPECT_NE(testing::internal::GetCapturedStderr().find("gateway.signing_key_file is not set"),
+            std::string::npos);
   struct Sink : OutputSink {
-    std::int8_t result = -1;
+    int replies = 0;
     void SendFrame(std::size_t, std::int64_t, const protocol::CanFrame&) override {}
-    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>& b) override {
-      Reply r;
-      if (r.decode(b.data(), 0, static_cast<int>(b.size())) > 0) result = r.result;
+    bool PublishLcm(const std::string&, std::int64_t, const std::vector<std::uint8_t>&) override {
+      ++replies;
       return true;
     }
   } sink;
   pumptherm::alarm_clear_t m = Command(kNowUs, 1);
-  Sign(Key(1), m);
+  SignCommand(op, KeyOf(100).public_key(), kPrefix, m);
   EXPECT_FALSE(g.ClearFromLcm(&m, kNowUs, sink));
-  EXPECT_EQ(sink.result, Reply::RESULT_NO_KEY);
+  EXPECT_EQ(sink.replies, 0);
 }
 
 TEST(LogRateLimiter, BurstPerWindowThenCountsAndReportsWhatWasHeldBack) {
@@ -318,7 +602,7 @@ TEST(LogRateLimiter, BurstPerWindowThenCountsAndReportsWhatWasHeldBack) {
   EXPECT_THROW(LogRateLimiter(0, 1.0), std::invalid_argument);
 }
 
-TEST(ClearAuth, RefusedClearsAreLoggedRateLimitedWithTheCountOfTheRest) {
+TEST(ClearAuth, RefusedCanClearsAreLoggedRateLimitedThenSummarised) {
   Gateway g(
       ParseConfig("[alarms]\nclear_can_interfaces = [\"can0\"]\n[[can]]\ninterface = \"can0\"\n"
                   "[[pump]]\nname = \"tmp1\"\nnode_id = 1\n",
@@ -346,116 +630,80 @@ TEST(ClearAuth, RefusedClearsAreLoggedRateLimitedWithTheCountOfTheRest) {
   g.Advance(kNowUs + 61'000'000, sink);
   EXPECT_FALSE(g.Clear("nosuch", "can:can0", ""));
   const std::string after = testing::internal::GetCapturedStderr();
-  EXPECT_EQ(lines(after, "95 refused alarm clear(s) not logged"), 1U) << after;
+  EXPECT_EQ(lines(after, "95 refused alarm clear(s) from can:can9 not logged"), 1U) << after;
   EXPECT_EQ(lines(after, "alarm clear for unknown pump 'nosuch'"), 1U) << after;
 }
 
-TEST(ClearAuth, StateWithoutCountersLoadsAndCountersNeverGoDown) {
-  ClearAuthenticator a(30.0);
-  EXPECT_EQ(a.Restore(toml::parse("version = 2\n")), "");  // a state file from before
-  EXPECT_EQ(a.last_counter("tmp1"), 0);
-  EXPECT_EQ(a.Restore(toml::parse("[clear_auth]\nversion = 1\nlast_counter = { tmp1 = 50 }\n")),
-            "");
-  EXPECT_EQ(a.Restore(toml::parse("[clear_auth]\nversion = 1\nlast_counter = { tmp1 = 7 }\n")), "");
-  EXPECT_EQ(a.last_counter("tmp1"), 50);
-  EXPECT_NE(a.Restore(toml::parse("[clear_auth]\nversion = 9\n")).find("unknown version"),
-            std::string::npos);
-  EXPECT_NE(a.Restore(toml::parse("[clear_auth]\nversion = 1\nlast_counter = { tmp1 = 'x' }\n"))
-                .find("tmp1"),
-            std::string::npos);
-}
-
-/// A temporary directory with a key file of mode `mode`, owned by the caller's group.
-class KeyFile : public ::testing::Test {
- protected:
-  void SetUp() override {
-    char t[] = "/tmp/pumptherm-key-XXXXXX";
-    ASSERT_NE(::mkdtemp(t), nullptr);
-    dir_ = t;
-    path_ = dir_ + "/clear.key";
-    const ClearKey k = Key(9);
-    WriteFileAtomically(path_, std::string(k.begin(), k.end()), 0640);
-    const struct group* g = ::getgrgid(::getegid());
-    ASSERT_NE(g, nullptr);
-    group_ = g->gr_name;
-  }
-  void TearDown() override {
-    ::unlink(path_.c_str());
-    ::unlink((dir_ + "/" + kClearKeyCredential).c_str());
-    ::rmdir(dir_.c_str());
-  }
-  DaemonConfig Config(const std::string& group) const {
-    return ParseConfig(
-        "[alarms]\nclear_lcm_sources = [\"operator\"]\nclear_key_file = \"clear.key\"\n"
-        "clear_key_group = \"" +
-            group + "\"\n",
-        dir_ + "/pumpthermd.toml");
-  }
-  std::string dir_, path_, group_;
-};
-
-TEST_F(KeyFile, PermissionsAreCheckedWhenTheKeyIsLoaded) {
-  EXPECT_EQ(ClearKeyFileProblem(path_, group_), "");
-  EXPECT_EQ(LoadConfiguredClearKey(Config(group_), ""), Key(9));
-  ASSERT_EQ(::chmod(path_.c_str(), 0644), 0);  // world-readable: a configuration error
-  EXPECT_NE(ClearKeyFileProblem(path_, group_).find("open to others (mode 0644)"),
-            std::string::npos);
+TEST(ClearAuth, OperatorKeysAreParsedWithTheirLines) {
+  const std::string pk = FormatPublicKey(KeyOf(1).public_key());
+  const DaemonConfig c = ParseConfig(
+      "[gateway]\nsigning_key_file = \"gw.key\"\n[alarms]\nclear_window_s = 5\n"
+      "[[alarms.clear_operators]]\nname = \"alice\"\npublic_key = \"" +
+          pk + "\"\nrevoked = true\n",
+      "/etc/p.toml");
+  EXPECT_EQ(c.gateway.signing_key_file, "/etc/gw.key");  // relative to the configuration
+  ASSERT_EQ(c.clear_auth.operators.size(), 1U);
+  EXPECT_EQ(c.clear_auth.operators[0].name, "alice");
+  EXPECT_TRUE(c.clear_auth.operators[0].revoked);
+  EXPECT_EQ(c.clear_auth.operators[0].public_key, KeyOf(1).public_key());
+  EXPECT_EQ(c.clear_auth.window_s, 5.0);
+  EXPECT_FALSE(c.clear_auth.allow_shared_key);
   try {
-    LoadConfiguredClearKey(Config(group_), "");
-    ADD_FAILURE() << "a world-readable key was accepted";
+    ParseConfig("[alarms]\n[[alarms.clear_operators]]\nname = \"bob\"\npublic_key = \"xyz\"\n",
+                "/etc/p.toml");
+    ADD_FAILURE() << "a bad public key was accepted";
   } catch (const ConfigError& e) {
     EXPECT_NE(
-        std::string(e.what()).find(dir_ + "/pumpthermd.toml:3: key 'alarms.clear_key_file': " +
-                                   path_ + " is open to others (mode 0644)"),
+        std::string(e.what()).find("/etc/p.toml:4: key 'alarms.clear_operators[0].public_key'"),
         std::string::npos)
         << e.what();
   }
-  ASSERT_EQ(::chmod(path_.c_str(), 0660), 0);
-  EXPECT_NE(ClearKeyFileProblem(path_, group_).find("writable by its group (mode 0660)"),
-            std::string::npos);
-  ASSERT_EQ(::chmod(path_.c_str(), 0600), 0);
-  EXPECT_EQ(ClearKeyFileProblem(path_, group_), "");
-  EXPECT_NE(ClearKeyFileProblem(path_, "no-such-group-pumptherm").find("does not exist"),
-            std::string::npos);
-  // Another existing group than the file's.
-  const std::string other = group_ == "root" ? "daemon" : "root";
-  if (::getgrnam(other.c_str())) {
-    EXPECT_NE(ClearKeyFileProblem(path_, other).find("not to '" + other + "'"), std::string::npos);
-  }
-  EXPECT_NE(ClearKeyFileProblem(dir_ + "/missing.key", group_).find("cannot stat"),
-            std::string::npos);
-}
-
-TEST_F(KeyFile, WrongSizeIsAnErrorAndASystemdCredentialIsPreferred) {
-  WriteFileAtomically(path_, "short\n", 0640);
-  EXPECT_THROW(LoadConfiguredClearKey(Config(group_), ""), ConfigError);
-  // systemd's copy (LoadCredential=) is read when present and non-empty; the file's
-  // permissions are still checked.
-  const ClearKey k = Key(40);
-  WriteFileAtomically(dir_ + "/" + kClearKeyCredential, std::string(k.begin(), k.end()), 0400);
-  EXPECT_EQ(LoadConfiguredClearKey(Config(group_), dir_), Key(40));
-  // The unit's SetCredential= fallback: the file itself is read (here: the short one).
-  WriteFileAtomically(dir_ + "/" + kClearKeyCredential, std::string(kNoClearKeyCredential), 0400);
-  EXPECT_THROW(LoadConfiguredClearKey(Config(group_), dir_), ConfigError);
-  const ClearKey f = Key(60);
-  WriteFileAtomically(path_, std::string(f.begin(), f.end()), 0640);
-  EXPECT_EQ(LoadConfiguredClearKey(Config(group_), dir_), Key(60));
-}
-
-TEST(ClearAuth, KeyKeysAreParsedAndAGroupIsRequired) {
-  // Sources without a key parse (the gateway warns and refuses every LCM clear: NO_KEY above).
-  EXPECT_EQ(ParseConfig("[alarms]\nclear_lcm_sources = [\"operator\"]\n", "/etc/p.toml")
-                .clear_auth.key_file,
-            "");
-  EXPECT_THROW(ParseConfig("[alarms]\nclear_key_file = \"k\"\n", "/etc/p.toml"),
-               ConfigError);  // no group
-  const DaemonConfig c = ParseConfig(
-      "[alarms]\nclear_key_file = \"k\"\nclear_key_group = \"ops\"\nclear_window_s = 5\n",
-      "/etc/p.toml");
-  EXPECT_EQ(c.clear_auth.key_file, "/etc/k");  // relative to the configuration's directory
-  EXPECT_EQ(c.clear_auth.key_group, "ops");
-  EXPECT_EQ(c.clear_auth.window_s, 5.0);
+  EXPECT_THROW(
+      ParseConfig("[alarms]\n[[alarms.clear_operators]]\nname = \"a\"\npublic_key = \"" + pk +
+                      "\"\n[[alarms.clear_operators]]\nname = \"b\"\npublic_key = \"" + pk + "\"\n",
+                  "/etc/p.toml"),
+      ConfigError);  // one key, two names
   EXPECT_THROW(ParseConfig("[alarms]\nclear_window_s = 0.5\n", "/etc/p.toml"), ConfigError);
+  EXPECT_THROW(ParseConfig("[gateway]\nlost_safety_state = \"ignore\"\n", "/etc/p.toml"),
+               ConfigError);
+}
+
+/// A gateway key file written by keygen, loaded as the daemon does (directly, or from systemd's
+/// credential copy), its permissions checked.
+TEST(ClearAuth, GatewayKeyFileIsCheckedAndASystemdCredentialIsPreferred) {
+  const std::string dir = test_files::TestTempDir("gwkey");
+  ::chmod(dir.c_str(), 0700);
+  const std::string path = dir + "/gateway.key";
+  ::unlink(path.c_str());
+  ::unlink(PublicKeyPathOf(path).c_str());
+  WriteKeyFiles(path, KeyOf(100), "gw");
+  const DaemonConfig c =
+      ParseConfig("[gateway]\nsigning_key_file = \"gateway.key\"\n", dir + "/pumpthermd.toml");
+  EXPECT_EQ(LoadConfiguredGatewayKey(c, "")->public_key(), KeyOf(100).public_key());
+  const std::string creds = dir + "/creds";
+  ::mkdir(creds.c_str(), 0700);
+  const Seed other = SeedOf(120);
+  WriteFileAtomically(creds + "/" + kGatewayKeyCredential, std::string(other.begin(), other.end()),
+                      0400);
+  EXPECT_EQ(LoadConfiguredGatewayKey(c, creds)->public_key(), KeyOf(120).public_key());
+  WriteFileAtomically(creds + "/" + kGatewayKeyCredential, std::string(kNoCredential), 0400);
+  EXPECT_EQ(LoadConfiguredGatewayKey(c, creds)->public_key(), KeyOf(100).public_key());
+  ASSERT_EQ(::chmod(path.c_str(), 0644), 0);
+  try {
+    LoadConfiguredGatewayKey(c, creds);
+    ADD_FAILURE() << "a world-readable gateway key was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find(dir +
+                                         "/pumpthermd.toml:2: key "
+                                         "'gateway.signing_key_file': " +
+                                         path + " is open to its group or others (mode 0644)"),
+              std::string::npos)
+        << e.what();
+  }
+  ::unlink((creds + "/" + kGatewayKeyCredential).c_str());
+  ::rmdir(creds.c_str());
+  ::unlink(path.c_str());
+  ::unlink(PublicKeyPathOf(path).c_str());
 }
 
 }  // namespace

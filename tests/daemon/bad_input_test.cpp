@@ -13,6 +13,7 @@
 
 #include "daemon/config.hpp"
 #include "daemon/gateway.hpp"
+#include "daemon/safety_state.hpp"
 #include "estimators/motor.hpp"
 #include "estimators/thermal_model.hpp"
 #include "protocol/candump_log.hpp"
@@ -125,6 +126,13 @@ std::string Dbc(const std::string& text) {
 }
 
 // --- frames, clear commands and saved state through the gateway ---
+/// The operators' and the gateway's keys of the catalogue: panel (listed), old-panel (listed,
+/// revoked), mallory (not listed), the gateway's.
+SigningKey Panel() { return SigningKey(Seed{1, 1}); }
+SigningKey OldPanel() { return SigningKey(Seed{2, 2}); }
+SigningKey Mallory() { return SigningKey(Seed{3, 3}); }
+SigningKey GatewayKey() { return SigningKey(Seed{9, 9}); }
+
 const std::string kGatewayConfig = R"(
 [gateway]
 heartbeat_period_s = 0
@@ -132,9 +140,15 @@ heartbeat_period_s = 0
 interface = "can0"
 [alarms]
 clear_can_interfaces = ["can0"]
-clear_lcm_sources = ["panel"]
-clear_key_file = "clear.key"
-clear_key_group = "root"
+[[alarms.clear_operators]]
+name = "panel"
+public_key = ")" + FormatPublicKey(Panel().public_key()) +
+                                   R"("
+[[alarms.clear_operators]]
+name = "old-panel"
+public_key = ")" + FormatPublicKey(OldPanel().public_key()) +
+                                   R"("
+revoked = true
 [[pump]]
 name = "tmp1"
 node_id = 1
@@ -194,23 +208,22 @@ std::string Clear(const std::string& pump, const std::string& source) {
 
 constexpr std::int64_t kNowUs = 1'700'000'000'000'000;
 
-ClearKey TestKey(std::uint8_t seed) {
-  ClearKey k{};
-  for (std::size_t i = 0; i < k.size(); ++i) k[i] = static_cast<std::uint8_t>(seed + i);
-  return k;
-}
-
-/// Counts what a gateway keyed with TestKey(1) made of LCM clear commands `messages` (nullptr:
-/// bytes that did not decode), and the verdict of the last reply it published.
+/// Counts what a gateway with GatewayKey() made of LCM clear commands `messages` (nullptr:
+/// bytes that did not decode), the replies it published and the verdict of the last one.
 std::string LcmClear(const std::vector<const pumptherm::alarm_clear_t*>& messages) {
   Gateway g(ParseConfig(kGatewayConfig, std::string(PUMPTHERM_SOURCE_DIR) + "/p.toml"));
-  g.SetClearKey(TestKey(1));
+  g.SetGatewayKey(GatewayKey());
+  g.LoadClearKeys("");
   struct ReplySink : NullSink {
     std::string last;
+    int replies = 0;
     bool PublishLcm(const std::string& channel, std::int64_t,
                     const std::vector<std::uint8_t>& b) override {
       pumptherm::alarm_clear_reply_t r;
-      if (r.decode(b.data(), 0, static_cast<int>(b.size())) > 0) last = channel + ": " + r.reason;
+      if (r.decode(b.data(), 0, static_cast<int>(b.size())) > 0) {
+        last = channel + ": " + r.reason;
+        ++replies;
+      }
       return true;
     }
   } sink;
@@ -220,23 +233,40 @@ std::string LcmClear(const std::vector<const pumptherm::alarm_clear_t*>& message
          std::to_string(g.counters().clears_accepted) + ", clears_refused " +
          std::to_string(g.counters().clears_refused) + ", clears_unauthenticated " +
          std::to_string(g.counters().clears_unauthenticated) +
-         (sink.last.empty() ? "; no reply" : "; reply " + sink.last);
+         (sink.replies == 0
+              ? "; no reply"
+              : "; " + std::to_string(sink.replies) + " reply, the last " + sink.last);
 }
 
-/// A clear command for `pump` from `source`, signed with TestKey(key_seed) (0: no code).
-pumptherm::alarm_clear_t ClearCommand(const std::string& pump, const std::string& source,
-                                      std::uint8_t key_seed, std::int64_t utime = kNowUs,
-                                      std::int64_t counter = 5) {
+/// A clear command for `pump` of gateway `gateway`, node `node`, signed with `key` (nullptr:
+/// not signed, with `key_id` claimed).
+pumptherm::alarm_clear_t ClearCommand(const std::string& pump, const SigningKey* key,
+                                      std::int64_t utime = kNowUs, std::int64_t counter = 5,
+                                      const std::string& gateway = "pumptherm",
+                                      const std::string& node = "") {
   pumptherm::alarm_clear_t m;
   m.utime = utime;
+  m.gateway = gateway;
   m.pump = pump;
-  m.node = "";
-  m.source = source;
+  m.node = node;
+  m.key_id = Panel().key_id();
   m.comment = "";
   m.counter = counter;
-  std::fill(std::begin(m.mac), std::end(m.mac), std::uint8_t{0});
-  if (key_seed != 0) Sign(TestKey(key_seed), m);
+  std::fill(std::begin(m.tag), std::end(m.tag), std::uint8_t{0});
+  std::fill(std::begin(m.signature), std::end(m.signature), std::uint8_t{0});
+  if (key) SignCommand(*key, GatewayKey().public_key(), "PUMPTHERM", m);
   return m;
+}
+
+/// What ParseSafetyState makes of the text of a valid safety state changed by `change`.
+std::string SafetyText(const std::function<std::string(std::string)>& change) {
+  SafetyState s;
+  s.latched["tmp1"] = {{"winding", 130.0}};
+  s.counters["tmp1"]["0123456789abcdef"] = 42;
+  std::string problem;
+  return ParseSafetyState(change(FormatSafetyState(s)), &problem)
+             ? "read"
+             : "refused: " + problem + "; the pumps latch 'safety state lost'";
 }
 
 std::string LcmClear(const pumptherm::alarm_clear_t& m) { return LcmClear({&m}); }
@@ -407,41 +437,76 @@ std::vector<Row> Catalogue() {
       {"CAN frame", "empty", "PUMP_STATUS with 0 bytes", [] { return Frame(0x181, ""); },
        "rx_bad_length 1"},
       // --- clear commands (LCM alarm_clear_t and PUMP_CLEAR frames) ---
-      {"LCM clear", "spoofed", "source `panel` (configured), no code",
-       [] { return LcmClear(ClearCommand("tmp1", "panel", 0)); },
-       "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1; reply "
-       "PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: no or a wrong authentication code"},
-      {"LCM clear", "spoofed", "source `panel`, code made with another key",
-       [] { return LcmClear(ClearCommand("tmp1", "panel", 2)); }, "wrong authentication code"},
-      {"LCM clear", "spoofed", "source `panel`, no code, through the unauthenticated path",
+      {"LCM clear", "spoofed", "panel's key ID, no tag or signature",
+       [] { return LcmClear(ClearCommand("tmp1", nullptr)); },
+       "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1; no reply"},
+      {"LCM clear", "spoofed", "panel's key ID, signed with another key",
+       [] {
+         const SigningKey m = Mallory();
+         auto c = ClearCommand("tmp1", &m);
+         c.key_id = Panel().key_id();
+         return LcmClear(c);
+       },
+       "clears_unauthenticated 1; no reply"},
+      {"LCM clear", "unknown", "signed with a key not in alarms.clear_operators",
+       [] {
+         const SigningKey m = Mallory();
+         return LcmClear(ClearCommand("tmp1", &m));
+       },
+       "clears_unauthenticated 1; no reply"},
+      {"LCM clear", "spoofed", "source `panel` by name, through the unsigned path",
        [] { return Clear("tmp1", "panel"); },
        "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 1"},
       {"LCM clear", "replayed", "a valid command received twice",
        [] {
-         const auto m = ClearCommand("tmp1", "panel", 1);
+         const SigningKey k = Panel();
+         const auto m = ClearCommand("tmp1", &k);
          return LcmClear({&m, &m});
        },
-       "refused, logged; clears_accepted 1, clears_refused 1, clears_unauthenticated 0; reply "
-       "PUMPTHERM/tmp1/ALARM_CLEAR_REPLY: counter 5 is not above the last accepted 5"},
+       "refused, logged; clears_accepted 1, clears_refused 1, clears_unauthenticated 0; 1 reply"},
+      {"LCM clear", "revoked", "signed with old-panel's revoked key",
+       [] {
+         const SigningKey k = OldPanel();
+         return LcmClear(ClearCommand("tmp1", &k));
+       },
+       "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 0; no reply"},
+      {"LCM clear", "other gateway", "a valid command for gateway `hall9`",
+       [] {
+         const SigningKey k = Panel();
+         return LcmClear(ClearCommand("tmp1", &k, kNowUs, 5, "hall9"));
+       },
+       "no reply"},
       {"LCM clear", "old", "a valid command issued 31 s ago",
-       [] { return LcmClear(ClearCommand("tmp1", "panel", 1, kNowUs - 31'000'000)); },
+       [] {
+         const SigningKey k = Panel();
+         return LcmClear(ClearCommand("tmp1", &k, kNowUs - 31'000'000));
+       },
        "window 30 s"},
       {"LCM clear", "huge", "a valid command with `utime` INT64_MIN",
        [] {
-         return LcmClear(
-             ClearCommand("tmp1", "panel", 1, std::numeric_limits<std::int64_t>::min()));
+         const SigningKey k = Panel();
+         return LcmClear(ClearCommand("tmp1", &k, std::numeric_limits<std::int64_t>::min()));
        },
        "refused"},
-      {"LCM clear", "unknown", "source `intruder` with a valid code",
-       [] { return LcmClear(ClearCommand("tmp1", "intruder", 1)); },
-       "not in alarms.clear_lcm_sources"},
+      {"LCM clear", "unknown", "a valid command for node `frame`, which is not latched",
+       [] {
+         const SigningKey k = Panel();
+         return LcmClear(ClearCommand("tmp1", &k, kNowUs, 5, "pumptherm", "frame"));
+       },
+       "node 'frame' has no latched trip"},
       {"LCM clear", "unknown", "pump `nope`",
-       [] { return LcmClear(ClearCommand("nope", "panel", 1)); },
+       [] {
+         const SigningKey k = Panel();
+         return LcmClear(ClearCommand("nope", &k));
+       },
        "refused, logged; clears_accepted 0, clears_refused 1, clears_unauthenticated 0; no reply"},
       {"LCM clear", "wrong type", "bytes that do not decode as alarm_clear_t",
        [] { return LcmClear({nullptr}); }, "clears_unauthenticated 1; no reply"},
-      {"LCM clear", "valid", "source `panel`, signed with the key, new counter",
-       [] { return LcmClear(ClearCommand("tmp1", "panel", 1)); },
+      {"LCM clear", "valid", "signed with panel's key, new counter",
+       [] {
+         const SigningKey k = Panel();
+         return LcmClear(ClearCommand("tmp1", &k));
+       },
        "accepted, logged; clears_accepted 1, clears_refused 0"},
       {"CAN clear", "unknown", "PUMP_CLEAR on `can:can1`", [] { return Clear("tmp1", "can:can1"); },
        "refused"},
@@ -501,6 +566,19 @@ std::vector<Row> Catalogue() {
        "restored 0"},
       {"saved state", "non-UTF-8", "a byte `\\xff` in a key",
        [state] { return Restore(Replace(state, "version", "ver\xffsion")); }, "restored 0"},
+      // --- the safety state (safety.toml: latched trips and clear counters) ---
+      {"safety state", "valid", "as the gateway writes it",
+       [] { return SafetyText([](std::string t) { return t; }); }, "read"},
+      {"safety state", "damaged", "`winding` changed to `Winding` (still TOML)",
+       [] {
+         return SafetyText([](std::string t) { return Replace(t, "'winding'", "'Winding'"); });
+       },
+       "the checksum does not match"},
+      {"safety state", "empty", "cut short after 40 bytes",
+       [] { return SafetyText([](std::string t) { return t.substr(0, 40); }); },
+       "no checksum line"},
+      {"safety state", "empty", "an empty file",
+       [] { return SafetyText([](std::string) { return std::string(); }); }, "no checksum line"},
   };
   return rows;
 }

@@ -46,6 +46,10 @@ struct RecordingSink : OutputSink {
   }
 };
 
+/// The operator's key (listed in Config as "panel") and the gateway's.
+SigningKey PanelKey() { return SigningKey(Seed{7, 1, 8}); }
+SigningKey GatewayKey() { return SigningKey(Seed{7, 9, 9}); }
+
 std::string Config(const std::string& extra = "") {
   return R"(
 [gateway]
@@ -56,12 +60,13 @@ interface = "can0"
 
 [alarms]
 hold_s = 2
-clear_lcm_sources = ["panel"]
-clear_key_file = "clear.key"
-clear_key_group = "root"
 # The bench's frame sensor is the noiseless truth: steady, it repeats its value to the bit, so
 # the flat-noise test for a stuck sensor does not apply to it.
 flat_after_s = 0
+[[alarms.clear_operators]]
+name = "panel"
+public_key = ")" +
+         FormatPublicKey(PanelKey().public_key()) + R"("
 
 [[pump]]
 name = "tmp1"
@@ -73,24 +78,24 @@ measured_node = "frame"
 )" + extra;
 }
 
-const ClearKey kKey = [] {
-  ClearKey k{};
-  for (std::size_t i = 0; i < k.size(); ++i) k[i] = static_cast<std::uint8_t>(i * 7 + 1);
-  return k;
-}();
-
-/// A clear command for pump tmp1 from "panel", signed with kKey.
+/// A clear command for pump tmp1 of gateway "pumptherm", signed with the panel's key.
 pumptherm::alarm_clear_t SignedClear(std::int64_t utime, std::int64_t counter,
                                      const std::string& comment) {
   pumptherm::alarm_clear_t m;
   m.utime = utime;
+  m.gateway = "pumptherm";
   m.pump = "tmp1";
   m.node = "";
-  m.source = "panel";
   m.comment = comment;
   m.counter = counter;
-  Sign(kKey, m);
+  SignCommand(PanelKey(), GatewayKey().public_key(), "PUMPTHERM", m);
   return m;
+}
+
+/// Gives `g` the gateway's key and the operators' of its configuration.
+void Keyed(Gateway& g) {
+  g.SetGatewayKey(GatewayKey());
+  g.LoadClearKeys("");
 }
 
 /// Drives a gateway with 100 Hz fast frames and 10 Hz status frames of a pump at 800 r/min and
@@ -669,7 +674,7 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
     EXPECT_EQ(v[static_cast<std::size_t>(alarm->FindSignal("AlarmLevel"))], 2.0)
         << "first GW_ALARM after the restart";
   }
-  r.gateway_.SetClearKey(kKey);
+  Keyed(r.gateway_);
   const auto after_restart = SignedClear(r.t_us_, 1, "after the restart");
   EXPECT_TRUE(r.gateway_.ClearFromLcm(&after_restart, r.t_us_, r.sink));
   r.Run(10.0, 0.0);
@@ -721,7 +726,7 @@ slot_winding = { warning_degC = 50, trip_degC = 55 }
 
   // A source name alone clears nothing, a signed command does.
   EXPECT_FALSE(b.gateway_.Clear("tmp1", "panel", ""));
-  b.gateway_.SetClearKey(kKey);
+  Keyed(b.gateway_);
   const auto checked = SignedClear(b.t_us_, 1, "checked the pump");
   EXPECT_TRUE(b.gateway_.ClearFromLcm(&checked, b.t_us_, b.sink));
   b.Run(10.0, 0.0);
@@ -858,7 +863,7 @@ TEST(Pipeline, LcmOverMemqCarriesEveryTypeAndAcceptsClearCommands) {
   std::vector<std::string> cleared;
   LcmBridge bridge("memq://", "PUMPTHERM",
                    [&](const std::string&, const pumptherm::alarm_clear_t* m) {
-                     cleared.push_back(m ? m->pump + "/" + m->source : "undecodable");
+                     cleared.push_back(m ? m->pump + "/" + m->key_id : "undecodable");
                    });
   struct Counter {
     std::map<std::string, int> n;
@@ -871,8 +876,9 @@ TEST(Pipeline, LcmOverMemqCarriesEveryTypeAndAcceptsClearCommands) {
   pumptherm::alarm_clear_t clear;
   clear.utime = 0;
   clear.pump = "tmp1";
+  clear.gateway = "pumptherm";
   clear.node = "";
-  clear.source = "panel";
+  clear.key_id = "panel";
   clear.comment = "test";
   std::vector<std::uint8_t> bytes(static_cast<std::size_t>(clear.getEncodedSize()));
   clear.encode(bytes.data(), 0, static_cast<int>(bytes.size()));

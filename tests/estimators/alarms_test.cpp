@@ -162,6 +162,66 @@ TEST(Alarms, LatchedTripsSaveAndRestoreAcrossARestart) {
   EXPECT_TRUE(g.m.LatchedTrips().empty());
 }
 
+TEST(Alarms, ClearingOneNodeLeavesTheOthersLatched) {
+  Fixture f;
+  f.nodes[0] = 50.0;
+  f.nodes[1] = 150.0;
+  f.in.sensor_degC = 95.0;
+  for (double t = 0; t <= 3; t += 1) f.At(t);
+  ASSERT_EQ(f.m.LatchedTrips().size(), 2U);
+  EXPECT_FALSE(f.m.Clear(0)) << "node 0 was never latched";
+  EXPECT_FALSE(f.m.Clear(AlarmMonitor::kStateLostTrip));
+  EXPECT_FALSE(f.m.Clear(7)) << "no such node";
+  EXPECT_TRUE(f.m.Clear(AlarmMonitor::kSensorTrip));
+  ASSERT_EQ(f.m.LatchedTrips().size(), 1U);
+  EXPECT_EQ(f.m.LatchedTrips()[0].node, 1);
+  EXPECT_TRUE(f.m.state().trip_latched);
+  EXPECT_FALSE(f.m.Clear(AlarmMonitor::kSensorTrip)) << "cleared already";
+  EXPECT_TRUE(f.m.Clear(1));
+  EXPECT_FALSE(f.m.state().trip_latched);
+}
+
+TEST(Alarms, StateLostIsALatchedTripOfThePumpUntilCleared) {
+  Fixture f;
+  f.nodes[0] = 30.0;
+  f.nodes[1] = 30.0;
+  f.m.LatchStateLost(0.0);
+  EXPECT_EQ(f.m.state().level, AlarmLevel::kTrip);
+  EXPECT_EQ(f.m.state().reason, AlarmReason::kSafetyStateLost);
+  EXPECT_EQ(f.m.state().node, -1);
+  EXPECT_TRUE(f.m.state().trip_latched);
+  for (double t = 1; t <= 30; t += 1) EXPECT_EQ(f.At(t).level, AlarmLevel::kTrip) << t;
+  const auto trips = f.m.LatchedTrips();
+  ASSERT_EQ(trips.size(), 1U);
+  EXPECT_EQ(trips[0].node, AlarmMonitor::kStateLostTrip);
+  // Saved and restored like any latched trip; cleared, it is gone at once (no condition keeps it).
+  Fixture g;
+  EXPECT_TRUE(g.m.RestoreLatchedTrip(trips[0], 40.0));
+  EXPECT_TRUE(g.m.state().trip_latched);
+  EXPECT_TRUE(g.m.Clear(AlarmMonitor::kStateLostTrip));
+  EXPECT_EQ(g.m.state().level, AlarmLevel::kNone);
+  EXPECT_FALSE(g.m.state().trip_latched);
+  EXPECT_EQ(std::string(AlarmReasonName(AlarmReason::kSafetyStateLost)), "safety_state_lost");
+}
+
+TEST(Alarms, SecondSenderWarnsAtOnceAndClearsAfterItsQuietTime) {
+  AlarmConfig c = Config();
+  c.second_sender_clear_s = 100.0;
+  AlarmMonitor m(c, {{80.0, 100.0}}, {70.0, 90.0});
+  double node = 30.0;
+  AlarmInputs in;
+  in.node_degC = &node;
+  m.Step(0.0, in);
+  m.RaiseSecondSender(5.0);
+  EXPECT_EQ(m.state().level, AlarmLevel::kWarning);
+  EXPECT_EQ(m.state().reason, AlarmReason::kSecondSender);
+  EXPECT_FALSE(m.state().trip_latched);
+  m.RaiseSecondSender(50.0);  // more evidence: the quiet time starts again
+  EXPECT_EQ(m.Step(140.0, in).level, AlarmLevel::kWarning);
+  EXPECT_EQ(m.Step(151.0, in).level, AlarmLevel::kNone);
+  EXPECT_EQ(std::string(AlarmReasonName(AlarmReason::kSecondSender)), "second_sender");
+}
+
 TEST(Alarms, MeasuredSensorHasItsOwnLevels) {
   Fixture f;
   f.nodes[0] = 60.0;

@@ -122,26 +122,31 @@ void FlattenInto(Flat& f, const std::string& p, const alarm_t& m) {
 
 void FlattenInto(Flat& f, const std::string& p, const alarm_clear_t& m) {
   f.Integer(p + ".utime", m.utime);
+  f.Text(p + ".gateway", m.gateway);
   f.Text(p + ".pump", m.pump);
   f.Text(p + ".node", m.node);
-  f.Text(p + ".source", m.source);
+  f.Text(p + ".key_id", m.key_id);
   f.Text(p + ".comment", m.comment);
   f.Integer(p + ".counter", m.counter);
   // Java's byte is signed.
   for (std::size_t i = 0; i < 32; ++i)
-    f.Integer(Index(p + ".mac", i), static_cast<std::int8_t>(m.mac[i]));
+    f.Integer(Index(p + ".tag", i), static_cast<std::int8_t>(m.tag[i]));
+  for (std::size_t i = 0; i < 64; ++i)
+    f.Integer(Index(p + ".signature", i), static_cast<std::int8_t>(m.signature[i]));
 }
 
 void FlattenInto(Flat& f, const std::string& p, const alarm_clear_reply_t& m) {
   f.Integer(p + ".utime", m.utime);
+  f.Text(p + ".gateway", m.gateway);
   f.Text(p + ".pump", m.pump);
+  f.Text(p + ".key_id", m.key_id);
   f.Integer(p + ".counter", m.counter);
   f.Integer(p + ".result", m.result);
   f.Text(p + ".reason", m.reason);
   f.Integer(p + ".last_counter", m.last_counter);
   f.Bool(p + ".trip_latched", m.trip_latched);
-  for (std::size_t i = 0; i < 32; ++i)
-    f.Integer(Index(p + ".mac", i), static_cast<std::int8_t>(m.mac[i]));
+  for (std::size_t i = 0; i < 64; ++i)
+    f.Integer(Index(p + ".signature", i), static_cast<std::int8_t>(m.signature[i]));
 }
 
 void FlattenInto(Flat& f, const std::string& p, const gateway_health_t& m) {
@@ -149,6 +154,9 @@ void FlattenInto(Flat& f, const std::string& p, const gateway_health_t& m) {
   f.Number(p + ".uptime_s", m.uptime_s);
   f.Integer(p + ".num_pumps", m.num_pumps);
   f.Integer(p + ".lcm_publish_failures", m.lcm_publish_failures);
+  f.Integer(p + ".clears_accepted", m.clears_accepted);
+  f.Integer(p + ".clears_refused", m.clears_refused);
+  f.Integer(p + ".clears_unauthenticated", m.clears_unauthenticated);
   f.Integer(p + ".num_interfaces", m.num_interfaces);
   for (std::size_t i = 0; i < m.interfaces.size(); ++i) {
     const std::string c = Index(p + ".interfaces", i);
@@ -164,6 +172,7 @@ void FlattenInto(Flat& f, const std::string& p, const gateway_health_t& m) {
     f.Integer(c + ".rx_rejected", h.rx_rejected);
     f.Integer(c + ".error_frames", h.error_frames);
     f.Integer(c + ".reopens", h.reopens);
+    f.Integer(c + ".rx_second_sender", h.rx_second_sender);
   }
 }
 

@@ -184,48 +184,58 @@ inline void ExpectSame(const alarm_t& e, const alarm_t& a) {
 inline alarm_clear_t SampleAlarmClear() {
   alarm_clear_t m;
   m.utime = 1'763'776'803'000'000;
+  m.gateway = "hall-2";
   m.pump = "tmp-07";
-  m.node = "";
-  m.source = "operator@console-2";
+  m.node = "winding";
+  m.key_id = "0123456789abcdef";
   m.comment = "Wicklung geprüft, Störung behoben";  // non-ASCII UTF-8 on purpose
   m.counter = 1'763'776'803'000'017;
   // Bytes above 127 on purpose (Java's byte is signed).
-  for (int i = 0; i < 32; ++i) m.mac[i] = static_cast<std::uint8_t>(i * 8 + 3);
+  for (int i = 0; i < 32; ++i) m.tag[i] = static_cast<std::uint8_t>(i * 8 + 3);
+  for (int i = 0; i < 64; ++i) m.signature[i] = static_cast<std::uint8_t>(i * 4 + 1);
   return m;
 }
 
 inline void ExpectSame(const alarm_clear_t& e, const alarm_clear_t& a) {
   EXPECT_EQ(e.utime, a.utime);
+  EXPECT_EQ(e.gateway, a.gateway);
   EXPECT_EQ(e.pump, a.pump);
   EXPECT_EQ(e.node, a.node);
-  EXPECT_EQ(e.source, a.source);
+  EXPECT_EQ(e.key_id, a.key_id);
   EXPECT_EQ(e.comment, a.comment);
   EXPECT_EQ(e.counter, a.counter);
-  for (int i = 0; i < 32; ++i) EXPECT_EQ(e.mac[i], a.mac[i]) << "mac[" << i << "]";
+  for (int i = 0; i < 32; ++i) EXPECT_EQ(e.tag[i], a.tag[i]) << "tag[" << i << "]";
+  for (int i = 0; i < 64; ++i)
+    EXPECT_EQ(e.signature[i], a.signature[i]) << "signature[" << i << "]";
 }
 
 inline alarm_clear_reply_t SampleAlarmClearReply() {
   alarm_clear_reply_t m;
   m.utime = 1'763'776'803'250'000;
+  m.gateway = "hall-2";
   m.pump = "tmp-07";
+  m.key_id = "0123456789abcdef";
   m.counter = 1'763'776'803'000'017;
-  m.result = alarm_clear_reply_t::RESULT_REPLAYED;
-  m.reason = "counter 1763776803000017 is not above the last accepted 1763776803000018";
-  m.last_counter = 1'763'776'803'000'018;
+  m.result = alarm_clear_reply_t::RESULT_NODE_NOT_LATCHED;
+  m.reason = "node 'frame' has no latched trip";
+  m.last_counter = 1'763'776'803'000'016;
   m.trip_latched = true;
-  for (int i = 0; i < 32; ++i) m.mac[i] = static_cast<std::uint8_t>(255 - i * 7);
+  for (int i = 0; i < 64; ++i) m.signature[i] = static_cast<std::uint8_t>(255 - i * 3);
   return m;
 }
 
 inline void ExpectSame(const alarm_clear_reply_t& e, const alarm_clear_reply_t& a) {
   EXPECT_EQ(e.utime, a.utime);
+  EXPECT_EQ(e.gateway, a.gateway);
   EXPECT_EQ(e.pump, a.pump);
+  EXPECT_EQ(e.key_id, a.key_id);
   EXPECT_EQ(e.counter, a.counter);
   EXPECT_EQ(e.result, a.result);
   EXPECT_EQ(e.reason, a.reason);
   EXPECT_EQ(e.last_counter, a.last_counter);
   EXPECT_EQ(e.trip_latched, a.trip_latched);
-  for (int i = 0; i < 32; ++i) EXPECT_EQ(e.mac[i], a.mac[i]) << "mac[" << i << "]";
+  for (int i = 0; i < 64; ++i)
+    EXPECT_EQ(e.signature[i], a.signature[i]) << "signature[" << i << "]";
 }
 
 /// `interfaces`: how many CAN interfaces the sample reports.
@@ -235,6 +245,9 @@ inline gateway_health_t SampleGatewayHealth(int interfaces = 2) {
   m.uptime_s = 86'400.25;
   m.num_pumps = 32;
   m.lcm_publish_failures = std::numeric_limits<std::int64_t>::max();
+  m.clears_accepted = 3;
+  m.clears_refused = 200'017;
+  m.clears_unauthenticated = 200'001;
   for (int i = 0; i < interfaces; ++i) {
     interface_health_t h;
     h.name = "can" + std::to_string(i);
@@ -249,6 +262,7 @@ inline gateway_health_t SampleGatewayHealth(int interfaces = 2) {
     h.rx_rejected = 17 + i;
     h.error_frames = 5 + i;
     h.reopens = i;
+    h.rx_second_sender = 40 + i;
     m.interfaces.push_back(h);
   }
   m.num_interfaces = interfaces;
@@ -260,6 +274,9 @@ inline void ExpectSame(const gateway_health_t& e, const gateway_health_t& a) {
   EXPECT_TRUE(SameBits(e.uptime_s, a.uptime_s));
   EXPECT_EQ(e.num_pumps, a.num_pumps);
   EXPECT_EQ(e.lcm_publish_failures, a.lcm_publish_failures);
+  EXPECT_EQ(e.clears_accepted, a.clears_accepted);
+  EXPECT_EQ(e.clears_refused, a.clears_refused);
+  EXPECT_EQ(e.clears_unauthenticated, a.clears_unauthenticated);
   ASSERT_EQ(e.num_interfaces, a.num_interfaces);
   ASSERT_EQ(a.interfaces.size(), static_cast<std::size_t>(a.num_interfaces));
   for (std::size_t i = 0; i < e.interfaces.size(); ++i) {
@@ -277,6 +294,7 @@ inline void ExpectSame(const gateway_health_t& e, const gateway_health_t& a) {
     EXPECT_EQ(eh.rx_rejected, ah.rx_rejected);
     EXPECT_EQ(eh.error_frames, ah.error_frames);
     EXPECT_EQ(eh.reopens, ah.reopens);
+    EXPECT_EQ(eh.rx_second_sender, ah.rx_second_sender);
   }
 }
 

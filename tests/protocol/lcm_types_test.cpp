@@ -124,8 +124,9 @@ TEST(LcmTypes, DecodingAsTheWrongTypeIsRefused) {
 TEST(LcmTypes, InflatedArrayCountIsRefused) {
   std::vector<std::uint8_t> bytes = Encode(SampleGatewayHealth(1));
   // num_interfaces is the int32 just before the only interface's name; it sits after
-  // hash(8) utime(8) uptime_s(8) num_pumps(4) lcm_publish_failures(8), big-endian.
-  constexpr std::size_t kCountOffset = 8 + 8 + 8 + 4 + 8;
+  // hash(8) utime(8) uptime_s(8) num_pumps(4) lcm_publish_failures(8) and the three clear
+  // counters (8 each), big-endian.
+  constexpr std::size_t kCountOffset = 8 + 8 + 8 + 4 + 8 + 3 * 8;
   ASSERT_EQ(bytes[kCountOffset + 3], 1);
   bytes[kCountOffset + 3] = 2;
   gateway_health_t decoded;
@@ -151,21 +152,26 @@ TEST(LcmTypes, FingerprintsAndNamesAreDistinct) {
 TEST(LcmTypes, AlarmClearWireLayoutFollowsTheSpecification) {
   alarm_clear_t m;
   m.utime = 0x0102030405060708;
+  m.gateway = "g";
   m.pump = "p";
   m.node = "";
-  m.source = "s";
+  m.key_id = "k";
   m.comment = "";
   m.counter = 0x1112131415161718;
-  for (int i = 0; i < 32; ++i) m.mac[i] = static_cast<std::uint8_t>(0xA0 + i);
+  for (int i = 0; i < 32; ++i) m.tag[i] = static_cast<std::uint8_t>(0xA0 + i);
+  for (int i = 0; i < 64; ++i) m.signature[i] = static_cast<std::uint8_t>(0x40 + i);
   const std::vector<std::uint8_t> bytes = Encode(m);
   std::vector<std::uint8_t> body{0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08,   // utime
+                                 0,    0,    0,    2,    'g',  0,                  // gateway
                                  0,    0,    0,    2,    'p',  0,                  // pump
                                  0,    0,    0,    1,    0,                        // node ""
-                                 0,    0,    0,    2,    's',  0,                  // source
+                                 0,    0,    0,    2,    'k',  0,                  // key_id
                                  0,    0,    0,    1,    0,                        // comment ""
                                  0x11, 0x12, 0x13, 0x14, 0x15, 0x16, 0x17, 0x18};  // counter
   for (int i = 0; i < 32; ++i)
-    body.push_back(static_cast<std::uint8_t>(0xA0 + i));  // mac: 32 bytes, no length
+    body.push_back(static_cast<std::uint8_t>(0xA0 + i));  // tag: 32 bytes, no length
+  for (int i = 0; i < 64; ++i)
+    body.push_back(static_cast<std::uint8_t>(0x40 + i));  // signature: 64 bytes
   ASSERT_EQ(bytes.size(), 8 + body.size());
   EXPECT_EQ(std::vector<std::uint8_t>(bytes.begin() + 8, bytes.end()), body);
   std::uint64_t hash = 0;

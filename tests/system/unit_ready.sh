@@ -5,7 +5,8 @@
 # as a dynamic user, counts frames sent with cansend in its STATUS line, sends its heartbeat
 # through the sandbox, keeps the watchdog fed, logs to the journal and stops cleanly.
 # `systemd-analyze security` is printed and its exposure must be at most 1.5. The
-# clear key reaches the sandboxed daemon (LoadCredential=) and a world-readable one is refused.
+# gateway's signing key reaches the sandboxed daemon (LoadCredential=) and a world-readable one
+# is refused.
 # Runs as root in the guest (tests/system/run_system_test.sh); vcan0 is up.
 set -eu
 T=unit_ready
@@ -147,30 +148,33 @@ grep -q 'pumpthermd\[[0-9]*\]: SIGTERM received' "$WORK_DIR/journal.txt" ||
 journalctl -u "$unit" --no-pager -p notice -o cat | grep -q 'listening on vcan0' ||
   fail "'listening on vcan0' is not logged at priority notice or higher"
 
-# 10. The clear key (mode 0640, the operators' group) reaches the sandboxed dynamic user through
-# LoadCredential=: the daemon starts with LCM clears configured; a world-readable key stops it.
-groupadd --system pumptherm-operators
-head -c 32 /dev/urandom >/etc/pumptherm/clear.key
-chgrp pumptherm-operators /etc/pumptherm/clear.key
-chmod 0640 /etc/pumptherm/clear.key
+# 10. The gateway's signing key (root's, mode 0600) reaches the sandboxed dynamic user through
+# LoadCredential=: the daemon starts with signed clears configured; a world-readable key stops it.
+# A secret key file is the key's 32-byte seed (what pumptherm keygen writes).
+head -c 32 /dev/urandom >/etc/pumptherm/gateway.key
+chmod 0600 /etc/pumptherm/gateway.key
+sed -i 's|^name = "system-test"$|name = "system-test"\nsigning_key_file = "/etc/pumptherm/gateway.key"|' \
+  /etc/pumptherm/pumpthermd.toml
 cat >>/etc/pumptherm/pumpthermd.toml <<'TOML'
 
 [alarms]
-clear_lcm_sources = ["operator"]
-clear_key_file = "/etc/pumptherm/clear.key"
-clear_key_group = "pumptherm-operators"
+[[alarms.clear_operators]]
+name = "operator"
+public_key = "ed25519:ebVWLo/mVPlAeLES6KmLp5AfhTrmlb7X4OORC60ElmQ="
 TOML
 pumpthermd --check-config /etc/pumptherm/pumpthermd.toml | sed "s/^/$T: /" ||
-  fail "--check-config refuses the configuration with the clear key"
-systemctl start "$unit" || fail "systemctl start with the clear key failed"
+  fail "--check-config refuses the configuration with the gateway key"
+systemctl start "$unit" || fail "systemctl start with the gateway key failed"
 state="$(show ActiveState)/$(show SubState)"
-[ "$state" = active/running ] || fail "state with the clear key is $state, want active/running"
+[ "$state" = active/running ] || fail "state with the gateway key is $state, want active/running"
+journalctl -u "$unit" --no-pager -o cat | grep -q 'signing_key_file is not set' &&
+  fail "the sandboxed daemon did not get the gateway key"
 systemctl stop "$unit"
-echo "$T: starts with a 0640 root:pumptherm-operators clear key (LoadCredential=)"
-chmod 0644 /etc/pumptherm/clear.key
+echo "$T: starts with a 0600 root gateway key (LoadCredential=)"
+chmod 0644 /etc/pumptherm/gateway.key
 systemctl start "$unit" 2>/dev/null || true
-key_refused() { journalctl -u "$unit" --no-pager -o cat | grep -q 'clear.key is open to others (mode 0644)'; }
-wait_for 20 key_refused || fail "a world-readable clear key did not stop the daemon with its reason"
+key_refused() { journalctl -u "$unit" --no-pager -o cat | grep -q 'gateway.key is open to its group or others (mode 0644)'; }
+wait_for 20 key_refused || fail "a world-readable gateway key did not stop the daemon with its reason"
 systemctl stop "$unit" || true
-echo "$T: a world-readable clear key is refused: $(journalctl -u "$unit" --no-pager -o cat | grep -m1 'open to others')"
+echo "$T: a world-readable gateway key is refused: $(journalctl -u "$unit" --no-pager -o cat | grep -m1 'open to its group')"
 echo "$T: PASS (exposure $exposure)"

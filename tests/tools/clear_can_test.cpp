@@ -68,7 +68,7 @@ TEST(ClearRouteTest, AutoTakesLcmWhenKeyedElseTheCanInterfaceTheConfigLists) {
 
   daemon::DaemonConfig keyed = can_only;
   keyed.lcm.url = "memq://";
-  keyed.clear_auth.key_file = "/etc/pumptherm/clear.key";
+  keyed.gateway.signing_key_file = "/etc/pumptherm/gateway.key";
   EXPECT_EQ(ChooseClearRoute(keyed, keyed.pumps[0], "auto").route, ClearRoute::kLcm);
   r = ChooseClearRoute(keyed, keyed.pumps[0], "can");
   EXPECT_EQ(r.route, ClearRoute::kCan);

@@ -63,7 +63,7 @@ for node in 1 2 3; do
 done
 echo "$SCENARIO_NAME: gateway frames captured: $(wc -l <"$out_log")"
 
-strings "$WORK_DIR/live.lcm" | grep -o 'PUMPTHERM/[A-Za-z0-9_]*/[A-Z_]*' | sort | uniq -c >"$WORK_DIR/channels.txt" || true
+strings "$WORK_DIR/live.lcm" | grep -oE 'PUMPTHERM/[A-Za-z0-9_.-]*/(TELEMETRY|TEMPS|ALARM_CLEAR_REPLY|ALARM|HEALTH|DIGEST)' | sort | uniq -c >"$WORK_DIR/channels.txt" || true
 echo "$SCENARIO_NAME: LCM channels received live:"
 sed 's/^/  /' "$WORK_DIR/channels.txt"
 for p in pump1 pump2 pump3; do

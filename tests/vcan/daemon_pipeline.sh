@@ -89,7 +89,7 @@ for node in 1 2 3; do
 done
 
 # Every LCM message type reached the subscriber (channel names are plain text in the log).
-strings "$WORK_DIR/live.lcm" | grep -o 'PUMPTHERM/[A-Za-z0-9_]*/[A-Z_]*' | sort | uniq -c >"$WORK_DIR/channels.txt" || true
+strings "$WORK_DIR/live.lcm" | grep -oE 'PUMPTHERM/[A-Za-z0-9_.-]*/(TELEMETRY|TEMPS|ALARM_CLEAR_REPLY|ALARM|HEALTH|DIGEST)' | sort | uniq -c >"$WORK_DIR/channels.txt" || true
 echo "$SCENARIO_NAME: LCM channels recorded:"
 sed 's/^/  /' "$WORK_DIR/channels.txt"
 for ch in PUMPTHERM/pump1/TELEMETRY PUMPTHERM/pump1/TEMPS PUMPTHERM/pump1/ALARM PUMPTHERM/GATEWAY/HEALTH; do

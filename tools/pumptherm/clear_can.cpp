@@ -34,14 +34,15 @@ const char* LevelName(GatewayAlarmLevel l) {
 
 ClearRouteChoice ChooseClearRoute(const daemon::DaemonConfig& c, const daemon::PumpConfig& pump,
                                   std::string_view via) {
-  const bool lcm_ok = !c.lcm.url.empty() && !c.clear_auth.key_file.empty();
+  const bool lcm_ok = !c.lcm.url.empty() && !c.gateway.signing_key_file.empty();
   const bool can_ok =
       !pump.interface.empty() && Contains(pump.alarms.clear_can_interfaces, pump.interface);
   if (via == "lcm" || (via == "auto" && lcm_ok)) {
     if (!lcm_ok) {
-      throw InputError(fmt::format(
-          "{}: LCM clears need lcm.url and alarms.clear_key_file (or give --url and --key)",
-          c.source));
+      throw InputError(
+          fmt::format("{}: LCM clears need lcm.url and gateway.signing_key_file (or give --url and "
+                      "--gateway-key)",
+                      c.source));
     }
     return {ClearRoute::kLcm, {}};
   }
@@ -53,7 +54,7 @@ ClearRouteChoice ChooseClearRoute(const daemon::DaemonConfig& c, const daemon::P
           "refuse a CAN clear{}",
           c.source, pump.name, pump.interface,
           pump.alarms.clear_can_interfaces.empty() ? " (empty)" : "",
-          via == "auto" ? "; and LCM clears need lcm.url and alarms.clear_key_file" : ""));
+          via == "auto" ? "; and LCM clears need lcm.url and gateway.signing_key_file" : ""));
     }
     return {ClearRoute::kCan, pump.interface};
   }

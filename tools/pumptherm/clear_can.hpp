@@ -24,7 +24,7 @@ struct ClearRouteChoice {
 };
 
 /// The route for pump `pump` of config `c`: `via` is "lcm", "can" or "auto". Auto takes LCM
-/// when the configuration has an LCM URL and a clear key (authenticated, answered), else CAN
+/// when the configuration has an LCM URL and a gateway signing key (signed, answered), else CAN
 /// when the pump's interface is in the pump's alarms.clear_can_interfaces. Throws InputError
 /// naming the configuration file and the keys when the chosen (or any) route is not authorised.
 ClearRouteChoice ChooseClearRoute(const daemon::DaemonConfig& c, const daemon::PumpConfig& pump,

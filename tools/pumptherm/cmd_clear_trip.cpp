@@ -1,8 +1,8 @@
 // pumptherm clear-trip: clears a pump's latched trip through the gateway the way its
-// configuration authorises: over LCM with a command signed with the clear key, reporting the
-// gateway's signed answer (docs/threat-model.md; docs/lcm.md, "Clearing a trip"), or with a
-// PUMP_CLEAR frame on the pump's CAN interface, reporting the gateway's GW_ALARM level before
-// and after (docs/protocol.md).
+// configuration authorises: over LCM with a command signed with the operator's own key,
+// reporting the gateway's signed answer (docs/threat-model.md; docs/lcm.md, "Clearing a trip"),
+// or with a PUMP_CLEAR frame on the pump's CAN interface, reporting the gateway's GW_ALARM level
+// before and after (docs/protocol.md).
 #include <fmt/core.h>
 #include <poll.h>
 #include <time.h>
@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <lcm/lcm-cpp.hpp>
 #include <memory>
 #include <system_error>
@@ -31,26 +32,40 @@ struct ClearTripOptions {
   std::string pump;
   std::string config = "/etc/pumptherm/pumpthermd.toml";
   std::string key_file;
+  std::string gateway;
+  std::string gateway_key;
   std::string url;
   std::string prefix;
-  std::string source;
   std::string node;
   std::string comment;
+  std::string shared_key;
+  std::string source;
   std::string via = "auto";
   double timeout_s = 5.0;
 };
 
+/// The operator's key unless --key names another: ~/.config/pumptherm/operator.key.
+std::string DefaultKeyFile() {
+  const char* config_home = std::getenv("XDG_CONFIG_HOME");
+  const char* home = std::getenv("HOME");
+  if (config_home && *config_home) return std::string(config_home) + "/pumptherm/operator.key";
+  return std::string(home ? home : ".") + "/.config/pumptherm/operator.key";
+}
+
 /// What the command needs, from the daemon's configuration and the options over it.
 struct Settings {
-  std::string url, prefix = "PUMPTHERM", key_file, key_group, source = "operator";
+  std::string url, prefix = "PUMPTHERM", gateway = "pumptherm", gateway_key, key_file;
+  std::string shared_key, key_group, source = "operator";  // the earlier scheme (migration)
 };
 
-/// Settings from the options alone, for a host without the daemon's configuration.
-Settings FromOptions(const ClearTripOptions& o) {
-  Settings s;
-  s.url = o.url;
-  s.key_file = o.key_file;
+/// The options over `s` (the configuration's settings, or the defaults).
+Settings Override(Settings s, const ClearTripOptions& o) {
+  if (!o.url.empty()) s.url = o.url;
   if (!o.prefix.empty()) s.prefix = o.prefix;
+  if (!o.gateway.empty()) s.gateway = o.gateway;
+  if (!o.gateway_key.empty()) s.gateway_key = o.gateway_key;
+  s.key_file = o.key_file.empty() ? DefaultKeyFile() : o.key_file;
+  if (!o.shared_key.empty()) s.shared_key = o.shared_key;
   if (!o.source.empty()) s.source = o.source;
   return s;
 }
@@ -59,7 +74,8 @@ daemon::DaemonConfig LoadDaemonConfig(const ClearTripOptions& o) {
   try {
     return daemon::LoadConfig(o.config);
   } catch (const daemon::ConfigError& e) {
-    throw InputError(fmt::format("{} (without the configuration, give --url and --key)", e.what()));
+    throw InputError(fmt::format(
+        "{} (without the configuration, give --url, --gateway and --gateway-key)", e.what()));
   }
 }
 
@@ -73,17 +89,22 @@ const daemon::PumpConfig& FindPump(const daemon::DaemonConfig& c, const ClearTri
 
 Settings Resolve(const ClearTripOptions& o, const daemon::DaemonConfig& c) {
   Settings s;
-  s.url = o.url.empty() ? c.lcm.url : o.url;
-  s.prefix = o.prefix.empty() ? c.lcm.channel_prefix : o.prefix;
-  s.key_file = o.key_file.empty() ? c.clear_auth.key_file : o.key_file;
+  s.url = c.lcm.url;
+  s.prefix = c.lcm.channel_prefix;
+  s.gateway = c.gateway.name;
+  if (!c.gateway.signing_key_file.empty())
+    s.gateway_key = daemon::PublicKeyPathOf(c.gateway.signing_key_file);
+  if (c.clear_auth.allow_shared_key) s.shared_key = c.clear_auth.key_file;
   s.key_group = c.clear_auth.key_group;
-  const auto& sources = c.alarms.clear_lcm_sources;
-  s.source = !o.source.empty() ? o.source : sources.empty() ? s.source : sources.front();
+  if (!c.alarms.clear_lcm_sources.empty()) s.source = c.alarms.clear_lcm_sources.front();
+  s = Override(s, o);
   if (s.url.empty())
     throw InputError(fmt::format("{}: LCM is off (lcm.url is empty); give --url", o.config));
-  if (s.key_file.empty()) {
+  if (s.gateway_key.empty()) {
     throw InputError(fmt::format(
-        "{}: no alarms.clear_key_file: LCM clears are off in this configuration", o.config));
+        "{}: no gateway.signing_key_file: LCM clears are off in this configuration (or give "
+        "--gateway-key)",
+        o.config));
   }
   return s;
 }
@@ -98,15 +119,16 @@ int Report(const std::string& pump, const daemon::ClearExchange& x, const Settin
            double timeout_s) {
   if (!x.reply) {
     if (x.untrusted_replies > 0) {
-      fmt::print(
-          stderr,
-          "{}: the gateway answered '{}', but not signed with {}: it holds another key (or none)\n",
-          pump, x.untrusted_reason, s.key_file);
+      fmt::print(stderr,
+                 "{}: an answer '{}' came, but not signed by the key of {}: not from gateway "
+                 "'{}'\n",
+                 pump, x.untrusted_reason, s.gateway_key, s.gateway);
     } else {
       fmt::print(stderr,
-                 "{}: no answer from the gateway within {} s on {} (is pumpthermd running there, "
-                 "with this pump?)\n",
-                 pump, timeout_s, s.url);
+                 "{}: no answer from gateway '{}' within {} s on {}: it answers only commands "
+                 "signed by a key it lists (its journal says why it refused one), or it is not "
+                 "running there with this pump\n",
+                 pump, s.gateway, timeout_s, s.url);
     }
     return 1;
   }
@@ -120,33 +142,50 @@ int Report(const std::string& pump, const daemon::ClearExchange& x, const Settin
   return 0;
 }
 
-int RunLcmClear(const ClearTripOptions& o, const Settings& s) {
-  if (const std::string problem = daemon::ClearKeyFileProblem(s.key_file, s.key_group);
-      !problem.empty()) {
-    throw InputError(problem);
+/// Signs `m` with the operator's key (or, for a migration, the shared key).
+void SignFor(const Settings& s, const daemon::PublicKey& gateway, pumptherm::alarm_clear_t& m) {
+  if (!s.shared_key.empty()) {
+    if (const std::string problem = daemon::ClearKeyFileProblem(s.shared_key, s.key_group);
+        !problem.empty()) {
+      throw InputError(problem);
+    }
+    try {
+      daemon::SignCommandShared(daemon::ReadClearKeyFile(s.shared_key), s.source, s.prefix, m);
+    } catch (const std::runtime_error& e) {
+      throw InputError(e.what());
+    }
+    return;
   }
-  daemon::ClearKey key{};
+  if (const std::string problem =
+          daemon::SecretKeyFileProblem(s.key_file, daemon::KeyOwner::kCaller);
+      !problem.empty()) {
+    throw InputError(fmt::format("{} (pumptherm keygen {} makes your key)", problem, s.key_file));
+  }
   try {
-    key = daemon::ReadClearKeyFile(s.key_file);
+    daemon::SignCommand(daemon::ReadSecretKeyFile(s.key_file), gateway, s.prefix, m);
   } catch (const std::runtime_error& e) {
     throw InputError(e.what());
   }
-  lcm::LCM lcm(s.url);
-  if (!lcm.good()) throw std::runtime_error("LCM: cannot start with URL '" + s.url + "'");
+}
+
+int RunLcmClear(const ClearTripOptions& o, const Settings& s) {
+  daemon::PublicKey gateway{};
+  try {
+    gateway = daemon::ReadPublicKeyFile(s.gateway_key);
+  } catch (const std::runtime_error& e) {
+    throw InputError(fmt::format("the gateway's public key: {}", e.what()));
+  }
   pumptherm::alarm_clear_t m;
+  m.gateway = s.gateway;
   m.pump = o.pump;
   m.node = o.node;
-  m.source = s.source;
   m.comment = o.comment;
   m.utime = NowUs();
-  m.counter = m.utime;  // grows by itself, on every host whose clock is inside the window
-  daemon::ClearExchange x = daemon::SendClear(lcm, s.prefix, key, m, o.timeout_s);
-  // Another sender's clock ran ahead: sign once more above the gateway's last counter.
-  if (x.reply && x.reply->result == Reply::RESULT_REPLAYED) {
-    m.utime = NowUs();
-    m.counter = std::max(m.utime, x.reply->last_counter + 1);
-    x = daemon::SendClear(lcm, s.prefix, key, m, o.timeout_s);
-  }
+  m.counter = m.utime;  // grows by itself while this host's clock does
+  SignFor(s, gateway, m);
+  lcm::LCM lcm(s.url);
+  if (!lcm.good()) throw std::runtime_error("LCM: cannot start with URL '" + s.url + "'");
+  const daemon::ClearExchange x = daemon::SendClear(lcm, s.prefix, gateway, m, o.timeout_s);
   return Report(o.pump, x, s, o.timeout_s);
 }
 
@@ -232,17 +271,19 @@ int RunCanClear(const ClearTripOptions& o, const daemon::DaemonConfig& c,
 }
 
 int RunClearTrip(const ClearTripOptions& o) {
-  // Another host without the daemon's configuration: LCM with the URL and key given.
-  if (!o.url.empty() && !o.key_file.empty() && ::access(o.config.c_str(), F_OK) != 0) {
+  // Another host without the daemon's configuration: LCM with the URL and the gateway given.
+  if (!o.url.empty() && !o.gateway_key.empty() && ::access(o.config.c_str(), F_OK) != 0) {
     if (o.via == "can") throw InputError("--via can needs the daemon's configuration (-c)");
-    return RunLcmClear(o, FromOptions(o));
+    if (o.gateway.empty()) throw InputError("--gateway NAME: the gateway's gateway.name");
+    return RunLcmClear(o, Override(Settings{}, o));
   }
   const daemon::DaemonConfig c = LoadDaemonConfig(o);
   const daemon::PumpConfig& pump = FindPump(c, o);
-  // --url/--key on the command line stand for the configuration's LCM settings.
+  // --url/--gateway-key on the command line stand for the configuration's LCM settings.
   daemon::DaemonConfig routed = c;
   if (!o.url.empty()) routed.lcm.url = o.url;
-  if (!o.key_file.empty()) routed.clear_auth.key_file = o.key_file;
+  if (!o.gateway_key.empty() && routed.gateway.signing_key_file.empty())
+    routed.gateway.signing_key_file = o.gateway_key;
   const ClearRouteChoice route = ChooseClearRoute(routed, pump, o.via);
   if (route.route == ClearRoute::kCan) return RunCanClear(o, c, pump, route.interface);
   return RunLcmClear(o, Resolve(o, c));
@@ -255,16 +296,26 @@ const SubcommandRegistrar kRegistrar{
       auto o = std::make_shared<ClearTripOptions>();
       app.add_option("pump", o->pump, "Pump name from the daemon configuration")->required();
       app.add_option("-c,--config", o->config,
-                     "The daemon configuration: LCM URL, key file, sources")
+                     "The daemon configuration: LCM URL, prefix, gateway name and key")
           ->capture_default_str();
       app.add_option("--key", o->key_file,
-                     "Key file (default: alarms.clear_key_file of the configuration)");
+                     "Your secret key (pumptherm keygen; default: "
+                     "~/.config/pumptherm/operator.key)");
+      app.add_option("--gateway", o->gateway,
+                     "The gateway's name (default: gateway.name of the configuration)");
+      app.add_option("--gateway-key", o->gateway_key,
+                     "The gateway's public key file (default: gateway.signing_key_file + .pub)");
       app.add_option("--url", o->url, "LCM URL (default: lcm.url of the configuration)");
       app.add_option("--prefix", o->prefix,
                      "LCM channel prefix (default: lcm.channel_prefix, or PUMPTHERM)");
+      app.add_option("--node", o->node,
+                     "Alarm node whose latched trip to clear (default: every latched trip)");
+      app.add_option("--shared-key", o->shared_key,
+                     "Sign with the shared key of the earlier scheme instead (migration; the "
+                     "gateway needs alarms.clear_allow_shared_key)");
       app.add_option("--source", o->source,
-                     "Who clears (default: the first of alarms.clear_lcm_sources)");
-      app.add_option("--node", o->node, "Node whose trip to clear (default: every latched trip)");
+                     "With --shared-key: the source to claim (default: the first of "
+                     "alarms.clear_lcm_sources)");
       app.add_option("--comment", o->comment, "Why; the gateway logs it");
       app.add_option(
              "--via", o->via,
@@ -278,10 +329,10 @@ const SubcommandRegistrar kRegistrar{
       app.footer(
           "Exit codes: 0 the gateway accepted the clear, 1 it refused or did not answer, 2 bad "
           "input.\n"
-          "Without the configuration file, --url and --key are needed (LCM).\n"
+          "Without the configuration file, --url, --gateway and --gateway-key are needed (LCM).\n"
           "On CAN there is no answer: the command reports the gateway's GW_ALARM level before the\n"
           "clear and after it (the trip gone within --timeout-s: exit 0).\n"
-          "Example (as a member of the group that owns the key file):\n"
+          "Example (with your key listed in the gateway's alarms.clear_operators):\n"
           "  pumptherm clear-trip tmp1 --comment 'bearing replaced'");
       return [o] { return RunClearTrip(*o); };
     }};

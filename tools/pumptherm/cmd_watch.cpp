@@ -8,11 +8,17 @@
 #include <chrono>
 #include <cstdio>
 #include <lcm/lcm-cpp.hpp>
+#include <map>
+#include <memory>
+#include <optional>
 
+#include "daemon/clear_keys.hpp"
 #include "daemon/config.hpp"
 #include "protocol/lcm/channels.hpp"
+#include "pumptherm/gateway_digest_t.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 #include "tools/pumptherm/watch.hpp"
+#include "tools/pumptherm/watch_digest.hpp"
 
 namespace pumptherm::tools {
 namespace {
@@ -26,6 +32,7 @@ struct WatchOptions {
   double period_s = 5.0;
   int count = 0;
   double stale_after_s = 15.0;
+  std::string gateway_key;  // the gateway's public key file: mark what it did not sign
 };
 
 /// Where to listen: from the options, over the gateway's configuration when it can be read.
@@ -64,16 +71,48 @@ std::int64_t NowUs() {
 
 struct Receiver {
   PumpWatch watch;
-  void OnTemps(const lcm::ReceiveBuffer*, const std::string&, const pumptherm::temperatures_t* m) {
+  std::unique_ptr<DigestCheck> check;  // with --gateway-key
+  void OnTemps(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
+               const pumptherm::temperatures_t* m) {
     watch.OnTemperatures(*m, NowUs());
+    if (check) check->OnMessage(channel, rbuf->data, rbuf->data_size, NowUs());
   }
-  void OnAlarm(const lcm::ReceiveBuffer*, const std::string&, const pumptherm::alarm_t* m) {
+  void OnAlarm(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
+               const pumptherm::alarm_t* m) {
     watch.OnAlarm(*m, NowUs());
+    if (check) check->OnMessage(channel, rbuf->data, rbuf->data_size, NowUs());
+  }
+  void OnDigest(const lcm::ReceiveBuffer*, const std::string&,
+                const pumptherm::gateway_digest_t* d) {
+    if (check) check->OnDigest(*d, NowUs());
   }
   void OnTelemetry(const lcm::ReceiveBuffer*, const std::string&, const pumptherm::telemetry_t* m) {
     watch.OnTelemetry(*m, NowUs());
   }
 };
+
+/// Per pump: whether the gateway signed its latest TEMPS and ALARM (--gateway-key).
+std::map<std::string, std::string> SignatureMarks(const Receiver& rx, const std::string& prefix) {
+  using lcm_channels::PumpChannel;
+  using V = DigestCheck::Verdict;
+  std::map<std::string, std::string> marks;
+  if (!rx.check) return marks;
+  for (const std::string& pump : rx.watch.Pumps()) {
+    const V t =
+        rx.check->Latest(lcm_channels::PumpChannelName(prefix, pump, PumpChannel::kTemperatures));
+    const V a = rx.check->Latest(lcm_channels::PumpChannelName(prefix, pump, PumpChannel::kAlarm));
+    if (t == V::kNotSigned || a == V::kNotSigned) {
+      marks[pump] = "NOT FROM THE GATEWAY (no signed digest lists it)";
+    } else if (!rx.check->any_digest()) {
+      marks[pump] = "unverified (no signed digest from the gateway yet)";
+    } else if ((t == V::kSigned || t == V::kNone) && (a == V::kSigned || a == V::kNone)) {
+      marks[pump] = "signed";
+    } else {
+      marks[pump] = "signature pending";
+    }
+  }
+  return marks;
+}
 
 int RunWatch(WatchOptions o) {
   if (!(o.period_s > 0.0)) throw InputError("--period-s must be positive");
@@ -88,6 +127,14 @@ int RunWatch(WatchOptions o) {
   if (!lcm.good()) throw std::runtime_error("LCM: cannot start with URL '" + s.url + "'");
   Receiver rx;
   for (const auto& [pump, node] : s.measured_nodes) rx.watch.SetMeasuredNode(pump, node);
+  if (!o.gateway_key.empty()) {
+    try {
+      rx.check = std::make_unique<DigestCheck>(daemon::ReadPublicKeyFile(o.gateway_key), s.prefix);
+    } catch (const std::runtime_error& e) {
+      throw InputError(fmt::format("--gateway-key: {}", e.what()));
+    }
+    lcm.subscribe(lcm_channels::GatewayDigestChannelName(s.prefix), &Receiver::OnDigest, &rx);
+  }
   using lcm_channels::PumpChannel;
   lcm.subscribe(lcm_channels::AllPumpsPattern(s.prefix, PumpChannel::kTemperatures),
                 &Receiver::OnTemps, &rx);
@@ -113,9 +160,12 @@ int RunWatch(WatchOptions o) {
     if (rx.watch.PumpCount() == 0) {
       fmt::print("no pumptherm messages yet under {}/<pump>/TEMPS, ALARM or TELEMETRY\n", s.prefix);
     } else if (o.pump.empty()) {
-      fmt::print("\n{}", rx.watch.Table(now, o.stale_after_s));
+      fmt::print("\n{}", rx.watch.Table(now, o.stale_after_s, SignatureMarks(rx, s.prefix)));
     } else {
-      fmt::print("\n{}", rx.watch.Detail(o.pump, now, o.stale_after_s));
+      const auto marks = SignatureMarks(rx, s.prefix);
+      const auto mark = marks.find(o.pump);
+      fmt::print("\n{}{}", rx.watch.Detail(o.pump, now, o.stale_after_s),
+                 mark == marks.end() ? std::string() : "messages: " + mark->second + "\n");
     }
     std::fflush(stdout);
     ++shown;
@@ -145,6 +195,9 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--stale-after-s", o->stale_after_s,
                      "mark a pump STALE after this long silent")
           ->capture_default_str();
+      app.add_option("--gateway-key", o->gateway_key,
+                     "the gateway's public key file (gateway.signing_key_file + .pub): mark each "
+                     "pump whose messages the gateway's signed digests do not list");
       app.footer(
           "Examples:\n"
           "  pumptherm watch                  (on the gateway: its configuration's URL)\n"

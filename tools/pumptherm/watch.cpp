@@ -226,8 +226,16 @@ void PumpWatch::SetMeasuredNode(const std::string& pump, const std::string& node
   measured_nodes_[pump] = node;
 }
 
-// Columns: pump 12, age 10, alarm 28, hottest 21, diagnosis the rest of kWatchColumns.
-std::string PumpWatch::Table(std::int64_t now_us, double stale_after_s) const {
+std::vector<std::string> PumpWatch::Pumps() const {
+  std::vector<std::string> out;
+  for (const auto& [name, e] : pumps_) out.push_back(name);
+  return out;
+}
+
+// Columns: pump 12, age 10, alarm 28, hottest 21, diagnosis the rest of kWatchColumns; a mark
+// other than "signed" (--gateway-key) takes the diagnosis's place.
+std::string PumpWatch::Table(std::int64_t now_us, double stale_after_s,
+                             const std::map<std::string, std::string>& marks) const {
   constexpr std::size_t kPump = 12, kAge = 10, kAlarm = 28, kHot = 21;
   constexpr std::size_t kDiagnosis = kWatchColumns - kPump - kAge - kAlarm - kHot - 4;
   std::string out = fmt::format("{:<12} {:>10} {:<28} {:<21} {}\n", "pump", "age", "alarm",
@@ -238,11 +246,16 @@ std::string PumpWatch::Table(std::int64_t now_us, double stale_after_s) const {
     const auto node = measured_nodes_.find(name);
     const std::string measured = node == measured_nodes_.end() ? e.measured_node : node->second;
     const std::string age = (stale ? "STALE " : "") + AgeText(now_us, last);
-    const std::string line = fmt::format(
-        "{} {:>10} {} {} {}", Pad(Fit(name, kPump), kPump), age,
-        Pad(Fit(AlarmCell(e.alarm, e.alarm_rx_us >= 0), kAlarm), kAlarm),
-        Pad(Fit(e.temps_rx_us >= 0 ? Hottest(e.temps) : "-", kHot), kHot),
-        e.alarm_rx_us >= 0 ? Fit(Diagnosis(e.alarm, measured, false), kDiagnosis) : "-");
+    const auto mark = marks.find(name);
+    const std::string last_cell = mark != marks.end() && mark->second != "signed"
+                                      ? "! " + mark->second
+                                  : e.alarm_rx_us >= 0 ? Diagnosis(e.alarm, measured, false)
+                                                       : "-";
+    const std::string line =
+        fmt::format("{} {:>10} {} {} {}", Pad(Fit(name, kPump), kPump), age,
+                    Pad(Fit(AlarmCell(e.alarm, e.alarm_rx_us >= 0), kAlarm), kAlarm),
+                    Pad(Fit(e.temps_rx_us >= 0 ? Hottest(e.temps) : "-", kHot), kHot),
+                    Fit(last_cell, kDiagnosis));
     out += line + "\n";
   }
   return out;

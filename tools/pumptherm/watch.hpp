@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <map>
 #include <string>
+#include <vector>
 
 #include "pumptherm/alarm_t.hpp"
 #include "pumptherm/telemetry_t.hpp"
@@ -36,8 +37,13 @@ class PumpWatch {
 
   /// One line per pump, sorted by name, none wider than kWatchColumns: the age of its last
   /// message (STALE after `stale_after_s` of silence), the alarm level with what raised it, the
-  /// hottest node's estimate with its +-2 sd band, and the model diagnosis with since when.
-  std::string Table(std::int64_t now_us, double stale_after_s) const;
+  /// hottest node's estimate with its +-2 sd band, and the model diagnosis with since when; a
+  /// pump's mark in `marks` other than "signed" (whether the gateway signed its messages,
+  /// `--gateway-key`) takes the diagnosis's place.
+  std::string Table(std::int64_t now_us, double stale_after_s,
+                    const std::map<std::string, std::string>& marks = {}) const;
+  /// The names of the pumps heard from, sorted.
+  std::vector<std::string> Pumps() const;
 
   /// Everything known of one pump: every node with its band, the direct readings (frame sensor,
   /// ambient, winding from resistance, magnet from flux), the diagnosis and since when, every
