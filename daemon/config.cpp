@@ -207,6 +207,10 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     TableReader r(*t, "dbc", source);
     config.dbc.file = r.String("file", &config.dbc.file);
     config.dbc.mapping = r.String("mapping", &config.dbc.mapping);
+    if (const toml::node* n = t->get("file"))
+      config.dbc.file_line = static_cast<int>(n->source().begin.line);
+    if (const toml::node* n = t->get("mapping"))
+      config.dbc.mapping_line = static_cast<int>(n->source().begin.line);
     r.RejectUnknown();
   }
 
@@ -313,6 +317,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       TableReader r(*t, fmt::format("pump[{}]", i), source);
       PumpConfig pc;
       pc.line = static_cast<int>(t->source().begin.line);
+      for (const auto& [k, v] : *t)
+        pc.key_lines[std::string(k.str())] = static_cast<int>(v.source().begin.line);
       pc.name = r.String("name", nullptr);
       if (pc.name.empty() || pc.name.find_first_of(" \t/") != std::string::npos) {
         r.Fail(t->get("name"), "name",

@@ -9,6 +9,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "estimators/alarms.hpp"
@@ -60,6 +61,8 @@ struct DbcConfig {
   std::string file = "pumptherm.dbc";              ///< path or shipped name
   std::string mapping = "mapping_pumptherm.toml";  ///< path or shipped name of the mapping
   std::string base_dir = ".";                      ///< directory of the config file
+  int file_line = 0;     ///< line of `dbc.file` in the config file (0: not given there)
+  int mapping_line = 0;  ///< line of `dbc.mapping` (0: not given there)
 };
 
 struct LcmConfig {
@@ -119,6 +122,13 @@ struct PumpConfig {
   bool disturbance_states_explicit = false;  ///< the config file set `disturbance_states`
   AlarmsConfig alarms;                       ///< the gateway's [alarms] with this pump's overrides
   int line = 0;                              ///< line of the [[pump]] table
+  /// Line of each key given in the [[pump]] table, for messages about its value.
+  std::map<std::string, int, std::less<>> key_lines;
+  /// The line of `key` in this pump's table, or the table's line when the key was not given.
+  int LineOf(std::string_view key) const {
+    const auto it = key_lines.find(key);
+    return it == key_lines.end() ? line : it->second;
+  }
 };
 
 struct DaemonConfig {

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include <cstdint>
+#include <functional>
 #include <initializer_list>
 #include <span>
 #include <string>
@@ -34,6 +35,23 @@ std::string EscapeControl(std::string_view text);
 /// and the fields, so that `journalctl PUMP=pump3` finds it (if the journal socket refuses it,
 /// the line goes to stderr as without fields). Elsewhere the fields are not written.
 void LogLine(LogLevel level, std::string_view message, std::span<const LogField> fields = {});
+
+/// While it lives, every line LogLine would write goes to `sink` instead (unescaped, without
+/// fields): for a command that runs the pipeline to report on it (`pumpthermd --check-config
+/// --against` runs it once per candidate sensor lag). Captures nest; one thread only.
+class LogCapture {
+ public:
+  using Sink = std::function<void(LogLevel, std::string_view)>;
+  explicit LogCapture(Sink sink);
+  ~LogCapture();
+  LogCapture(const LogCapture&) = delete;
+  LogCapture& operator=(const LogCapture&) = delete;
+
+ private:
+  friend void LogLine(LogLevel, std::string_view, std::span<const LogField>);
+  Sink sink_;
+  LogCapture* outer_;
+};
 
 template <typename... Args>
 void Log(LogLevel level, fmt::format_string<Args...> format, Args&&... args) {

@@ -394,7 +394,7 @@ TEST(DbcTest, PumpthermFrameSetIsCompleteAndConsistent) {
   const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "protocol/pumptherm.dbc");
   EXPECT_TRUE(dbc.problems.empty())
       << dbc.problems.front().line << ": " << dbc.problems.front().message;
-  EXPECT_EQ(dbc.messages.size(), 11u);
+  EXPECT_EQ(dbc.messages.size(), 12u);
   for (const auto& m : dbc.messages) {
     SCOPED_TRACE(m.name);
     ASSERT_TRUE(m.cycle_time_ms.has_value());

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <optional>
 #include <sstream>
@@ -204,18 +205,56 @@ std::string TimeText(std::int64_t time_us) {
                      std::llabs(time_us) % 1000000);
 }
 
+/// The record's time for JSON ("null" for a screen-format line without one) and CSV (empty).
+std::string JsonTime(const protocol::CandumpRecord& r) {
+  return r.has_time ? TimeText(r.time_us) : "null";
+}
+std::string CsvTime(const protocol::CandumpRecord& r) {
+  return r.has_time ? TimeText(r.time_us) : std::string();
+}
+
 std::string CanIdText(const protocol::CanFrame& f) {
   return f.extended ? fmt::format("0x{:08X}", f.id) : fmt::format("0x{:03X}", f.id);
 }
 
 /// Counts of one decode run, reported on stderr at the end.
 struct DecodeCounts {
-  std::size_t decoded = 0, unknown = 0, too_short = 0, bad_lines = 0;
-  std::size_t unknown_per_pump = 0;  ///< of `unknown`: a message at CAN ID - n, 0 < n < 16
+  std::size_t decoded = 0, too_short = 0, bad_lines = 0;
+  std::size_t unknown_standard = 0, unknown_extended = 0;  ///< IDs not in the DBC, 11 / 29 bit
+  std::size_t error_frames = 0, remote_frames = 0;         ///< never decoded
+  /// Of the unknown frames: a DBC message at CAN ID - n for a node n at or above the limit
+  /// (below kHintMaxNode), and the largest such n.
+  std::size_t unknown_per_pump = 0;
+  unsigned max_node = 0;
 };
 
-/// Node IDs the hint tries when frames are unknown without --node-id-limit (pumptherm.dbc's).
-constexpr unsigned kHintNodeIdLimit = 16;
+/// Node IDs the hint looks at for unknown frames: a message at CAN ID - n, n below this.
+constexpr unsigned kHintMaxNode = 128;
+
+/// The smallest node n (limit <= n < kHintMaxNode) with a DBC message at the frame's ID - n, or
+/// -1; remembered per ID (a log has few distinct IDs).
+class NodeHint {
+ public:
+  NodeHint(const protocol::DbcCodec& codec, unsigned limit) : codec_(codec), limit_(limit) {}
+  int Node(const protocol::CanFrame& f) {
+    const std::uint64_t key = (static_cast<std::uint64_t>(f.extended) << 32) | f.id;
+    if (const auto it = cache_.find(key); it != cache_.end()) return it->second;
+    int node = -1;
+    for (unsigned n = limit_; n < kHintMaxNode && n <= f.id; ++n) {
+      if (codec_.Find(f.id - n, f.extended) >= 0) {
+        node = static_cast<int>(n);
+        break;
+      }
+    }
+    cache_[key] = node;
+    return node;
+  }
+
+ private:
+  const protocol::DbcCodec& codec_;
+  unsigned limit_;
+  std::map<std::uint64_t, int> cache_;
+};
 
 /// Writes decoded frames as JSON lines, CSV rows, or the input annotated as cantools decode does.
 class DecodeWriter {
@@ -248,14 +287,13 @@ class DecodeWriter {
       std::vector<std::string> row(columns_);
       const std::size_t first = first_column_[static_cast<std::size_t>(m.index)];
       for (std::size_t i = 0; i < values.size(); ++i) row[first + i] = Number(values[i]);
-      fmt::print("{},{},{},{},{},{}\n", TimeText(r.time_us), r.interface, CanIdText(r.frame),
-                 m.node, msg.name, fmt::join(row, ","));
+      fmt::print("{},{},{},{},{},{}\n", CsvTime(r), r.interface, CanIdText(r.frame), m.node,
+                 msg.name, fmt::join(row, ","));
       return;
     }
     std::string out = fmt::format(
         R"({{"time_s":{},"interface":"{}","can_id":"{}","node":{},"message":"{}","signals":{{)",
-        TimeText(r.time_us), JsonEscape(r.interface), CanIdText(r.frame), m.node,
-        JsonEscape(msg.name));
+        JsonTime(r), JsonEscape(r.interface), CanIdText(r.frame), m.node, JsonEscape(msg.name));
     for (std::size_t i = 0; i < values.size(); ++i) {
       const std::string v = Number(values[i]);
       out += fmt::format(R"({}"{}":{})", i == 0 ? "" : ",", JsonEscape(msg.signals[i].name),
@@ -343,6 +381,7 @@ int Decode(const DecodeOptions& o) {
   std::string line;
   std::size_t line_no = 0;
   DecodeCounts n;
+  NodeHint hint(codec, o.node_id_limit);
   while (std::getline(*in, line)) {
     ++line_no;
     if (!line.empty() && line.back() == '\r') line.pop_back();
@@ -353,10 +392,15 @@ int Decode(const DecodeOptions& o) {
       fmt::print(stderr, "{}:{}:{}: warning: {}; {}\n", log_name, line_no, p.column, p.error,
                  annotate ? "line passed through undecoded" : "line skipped");
     }
-    n.unknown += result == LineResult::kUnknownId;
-    if (result == LineResult::kUnknownId && o.node_id_limit == 1) {
-      n.unknown_per_pump += MatchFrame(codec, p.record.frame, kHintNodeIdLimit).index >= 0;
+    if (result == LineResult::kUnknownId) {
+      (p.record.frame.extended ? n.unknown_extended : n.unknown_standard) += 1;
+      if (const int node = hint.Node(p.record.frame); node >= 0) {
+        ++n.unknown_per_pump;
+        n.max_node = std::max(n.max_node, static_cast<unsigned>(node));
+      }
     }
+    if (p.ok && p.record.frame.error) ++n.error_frames;
+    if (p.ok && p.record.frame.remote) ++n.remote_frames;
     n.too_short += result == LineResult::kTooShort;
     n.decoded += result == LineResult::kDecoded;
     if (annotate) {
@@ -370,16 +414,17 @@ int Decode(const DecodeOptions& o) {
   }
   std::fflush(stdout);
   fmt::print(stderr,
-             "{}: {} frames decoded, {} with IDs not in {}, {} shorter than their message, {} bad "
-             "lines {}\n",
-             log_name, n.decoded, n.unknown, o.dbc_path, n.too_short, n.bad_lines,
-             annotate ? "passed through undecoded" : "skipped");
+             "{}: {} frames decoded, {} with IDs not in {} ({} 11-bit, {} 29-bit), {} shorter than "
+             "their message, {} error and {} remote frames not decoded, {} bad lines {}\n",
+             log_name, n.decoded, n.unknown_standard + n.unknown_extended, o.dbc_path,
+             n.unknown_standard, n.unknown_extended, n.too_short, n.error_frames, n.remote_frames,
+             n.bad_lines, annotate ? "passed through undecoded" : "skipped");
   if (n.unknown_per_pump > 0) {
-    fmt::print(
-        stderr,
-        "{}: {} of the unknown frames are a message at CAN ID = DBC ID + node ID (node below {}): "
-        "the DBC's IDs are per pump; decode them with --node-id-limit {}\n",
-        log_name, n.unknown_per_pump, kHintNodeIdLimit, kHintNodeIdLimit);
+    fmt::print(stderr,
+               "{}: {} of the unknown frames are a message at CAN ID = DBC ID + node ID, node "
+               "IDs up to {}: the DBC's IDs are per pump (or per node); decode them with "
+               "--node-id-limit {}\n",
+               log_name, n.unknown_per_pump, n.max_node, n.max_node + 1);
   }
   return 0;
 }
