@@ -47,7 +47,8 @@ expect 1 "empty.log: empty: no frame to run on" -- "$bin" --check-config "$tmp/d
 
 # The sensor's lag from 10 minutes of the demo (true lag 30 s), the configuration without it.
 "$pumptherm" plant demo --duration-s 600 --out "$tmp/plant" --quiet || { echo "FAIL: plant"; exit 1; }
-grep -v '^frame_sensor_lag_s' "$demo" > "$tmp/nolag.toml"
+# Pumps 1 and 2 (pump 3 loses its cooling at 4 min: too little data before, the lag not told).
+grep -v '^frame_sensor_lag_s' "$demo" | awk '/^\[\[pump\]\]/ { n++ } n < 3' > "$tmp/nolag.toml"
 "$bin" --check-config "$tmp/nolag.toml" --against "$tmp/plant/demo.log" > "$tmp/lag.txt" 2>&1
 code=$?
 cat "$tmp/lag.txt" | sed -n '/frame sensor lag/,$p'
