@@ -80,9 +80,12 @@ class Census {
     }
     for (const auto& [node, ref] : mapping.node_temperatures)
       output_messages_.insert(ref.message_index);
-    for (const auto& pc : config.pumps) {
-      motors_.push_back(LoadMotor(pc));
+    for (std::size_t p = 0; p < config.pumps.size(); ++p) {
+      motors_.push_back(LoadMotor(config.pumps[p]));
       inputs_.emplace_back(protocol::kMappingInputCount);
+      auto& ranges = ranges_.emplace_back();
+      for (std::size_t i = 0; i < protocol::kMappingInputCount; ++i)
+        ranges.push_back(Plausible(p, static_cast<MappingInput>(i)));
     }
   }
 
@@ -112,6 +115,7 @@ class Census {
   /// Per configured pump, per mapping input.
   std::vector<std::vector<InputSeen>> inputs_;
   std::vector<estimators::MotorDescription> motors_;
+  std::vector<std::vector<Range>> ranges_;  ///< per pump, per mapping input: Plausible()
 
   /// The plausible range of input `i` of pump `p`.
   Range Plausible(std::size_t p, MappingInput i) const {
@@ -213,7 +217,7 @@ class Census {
         ++seen.values;
         seen.min = std::isnan(seen.min) ? v : std::min(seen.min, v);
         seen.max = std::isnan(seen.max) ? v : std::max(seen.max, v);
-        const Range range = Plausible(p, input);
+        const Range& range = ranges_[p][i];
         if (v < range.low || v > range.high) {
           if (seen.implausible++ == 0) {
             seen.first_implausible_line = line;
@@ -442,7 +446,7 @@ class Report {
   std::vector<std::string> lines_;
 };
 
-/// Configured pumps against the nodes heard; returns the nodes heard that no pump has.
+/// Configured pumps against the nodes heard, and another gateway's frames.
 void ReportNodes(const DaemonConfig& config, const protocol::Dbc& dbc, const Census& census,
                  Report& report) {
   std::map<std::pair<std::string, std::uint32_t>, std::uint64_t> heard;  // (iface, node) -> frames
@@ -482,8 +486,9 @@ void ReportNodes(const DaemonConfig& config, const protocol::Dbc& dbc, const Cen
   }
   for (const auto& [iface, nodes] : others) {
     report.Change(fmt::format(
-        "another gateway sends on {}: {} of nodes {} are in the recording; two gateways on one bus "
-        "send the same IDs (stop the other one, or give this one's pumps other IDs)",
+        "a gateway already sends on {}: {} of nodes {} are in the recording; two gateways on one "
+        "bus send the same IDs (stop the other one, or give this one's pumps other IDs; if it "
+        "was this one, record with it stopped)",
         iface, fmt::join(other_messages, ", "), fmt::join(nodes, ", ")));
   }
   for (const auto& [iface, n] : census.heartbeats_) {

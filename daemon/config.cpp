@@ -178,6 +178,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       }
       nr.RejectUnknown();
       lc.line = static_cast<int>(v.source().begin.line);
+      lc.key = r.Join("levels." + node);
       a.levels[node] = lc;
     }
   };
@@ -235,6 +236,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       TableReader r(*t, "output_periods_s", source);
       const std::string key(k.str());
       config.output_periods_s[key] = r.Number(key, 1.0, 0.001, 3600.0);
+      config.output_period_lines[key] = static_cast<int>(v.source().begin.line);
     }
   }
 
@@ -366,6 +368,9 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
 }
 
 DaemonConfig LoadConfig(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode))
+    throw ConfigError(fmt::format("{}: is a directory, not a configuration file", path));
   std::ifstream in(path, std::ios::binary);
   if (!in) throw ConfigError(fmt::format("{}: cannot open: {}", path, std::strerror(errno)));
   std::ostringstream ss;

@@ -76,6 +76,7 @@ struct LcmConfig {
 struct LevelsConfig {
   estimators::TemperatureLimits limits;
   int line = 0;
+  std::string key;  ///< e.g. "pump[0].alarms.levels.winding", for messages
 };
 
 struct AlarmsConfig {
@@ -139,6 +140,7 @@ struct DaemonConfig {
   AlarmsConfig alarms;         ///< defaults for every pump
   ClearAuthConfig clear_auth;  ///< from [alarms]: clear_key_file, clear_key_group, clear_window_s
   std::map<std::string, double> output_periods_s;  ///< DBC message name -> period override
+  std::map<std::string, int> output_period_lines;  ///< DBC message name -> its key's line
   std::vector<InterfaceConfig> interfaces;
   std::vector<PumpConfig> pumps;
 };

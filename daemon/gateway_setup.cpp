@@ -308,7 +308,8 @@ void Gateway::CheckPumpNodes(const PumpConfig& pc, const std::string& key,
         pc.name, model.Name(), node, NodeList(model));
     // Levels that are not in the file (a tool's what-if levels) have no line to name.
     if (levels.line <= 0) throw ConfigError(fmt::format("levels for '{}': {}", node, what));
-    throw KeyError(config_, levels.line, "alarms.levels." + node, what);
+    throw KeyError(config_, levels.line, levels.key.empty() ? "alarms.levels." + node : levels.key,
+                   what);
   }
 }
 
@@ -357,6 +358,18 @@ void Gateway::CheckOutputSignals(const std::string& dbc_path,
   for (const auto& u : uses) messages.insert(u.ref->message_index);
   for (std::size_t o = 0; o < protocol::kMappingOutputCount; ++o) {
     if (mapping_.outputs[o]) messages.insert(mapping_.outputs[o]->message_index);
+  }
+  // An override of a message the gateway does not send would change nothing, silently.
+  for (const auto& [name, period_s] : config_.output_periods_s) {
+    const protocol::DbcMessage* msg = dbc_.FindMessage(name);
+    if (msg != nullptr && messages.contains(static_cast<int>(msg - dbc_.messages.data()))) continue;
+    std::vector<std::string> names;
+    for (int m : messages) names.push_back(dbc_.messages[static_cast<std::size_t>(m)].name);
+    const auto line = config_.output_period_lines.find(name);
+    throw KeyError(config_, line == config_.output_period_lines.end() ? 0 : line->second,
+                   "output_periods_s." + name,
+                   fmt::format("{} is not a message the gateway sends (its output messages: {})",
+                               name, fmt::join(names, ", ")));
   }
   std::vector<std::string> no_cycle;
   for (int m : messages) {

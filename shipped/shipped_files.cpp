@@ -89,6 +89,10 @@ std::string Resolve(FileKind kind, const std::string& reference, const std::stri
     if (fs::is_regular_file(c, ec)) return c.lexically_normal().string();
     tried += "\n  " + c.lexically_normal().string();
   }
+  std::error_code dir_ec;
+  if (fs::is_directory(as_path, dir_ec))
+    throw FileNotFound(
+        fmt::format("'{}': is a directory, not a {} file", as_path.string(), info.share_dir));
   throw FileNotFound(
       fmt::format("'{}': no such {} file; looked for:{}", reference, info.share_dir, tried));
 }

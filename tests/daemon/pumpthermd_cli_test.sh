@@ -74,6 +74,12 @@ expect 78 "cut.toml:4: key 'dbc.file'" -- "$bin" --config "$tmp/cut.toml"
 grep -v '^BA_ "GenMsgCycleTime"' "$dbc" > "$tmp/cycle.dbc"
 one_pump "$tmp/cycle.toml" cycle.dbc
 expect 2 "cycle.toml:4: key 'dbc.file': .*cycle.dbc: output messages GW_ALARM, .* have no cycle time \(attribute GenMsgCycleTime, neither its BA_ nor a default above 0\): the gateway would send them every 1 s" -- "$bin" --check-config "$tmp/cycle.toml"
+# An override of a message the gateway does not send would change nothing.
+one_pump "$tmp/period.toml" pumptherm.dbc
+printf '[output_periods_s]\nGW_TEMP_A = 0.5\n' >> "$tmp/period.toml"
+expect 2 "period.toml:11: key 'output_periods_s.GW_TEMP_A': GW_TEMP_A is not a message the gateway sends \(its output messages: GW_ALARM, " -- "$bin" --check-config "$tmp/period.toml"
+# A configuration that is a directory says so.
+expect 2 "$tmp: is a directory, not a configuration file" -- "$bin" --check-config "$tmp"
 # A path that exists is a path, whatever the case of its extension.
 cp "$dbc" "$tmp/Upper.DBC"
 one_pump "$tmp/upper.toml" Upper.DBC

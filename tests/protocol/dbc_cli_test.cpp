@@ -204,6 +204,28 @@ TEST(DbcCliTest, DecodeCountsEveryKindAndLeavesNoTimeNull) {
   fs::remove(log);
 }
 
+// A named log that holds no frame, or is a directory, is no recording: exit 1 or 2, the file named.
+TEST(DbcCliTest, DecodeOfAFileWithoutFramesOrADirectorySaysSo) {
+  const fs::path log = TempFile("noframes.log");
+  std::ofstream(log) << "hello\n# a comment\n";
+  RunResult r = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + log.string() + "'");
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find(log.string() + ": no CAN frame in 2 lines (1 not candump lines)"),
+            std::string::npos)
+      << r.out;
+  fs::remove(log);
+  const fs::path dir = TempFile("logdir");
+  fs::create_directories(dir);
+  r = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + dir.string() + "'");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find(dir.string() + ": is a directory, not a candump log"), std::string::npos)
+      << r.out;
+  r = RunPumptherm("dbc check '" + dir.string() + "'");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find("is a directory, not a dbc file"), std::string::npos) << r.out;
+  fs::remove_all(dir);
+}
+
 // A file that exists is a path, whatever the case of its extension (cantools' corpus has
 // issue_168.DBC); a bare name that is no file here is the shipped file.
 TEST(DbcCliTest, AFileWithAnUpperCaseExtensionIsAPath) {

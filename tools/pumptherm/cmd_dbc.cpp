@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -228,6 +229,7 @@ std::string CanIdText(const protocol::CanFrame& f) {
 
 /// Counts of one decode run, reported on stderr at the end.
 struct DecodeCounts {
+  std::size_t frames = 0;  ///< lines that are frames (decoded or not)
   std::size_t decoded = 0, too_short = 0, bad_lines = 0;
   std::size_t unknown_standard = 0, unknown_extended = 0;  ///< IDs not in the DBC, 11 / 29 bit
   std::size_t error_frames = 0, remote_frames = 0;         ///< never decoded
@@ -381,6 +383,9 @@ int Decode(const DecodeOptions& o) {
   const bool from_stdin = o.log_path.empty() || o.log_path == "-";
   const std::string log_name = from_stdin ? "<stdin>" : o.log_path;
   if (!from_stdin) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(o.log_path, ec))
+      throw InputError(fmt::format("{}: is a directory, not a candump log", o.log_path));
     file = std::make_unique<std::ifstream>(o.log_path);
     if (!*file) throw InputError(fmt::format("{}: cannot open", o.log_path));
     in = file.get();
@@ -408,6 +413,7 @@ int Decode(const DecodeOptions& o) {
         n.max_node = std::max(n.max_node, static_cast<unsigned>(node));
       }
     }
+    n.frames += p.ok;
     if (p.ok && p.record.frame.error) ++n.error_frames;
     if (p.ok && p.record.frame.remote) ++n.remote_frames;
     n.too_short += result == LineResult::kTooShort;
@@ -434,6 +440,12 @@ int Decode(const DecodeOptions& o) {
                "IDs up to {}: the DBC's IDs are per pump (or per node); decode them with "
                "--node-id-limit {}\n",
                log_name, n.unknown_per_pump, n.max_node, n.max_node + 1);
+  }
+  // A named file without a single frame is not a recording (a pipe may stay empty).
+  if (!from_stdin && n.frames == 0) {
+    fmt::print(stderr, "{}: no CAN frame in {} lines ({} not candump lines)\n", log_name, line_no,
+               n.bad_lines);
+    return 1;
   }
   return 0;
 }
