@@ -218,6 +218,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       }
       nr.RejectUnknown();
       lc.line = static_cast<int>(v.source().begin.line);
+      lc.key = r.Join("levels." + node);
       a.levels[node] = lc;
     }
   };
@@ -260,6 +261,10 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     TableReader r(*t, "dbc", source);
     config.dbc.file = r.String("file", &config.dbc.file);
     config.dbc.mapping = r.String("mapping", &config.dbc.mapping);
+    if (const toml::node* n = t->get("file"))
+      config.dbc.file_line = static_cast<int>(n->source().begin.line);
+    if (const toml::node* n = t->get("mapping"))
+      config.dbc.mapping_line = static_cast<int>(n->source().begin.line);
     r.RejectUnknown();
   }
 
@@ -291,6 +296,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       TableReader r(*t, "output_periods_s", source);
       const std::string key(k.str());
       config.output_periods_s[key] = r.Number(key, 1.0, 0.001, 3600.0);
+      config.output_period_lines[key] = static_cast<int>(v.source().begin.line);
     }
   }
 
@@ -373,6 +379,8 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       TableReader r(*t, fmt::format("pump[{}]", i), source);
       PumpConfig pc;
       pc.line = static_cast<int>(t->source().begin.line);
+      for (const auto& [k, v] : *t)
+        pc.key_lines[std::string(k.str())] = static_cast<int>(v.source().begin.line);
       pc.name = r.String("name", nullptr);
       if (pc.name.empty() || pc.name.find_first_of(" \t/") != std::string::npos) {
         r.Fail(t->get("name"), "name",
@@ -420,6 +428,9 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
 }
 
 DaemonConfig LoadConfig(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode))
+    throw ConfigError(fmt::format("{}: is a directory, not a configuration file", path));
   std::ifstream in(path, std::ios::binary);
   if (!in) throw ConfigError(fmt::format("{}: cannot open: {}", path, std::strerror(errno)));
   std::ostringstream ss;

@@ -9,6 +9,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "daemon/clear_keys.hpp"
@@ -75,6 +76,8 @@ struct DbcConfig {
   std::string file = "pumptherm.dbc";              ///< path or shipped name
   std::string mapping = "mapping_pumptherm.toml";  ///< path or shipped name of the mapping
   std::string base_dir = ".";                      ///< directory of the config file
+  int file_line = 0;     ///< line of `dbc.file` in the config file (0: not given there)
+  int mapping_line = 0;  ///< line of `dbc.mapping` (0: not given there)
 };
 
 struct LcmConfig {
@@ -91,6 +94,7 @@ struct LcmConfig {
 struct LevelsConfig {
   estimators::TemperatureLimits limits;
   int line = 0;
+  std::string key;  ///< e.g. "pump[0].alarms.levels.winding", for messages
 };
 
 struct AlarmsConfig {
@@ -150,6 +154,13 @@ struct PumpConfig {
   bool disturbance_states_explicit = false;  ///< the config file set `disturbance_states`
   AlarmsConfig alarms;                       ///< the gateway's [alarms] with this pump's overrides
   int line = 0;                              ///< line of the [[pump]] table
+  /// Line of each key given in the [[pump]] table, for messages about its value.
+  std::map<std::string, int, std::less<>> key_lines;
+  /// The line of `key` in this pump's table, or the table's line when the key was not given.
+  int LineOf(std::string_view key) const {
+    const auto it = key_lines.find(key);
+    return it == key_lines.end() ? line : it->second;
+  }
 };
 
 struct DaemonConfig {
@@ -160,6 +171,7 @@ struct DaemonConfig {
   AlarmsConfig alarms;         ///< defaults for every pump
   ClearAuthConfig clear_auth;  ///< from [alarms]: clear_operators, clear_window_s, shared key
   std::map<std::string, double> output_periods_s;  ///< DBC message name -> period override
+  std::map<std::string, int> output_period_lines;  ///< DBC message name -> its key's line
   std::vector<InterfaceConfig> interfaces;
   std::vector<PumpConfig> pumps;
 };

@@ -322,6 +322,14 @@ class Gateway {
   void BuildOutputPlans(PumpIo& io, const estimators::ThermalModel& model) const;
   /// routes_ and standard_routes_ for pump `p`'s input frames.
   void AddRoutes(const PumpIo& io, std::size_t p, const std::string& key);
+  /// Throws ConfigError at the key's line, listing the model's nodes, if measured_node,
+  /// magnet_node, rotor_node or a node with alarm levels is not a node of `model`.
+  void CheckPumpNodes(const PumpConfig& pc, const std::string& key,
+                      const estimators::ThermalModel& model) const;
+  /// Throws ConfigError (at dbc.file) if a mapped output that can be unknown has no "not
+  /// available" raw value in the DBC, or an output message has no cycle time and no
+  /// output_periods_s override: what would otherwise go out wrong without a word.
+  void CheckOutputSignals(const std::string& dbc_path, const std::string& mapping_path) const;
   /// Throws ConfigError naming the pump and node if a node of `model` has no CAN output, or
   /// cannot be named by alarm_node.
   void CheckNodeOutputs(const PumpConfig& pc, const std::string& key,

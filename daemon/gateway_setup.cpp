@@ -1,11 +1,14 @@
 // Building the gateway from its configuration: the DBC and mapping, the input messages, and per
 // pump its motor, thermal model, output plans and input routes.
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
+#include <set>
+#include <utility>
 
 #include "daemon/gateway.hpp"
 #include "daemon/gateway_detail.hpp"
@@ -34,10 +37,21 @@ constexpr std::size_t kMaxReportedDbcProblems = 20;
 
 namespace {
 
-/// A configuration error at `line` of the configuration, naming its key.
+/// A configuration error at `line` of the configuration, naming its key; line 0: a key not
+/// given in the file, whose default is at fault.
 ConfigError KeyError(const DaemonConfig& config, int line, const std::string& key,
                      const std::string& what) {
+  if (line <= 0)
+    return ConfigError(
+        fmt::format("{}: key '{}' (not set: its default): {}", config.source, key, what));
   return ConfigError(fmt::format("{}:{}: key '{}': {}", config.source, line, key, what));
+}
+
+/// "the model's nodes: frame, stator, winding, rotor".
+std::string NodeList(const estimators::ThermalModel& model) {
+  std::string list;
+  for (const auto& n : model.StateNames()) list += (list.empty() ? "" : ", ") + n;
+  return list;
 }
 
 }  // namespace
@@ -61,7 +75,7 @@ void Gateway::LoadFrameLayout() {
     dbc_path = ResolveResource(ResourceKind::kDbc, config_.dbc.file, config_.dbc.base_dir);
     dbc_ = protocol::ParseDbc(ReadTextFile(dbc_path), dbc_path);
   } catch (const std::exception& e) {
-    throw KeyError(config_, 0, "dbc.file", e.what());
+    throw KeyError(config_, config_.dbc.file_line, "dbc.file", e.what());
   }
   // Statements the reader skipped and other oddities: the rest of the DBC is in use.
   for (std::size_t i = 0; i < dbc_.problems.size() && i < kMaxReportedDbcProblems; ++i) {
@@ -72,14 +86,16 @@ void Gateway::LoadFrameLayout() {
     Log(LogLevel::kWarning, "{}: {} more DBC warnings (pumptherm dbc check lists them)", dbc_path,
         dbc_.problems.size() - kMaxReportedDbcProblems);
   }
+  std::string mapping_path;
   try {
-    const std::string path =
-        ResolveResource(ResourceKind::kDbc, config_.dbc.mapping, config_.dbc.base_dir);
-    mapping_ = protocol::ParseMapping(ReadTextFile(path), path, dbc_, MappingOutputs());
+    mapping_path = ResolveResource(ResourceKind::kDbc, config_.dbc.mapping, config_.dbc.base_dir);
+    mapping_ =
+        protocol::ParseMapping(ReadTextFile(mapping_path), mapping_path, dbc_, MappingOutputs());
   } catch (const std::exception& e) {
-    throw KeyError(config_, 0, "dbc.mapping", e.what());
+    throw KeyError(config_, config_.dbc.mapping_line, "dbc.mapping", e.what());
   }
   for (const std::string& d : mapping_.deprecations) Log(LogLevel::kWarning, "{}", d);
+  CheckOutputSignals(dbc_path, mapping_path);
   codec_ = std::make_unique<protocol::DbcCodec>(dbc_);
   std::size_t max_signals = 1;
   for (const auto& m : dbc_.messages) max_signals = std::max(max_signals, m.signals.size());
@@ -117,7 +133,7 @@ void Gateway::AddPump(std::size_t p, ModelCache& models) {
   const PumpConfig& pc = config_.pumps[p];
   const std::string key = fmt::format("pump[{}]", p);
   if (pc.node_id >= mapping_.node_id_limit) {
-    throw KeyError(config_, pc.line, key + ".node_id",
+    throw KeyError(config_, pc.LineOf("node_id"), key + ".node_id",
                    fmt::format("{} is not below the mapping's node_id_limit {}", pc.node_id,
                                mapping_.node_id_limit));
   }
@@ -125,11 +141,12 @@ void Gateway::AddPump(std::size_t p, ModelCache& models) {
   for (const auto& i : config_.interfaces)
     known_interface = known_interface || i.name == pc.interface;
   if (!known_interface || pc.interface.empty()) {
-    throw KeyError(config_, pc.line, key + ".interface",
+    throw KeyError(config_, pc.LineOf("interface"), key + ".interface",
                    fmt::format("'{}' is not a configured [[can]] interface", pc.interface));
   }
   const estimators::MotorDescription motor = LoadPumpMotor(pc, key);
   const std::shared_ptr<const estimators::ThermalModel> model = LoadPumpModel(pc, key, models);
+  CheckPumpNodes(pc, key, *model);
   try {
     pumps_.push_back(std::make_unique<Pump>(pc, motor, model, config_.gateway.thermal_period_s));
   } catch (const std::exception& e) {
@@ -168,7 +185,7 @@ estimators::MotorDescription Gateway::LoadPumpMotor(const PumpConfig& pc,
     const std::string path = ResolveResource(ResourceKind::kMotor, pc.motor, config_.dbc.base_dir);
     return estimators::ParseMotorDescription(ReadTextFile(path), path);
   } catch (const std::exception& e) {
-    throw KeyError(config_, pc.line, key + ".motor", e.what());
+    throw KeyError(config_, pc.LineOf("motor"), key + ".motor", e.what());
   }
 }
 
@@ -190,7 +207,7 @@ std::shared_ptr<const estimators::ThermalModel> Gateway::LoadPumpModel(const Pum
     }
     return it->second;
   } catch (const std::exception& e) {
-    throw KeyError(config_, pc.line, key + ".thermal_model", e.what());
+    throw KeyError(config_, pc.LineOf("thermal_model"), key + ".thermal_model", e.what());
   }
 }
 
@@ -258,6 +275,106 @@ void Gateway::AddRoutes(const PumpIo& io, std::size_t p, const std::string& key)
       }
       standard_routes_[io.iface * kStandardIds + id] = route;
     }
+  }
+}
+
+void Gateway::CheckPumpNodes(const PumpConfig& pc, const std::string& key,
+                             const estimators::ThermalModel& model) const {
+  const std::pair<const char*, const std::string*> nodes[] = {{"measured_node", &pc.measured_node},
+                                                              {"magnet_node", &pc.magnet_node},
+                                                              {"rotor_node", &pc.rotor_node}};
+  for (const auto& [name, node] : nodes) {
+    if (node->empty() || model.StateIndex(*node) >= 0) continue;
+    throw KeyError(config_, pc.LineOf(name), key + "." + name,
+                   fmt::format("'{}' is not a node with heat capacity of model {} (its nodes: {})",
+                               *node, model.Name(), NodeList(model)));
+  }
+  for (const auto& [node, levels] : pc.alarms.levels) {
+    if (node == "sensor" || node == "winding_resistance" || model.StateIndex(node) >= 0) continue;
+    const std::string what = fmt::format(
+        "pump '{}' (model {}) has no node '{}' (its nodes: {}; also 'sensor' and "
+        "'winding_resistance')",
+        pc.name, model.Name(), node, NodeList(model));
+    // Levels that are not in the file (a tool's what-if levels) have no line to name.
+    if (levels.line <= 0) throw ConfigError(fmt::format("levels for '{}': {}", node, what));
+    throw KeyError(config_, levels.line, levels.key.empty() ? "alarms.levels." + node : levels.key,
+                   what);
+  }
+}
+
+void Gateway::CheckOutputSignals(const std::string& dbc_path,
+                                 const std::string& mapping_path) const {
+  // What the configuration would send wrong: a value the gateway does not know goes out as
+  // the signal's "not available" raw value, and without one as raw 0 (a number: -50 degC on
+  // the shipped temperature signals); a message without a cycle time goes out every second.
+  struct Use {
+    std::string key;  // the mapping's key
+    const protocol::SignalRef* ref;
+  };
+  std::vector<Use> uses;
+  // Outputs that always have a value (a status, a count, the node index of the frame) need no
+  // reserved raw value: the others are NaN while unknown (before the first estimate, a stale
+  // reading).
+  for (const auto& [key, ref] : mapping_.outputs) {
+    const PublishedField* field = FindPublishedField(key);
+    if (field == nullptr || field->always_known) continue;
+    uses.push_back({"outputs." + key, &ref});
+  }
+  for (const auto& [node, ref] : mapping_.node_temperatures)
+    uses.push_back({"outputs.nodes." + node, &ref});
+  std::vector<std::string> missing;
+  for (const auto& u : uses) {
+    const auto& msg = dbc_.messages[static_cast<std::size_t>(u.ref->message_index)];
+    if (!msg.signals[static_cast<std::size_t>(u.ref->signal_index)].not_available_raw)
+      missing.push_back(fmt::format("{}.{} ({})", msg.name, u.ref->signal, u.key));
+  }
+  if (!missing.empty()) {
+    constexpr std::size_t kListed = 6;
+    const std::size_t count = missing.size();
+    if (count > kListed) {
+      missing.resize(kListed);
+      missing.push_back(fmt::format("and {} more", count - kListed));
+    }
+    throw KeyError(
+        config_, config_.dbc.file_line, "dbc.file",
+        fmt::format("{}: {} output signal{} without a \"not available\" raw value (attribute "
+                    "GenSigSNA), {}: while unknown (before the first estimate, a stale reading) "
+                    "{} would go out as raw 0, a number; declare BA_DEF_ SG_ \"GenSigSNA\" and "
+                    "its BA_ for each (docs/protocol.md, \"Not available\"; the mapping is {})",
+                    dbc_path, count, count == 1 ? "" : "s", fmt::join(missing, ", "),
+                    count == 1 ? "it" : "they", mapping_path));
+  }
+  std::set<int> messages;
+  for (const auto& u : uses) messages.insert(u.ref->message_index);
+  for (const auto& [key, ref] : mapping_.outputs) messages.insert(ref.message_index);
+  // An override of a message the gateway does not send would change nothing, silently.
+  for (const auto& [name, period_s] : config_.output_periods_s) {
+    const protocol::DbcMessage* msg = dbc_.FindMessage(name);
+    if (msg != nullptr && messages.contains(static_cast<int>(msg - dbc_.messages.data()))) continue;
+    std::vector<std::string> names;
+    for (int m : messages) names.push_back(dbc_.messages[static_cast<std::size_t>(m)].name);
+    const auto line = config_.output_period_lines.find(name);
+    throw KeyError(config_, line == config_.output_period_lines.end() ? 0 : line->second,
+                   "output_periods_s." + name,
+                   fmt::format("{} is not a message the gateway sends (its output messages: {})",
+                               name, fmt::join(names, ", ")));
+  }
+  std::vector<std::string> no_cycle;
+  for (int m : messages) {
+    const auto& msg = dbc_.messages[static_cast<std::size_t>(m)];
+    if (config_.output_periods_s.contains(msg.name)) continue;
+    if (!msg.cycle_time_ms || *msg.cycle_time_ms <= 0) no_cycle.push_back(msg.name);
+  }
+  if (!no_cycle.empty()) {
+    throw KeyError(
+        config_, config_.dbc.file_line, "dbc.file",
+        fmt::format("{}: output message{} {} ha{} no cycle time (attribute GenMsgCycleTime, "
+                    "neither its BA_ nor a default above 0): the gateway would send {} every "
+                    "1 s; add the attribute, or set output_periods_s.{} = SECONDS in the "
+                    "configuration",
+                    dbc_path, no_cycle.size() == 1 ? "" : "s", fmt::join(no_cycle, ", "),
+                    no_cycle.size() == 1 ? "s" : "ve", no_cycle.size() == 1 ? "it" : "them",
+                    no_cycle.front()));
   }
 }
 

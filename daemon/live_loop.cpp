@@ -673,11 +673,8 @@ LiveLoop::LiveLoop(const DaemonConfig& config, std::string config_path, LiveOpti
   m.config = config;
   m.config_path = std::move(config_path);
   m.options = options;
-  if (config.interfaces.empty()) {
-    throw std::system_error(
-        EINVAL, std::generic_category(),
-        config.source + ": no [[can]] interface configured (use -r LOG for a log)");
-  }
+  if (config.interfaces.empty())
+    throw ConfigError(config.source + ": no [[can]] interface configured (use -r LOG for a log)");
   m.gateway = std::make_unique<Gateway>(m.config);
   m.gateway->LoadClearKeys(CredentialsDirectory());
   m.epoll = UniqueFd(epoll_create1(EPOLL_CLOEXEC));

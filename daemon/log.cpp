@@ -78,7 +78,21 @@ std::string EscapeControl(std::string_view text) {
   return out;
 }
 
+namespace {
+LogCapture* active_capture = nullptr;
+}  // namespace
+
+LogCapture::LogCapture(Sink sink) : sink_(std::move(sink)), outer_(active_capture) {
+  active_capture = this;
+}
+
+LogCapture::~LogCapture() { active_capture = outer_; }
+
 void LogLine(LogLevel level, std::string_view raw, std::span<const LogField> fields) {
+  if (active_capture != nullptr) {
+    active_capture->sink_(level, raw);
+    return;
+  }
   static const bool journal = std::getenv("JOURNAL_STREAM") != nullptr;
   // Only what needs it is copied: most lines have no control character and no backslash.
   std::string escaped;

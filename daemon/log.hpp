@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include <cstdint>
+#include <functional>
 #include <initializer_list>
 #include <span>
 #include <string>
@@ -45,6 +46,23 @@ inline constexpr std::int64_t kNoLogTime = INT64_MIN;
 /// offline runs call it with the pipeline's time before each frame, so a line says when in the
 /// recording it happened. Until the first call, lines carry the wall clock.
 void SetLogTime(std::int64_t unix_us);
+
+/// While it lives, every line LogLine would write goes to `sink` instead (unescaped, without
+/// fields): for a command that runs the pipeline to report on it (`pumpthermd --check-config
+/// --against` runs it once per candidate sensor lag). Captures nest; one thread only.
+class LogCapture {
+ public:
+  using Sink = std::function<void(LogLevel, std::string_view)>;
+  explicit LogCapture(Sink sink);
+  ~LogCapture();
+  LogCapture(const LogCapture&) = delete;
+  LogCapture& operator=(const LogCapture&) = delete;
+
+ private:
+  friend void LogLine(LogLevel, std::string_view, std::span<const LogField>);
+  Sink sink_;
+  LogCapture* outer_;
+};
 
 template <typename... Args>
 void Log(LogLevel level, fmt::format_string<Args...> format, Args&&... args) {

@@ -51,7 +51,8 @@ struct File {
 /// Frames to a candump log, LCM messages to an LCM log.
 class LogSink : public OutputSink {
  public:
-  LogSink(const OfflineOptions& o, const Gateway& g) : frames_(o.output_log, "w"), gateway_(g) {
+  LogSink(const OfflineOptions& o, const Gateway& g)
+      : frames_(o.output_log, "w"), gateway_(g), publish_(o.lcm_publish) {
     if (!o.lcm_log.empty()) {
       lcm_ = std::make_unique<lcm::LogFile>(o.lcm_log, "w");
       if (!lcm_->good())
@@ -70,14 +71,17 @@ class LogSink : public OutputSink {
   bool PublishLcm(const std::string& channel, std::int64_t time_us,
                   const std::vector<std::uint8_t>& bytes) override {
     ++lcm_out;
-    if (!lcm_) return true;
+    bool sent = true;
+    if (publish_ != nullptr)
+      sent = publish_->publish(channel, bytes.data(), static_cast<unsigned>(bytes.size())) == 0;
+    if (!lcm_) return sent;
     lcm::LogEvent ev;
     ev.eventnum = 0;
     ev.timestamp = time_us;
     ev.channel = channel;
     ev.datalen = static_cast<std::int32_t>(bytes.size());
     ev.data = const_cast<std::uint8_t*>(bytes.data());
-    return lcm_->writeEvent(&ev) == 0;
+    return lcm_->writeEvent(&ev) == 0 && sent;
   }
   void Close() {
     frames_.Close();
@@ -91,6 +95,7 @@ class LogSink : public OutputSink {
   const Gateway& gateway_;
   std::string line_;  ///< the line being written, its capacity kept
   std::unique_ptr<lcm::LogFile> lcm_;
+  lcm::LCM* publish_;
 };
 
 /// One CSV per pump, a row per thermal step.
@@ -172,8 +177,16 @@ class LineReader {
     end_ -= pos_;
     pos_ = 0;
     if (end_ == buffer_.size()) buffer_.resize(2 * buffer_.size());
-    const std::streamsize n = in_.rdbuf()->sgetn(
-        buffer_.data() + end_, static_cast<std::streamsize>(buffer_.size() - end_));
+    std::streamsize n = 0;
+    try {
+      n = in_.rdbuf()->sgetn(buffer_.data() + end_,
+                             static_cast<std::streamsize>(buffer_.size() - end_));
+    } catch (const std::exception&) {
+      // libstdc++ throws from the file buffer ("basic_filebuf::xsgetn error reading the file:
+      // Is a directory"); errno still says why.
+      error_ = std::strerror(errno);
+      n = 0;
+    }
     if (n <= 0) {
       eof_ = true;
     } else {
@@ -184,6 +197,11 @@ class LineReader {
   std::vector<char> buffer_;
   std::size_t pos_ = 0, end_ = 0;
   bool eof_ = false;
+  std::string error_;
+
+ public:
+  /// Why reading stopped before the end ("" at the end of the input).
+  const std::string& error() const { return error_; }
 };
 
 /// Interface indices by name for the offline loop: every line names an interface, nearly always
@@ -243,13 +261,35 @@ std::int64_t OfflineClock::Now(std::int64_t stamp_us) {
   return last_now_us_;
 }
 
+namespace {
+
+/// The lines of a recording held until its first stamps have said what they count.
+struct HeldLine {
+  std::uint64_t number;
+  std::string text;
+};
+
+/// Reads the first kCandumpStampsToClassify stamps (or the whole log, if shorter) into `held`
+/// and classifies them.
+protocol::CandumpTimeBase ProbeTimeBase(LineReader& reader, std::vector<HeldLine>& held) {
+  std::vector<std::int64_t> stamps;
+  std::string_view line;
+  while (stamps.size() < protocol::kCandumpStampsToClassify && reader.Next(line)) {
+    held.push_back({held.size() + 1, std::string(line)});
+    const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
+    if (p.ok && p.record.has_time) stamps.push_back(p.record.time_us);
+  }
+  return protocol::ClassifyCandumpStamps(stamps.data(), stamps.size());
+}
+
+}  // namespace
+
 OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& gateway,
                          const OfflineOptions& options) {
   OfflineResult r;
   LogSink sink(options, gateway);
   CsvSink csv(options, gateway);
   LineReader reader(in);
-  std::string_view line;
   InterfaceCache interfaces(gateway);
   std::int64_t last_time_us = -1;
   std::int64_t next_table_us = -1;
@@ -264,15 +304,27 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
     std::fputs(text.c_str(), stderr);
     std::fflush(stderr);
   };
-  while (reader.Next(line)) {
+  std::vector<std::size_t> heartbeat_interfaces;
+  for (const auto& i : gateway.config().interfaces)
+    heartbeat_interfaces.push_back(gateway.Interface(i.name));
+  std::vector<HeldLine> held;
+  r.time_base = ProbeTimeBase(reader, held);
+  if (r.time_base != protocol::CandumpTimeBase::kAbsolute) {
+    Log(LogLevel::kNotice,
+        "{}: the timestamps are {}, not Unix time: read as seconds since the recording's start "
+        "(the CSV's time_s, LCM utime and the output log count from 0)",
+        source, protocol::CandumpTimeBaseName(r.time_base));
+  }
+  protocol::CandumpTimeline timeline(r.time_base);
+  auto process = [&](std::string_view line) {
     ++r.lines;
     const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
-    if (p.skip) continue;
+    if (p.skip) return;
     if (!p.ok) {
       if (++r.bad_lines <= options.max_reported) {
         Log(LogLevel::kWarning, "{}:{}:{}: {}; line skipped", source, r.lines, p.column, p.error);
       }
-      continue;
+      return;
     }
     if (!p.record.has_time) {
       if (++r.untimed_lines <= options.max_reported) {
@@ -281,10 +333,10 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
             "receive times; line skipped (record with candump -l, -L or -t a)",
             source, r.lines);
       }
-      continue;
+      return;
     }
     const std::size_t iface = interfaces.Index(p.record.interface);
-    const std::int64_t now = clock.Now(p.record.time_us);
+    const std::int64_t now = clock.Now(timeline.TimeUs(p.record.time_us));
     SetLogTime(now);  // offline the pipeline's time is the recording's (Unix time)
     if (clock.steps_back() > r.time_steps_back) {
       r.time_steps_back = clock.steps_back();
@@ -297,12 +349,21 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
       }
     }
     if (log_start_us < 0) log_start_us = now;
-    gateway.OnFrame(iface, protocol::TimedFrame{now, p.record.frame});
+    const protocol::TimedFrame frame{now, p.record.frame};
+    if (options.on_frame) options.on_frame(iface, frame, r.lines);
+    gateway.OnFrame(iface, frame);
     // Time-driven work only when some is due: a frame that brings nothing due costs nothing
     // here. The CSV rows follow the thermal steps, which happen only in Advance.
     if (now >= gateway.NextDueUs()) {
       gateway.Advance(now, sink);
       csv.Write(gateway);
+      if (options.after_advance) options.after_advance(gateway, now);
+    }
+    // The heartbeat, as live on every configured interface.
+    if (now >= gateway.counter().NextHeartbeatUs()) {
+      while (const auto beat = gateway.counter().HeartbeatDue(now)) {
+        for (const std::size_t i : heartbeat_interfaces) sink.SendFrame(i, now, *beat);
+      }
     }
     last_time_us = now;
     ++r.frames;
@@ -318,7 +379,16 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
         next_table_us = now + static_cast<std::int64_t>(options.table_period_s * 1e6);
       }
     }
-  }
+  };
+  for (const HeldLine& h : held) process(h.text);
+  held.clear();
+  std::string_view line;
+  while (reader.Next(line)) process(line);
+  if (!reader.error().empty())
+    throw std::runtime_error(
+        fmt::format("{}: cannot read the log after line {}: {}", source, r.lines, reader.error()));
+  r.first_us = log_start_us;
+  r.last_us = last_time_us;
   if (r.time_steps_back > options.max_reported) {
     Log(LogLevel::kWarning, "{}: time went back {} times in all", source, r.time_steps_back);
   }
@@ -336,6 +406,27 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
   r.frames_out = sink.frames_out;
   r.lcm_out = sink.lcm_out;
   return r;
+}
+
+std::ifstream OpenLog(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw std::runtime_error(fmt::format("{}: is a directory, not a candump log", path));
+  std::ifstream file(path, std::ios::binary);
+  if (!file)
+    throw std::runtime_error(
+        fmt::format("{}: cannot read the log: {}", path, std::strerror(errno)));
+  return file;
+}
+
+void RequireFrames(const OfflineResult& r, const std::string& source) {
+  if (r.frames > 0) return;
+  if (r.lines == 0) throw std::runtime_error(fmt::format("{}: empty: no frame to run on", source));
+  const std::uint64_t other = r.lines - r.bad_lines - r.untimed_lines;
+  throw std::runtime_error(fmt::format(
+      "{}: no frame to run on in {} line{}: {} not candump lines, {} without a timestamp, {} "
+      "blank or comments (docs/protocol.md, \"candump formats\")",
+      source, r.lines, r.lines == 1 ? "" : "s", r.bad_lines, r.untimed_lines, other));
 }
 
 }  // namespace pumptherm::daemon

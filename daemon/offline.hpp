@@ -6,11 +6,18 @@
 
 #include <cstdint>
 #include <cstdio>
+#include <fstream>
+#include <functional>
 #include <istream>
 #include <memory>
 #include <string>
 
 #include "daemon/gateway.hpp"
+#include "protocol/candump_log.hpp"
+
+namespace lcm {
+class LCM;
+}
 
 namespace pumptherm::daemon {
 
@@ -25,6 +32,15 @@ struct OfflineOptions {
   double table_period_s = 60.0;     ///< of log time between tables
   double pace = 0.0;                ///< log seconds per wall second (0 = as fast as possible)
   std::uint64_t max_reported = 20;  ///< malformed lines reported on stderr (all are counted)
+  /// Also publish every LCM message here as it is made (`pumptherm replay --pace`: watch and the
+  /// spy follow a recording); nullptr: only the LCM log file. Not owned.
+  lcm::LCM* lcm_publish = nullptr;
+  /// Called after each Advance that ran, with the pipeline's time (us): what a tool reads from
+  /// the pumps' snapshots as the recording plays (`pumptherm replay`, `--check-config --against`).
+  std::function<void(const Gateway&, std::int64_t)> after_advance;
+  /// Called with every frame before the gateway gets it: its interface (FrameCounter index),
+  /// the frame at the pipeline's time and the log line it came from.
+  std::function<void(std::size_t, const protocol::TimedFrame&, std::uint64_t)> on_frame;
 };
 
 struct OfflineResult {
@@ -40,6 +56,11 @@ struct OfflineResult {
   std::uint64_t time_steps_back = 0;
   std::uint64_t frames_out = 0;
   std::uint64_t lcm_out = 0;
+  /// What the recording's stamps count: relative ones (-t z, -t d) become seconds since its
+  /// start (ClassifyCandumpStamps; a notice names the file and the format found).
+  protocol::CandumpTimeBase time_base = protocol::CandumpTimeBase::kAbsolute;
+  std::int64_t first_us = -1;  ///< the pipeline's time of the first and last frame (-1: none)
+  std::int64_t last_us = -1;
 };
 
 /// The pipeline's clock in offline mode, from the log's stamps (kernel receive times, the wall
@@ -68,9 +89,21 @@ class OfflineClock {
 
 /// Feeds every frame of the candump recording in `in` (any format ParseCandumpLine reads; read
 /// in large blocks) to `gateway`, advancing it whenever its NextDueUs() is reached. `source`
-/// names the log in warnings ("FILE:LINE:COLUMN: what was expected"). Throws std::runtime_error
-/// only when an output file cannot be written.
+/// names the log in warnings ("FILE:LINE:COLUMN: what was expected"). The first
+/// kCandumpStampsToClassify stamps say what they count (ClassifyCandumpStamps); relative ones
+/// are read as time since the recording's start (its frames are held until then, so nothing
+/// runs on a wrong clock). Throws std::runtime_error naming the file when an output file cannot
+/// be written or the log cannot be read.
 OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& gateway,
                          const OfflineOptions& options = {});
+
+/// Opens the candump log at `path` for RunOffline. Throws std::runtime_error naming the file
+/// when it does not exist, is a directory, or cannot be opened.
+std::ifstream OpenLog(const std::string& path);
+
+/// Throws std::runtime_error naming `source` and what it held when a run found no frame to run
+/// on: an empty file, only blank or comment lines, or lines none of which is a timed frame
+/// (how many were malformed, how many lacked a timestamp).
+void RequireFrames(const OfflineResult& r, const std::string& source);
 
 }  // namespace pumptherm::daemon

@@ -94,7 +94,7 @@ const std::array kFields = std::to_array<PublishedField>({
   {"flux_Wb", "Wb", "GW_IDENT", "Flux_Wb", &T::flux_Wb, "flux_Wb", {Kind::kFixed, 7},
    [](const FieldSource& s) { return Identified(s) ? E(s).resistance.flux_Wb : kNaN; }},
   {"rs_status", "", "GW_IDENT", "RsStatus", &T::ident_status, "ident_status", {Kind::kInteger, 0},
-   [](const FieldSource& s) { return Code(E(s).resistance.status); }},
+   [](const FieldSource& s) { return Code(E(s).resistance.status); }, nullptr, {}, true},
   {"frame_measured_degC", "degC", "", "", {}, "frame_measured_C", {Kind::kFixed, 2},
    [](const FieldSource& s) { return E(s).frame_measured_degC; }},
   {"ambient_degC", "degC", "", "", {}, "ambient_C", {Kind::kFixed, 2},
@@ -114,9 +114,9 @@ const std::array kFields = std::to_array<PublishedField>({
    {Kind::kFixed, 0},
    [](const FieldSource& s) { return E(s).alarm.time_to_trip_s; }},
   {"alarm_active_reasons", "", "", "", {}, "alarm_active_reasons", {Kind::kInteger, 0},
-   [](const FieldSource& s) { return Code(E(s).alarm.active_reasons); }},
+   [](const FieldSource& s) { return Code(E(s).alarm.active_reasons); }, nullptr, {}, true},
   {"sensor_fault", "", "", "", {}, "sensor_fault", {Kind::kInteger, 0},
-   [](const FieldSource& s) { return Code(E(s).sensor_fault); }},
+   [](const FieldSource& s) { return Code(E(s).sensor_fault); }, nullptr, {}, true},
   {"winding_resistance_sd_K", "K", "GW_IDENT_SD", "WindingResSd_K", &T::resistance_winding_sd_K,
    "winding_resistance_sd_K", {Kind::kFixed, 4},
    // Only with the temperature it belongs to.
@@ -143,26 +143,26 @@ const std::array kFields = std::to_array<PublishedField>({
    [](const FieldSource& s) {
      const auto st = E(s).resistance.status;
      return Code(st == ResistanceStatus::kNotIdentifiable ? ResistanceStatus::kTracking : st);
-   }},
+   }, nullptr, {}, true},
   {"mismatch_since_us", "us", "", "", &A::mismatch_since_utime, "", {},
    // Since the Unix epoch (the pipeline's clock is monotonic live); 0: none.
    [](const FieldSource& s) {
      const double onset_s = E(s).mismatch.onset_s;
      return std::isfinite(onset_s) ? std::floor(onset_s * 1e6) + s.wall_offset_us : 0.0;
-   }},
-  {"filter_status", "", "", "", &T::filter_status, "", {}, FilterStatus},
+   }, nullptr, {}, true},
+  {"filter_status", "", "", "", &T::filter_status, "", {}, FilterStatus, nullptr, {}, true},
   {"uptime_s", "s", "GW_HEALTH", "Uptime_s", {}, "", {},
-   [](const FieldSource& s) { return s.uptime_s; }},
+   [](const FieldSource& s) { return s.uptime_s; }, nullptr, {}, true},
   {"frame_rate_Hz", "Hz", "GW_HEALTH", "FrameRate_Hz", {}, "", {},
-   [](const FieldSource& s) { return s.frame_rate_Hz; }},
+   [](const FieldSource& s) { return s.frame_rate_Hz; }, nullptr, {}, true},
   {"drops", "", "GW_HEALTH", "Drops", {}, "", {},
-   [](const FieldSource& s) { return s.lost_frames; }},
+   [](const FieldSource& s) { return s.lost_frames; }, nullptr, {}, true},
   {"bus_state", "", "GW_HEALTH", "BusState", {}, "", {},
-   [](const FieldSource& s) { return s.bus_state; }},
+   [](const FieldSource& s) { return s.bus_state; }, nullptr, {}, true},
   {protocol::kNodeIndexKey, "", "GW_NODE_TEMP", "NodeIndex", {}, "", {},
-   [](const FieldSource& s) { return s.node >= 0 ? Code(s.node) : kNaN; }},
+   [](const FieldSource& s) { return s.node >= 0 ? Code(s.node) : kNaN; }, nullptr, {}, true},
   {protocol::kNodeCountKey, "", "GW_NODE_TEMP", "NodeCount", {}, "", {},
-   [](const FieldSource& s) { return Code(E(s).node_degC.size()); }},
+   [](const FieldSource& s) { return Code(E(s).node_degC.size()); }, nullptr, {}, true},
   {protocol::kNodeTempKey, "degC", "GW_NODE_TEMP", "NodeTemp_degC", {}, "", {},
    [](const FieldSource& s) { return NodeValue(s, E(s).node_degC); }},
   {protocol::kNodeSdKey, "K", "GW_NODE_TEMP", "NodeSd_K", {}, "", {},

@@ -57,7 +57,8 @@ struct PublishedField {
   using Word = const char* (*)(const FieldSource&);
   PublishedField(std::string_view name_, std::string_view unit_, std::string_view dbc_message_,
                  std::string_view dbc_signal_, LcmField lcm_, std::string_view csv_column_,
-                 CsvFormat csv_, Value value_, Word word_ = nullptr, std::string_view old_key_ = {})
+                 CsvFormat csv_, Value value_, Word word_ = nullptr, std::string_view old_key_ = {},
+                 bool always_known_ = false)
       : name(name_),
         unit(unit_),
         dbc_message(dbc_message_),
@@ -67,7 +68,8 @@ struct PublishedField {
         csv(csv_),
         value(value_),
         word(word_),
-        old_key(old_key_) {}
+        old_key(old_key_),
+        always_known(always_known_) {}
 
   std::string_view name;  ///< the mapping's output key
   std::string_view unit;  ///< "degC", "K", "ohm", "Wb", "s", "Hz", "" for a code or a count
@@ -83,6 +85,9 @@ struct PublishedField {
   Word word = nullptr;
   /// A key this output had before (still read, reported as deprecated).
   std::string_view old_key;
+  /// Its value is never "not available" (a status, a count, a node index): its signal needs no
+  /// reserved raw value (the configuration check asks one of every other output).
+  bool always_known = false;
 };
 
 /// Every published field, in the CSV's column order.

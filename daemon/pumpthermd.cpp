@@ -8,6 +8,7 @@
 #include <iostream>
 #include <system_error>
 
+#include "daemon/commission.hpp"
 #include "daemon/config.hpp"
 #include "daemon/gateway.hpp"
 #include "daemon/live_loop.hpp"
@@ -18,6 +19,56 @@ namespace {
 
 constexpr int kExitRunFailed = 1;
 constexpr int kExitBadInput = 2;
+/// A configuration the service refuses (EX_CONFIG of sysexits.h; systemd shows it as
+/// "status=78/CONFIG"): the unit's RestartPreventExitStatus= stops restarting, since a restart
+/// reads the same file.
+constexpr int kExitConfigRefused = 78;
+
+using pumptherm::daemon::ConfigError;
+using pumptherm::daemon::DaemonConfig;
+
+/// What a configuration needs to run as the service, beyond loading: an interface to listen on
+/// (else the service refuses to start) and a pump (else it would estimate nothing).
+void RequireServiceConfig(const DaemonConfig& c) {
+  if (c.interfaces.empty())
+    throw ConfigError(c.source +
+                      ": no [[can]] interface: the service would not start (add [[can]] with "
+                      "interface = \"can0\"; pumpthermd -r LOG runs a recording without one)");
+  if (c.pumps.empty())
+    throw ConfigError(c.source +
+                      ": no [[pump]]: the gateway would estimate nothing, only count frames and "
+                      "send its heartbeat (add [[pump]] with name and node_id)");
+}
+
+/// --check-config FILE [--against LOG]: exit 0 valid (and, against a recording, nothing to
+/// change), 2 refused or something to change, 1 the recording cannot be read.
+int CheckConfig(const std::string& path, const std::string& against, bool lag_fit) {
+  using namespace pumptherm::daemon;
+  try {
+    const DaemonConfig c = LoadConfig(path);
+    if (const std::string w = ConfigPermissionWarning(path); !w.empty())
+      Log(LogLevel::kWarning, "{}", w);
+    Gateway g(c);  // also checks the DBC, mapping, motors and models it names
+    g.LoadClearKeys(CredentialsDirectory());  // and the key files' permissions
+    RequireServiceConfig(c);
+    if (!against.empty()) {
+      CommissionOptions options;
+      if (!lag_fit) options.lag_grid_s.clear();
+      const CommissionResult r = CommissionAgainst(c, against, options);
+      fmt::print("{}", r.report);
+      return r.changes.empty() ? 0 : kExitBadInput;
+    }
+    fmt::print("{}: OK ({} interface{}, {} pump{})\n", path, c.interfaces.size(),
+               c.interfaces.size() == 1 ? "" : "s", c.pumps.size(), c.pumps.size() == 1 ? "" : "s");
+    return 0;
+  } catch (const ConfigError& e) {
+    Log(LogLevel::kError, "{}", e.what());
+    return kExitBadInput;
+  } catch (const std::exception& e) {
+    Log(LogLevel::kError, "{}", e.what());
+    return kExitRunFailed;
+  }
+}
 
 }  // namespace
 
@@ -36,6 +87,15 @@ int main(int argc, char** argv) {
                  "as possible, with the log's timestamps as the clock");
   app.add_option("--check-config", check_path,
                  "validate a configuration file (and the files it names) and exit");
+  std::string against_path;
+  app.add_option("--against", against_path,
+                 "with --check-config: commission the configuration against a candump recording "
+                 "of its bus (node IDs, rates, plausible values, clocks, the sensor's lag) and "
+                 "report what to change");
+  bool no_lag_fit = false;
+  app.add_flag("--no-lag-fit", no_lag_fit,
+               "with --against: skip the frame sensor's lag fit (it runs the pipeline once per "
+               "candidate lag, about 15 times the cost of one run)");
   app.add_option("--output-log", offline.output_log,
                  "with -r: write the frames the gateway sends as a candump log");
   app.add_option("--lcm-log", offline.lcm_log,
@@ -62,7 +122,9 @@ int main(int argc, char** argv) {
       "  pumpthermd -r recording.log                            offline, per-ID frame counts\n"
       "  candump -L vcan0 | pumpthermd -r -                     offline from a pipe\n"
       "  pumpthermd --check-config pumpthermd.toml              validate and exit\n"
-      "Exit codes: 0 success, 1 the run failed (resource, I/O), 2 bad configuration or usage.");
+      "  pumpthermd --check-config c.toml --against bus.log     commission against a recording\n"
+      "Exit codes: 0 success, 1 the run failed (resource, I/O), 2 bad configuration or usage\n"
+      "(or, --against, something to change), 78 a configuration the service refuses.");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -70,22 +132,11 @@ int main(int argc, char** argv) {
     return code == 0 ? 0 : kExitBadInput;
   }
 
-  if (!check_path.empty()) {
-    try {
-      const DaemonConfig c = LoadConfig(check_path);
-      if (const std::string w = ConfigPermissionWarning(check_path); !w.empty())
-        Log(LogLevel::kWarning, "{}", w);
-      Gateway g(c);  // also checks the DBC, mapping, motors and models it names
-      g.LoadClearKeys(CredentialsDirectory());  // and the key files' permissions
-      fmt::print("{}: OK ({} interface{}, {} pump{})\n", check_path, c.interfaces.size(),
-                 c.interfaces.size() == 1 ? "" : "s", c.pumps.size(),
-                 c.pumps.size() == 1 ? "" : "s");
-      return 0;
-    } catch (const ConfigError& e) {
-      Log(LogLevel::kError, "{}", e.what());
-      return kExitBadInput;
-    }
+  if (!against_path.empty() && check_path.empty()) {
+    Log(LogLevel::kError, "--against LOG goes with --check-config FILE");
+    return kExitBadInput;
   }
+  if (!check_path.empty()) return CheckConfig(check_path, against_path, !no_lag_fit);
 
   DaemonConfig config;
   try {
@@ -96,7 +147,7 @@ int main(int argc, char** argv) {
     }
   } catch (const ConfigError& e) {
     Log(LogLevel::kError, "{}", e.what());
-    return kExitBadInput;
+    return log_path.empty() ? kExitConfigRefused : kExitBadInput;
   }
 
   if (!log_path.empty()) {
@@ -113,9 +164,10 @@ int main(int argc, char** argv) {
     std::istream* in = &std::cin;
     const std::string source = log_path == "-" ? "<stdin>" : log_path;
     if (log_path != "-") {
-      file.open(log_path);
-      if (!file) {
-        Log(LogLevel::kError, "{}: cannot read the log: {}", log_path, std::strerror(errno));
+      try {
+        file = OpenLog(log_path);
+      } catch (const std::exception& e) {
+        Log(LogLevel::kError, "{}", e.what());
         return kExitRunFailed;
       }
       in = &file;
@@ -136,6 +188,12 @@ int main(int argc, char** argv) {
     }
     if (in->bad()) {
       Log(LogLevel::kError, "{}: read error: {}", source, std::strerror(errno));
+      return kExitRunFailed;
+    }
+    try {
+      RequireFrames(r, source);
+    } catch (const std::exception& e) {
+      Log(LogLevel::kError, "{}", e.what());
       return kExitRunFailed;
     }
     fmt::print("{}: {} frames, {} CAN IDs, {} malformed lines skipped\n", source, r.frames,
@@ -161,6 +219,14 @@ int main(int argc, char** argv) {
                    c.fast_frames, c.status_frames, c.samples, c.unpaired, c.lost_frames,
                    c.rejected_values, c.thermal_steps, c.filter_resets);
       }
+      // A configured pump that no frame reached: a wrong node_id or interface, or the wrong log.
+      for (const auto& p : gateway->pumps()) {
+        if (p->counters().fast_frames + p->counters().status_frames > 0) continue;
+        Log(LogLevel::kWarning,
+            "{}: pump {} (node {} on {}) heard no frame in the recording: no estimate "
+            "(pumpthermd --check-config CONFIG --against LOG names the nodes heard)",
+            source, p->config().name, p->config().node_id, p->config().interface);
+      }
     }
     return 0;
   }
@@ -170,6 +236,9 @@ int main(int argc, char** argv) {
         "nothing to do: give --config FILE for live interfaces or -r LOG for a log");
     return kExitBadInput;
   }
+  if (config.pumps.empty() && !config.interfaces.empty())
+    Log(LogLevel::kWarning, "{}: no [[pump]]: only counting frames and sending the heartbeat",
+        config.source);
   try {
     LiveOptions live;
     live.table = offline.table;
@@ -181,7 +250,7 @@ int main(int argc, char** argv) {
     return code;
   } catch (const ConfigError& e) {
     Log(LogLevel::kError, "{}", e.what());
-    return kExitBadInput;
+    return kExitConfigRefused;
   } catch (const std::exception& e) {
     Log(LogLevel::kError, "{}", e.what());
     return kExitRunFailed;

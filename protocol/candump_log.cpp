@@ -317,6 +317,35 @@ CandumpParse ParseCandumpLine(std::string_view line) noexcept {
   return p;
 }
 
+const char* CandumpTimeBaseName(CandumpTimeBase base) noexcept {
+  switch (base) {
+    case CandumpTimeBase::kAbsolute:
+      return "Unix time";
+    case CandumpTimeBase::kSinceFirst:
+      return "the time since the first frame (candump -t z)";
+    case CandumpTimeBase::kSincePrevious:
+      return "the time since the previous frame (candump -t d)";
+  }
+  return "";
+}
+
+CandumpTimeBase ClassifyCandumpStamps(const std::int64_t* stamps_us, std::size_t count) noexcept {
+  constexpr std::int64_t kUnixFrom_us = 1'000'000'000'000'000;  // 1e9 s: 2001-09-09
+  for (std::size_t i = 0; i < count; ++i) {
+    if (stamps_us[i] >= kUnixFrom_us) return CandumpTimeBase::kAbsolute;
+  }
+  if (count == 0) return CandumpTimeBase::kAbsolute;  // nothing to read otherwise
+  if (count < 3) return CandumpTimeBase::kSinceFirst;
+  // The first step is the same in both (-t d's first stamp is 0, its second the first gap).
+  std::size_t up = 0, down = 0;
+  for (std::size_t i = 2; i < count; ++i) {
+    up += stamps_us[i] > stamps_us[i - 1];
+    down += stamps_us[i] < stamps_us[i - 1];
+  }
+  return (up == 0 || 10 * down > up) ? CandumpTimeBase::kSincePrevious
+                                     : CandumpTimeBase::kSinceFirst;
+}
+
 namespace {
 
 /// Appends `v` in decimal, zero-padded to at least `width` digits.

@@ -11,9 +11,10 @@
 ///
 /// The screen format also carries "remote request", the ASCII column of -a and "ERRORFRAME"
 /// after the bytes. Not read: -t A's local-time date stamps (an error says so), the binary and
-/// byte-swapped views (-B, -S), and the explanation lines -e prints under an error frame. -t d
-/// prints the time since the previous frame, which reads as a time like -t z's: record with -t a
-/// or -l where the time matters.
+/// byte-swapped views (-B, -S), and the explanation lines -e prints under an error frame. -t z
+/// prints the time since the first frame and -t d the time since the previous one: a line alone
+/// cannot say which, so a reader classifies the first stamps of a recording
+/// (ClassifyCandumpStamps) and turns -t d's into times (CandumpTimeline).
 /// Pure parsing and formatting: the caller hands in one line of text and gets a frame or an error.
 
 #include <cstdint>
@@ -48,6 +49,44 @@ struct CandumpParse {
 /// Parses one line (without its newline) in any of the formats above. Never throws, never
 /// allocates.
 CandumpParse ParseCandumpLine(std::string_view line) noexcept;
+
+/// What a recording's stamps count.
+enum class CandumpTimeBase {
+  kAbsolute,       ///< Unix time (-l, -L, -t a, asc2log with the ASC's date)
+  kSinceFirst,     ///< seconds since the first frame (-t z; asc2log of an ASC without a date)
+  kSincePrevious,  ///< seconds since the previous frame (-t d)
+};
+
+/// "Unix time", "time since the first frame (candump -t z)", ...
+const char* CandumpTimeBaseName(CandumpTimeBase base) noexcept;
+
+/// Stamps a reader looks at before it classifies a recording's time base.
+inline constexpr std::size_t kCandumpStampsToClassify = 64;
+
+/// Classifies a recording from its first stamps (in order, microseconds as parsed). Stamps from
+/// 2001-09-09 (1e9 s) on are Unix time. Smaller ones count from the recording's start: -t z's
+/// never go back, while -t d's go up and down with the gaps between frames (or stay equal, for
+/// evenly spaced frames), so stamps that go back more than a tenth as often as they go forward,
+/// or never move after the second, are -t d's. Fewer than three stamps: since the first (the
+/// first two stamps read the same either way); none: Unix time (nothing to convert).
+CandumpTimeBase ClassifyCandumpStamps(const std::int64_t* stamps_us, std::size_t count) noexcept;
+
+/// Turns the stamps of a recording into times (microseconds): as they are, or, for -t d's, each
+/// stamp added to the time of the frame before.
+class CandumpTimeline {
+ public:
+  explicit CandumpTimeline(CandumpTimeBase base) : base_(base) {}
+  std::int64_t TimeUs(std::int64_t stamp_us) noexcept {
+    if (base_ != CandumpTimeBase::kSincePrevious) return stamp_us;
+    sum_us_ += stamp_us;
+    return sum_us_;
+  }
+  CandumpTimeBase base() const noexcept { return base_; }
+
+ private:
+  CandumpTimeBase base_;
+  std::int64_t sum_us_ = 0;
+};
 
 /// Formats a frame as a candump log line (no trailing newline), as `candump -l` writes it.
 std::string FormatCandumpLine(std::int64_t time_us, std::string_view interface,

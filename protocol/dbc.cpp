@@ -685,7 +685,12 @@ class Parser {
       const std::string text = Unescape(Expect(TokenKind::kString, "a comment string").text);
       ExpectPunct(';');
       if (DbcSignal* s = SignalByRawId(id, sig, obj.line, obj.column, "CM_")) s->comment = text;
-    } else if (obj.text == "BU_" || obj.text == "EV_") {
+    } else if (obj.text == "BU_") {
+      const std::string node(Expect(TokenKind::kIdentifier, "a node name").text);
+      const std::string text = Unescape(Expect(TokenKind::kString, "a comment string").text);
+      ExpectPunct(';');
+      dbc_.node_comments[node] = text;
+    } else if (obj.text == "EV_") {
       Expect(TokenKind::kIdentifier, "a name");
       Expect(TokenKind::kString, "a comment string");
       ExpectPunct(';');
@@ -913,6 +918,7 @@ class Parser {
       }
     }
     for (auto& m : dbc_.messages) CheckMessage(m);
+    ApplyLongNames();
     std::stable_sort(dbc_.problems.begin(), dbc_.problems.end(),
                      [](const DbcProblem& a, const DbcProblem& b) { return a.line < b.line; });
   }
@@ -967,8 +973,86 @@ class Parser {
         }
         break;
       }
+      case DbcAttributeDefinition::Object::kNode:
+        dbc_.node_attributes[a.node][a.name] = a.value;
+        break;
       default:
-        break;  // node and environment attributes are kept nowhere: the codec does not use them
+        break;  // environment variables are skipped, and their attributes with them
+    }
+  }
+
+  /// The long name in `attributes` under `key` (removed from them), or "" when none is given.
+  static std::string TakeLongName(DbcAttributes& attributes, std::string_view key) {
+    const auto it = attributes.find(key);
+    if (it == attributes.end()) return "";
+    const std::string* text = std::get_if<std::string>(&it->second);
+    std::string name = text ? *text : "";
+    attributes.erase(it);
+    return name;
+  }
+
+  /// Long names (the header's "Long names"), once every statement has been resolved by the
+  /// short names. A long name that would repeat a name already taken keeps the short one.
+  void ApplyLongNames() {
+    std::map<std::string, std::string, std::less<>> node_names;
+    for (auto& [node, attributes] : dbc_.node_attributes) {
+      const std::string long_name = TakeLongName(attributes, "SystemNodeLongSymbol");
+      if (!long_name.empty()) node_names[node] = long_name;
+    }
+    auto node_name = [&](std::string& name) {
+      if (const auto it = node_names.find(name); it != node_names.end()) name = it->second;
+    };
+    for (auto& n : dbc_.nodes) node_name(n);
+    RenameKeys(dbc_.node_attributes, node_names);
+    RenameKeys(dbc_.node_comments, node_names);
+    std::set<std::string, std::less<>> message_names;
+    for (const auto& m : dbc_.messages) message_names.insert(m.name);
+    for (auto& m : dbc_.messages) {
+      node_name(m.transmitter);
+      const std::string long_name = TakeLongName(m.attributes, "SystemMessageLongSymbol");
+      if (!long_name.empty() && long_name != m.name) {
+        if (message_names.contains(long_name)) {
+          Problem(m.line, 1,
+                  fmt::format("SystemMessageLongSymbol \"{}\" of message {} is the "
+                              "name of another message; the short name is kept",
+                              long_name, m.name));
+        } else {
+          message_names.insert(long_name);
+          m.name = long_name;
+        }
+      }
+      std::map<std::string, std::string, std::less<>> signal_names;
+      std::set<std::string, std::less<>> taken;
+      for (const auto& s : m.signals) taken.insert(s.name);
+      for (auto& s : m.signals) {
+        for (auto& r : s.receivers) node_name(r);
+        const std::string long_signal = TakeLongName(s.attributes, "SystemSignalLongSymbol");
+        if (long_signal.empty() || long_signal == s.name) continue;
+        if (taken.contains(long_signal)) {
+          Problem(s.line, s.column,
+                  fmt::format("SystemSignalLongSymbol \"{}\" of signal {} is the name of "
+                              "another signal of {}; the short name is kept",
+                              long_signal, s.name, m.name));
+          continue;
+        }
+        taken.insert(long_signal);
+        signal_names[s.name] = long_signal;
+        s.name = long_signal;
+      }
+      for (auto& s : m.signals) {
+        if (const auto it = signal_names.find(s.multiplexer_switch); it != signal_names.end())
+          s.multiplexer_switch = it->second;
+      }
+    }
+  }
+
+  template <typename Map>
+  static void RenameKeys(Map& map, const std::map<std::string, std::string, std::less<>>& names) {
+    for (const auto& [from, to] : names) {
+      auto node = map.extract(from);
+      if (node.empty()) continue;
+      node.key() = to;
+      map.insert(std::move(node));
     }
   }
 

@@ -16,6 +16,13 @@
 ///
 /// Project convention (docs/protocol.md): a signal attribute `GenSigSNA` holds the raw value
 /// that means "not available"; the codec decodes it to NaN and encodes NaN to it.
+///
+/// Long names: Vector's tools write names of at most 32 characters in the statements and the
+/// whole name as a STRING attribute (`SystemSignalLongSymbol`, `SystemMessageLongSymbol`,
+/// `SystemNodeLongSymbol`); as in cantools and canmatrix, the long name is the name (of the
+/// signal, message, node, and of transmitters and receivers), and the attribute is dropped.
+/// Statements in the file refer to the short names. `SystemEnvVarLongSymbol` names environment
+/// variables, which this reader skips.
 
 #include <cstdint>
 #include <map>
@@ -127,6 +134,9 @@ struct Dbc {
   std::map<std::string, std::map<std::int64_t, std::string>, std::less<>> value_tables;
   std::vector<DbcAttributeDefinition> attribute_definitions;
   DbcAttributes network_attributes;
+  /// Attributes (`BA_ "..." BU_ node`) and comments (`CM_ BU_`) of the nodes, by node name.
+  std::map<std::string, DbcAttributes, std::less<>> node_attributes;
+  std::map<std::string, std::string, std::less<>> node_comments;
   std::string comment;
   std::vector<DbcProblem> problems;
 

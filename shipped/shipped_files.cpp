@@ -2,11 +2,13 @@
 
 #include <fmt/format.h>
 
+#include <cctype>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string_view>
 
 namespace pumptherm::shipped {
 namespace fs = std::filesystem;
@@ -33,9 +35,19 @@ KindInfo Info(FileKind kind) {
   return {"", "", ""};
 }
 
+/// Whether `name` ends in `extension`, in any case (".DBC", ".Toml": files from other systems).
+bool EndsWithNoCase(const std::string& name, std::string_view extension) {
+  if (name.size() < extension.size()) return false;
+  const std::string_view tail = std::string_view(name).substr(name.size() - extension.size());
+  for (std::size_t i = 0; i < tail.size(); ++i) {
+    if (std::tolower(static_cast<unsigned char>(tail[i])) != extension[i]) return false;
+  }
+  return true;
+}
+
 bool IsPath(const std::string& reference) {
-  return reference.find('/') != std::string::npos || reference.ends_with(".toml") ||
-         reference.ends_with(".dbc");
+  return reference.find('/') != std::string::npos || EndsWithNoCase(reference, ".toml") ||
+         EndsWithNoCase(reference, ".dbc");
 }
 
 std::string WithExtension(const std::string& name, const char* extension) {
@@ -61,10 +73,12 @@ std::vector<std::string> SearchDirs(FileKind kind) {
 std::string Resolve(FileKind kind, const std::string& reference, const std::string& base_dir) {
   const KindInfo info = Info(kind);
   std::vector<fs::path> candidates;
-  if (IsPath(reference)) {
-    const fs::path p(reference);
-    candidates.push_back(p.is_absolute() ? p : fs::path(base_dir) / p);
-  }
+  // A file that exists is taken as a path whatever its name looks like ("issue_168.DBC", a model
+  // without an extension); a reference that only looks like a path is reported as one.
+  const fs::path as_path =
+      fs::path(reference).is_absolute() ? fs::path(reference) : fs::path(base_dir) / reference;
+  std::error_code exists_ec;
+  if (IsPath(reference) || fs::is_regular_file(as_path, exists_ec)) candidates.push_back(as_path);
   if (reference.find('/') == std::string::npos) {
     const std::string file = WithExtension(reference, info.extension);
     for (const std::string& dir : SearchDirs(kind)) candidates.push_back(fs::path(dir) / file);
@@ -75,6 +89,10 @@ std::string Resolve(FileKind kind, const std::string& reference, const std::stri
     if (fs::is_regular_file(c, ec)) return c.lexically_normal().string();
     tried += "\n  " + c.lexically_normal().string();
   }
+  std::error_code dir_ec;
+  if (fs::is_directory(as_path, dir_ec))
+    throw FileNotFound(
+        fmt::format("'{}': is a directory, not a {} file", as_path.string(), info.share_dir));
   throw FileNotFound(
       fmt::format("'{}': no such {} file; looked for:{}", reference, info.share_dir, tried));
 }

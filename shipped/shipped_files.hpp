@@ -2,11 +2,12 @@
 /// Finding the files pumptherm ships (thermal models, motor descriptions, the DBC and its
 /// mapping, plant scenarios), for the daemon and the tools alike: one search order.
 ///
-/// A reference that contains '/' or ends in the kind's extension (".toml", ".dbc") is a path;
-/// a relative path is taken from `base_dir` (the directory of the file that names it, "." for a
-/// command-line argument). Any other reference is the name of a shipped file, with the kind's
-/// extension added when it lacks one. A bare file name ("pumptherm.dbc") is tried as a path
-/// first and then as a name. Names are looked up, in this order, in:
+/// A reference that contains '/', ends in ".toml" or ".dbc" (in any case: "issue_168.DBC"), or
+/// names a file that exists is a path; a relative path is taken from `base_dir` (the directory
+/// of the file that names it, "." for a command-line argument). Any other reference is the name
+/// of a shipped file, with the kind's extension added when it lacks one. A bare file name
+/// ("pumptherm.dbc") is tried as a path first and then as a name. Names are looked up, in this
+/// order, in:
 ///   1. <directory of the running executable>/../share/pumptherm/<kind dir> (an installed tree,
 ///      wherever it was installed or unpacked);
 ///   2. <configured install prefix>/share/pumptherm/<kind dir> (CMAKE_INSTALL_FULL_DATADIR);

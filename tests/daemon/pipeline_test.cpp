@@ -901,8 +901,10 @@ TEST(Pipeline, ConfigurationErrorsNameTheKey) {
     return std::string();
   };
   EXPECT_NE(error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n")
-                .find("p.toml:17: key 'pump[0]': pump 'tmp1': alarm levels (line 25) for node "
-                      "'winding', which model 'saheba2010-improved' does not have"),
+                .find("p.toml:25: key 'pump[0].alarms.levels.winding': pump 'tmp1' (model "
+                      "saheba2010-improved) has no node 'winding' (its nodes: frame, yoke, teeth, "
+                      "slot_winding, end_winding, rotor, shaft; also 'sensor' and "
+                      "'winding_resistance')"),
             std::string::npos)
       << error_of("[pump.alarms.levels]\nwinding = { trip_degC = 100 }\n");
   const std::string bad_model = [] {
@@ -922,20 +924,20 @@ thermal_model = "no-such-model"
     return std::string();
   }();
   EXPECT_NE(
-      bad_model.find("p.toml:4: key 'pump[0].thermal_model': 'no-such-model': no such models file"),
+      bad_model.find("p.toml:7: key 'pump[0].thermal_model': 'no-such-model': no such models file"),
       std::string::npos)
       << bad_model;
   // The magnet temperature: a node with capacity, and a motor that states its magnet law.
   const std::string massless = error_of("magnet_node = \"7\"\n");
-  EXPECT_NE(massless.find(
-                "magnet_node '7' is not a node with heat capacity of model 'saheba2010-improved'"),
+  EXPECT_NE(massless.find("key 'pump[0].magnet_node': '7' is not a node with heat capacity of "
+                          "model saheba2010-improved (its nodes: frame, yoke"),
             std::string::npos)
       << massless;
   // The rotor heat's node: one with capacity.
   const std::string no_rotor = error_of("rotor_node = \"rotr\"\n");
   EXPECT_NE(
-      no_rotor.find(
-          "rotor_node 'rotr' is not a node with heat capacity of model 'saheba2010-improved'"),
+      no_rotor.find("key 'pump[0].rotor_node': 'rotr' is not a node with heat capacity of model "
+                    "saheba2010-improved"),
       std::string::npos)
       << no_rotor;
   EXPECT_EQ(error_of("rotor_node = \"shaft\"\n"), "");

@@ -296,3 +296,38 @@ TEST(CandumpLog, FormatEqualsTheReferenceFormatter) {
 
 }  // namespace
 }  // namespace pumptherm::protocol
+
+namespace pumptherm::protocol {
+namespace {
+
+// What a recording's stamps count, from its first stamps: Unix time from 2001 on; -t z never
+// goes back; -t d goes up and down with the gaps between frames, or stays put when they are
+// even.
+TEST(CandumpTimeBaseTest, StampsAreClassified) {
+  const std::int64_t unix_us[] = {1700000000000000, 1700000000010000, 1700000000020000};
+  EXPECT_EQ(ClassifyCandumpStamps(unix_us, 3), CandumpTimeBase::kAbsolute);
+  // -t z: 10 ms frames with a 100 ms one among them.
+  const std::int64_t z[] = {0, 10000, 10100, 20000, 20100, 30000, 100000, 100100};
+  EXPECT_EQ(ClassifyCandumpStamps(z, 8), CandumpTimeBase::kSinceFirst);
+  // -t d of the same frames: the gaps.
+  const std::int64_t d[] = {0, 10000, 100, 9900, 100, 9900, 70000, 100};
+  EXPECT_EQ(ClassifyCandumpStamps(d, 8), CandumpTimeBase::kSincePrevious);
+  // -t d of evenly spaced frames: the same gap every time.
+  const std::int64_t even[] = {0, 10000, 10000, 10000, 10000};
+  EXPECT_EQ(ClassifyCandumpStamps(even, 5), CandumpTimeBase::kSincePrevious);
+  // Too few to tell: both read the same.
+  EXPECT_EQ(ClassifyCandumpStamps(d, 2), CandumpTimeBase::kSinceFirst);
+  // A small (1970) clock with -l's stamps still runs forward: read as it is.
+  const std::int64_t boot[] = {12000000, 12010000, 12020000, 12030000};
+  EXPECT_EQ(ClassifyCandumpStamps(boot, 4), CandumpTimeBase::kSinceFirst);
+
+  CandumpTimeline timeline(CandumpTimeBase::kSincePrevious);
+  std::int64_t t = 0;
+  for (std::int64_t s : d) t = timeline.TimeUs(s);
+  EXPECT_EQ(t, 100100);
+  CandumpTimeline same(CandumpTimeBase::kSinceFirst);
+  EXPECT_EQ(same.TimeUs(42), 42);
+}
+
+}  // namespace
+}  // namespace pumptherm::protocol

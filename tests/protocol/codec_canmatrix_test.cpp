@@ -69,6 +69,7 @@ struct TheirValue {
 /// canmatrix's values by (frame index, signal name); frames whose ID it lacks in `missing`.
 struct Theirs {
   std::map<std::pair<int, std::string>, TheirValue> values;
+  std::map<int, std::string> message_names;  ///< by frame index
   std::size_t missing = 0;
   std::size_t padded = 0;
 };
@@ -104,6 +105,9 @@ std::vector<Theirs> RunCanmatrix(const std::vector<std::pair<fs::path, fs::path>
       ++all.back().missing;
     } else if (kind == "padded") {
       ++all.back().padded;
+    } else if (kind == "msg") {
+      ls >> name;
+      all.back().message_names[index] = name;
     } else if (kind == "sig") {
       ls >> name >> raw >> phys;
       all.back().values[{index, name}] = {ParsePyNumber(raw), ParsePyNumber(phys)};
@@ -262,6 +266,41 @@ TEST(CodecCanmatrixTest, DecodesLikeCanmatrixOnEveryDbc) {
             << " frames canmatrix could decode only padded to 64 bytes\n";
   EXPECT_GT(tally.compared, 0u);
   EXPECT_EQ(tally.agreed, tally.compared);
+}
+
+// Long names (SystemMessageLongSymbol, SystemSignalLongSymbol) are the names canmatrix shows:
+// every message and every signal we decode in a frame has the name canmatrix gives it.
+TEST(CodecCanmatrixTest, LongNamesAreTheNamesCanmatrixShows) {
+  const std::string why = CanmatrixUnavailable();
+  if (!why.empty()) {
+    if (InCi()) FAIL() << "CI=true and the cross-check cannot run: " << why;
+    GTEST_SKIP() << why;
+  }
+  const Case c =
+      MakeCase(test::SourceDir() / "tests" / "protocol" / "dbc" / "long_names.dbc", 7, 4, 900);
+  const std::vector<Theirs> theirs = RunCanmatrix({{c.path, c.frames_path}});
+  fs::remove(c.frames_path);
+  ASSERT_EQ(theirs.size(), 1u);
+  const DbcCodec codec(c.dbc);
+  std::size_t names = 0;
+  for (std::size_t fi = 0; fi < c.frames.size(); ++fi) {
+    const auto& [mi, data] = c.frames[fi];
+    const DbcMessage& m = c.dbc.messages[mi];
+    EXPECT_EQ(theirs[0].message_names.at(static_cast<int>(fi)), m.name);
+    std::vector<double> ours(codec.message(mi).signal_count());
+    ASSERT_EQ(codec.message(mi).Decode(data, ours), CodecStatus::kOk);
+    for (std::size_t si = 0; si < m.signals.size(); ++si) {
+      // A long name that would repeat another signal's keeps its short one here; canmatrix
+      // gives both signals the one name.
+      if (m.signals[si].name == "WouldRepeatTaken" || !codec.message(mi).IsPresent(data, si))
+        continue;
+      EXPECT_TRUE(theirs[0].values.contains({static_cast<int>(fi), m.signals[si].name}))
+          << m.name << "." << m.signals[si].name << " frame " << fi;
+      ++names;
+    }
+  }
+  EXPECT_GT(names, 20u);
+  std::cout << names << " signal values under the same long names as canmatrix's\n";
 }
 
 }  // namespace

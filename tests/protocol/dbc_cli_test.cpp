@@ -43,7 +43,7 @@ fs::path TempFile(const std::string& name) {
 TEST(DbcCliTest, CheckListsThePumpthermFrameSet) {
   const RunResult r = RunPumptherm("dbc check '" + test::PumpthermDbc().string() + "'");
   EXPECT_EQ(r.exit_code, 0) << r.out;
-  EXPECT_NE(r.out.find("11 messages, 49 signals, 3 nodes"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("12 messages, 51 signals, 3 nodes"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("0x100 PUMP_FAST_I 8 bytes, 10 ms, from PumpDrive"), std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("n/a raw -32768"), std::string::npos) << r.out;
@@ -98,7 +98,7 @@ TEST(DbcCliTest, DecodeGivesBackWhatTheEncoderWrote) {
   CanFrame short_frame = f;
   short_frame.len = 4;
   CanFrame unknown = f;
-  unknown.id = 0x7FF;
+  unknown.id = 0x6FF;  // GW_HEALTH + 255: no node's (0x7F0 + n is the heartbeat's block)
   const fs::path log = TempFile("run.log");
   {
     std::ofstream out(log);
@@ -117,7 +117,8 @@ TEST(DbcCliTest, DecodeGivesBackWhatTheEncoderWrote) {
       std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("1 frames decoded, 1 with IDs not in"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("1 shorter than their message"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("(1 11-bit, 0 29-bit), 1 shorter than their message"), std::string::npos)
+      << r.out;
 
   // CSV from stdin, one message selected.
   r = RunPumptherm("dbc decode --format csv --message PUMP_FAST_I --node-id-limit 16" + dbc_arg,
@@ -151,8 +152,9 @@ TEST(DbcCliTest, DecodeSkipsAndCountsBadLogLines) {
             std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("\"time_s\":4.000000"), std::string::npos) << r.out;  // reading went on
-  EXPECT_NE(r.out.find("2 frames decoded, 0 with IDs not in pumptherm.dbc, 0 shorter than their "
-                       "message, 2 bad lines skipped"),
+  EXPECT_NE(r.out.find("2 frames decoded, 0 with IDs not in pumptherm.dbc (0 11-bit, 0 29-bit), 0 "
+                       "shorter than their message, 0 error and 0 remote frames not decoded, 2 bad "
+                       "lines skipped"),
             std::string::npos)
       << r.out;
 }
@@ -161,7 +163,7 @@ TEST(DbcCliTest, DecodeSkipsAndCountsBadLogLines) {
 // are unknown, and the summary says which option decodes them.
 TEST(DbcCliTest, UnknownPerPumpFramesNameTheNodeIdOption) {
   const fs::path log = TempFile("perpump.log");
-  std::ofstream(log) << "(1.000000) can0 203#0622784000000207\n(2.000000) can0 7FF#00\n";
+  std::ofstream(log) << "(1.000000) can0 203#0622784000000207\n(2.000000) can0 6FF#00\n";
   const RunResult plain = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + log.string() + "'");
   const RunResult offset =
       RunPumptherm("dbc decode --dbc pumptherm.dbc --node-id-limit 16 '" + log.string() + "'");
@@ -169,15 +171,73 @@ TEST(DbcCliTest, UnknownPerPumpFramesNameTheNodeIdOption) {
   EXPECT_EQ(plain.exit_code, 0) << plain.out;
   EXPECT_NE(plain.out.find("0 frames decoded, 2 with IDs not in pumptherm.dbc"), std::string::npos)
       << plain.out;
-  EXPECT_NE(
-      plain.out.find(
-          "1 of the unknown frames are a message at CAN ID = DBC ID + node ID (node below 16)"),
-      std::string::npos)
+  EXPECT_NE(plain.out.find("1 of the unknown frames are a message at CAN ID = DBC ID + node ID, "
+                           "node IDs up to 3: the DBC's IDs are per pump (or per node); decode "
+                           "them with --node-id-limit 4"),
+            std::string::npos)
       << plain.out;
   EXPECT_NE(offset.out.find("1 frames decoded, 1 with IDs not in pumptherm.dbc"), std::string::npos)
       << offset.out;
   EXPECT_EQ(offset.out.find("of the unknown frames are a message"), std::string::npos)
       << offset.out;
+}
+
+// Every kind of frame that does not decode is counted, 29-bit ones too; a line without a
+// timestamp has no time (null), not 0.
+TEST(DbcCliTest, DecodeCountsEveryKindAndLeavesNoTimeNull) {
+  const fs::path log = TempFile("kinds.log");
+  std::ofstream(log) << "(1.000000) can0 12345678#00\n"                  // 29-bit, unknown
+                     << "(1.100000) can0 20000080#0000000000000000\n"    // error frame
+                     << "(1.200000) can0 103#R\n"                        // remote frame
+                     << "  can0  100   [8]  00 00 00 00 00 00 00 00\n";  // screen, no time
+  RunResult r = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + log.string() + "'");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find(R"({"time_s":null,"interface":"can0","can_id":"0x100","node":0,)"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("1 frames decoded, 1 with IDs not in pumptherm.dbc (0 11-bit, 1 29-bit), 0 "
+                       "shorter than their message, 1 error and 1 remote frames not decoded"),
+            std::string::npos)
+      << r.out;
+  r = RunPumptherm("dbc decode --format csv --dbc pumptherm.dbc '" + log.string() + "'");
+  EXPECT_NE(r.out.find("\n,can0,0x100,0,PUMP_FAST_I,"), std::string::npos) << r.out;
+  fs::remove(log);
+}
+
+// A named log that holds no frame, or is a directory, is no recording: exit 1 or 2, the file named.
+TEST(DbcCliTest, DecodeOfAFileWithoutFramesOrADirectorySaysSo) {
+  const fs::path log = TempFile("noframes.log");
+  std::ofstream(log) << "hello\n# a comment\n";
+  RunResult r = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + log.string() + "'");
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find(log.string() + ": no CAN frame in 2 lines (1 not candump lines)"),
+            std::string::npos)
+      << r.out;
+  fs::remove(log);
+  const fs::path dir = TempFile("logdir");
+  fs::create_directories(dir);
+  r = RunPumptherm("dbc decode --dbc pumptherm.dbc '" + dir.string() + "'");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find(dir.string() + ": is a directory, not a candump log"), std::string::npos)
+      << r.out;
+  r = RunPumptherm("dbc check '" + dir.string() + "'");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find("is a directory, not a dbc file"), std::string::npos) << r.out;
+  fs::remove_all(dir);
+}
+
+// A file that exists is a path, whatever the case of its extension (cantools' corpus has
+// issue_168.DBC); a bare name that is no file here is the shipped file.
+TEST(DbcCliTest, AFileWithAnUpperCaseExtensionIsAPath) {
+  const fs::path dir = TempFile("upper");
+  fs::create_directories(dir);
+  fs::copy_file(test::PumpthermDbc(), dir / "Site.DBC", fs::copy_options::overwrite_existing);
+  const std::string cd =
+      "cd '" + dir.string() + "' && '" + PUMPTHERM_BIN + "' dbc check Site.DBC 2>&1";
+  const test_files::CommandResult c = test_files::RunCommand(cd);
+  EXPECT_EQ(c.exit_code, 0) << c.out;
+  EXPECT_NE(c.out.find("Site.DBC: 12 messages"), std::string::npos) << c.out;
+  fs::remove_all(dir);
 }
 
 /// PUMP_FAST_I of pump 3 as our encoder writes it (Id 12.345 A, Iq -0.5 A, 2199.11 rad/s, counter
@@ -197,7 +257,7 @@ CanFrame FastFrameOfPump3() {
 TEST(DbcCliTest, AnnotateEchoesEveryLineAsCantoolsDecodeDoes) {
   const CanFrame f = FastFrameOfPump3();
   CanFrame unknown = f;
-  unknown.id = 0x7FF;
+  unknown.id = 0x6FF;
   const std::string frame_line = FormatCandumpLine(1700000000123456, "vcan0", f);
   const fs::path log = TempFile("annotate.log");
   std::ofstream(log) << "# recorded on the bench\n"
@@ -211,10 +271,10 @@ TEST(DbcCliTest, AnnotateEchoesEveryLineAsCantoolsDecodeDoes) {
   EXPECT_NE(r.out.find("# recorded on the bench\n" + frame_line +
                        " :: PUMP_FAST_I[node 3](Id_A: 12.345 A, Iq_A: -0.5 A, SpeedElec_rad_per_s: "
                        "2199.11 rad/s, "
-                       "RollingCounter: 7)\n(1700000000.133456) vcan0 7FF#"),
+                       "RollingCounter: 7)\n(1700000000.133456) vcan0 6FF#"),
             std::string::npos)
       << r.out;
-  EXPECT_NE(r.out.find(" :: Unknown frame id 2047 (0x7ff)\n"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" :: Unknown frame id 1791 (0x6ff)\n"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("\n(2.0) vcan0 10Z#00\n"), std::string::npos) << r.out;
   EXPECT_NE(
       r.out.find(
@@ -223,8 +283,9 @@ TEST(DbcCliTest, AnnotateEchoesEveryLineAsCantoolsDecodeDoes) {
       << r.out;
   EXPECT_NE(
       r.out.find(
-          "1 frames decoded, 1 with IDs not in pumptherm.dbc, 0 shorter than their message, 1 bad "
-          "lines passed through undecoded"),
+          "1 frames decoded, 1 with IDs not in pumptherm.dbc (1 11-bit, 0 29-bit), 0 shorter than "
+          "their message, 0 error and 0 remote frames not decoded, 1 bad lines passed through "
+          "undecoded"),
       std::string::npos)
       << r.out;
 

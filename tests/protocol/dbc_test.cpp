@@ -336,11 +336,65 @@ TEST(DbcTest, EveryRealDbcLoads) {
   }
 }
 
+// Vector's tools write names of at most 32 characters in the statements and the long name as
+// an attribute; the long name is the name (as cantools and canmatrix show it), statements that
+// refer to the short name still apply, and a long name that would repeat another keeps the
+// short one. The fixture is ours (tests/protocol/dbc/long_names.dbc), modelled on the cases of
+// cantools' tests/files/dbc/long_names.dbc; codec_canmatrix_test checks the names against
+// canmatrix.
+TEST(DbcTest, LongNamesAreTheNames) {
+  const auto path = test::SourceDir() / "tests" / "protocol" / "dbc" / "long_names.dbc";
+  const Dbc dbc = ParseDbc(test::ReadFile(path), "long_names.dbc");
+  ASSERT_EQ(dbc.nodes.size(), 2u);
+  EXPECT_EQ(dbc.nodes[0], "TurboPumpDriveController_Hall_B_Line_4");
+  EXPECT_EQ(dbc.node_comments.at("TurboPumpDriveController_Hall_B_Line_4"),
+            "the drive, by its short name");
+  const DbcMessage* fast = dbc.FindMessage("TurboPumpFastTelemetryCurrents_DirectAndQuadrature");
+  ASSERT_NE(fast, nullptr);
+  EXPECT_EQ(fast->transmitter, "TurboPumpDriveController_Hall_B_Line_4");
+  EXPECT_EQ(fast->comment, "the fast telemetry, by its ID");
+  EXPECT_FALSE(fast->attributes.contains("SystemMessageLongSymbol"));
+  ASSERT_EQ(fast->signals.size(), 3u);
+  EXPECT_EQ(fast->signals[0].name, "StatorCurrentDirectAxisAmpere_Id");
+  EXPECT_EQ(fast->signals[0].comment, "Id, by its short name");
+  EXPECT_EQ(fast->signals[0].not_available_raw, -32768);  // BA_ by the short name
+  EXPECT_EQ(fast->signals[1].name, "StatorCurrentQuadratureAxisAmpere_Iq");
+  EXPECT_FALSE(fast->signals[1].attributes.contains("SystemSignalLongSymbol"));
+  EXPECT_EQ(fast->signals[2].name, "Counter");
+
+  const DbcMessage* table = dbc.FindMessage("GatewayNodeTemperatureTable_ByThermalNetworkNode");
+  ASSERT_NE(table, nullptr);
+  EXPECT_EQ(table->signals[0].name, "ThermalNetworkNodeIndexMultiplexer");
+  EXPECT_EQ(table->signals[0].receivers,
+            std::vector<std::string>{"TurboPumpDriveController_Hall_B_Line_4"});
+  EXPECT_EQ(table->signals[0].value_descriptions.at(1), "stator");
+  EXPECT_EQ(table->signals[1].name, "NodeTemperatureDegreesCelsius_Frame");
+  // The multiplexed signals follow their switch's new name, and still decode by it.
+  EXPECT_EQ(table->signals[2].multiplexer_switch, "ThermalNetworkNodeIndexMultiplexer");
+  const MessageCodec codec(*table);
+  const std::uint8_t frame[8] = {1, 0, 0x10, 0x27, 0, 0, 0, 0};  // node 1, raw 10000
+  std::vector<double> values(codec.signal_count());
+  ASSERT_EQ(codec.Decode(frame, values), CodecStatus::kOk);
+  EXPECT_TRUE(std::isnan(values[1]));
+  EXPECT_NEAR(values[2], 50.0, 1e-9);
+
+  // A long name that is another signal's name: the short name stays, with a warning.
+  const DbcMessage* short_name = dbc.FindMessage("ShortName");
+  ASSERT_NE(short_name, nullptr);
+  EXPECT_EQ(short_name->signals[2].name, "WouldRepeatTaken");
+  bool warned = false;
+  for (const auto& p : dbc.problems)
+    warned = warned || p.message.find("is the name of another signal") != std::string::npos;
+  EXPECT_TRUE(warned);
+  // The environment variable's long name names nothing this reader keeps: no problem about it.
+  for (const auto& p : dbc.problems) EXPECT_EQ(p.message.find("EnvVar"), std::string::npos);
+}
+
 TEST(DbcTest, PumpthermFrameSetIsCompleteAndConsistent) {
   const Dbc dbc = ParseDbc(test::ReadFile(test::PumpthermDbc()), "protocol/pumptherm.dbc");
   EXPECT_TRUE(dbc.problems.empty())
       << dbc.problems.front().line << ": " << dbc.problems.front().message;
-  EXPECT_EQ(dbc.messages.size(), 11u);
+  EXPECT_EQ(dbc.messages.size(), 12u);
   for (const auto& m : dbc.messages) {
     SCOPED_TRACE(m.name);
     ASSERT_TRUE(m.cycle_time_ms.has_value());

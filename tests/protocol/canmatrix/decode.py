@@ -9,7 +9,8 @@ FRAMES.txt: one frame per line, "<CAN ID hex> <extended 0|1> <payload hex>". Out
 pair "file <pair index>", then one line per signal canmatrix decodes (multiplexed signals that
 the frame does not select are left out):
     sig <frame index> <signal name> <raw> <physical>
-"nomsg <frame index>" for a frame whose ID canmatrix did not load, and "padded <frame index>"
+"msg <frame index> <message name>" for each frame it knows, "nomsg <frame index>" for a frame
+whose ID canmatrix did not load, and "padded <frame index>"
 for a frame canmatrix could not decode at its declared length (a signal reaching past it),
 decoded again padded with zeros to 64 bytes. Numbers are printed with repr (shortest round trip).
 """
@@ -31,6 +32,7 @@ def decode_file(dbc_path, frames_path, out):
             if frame is None:
                 out.append("nomsg %d" % index)
                 continue
+            out.append("msg %d %s" % (index, frame.name))
             payload = bytearray.fromhex(fields[2] if len(fields) > 2 else "")
             try:
                 decoded_signals = frame.decode(payload)
