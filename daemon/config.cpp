@@ -404,6 +404,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.frame_sensor_lag_s = r.Number("frame_sensor_lag_s", pc.frame_sensor_lag_s, 0.0, 3600.0);
       pc.disturbance_states = r.Bool("disturbance_states", pc.disturbance_states);
       pc.disturbance_states_explicit = t->get("disturbance_states") != nullptr;
+      pc.voltage_reading = r.Bool("voltage_reading", pc.voltage_reading);
       pc.alarms = config.alarms;
       if (const toml::table* at = r.Table("alarms")) {
         TableReader ar(*at, r.Join("alarms"), source);

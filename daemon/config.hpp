@@ -152,8 +152,13 @@ struct PumpConfig {
   /// `measured_node` (estimators::BoundaryOnlyThrough).
   bool disturbance_states = true;
   bool disturbance_states_explicit = false;  ///< the config file set `disturbance_states`
-  AlarmsConfig alarms;                       ///< the gateway's [alarms] with this pump's overrides
-  int line = 0;                              ///< line of the [[pump]] table
+  /// Fuse the drive's q-axis voltage into the disturbance-state filter (a row in the winding,
+  /// the magnet and this pump's R0, psi0 and voltage offset): the winding from resistance and
+  /// the magnet from flux come out of the filter. It trusts the motor file's copper and magnet
+  /// laws; false for a motor whose magnet law is not known.
+  bool voltage_reading = true;
+  AlarmsConfig alarms;  ///< the gateway's [alarms] with this pump's overrides
+  int line = 0;         ///< line of the [[pump]] table
   /// Line of each key given in the [[pump]] table, for messages about its value.
   std::map<std::string, int, std::less<>> key_lines;
   /// The line of `key` in this pump's table, or the table's line when the key was not given.

@@ -138,6 +138,18 @@ const std::array kFields = std::to_array<PublishedField>({
    [](const FieldSource& s) { return E(s).mismatch.value; }},
   {"frame_sensor_offset_K", "K", "", "", {}, "frame_sensor_offset_K", {Kind::kFixed, 3},
    [](const FieldSource& s) { return E(s).sensor_offset_K; }},
+  {"identifier_winding_degC", "degC", "", "", {}, "identifier_winding_C", {Kind::kFixed, 4},
+   [](const FieldSource& s) { return E(s).identifier_winding_degC; }},
+  {"voltage_reading", "", "", "", {}, "voltage_reading", {Kind::kWord, 0},
+   [](const FieldSource& s) { return Code(E(s).voltage_reading.state); },
+   [](const FieldSource& s) { return estimators::ReadingStateName(E(s).voltage_reading.state); },
+   {}, true},
+  {"r0_error", "", "", "", {}, "r0_error", {Kind::kGeneral, 4},
+   [](const FieldSource& s) { return E(s).calibration.dr; }},
+  {"psi0_error", "", "", "", {}, "psi0_error", {Kind::kGeneral, 4},
+   [](const FieldSource& s) { return E(s).calibration.dpsi; }},
+  {"voltage_offset_V", "V", "", "", {}, "voltage_offset_V", {Kind::kFixed, 4},
+   [](const FieldSource& s) { return E(s).calibration.u0_V; }},
   {"flux_status", "", "GW_IDENT", "FluxStatus", {}, "", {},
    // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
    [](const FieldSource& s) {

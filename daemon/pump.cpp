@@ -34,6 +34,7 @@ estimators::PumpEstimatorConfig EstimatorConfig(const PumpConfig& c, double ther
   e.magnet.min_sd_K = c.magnet_min_sd_K;
   e.magnet.max_winding_gain = c.magnet_max_winding_gain;
   e.rotor_node = c.rotor_node;
+  e.voltage.fuse = c.voltage_reading;
   e.alarms = c.alarms.monitor;
   for (const auto& [node, levels] : c.alarms.levels) e.levels[node] = levels.limits;
   e.period_s = thermal_period_s;
@@ -143,6 +144,13 @@ void Pump::Identify(const protocol::DqPair& pair) {
   if (!(dt_s > 0.0)) dt_s = 1e-4;  // two samples in one timestamp tick
   last_sample_us_ = pair.t_us;
   identifier_.Update(s, dt_s);
+  ++drive_.n;
+  drive_.id += s.id_A;
+  drive_.iq += s.iq_A;
+  drive_.iq2 += s.iq_A * s.iq_A;
+  drive_.ud += s.ud_V;
+  drive_.uq += s.uq_V;
+  drive_.w += s.w_r_rad_per_s;
   ++counters_.samples;
   if (identifier_.blocks() != identifier_blocks_) {
     identifier_blocks_ = identifier_.blocks();
@@ -217,6 +225,22 @@ bool Pump::PeriodInputs(estimators::PumpPeriod& p) {
   return have_inputs_;
 }
 
+estimators::DriveAverages Pump::TakeDriveAverages() {
+  estimators::DriveAverages a;
+  a.samples = drive_.n;
+  if (drive_.n > 0) {
+    const double n = drive_.n;
+    a.id_A = drive_.id / n;
+    a.iq_A = drive_.iq / n;
+    a.ud_V = drive_.ud / n;
+    a.uq_V = drive_.uq / n;
+    a.w_rad_per_s = drive_.w / n;
+    a.iq_sd_A = std::sqrt(std::max(drive_.iq2 / n - a.iq_A * a.iq_A, 0.0));
+  }
+  drive_ = DriveSums{};
+  return a;
+}
+
 estimators::IdentifierOutput Pump::IdentifierAt(std::int64_t t_us) const {
   estimators::IdentifierOutput o;
   o.estimate = identifier_.estimate();
@@ -228,6 +252,7 @@ estimators::IdentifierOutput Pump::IdentifierAt(std::int64_t t_us) const {
 
 void Pump::ThermalStep(std::int64_t end_us, double dt_s) {
   estimators::PumpPeriod p;
+  p.drive = TakeDriveAverages();
   if (!PeriodInputs(p)) return;
   held_inputs_ = p.inputs;
   p.end_us = end_us;

@@ -175,6 +175,14 @@ class Pump {
   // Inputs averaged over the current thermal period.
   double sum_id2_ = 0.0, sum_iq2_ = 0.0, sum_speed_ = 0.0, sum_iq_ = 0.0;
   int n_inputs_ = 0;
+  /// The period's paired samples, for the voltage equation (estimators::DriveAverages).
+  struct DriveSums {
+    int n = 0;
+    double id = 0.0, iq = 0.0, iq2 = 0.0, ud = 0.0, uq = 0.0, w = 0.0;
+  };
+  DriveSums drive_;
+  /// The period's drive averages (and the sums back to zero).
+  estimators::DriveAverages TakeDriveAverages();
   estimators::ThermalInputs held_inputs_;
   bool have_inputs_ = false;
   std::int64_t next_step_us_ = -1;

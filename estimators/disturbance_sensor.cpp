@@ -22,7 +22,10 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
       !(c.loss_scale_max_sd > 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
       !(c.winding_bias_sd_K >= 0.0) || !(c.winding_bias_tau_s > 0.0) ||
       !(c.magnet_bias_sd_K >= 0.0) || !(c.magnet_bias_tau_s > 0.0) ||
-      !(c.magnet_min_white_sd_K > 0.0) || !(c.sensor_step_gate_sd >= 0.0)) {
+      !(c.magnet_min_white_sd_K > 0.0) || !(c.sensor_step_gate_sd >= 0.0) || !(c.r0_sd_rel > 0.0) ||
+      !(c.psi0_sd_rel > 0.0) || !(c.calibration_walk_per_sqrt_h >= 0.0) ||
+      !(c.voltage_offset_sd_V > 0.0) || !(c.voltage_offset_tau_s > 0.0) || !(c.uq_min_sd_V > 0.0) ||
+      !(c.voltage_gate_sd >= 0.0)) {
     throw std::invalid_argument(
         "disturbance sensor: standard deviations and times must be positive");
   }
@@ -45,6 +48,29 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   sensor_model_.PlaceOffset(k++);
   if (has_winding && c.winding_bias_sd_K > 0.0) wb_ = k++;
   if (magnet_ >= 0 && c.magnet_bias_sd_K > 0.0) mb_ = k++;
+  if (c.voltage_reading) {
+    const std::string& node = !c.voltage_magnet_node.empty() ? c.voltage_magnet_node
+                              : !c.magnet_node.empty()       ? c.magnet_node
+                                                             : c.rotor_node;
+    vmagnet_ = model_.StateIndex(node);
+    if (vmagnet_ < 0) {
+      throw std::invalid_argument(fmt::format(
+          "disturbance sensor: the voltage reading needs the magnet's node; '{}' is not a node "
+          "with heat capacity of model '{}'",
+          node, model_.Name()));
+    }
+    const VoltageLaw& law = c.voltage_law;
+    if (!(law.r0_ohm > 0.0) || !(law.psi0_Wb > 0.0) || !std::isfinite(law.alpha_per_K) ||
+        !std::isfinite(law.beta_per_K) || !std::isfinite(law.t0_degC) ||
+        !std::isfinite(law.magnet_t0_degC)) {
+      throw std::invalid_argument(
+          "disturbance sensor: the voltage reading needs R0 and psi0 above 0 and finite laws");
+    }
+    dr_state_ = k++;
+    dpsi_ = k++;
+    dbeta_ = k++;
+    u0_ = k++;
+  }
   n_aug_ = k;
   // The nodes and the sensor lag are discretised together (exact ZOH); the disturbances are held
   // over a step and enter through that discretisation's Phi (Step()), so the matrix exponential is
@@ -65,6 +91,8 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   BuildRows();
   x_nodes_ = Eigen::VectorXd::Zero(n_);
   sw_ = Eigen::VectorXd::Zero(n_);
+  cv_row_ = Eigen::RowVectorXd::Zero(n_aug_);
+  pv_ = Eigen::VectorXd::Zero(n_aug_);
   const int aux = n_aug_ - nb;
   aux_cov_ = Eigen::MatrixXd::Zero(aux, aux);
   aux_cross_ = Eigen::MatrixXd::Zero(aux, n_);
@@ -85,6 +113,7 @@ void DisturbanceThermalSensor::BuildRows() {
   int m = 1;
   if (has_winding) row_w_ = m++;
   if (magnet_ >= 0) row_m_ = m++;
+  if (dr_state_ >= 0) row_v_ = m++;
   c_all_ = Eigen::MatrixXd::Zero(m, n_aug_);
   sm_all_ = Eigen::MatrixXd::Zero(m, m);
   y_all_ = Eigen::VectorXd::Zero(m);
@@ -114,16 +143,25 @@ void DisturbanceThermalSensor::GaussMarkov(int state, double sd, double tau_s, d
 }
 
 void DisturbanceThermalSensor::Initialise(double x0_degC) {
+  InitialiseWith(x0_degC, config_.initial_sd_K, config_.initial_spread_sd_K);
+}
+
+void DisturbanceThermalSensor::InitialiseKnown(double x0_degC, double sd_K) {
+  InitialiseWith(x0_degC, 0.0, sd_K);
+}
+
+void DisturbanceThermalSensor::InitialiseWith(double x0_degC, double common_sd_K,
+                                              double spread_sd_K) {
   const auto& c = config_;
   Eigen::MatrixXd s = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
   Eigen::VectorXd x = Eigen::VectorXd::Zero(n_aug_);
-  sensor_model_.SetInitial(x0_degC, c.initial_sd_K, c.initial_spread_sd_K, c.sensor_offset_sd_K, x,
-                           s);
+  sensor_model_.SetInitial(x0_degC, common_sd_K, spread_sd_K, c.sensor_offset_sd_K, x, s);
   s(df_, df_) = 1.0;  // W^2: a watt either way at the start
   if (dr_ >= 0) s(dr_, dr_) = c.rotor_heat_sd_W * c.rotor_heat_sd_W;
   if (ls_ >= 0) s(ls_, ls_) = 0.01;  // 10 % either way at the start
   if (wb_ >= 0) s(wb_, wb_) = c.winding_bias_sd_K * c.winding_bias_sd_K;
   if (mb_ >= 0) s(mb_, mb_) = c.magnet_bias_sd_K * c.magnet_bias_sd_K;
+  VoltagePriors(x, s);
   filter_.Reset(x, s);
   frame_fused_last_ = reopen_offset_ = false;
   stepped_offset_K_ = 0.0;
@@ -193,6 +231,33 @@ void DisturbanceThermalSensor::RestoreSteppedOffset(double stepped_K) {
     throw std::invalid_argument("DisturbanceThermalSensor: the offset's step sum must be finite");
   }
   stepped_offset_K_ = stepped_K;
+}
+
+void DisturbanceThermalSensor::VoltagePriors(Eigen::VectorXd& x, Eigen::MatrixXd& s) const {
+  if (dr_state_ < 0) return;
+  const auto& c = config_;
+  x(dr_state_) = x(dpsi_) = x(dbeta_) = x(u0_) = 0.0;
+  s(dr_state_, dr_state_) = c.r0_sd_rel * c.r0_sd_rel;
+  s(dpsi_, dpsi_) = c.psi0_sd_rel * c.psi0_sd_rel;
+  s(dbeta_, dbeta_) = c.magnet_law_sd_rel * c.magnet_law_sd_rel;
+  s(u0_, u0_) = c.voltage_offset_sd_V * c.voltage_offset_sd_V;
+}
+
+ThermalObserver::Calibration DisturbanceThermalSensor::VoltageCalibration() const {
+  Calibration out;
+  if (dr_state_ < 0) return out;
+  const Eigen::VectorXd& x = filter_.State();
+  const Eigen::MatrixXd& p = filter_.Covariance();
+  auto sd = [&](int i) { return std::sqrt(std::max(p(i, i), 0.0)); };
+  out.dr = x(dr_state_);
+  out.dr_sd = sd(dr_state_);
+  out.dpsi = x(dpsi_);
+  out.dpsi_sd = sd(dpsi_);
+  out.dbeta = x(dbeta_);
+  out.dbeta_sd = sd(dbeta_);
+  out.u0_V = x(u0_);
+  out.u0_sd_V = sd(u0_);
+  return out;
 }
 
 double DisturbanceThermalSensor::NodeSd_K(int i) const {
@@ -287,6 +352,12 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   }
   if (wb_ >= 0) GaussMarkov(wb_, c.winding_bias_sd_K, c.winding_bias_tau_s, dt_s);
   if (mb_ >= 0) GaussMarkov(mb_, c.magnet_bias_sd_K, c.magnet_bias_tau_s, dt_s);
+  if (dr_state_ >= 0) {
+    const double walk = c.calibration_walk_per_sqrt_h * c.calibration_walk_per_sqrt_h / 3600.0;
+    sp_(dr_state_, dr_state_) = sp_(dpsi_, dpsi_) = walk * dt_s;
+    sp_(dbeta_, dbeta_) = c.magnet_law_sd_rel > 0.0 ? walk * dt_s : 0.0;
+    GaussMarkov(u0_, c.voltage_offset_sd_V, c.voltage_offset_tau_s, dt_s);
+  }
   filter_.Predict(ad_, bu_, sp_);
   return true;
 }
@@ -303,25 +374,62 @@ const ObserverReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, do
     report_.refused = true;
     return report_;
   }
-  const bool frame = std::isfinite(r.frame_degC);
-  if (frame) OpenOffsetOnStep(r.frame_degC);
-  frame_fused_last_ = frame;
-  const bool winding = row_w_ >= 0 && std::isfinite(r.winding_degC);
-  const bool magnet =
-      row_m_ >= 0 && std::isfinite(r.magnet_degC) && std::isfinite(r.magnet_winding_gain);
-  if (!frame && !winding && !magnet) {
+  Used used;
+  used.frame = std::isfinite(r.frame_degC);
+  if (used.frame) OpenOffsetOnStep(r.frame_degC);
+  frame_fused_last_ = used.frame;
+  used.winding = row_w_ >= 0 && std::isfinite(r.winding_degC);
+  used.magnet = row_m_ >= 0 && std::isfinite(r.magnet_degC) && std::isfinite(r.magnet_winding_gain);
+  const bool voltage =
+      row_v_ >= 0 && std::isfinite(r.uq_V) && std::isfinite(r.iq_A) && std::isfinite(r.w_rad_per_s);
+  used.voltage = voltage && VoltageRow(r);
+  report_.rejected_readings += voltage && !used.voltage;
+  if (!used.Any()) {
     report_.update = &filter_.Update(c0_, y0_, sm0_);
     return report_;
   }
-  FillRows(r, frame, winding, magnet);
+  FillRows(r, used);
   const KalmanUpdateReport& update = filter_.Update(c_all_, y_all_, sm_all_);
-  if (frame) RememberReading(r.frame_degC);
-  ReportRows(update, frame, winding, magnet);
+  if (used.frame) RememberReading(r.frame_degC);
+  ReportRows(update, used);
   return report_;
 }
 
-void DisturbanceThermalSensor::FillRows(const ThermalReadings& r, bool frame, bool winding,
-                                        bool magnet) {
+bool DisturbanceThermalSensor::VoltageRow(const ThermalReadings& r) {
+  // Han 2019 eq. 6 with the copper and magnet laws (estimators/voltage_equation.hpp),
+  // linearised at the predicted state: the row is its gradient, the observation uq less the
+  // equation at the estimate plus the row times the estimate (an extended Kalman update).
+  const Eigen::VectorXd& x = filter_.State();
+  const Eigen::VectorXd& w = model_.WindingWeights();
+  QAxisState q;
+  q.winding_degC = w.dot(x.head(n_));
+  q.magnet_degC = x(vmagnet_);
+  q.dr = x(dr_state_);
+  q.dpsi = x(dpsi_);
+  q.dbeta = x(dbeta_);
+  q.u0_V = x(u0_);
+  const QAxisPoint p{r.iq_A, r.w_rad_per_s};
+  const QAxisGradient g = QAxisGradientAt(config_.voltage_law, p, q);
+  cv_row_.setZero();
+  cv_row_.head(n_) = g.winding_V_per_K * w.transpose();
+  cv_row_(vmagnet_) += g.magnet_V_per_K;
+  cv_row_(dr_state_) = g.dr_V;
+  cv_row_(dpsi_) = g.dpsi_V;
+  cv_row_(dbeta_) = g.dbeta_V;
+  cv_row_(u0_) = g.u0;
+  const double innovation_V = r.uq_V - QAxisVoltage_V(config_.voltage_law, p, q);
+  yv_ = innovation_V + cv_row_.dot(x);
+  uq_sd_V_ =
+      std::isfinite(r.uq_sd_V) ? std::max(r.uq_sd_V, config_.uq_min_sd_V) : config_.uq_min_sd_V;
+  const double gate = config_.voltage_gate_sd;
+  if (!(gate > 0.0)) return true;
+  pv_.noalias() = filter_.Covariance() * cv_row_.transpose();
+  const double var = cv_row_.dot(pv_) + uq_sd_V_ * uq_sd_V_;
+  return innovation_V * innovation_V <= gate * gate * var;
+}
+
+void DisturbanceThermalSensor::FillRows(const ThermalReadings& r, const Used& used) {
+  const bool frame = used.frame, winding = used.winding, magnet = used.magnet;
   const auto& c = config_;
   // A missing reading: a zero row, zero innovation, unit variance (no gain, no effect).
   c_all_.setZero();
@@ -354,10 +462,17 @@ void DisturbanceThermalSensor::FillRows(const ThermalReadings& r, bool frame, bo
       y_all_(row_m_) = r.magnet_degC;
     }
   }
+  if (row_v_ >= 0) {
+    sm_all_(row_v_, row_v_) = 1.0;
+    if (used.voltage) {
+      c_all_.row(row_v_) = cv_row_;
+      sm_all_(row_v_, row_v_) = uq_sd_V_ * uq_sd_V_;
+      y_all_(row_v_) = yv_;
+    }
+  }
 }
 
-void DisturbanceThermalSensor::ReportRows(const KalmanUpdateReport& update, bool frame,
-                                          bool winding, bool magnet) {
+void DisturbanceThermalSensor::ReportRows(const KalmanUpdateReport& update, const Used& used) {
   report_.update = &update;
   if (!update.ok) return;
   auto row = [&](ReadingRow& out, int i) {
@@ -365,9 +480,10 @@ void DisturbanceThermalSensor::ReportRows(const KalmanUpdateReport& update, bool
     out.innovation_K = update.innovation(i);
     out.innovation_var_K2 = update.innovation_var(i);
   };
-  if (frame) row(report_.frame, 0);
-  if (winding) row(report_.winding, row_w_);
-  if (magnet) row(report_.magnet, row_m_);
+  if (used.frame) row(report_.frame, 0);
+  if (used.winding) row(report_.winding, row_w_);
+  if (used.magnet) row(report_.magnet, row_m_);
+  if (used.voltage) row(report_.voltage, row_v_);
 }
 
 // The step between two readings against the step the filter predicted between them: the

@@ -33,6 +33,7 @@
 #include "estimators/thermal_discretisation.hpp"
 #include "estimators/thermal_model.hpp"
 #include "estimators/thermal_observer.hpp"
+#include "estimators/voltage_equation.hpp"
 
 namespace pumptherm::estimators {
 
@@ -90,6 +91,32 @@ struct DisturbanceSensorConfig {
   double magnet_min_white_sd_K = 0.3;
   double initial_sd_K = 20.0;  ///< as VirtualSensorConfig
   double initial_spread_sd_K = 5.0;
+  /// The drive's q-axis voltage as a reading (estimators/voltage_equation.hpp): an extended row
+  /// of the winding (the model's winding weights) and the magnet node, with states for the
+  /// relative errors of R0 and psi0 (this pump's, against its nameplate) and for the voltage
+  /// offset the drive's known error leaves. Off unless `voltage_reading`.
+  bool voltage_reading = false;
+  VoltageLaw voltage_law;
+  /// The node whose temperature the flux follows (the magnet's; empty: `magnet_node`, else
+  /// `rotor_node`).
+  std::string voltage_magnet_node;
+  double r0_sd_rel = 0.03;    ///< prior sd of R0's relative error (a nameplate: a few percent)
+  double psi0_sd_rel = 0.02;  ///< prior sd of psi0's relative error
+  /// Prior sd of the magnet's temperature coefficient's relative error; 0 (the default): the
+  /// motor file's law is taken as exact and the state stays at 0. With 0.3 the demo's magnet
+  /// from flux is 1.2-2.2 K off instead of 0.1-0.4 K, and a law 20 % off still leaves the rotor
+  /// 7-14 K off (docs/resistance-identification.md, "A wrong magnet law").
+  double magnet_law_sd_rel = 0.0;
+  /// Random walk of both relative errors (the motor ageing), per sqrt(h).
+  double calibration_walk_per_sqrt_h = 1e-4;
+  double voltage_offset_sd_V = 0.1;       ///< stationary sd of the offset (Gauss-Markov)
+  double voltage_offset_tau_s = 86400.0;  ///< its correlation time
+  /// Least white sd of one period's mean uq: the reading's noise, quantisation and the ripple
+  /// that a second's mean does not remove.
+  double uq_min_sd_V = 0.003;
+  /// A voltage row whose innovation lies beyond this many of its sds is left out (an outlier:
+  /// a transient the steady-state equation does not describe).
+  double voltage_gate_sd = 5.0;
 };
 
 /// The readings of one period (the observer interface's).
@@ -113,6 +140,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
   int NodeCount() const override { return n_; }
   int StateCount() const override { return n_aug_; }
   void Initialise(double x0_degC) override;
+  void InitialiseKnown(double x0_degC, double sd_K) override;
   /// The sensor's lag state at the measured node (its row of `s_K2`), every disturbance and
   /// bias at zero with its prior sd as Initialise(double).
   void InitialiseNodes(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) override;
@@ -129,6 +157,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// Node i's sd with the floor (sd_floor_K in quadrature).
   double NodeSd_K(int i) const override;
   double WeightedVariance_K2(const Eigen::VectorXd& w) const override;
+  double SdFloor_K() const override { return config_.sd_floor_K; }
   /// The largest node sd the filter would have if its disturbances, biases and the sensor's
   /// offset were known (the node block's Schur complement, floor included): what a start or a
   /// restart leaves to settle. The rotor's large sd without a magnet reading comes from the rotor
@@ -172,6 +201,8 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// The next fused frame reading may open a step of the offset even though the previous step
   /// fused none (a sensor back from a fault that left it out, such as a jump beyond physics).
   void ReopenSensorOffset() override { reopen_offset_ = true; }
+  bool TakesVoltage() const override { return row_v_ >= 0; }
+  Calibration VoltageCalibration() const override;
   /// The magnet reading's estimated bias, K (0 without a magnet reading).
   double MagnetBias_K() const { return mb_ >= 0 ? filter_.State()(mb_) : 0.0; }
   const KalmanFilter& Filter() const { return filter_; }
@@ -184,10 +215,23 @@ class DisturbanceThermalSensor : public ThermalObserver {
   void GaussMarkov(int state, double sd, double tau_s, double dt_s);
   /// The time update of one period (false: refused, nothing changed).
   bool Predict(const ThermalInputs& in, double dt_s);
-  /// The update rows of this step's readings into c_all_, y_all_, sm_all_; which were finite.
-  void FillRows(const ThermalReadings& r, bool frame, bool winding, bool magnet);
+  /// Which readings of `r` enter this step's update.
+  struct Used {
+    bool frame = false, winding = false, magnet = false, voltage = false;
+    bool Any() const { return frame || winding || magnet || voltage; }
+  };
+  /// The update rows of this step's readings into c_all_, y_all_, sm_all_.
+  void FillRows(const ThermalReadings& r, const Used& used);
+  /// The voltage row (extended: linearised at the predicted state); false when its innovation
+  /// fails the gate (voltage_gate_sd).
+  bool VoltageRow(const ThermalReadings& r);
   /// The report's rows from the update.
-  void ReportRows(const KalmanUpdateReport& update, bool frame, bool winding, bool magnet);
+  void ReportRows(const KalmanUpdateReport& update, const Used& used);
+  /// Every node and the lag at `x0_degC` with a common sd and one of each's own; the rest at its
+  /// prior.
+  void InitialiseWith(double x0_degC, double common_sd_K, double spread_sd_K);
+  /// The priors of the voltage reading's states into `x`, `s`.
+  void VoltagePriors(Eigen::VectorXd& x, Eigen::MatrixXd& s) const;
   /// The sensor-offset step test on the predicted state (sensor_step_gate_sd).
   void OpenOffsetOnStep(double frame_degC);
   /// After an update with a frame reading: that reading and the filter's reading of it.
@@ -196,7 +240,13 @@ class DisturbanceThermalSensor : public ThermalObserver {
   int n_ = 0, df_ = 0, dr_ = -1, ls_ = -1, n_aug_ = 0, rotor_ = -1;
   int wb_ = -1, mb_ = -1, magnet_ = -1;  ///< winding and magnet reading biases, the magnet node
   int row_w_ = -1, row_m_ = -1;          ///< their rows in the update (-1: none)
-  bool frame_fused_last_ = false;        ///< the previous step fused a frame reading
+  /// The voltage reading: R0's and psi0's relative errors, the offset, the flux's node, its row.
+  int dr_state_ = -1, dpsi_ = -1, dbeta_ = -1, u0_ = -1, vmagnet_ = -1, row_v_ = -1;
+  Eigen::RowVectorXd cv_row_;      ///< this step's voltage row (1 x n_aug)
+  Eigen::VectorXd pv_;             ///< the covariance times it (the gate's workspace)
+  double yv_ = 0.0;                ///< its linearised observation
+  double uq_sd_V_ = 0.0;           ///< its sd
+  bool frame_fused_last_ = false;  ///< the previous step fused a frame reading
   /// The last fused frame reading, the filter's reading of it after that update and its variance.
   double last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
   double last_predicted_degC_ = 0.0;

@@ -61,6 +61,12 @@ void VirtualThermalSensor::Initialise(double x0_degC) {
   Initialise(Eigen::VectorXd::Constant(model_.StateCount(), x0_degC));
 }
 
+void VirtualThermalSensor::InitialiseKnown(double x0_degC, double sd_K) {
+  const int n = model_.StateCount();
+  filter_.Reset(Eigen::VectorXd::Constant(n, x0_degC),
+                Eigen::MatrixXd::Identity(n, n) * (sd_K * sd_K));
+}
+
 bool VirtualThermalSensor::CanRestore(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) const {
   const int n = model_.StateCount();
   return x.size() == n && s.rows() == n && s.cols() == n && x.allFinite() && s.allFinite() &&

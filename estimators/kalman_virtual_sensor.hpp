@@ -109,6 +109,7 @@ class VirtualThermalSensor : public ThermalObserver {
   int NodeCount() const override { return model_.StateCount(); }
   int StateCount() const override { return model_.StateCount(); }
   void Initialise(double x0_degC) override;
+  void InitialiseKnown(double x0_degC, double sd_K) override;
   void InitialiseNodes(const Eigen::VectorXd& x_degC, const Eigen::MatrixXd& s_K2) override {
     Restore(x_degC, s_K2);
   }

@@ -27,7 +27,25 @@ std::string MagnetNodeIn(const PumpEstimatorConfig& c, const ThermalModel& model
   return model.StateIndex(c.magnet.magnet_node) >= 0 ? c.magnet.magnet_node : std::string();
 }
 
+/// The node whose temperature the flux follows: the magnet's, else the rotor's; empty when the
+/// model has neither.
+std::string VoltageMagnetNode(const PumpEstimatorConfig& c, const ThermalModel& model) {
+  const std::string magnet = MagnetNodeIn(c, model);
+  if (!magnet.empty()) return magnet;
+  const std::string rotor = RotorNode(c);
+  return model.StateIndex(rotor) >= 0 ? rotor : std::string();
+}
+
+/// Whether the disturbance-state filter takes the drive's voltage: asked for, a motor with R0
+/// and psi0, a magnet node.
+bool TakesVoltage(const PumpEstimatorConfig& c, const MotorDescription& motor,
+                  const ThermalModel& model) {
+  return c.voltage.fuse && motor.copper.r0_ohm > 0.0 && motor.flux_Wb > 0.0 &&
+         !VoltageMagnetNode(c, model).empty();
+}
+
 std::unique_ptr<ThermalObserver> MakeObserver(const PumpEstimatorConfig& c,
+                                              const MotorDescription& motor,
                                               const ThermalModel& model, bool disturbance) {
   if (disturbance) {
     DisturbanceSensorConfig d = c.disturbance;
@@ -42,6 +60,13 @@ std::unique_ptr<ThermalObserver> MakeObserver(const PumpEstimatorConfig& c,
     d.winding_reading = false;
     d.magnet_node = MagnetNodeIn(c, model);
     d.magnet_bias_sd_K = c.magnet.min_sd_K;
+    d.voltage_reading = TakesVoltage(c, motor, model);
+    if (d.voltage_reading) {
+      d.voltage_law = VoltageLawOf(motor);
+      d.voltage_magnet_node = VoltageMagnetNode(c, model);
+      d.r0_sd_rel = c.r0_sd_rel;
+      d.psi0_sd_rel = c.psi0_sd_rel;
+    }
     return std::make_unique<DisturbanceThermalSensor>(model, d);
   }
   VirtualSensorConfig v = c.standard;
@@ -113,10 +138,11 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
       motor_(motor),
       model_(model),
       disturbance_states_(ResolveDisturbance(config, model)),
-      observer_(MakeObserver(config, model, disturbance_states_)),
+      observer_(MakeObserver(config, motor, model, disturbance_states_)),
       frame_(config.alarms),
       magnet_(motor, model, MagnetConfig(config)),
       winding_(WindingConfig(config)),
+      voltage_(motor, config.voltage),
       mismatch_(model, MismatchConfig(config, model)),
       alarms_(MakeAlarms()),
       values_(model, config.alarms, observer_->ModelsSensorLag() ? 0.0 : config.frame_sensor_lag_s,
@@ -129,6 +155,8 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
                     config_.rotor_node, model_.Name()));
   }
   measured_state_ = model_.StateIndex(config_.measured_node);
+  if (observer_->TakesVoltage())
+    voltage_magnet_state_ = model_.StateIndex(VoltageMagnetNode(config_, model_));
   const int n = model_.StateCount();
   const auto nn = static_cast<std::size_t>(n);
   x_degC_ = Eigen::VectorXd::Zero(n);
@@ -166,7 +194,17 @@ bool PumpEstimator::StartIfNeeded(const PumpPeriod& p) {
   const double measured = frame_.offered_degC();
   const double x0 = std::isfinite(measured) ? measured : p.ambient_degC;
   if (!std::isfinite(x0)) return false;  // no temperature at all yet: nothing to estimate
-  observer_->Initialise(x0);
+  // A pump at rest whose frame is at the ambient has been off long enough to be at the frame's
+  // temperature throughout: the natural moment to learn its R0 and psi0 from the run-up.
+  const double rated_rpm = motor_.rated_speed_rpm;
+  const bool cold = std::isfinite(measured) && std::isfinite(p.ambient_degC) &&
+                    std::abs(measured - p.ambient_degC) <= config_.cold_start_band_K &&
+                    rated_rpm > 0.0 && std::abs(p.inputs.speed_rpm) < 0.1 * rated_rpm;
+  if (cold) {
+    observer_->InitialiseKnown(x0, config_.cold_start_sd_K);
+  } else {
+    observer_->Initialise(x0);
+  }
   mismatch_.Initialise(x0, static_cast<double>(p.end_us) * 1e-6);
   initialised_ = true;
   return true;
@@ -178,16 +216,25 @@ void PumpEstimator::PrepareReadings(const PumpPeriod& p) {
   winding_.Prepare(p.identifier);
   winding_.Offer(readings_);
   magnet_.Prepare(p.identifier, p.mean_iq_A, ElectricalSpeed_rad_per_s(motor_, p.inputs.speed_rpm));
-  magnet_.Offer(readings_);
+  // The voltage itself, not the identifier's back-EMF line fitted to the same samples: the two
+  // would count one measurement twice. Without the frame's level the voltage is left out
+  // (VoltageReading::Prepare) and the line stands in for it, as for an observer without voltage.
+  if (observer_->TakesVoltage()) {
+    voltage_.Prepare(p.drive, frame_.fault() != SensorFault::kNone);
+    voltage_.Offer(readings_);
+  }
+  if (!voltage_.Offered()) magnet_.Offer(readings_);
 }
 
 void PumpEstimator::RecordReadings(const ObserverReport& report) {
   frame_.Record(report.frame);
   winding_.Record(report.winding);
   magnet_.Record(report.magnet);
+  voltage_.Record(report.voltage, observer_->TakesVoltage());
   estimate_.frame_reading = frame_.status();
   estimate_.winding_reading = winding_.status();
   estimate_.magnet_reading = magnet_.status();
+  estimate_.voltage_reading = voltage_.status();
 }
 
 bool PumpEstimator::Step(const PumpPeriod& p) {
@@ -210,6 +257,7 @@ bool PumpEstimator::Step(const PumpPeriod& p) {
     return false;
   }
   RecordReadings(report);
+  if (report.voltage.fused) voltage_fused_us_ = p.end_us;
   ++counters_.steps;
   CheckModel(p, frame_.offered_degC());
   const bool diverged = Diverged();
@@ -225,10 +273,13 @@ void PumpEstimator::CheckModel(const PumpPeriod& p, double measured_degC) {
   double winding_degC = 0.0;
   const Eigen::VectorXd& w = model_.WindingWeights();
   for (int i = 0; i < w.size(); ++i) winding_degC += w(i) * observer_->Node_degC(i);
+  // With the voltage reading, the magnet it gives at the filter's winding and calibration.
+  const double magnet_degC = observer_->TakesVoltage()
+                                 ? voltage_.MagnetAt_degC(*observer_, model_, voltage_magnet_state_)
+                                 : magnet_.MagnetAt_degC(winding_degC);
   const std::uint64_t refused = mismatch_.refused_steps();
-  const MismatchFinding& f =
-      mismatch_.Step(p.inputs, p.dt_s, measured_degC, static_cast<double>(p.end_us) * 1e-6,
-                     magnet_.MagnetAt_degC(winding_degC));
+  const MismatchFinding& f = mismatch_.Step(p.inputs, p.dt_s, measured_degC,
+                                            static_cast<double>(p.end_us) * 1e-6, magnet_degC);
   counters_.mismatch_refused += mismatch_.refused_steps() - refused;
   if (NewVerdict(f, estimate_.mismatch)) ++estimate_.mismatch_changes;
   estimate_.mismatch = f;
@@ -266,11 +317,17 @@ void PumpEstimator::PublishNodes(bool diverged) {
 
 void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& report) {
   estimate_.time_us = p.end_us;
-  estimate_.winding_resistance_degC = winding_.degC();
-  estimate_.winding_resistance_sd_K = winding_.sd_K();
-  estimate_.magnet_flux_degC = estimate_.magnet_flux_sd_K = kNaN;
-  if (estimate_.initialised)
-    magnet_.Publish(*observer_, estimate_.magnet_flux_degC, estimate_.magnet_flux_sd_K);
+  estimate_.identifier_winding_degC = winding_.degC();
+  estimate_.calibration = observer_->VoltageCalibration();
+  if (observer_->TakesVoltage() && frame_.fault() == SensorFault::kNone) {
+    PublishFromVoltage(p);
+  } else {
+    estimate_.winding_resistance_degC = winding_.degC();
+    estimate_.winding_resistance_sd_K = winding_.sd_K();
+    estimate_.magnet_flux_degC = estimate_.magnet_flux_sd_K = kNaN;
+    if (estimate_.initialised)
+      magnet_.Publish(*observer_, estimate_.magnet_flux_degC, estimate_.magnet_flux_sd_K);
+  }
   estimate_.frame_measured_degC = frame_.offered_degC();
   estimate_.sensor_fault = frame_.fault();
   estimate_.ambient_degC = p.inputs.ambient_degC;
@@ -283,6 +340,34 @@ void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& r
   estimate_.sensor_steps = static_cast<std::uint64_t>(observer_->SensorSteps());
   estimate_.last_sensor_step_K = observer_->LastSensorStep_K();
   estimate_.stepped_offset_K = observer_->SteppedOffset_K();
+}
+
+void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
+  PumpEstimate& e = estimate_;
+  e.winding_resistance_degC = e.winding_resistance_sd_K = kNaN;
+  e.magnet_flux_degC = e.magnet_flux_sd_K = kNaN;
+  const bool fresh =
+      voltage_fused_us_ >= 0 &&
+      static_cast<double>(p.end_us - voltage_fused_us_) * 1e-6 <= config_.alarms.stale_after_s;
+  if (!fresh || !e.initialised) return;
+  // The flux follows the magnet: its node, as the filter has it with the voltage.
+  e.magnet_flux_degC = observer_->Node_degC(voltage_magnet_state_);
+  e.magnet_flux_sd_K = observer_->NodeSd_K(voltage_magnet_state_);
+  // The resistance follows the copper: the winding weights, while R0 is known (a resistance
+  // with R0 a nameplate's few percent off tells the winding no better than the frame does).
+  const Eigen::VectorXd& w = model_.WindingWeights();
+  if (!(w.sum() > 0.0)) return;
+  double winding_degC = 0.0;
+  for (int i = 0; i < w.size(); ++i) winding_degC += w(i) * observer_->Node_degC(i);
+  // R0's relative error as a winding temperature: R = R0 (1 + dR)(1 + alpha (Tw - T0)).
+  const auto& cu = motor_.copper;
+  const double calibration_sd_K =
+      e.calibration.dr_sd * (1.0 + cu.alpha_per_K * (winding_degC - cu.t0_degC)) / cu.alpha_per_K;
+  if (!(calibration_sd_K <= config_.max_calibration_sd_K)) return;
+  e.winding_resistance_degC = winding_degC;
+  // The nodes' sd floor (model error no state represents) applies to the winding too.
+  const double floor_K = observer_->SdFloor_K();
+  e.winding_resistance_sd_K = std::sqrt(observer_->WeightedVariance_K2(w) + floor_K * floor_K);
 }
 
 void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
@@ -314,7 +399,7 @@ void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
     estimate_.node_sd_K[k] =
         AlarmValues::PublishedSd_K(alarm_sd_[k], alarm_values_[k] - x_degC_(i));
   }
-  alarm_values_.back() = winding_.degC();
+  alarm_values_.back() = estimate_.winding_resistance_degC;
 }
 
 void PumpEstimator::StepAlarms(const PumpPeriod& p, bool diverged) {

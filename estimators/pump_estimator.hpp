@@ -30,6 +30,7 @@
 #include "estimators/pump_period.hpp"
 #include "estimators/readings/frame_reading.hpp"
 #include "estimators/readings/magnet_flux_reading.hpp"
+#include "estimators/readings/voltage_reading.hpp"
 #include "estimators/readings/winding_resistance_reading.hpp"
 #include "estimators/thermal_model.hpp"
 #include "estimators/thermal_observer.hpp"
@@ -56,6 +57,18 @@ struct PumpEstimatorConfig {
   /// cooling path (BoundaryOnlyThrough), else the standard one.
   std::optional<bool> disturbance_states;
   WindingResistanceReadingConfig winding;  ///< fuse, model_sd_K (stale_after_s from `alarms`)
+  /// The drive's q-axis voltage as a reading (the observers that take it: the disturbance-state
+  /// filter), and the priors of this pump's R0 and psi0 against the motor's nameplate.
+  VoltageReadingConfig voltage;
+  double r0_sd_rel = 0.03;
+  double psi0_sd_rel = 0.02;
+  /// The winding from resistance is published from the voltage reading while R0 is known to
+  /// this (its sd, as a winding temperature, K): after a cold start or a saved calibration.
+  double max_calibration_sd_K = 3.0;
+  /// A start with the pump at rest (below a tenth of rated speed) and its frame within this of
+  /// the ambient is a cold start: every node at the frame's temperature within cold_start_sd_K.
+  double cold_start_band_K = 3.0;
+  double cold_start_sd_K = 2.0;
   MagnetFluxReadingConfig magnet;  ///< magnet_node, min_sd_K, max_winding_gain (the rest set here)
   /// The node of the rotor-heat state and of the rotor-loss hypothesis; empty: the magnet's
   /// node, else "rotor" where the model has it.
@@ -86,13 +99,22 @@ struct PumpEstimate {
   /// (ThermalObserver::SettlingSd_K below 5 K).
   bool filter_converged = false;
   ResistanceEstimate resistance;  ///< the identifier's at the period's end
-  /// The winding from the identified resistance (NaN unless the identifier tracks, fresh) and
-  /// the identifier's sd of it.
+  /// The winding temperature the resistance reflects (the model's winding weights) and its sd:
+  /// with the drive's voltage as a reading, the observer's (fresh voltage, R0 known to
+  /// max_calibration_sd_K); else the identifier's while it tracks. NaN otherwise.
   double winding_resistance_degC = std::numeric_limits<double>::quiet_NaN();
   double winding_resistance_sd_K = std::numeric_limits<double>::quiet_NaN();
-  /// The magnet from the identified back-EMF at the filter's winding estimate, and its sd.
+  /// The magnet's temperature from its flux and its sd: with the voltage reading, the
+  /// observer's magnet node (fresh voltage); else from the identifier's back-EMF line at the
+  /// filter's winding estimate. NaN otherwise.
   double magnet_flux_degC = std::numeric_limits<double>::quiet_NaN();
   double magnet_flux_sd_K = std::numeric_limits<double>::quiet_NaN();
+  /// The resistance identifier's own winding temperature (Han 2019 eq. 3; NaN unless it tracks,
+  /// fresh): the paper's method, beside the fused one.
+  double identifier_winding_degC = std::numeric_limits<double>::quiet_NaN();
+  /// This pump's R0 and psi0 against the nameplate and the voltage offset, as the observer
+  /// estimates them (NaN without the voltage reading).
+  ThermalObserver::Calibration calibration;
   double frame_measured_degC = std::numeric_limits<double>::quiet_NaN();  ///< as fused
   SensorFault sensor_fault = SensorFault::kNone;
   /// The frame sensor's offset as the filter estimates it, K (NaN without it), the steps of it
@@ -105,7 +127,7 @@ struct PumpEstimate {
   double speed_rpm = std::numeric_limits<double>::quiet_NaN();
   double innovation_K = std::numeric_limits<double>::quiet_NaN();  ///< the frame row's
   double nis = std::numeric_limits<double>::quiet_NaN();           ///< the frame row's
-  ReadingStatus frame_reading, winding_reading, magnet_reading;
+  ReadingStatus frame_reading, winding_reading, magnet_reading, voltage_reading;
   AlarmState alarm;
   int time_to_trip_node = -1;          ///< state index the forecast is about (-1: none)
   std::uint64_t alarm_changes = 0;     ///< increments whenever `alarm` changes
@@ -218,6 +240,8 @@ class PumpEstimator {
   bool Diverged();
   void PublishNodes(bool diverged);
   void PublishReadings(const PumpPeriod& period, const ObserverReport& report);
+  /// The winding from resistance and the magnet from flux as the voltage reading gives them.
+  void PublishFromVoltage(const PumpPeriod& period);
   /// The bounds the levels act on, the alarm values and the published sds.
   void StepBounds(const PumpPeriod& period, bool diverged);
   /// The forecast and the alarms; counts a change worth publishing.
@@ -243,6 +267,9 @@ class PumpEstimator {
   FrameReading frame_;
   MagnetFluxReading magnet_;
   WindingResistanceReading winding_;
+  VoltageReading voltage_;
+  int voltage_magnet_state_ = -1;       ///< the node the flux follows (-1: no voltage reading)
+  std::int64_t voltage_fused_us_ = -1;  ///< the last step that fused the voltage
   MismatchDetector mismatch_;
   AlarmMonitor alarms_;
   AlarmValues values_;

@@ -22,6 +22,19 @@ struct IdentifierOutput {
   double block_age_s = std::numeric_limits<double>::quiet_NaN();
 };
 
+/// The drive's dq quantities averaged over the period's paired samples (the voltage equation's
+/// inputs; estimators/readings/voltage_reading.hpp).
+struct DriveAverages {
+  int samples = 0;  ///< paired samples in the period
+  double id_A = std::numeric_limits<double>::quiet_NaN();
+  double iq_A = std::numeric_limits<double>::quiet_NaN();
+  double ud_V = std::numeric_limits<double>::quiet_NaN();
+  double uq_V = std::numeric_limits<double>::quiet_NaN();
+  double w_rad_per_s = std::numeric_limits<double>::quiet_NaN();  ///< electrical
+  /// The sd of iq over the period's samples, A: a load change inside the period.
+  double iq_sd_A = std::numeric_limits<double>::quiet_NaN();
+};
+
 struct PumpPeriod {
   std::int64_t end_us = 0;  ///< the period's end (the pipeline's clock)
   double dt_s = 1.0;        ///< its length (one step over a long silence may be longer)
@@ -40,6 +53,7 @@ struct PumpPeriod {
   double telemetry_age_s = 0.0;
   double fast_age_s = std::numeric_limits<double>::quiet_NaN();
   IdentifierOutput identifier;
+  DriveAverages drive;
 };
 
 }  // namespace pumptherm::estimators

@@ -32,6 +32,13 @@ struct ThermalReadings {
   double magnet_degC = std::numeric_limits<double>::quiet_NaN();
   double magnet_sd_K = std::numeric_limits<double>::quiet_NaN();
   double magnet_winding_gain = 0.0;
+  /// The drive's q-axis voltage averaged over the period, less its known terms
+  /// (QAxisKnownTerms_V), at the period's mean q current and electrical speed, and the white sd
+  /// of that mean (estimators/voltage_equation.hpp); NaN uq: none.
+  double uq_V = std::numeric_limits<double>::quiet_NaN();
+  double uq_sd_V = std::numeric_limits<double>::quiet_NaN();
+  double iq_A = std::numeric_limits<double>::quiet_NaN();
+  double w_rad_per_s = std::numeric_limits<double>::quiet_NaN();
 };
 
 /// One reading's row in an update: whether it was fused, its innovation y - C x- (K) and that
@@ -47,7 +54,7 @@ struct ReadingRow {
 /// What one observer step did: the filter's update report and each reading's row.
 struct ObserverReport {
   const KalmanUpdateReport* update = nullptr;
-  ReadingRow frame, winding, magnet;
+  ReadingRow frame, winding, magnet, voltage;
   /// The step was refused (non-finite inputs or period, or a model that cannot be linearised
   /// there): nothing changed.
   bool refused = false;
@@ -67,6 +74,9 @@ class ThermalObserver {
   /// Every node (and the sensor's lag) at `x0_degC`, with the configured initial covariance;
   /// whatever else the filter estimates at its prior.
   virtual void Initialise(double x0_degC) = 0;
+  /// Every node (and the sensor's lag) at `x0_degC` within `sd_K` each, independently: a cold
+  /// start, the pump at rest at its frame's temperature; the rest at its prior.
+  virtual void InitialiseKnown(double x0_degC, double sd_K) = 0;
   /// Starts from node temperatures `x_degC` (n) with their covariance `s_K2` (n x n), the rest
   /// at its prior (a restart from a state that kept the nodes alone). Throws
   /// std::invalid_argument for wrong sizes or non-finite values.
@@ -94,6 +104,9 @@ class ThermalObserver {
   /// The variance of w^T x over the nodes (w of size NodeCount()), K^2: e.g. the winding's.
   /// No allocation.
   virtual double WeightedVariance_K2(const Eigen::VectorXd& w) const = 0;
+  /// The floor NodeSd_K adds in quadrature to every node's sd (model error no state
+  /// represents), K; 0 for a filter without one.
+  virtual double SdFloor_K() const { return 0.0; }
   /// The largest node sd that a (re)start leaves to settle, K: the filter has converged once it
   /// is small. Large by design for a node the readings barely see is not counted here (the
   /// disturbance filter's rotor, whose temperature integrates the history of an unknown heat),
@@ -128,6 +141,22 @@ class ThermalObserver {
   }
   /// The sum of the offset's steps, restored with the whole state (Restore()).
   virtual void RestoreSteppedOffset(double stepped_K) { (void)stepped_K; }
+
+  /// Whether the filter takes the drive's q-axis voltage as a reading (ThermalReadings::uq_V).
+  virtual bool TakesVoltage() const { return false; }
+  /// Its calibration as estimated: the relative errors of R0 and psi0 and the voltage offset
+  /// (V), with their sds (NaN without the voltage reading).
+  struct Calibration {
+    double dr = std::numeric_limits<double>::quiet_NaN();
+    double dr_sd = std::numeric_limits<double>::quiet_NaN();
+    double dpsi = std::numeric_limits<double>::quiet_NaN();
+    double dpsi_sd = std::numeric_limits<double>::quiet_NaN();
+    double dbeta = std::numeric_limits<double>::quiet_NaN();
+    double dbeta_sd = std::numeric_limits<double>::quiet_NaN();
+    double u0_V = std::numeric_limits<double>::quiet_NaN();
+    double u0_sd_V = std::numeric_limits<double>::quiet_NaN();
+  };
+  virtual Calibration VoltageCalibration() const { return {}; }
 };
 
 }  // namespace pumptherm::estimators

@@ -12,7 +12,8 @@ Runs `pumptherm plant demo` (unless --reuse), the gateway offline on its recordi
 Prints a table and writes judge.json into the output directory. Standard library only.
 With --check it exits 1 when a goal of the demo is missed (docs/virtual-sensor.md, "The demo
 judged node by node"): a node more than --max-error-K off or covered less than --min-coverage
-of the time, or an alarm on a pump whose truth never crosses the level, or a warning or trip
+of the time, the winding from resistance published less than 80 % of the time or covered less
+than --min-coverage of it, or an alarm on a pump whose truth never crosses the level, or a warning or trip
 later than 30 s after (or earlier than 120 s before) the true crossing.
 
 Example:
@@ -55,10 +56,14 @@ def interp(ts, vs, t):
 
 
 def judge_series(est_t, est_v, est_sd, truth_t, truth_v, skip_s):
-    """Max |error|, coverage (truth within +-2 sd) and the sample count after skip_s."""
-    max_err, inside, n = 0.0, 0, 0
+    """Max |error|, coverage (truth within +-2 sd), the sample count and the share of rows with
+    a value (available) after skip_s."""
+    max_err, inside, n, rows = 0.0, 0, 0, 0
     for t, v, sd in zip(est_t, est_v, est_sd):
-        if t < skip_s or not math.isfinite(v):
+        if t < skip_s:
+            continue
+        rows += 1
+        if not math.isfinite(v):
             continue
         truth = interp(truth_t, truth_v, t)
         if not math.isfinite(truth):
@@ -69,7 +74,8 @@ def judge_series(est_t, est_v, est_sd, truth_t, truth_v, skip_s):
         if math.isfinite(sd) and err <= 2.0 * sd:
             inside += 1
     return {"max_abs_error_K": round(max_err, 2) if n else None,
-            "coverage_2sd": round(inside / n, 3) if n else None, "samples": n}
+            "coverage_2sd": round(inside / n, 3) if n else None, "samples": n,
+            "available": round(n / rows, 3) if rows else None}
 
 
 def first_at_or_above(ts, vs, level):
@@ -142,7 +148,9 @@ def main():
 
     print(f"after {a.skip_s:.0f} s: max |error| K / coverage of +-2 sd")
     for p in report["pumps"]:
-        cells = [f"{k} {v['max_abs_error_K']} / {v['coverage_2sd']}" for k, v in {**p["nodes"], **p["extra"]}.items()]
+        cells = [f"{k} {v['max_abs_error_K']} / {v['coverage_2sd']}" for k, v in p["nodes"].items()]
+        cells += [f"{k} {v['max_abs_error_K']} / {v['coverage_2sd']} (available {v['available']})"
+                  for k, v in p["extra"].items()]
         print(f"  {p['name']}: " + "; ".join(cells))
         al = p["alarms"]
         print(f"    warning {al['warning_s']} s (truth {al['true_warning_s']}), trip {al['trip_s']} s "
@@ -166,6 +174,12 @@ def Missed(report, max_error_K, min_coverage):
                 out.append(f"{p['name']} {node}: max |error| {v['max_abs_error_K']} K > {max_error_K} K")
             if v["coverage_2sd"] is None or v["coverage_2sd"] < min_coverage:
                 out.append(f"{p['name']} {node}: coverage {v['coverage_2sd']} < {min_coverage}")
+        # The winding from resistance: published most of the time, and honest when it is.
+        w = p["extra"].get("winding_from_resistance")
+        if w is None or w["available"] is None or w["available"] < 0.8:
+            out.append(f"{p['name']} winding from resistance: available {w and w['available']} < 0.8")
+        elif w["coverage_2sd"] is None or w["coverage_2sd"] < min_coverage:
+            out.append(f"{p['name']} winding from resistance: coverage {w['coverage_2sd']} < {min_coverage}")
         al = p["alarms"]
         for level in ("warning", "trip"):
             got, truth = al[level + "_s"], al["true_" + level + "_s"]

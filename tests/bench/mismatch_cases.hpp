@@ -235,6 +235,9 @@ inline pe::PumpEstimatorConfig EstimatorConfig(const CaseSpec& spec, const std::
   c.disturbance = dc;
   // The pump sets the magnet reading's bias sd from its least sd (magnet_min_sd_K).
   c.magnet.min_sd_K = dc.magnet_bias_sd_K;
+  // The cases emulate the identifier's outputs, not the drive's voltages: the magnet reading
+  // from the back-EMF line is the one to fuse.
+  c.voltage.fuse = false;
   c.alarms.flat_after_s = spec.flat_after_s;
   c.mismatch.ambient_ramp_s = spec.fit_ambient_ramp_s;
   if (!spec.magnet_to_detector) c.mismatch_magnet = false;
