@@ -3,8 +3,8 @@
 # candump recording of the plant simulator. Checks: a row per paired current/voltage frame at
 # the drive's 100 Hz; identify --log gives exactly what identify -i gives on telemetry's CSV; the
 # frame temperature agrees with the simulator's measured CSV; a bad line and a line without a
-# timestamp are skipped with file:line and counted; the screen format gives the same rows; a node
-# ID without frames is exit 2 naming it.
+# timestamp are skipped with file:line and counted; the screen format and relative stamps (-t z,
+# -t d) give the same rows; a directory or a node ID without frames is exit 2 naming it.
 #   telemetry_cli_test.sh PUMPTHERM
 set -u
 exe=$1
@@ -43,6 +43,29 @@ assert abs(last - truth) <= 0.3, (last, truth)
 assert all(len(r["iq_A"]) < 14 for r in rows), "numbers carry binary noise"
 print(f"frame_C at the end: {last} (simulator's sensor {truth}); {len(rows)} rows")
 PY
+# The same recording with candump -t z stamps (since the first frame) and -t d stamps (since the
+# previous frame): both read as seconds since the start, the same rows as Unix time's.
+python3 - "$tmp/d/demo.log" "$tmp/z.log" "$tmp/dd.log" <<'PY' || fail "relative stamps"
+import sys
+lines = open(sys.argv[1]).read().splitlines()
+us = [int(l[1:l.index(")")].replace(".", "")) for l in lines]
+rest = [l[l.index(")"):] for l in lines]
+fmt = lambda t: f"({t // 1000000}.{t % 1000000:06d}"
+open(sys.argv[2], "w").write("".join(fmt(t - us[0]) + r + "\n" for t, r in zip(us, rest)))
+prev = [us[0]] + us[:-1]
+open(sys.argv[3], "w").write("".join(fmt(t - p) + r + "\n" for t, p, r in zip(us, prev, rest)))
+PY
+"$exe" telemetry --log "$tmp/z.log" --node-id 3 -o "$tmp/p3z.csv" 2> "$tmp/z.txt" || fail "telemetry on -t z"
+"$exe" telemetry --log "$tmp/dd.log" --node-id 3 -o "$tmp/p3d.csv" 2> "$tmp/d.txt" || fail "telemetry on -t d"
+grep -q "since the first frame" "$tmp/z.txt" || { cat "$tmp/z.txt"; fail "-t z stamps not named"; }
+grep -q "since the previous frame" "$tmp/d.txt" || { cat "$tmp/d.txt"; fail "-t d stamps not named"; }
+cmp -s "$tmp/p3z.csv" "$tmp/p3d.csv" || fail "-t d stamps give other rows than -t z"
+cut -d, -f2- "$tmp/p3log.csv" > "$tmp/abs.cols"
+cut -d, -f2- "$tmp/p3z.csv" > "$tmp/z.cols"
+cmp -s "$tmp/abs.cols" "$tmp/z.cols" || fail "relative stamps give other values than Unix time"
+"$exe" telemetry --log "$tmp/d" --node-id 3 > /dev/null 2> "$tmp/dir.txt"
+[ $? -eq 2 ] || fail "a directory as --log: expected exit 2"
+grep -q "is a directory" "$tmp/dir.txt" || { cat "$tmp/dir.txt"; fail "a directory as --log: message"; }
 "$exe" identify -i "$tmp/p3.csv" -o "$tmp/a.csv" 2>/dev/null || fail "identify -i"
 "$exe" identify --log "$tmp/d/demo.log" --node-id 3 -o "$tmp/b.csv" 2>/dev/null || fail "identify --log"
 cmp -s "$tmp/a.csv" "$tmp/b.csv" || fail "identify --log differs from identify -i on telemetry's CSV"

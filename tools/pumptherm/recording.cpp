@@ -3,6 +3,7 @@
 #include <fmt/core.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <limits>
@@ -148,6 +149,9 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
   }
   std::ifstream file;
   if (s.log != "-") {
+    std::error_code ec;
+    if (std::filesystem::is_directory(s.log, ec))
+      throw InputError(fmt::format("--log {}: is a directory, not a candump log", s.log));
     file.open(s.log);
     if (!file) throw InputError(fmt::format("--log {}: cannot open", s.log));
   }
@@ -159,8 +163,31 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
                              mapping.input(MappingInput::kAmbientTempDegC).has_value();
   Assembler assembler(motor, status_mapped, csv, counts);
   std::vector<double> values(64);
+  // The stamps' time base (Unix time, or candump -t z / -t d), from the first ones, as the
+  // daemon reads a recording (protocol::ClassifyCandumpStamps).
+  std::vector<std::string> held;
+  std::vector<std::int64_t> stamps;
   std::string line;
-  while (std::getline(in, line)) {
+  while (stamps.size() < protocol::kCandumpStampsToClassify && std::getline(in, line)) {
+    const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
+    if (p.ok && p.record.has_time) stamps.push_back(p.record.time_us);
+    held.push_back(std::move(line));
+  }
+  protocol::CandumpTimeline timeline(protocol::ClassifyCandumpStamps(stamps.data(), stamps.size()));
+  if (timeline.base() != protocol::CandumpTimeBase::kAbsolute) {
+    fmt::print(stderr,
+               "{}: the timestamps are {}, not Unix time: read as seconds since the start\n", where,
+               protocol::CandumpTimeBaseName(timeline.base()));
+  }
+  std::size_t next_held = 0;
+  auto next_line = [&]() -> bool {
+    if (next_held < held.size()) {
+      line = std::move(held[next_held++]);
+      return true;
+    }
+    return static_cast<bool>(std::getline(in, line));
+  };
+  while (next_line()) {
     ++counts.lines;
     const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
     if (p.skip) continue;
@@ -180,6 +207,7 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
       }
       continue;
     }
+    const std::int64_t time_us = timeline.TimeUs(p.record.time_us);
     const protocol::CanFrame& f = p.record.frame;
     if (f.error || f.remote || f.id < s.node_id) continue;
     if (!s.interface.empty() && p.record.interface != s.interface) continue;
@@ -204,7 +232,7 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
       status = status || b.input == MappingInput::kFrameTempDegC ||
                b.input == MappingInput::kSpeedMechRpm;
     }
-    assembler.OnFrame(p.record.time_us, v, currents, voltages, status);
+    assembler.OnFrame(time_us, v, currents, voltages, status);
   }
   if (counts.bad_lines > kWarnedLines) {
     fmt::print(stderr, "{}: {} bad lines skipped in all (the first {} shown)\n", where,
