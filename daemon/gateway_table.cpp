@@ -41,13 +41,23 @@ std::string Gateway::StatusLine() const {
 
 namespace {
 
-/// The table's Rs: "-" before identification and while the estimate is outside the motor's
-/// plausible band (its number then says nothing of the winding).
+/// The table's Rs, as current as the winding it stands for: the copper law at the published
+/// winding from resistance and this pump's R0 (the voltage fused in the filter); else the
+/// identifier's while it tracks or converges; "held" while it holds an old value (it would read
+/// as current), "-" before identification, "implaus." outside the motor's plausible band.
 template <typename Num>
-std::string RsCell(const estimators::ResistanceEstimate& r, Num num) {
+std::string RsCell(const PumpSnapshot& s, const estimators::MotorDescription& motor, Num num) {
+  const auto& cu = motor.copper;
+  if (std::isfinite(s.winding_resistance_degC) && std::isfinite(s.calibration.dr)) {
+    return num(cu.r0_ohm * (1.0 + s.calibration.dr) *
+                   (1.0 + cu.alpha_per_K * (s.winding_resistance_degC - cu.t0_degC)),
+               4);
+  }
   using S = estimators::ResistanceStatus;
+  const estimators::ResistanceEstimate& r = s.resistance;
   if (r.status == S::kInitialising) return "-";
   if (r.status == S::kImplausible) return "implaus.";
+  if (r.status == S::kHeld || r.status == S::kNotIdentifiable) return "held";
   return num(r.resistance_ohm, 4);
 }
 
@@ -97,7 +107,7 @@ std::string Gateway::PumpTable() const {
             : "-";
     out += fmt::format("{:<12} {:>7} {:>13} {:>20} {:>14} {:>8}  {}\n", p->config().name,
                        num(s.speed_rpm, 0), sensor, hot, num(s.winding_resistance_degC, 1),
-                       RsCell(s.resistance, num), TableAlarmCell(*p, alarm));
+                       RsCell(s, p->motor(), num), TableAlarmCell(*p, alarm));
   }
   return out;
 }
