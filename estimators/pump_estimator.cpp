@@ -269,14 +269,12 @@ bool PumpEstimator::Step(const PumpPeriod& p) {
 }
 
 void PumpEstimator::CheckModel(const PumpPeriod& p, double measured_degC) {
-  // The magnet temperature of this step's back-EMF row at the filter's winding estimate.
-  double winding_degC = 0.0;
-  const Eigen::VectorXd& w = model_.WindingWeights();
-  for (int i = 0; i < w.size(); ++i) winding_degC += w(i) * observer_->Node_degC(i);
-  // With the voltage reading, the magnet it gives at the filter's winding and calibration.
-  const double magnet_degC = observer_->TakesVoltage()
-                                 ? voltage_.MagnetAt_degC(*observer_, model_, voltage_magnet_state_)
-                                 : magnet_.MagnetAt_degC(winding_degC);
+  // The magnet temperature of this step's back-EMF row at the filter's winding estimate; with
+  // the voltage reading, the magnet it gives at the filter's winding and calibration.
+  const double magnet_degC =
+      observer_->TakesVoltage()
+          ? voltage_.MagnetAt_degC(*observer_, model_, voltage_magnet_state_)
+          : magnet_.MagnetAt_degC(observer_->Weighted_degC(model_.WindingWeights()));
   const std::uint64_t refused = mismatch_.refused_steps();
   const MismatchFinding& f = mismatch_.Step(p.inputs, p.dt_s, measured_degC,
                                             static_cast<double>(p.end_us) * 1e-6, magnet_degC);
@@ -357,8 +355,7 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
   // with R0 a nameplate's few percent off tells the winding no better than the frame does).
   const Eigen::VectorXd& w = model_.WindingWeights();
   if (!(w.sum() > 0.0)) return;
-  double winding_degC = 0.0;
-  for (int i = 0; i < w.size(); ++i) winding_degC += w(i) * observer_->Node_degC(i);
+  const double winding_degC = observer_->Weighted_degC(w);
   // R0's relative error as a winding temperature: R = R0 (1 + dR)(1 + alpha (Tw - T0)).
   const auto& cu = motor_.copper;
   const double calibration_sd_K =

@@ -100,6 +100,13 @@ class ThermalObserver {
   /// Node i's estimate, degC, and its sd as reported (with any floor the filter keeps for model
   /// error no state represents), K.
   double Node_degC(int i) const { return State()(i); }
+  /// w^T x over the nodes (w of at most NodeCount() entries): e.g. the winding's temperature
+  /// from the model's winding weights, degC.
+  double Weighted_degC(const Eigen::VectorXd& w) const {
+    double sum = 0.0;
+    for (int i = 0; i < w.size(); ++i) sum += w(i) * Node_degC(i);
+    return sum;
+  }
   virtual double NodeSd_K(int i) const = 0;
   /// The variance of w^T x over the nodes (w of size NodeCount()), K^2: e.g. the winding's.
   /// No allocation.

@@ -100,8 +100,7 @@ void MagnetFluxReading::Publish(const ThermalObserver& observer, double& degC, d
   degC = sd_K = std::nan("");
   if (!std::isfinite(z_degC_) || gated_) return;
   const Eigen::VectorXd& w = model_.WindingWeights();
-  double winding_degC = 0.0;
-  for (int i = 0; i < w.size(); ++i) winding_degC += w(i) * observer.Node_degC(i);
+  const double winding_degC = observer.Weighted_degC(w);
   const double z_sd_K = std::max(z_sd_K_, config_.min_sd_K);
   degC = z_degC_ - gain_ * winding_degC;
   sd_K = std::sqrt(z_sd_K * z_sd_K + gain_ * gain_ * observer.WeightedVariance_K2(w));

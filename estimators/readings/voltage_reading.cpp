@@ -61,8 +61,7 @@ double VoltageReading::MagnetAt_degC(const ThermalObserver& observer, const Ther
   const ThermalObserver::Calibration c = observer.VoltageCalibration();
   if (!std::isfinite(c.dr)) return std::nan("");
   const Eigen::VectorXd& w = model.WindingWeights();
-  double winding_degC = 0.0;
-  for (int i = 0; i < w.size(); ++i) winding_degC += w(i) * observer.Node_degC(i);
+  const double winding_degC = observer.Weighted_degC(w);
   // The equation at the magnet's reference temperature, and its slope in Tm: linear in Tm.
   QAxisState s;
   s.winding_degC = winding_degC;
