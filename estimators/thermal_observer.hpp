@@ -96,7 +96,8 @@ class ThermalObserver {
   virtual double WeightedVariance_K2(const Eigen::VectorXd& w) const = 0;
   /// The largest node sd that a (re)start leaves to settle, K: the filter has converged once it
   /// is small. Large by design for a node the readings barely see is not counted here (the
-  /// disturbance filter's rotor), only what knowing the level and the dynamics removes.
+  /// disturbance filter's rotor, whose temperature integrates the history of an unknown heat),
+  /// only what knowing the level and the dynamics removes.
   virtual double SettlingSd_K() const = 0;
 
   /// Whether the filter models the frame sensor's first-order lag (a state of its own): a

@@ -399,7 +399,7 @@ case_readers() {
     --duration-s 10 >/dev/null 2>&1 &
   local forger=$!
   local out
-  out=$(in_ns "$pumptherm" watch --lcm-url "$url" --prefix HALL1 --gateway-key "$tmp/hall1.key.pub" \
+  out=$(in_ns "$pumptherm" watch --url "$url" --prefix HALL1 --gateway-key "$tmp/hall1.key.pub" \
     --period-s 4 --count 2)
   wait "$forger"
   stop

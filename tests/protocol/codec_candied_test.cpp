@@ -20,6 +20,9 @@
 //     exponent on its SG_ line.
 //  4. Raw values wider than 53 bits: candied builds them with parseInt on a bit string into a
 //     double; they are compared with a relative tolerance of 1e-15 instead of exactly.
+//  5. Long names (Vector's `SystemMessageLongSymbol` / `SystemSignalLongSymbol` attributes):
+//     candied ignores them and names messages and signals as the BO_/SG_ statements do; the test
+//     asks candied by those names and compares the same signals.
 // Not a defect but a different choice: candied clamps the physical value to [min, max] when the
 // DBC gives a range; DBC ranges are informational, so our codec does not clamp. Where candied
 // clamped, the test checks candied's value is the clamp of ours.
@@ -34,6 +37,7 @@
 #include <fstream>
 #include <map>
 #include <random>
+#include <regex>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -161,6 +165,41 @@ struct Tally {
   std::size_t clamped_by_candied = 0;
 };
 
+/// candied 2.2.0 ignores Vector's long-name attributes (`SystemMessageLongSymbol`,
+/// `SystemSignalLongSymbol`) and names messages and signals as the BO_ and SG_ statements do (at
+/// most 32 characters); our parser names them by the long names (protocol/dbc.hpp). These are the
+/// statements' names, to ask candied by.
+struct StatementNames {
+  std::map<std::uint32_t, std::string> message;                         ///< by raw BO_ id
+  std::map<std::pair<std::uint32_t, std::string>, std::string> signal;  ///< (id, long) -> short
+
+  std::string Message(const DbcMessage& m) const {
+    const auto it = message.find(RawId(m));
+    return it == message.end() ? m.name : it->second;
+  }
+  std::string Signal(const DbcMessage& m, const DbcSignal& s) const {
+    const auto it = signal.find({RawId(m), s.name});
+    return it == signal.end() ? s.name : it->second;
+  }
+  static std::uint32_t RawId(const DbcMessage& m) { return m.id | (m.extended ? 0x80000000u : 0u); }
+};
+
+StatementNames ReadStatementNames(const std::vector<std::string>& lines) {
+  static const std::regex kMessage(R"re(^BO_\s+(\d+)\s+(\w+)\s*:)re");
+  static const std::regex kLongSignal(
+      R"re(^BA_\s+"SystemSignalLongSymbol"\s+SG_\s+(\d+)\s+(\w+)\s+"([^"]*)")re");
+  StatementNames names;
+  std::smatch m;
+  for (const std::string& l : lines) {
+    if (std::regex_search(l, m, kMessage)) {
+      names.message[static_cast<std::uint32_t>(std::stoul(m[1]))] = m[2];
+    } else if (std::regex_search(l, m, kLongSignal)) {
+      names.signal[{static_cast<std::uint32_t>(std::stoul(m[1])), m[3]}] = m[2];
+    }
+  }
+  return names;
+}
+
 void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_message,
                     Tally& tally) {
   SCOPED_TRACE(path.string());
@@ -173,6 +212,7 @@ void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_mes
     std::string l;
     while (std::getline(in, l)) lines.push_back(l);
   }
+  const StatementNames statement = ReadStatementNames(lines);
 
   // Random frames, exactly as long as each message needs.
   std::mt19937_64 rng(seed);
@@ -185,7 +225,7 @@ void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_mes
       for (int k = 0; k < frames_per_message; ++k) {
         std::vector<std::uint8_t> data(codec.message(mi).min_bytes());
         for (auto& b : data) b = static_cast<std::uint8_t>(rng());
-        f << dbc.messages[mi].name << ' ';
+        f << statement.Message(dbc.messages[mi]) << ' ';
         for (auto b : data) f << "0123456789ABCDEF"[b >> 4] << "0123456789ABCDEF"[b & 15];
         f << '\n';
         frames.emplace_back(mi, std::move(data));
@@ -198,7 +238,7 @@ void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_mes
   // 1. Definitions as both parsed them.
   for (const auto& m : dbc.messages) {
     for (const auto& s : m.signals) {
-      const auto it = candied.defs.find(m.name + "." + s.name);
+      const auto it = candied.defs.find(statement.Message(m) + "." + statement.Signal(m, s));
       if (it == candied.defs.end()) {
         EXPECT_TRUE(LineHasExponent(lines, s.line))
             << m.name << "." << s.name << " (line " << s.line << ") missing from candied's parse";
@@ -225,7 +265,7 @@ void CrossCheckFile(const fs::path& path, std::uint64_t seed, int frames_per_mes
     ASSERT_EQ(mc.Decode(data, ours), CodecStatus::kOk);
     for (std::size_t si = 0; si < m.signals.size(); ++si) {
       const DbcSignal& s = m.signals[si];
-      const auto it = candied.sigs.find({static_cast<int>(fi), s.name});
+      const auto it = candied.sigs.find({static_cast<int>(fi), statement.Signal(m, s)});
       if (it == candied.sigs.end()) continue;  // dropped by candied, counted above
       if (SignalEndByte(s) > m.size_bytes) {
         // Past the declared length: null for us in every frame, bits past the payload for candied.

@@ -66,7 +66,7 @@ if [[ $(id -u) -eq 0 ]] && ip netns add "$ns" 2>/dev/null; then
   url='udpm://239.255.76.67:7667?ttl=0'
   ip netns exec "$ns" "$pumptherm" replay "$recording" --config "$tmp/nolcm.toml" --pace 25 \
     --lcm-url "$url" > /dev/null 2>&1 &
-  out=$(ip netns exec "$ns" "$pumptherm" watch --lcm-url "$url" --period-s 1 --count 2) || true
+  out=$(ip netns exec "$ns" "$pumptherm" watch --url "$url" --period-s 1 --count 2) || true
   wait
   if grep -q pump1 <<<"$out" && grep -q pump3 <<<"$out" && grep -q 'winding ' <<<"$out"; then
     echo "ok: pumptherm watch follows the paced replay (pump1..pump3, nodes by name)"

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string_view>
 
 #include "daemon/operator_text.hpp"
 #include "estimators/alarms.hpp"
@@ -232,12 +233,14 @@ std::vector<std::string> PumpWatch::Pumps() const {
   return out;
 }
 
-// Columns: pump 12, age 10, alarm 28, hottest 21, diagnosis the rest of kWatchColumns; a mark
-// other than "signed" (--gateway-key) takes the diagnosis's place.
+// Columns: pump 12, age 10, alarm 28, hottest 21, diagnosis the rest of kWatchColumns. With
+// --gateway-key, a pump whose messages the gateway signed ends its row with "signed"; any other
+// mark takes the diagnosis's place.
 std::string PumpWatch::Table(std::int64_t now_us, double stale_after_s,
                              const std::map<std::string, std::string>& marks) const {
   constexpr std::size_t kPump = 12, kAge = 10, kAlarm = 28, kHot = 21;
   constexpr std::size_t kDiagnosis = kWatchColumns - kPump - kAge - kAlarm - kHot - 4;
+  constexpr std::string_view kSignedMark = "  signed";
   std::string out = fmt::format("{:<12} {:>10} {:<28} {:<21} {}\n", "pump", "age", "alarm",
                                 "hottest, degC ±2 sd", "diagnosis");
   for (const auto& [name, e] : pumps_) {
@@ -247,15 +250,18 @@ std::string PumpWatch::Table(std::int64_t now_us, double stale_after_s,
     const std::string measured = node == measured_nodes_.end() ? e.measured_node : node->second;
     const std::string age = (stale ? "STALE " : "") + AgeText(now_us, last);
     const auto mark = marks.find(name);
-    const std::string last_cell = mark != marks.end() && mark->second != "signed"
-                                      ? "! " + mark->second
-                                  : e.alarm_rx_us >= 0 ? Diagnosis(e.alarm, measured, false)
-                                                       : "-";
+    const bool is_signed = mark != marks.end() && mark->second == "signed";
+    const std::string diagnosis = e.alarm_rx_us >= 0 ? Diagnosis(e.alarm, measured, false) : "-";
+    const std::string last_cell = mark != marks.end() && !is_signed
+                                      ? Fit("! " + mark->second, kDiagnosis)
+                                  : is_signed ? Pad(Fit(diagnosis, kDiagnosis - kSignedMark.size()),
+                                                    kDiagnosis - kSignedMark.size()) +
+                                                    std::string(kSignedMark)
+                                              : Fit(diagnosis, kDiagnosis);
     const std::string line =
         fmt::format("{} {:>10} {} {} {}", Pad(Fit(name, kPump), kPump), age,
                     Pad(Fit(AlarmCell(e.alarm, e.alarm_rx_us >= 0), kAlarm), kAlarm),
-                    Pad(Fit(e.temps_rx_us >= 0 ? Hottest(e.temps) : "-", kHot), kHot),
-                    Fit(last_cell, kDiagnosis));
+                    Pad(Fit(e.temps_rx_us >= 0 ? Hottest(e.temps) : "-", kHot), kHot), last_cell);
     out += line + "\n";
   }
   return out;
