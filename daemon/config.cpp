@@ -327,6 +327,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     m.forecast_horizon_s = r.Number("forecast_horizon_s", m.forecast_horizon_s, 0.0, 86400.0);
     m.forecast_clear_s = r.Number("forecast_clear_s", m.forecast_clear_s, 0.0, 86400.0);
     m.sensor_fault_clear_s = r.Number("sensor_fault_clear_s", m.sensor_fault_clear_s, 0.0, 86400.0);
+    m.silence_delay_s = r.Number("silence_delay_s", m.silence_delay_s, 0.0, 86400.0);
     m.trip_sd_factor = r.Number("trip_sd_factor", m.trip_sd_factor, 0.0, 10.0);
     m.warning_sd_factor = r.Number("warning_sd_factor", m.warning_sd_factor, 0.0, 10.0);
     a.clear_can_interfaces = r.Strings("clear_can_interfaces");

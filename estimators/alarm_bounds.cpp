@@ -40,6 +40,22 @@ ThermalInputs WorseInputs(const ThermalInputs& a, const ThermalInputs& b) {
   return w;
 }
 
+ThermalInputs WorstInputs(const ThermalInputs& held, const SilenceWorstLoad& worst) {
+  ThermalInputs w = held;
+  w.iq_A = std::max(worst.max_current_A, std::hypot(held.id_A, held.iq_A));
+  w.id_A = 0.0;
+  w.speed_rpm = std::max(worst.max_speed_rpm, std::abs(held.speed_rpm));
+  return w;
+}
+
+SilenceBound::SilenceBound(const SilenceWorstLoad& worst, double delay_s)
+    : worst_(worst), delay_s_(delay_s) {
+  if (!(delay_s >= 0.0) || !(worst.max_current_A >= 0.0) || !(worst.max_speed_rpm >= 0.0)) {
+    throw std::invalid_argument(
+        "SilenceBound: the delay, the largest current and the largest speed must be >= 0");
+  }
+}
+
 bool SilenceBound::Propagate(const ThermalModel& model, const ThermalInputs& in, double dt_s,
                              Eigen::VectorXd& x) {
   try {
@@ -56,16 +72,57 @@ bool SilenceBound::Propagate(const ThermalModel& model, const ThermalInputs& in,
   return x.allFinite();
 }
 
-void SilenceBound::Begin(const Eigen::VectorXd& x_degC, const ThermalInputs& in, double start_s) {
+void SilenceBound::Begin(const Eigen::VectorXd& x_degC, const ThermalInputs& in, double start_s,
+                         const Eigen::VectorXd& now_degC, double now_s) {
   start_degC_ = x_degC;
   start_inputs_ = in;
   start_s_ = start_s;
   bound_degC_.resize(0);
+  EndWorstCase();
+  from_degC_ = now_degC;
+  from_inputs_ = in;
+  from_s_ = now_s;
 }
 
 void SilenceBound::Reset() {
   start_degC_.resize(0);
   bound_degC_.resize(0);
+  from_degC_.resize(0);
+  EndWorstCase();
+}
+
+void SilenceBound::EndWorstCase() {
+  worst_now_degC_.resize(0);
+  worst_then_degC_.resize(0);
+  acting_ = false;
+}
+
+bool SilenceBound::RunWorstTo(const ThermalModel& model, double to_s, Eigen::VectorXd& x,
+                              double& at_s) const {
+  if (!(to_s > at_s)) return true;
+  const bool ok = Propagate(model, worst_inputs_, to_s - at_s, x);
+  at_s = to_s;
+  return ok;
+}
+
+void SilenceBound::StepWorstCase(const ThermalModel& model, double end_s, double min_silence_s) {
+  if (!(worst_.max_current_A > 0.0) || from_degC_.size() == 0) return;
+  if (worst_now_degC_.size() != from_degC_.size()) {
+    // The silence's first step: from the estimate after the last step with inputs (the load may
+    // have risen right after it).
+    worst_inputs_ = WorstInputs(from_inputs_, worst_);
+    worst_now_degC_ = worst_then_degC_ = from_degC_;
+    now_s_ = then_s_ = from_s_;
+  }
+  // Stepped on from where each stands (re-linearised at each step: exact for a network linear
+  // in its temperatures, and close for one that is not).
+  if (!RunWorstTo(model, end_s, worst_now_degC_, now_s_) ||
+      !RunWorstTo(model, end_s - delay_s_, worst_then_degC_, then_s_)) {
+    EndWorstCase();
+    from_degC_.resize(0);  // nothing to restart it from until the next step with inputs
+    return;
+  }
+  acting_ = end_s - from_s_ > min_silence_s;
 }
 
 void SilenceBound::Step(const ThermalModel& model, const ThermalInputs& in, bool fresh,
@@ -75,8 +132,10 @@ void SilenceBound::Step(const ThermalModel& model, const ThermalInputs& in, bool
   if (!fresh) {
     if (bound_degC_.size() > 0 && !Propagate(model, in, period_s, bound_degC_))
       bound_degC_.resize(0);
+    StepWorstCase(model, end_s, min_silence_s);
     return;
   }
+  EndWorstCase();
   // The silence: the steps between the last one with inputs and this one.
   const double since_s = end_s - start_s_;
   if (start_degC_.size() == x_degC.size() && since_s - period_s > min_silence_s) {
@@ -95,9 +154,9 @@ void SilenceBound::Step(const ThermalModel& model, const ThermalInputs& in, bool
         x_degC + k * sd_K.unaryExpr([](double s) { return std::isfinite(s) ? s : 0.0; });
     if ((bound_degC_.array() <= upper.array()).all()) bound_degC_.resize(0);
   }
-  start_degC_ = x_degC;
-  start_inputs_ = in;
-  start_s_ = end_s;
+  start_degC_ = from_degC_ = x_degC;
+  start_inputs_ = from_inputs_ = in;
+  start_s_ = from_s_ = end_s;
 }
 
 void WithoutBoundaryPaths(ThermalLinearModel& lin, double boundary_degC) {

@@ -14,8 +14,8 @@ constexpr double kPublishedBandSds = 2.0;
 }  // namespace
 
 AlarmValues::AlarmValues(const ThermalModel& model, const AlarmConfig& config, double lag_s,
-                         double period_s)
-    : model_(model), lag_bias_(lag_s, period_s) {
+                         double period_s, const SilenceWorstLoad& silence)
+    : model_(model), lag_bias_(lag_s, period_s), silence_(silence, config.silence_delay_s) {
   const int n = model.StateCount();
   // The ring reaches back over the stuck test's flat time and the fault's hold, plus a margin.
   const double reach_s = config.flat_after_s + config.hold_s + 2.0 * period_s;
@@ -80,12 +80,20 @@ void AlarmValues::Remember(std::int64_t end_us, bool valid, const Eigen::VectorX
 
 double AlarmValues::Value_degC(int i, double estimate_degC) const {
   // The highest of: the estimate raised by the lagging reading's bias, the worst case while
-  // running blind, the worst case of a telemetry silence.
+  // running blind, the worst case of a telemetry silence (as it was silence_delay_s ago) and
+  // the bound after one.
   double v = estimate_degC + lag_bias_.bias_K();
-  for (const Eigen::VectorXd* b : {&blind_.bound_degC(), &silence_.bound_degC()}) {
+  for (const Eigen::VectorXd* b :
+       {&blind_.bound_degC(), &silence_.bound_degC(), &silence_.delayed_worst_degC()}) {
     if (b->size() > i && !std::isnan((*b)(i))) v = std::max(v, (*b)(i));
   }
   return v;
+}
+
+double AlarmValues::BandTop_degC(int i, double estimate_degC) const {
+  const double v = Value_degC(i, estimate_degC);
+  const Eigen::VectorXd& w = silence_.worst_degC();
+  return w.size() > i && !std::isnan(w(i)) ? std::max(v, w(i)) : v;
 }
 
 double AlarmValues::PublishedSd_K(double filter_sd_K, double above_K) {

@@ -6,11 +6,14 @@
 ///    reading stands in), the worst case of a cooling failure nothing could see (BlindBound),
 ///    started from the estimate when the measurements stopped (for a stuck sensor, from the
 ///    step that fused the reading's last change: it was fused until the stuck test found it);
-///  - after a telemetry silence, the load that may have risen unseen (SilenceBound);
+///  - during a telemetry silence, the worst case of the motor's largest current from the
+///    estimate at its start, as it was silence_delay_s ago; after it, the load that may have
+///    risen unseen (SilenceBound);
 ///  - with a filter that fuses a lagging reading as the node itself, the reading's rise over
 ///    its lag (LagBias).
 /// Where a bound lies above the estimate, the published sd is widened so that the band
-/// x +- 2 sd reaches it. Pure library: time enters as arguments; no allocation per step.
+/// x +- 2 sd reaches it (during a silence, the worst case now: BandTop_degC). Pure library: time
+/// enters as arguments; no allocation per step outside a silence.
 
 #include <Eigen/Dense>
 #include <cstdint>
@@ -48,20 +51,28 @@ class AlarmValues {
  public:
   /// For a network of `model`'s nodes; `lag_s` the lag of a reading the filter does not model
   /// (0: none); the ring of recent estimates reaches over the stuck test's flat time and the
-  /// fault's hold (`config`). Throws std::invalid_argument for a period that is not positive.
-  AlarmValues(const ThermalModel& model, const AlarmConfig& config, double lag_s, double period_s);
+  /// fault's hold (`config`); `silence` the load a telemetry silence may hide (its worst case
+  /// acts config.silence_delay_s late). Throws std::invalid_argument for a period that is not
+  /// positive or a negative delay, current or speed.
+  AlarmValues(const ThermalModel& model, const AlarmConfig& config, double lag_s, double period_s,
+              const SilenceWorstLoad& silence = {});
 
   void Step(const AlarmValuesStep& step);
   /// The value node i's levels act on, for its estimate `estimate_degC`.
   double Value_degC(int i, double estimate_degC) const;
+  /// The top of the band published for node i: the value its levels act on, or during a silence
+  /// the worst case now when higher (the levels see it silence_delay_s late).
+  double BandTop_degC(int i, double estimate_degC) const;
   /// The sd published for a node whose filter sd is `filter_sd_K` and whose alarm value lies
   /// `above_K` above its estimate (NaN or <= 0: none): at least above_K / 2.
   static double PublishedSd_K(double filter_sd_K, double above_K);
   /// A blind bound is running (the previous step was blind).
   bool Blind() const { return blind_.bound_degC().size() > 0; }
-  /// A silence from `start_s` (a restart: the time down), from the saved estimate and inputs.
-  void BeginSilence(const Eigen::VectorXd& x_degC, const ThermalInputs& in, double start_s) {
-    silence_.Begin(x_degC, in, start_s);
+  /// A silence from `start_s` (a restart: the time down), from the saved estimate and inputs;
+  /// its worst case while still silent from `now_degC` at `now_s` (SilenceBound::Begin).
+  void BeginSilence(const Eigen::VectorXd& x_degC, const ThermalInputs& in, double start_s,
+                    const Eigen::VectorXd& now_degC, double now_s) {
+    silence_.Begin(x_degC, in, start_s, now_degC, now_s);
   }
 
  private:

@@ -112,6 +112,11 @@ struct AlarmConfig {
   double sensor_fault_clear_s = 30.0;
   /// A second-sender warning clears after this long without new evidence of one (s).
   double second_sender_clear_s = 600.0;
+  /// During a telemetry silence the levels act on the worst case of the motor's largest current
+  /// as it was this long ago (s; AlarmValues): a trip comes this long (plus the hold) after the
+  /// earliest moment any load the drive allows could have crossed the level, never later, and
+  /// a shorter silence trips nothing. 0: on the worst case itself.
+  double silence_delay_s = 25.0;
   int sensor_node = -1;  ///< node index the measured sensor sits on (reports)
   /// Levels act on an upper bound of each estimate, mean + k sd (docs/daemon.md, "Alarm rule"):
   /// k for the trip and for the warning level.

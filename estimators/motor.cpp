@@ -30,11 +30,17 @@ t0_degC = 27.2
 alpha_per_K = 4.1e-3
 plausible_min_degC = -20.0
 plausible_max_degC = 180.0
-# Optional [drive] table: the step of the uq the drive reports (its ADC or command resolution,
-# codes at integer multiples of it). With it the identifier removes the quantisation bias of its
-# block means (docs/resistance-identification.md); the paper does not give it. For example, 12
-# bits over a +/-48 V DC link:
-# [drive]
+
+[drive]
+# The drive's current limit: the largest magnitude of the dq current vector (the phase currents'
+# peak) it lets the motor draw. The paper does not give it: assumed 15 A, 900 W of shaft power at
+# the rated speed (1.5 psi_f w_r iq) and the heaviest load of the plant's scenarios. While a
+# pump's telemetry is silent, the alarms assume the motor may draw it (docs/daemon.md).
+max_current_A = 15.0
+# The step of the uq the drive reports (its ADC or command resolution, codes at integer multiples
+# of it). With it the identifier removes the quantisation bias of its block means
+# (docs/resistance-identification.md); the paper does not give it. For example, 12 bits over a
+# +/-48 V DC link:
 # uq_resolution_V = 0.0234375
 # The drive's voltage error from dead time, if known (compensated before identification):
 # u_err tanh(|i| / knee) along the current vector; knee 0 gives u_err sign(i).
@@ -150,6 +156,19 @@ void ParseVoltageError(const toml::table& drive, std::string_view source, MotorD
   }
 }
 
+// The drive's current limit, |i_dq|. Far above any drive this gateway watches is a typo (a value
+// in mA), and a silence's worst case would trip every pump at once.
+void ParseMaxCurrent(const toml::table& drive, std::string_view source, MotorDescription& m) {
+  const auto i = Number(drive, "max_current_A", "drive.max_current_A", source, false);
+  if (!i) return;
+  if (!(*i > 0.0 && *i <= 10000.0)) {
+    throw MotorDescriptionError(
+        fmt::format("{}: key 'drive.max_current_A' must be within (0, 10000] A, got {}",
+                    Where(source, drive.get("max_current_A")->source()), *i));
+  }
+  m.max_current_A = *i;
+}
+
 }  // namespace
 
 MotorDescription ParseMotorDescription(std::string_view text, std::string_view source) {
@@ -230,8 +249,9 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
           fmt::format("{}: key 'drive' must be a table", Where(source, drive_node->source())));
     }
     const toml::table& drive = *drive_node->as_table();
-    RejectUnknownKeys(drive, {"uq_resolution_V", "voltage_error_V", "voltage_error_knee_A"},
-                      "drive.", source);
+    RejectUnknownKeys(
+        drive, {"max_current_A", "uq_resolution_V", "voltage_error_V", "voltage_error_knee_A"},
+        "drive.", source);
     if (auto v = Number(drive, "uq_resolution_V", "drive.uq_resolution_V", source, false)) {
       // 12 bits over a 48 V link is 23 mV; a step of volts would be no voltage measurement.
       if (!(*v > 0.0 && *v <= 10.0)) {
@@ -242,6 +262,7 @@ MotorDescription ParseMotorDescription(std::string_view text, std::string_view s
       m.uq_resolution_V = *v;
     }
     ParseVoltageError(drive, source, m);
+    ParseMaxCurrent(drive, source, m);
   }
   if (const toml::node* magnet_node = root.get("magnet")) ParseMagnetLaw(*magnet_node, source, m);
   return m;

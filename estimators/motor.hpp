@@ -15,6 +15,7 @@
 ///     plausible_min_degC = -20.0    # band outside which an identified Rs is "implausible"
 ///     plausible_max_degC = 180.0
 ///     [drive]                       # optional: how the drive reports its signals
+///     max_current_A = 15.0          # the drive's current limit, |i_dq| (optional)
 ///     uq_resolution_V = 0.0234375   # step of the reported uq (codes at multiples of it)
 ///     voltage_error_V = 0.15        # inverter dead-time voltage error (optional)
 ///     voltage_error_knee_A = 0.5    # its tanh knee (optional; 0 = sign(i))
@@ -73,6 +74,11 @@ struct MotorDescription {
   double voltage_error_V = 0.0;
   /// Current magnitude at which that error reaches 76 % (tanh), A; 0 = the plain sign(i) term.
   double voltage_error_knee_A = 0.0;
+  /// The largest current the drive lets the motor draw: the magnitude of the dq current vector,
+  /// sqrt(id^2 + iq^2) (amplitude-invariant: the phase currents' peak), A. While a pump's
+  /// telemetry is silent the alarms assume it may draw this (docs/daemon.md, "The pipeline, per
+  /// pump"). 0 = not known: a silence is judged only once its frames return.
+  double max_current_A = 0.0;
 };
 
 /// The q-axis share of the inverter voltage error at currents (id, iq), V:
@@ -84,7 +90,8 @@ double VoltageErrorQ_V(const MotorDescription& motor, double id_A, double iq_A) 
 /// syntax error, a missing, unknown or mistyped key, or a value out of range
 /// (pole_pairs < 1, non-positive speed, flux, inductance, r0 or alpha, empty band, a
 /// uq_resolution_V outside (0, 10] V, a voltage_error_V outside [0, 5] V, a knee outside
-/// [0, 100] A or without voltage_error_V, a magnet coefficient outside [-5e-3, -1e-5] per K).
+/// [0, 100] A or without voltage_error_V, a max_current_A outside (0, 10000] A, a magnet
+/// coefficient outside [-5e-3, -1e-5] per K).
 MotorDescription ParseMotorDescription(std::string_view text, std::string_view source);
 
 /// The TOML text of a built-in preset, or an empty view when `name` is not a preset.

@@ -146,7 +146,7 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
       mismatch_(model, MismatchConfig(config, model)),
       alarms_(MakeAlarms()),
       values_(model, config.alarms, observer_->ModelsSensorLag() ? 0.0 : config.frame_sensor_lag_s,
-              config.period_s),
+              config.period_s, SilenceWorstLoad{motor.max_current_A, motor.rated_speed_rpm}),
       forecast_(model.StateCount()) {
   if (!(config_.period_s > 0.0)) throw std::invalid_argument("thermal period must be positive");
   if (!config_.rotor_node.empty() && model_.StateIndex(config_.rotor_node) < 0) {
@@ -393,8 +393,8 @@ void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
     const auto k = static_cast<std::size_t>(i);
     alarm_values_[k] = diverged ? kNaN : values_.Value_degC(i, x_degC_(i));
     alarm_sd_[k] = estimate_.node_sd_K[k];
-    estimate_.node_sd_K[k] =
-        AlarmValues::PublishedSd_K(alarm_sd_[k], alarm_values_[k] - x_degC_(i));
+    const double top_degC = diverged ? kNaN : values_.BandTop_degC(i, x_degC_(i));
+    estimate_.node_sd_K[k] = AlarmValues::PublishedSd_K(alarm_sd_[k], top_degC - x_degC_(i));
   }
   alarm_values_.back() = estimate_.winding_resistance_degC;
 }
@@ -553,7 +553,8 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
   RestoreObserver(state, whole, gap_s, x, s);
   // The time the daemon was down is a telemetry silence: the load may have risen in it.
-  values_.BeginSilence(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6);
+  values_.BeginSilence(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6, x,
+                       static_cast<double>(now_us) * 1e-6);
   // The mismatch test starts afresh (learning) from the restored level.
   mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0,
                        static_cast<double>(now_us) * 1e-6);

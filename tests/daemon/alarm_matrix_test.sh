@@ -40,7 +40,9 @@ outage_step_before - 4 30 - 85
 fast_rise - 2 30 - 85
 band - 2 30 - 85
 lossy_link 0 4 30 - 75
-offset_cooling - 2 30 wrong 85"
+offset_cooling - 2 30 wrong 85
+outage_12A - 4 30 - 85
+outage_short_hot - 2 30 - 85"
 
 # first CSV COLUMN THRESHOLD: first time_s where COLUMN >= THRESHOLD ("none" if never).
 first() {

@@ -6,6 +6,7 @@
 #include <limits>
 #include <stdexcept>
 
+#include "estimators/alarm_values.hpp"
 #include "tests/estimators/one_node_model.hpp"
 
 namespace pumptherm::estimators {
@@ -107,11 +108,123 @@ TEST(SilenceBound, TheSilenceIsTimedByTheStepsEndsNotCounted) {
 
 TEST(SilenceBound, ARestartIsASilenceFromTheSavedState) {
   SilenceFixture f;
-  f.bound.Begin(Eigen::VectorXd::Constant(1, 30.0), Load(1.0), -100.0);  // saved 100 s before 0 s
+  // Saved 100 s before 0 s, at 30 degC; aged to 26 degC at the restart.
+  f.bound.Begin(Eigen::VectorXd::Constant(1, 30.0), Load(1.0), -100.0,
+                Eigen::VectorXd::Constant(1, 26.0), 0.0);
   f.x(0) = 25.0;
   f.Step(3.0, true);  // the first step with inputs after the restart ends at 1 s
   ASSERT_EQ(f.bound.bound_degC().size(), 1);
   EXPECT_NEAR(f.bound.bound_degC()(0), Closed(30.0, 20.0, 18.0, 101.0), 1e-6);
+}
+
+// While silent, with the largest current known: the one node at 5 A (50 W) from the estimate
+// after the last step with inputs, the first-order response T(t) = Ta + P R + (T0 - Ta - P R)
+// e^(-t / RC) (one_node_model.hpp), the published band on it at once (after min_silence_s), the
+// levels on it as it was delay_s earlier.
+TEST(SilenceBound, WhileSilentTheWorstCaseIsTheFirstOrderResponseAtTheLargestCurrent) {
+  SilenceFixture f;
+  f.bound = SilenceBound(SilenceWorstLoad{5.0, 0.0}, 10.0);
+  f.Step(1.0, true);  // ends at 1 s, estimate 30 degC at 1 A: the silence starts here
+  for (int k = 1; k <= 60; ++k) {
+    f.x(0) = 30.0 - 0.01 * k;  // the estimate runs on at the held 1 A (its value plays no part)
+    f.Step(1.0, false);
+    const double worst = Closed(30.0, 20.0, 50.0, k), then = Closed(30.0, 20.0, 50.0, k - 10);
+    if (k <= 2) {  // not yet longer than min_silence_s: no silence
+      EXPECT_EQ(f.bound.worst_degC().size(), 0) << k;
+    } else {
+      ASSERT_EQ(f.bound.worst_degC().size(), 1) << k;
+      EXPECT_NEAR(f.bound.worst_degC()(0), worst, 1e-9) << k;
+    }
+    if (k <= 10) {
+      EXPECT_EQ(f.bound.delayed_worst_degC().size(), 0) << k;
+    } else {
+      ASSERT_EQ(f.bound.delayed_worst_degC().size(), 1) << k;
+      EXPECT_NEAR(f.bound.delayed_worst_degC()(0), then, 1e-9) << k;
+    }
+  }
+  EXPECT_NEAR(f.bound.worst_degC()(0), 48.05, 0.01);  // by hand: 70 - 40 e^-0.6
+  f.Step(1.0, true);  // the frames are back: the worst case ends (the load is seen again)
+  EXPECT_EQ(f.bound.worst_degC().size(), 0);
+  EXPECT_EQ(f.bound.delayed_worst_degC().size(), 0);
+  // A gap in a log runs as one step: the worst case is run over all of it.
+  f.bound.Step(*f.model, Load(1.0), false, f.x, f.sd, f.t_s + 40.0, 1.0, 2.0, 2.0);
+  ASSERT_EQ(f.bound.delayed_worst_degC().size(), 1);
+  EXPECT_NEAR(f.bound.worst_degC()(0), Closed(f.x(0), 20.0, 50.0, 40.0), 1e-9);
+  EXPECT_NEAR(f.bound.delayed_worst_degC()(0), Closed(f.x(0), 20.0, 50.0, 30.0), 1e-9);
+}
+
+TEST(SilenceBound, WithoutTheLargestCurrentOrAfterAResetNoWorstCase) {
+  SilenceFixture f;  // max_current_A 0: not known
+  f.Step(1.0, true);
+  for (int k = 0; k < 30; ++k) f.Step(1.0, false);
+  EXPECT_EQ(f.bound.worst_degC().size(), 0);
+  EXPECT_EQ(f.bound.delayed_worst_degC().size(), 0);
+  SilenceFixture g;
+  g.bound = SilenceBound(SilenceWorstLoad{5.0, 0.0}, 0.0);
+  g.Step(1.0, true);
+  for (int k = 0; k < 5; ++k) g.Step(1.0, false);
+  ASSERT_EQ(g.bound.delayed_worst_degC().size(), 1);  // delay 0: the levels on the worst case
+  EXPECT_NEAR(g.bound.delayed_worst_degC()(0), Closed(30.0, 20.0, 50.0, 5.0), 1e-9);
+  g.bound.Reset();  // the filter was reset: nothing to start a worst case from
+  for (int k = 0; k < 5; ++k) g.Step(1.0, false);
+  EXPECT_EQ(g.bound.worst_degC().size(), 0);
+  EXPECT_THROW(SilenceBound(SilenceWorstLoad{5.0, 0.0}, -1.0), std::invalid_argument);
+  EXPECT_THROW(SilenceBound(SilenceWorstLoad{-5.0, 0.0}, 1.0), std::invalid_argument);
+}
+
+TEST(SilenceBound, ARestartsWorstCaseStartsFromTheStateAgedToIt) {
+  SilenceFixture f;
+  f.bound = SilenceBound(SilenceWorstLoad{5.0, 0.0}, 0.0);
+  f.bound.Begin(Eigen::VectorXd::Constant(1, 30.0), Load(1.0), -100.0,
+                Eigen::VectorXd::Constant(1, 26.0), 0.0);
+  for (int k = 1; k <= 5; ++k) f.Step(1.0, false);  // no frames yet after the restart
+  ASSERT_EQ(f.bound.worst_degC().size(), 1);
+  EXPECT_NEAR(f.bound.worst_degC()(0), Closed(26.0, 20.0, 50.0, 5.0), 1e-9);
+}
+
+// What the levels act on and what is published while silent: the levels on the worst case as it
+// was silence_delay_s ago, the band x +- 2 sd reaching the worst case now.
+TEST(AlarmValues, WhileSilentTheLevelsSeeTheDelayedWorstCaseTheBandTheWorstNow) {
+  const ThermalModel model = ThermalModel::Parse(kOneNode, "one.toml");
+  AlarmConfig config;
+  config.silence_delay_s = 10.0;
+  AlarmValues values(model, config, 0.0, 1.0, SilenceWorstLoad{5.0, 0.0});
+  Eigen::VectorXd x = Eigen::VectorXd::Constant(1, 30.0), sd = Eigen::VectorXd::Constant(1, 0.5);
+  const ThermalInputs in = Load(1.0);
+  AlarmValuesStep s;
+  s.period_s = 1.0;
+  s.inputs = &in;
+  s.x_degC = &x;
+  s.sd_K = &sd;
+  s.lagging_degC = kNaN;
+  for (int k = 0; k <= 30; ++k) {
+    s.end_us = (k + 1) * 1'000'000;
+    s.fresh_inputs = k == 0;  // silent after the first step
+    values.Step(s);
+  }
+  const double then = Closed(30.0, 20.0, 50.0, 20.0), now = Closed(30.0, 20.0, 50.0, 30.0);
+  EXPECT_NEAR(values.Value_degC(0, 30.0), then, 1e-9);
+  EXPECT_NEAR(values.BandTop_degC(0, 30.0), now, 1e-9);
+  EXPECT_NEAR(AlarmValues::PublishedSd_K(0.5, now - 30.0), (now - 30.0) / 2.0, 1e-12);
+  s.end_us += 1'000'000;
+  s.fresh_inputs = true;  // the frames are back at the same load: nothing above the estimate
+  values.Step(s);
+  EXPECT_EQ(values.Value_degC(0, 30.0), 30.0);
+  EXPECT_EQ(values.BandTop_degC(0, 30.0), 30.0);
+}
+
+TEST(WorstInputs, TheLargestCurrentOnTheQAxisAtTheLargestSpeed) {
+  ThermalInputs held = Load(4.0);
+  held.id_A = -3.0;
+  held.speed_rpm = -1000.0;
+  const ThermalInputs w = WorstInputs(held, SilenceWorstLoad{4.5, 21000.0});
+  EXPECT_EQ(w.iq_A, 5.0);  // |i| held, 5 A, is above the largest current given: kept
+  EXPECT_EQ(w.id_A, 0.0);
+  EXPECT_EQ(w.speed_rpm, 21000.0);
+  EXPECT_EQ(w.ambient_degC, 20.0);  // held
+  const ThermalInputs v = WorstInputs(Load(1.0), SilenceWorstLoad{15.0, 0.0});
+  EXPECT_EQ(v.iq_A, 15.0);
+  EXPECT_EQ(v.speed_rpm, 0.0);
 }
 
 TEST(SilenceBound, AShortGapIsNoSilence) {

@@ -145,6 +145,28 @@ TEST(MotorDescription, DriveTableGivesTheUqResolution) {
       << not_table;
 }
 
+// The drive's current limit: what a telemetry silence may hide (estimators/alarm_bounds.hpp).
+TEST(MotorDescription, DriveTableGivesTheLargestCurrent) {
+  EXPECT_EQ(ParseMotorDescription(kValid, "m.toml").max_current_A, 0.0);  // not known
+  EXPECT_DOUBLE_EQ(MotorPreset("han2019-tmp").max_current_A, 15.0);
+  const MotorDescription m =
+      ParseMotorDescription(std::string(kValid) + "[drive]\nmax_current_A = 40\n", "m.toml");
+  EXPECT_DOUBLE_EQ(m.max_current_A, 40.0);
+  for (const char* bad : {"0", "-3.0", "15000.0"}) {
+    const std::string e = ErrorOf(std::string(kValid) + "[drive]\nmax_current_A = " + bad + "\n");
+    EXPECT_NE(e.find("m.toml:11: key 'drive.max_current_A' must be within (0, 10000] A"),
+              std::string::npos)
+        << bad << ": " << e;
+  }
+  const std::string text = ErrorOf(std::string(kValid) + "[drive]\nmax_current_A = \"15 A\"\n");
+  EXPECT_NE(text.find("m.toml:11: key 'drive.max_current_A' must be a number"), std::string::npos)
+      << text;
+  const std::string inf = ErrorOf(std::string(kValid) + "[drive]\nmax_current_A = inf\n");
+  EXPECT_NE(inf.find("m.toml:11: key 'drive.max_current_A' is not a finite number"),
+            std::string::npos)
+      << inf;
+}
+
 // The optional [magnet] table and the temperature it gives from a flux (estimators/magnet.hpp):
 // T = T0 + (psi/psi0 - 1)/beta, sd = sd_psi/(psi0 |beta|), worked by hand below.
 TEST(MotorDescription, MagnetTableGivesTheFluxTemperatureLaw) {
