@@ -156,6 +156,19 @@ std::string CauseText(const MismatchFinding& f, std::string_view measured_node) 
   return daemon::CauseText(f.state, f.effect, f.value, measured_node);
 }
 
+/// An estimated over-temperature raised while the telemetry is silent, on a motor whose largest
+/// current is stated: the levels act on that current's worst case (AlarmValues).
+bool SilenceWorstCase(const AlarmLineInputs& in) {
+  const estimators::AlarmState& a = *in.state;
+  const auto bit = [](AlarmReason r) {
+    return static_cast<std::uint16_t>(1u << static_cast<unsigned>(r));
+  };
+  return in.silence_worst_current_A > 0.0 && a.level != AlarmLevel::kNone &&
+         !in.conditions.empty() &&
+         in.conditions.front().reason == AlarmReason::kEstimatedOverTemperature &&
+         (a.active_reasons & bit(AlarmReason::kStaleTelemetry)) != 0;
+}
+
 }  // namespace
 
 JournalEntry AlarmEntry(const AlarmLineInputs& in) {
@@ -184,7 +197,13 @@ JournalEntry AlarmEntry(const AlarmLineInputs& in) {
       e.fields.push_back({"VALUE_DEGC", fmt::format("{:.2f}", value)});
     if (std::isfinite(c.threshold)) e.fields.push_back({"THRESHOLD_DEGC", Short(c.threshold)});
   }
-  if (in.mismatch != nullptr && DiagnosisBlames(in.mismatch->state)) {
+  if (SilenceWorstCase(in)) {
+    e.text += fmt::format(
+        "; cause: no telemetry: the level acts on the worst case of the drive's largest current "
+        "({} A) since the last frame",
+        Short(in.silence_worst_current_A));
+    e.fields.push_back({"CAUSE", "telemetry_silence"});
+  } else if (in.mismatch != nullptr && DiagnosisBlames(in.mismatch->state)) {
     e.text += "; cause: " + CauseText(*in.mismatch, in.measured_node) +
               SinceText(*in.mismatch, in.wall_offset_us);
     e.fields.push_back({"CAUSE", CauseField(*in.mismatch)});

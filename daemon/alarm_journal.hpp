@@ -45,6 +45,10 @@ struct AlarmLineInputs {
   const estimators::MismatchFinding* mismatch = nullptr;
   /// Unix time minus the pipeline's time, us (Gateway::SetWallClockOffset; 0 offline).
   std::int64_t wall_offset_us = 0;
+  /// The motor's largest current (A; 0: not stated). While the telemetry is silent and this is
+  /// stated, an estimated over-temperature acts on the worst case of that current, and the line
+  /// says so: the value is what the winding could have reached, not what was seen.
+  double silence_worst_current_A = 0.0;
 };
 
 /// The line for an alarm change, e.g. "pump3: warning: no telemetry for 4.0 s (limit 2 s)";

@@ -53,14 +53,17 @@ enum class LostSafetyState {
 };
 
 struct GatewayConfig {
-  std::string name = "pumptherm";         ///< shown in the status line and logs
-  std::uint32_t heartbeat_id = 0x7F0;     ///< 11-bit CAN ID of the heartbeat frame
-  double heartbeat_period_s = 1.0;        ///< 0 disables the heartbeat
-  double status_period_s = 2.0;           ///< systemd STATUS= and journal summary period
-  double thermal_period_s = 1.0;          ///< virtual thermal sensor period (frame time)
-  std::string state_directory;            ///< empty: $STATE_DIRECTORY, else no saved state
-  double state_save_period_s = 60.0;      ///< how often estimator state is saved
-  bool test_hang_switch = false;          ///< tests only: SIGUSR1 makes the loop hang
+  std::string name = "pumptherm";      ///< shown in the status line and logs
+  std::uint32_t heartbeat_id = 0x7F0;  ///< 11-bit CAN ID of the heartbeat frame
+  double heartbeat_period_s = 1.0;     ///< 0 disables the heartbeat
+  double status_period_s = 2.0;        ///< systemd STATUS= and journal summary period
+  double thermal_period_s = 1.0;       ///< virtual thermal sensor period (frame time)
+  std::string state_directory;         ///< empty: $STATE_DIRECTORY, else no saved state
+  double state_save_period_s = 60.0;   ///< how often estimator state is saved
+  bool test_hang_switch = false;       ///< tests only: SIGUSR1 makes the loop hang
+  /// Warn about frames of node IDs no pump has (a wrong node_id); off where one pump of a
+  /// recording of many is run on purpose (`pumptherm estimate`). Counted either way.
+  bool warn_unconfigured_nodes = true;
   double test_state_write_pause_s = 0.0;  ///< tests only: pause in the middle of each state write
   /// tests only: pause in the middle of each safety state write (a kill -9 lands in it)
   double test_safety_write_pause_s = 0.0;

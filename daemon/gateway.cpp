@@ -108,6 +108,7 @@ void Gateway::WarnUnconfiguredNode(std::size_t iface, const protocol::TimedFrame
       continue;
     }
     ++counters_.rx_unconfigured_node;
+    if (!config_.gateway.warn_unconfigured_nodes) return;
     const std::uint32_t node = tf.frame.id - msg.id;
     const std::uint64_t key = (static_cast<std::uint64_t>(iface) << 32) | node;
     auto [it, first] = unconfigured_warned_us_.try_emplace(key, tf.time_us);
@@ -221,7 +222,7 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
     const JournalEntry entry =
         AlarmEntry({name, &a, conditions_, &pump.model().StateNames(), io.logged_active_reasons,
                     &pump.config().alarms.monitor, pump.config().measured_node,
-                    &pump.snapshot().mismatch, wall_offset_us_});
+                    &pump.snapshot().mismatch, wall_offset_us_, pump.motor().max_current_A});
     LogLine(entry.level, entry.text, entry.fields);
     io.logged_active_reasons = a.active_reasons;
   }

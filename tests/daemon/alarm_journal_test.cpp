@@ -91,6 +91,37 @@ TEST_F(AlarmJournal, TripSaysTheBoundTheLevelAndTheCauseWithItsDate) {
   EXPECT_EQ(m.at("CAUSE"), "frame_ambient_resistance");
 }
 
+TEST_F(AlarmJournal, ATripDuringASilenceSaysItActsOnTheLargestCurrentsWorstCase) {
+  AlarmState a;
+  a.level = AlarmLevel::kTrip;
+  a.reason = AlarmReason::kEstimatedOverTemperature;
+  a.node = 2;
+  a.value = 124.1;
+  a.bound = 129.3;
+  a.active_reasons =
+      Bit(AlarmReason::kEstimatedOverTemperature) | Bit(AlarmReason::kStaleTelemetry);
+  a.trip_latched = true;
+  conditions_ = {
+      {AlarmLevel::kTrip, AlarmReason::kEstimatedOverTemperature, "", 2, 124.1, 120.0, 1767225757.0,
+       true},
+      {AlarmLevel::kWarning, AlarmReason::kStaleTelemetry, "", -1, 4.1, NAN, 1767225724.0, false}};
+  const auto f = CoolingLost();
+  const std::uint16_t logged = Bit(AlarmReason::kStaleTelemetry);
+  const JournalEntry e =
+      AlarmEntry({"pump3", &a, conditions_, &kNodes, logged, &config_, "frame", &f, 0, 15.0});
+  EXPECT_EQ(e.text,
+            "pump3: trip: winding 124.1 degC (bound 129.3 = estimate + 2 sd) >= 120 degC; cause: "
+            "no telemetry: the level acts on the worst case of the drive's largest current (15 A) "
+            "since the last frame; also active: stale telemetry; raised: estimated over "
+            "temperature; trip latched until cleared");
+  EXPECT_EQ(Fields(e).at("CAUSE"), "telemetry_silence");
+  // Without the largest current stated, the levels act on the estimate: no such cause.
+  const JournalEntry plain =
+      AlarmEntry({"pump3", &a, conditions_, &kNodes, logged, &config_, "frame", nullptr, 0, 0.0});
+  EXPECT_EQ(plain.text.find("largest current"), std::string::npos);
+  EXPECT_EQ(Fields(plain).count("CAUSE"), 0u);
+}
+
 TEST_F(AlarmJournal, ATripLatchedAgainAfterARestartSaysItsBoundReachedTheLevel) {
   // RestoreLatchedTrip keeps the value that raised the trip (the estimate), not its bound.
   AlarmState a;

@@ -104,9 +104,8 @@ daemon::PumpConfig DefaultPump(const EstimateOptions& o) {
 // ---------------------------------------------------------------------------------------------
 // A recording: the daemon's own pipeline for that one pump.
 
-/// The first interface named in `log` (candump's own lines), or "".
-std::string FirstInterface(const std::string& log) {
-  std::istringstream in(log);
+/// The first interface named in the candump lines of `in`, or "" (reads only up to it).
+std::string FirstInterface(std::istream& in) {
   std::string line;
   while (std::getline(in, line)) {
     const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
@@ -115,20 +114,44 @@ std::string FirstInterface(const std::string& log) {
   return {};
 }
 
-std::string ReadAll(const std::string& path) {
-  std::ostringstream ss;
-  if (path == "-") {
-    ss << std::cin.rdbuf();
-    return ss.str();
+/// The recording as a stream the daemon's offline loop reads block by block, as `pumpthermd -r`
+/// does: a file is opened twice (once to find its first interface when none is named), standard
+/// input, which cannot be read twice, is held in memory.
+struct RecordingStream {
+  std::ifstream file;
+  std::istringstream held;
+  std::istream* in = nullptr;
+  std::string first_interface;
+};
+
+void OpenRecording(const std::string& path, bool need_interface, RecordingStream& r) {
+  try {
+    if (path == "-") {
+      std::ostringstream ss;
+      ss << std::cin.rdbuf();
+      r.held.str(ss.str());
+      if (need_interface) {
+        r.first_interface = FirstInterface(r.held);
+        r.held.clear();
+        r.held.seekg(0);
+      }
+      r.in = &r.held;
+      return;
+    }
+    if (need_interface) {
+      std::ifstream peek = daemon::OpenLog(path);
+      r.first_interface = FirstInterface(peek);
+    }
+    r.file = daemon::OpenLog(path);
+    r.in = &r.file;
+  } catch (const std::runtime_error& e) {
+    throw InputError(fmt::format("--log {}", e.what()));
   }
-  std::ifstream f(path);
-  if (!f) throw InputError(fmt::format("--log {}: cannot open", path));
-  ss << f.rdbuf();
-  return ss.str();
 }
 
 int RunRecording(const EstimateOptions& o) {
-  const std::string log = ReadAll(o.recording.log);
+  RecordingStream log;
+  OpenRecording(o.recording.log, o.recording.interface.empty(), log);
   daemon::DaemonConfig c;
   if (!o.config.empty()) {
     c = ConfigWithPump(o.config, o.pump);
@@ -142,12 +165,14 @@ int RunRecording(const EstimateOptions& o) {
   // The pump listens on the recording's interface unless one is named.
   c.interfaces.clear();
   daemon::PumpConfig& pump = c.pumps.front();
-  pump.interface = !o.recording.interface.empty() ? o.recording.interface : FirstInterface(log);
+  pump.interface = !o.recording.interface.empty() ? o.recording.interface : log.first_interface;
   if (pump.interface.empty()) {
     throw InputError(fmt::format("--log {}: no CAN frame in it", o.recording.log));
   }
   c.lcm.url.clear();
   c.gateway.state_directory.clear();
+  // The other pumps of the recording are left out on purpose: no warning for each.
+  c.gateway.warn_unconfigured_nodes = false;
   std::unique_ptr<daemon::Gateway> gateway;
   try {
     gateway = std::make_unique<daemon::Gateway>(c);
@@ -157,9 +182,8 @@ int RunRecording(const EstimateOptions& o) {
   daemon::OfflineOptions offline;
   offline.csv_file = o.output;
   offline.csv_time_origin_s = o.csv_time_origin_s;
-  std::istringstream in(log);
   const std::string source = o.recording.log == "-" ? "<stdin>" : o.recording.log;
-  daemon::RunOffline(in, source, *gateway, offline);
+  daemon::RunOffline(*log.in, source, *gateway, offline);
   if (gateway->pumps().front()->counters().thermal_steps == 0) {
     throw InputError(fmt::format(
         "{}: no thermal step for node ID {} on {} (no frame of this pump, or none paired)", source,
