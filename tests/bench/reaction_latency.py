@@ -19,11 +19,13 @@ schedule. The definitions (docs/robustness.md, "Live reaction"):
   frame. delay = answer - completing frame.
 - The outputs go out on their own schedule (daemon/gateway.cpp, AdvancePump): a grid of their
   period (GW_ALARM: its DBC cycle time; GW_NODE_TEMP: its cycle time divided by the model's
-  nodes, one node after another) from the pump's first output frame, re-anchored when the daemon
-  fell a whole period behind; a GW_ALARM sent at once on a change comes before its slot and skips
-  that slot. So a delay is the wait for the next slot (by design up to one output period) plus
-  the lateness: answer - its slot. "Beyond the schedule" is that lateness. The slot of the first
-  frame is its own stamp, so lateness is relative to how late that first frame was.
+  nodes, one node after another), re-anchored when the daemon fell a whole period behind; a
+  GW_ALARM sent at once on a change takes the next slot. So a delay is the wait for the next slot
+  (by design up to one output period) plus the lateness: answer - its slot. "Beyond the
+  schedule" is that lateness. The slots are not on the bus: the grid's phase is taken from its
+  most punctual frame (no scheduled frame leaves before its slot; schedule_lateness), so a
+  lateness is relative to that frame's, which includes at least the send itself. A GW_ALARM
+  whose alarm fields changed may have left before its slot: it is not timed.
 
 Percentiles are nearest-rank. Exits 1, naming what is missing, on a capture without telemetry or
 without a single GW_NODE_TEMP or GW_ALARM, or with a pump that has telemetry and no outputs.
@@ -43,8 +45,8 @@ import sys
 
 INPUTS = ("PUMP_FAST_I", "PUMP_FAST_U", "PUMP_STATUS")
 OUTPUTS = ("GW_NODE_TEMP", "GW_ALARM")
-# A GW_ALARM this much before its slot was sent at once on a change, not on its schedule.
-EARLY_TOLERANCE_US = 2000
+# The GW_ALARM signals whose change makes the daemon send it at once (Gateway::AdvancePump).
+ALARM_SIGNALS = ("AlarmLevel", "AlarmReason", "AlarmNode")
 
 
 class CaptureError(Exception):
@@ -52,13 +54,19 @@ class CaptureError(Exception):
 
 
 def read_dbc(path):
-    """Returns {message name: (id, cycle time in us or None)} for the messages we need."""
-    ids, cycles = {}, {}
+    """Returns {message name: (id, cycle time in us or None)} for the messages we need, and
+    {signal: (start bit, length)} of GW_ALARM's alarm signals (little-endian)."""
+    ids, cycles, alarm_bits, message = {}, {}, {}, None
     with open(path, encoding="utf-8", errors="replace") as f:
         for line in f:
             m = re.match(r"\s*BO_\s+(\d+)\s+(\w+)\s*:", line)
             if m:
                 ids[m.group(2)] = int(m.group(1))
+                message = m.group(2)
+                continue
+            m = re.match(r"\s*SG_\s+(\w+)\s*:\s*(\d+)\|(\d+)@1", line)
+            if m and message == "GW_ALARM" and m.group(1) in ALARM_SIGNALS:
+                alarm_bits[m.group(1)] = (int(m.group(2)), int(m.group(3)))
                 continue
             m = re.match(r'\s*BA_\s+"GenMsgCycleTime"\s+BO_\s+(\d+)\s+(\d+)\s*;', line)
             if m:
@@ -68,14 +76,18 @@ def read_dbc(path):
         if name not in ids:
             raise CaptureError(f"{path}: no message {name}")
         out[name] = (ids[name], cycles.get(ids[name]))
-    return out
+    missing = [n for n in ALARM_SIGNALS if n not in alarm_bits]
+    if missing:
+        raise CaptureError(f"{path}: GW_ALARM has no little-endian {', '.join(missing)}")
+    return out, alarm_bits
 
 
 def read_capture(path):
-    """Returns [(stamp_us, can_id)] in file order; stamps as integer microseconds."""
+    """Returns [(stamp_us, can_id, data)] in file order; stamps as integer microseconds, data as
+    an int (byte 0 least significant)."""
     opener = gzip.open if path.endswith(".gz") else open
     frames = []
-    line_re = re.compile(r"\((\d+)\.(\d{6})\)\s+\S+\s+([0-9A-Fa-f]+)#")
+    line_re = re.compile(r"\((\d+)\.(\d{6})\)\s+\S+\s+([0-9A-Fa-f]+)#([0-9A-Fa-f]*)")
     with opener(path, "rt", encoding="ascii", errors="replace") as f:
         for number, line in enumerate(f, 1):
             if not line.strip():
@@ -83,7 +95,8 @@ def read_capture(path):
             m = line_re.match(line)
             if not m:
                 raise CaptureError(f"{path}:{number}: not a candump -L line: {line.strip()[:60]!r}")
-            frames.append((int(m.group(1)) * 1_000_000 + int(m.group(2)), int(m.group(3), 16)))
+            data = int.from_bytes(bytes.fromhex(m.group(4)), "little") if len(m.group(4)) % 2 == 0 else 0
+            frames.append((int(m.group(1)) * 1_000_000 + int(m.group(2)), int(m.group(3), 16), data))
     return frames
 
 
@@ -93,25 +106,41 @@ def percentile(values, p):
     return s[max(0, math.ceil(p / 100.0 * len(s)) - 1)]
 
 
-def schedule_lateness(stamps, period_us):
-    """{stamp: lateness_us} of a pump's frames of one output message against its grid, and the
-    number of frames sent before their slot (on a change) and of re-anchorings."""
-    lateness, early, rephased = {}, 0, 0
-    due = stamps[0]
-    for t in stamps:
-        if t < due - EARLY_TOLERANCE_US:
-            early += 1
-            due += period_us  # the daemon skips the slot after a frame sent at once
-            continue
-        lateness[t] = t - due
-        due += period_us
-        if due <= t:
-            rephased += 1
-            due = t + period_us
-    return lateness, early, rephased
+def schedule_lateness(frames, period_us, on_change):
+    """Lateness of a pump's frames of one output message against the daemon's grid for it.
+
+    `frames`: [(stamp_us, data)] in time order; `on_change(previous data, data)`: whether a frame
+    may have been sent at once on a change (GW_ALARM whose alarm fields changed). The daemon
+    (Gateway::AdvancePump) emits a frame when its slot has come, or at once on an alarm change;
+    either way the next slot is one period on, unless the daemon was a whole period behind: then
+    it is one period after that emission (re-anchored). So within a stretch between
+    re-anchorings frame i (counted from the stretch's start) has slot anchor + i * period, and
+    no scheduled frame goes out before its slot: the anchor is the smallest stamp - i * period
+    of the stretch's scheduled frames (for a re-anchored stretch also the re-anchoring frame's
+    stamp, the daemon's time then). Returns ({stamp: lateness_us} of the scheduled frames,
+    frames sent on a change, re-anchorings)."""
+    stretches, start, base, running = [], 0, frames[0][0], None
+    changed = [i > 0 and on_change(frames[i - 1][1], frames[i][1]) for i in range(len(frames))]
+    for i, (t, _) in enumerate(frames):
+        offset = t - (i - start) * period_us
+        if not changed[i]:
+            running = offset if running is None else min(running, offset)
+        if running is not None and offset - running >= period_us:
+            stretches.append((start, i + 1, base))
+            # The next slot is one period after the daemon's time of this emission (<= t).
+            start, base, running = i + 1, t + period_us, t + period_us
+    stretches.append((start, len(frames), base))
+    lateness = {}
+    for start, end, base in stretches:
+        offsets = [frames[i][0] - (i - start) * period_us for i in range(start, end) if not changed[i]]
+        anchor = min(offsets + ([base] if start > 0 else []), default=base)
+        for i in range(start, end):
+            if not changed[i]:
+                lateness[frames[i][0]] = frames[i][0] - (i - start) * period_us - anchor
+    return lateness, sum(changed), len(stretches) - 1
 
 
-def analyse(frames, dbc, period_us, model_nodes, node_ids=range(16)):
+def analyse(frames, dbc, alarm_bits, period_us, model_nodes, node_ids=range(16)):
     """Per pump: boundaries and, per output, [(delay_us, lateness_us)]; plus stream counters."""
     first = lambda name: dbc[name][0]  # noqa: E731
     periods = {}
@@ -119,12 +148,12 @@ def analyse(frames, dbc, period_us, model_nodes, node_ids=range(16)):
         cycle = dbc[name][1] or 1_000_000
         periods[name] = max(1000, cycle // model_nodes) if name == "GW_NODE_TEMP" else cycle
     by_id = {}
-    for t, i in frames:
-        by_id.setdefault(i, []).append(t)
+    for t, i, data in frames:
+        by_id.setdefault(i, []).append((t, data))
     pumps = {}
     saw_output = {name: 0 for name in OUTPUTS}
     for n in node_ids:
-        inputs = sorted(t for m in INPUTS for t in by_id.get(first(m) + n, []))
+        inputs = sorted(t for m in INPUTS for t, _ in by_id.get(first(m) + n, []))
         if not inputs:
             continue
         outs = {name: sorted(by_id.get(first(name) + n, [])) for name in OUTPUTS}
@@ -137,12 +166,19 @@ def analyse(frames, dbc, period_us, model_nodes, node_ids=range(16)):
         if saw_output[name] == 0:
             raise CaptureError(f"no {name} frame in the capture: the gateway sent nothing (or "
                                f"candump did not record its output)")
+    def alarm_changed(a, b):
+        return any((a >> start) & ((1 << length) - 1) != (b >> start) & ((1 << length) - 1)
+                   for start, length in alarm_bits.values())
+
     result = {}
     for n, (inputs, outs) in pumps.items():
         for name in OUTPUTS:
             if not outs[name]:
                 raise CaptureError(f"pump node {n}: telemetry but no {name} frame")
-        late = {name: schedule_lateness(outs[name], periods[name]) for name in OUTPUTS}
+        late = {"GW_NODE_TEMP": schedule_lateness(outs["GW_NODE_TEMP"], periods["GW_NODE_TEMP"],
+                                                  lambda a, b: False),
+                "GW_ALARM": schedule_lateness(outs["GW_ALARM"], periods["GW_ALARM"], alarm_changed)}
+        outs = {name: [t for t, _ in outs[name]] for name in OUTPUTS}
         rows = {name: [] for name in OUTPUTS}
         boundaries = skipped = unanswered = 0
         k = 1
@@ -226,7 +262,8 @@ def report(result, periods, out):
         figures[f"{name}_every_frame_late_ms"] = {k: (s[k] / 1000 if k != "n" else s[k]) for k in s}
         print(f"{name}: {frames} frames, every {periods[name] / 1000:g} ms per pump; late against "
               f"the schedule p50/p99/max {'/'.join(ms(s[k]) for k in ('p50', 'p99', 'max'))} ms; "
-              f"{early} sent at once on a change; {rephased} re-anchorings (a period behind)",
+              f"{early} with a changed alarm (maybe sent at once: not timed); {rephased} "
+              f"re-anchorings (the daemon a whole period behind)",
               file=out)
     print(f"periods skipped (no frame within a period of the boundary): {figures['skipped']}; "
           f"answers missing at the end of the capture: {figures['unanswered']}", file=out)
@@ -247,11 +284,11 @@ def main(argv=None):
     ap.add_argument("--json", help="also write the figures here")
     a = ap.parse_args(argv)
     try:
-        dbc = read_dbc(a.dbc)
+        dbc, alarm_bits = read_dbc(a.dbc)
         frames = read_capture(a.capture)
         if not frames:
             raise CaptureError(f"{a.capture}: no frame")
-        result, periods = analyse(frames, dbc, round(a.period_s * 1e6), a.model_nodes)
+        result, periods = analyse(frames, dbc, alarm_bits, round(a.period_s * 1e6), a.model_nodes)
     except (CaptureError, OSError) as e:
         print(f"reaction_latency: error: {e}", file=sys.stderr)
         return 1
