@@ -127,6 +127,33 @@ class ReactionLatencyTest(unittest.TestCase):
         self.assertIn("1 with a changed alarm", out)
         self.assertIn("GW_NODE_TEMP: 14 frames", out)
 
+    def test_schedule_of_one_message(self):
+        def us(t):
+            return int(t.replace(".", ""))
+
+        def stream(node_id):
+            data = lambda f: bytes.fromhex(f[2] if len(f) > 2 else ALARM_OK)  # noqa: E731
+            return [(us(f[0]), int.from_bytes(data(f), "little")) for f in sorted(FRAMES)
+                    if f[1] == node_id]
+
+        never = lambda a, b: False  # noqa: E731
+        # Pump 2's first GW_NODE_TEMP is 3 ms late: the phase comes from the punctual ones.
+        late, changed, rephased = rl.schedule_lateness(stream("482"), 500_000, never)
+        self.assertEqual(sorted(late.values()), [0, 0, 0, 3000])
+        self.assertEqual(late[us("100.004000")], 3000)
+        self.assertEqual((changed, rephased), (0, 0))
+        # Pump 1's 799 ms late frame re-anchors the grid; the next frame is on time.
+        late, changed, rephased = rl.schedule_lateness(stream("481"), 500_000, never)
+        self.assertEqual(late, {us("100.101000"): 0, us("100.601000"): 0, us("101.900000"): 799_000,
+                                us("102.400000"): 0})
+        self.assertEqual((changed, rephased), (0, 1))
+        # Pump 0's alarm change at 101.200 is not timed and takes the slot 101.502.
+        late, changed, rephased = rl.schedule_lateness(stream("200"), 500_000,
+                                                       lambda a, b: (a & 3) != (b & 3))
+        self.assertNotIn(us("101.200000"), late)
+        self.assertEqual(set(late.values()), {0})
+        self.assertEqual((changed, rephased), (1, 0))
+
     def test_no_outputs_fails_loudly(self):
         inputs_only = [f for f in FRAMES if f[1].startswith("1")]
         rc, out, err = self.run_main(self.path("in.log", capture_text(inputs_only)))
