@@ -14,9 +14,13 @@
 # over 15 min (6716 and 6793); with two it keeps the recording's 9000. This is 40 s of traffic;
 # the issue's 15 minutes are daemon_full_bus_15min.sh, which sets FULL_BUS_LOOPS and sources this
 # file (canplayer -l: the recording played that many times).
+# LATENCY=1 (daemon_full_bus_latency.sh) also records the bus with candump while canplayer plays
+# it, for tests/bench/reaction_latency.py (docs/robustness.md, "Live reaction"), and the daemon's
+# CPU share over the playback; the capture goes to $OUT_DIR/bus.log.gz.
 set -eu
 SCENARIO_NAME=${SCENARIO_NAME:-daemon_full_bus}
 loops=${FULL_BUS_LOOPS:-1}
+latency=${LATENCY:-0}
 . "$DATA_DIR/daemon_lib.sh"
 
 {
@@ -41,11 +45,33 @@ start_daemon "$WORK_DIR/pumpthermd.toml"
 buffer=$(grep -o 'vcan0: receive buffer.*' "$WORK_DIR/daemon.err" | head -n 1)
 echo "$SCENARIO_NAME: $buffer"
 [ -n "$buffer" ] || fail "the daemon did not log its receive buffer"
+# The daemon's CPU time so far (utime + stime, clock ticks of 10 ms).
+cpu_ticks() { awk '{ print $14 + $15 }' "/proc/$DAEMON_PID/stat"; }
+if [ "$latency" = 1 ]; then
+  # Only the pumps' telemetry (0x100-0x11F, 0x180-0x18F) and the gateway's GW_ALARM (0x200-0x20F)
+  # and GW_NODE_TEMP (0x480-0x48F), filtered in the kernel: the filler frames and the other
+  # outputs would only cost the emulated CPUs. Kernel receive stamps (-L: candump's log format).
+  candump -L -r 16777216 vcan0,100:7E0,180:7F0,200:7F0,480:7F0 >"$WORK_DIR/bus.log" &
+  CANDUMP_PID=$!
+  sleep 1
+  kill -0 "$CANDUMP_PID" 2>/dev/null || fail "candump did not start"
+fi
 # /proc/uptime: 10 ms resolution (busybox date has no sub-second clock).
+ticks0=$(cpu_ticks)
 up0=$(cut -d' ' -f1 /proc/uptime)
 canplayer -I "$log" -l "$loops" || fail "canplayer failed"
 up1=$(cut -d' ' -f1 /proc/uptime)
+ticks1=$(cpu_ticks)
 sleep 1
+if [ "$latency" = 1 ]; then
+  kill -INT "$CANDUMP_PID"
+  wait "$CANDUMP_PID" || true
+  gzip -1 -c "$WORK_DIR/bus.log" >"$OUT_DIR/bus.log.gz"
+  echo "$SCENARIO_NAME: candump recorded $(wc -l <"$WORK_DIR/bus.log") frames (pump telemetry, GW_ALARM, GW_NODE_TEMP)"
+  share=$(awk -v a="$ticks0" -v b="$ticks1" -v u0="$up0" -v u1="$up1" 'BEGIN { printf "%.1f", (b - a) / (u1 - u0) }')
+  echo "$SCENARIO_NAME: the daemon's CPU share during the playback: $share % of one CPU ($(((ticks1 - ticks0) / 100)).$(printf '%02d' $(((ticks1 - ticks0) % 100))) s over $(awk -v a="$up0" -v b="$up1" 'BEGIN { printf "%.2f", b - a }') s)"
+  echo "cpu_share_percent=$share" >"$OUT_DIR/figures.txt"
+fi
 kill -0 "$DAEMON_PID" 2>/dev/null || fail "the daemon died"
 # The daemon's CPU time (utime + stime, clock ticks of 10 ms): how close the emulated CPU came.
 cpu=$(awk '{ printf "%.2f", ($14 + $15) / 100 }' "/proc/$DAEMON_PID/stat")
@@ -58,6 +84,9 @@ rate=$(awk -v n="$n_bus" -v a="$up0" -v b="$up1" 'BEGIN { printf "%.0f", n / (b 
 echo "$SCENARIO_NAME: canplayer put $n_bus frames on vcan0 in $(awk -v a="$up0" -v b="$up1" 'BEGIN { printf "%.2f", b - a }') s: $rate frames/s on average"
 echo "$SCENARIO_NAME: gateway: $status"
 echo "$SCENARIO_NAME: the daemon used $cpu s of CPU (user + system) for the run"
+if [ "$latency" = 1 ]; then
+  printf 'frames_per_s=%s\nrx=%s\nrx_drops=%s\n' "$rate" "$rx" "$rx_drops" >>"$OUT_DIR/figures.txt"
+fi
 [ -n "$rx" ] && [ -n "$rx_drops" ] || fail "cannot read the daemon's counters"
 [ "$rx_drops" -eq 0 ] || fail "$rx_drops receive-queue drops at $rate frames/s"
 [ "$rx" -eq "$n_bus" ] || fail "the daemon received $rx of the $n_bus frames on the bus"
