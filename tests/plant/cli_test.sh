@@ -89,7 +89,7 @@ grep -q "<svg" "$tmp/p.svg" || fail "not an SVG"
 # Missing column: exit 2 naming it; no gnuplot: exit 1 saying so.
 "$exe" plot --truth "$tmp/a/pump1.truth.csv" --nodes housing --out "$tmp/x.png" > "$tmp/out.txt" 2>&1
 [ $? -eq 2 ] || fail "missing column: expected exit 2"
-grep -q "housing_C" "$tmp/out.txt" || fail "missing column not named"
+grep -q "housing_degC" "$tmp/out.txt" || fail "missing column not named"
 "$exe" plot --truth "$tmp/a/pump1.truth.csv" --nodes frame --gnuplot "$tmp/no-gnuplot" --out "$tmp/x.png" > "$tmp/out.txt" 2>&1
 [ $? -eq 1 ] || fail "absent gnuplot: expected exit 1"
 grep -q "not installed" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "absent gnuplot message"; }

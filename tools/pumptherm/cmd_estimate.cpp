@@ -9,6 +9,7 @@
 #include <fstream>
 #include <iostream>
 #include <iterator>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <vector>
@@ -42,8 +43,9 @@ struct EstimateOptions {
   double sensor_lag_s = 0.0;
   std::string filter = "auto";  ///< auto (what the daemon ships), disturbance, standard
   double thermal_period_s = 1.0;
-  double csv_time_origin_s = 0.0;  ///< --log: subtracted from the Unix time in time_s
-  RecordingSource recording;       ///< --log: a candump recording
+  /// --log: subtracted from the Unix time in time_s (NaN: the recording's first whole second).
+  double csv_time_origin_s = std::numeric_limits<double>::quiet_NaN();
+  RecordingSource recording;  ///< --log: a candump recording
   // The CSV's columns and steps.
   std::string columns;
   double max_step_s = 0.0;
@@ -524,8 +526,8 @@ const SubcommandRegistrar kRegistrar{
           ->capture_default_str();
       app.add_option("--csv-time-origin", o->csv_time_origin_s,
                      "With --log: subtracted from the frames' Unix time in time_s (as "
-                     "pumpthermd's --csv-time-origin)")
-          ->capture_default_str();
+                     "pumpthermd's --csv-time-origin; default: the recording's first whole "
+                     "second; 0: Unix time)");
       app.add_option("--winding-column", o->winding_column,
                      "With --input: column with the winding temperature from resistance "
                      "identification, degC (the identifier's, tracking)");
