@@ -61,7 +61,7 @@ above() {
     $1 + 0 >= from { t = sprintf("%.0f", $1); if (!(t in truth)) next
       split(truth[t], tr, ","); ok = 1
       for (k in nodes) { n = nodes[k]
-        v = tr[col[ARGV[1], n "_C"]]; x = $col[ARGV[2], n "_degC"]; sd = $col[ARGV[2], n "_sd_K"]
+        v = tr[col[ARGV[1], n "_degC"]]; x = $col[ARGV[2], n "_degC"]; sd = $col[ARGV[2], n "_sd_K"]
         if (!(v + 0 <= x + 2 * sd)) ok = 0 }
       rows++; good += ok }
     END { printf "%.0f", rows ? 100 * good / rows : 0 }' "$2" "$1"
@@ -87,7 +87,7 @@ run() {
     max_changes=$((max_changes + extra))
     local truth=$tmp/$pump.truth.csv csv=$est/$pump.csv
     local tt at sf ch tat
-    tt=$(first "$truth" winding_resistance_C 120)
+    tt=$(first "$truth" winding_resistance_degC 120)
     at=$(first_word "$csv" alarm_level trip)
     # Map the daemon's time back to the recording's time.
     if [[ $at != none ]]; then
