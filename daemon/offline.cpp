@@ -111,14 +111,16 @@ class CsvSink {
       files_.push_back(std::make_unique<File>(
           dir.empty() ? o.csv_file : fmt::format("{}/{}.csv", dir, p->config().name), "w"));
       std::string header = "time_s";
-      for (const auto& n : p->model().StateNames()) header += fmt::format(",{}_C,{}_sd_K", n, n);
+      for (const auto& n : p->model().StateNames()) header += fmt::format(",{}_degC,{}_sd_K", n, n);
       header += CsvHeader() + "\n";
       std::fputs(header.c_str(), files_.back()->f);
       last_.push_back(-1);
       if (dir.empty()) break;  // csv_file: the first pump's
     }
   }
-  void Write(const Gateway& g) {
+  /// `first_us`: the recording's first frame (the default origin's whole second).
+  void Write(const Gateway& g, std::int64_t first_us) {
+    if (std::isnan(origin_s_)) origin_s_ = std::floor(static_cast<double>(first_us) * 1e-6);
     for (std::size_t i = 0; i < files_.size(); ++i) {
       const PumpSnapshot& s = g.pumps()[i]->snapshot();
       // A row per step with an estimate, or with an alarm before the first estimate (its
@@ -356,7 +358,7 @@ OfflineResult RunOffline(std::istream& in, const std::string& source, Gateway& g
     // here. The CSV rows follow the thermal steps, which happen only in Advance.
     if (now >= gateway.NextDueUs()) {
       gateway.Advance(now, sink);
-      csv.Write(gateway);
+      csv.Write(gateway, log_start_us);
       if (options.after_advance) options.after_advance(gateway, now);
     }
     // The heartbeat, as live on every configured interface.

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <functional>
 #include <istream>
+#include <limits>
 #include <memory>
 #include <string>
 
@@ -27,7 +28,9 @@ struct OfflineOptions {
   std::string csv_dir;     ///< per-pump CSV of every thermal step ("" = none)
   /// The CSV of the first pump into this file instead ("-": standard output; "" = none).
   std::string csv_file;
-  double csv_time_origin_s = 0.0;   ///< subtracted from the Unix time in the CSV's time_s
+  /// Subtracted from the Unix time in the CSV's time_s; NaN: the recording's first frame's
+  /// whole second (time since the recording's start, docs/daemon.md "Time in CSV files").
+  double csv_time_origin_s = std::numeric_limits<double>::quiet_NaN();
   bool table = false;               ///< print the pump table while running
   double table_period_s = 60.0;     ///< of log time between tables
   double pace = 0.0;                ///< log seconds per wall second (0 = as fast as possible)

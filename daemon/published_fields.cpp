@@ -62,6 +62,52 @@ double AlarmValue(const FieldSource& s) {
   return E(s).initialised && temp ? E(s).alarm.value : kNaN;
 }
 
+// The CSV's words for codes (docs/daemon.md, "Names"; the numbers are what CAN and LCM carry).
+constexpr std::array<std::string_view, 3> kLevelWords{"normal", "warning", "trip"};
+
+void Append(std::string& out, std::string_view word) { out += word; }
+
+/// A journal-style name with its spaces as underscores ("out of range" -> "out_of_range").
+void AppendWord(std::string& out, std::string_view name) {
+  for (const char c : name) out += c == ' ' ? '_' : c;
+}
+
+void LevelWord(const FieldSource& s, std::string& out) {
+  if (!AlarmKnown(s)) return;
+  const auto level = static_cast<std::size_t>(E(s).alarm.level);
+  if (level < kLevelWords.size()) Append(out, kLevelWords[level]);
+}
+
+void ReasonWord(const FieldSource& s, std::string& out) {
+  if (AlarmKnown(s)) AppendWord(out, estimators::AlarmReasonName(E(s).alarm.reason));
+}
+
+/// The alarm's node by name: a model node, `winding_resistance`, or empty for none.
+void AlarmNodeWord(const FieldSource& s, std::string& out) {
+  const double code = AlarmNode(s);
+  if (!std::isfinite(code)) return;
+  const auto k = static_cast<std::size_t>(code);
+  if (k == kAlarmNodeWindingRes) {
+    Append(out, "winding_resistance");
+  } else if (s.model != nullptr && k < s.model->StateNames().size()) {
+    Append(out, s.model->StateNames()[k]);
+  } else {
+    fmt::format_to(std::back_inserter(out), "node{}", k);
+  }
+}
+
+/// Every active reason's word, joined by '+' (empty: none active).
+void ActiveReasonsWord(const FieldSource& s, std::string& out) {
+  const unsigned bits = E(s).alarm.active_reasons;
+  bool first = true;
+  for (unsigned r = 0; r < 16; ++r) {
+    if ((bits & (1U << r)) == 0) continue;
+    if (!first) out += '+';
+    first = false;
+    AppendWord(out, estimators::AlarmReasonName(static_cast<AlarmReason>(r)));
+  }
+}
+
 double FilterStatus(const FieldSource& s) {
   const PumpEstimate& e = E(s);
   if (!e.initialised) return T::FILTER_NOT_STARTED;
@@ -75,11 +121,11 @@ double FilterStatus(const FieldSource& s) {
 /// message and signal, LCM field, CSV column and format, value, CSV word, old key.
 const std::array kFields = std::to_array<PublishedField>({
   {"winding_resistance_degC", "degC", "GW_TEMPS_A", "WindingRes_degC", &T::resistance_winding_degC,
-   "winding_resistance_C", {Kind::kFixed, 4},
+   "winding_resistance_degC", {Kind::kFixed, 4},
    [](const FieldSource& s) { return E(s).winding_resistance_degC; }, nullptr,
    "winding_res_temp_degC"},
   {"magnet_flux_degC", "degC", "GW_IDENT", "MagnetFlux_degC", &T::magnet_flux_degC,
-   "magnet_flux_C", {Kind::kFixed, 4},
+   "magnet_flux_degC", {Kind::kFixed, 4},
    [](const FieldSource& s) { return E(s).magnet_flux_degC; }, nullptr, "magnet_flux_temp_degC"},
   {"magnet_flux_sd_K", "K", "GW_IDENT_SD", "MagnetFluxSd_K", &T::magnet_flux_sd_K,
    "magnet_flux_sd_K", {Kind::kFixed, 4},
@@ -93,30 +139,40 @@ const std::array kFields = std::to_array<PublishedField>({
    }},
   {"flux_Wb", "Wb", "GW_IDENT", "Flux_Wb", &T::flux_Wb, "flux_Wb", {Kind::kFixed, 7},
    [](const FieldSource& s) { return Identified(s) ? E(s).resistance.flux_Wb : kNaN; }},
-  {"rs_status", "", "GW_IDENT", "RsStatus", &T::ident_status, "ident_status", {Kind::kInteger, 0},
-   [](const FieldSource& s) { return Code(E(s).resistance.status); }, nullptr, {}, true},
-  {"frame_measured_degC", "degC", "", "", {}, "frame_measured_C", {Kind::kFixed, 2},
-   [](const FieldSource& s) { return E(s).frame_measured_degC; }},
-  {"ambient_degC", "degC", "", "", {}, "ambient_C", {Kind::kFixed, 2},
+  {"rs_status", "", "GW_IDENT", "RsStatus", &T::ident_status, "ident_status", {Kind::kWord, 0},
+   [](const FieldSource& s) { return Code(E(s).resistance.status); },
+   [](const FieldSource& s, std::string& out) {
+     Append(out, estimators::ToString(E(s).resistance.status));
+   }, {}, true},
+  {"frame_sensor_degC", "degC", "", "", {}, "frame_sensor_degC", {Kind::kFixed, 2},
+   [](const FieldSource& s) { return E(s).frame_measured_degC; }, nullptr,
+   "frame_measured_degC"},
+  {"ambient_degC", "degC", "", "", {}, "ambient_degC", {Kind::kFixed, 2},
    [](const FieldSource& s) { return E(s).ambient_degC; }},
   {"speed_rpm", "rpm", "", "", {}, "speed_rpm", {Kind::kFixed, 1},
    [](const FieldSource& s) { return E(s).speed_rpm; }},
   {"nis", "", "", "", &T::nis, "nis", {Kind::kFixed, 3},
    [](const FieldSource& s) { return E(s).nis; }},
-  {"alarm_level", "", "GW_ALARM", "AlarmLevel", &A::level, "alarm_level", {Kind::kInteger, 0},
-   [](const FieldSource& s) { return AlarmKnown(s) ? Code(E(s).alarm.level) : kNaN; }},
-  {"alarm_reason", "", "GW_ALARM", "AlarmReason", {}, "alarm_reason", {Kind::kInteger, 0},
-   [](const FieldSource& s) { return AlarmKnown(s) ? Code(E(s).alarm.reason) : kNaN; }},
-  {"alarm_node", "", "GW_ALARM", "AlarmNode", {}, "alarm_node", {Kind::kInteger, 0},
-   AlarmNode},
+  {"alarm_level", "", "GW_ALARM", "AlarmLevel", &A::level, "alarm_level", {Kind::kWord, 0},
+   [](const FieldSource& s) { return AlarmKnown(s) ? Code(E(s).alarm.level) : kNaN; },
+   LevelWord},
+  {"alarm_reason", "", "GW_ALARM", "AlarmReason", {}, "alarm_reason", {Kind::kWord, 0},
+   [](const FieldSource& s) { return AlarmKnown(s) ? Code(E(s).alarm.reason) : kNaN; },
+   ReasonWord},
+  {"alarm_node", "", "GW_ALARM", "AlarmNode", {}, "alarm_node", {Kind::kWord, 0},
+   AlarmNode, AlarmNodeWord},
   {"alarm_value_degC", "degC", "GW_ALARM", "AlarmValue_degC", {}, "", {}, AlarmValue},
   {"time_to_trip_s", "s", "GW_ALARM", "TimeToTrip_s", &A::time_to_trip_s, "time_to_trip_s",
-   {Kind::kFixed, 0},
+   {Kind::kFixedOrEmpty, 0},
    [](const FieldSource& s) { return E(s).alarm.time_to_trip_s; }},
-  {"alarm_active_reasons", "", "", "", {}, "alarm_active_reasons", {Kind::kInteger, 0},
-   [](const FieldSource& s) { return Code(E(s).alarm.active_reasons); }, nullptr, {}, true},
-  {"sensor_fault", "", "", "", {}, "sensor_fault", {Kind::kInteger, 0},
-   [](const FieldSource& s) { return Code(E(s).sensor_fault); }, nullptr, {}, true},
+  {"alarm_active_reasons", "", "", "", {}, "alarm_active_reasons", {Kind::kWord, 0},
+   [](const FieldSource& s) { return Code(E(s).alarm.active_reasons); }, ActiveReasonsWord, {},
+   true},
+  {"sensor_fault", "", "", "", {}, "sensor_fault", {Kind::kWord, 0},
+   [](const FieldSource& s) { return Code(E(s).sensor_fault); },
+   [](const FieldSource& s, std::string& out) {
+     AppendWord(out, estimators::SensorFaultName(E(s).sensor_fault));
+   }, {}, true},
   {"winding_resistance_sd_K", "K", "GW_IDENT_SD", "WindingResSd_K", &T::resistance_winding_sd_K,
    "winding_resistance_sd_K", {Kind::kFixed, 4},
    // Only with the temperature it belongs to.
@@ -129,20 +185,26 @@ const std::array kFields = std::to_array<PublishedField>({
   {"mismatch_state", "", "GW_ALARM", "MismatchState", &A::mismatch_state, "mismatch_state",
    {Kind::kWord, 0},
    [](const FieldSource& s) { return E(s).initialised ? Code(E(s).mismatch.state) : kNaN; },
-   [](const FieldSource& s) { return estimators::MismatchStateName(E(s).mismatch.state); }},
+   [](const FieldSource& s, std::string& out) {
+     Append(out, estimators::MismatchStateName(E(s).mismatch.state));
+   }},
   {"mismatch_effect", "", "GW_ALARM", "MismatchEffect", &A::mismatch_effect, "mismatch_effect",
    {Kind::kWord, 0},
    [](const FieldSource& s) { return E(s).initialised ? Code(E(s).mismatch.effect) : kNaN; },
-   [](const FieldSource& s) { return estimators::MismatchEffectName(E(s).mismatch.effect); }},
+   [](const FieldSource& s, std::string& out) {
+     Append(out, estimators::MismatchEffectName(E(s).mismatch.effect));
+   }},
   {"mismatch_value", "", "", "", &A::mismatch_value, "mismatch_value", {Kind::kFixed, 3},
    [](const FieldSource& s) { return E(s).mismatch.value; }},
   {"frame_sensor_offset_K", "K", "", "", {}, "frame_sensor_offset_K", {Kind::kFixed, 3},
    [](const FieldSource& s) { return E(s).sensor_offset_K; }},
-  {"identifier_winding_degC", "degC", "", "", {}, "identifier_winding_C", {Kind::kFixed, 4},
+  {"identifier_winding_degC", "degC", "", "", {}, "identifier_winding_degC", {Kind::kFixed, 4},
    [](const FieldSource& s) { return E(s).identifier_winding_degC; }},
   {"voltage_reading", "", "", "", {}, "voltage_reading", {Kind::kWord, 0},
    [](const FieldSource& s) { return Code(E(s).voltage_reading.state); },
-   [](const FieldSource& s) { return estimators::ReadingStateName(E(s).voltage_reading.state); },
+   [](const FieldSource& s, std::string& out) {
+     Append(out, estimators::ReadingStateName(E(s).voltage_reading.state));
+   },
    {}, true},
   {"r0_error", "", "", "", {}, "r0_error", {Kind::kGeneral, 4},
    [](const FieldSource& s) { return E(s).calibration.dr; }},
@@ -193,16 +255,18 @@ std::vector<protocol::OutputSpec> MakeMappingOutputs() {
 void AppendCell(const PublishedField& f, const FieldSource& s, std::string& out) {
   out += ',';
   if (f.csv.kind == Kind::kWord) {
-    out += f.word(s);
+    f.word(s, out);
     return;
   }
   const double v = f.value(s);
+  if (!std::isfinite(v) && f.csv.kind == Kind::kFixedOrEmpty) return;
   if (!std::isfinite(v) && f.csv.kind == Kind::kInteger) {
     fmt::format_to(std::back_inserter(out), "{}", v);  // nan, inf
     return;
   }
   switch (f.csv.kind) {
     case Kind::kFixed:
+    case Kind::kFixedOrEmpty:
       fmt::format_to(std::back_inserter(out), "{:.{}f}", v, f.csv.digits);
       break;
     case Kind::kGeneral:

@@ -7,7 +7,7 @@
 /// offline CSV are filled from this list (docs/architecture.md, "Published values").
 ///
 /// Not here: the node temperatures and sds (one per model node: LCM arrays, CSV columns
-/// `<node>_C`, CAN through outputs.nodes or the node-indexed message, whose per-node fields are
+/// `<node>_degC`, CAN through outputs.nodes or the node-indexed message, whose per-node fields are
 /// here), the alarm's conditions and the channels' strings (LCM), and the saved state, which
 /// is the estimator's own state (PumpEstimatorState), not a published value.
 
@@ -45,16 +45,20 @@ using LcmField =
                  std::int8_t pumptherm::alarm_t::*, std::int64_t pumptherm::alarm_t::*>;
 
 /// How the CSV writes a value: fixed with `digits` decimals, general with `digits` significant
-/// digits, an integer, or a word (PublishedField::word).
+/// digits, an integer, or a word (PublishedField::word; a code is written as its word, the
+/// numbers CAN and LCM carry beside them in docs/daemon.md, "Names"). A value that is not
+/// available (NaN) is an empty cell, except `nan` in a fixed or general column.
 struct CsvFormat {
-  enum class Kind : std::uint8_t { kNone, kFixed, kGeneral, kInteger, kWord };
+  /// kFixedOrEmpty: fixed, and empty when there is none (NaN or infinite: time to trip).
+  enum class Kind : std::uint8_t { kNone, kFixed, kGeneral, kInteger, kWord, kFixedOrEmpty };
   Kind kind = Kind::kNone;
   int digits = 0;
 };
 
 struct PublishedField {
   using Value = double (*)(const FieldSource&);
-  using Word = const char* (*)(const FieldSource&);
+  /// Appends the CSV's word for the value to `out` (nothing for "not available").
+  using Word = void (*)(const FieldSource&, std::string& out);
   PublishedField(std::string_view name_, std::string_view unit_, std::string_view dbc_message_,
                  std::string_view dbc_signal_, LcmField lcm_, std::string_view csv_column_,
                  CsvFormat csv_, Value value_, Word word_ = nullptr, std::string_view old_key_ = {},

@@ -103,7 +103,8 @@ int main(int argc, char** argv) {
   app.add_option("--csv-dir", offline.csv_dir,
                  "with -r: write <pump>.csv per pump, a row per thermal step");
   app.add_option("--csv-time-origin", offline.csv_time_origin_s,
-                 "with --csv-dir: Unix time (s) that becomes time_s = 0 in the CSV files");
+                 "with --csv-dir: Unix time (s) that becomes time_s = 0 in the CSV files "
+                 "(default: the recording's first whole second; 0: Unix time)");
   app.add_flag("--table", offline.table,
                "print a table of the pumps on stderr while running (live or with -r)");
   auto* table_period =

@@ -34,7 +34,6 @@ mkdir -p "$out/estimates"
 
 echo "== 1/3 simulating the plant: pumptherm plant demo --out $out"
 "$build"/tools/pumptherm plant demo --out "$out"
-origin=$(head -n 1 "$out/demo.log" | sed 's/^(\([0-9]*\)\..*/\1/')
 
 if [[ $live == 1 ]]; then
   exec tools/demo-live.sh "$out"
@@ -42,7 +41,7 @@ fi
 
 echo "== 2/3 the gateway on the recording: pumpthermd -r $out/demo.log (pace x$pace)"
 "$build"/daemon/pumpthermd --config tools/demo/pumpthermd-demo.toml -r "$out/demo.log" \
-  --table --table-period 60 --pace "$pace" --csv-dir "$out/estimates" --csv-time-origin "$origin" \
+  --table --table-period 60 --pace "$pace" --csv-dir "$out/estimates" \
   --output-log "$out/gateway.log" --lcm-log "$out/gateway.lcm" 2>&1 >"$out/pumpthermd.txt" |
   tee "$out/pumpthermd.err"
 echo
@@ -53,7 +52,7 @@ echo "== 3/3 plotting: $out/demo.png"
   --truth "$out/pump1.truth.csv" --estimate "$out/estimates/pump1.csv" --label "pump1" \
   --truth "$out/pump2.truth.csv" --estimate "$out/estimates/pump2.csv" --label "pump2" \
   --truth "$out/pump3.truth.csv" --estimate "$out/estimates/pump3.csv" --label "pump3 (cooling fails)" \
-  --nodes winding,rotor,stator,frame --extra winding_resistance_C=winding,magnet_flux_C=rotor \
+  --nodes winding,rotor,stator,frame --extra winding_resistance_degC=winding,magnet_flux_degC=rotor \
   --warning-C 100 --trip-C 120 --row-height 300 \
   --title "pumptherm demo: the gateway's estimates against the plant's truth, and their error" \
   --out "$out/demo.png"

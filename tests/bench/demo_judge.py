@@ -5,7 +5,7 @@ Runs `pumptherm plant demo` (unless --reuse), the gateway offline on its recordi
 (`pumpthermd -r`, no pacing) with tools/demo/pumpthermd-demo.toml, and reports per pump:
   - per estimated node, after --skip-s (300 s): max |estimate - truth| and the share of steps in
     which the truth lies within estimate +- 2 sd (coverage);
-  - the same for the winding temperature from resistance (against the truth's winding_resistance_C)
+  - the same for the winding temperature from resistance (against the truth's winding_resistance_degC)
     and, when the CSV has it, the magnet temperature from the flux (against the truth of the
     magnet node, by its sd);
   - the first warning and trip against the truth's first crossings (summary.json).
@@ -30,17 +30,30 @@ import subprocess
 import sys
 
 
+# Codes the CSV files write as words (docs/daemon.md, "Names"): word -> number.
+LEVELS = {"normal": 0.0, "warning": 1.0, "trip": 2.0}
+# Columns of files written before one name per quantity: old -> current.
+RENAMED = {"winding_res_degC": "winding_resistance_degC", "frame_measured_degC": "frame_sensor_degC"}
+
+
+def current_name(name):
+    """A column's current name: a temperature under `_degC` (old files wrote `_C`)."""
+    if name.endswith("_C"):
+        name = name[:-2] + "_degC"
+    return RENAMED.get(name, name)
+
+
 def read_csv(path):
     with open(path, newline="") as f:
         rows = list(csv.reader(f))
-    header, body = rows[0], rows[1:]
+    header, body = [current_name(n) for n in rows[0]], rows[1:]
     cols = {name: [] for name in header}
     for r in body:
         for name, v in zip(header, r):
             try:
                 cols[name].append(float(v))
             except ValueError:
-                cols[name].append(math.nan)
+                cols[name].append(LEVELS.get(v, math.nan) if name == "alarm_level" else math.nan)
     return cols
 
 
@@ -127,20 +140,19 @@ def main():
         tt, et = truth["time_s"], est["time_s"]
         nodes = {}
         for col in est:
-            if (col.endswith("_sd_K") and col[:-5] + "_C" in est and col[:-5] + "_C" in truth
+            if (col.endswith("_sd_K") and col[:-5] + "_degC" in est and col[:-5] + "_degC" in truth
                     and col != "winding_resistance_sd_K"):
                 node = col[:-5]
-                nodes[node] = judge_series(et, est[node + "_C"], est[col], tt, truth[node + "_C"], a.skip_s)
+                nodes[node] = judge_series(et, est[node + "_degC"], est[col], tt, truth[node + "_degC"],
+                                           a.skip_s)
         extra = {}
-        # The truth's column before one name per quantity was winding_res_C.
-        truth_w = next((c for c in ("winding_resistance_C", "winding_res_C") if c in truth), None)
-        if "winding_resistance_C" in est and truth_w:
+        if "winding_resistance_degC" in est and "winding_resistance_degC" in truth:
             sd = est.get("winding_resistance_sd_K", [math.nan] * len(et))
-            extra["winding_from_resistance"] = judge_series(et, est["winding_resistance_C"], sd, tt,
-                                                            truth[truth_w], a.skip_s)
-        if "magnet_flux_C" in est and a.magnet_node + "_C" in truth:
-            extra["magnet_from_flux"] = judge_series(et, est["magnet_flux_C"], est["magnet_flux_sd_K"], tt,
-                                                     truth[a.magnet_node + "_C"], a.skip_s)
+            extra["winding_from_resistance"] = judge_series(et, est["winding_resistance_degC"], sd, tt,
+                                                            truth["winding_resistance_degC"], a.skip_s)
+        if "magnet_flux_degC" in est and a.magnet_node + "_degC" in truth:
+            extra["magnet_from_flux"] = judge_series(et, est["magnet_flux_degC"], est["magnet_flux_sd_K"], tt,
+                                                     truth[a.magnet_node + "_degC"], a.skip_s)
         level = est.get("alarm_level", [])
         alarms = {"warning_s": first_at_or_above(et, level, 1.0), "trip_s": first_at_or_above(et, level, 2.0),
                   "true_warning_s": p.get("warning_crossed_s"), "true_trip_s": p.get("trip_crossed_s")}

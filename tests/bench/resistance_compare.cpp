@@ -98,8 +98,8 @@ double MagnetTrajectory_degC(double t_s) {
 
 // The demo's pump 3 (tools/plant/scenarios/demo.toml, profile "heavy", cooling failed at 240 s):
 // run-up 120 s at 3 A, then 2.5 A, 3.5 A and 4.5 A; the winding follows the demo's truth
-// (pump3.truth.csv, winding_res_C): 4-5 K/min at first, about 6 K/min from 9 min on; its
-// magnet flux does not drift there (the model has no magnet node).
+// (pump3.truth.csv, winding_resistance_degC, then called winding_res_C): 4-5 K/min at first, about
+// 6 K/min from 9 min on; its magnet flux does not drift there (the model has no magnet node).
 double FastHeatingLoad_A(double t_s) {
   if (t_s < 240.0) return 2.5;
   if (t_s < 480.0) return 3.5;
@@ -107,7 +107,7 @@ double FastHeatingLoad_A(double t_s) {
 }
 double FastHeatingWinding_degC(double t_s) {
   // The demo's truth once a minute, 0 to 20 min (`pumptherm plant demo`, pump3.truth.csv,
-  // column winding_res_C), linear in between.
+  // column winding_resistance_degC), linear in between.
   static constexpr double kDegC[] = {22.00,  26.89,  31.01,  34.67,  37.86,  44.52,  50.06,
                                      55.52,  60.82,  70.44,  76.94,  83.11,  89.17,  95.21,
                                      101.15, 107.06, 112.95, 118.79, 124.59, 130.30, 135.99};
@@ -117,7 +117,7 @@ double FastHeatingWinding_degC(double t_s) {
 }
 
 // The demo's pump 3 rotor (the magnet), once a minute, 0 to 20 min (`pumptherm plant demo`,
-// pump3.truth.csv, column rotor_C): about 5.6 K/min from 9 min on.
+// pump3.truth.csv, column rotor_degC): about 5.6 K/min from 9 min on.
 double FastHeatingMagnet_degC(double t_s) {
   static constexpr double kDegC[] = {22.00, 22.81, 25.50, 28.84, 32.12,  36.37,  40.74,
                                      45.17, 49.71, 55.24, 60.81, 66.37,  71.93,  77.52,

@@ -49,10 +49,10 @@ first() {
   awk -F, -v col="$2" -v thr="$3" 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == col) c = i; next }
     $c + 0 >= thr + 0 { print $1; found = 1; exit } END { if (!found) print "none" }' "$1"
 }
-# first_bit CSV COLUMN BIT: first time_s where bit BIT of COLUMN is set.
-first_bit() {
-  awk -F, -v col="$2" -v bit="$3" 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == col) c = i; next }
-    int($c / 2 ^ bit) % 2 == 1 { print $1; found = 1; exit } END { if (!found) print "none" }' "$1"
+# first_word CSV COLUMN WORD: first time_s where COLUMN (words joined by "+") holds WORD.
+first_word() {
+  awk -F, -v col="$2" -v word="$3" 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == col) c = i; next }
+    ("+" $c "+") ~ ("\\+" word "\\+") { print $1; found = 1; exit } END { if (!found) print "none" }' "$1"
 }
 # above CSV TRUTH FROM_S: the share (%) of the CSV's rows from FROM_S on in which the truth of
 # every node lies at or below the published estimate + 2 sd (truth rows at whole seconds).
@@ -63,7 +63,7 @@ above() {
     $1 + 0 >= from { t = sprintf("%.0f", $1); if (!(t in truth)) next
       split(truth[t], tr, ","); ok = 1
       for (k in nodes) { n = nodes[k]
-        v = tr[col[ARGV[1], n "_C"]]; x = $col[ARGV[2], n "_C"]; sd = $col[ARGV[2], n "_sd_K"]
+        v = tr[col[ARGV[1], n "_degC"]]; x = $col[ARGV[2], n "_degC"]; sd = $col[ARGV[2], n "_sd_K"]
         if (!(v + 0 <= x + 2 * sd)) ok = 0 }
       rows++; good += ok }
     END { printf "%.0f", rows ? 100 * good / rows : 0 }' "$2" "$1"
@@ -89,15 +89,15 @@ run() {
     max_changes=$((max_changes + extra))
     local truth=$tmp/$pump.truth.csv csv=$est/$pump.csv
     local tt at sf ch tat
-    tt=$(first "$truth" winding_resistance_C 120)
-    at=$(first "$csv" alarm_level 2)
+    tt=$(first "$truth" winding_resistance_degC 120)
+    at=$(first_word "$csv" alarm_level trip)
     # Map the daemon's time back to the recording's time.
     if [[ $at != none ]]; then
       at=$(awk -v a="$at" -v f="$shift_from" -v s="$shift_s" 'BEGIN { print (a >= f + s && s != 0) ? a - s : a }')
     fi
     tat=-
     [[ $at != none ]] && tat=$(awk -F, -v a="$at" 'NR > 1 && $1 <= a { v = $10 } END { printf "%.1f", v }' "$truth")
-    sf=$(first_bit "$csv" alarm_active_reasons 8)
+    sf=$(first_word "$csv" alarm_active_reasons sensor_fault)
     ch=$(changes "$csv")
     local delay=-
     [[ $tt != none && $at != none ]] && delay=$(awk -v a="$at" -v t="$tt" 'BEGIN { printf "%.1f", a - t }')
@@ -121,7 +121,7 @@ run() {
     fi
     ((ch <= max_changes)) || { echo "FAIL: $name/$pump: alarm level changed $ch times (at most $max_changes)"; fail=1; }
     local imp
-    imp=$(first_bit "$csv" alarm_active_reasons 5)
+    imp=$(first_word "$csv" alarm_active_reasons implausible_sensor)
     [[ $reading == wrong || $imp == none ]] ||
       { echo "FAIL: $name/$pump: implausible_sensor at $imp s, the RTD reads right"; fail=1; }
     if [[ $share != - && $least_above != - ]]; then

@@ -22,13 +22,13 @@ fail=0
 for p in pump1 pump2 pump3; do
   # Truth rows every second; the daemon's rows a few ms after: matched to the nearest second.
   awk -F, -v skip=300 '
-    FNR == 1 { for (i = 1; i <= NF; i++) h[FILENAME, $i] = i; next }
-    FILENAME ~ /truth/ { truth[$1 + 0] = $h[FILENAME, "rotor_C"]; next }
+    FNR == 1 { for (i = 1; i <= NF; i++) { n = $i; sub(/_C$/, "_degC", n); h[FILENAME, n] = i }; next }
+    FILENAME ~ /truth/ { truth[$1 + 0] = $h[FILENAME, "rotor_degC"]; next }
     $1 + 0 >= skip {
       t = int($1 + 0.5); if (!(t in truth)) next
       n++
-      e = $h[FILENAME, "rotor_C"] - truth[t]; if (e < 0) e = -e; if (e > er) er = e
-      m = $h[FILENAME, "magnet_flux_C"]
+      e = $h[FILENAME, "rotor_degC"] - truth[t]; if (e < 0) e = -e; if (e > er) er = e
+      m = $h[FILENAME, "magnet_flux_degC"]
       if (m != "nan") { k++; e = m - truth[t]; if (e < 0) e = -e; if (e > em) em = e }
     }
     END {

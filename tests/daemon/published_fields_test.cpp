@@ -128,12 +128,38 @@ TEST(PublishedFields, OneEstimateReachesLcmAndTheCsvAlike) {
     }
     return std::string("(no column)");
   };
-  EXPECT_EQ(cell("winding_resistance_C"), "81.2500");
+  EXPECT_EQ(cell("winding_resistance_degC"), "81.2500");
   EXPECT_EQ(cell("magnet_flux_sd_K"), "3.2500");
-  EXPECT_EQ(cell("alarm_level"), "1");
-  EXPECT_EQ(cell("time_to_trip_s"), "inf");
+  // Codes as words (docs/daemon.md, "Names"); no time to trip: an empty cell.
+  EXPECT_EQ(cell("alarm_level"), "warning");
+  EXPECT_EQ(cell("ident_status"), "tracking");
+  EXPECT_EQ(cell("sensor_fault"), "none");
+  EXPECT_EQ(cell("alarm_active_reasons"), "");
+  EXPECT_EQ(cell("time_to_trip_s"), "");
   EXPECT_EQ(cell("mismatch_state"), "plant_change");
   EXPECT_EQ(cell("mismatch_effect"), "rotor_loss");
+  // The alarm's node by its name, every active reason joined by '+', a fault's kind as a word.
+  e.alarm.level = estimators::AlarmLevel::kTrip;
+  e.alarm.reason = estimators::AlarmReason::kEstimatedOverTemperature;
+  e.alarm.node = -1;
+  e.alarm.active_reasons = (1U << 4) | (1U << 8);
+  e.alarm.time_to_trip_s = 276.2;
+  e.sensor_fault = estimators::SensorFault::kOutOfRange;
+  row.clear();
+  AppendCsvRow(s, row);
+  const std::vector<std::string> words = Split(row.substr(1));
+  auto word = [&](const std::string& column) {
+    for (std::size_t i = 0; i < header.size(); ++i) {
+      if (header[i] == column) return words[i];
+    }
+    return std::string("(no column)");
+  };
+  EXPECT_EQ(word("alarm_level"), "trip");
+  EXPECT_EQ(word("alarm_reason"), "estimated_over_temperature");
+  EXPECT_EQ(word("alarm_node"), "winding_resistance");
+  EXPECT_EQ(word("alarm_active_reasons"), "stale_telemetry+sensor_fault");
+  EXPECT_EQ(word("sensor_fault"), "out_of_range");
+  EXPECT_EQ(word("time_to_trip_s"), "276");
   // Not available: NaN in LCM doubles and the CSV, -1 in LCM codes.
   estimators::PumpEstimate none;
   FieldSource n;

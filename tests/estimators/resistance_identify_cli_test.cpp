@@ -113,12 +113,12 @@ TEST(IdentifyCli, IdentifiesSimulatedTelemetry) {
   const Result r = Identify("good");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const tools::CsvTable out = tools::CsvTable::Read(TempPath("good.out.csv"));
-  EXPECT_EQ(out.columns(),
-            (std::vector<std::string>{"time_s", "resistance_ohm", "flux_Wb", "winding_resistance_C",
-                                      "status", "winding_resistance_sd_K", "flux_sd_Wb"}));
+  EXPECT_EQ(out.columns(), (std::vector<std::string>{"time_s", "resistance_ohm", "flux_Wb",
+                                                     "winding_resistance_degC", "status",
+                                                     "winding_resistance_sd_K", "flux_sd_Wb"}));
   EXPECT_EQ(out.rows(), 60000u);
   const auto rs = out.Column("resistance_ohm");
-  const auto temp = out.Column("winding_resistance_C");
+  const auto temp = out.Column("winding_resistance_degC");
   const auto status = out.Column("status");
   EXPECT_NEAR(rs.back(), true_r, 0.005 * true_r);
   EXPECT_NEAR(temp.back(), 45.0, 1.5);

@@ -57,10 +57,10 @@ bool DataPresent(std::string& why) {
   return true;
 }
 
-/// Mean-square error of `<node>_C` in `out` against the measured `<node>` column of the data.
+/// Mean-square error of `<node>_degC` in `out` against the measured `<node>` column of the data.
 double Mse_K2(const pumptherm::tools::CsvTable& data, const pumptherm::tools::CsvTable& out,
               const std::string& node) {
-  const auto m = data.Column(node), e = out.Column(node + "_C");
+  const auto m = data.Column(node), e = out.Column(node + "_degC");
   EXPECT_EQ(m.size(), e.size());
   double s = 0.0;
   for (std::size_t k = 0; k < m.size(); ++k) s += (e[k] - m[k]) * (e[k] - m[k]);
@@ -113,7 +113,8 @@ TEST(LossMapCli, EstimateWithTheYokeMeasuredRuns) {
 TEST(LossMapCli, FirstRowWithoutTheNodeColumnIsExit2NamingIt) {
   std::string why;
   if (!DataPresent(why)) GTEST_SKIP() << why;
-  // Without the Paderborn preset the node columns are looked up as <node>_C, which the data lack.
+  // Without the Paderborn preset the node columns are looked up as <node>_degC, which the data
+  // lack.
   const Result r = RunCli("simulate --model '" + kModel + "' --initial first-row --input '" +
                               kData + "' --output '" + TempPath("bad.csv") + "'",
                           "bad");

@@ -53,12 +53,12 @@ printf 'time_s,alarm_level\n0,normal\n8,warning\n15,trip\n' > "$tmp/word_events.
   --out "$tmp/w.png" > "$tmp/out.txt" 2>&1 || { cat "$tmp/out.txt"; fail "plot with word events"; }
 grep -q "alarm warning     8 s  trip    15 s" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "word-coded alarm levels not read"; }
 # An estimate with its sd and a diagnosis: an error panel, the diagnosis marked, one legend that
-# names only what is drawn (magnet_flux_C has no value: "not available", no legend entry).
-awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == "frame_C") c = i; print "time_s,frame_C,frame_sd_K,magnet_flux_C,mismatch_state,mismatch_effect,mismatch_value"; next }
+# names only what is drawn (magnet_flux_degC has no value: "not available", no legend entry).
+awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == "frame_degC") c = i; print "time_s,frame_degC,frame_sd_K,magnet_flux_degC,mismatch_state,mismatch_effect,mismatch_value"; next }
          { s = NR > 5 ? "plant_change" : "consistent"; e = NR > 10 ? "frame_ambient_resistance" : "none"
            print $1 "," $c + 0.3 ",0.2,nan," s "," e ",3.0" }' "$tmp/a/pump3.truth.csv" > "$tmp/est3.csv"
 "$exe" plot --truth "$tmp/a/pump3.truth.csv" --estimate "$tmp/est3.csv" --nodes frame \
-  --extra magnet_flux_C=frame --mark 5=test --keep-script --out "$tmp/e.png" > "$tmp/out.txt" 2>&1 ||
+  --extra magnet_flux_degC=frame --mark 5=test --keep-script --out "$tmp/e.png" > "$tmp/out.txt" 2>&1 ||
   { cat "$tmp/out.txt"; fail "plot with an error panel"; }
 script=$(sed -n 's/^gnuplot script and data kept in //p' "$tmp/out.txt")/plot.gp
 grep -q "estimate minus truth" "$script" || fail "no error panel"
@@ -89,7 +89,7 @@ grep -q "<svg" "$tmp/p.svg" || fail "not an SVG"
 # Missing column: exit 2 naming it; no gnuplot: exit 1 saying so.
 "$exe" plot --truth "$tmp/a/pump1.truth.csv" --nodes housing --out "$tmp/x.png" > "$tmp/out.txt" 2>&1
 [ $? -eq 2 ] || fail "missing column: expected exit 2"
-grep -q "housing_C" "$tmp/out.txt" || fail "missing column not named"
+grep -q "housing_degC" "$tmp/out.txt" || fail "missing column not named"
 "$exe" plot --truth "$tmp/a/pump1.truth.csv" --nodes frame --gnuplot "$tmp/no-gnuplot" --out "$tmp/x.png" > "$tmp/out.txt" 2>&1
 [ $? -eq 1 ] || fail "absent gnuplot: expected exit 1"
 grep -q "not installed" "$tmp/out.txt" || { cat "$tmp/out.txt"; fail "absent gnuplot message"; }

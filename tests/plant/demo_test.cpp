@@ -60,7 +60,7 @@ TEST(PlantDemo, Pump3WarnsThenTripsPumps1And2StayBelowWarning) {
   // The truth CSV says the same (it is what the daemon's demo test compares against).
   const tools::CsvTable truth = tools::CsvTable::Read((out / "pump3.truth.csv").string());
   const auto t = truth.Time();
-  const auto w = truth.Column("winding_resistance_C");
+  const auto w = truth.Column("winding_resistance_degC");
   double first_warning = -1.0;
   for (std::size_t k = 0; k < w.size(); ++k) {
     if (w[k] > 100.0) {

@@ -165,7 +165,7 @@ TEST(Plant, FramesDecodeToTheSimulatedValues) {
   const auto iq = measured.Column("iq_A");
   const auto id = measured.Column("id_A");
   const auto speed = measured.Column("speed_rpm");
-  const auto frame = measured.Column("frame_C");
+  const auto frame = measured.Column("frame_degC");
   const auto fast = Select(frames, "can0", 0x100 + 1);
   const auto volts = Select(frames, "can0", 0x110 + 1);
   const auto status = Select(frames, "can0", 0x180 + 1);
@@ -292,7 +292,7 @@ TEST(Plant, StaleSensorStopsStatusFrames) {
   EXPECT_EQ(Select(frames, "can0", 0x182).size(), 300u);   // pump b unaffected
   EXPECT_EQ(Select(frames, "can0", 0x101).size(), 3000u);  // fast frames continue
   const tools::CsvTable m = tools::CsvTable::Read((out / "a.measured.csv").string());
-  const auto frame = m.ColumnAllowingNaN("frame_C");
+  const auto frame = m.ColumnAllowingNaN("frame_degC");
   EXPECT_TRUE(std::isnan(frame[15]));
   EXPECT_FALSE(std::isnan(frame[25]));
 }
@@ -372,7 +372,8 @@ TEST(Plant, CoolingFailureRaisesTemperatures) {
       failed);
   const tools::CsvTable a = tools::CsvTable::Read((ok / "a.truth.csv").string());
   const tools::CsvTable b = tools::CsvTable::Read((failed / "a.truth.csv").string());
-  const double frame_ok = a.Column("frame_C").back(), frame_failed = b.Column("frame_C").back();
+  const double frame_ok = a.Column("frame_degC").back(),
+               frame_failed = b.Column("frame_degC").back();
   // 25 s of lost cooling: the frame keeps its heat (tens of W on 300 J/K: about 1 K more).
   EXPECT_GT(frame_failed - frame_ok, 0.5) << frame_ok << " vs " << frame_failed;
   EXPECT_EQ(b.Column("cooling_model").back(), 1.0);
@@ -384,8 +385,8 @@ TEST(Plant, WindingTemperatureFeedsTheResistance) {
   RunScenario(ScenarioText(), out);
   const tools::CsvTable t = tools::CsvTable::Read((out / "b.truth.csv").string());
   const auto rs = t.Column("resistance_ohm");
-  const auto tw = t.Column("winding_resistance_C");
-  const auto winding = t.Column("winding_C");
+  const auto tw = t.Column("winding_resistance_degC");
+  const auto winding = t.Column("winding_degC");
   for (std::size_t i = 0; i < rs.size(); ++i) {
     EXPECT_NEAR(rs[i], 0.28 * (1.0 + 4.1e-3 * (tw[i] - 27.2)), 1e-9);  // Han 2019 eq. 2
     EXPECT_NEAR(tw[i], winding[i], 1e-9);  // tmp-generic: one winding node

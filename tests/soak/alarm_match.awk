@@ -4,7 +4,7 @@
 # above_warning_s, the intervals in which the truth winding was above the warning level, at
 # 0.1 s resolution), then the gateway's alarm changes ("A <s> <iface> <id> <level> <reason>" from
 # output_stats.awk; s counts from the first output frame, within 10 ms of the scenario's t = 0).
-# Where a pump's levels differ, its truth CSV (<truth_dir>/<pump>.truth.csv: time_s, winding_C,
+# Where a pump's levels differ, its truth CSV (<truth_dir>/<pump>.truth.csv: time_s, winding_degC,
 # cooling_model, one row a minute) gives the true winding temperature and whether a cooling fault
 # is active.
 #
@@ -71,7 +71,7 @@ function gateway_at(key, t,    k) {
   for (k = 1; k <= nchg[key]; k++) if (chg_t[key, k] > t) break
   return k - 1
 }
-# Truth of pump p, read once: rows every minute (time_s, winding_C, cooling_model).
+# Truth of pump p, read once: rows every minute (time_s, winding_degC, cooling_model).
 function load_truth(p,    file, line, f, c, n, ct, cw, cm, i) {
   if (loaded[p]) return
   loaded[p] = 1
@@ -80,8 +80,8 @@ function load_truth(p,    file, line, f, c, n, ct, cw, cm, i) {
   while ((getline line < file) > 0) {
     c = split(line, f, ",")
     if (n == 0 && !ct) {
-      for (i = 1; i <= c; i++) { if (f[i] == "time_s") ct = i; if (f[i] == "winding_C") cw = i; if (f[i] == "cooling_model") cm = i }
-      if (!ct || !cw || !cm) { printf "alarms: cannot find time_s, winding_C, cooling_model in %s\n", file; broken = 1; return }
+      for (i = 1; i <= c; i++) { if (f[i] == "time_s") ct = i; if (f[i] == "winding_degC" || f[i] == "winding_C") cw = i; if (f[i] == "cooling_model") cm = i }
+      if (!ct || !cw || !cm) { printf "alarms: cannot find time_s, winding_degC, cooling_model in %s\n", file; broken = 1; return }
       continue
     }
     n++; tt[p, n] = f[ct] + 0; tw[p, n] = f[cw] + 0; tm[p, n] = f[cm] + 0

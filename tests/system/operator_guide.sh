@@ -51,8 +51,8 @@ done
 grep -q 'OK (1 interface, 3 pumps)' "$WORK_DIR"/block_*.out || fail "no --check-config OK line"
 [ "$(tail -n +2 estimates/pump1.csv | wc -l)" -gt 100 ] || fail "estimates/pump1.csv has too few rows"
 awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) c[$i] = i; next }
-         { v = $c["winding_C"] } END { exit !(v + 0 > 20 && v + 0 < 200) }' estimates/pump1.csv ||
-  fail "estimates/pump1.csv: the last winding_C is not a plausible temperature"
+         { v = $c["winding_degC"] } END { exit !(v + 0 > 20 && v + 0 < 200) }' estimates/pump1.csv ||
+  fail "estimates/pump1.csv: the last winding_degC is not a plausible temperature"
 journalctl -u "$unit" --no-pager | grep -q "pump3: trip: " || fail "pump3 never tripped live"
 # The alarm lines carry structured journal fields (daemon/log.hpp LogFields): the trip is found
 # by its fields alone, and its VALUE_DEGC is a temperature (the sensor's, over 85 degC).

@@ -109,7 +109,7 @@ for n in 1 2 3; do
   # The last GW_TEMPS_A of node n with a number in Frame_degC.
   est=$(awk -F, -v n="$n" 'NR == 1 { for (i = 1; i <= NF; i++) c[$i] = i; next }
         $c["node"] == n && $c["GW_TEMPS_A.Frame_degC"] != "" { v = $c["GW_TEMPS_A.Frame_degC"] } END { print v }' "$WORK_DIR/temps.csv")
-  truth=$(awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) c[$i] = i; next } { v = $c["frame_C"] } END { print v }' \
+  truth=$(awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) c[$i] = i; next } { v = $c[("frame_degC" in c) ? "frame_degC" : "frame_C"] } END { print v }' \
           "$WORK_DIR/demo/pump$n.truth.csv")
   [ -n "$est" ] || fail "no Frame_degC for pump node $n in the gateway's output"
   echo "$T: pump$n: frame estimated $est degC on CAN, truth $truth degC"

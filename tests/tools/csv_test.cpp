@@ -30,13 +30,17 @@ TEST(Csv, ReadsColumnsByName) {
 TEST(Csv, OldColumnNamesAreReadUnderTheCurrentOneWithAWarning) {
   // pumptherm plant's truth before one name per quantity, and identify's output.
   const auto plant = CsvTable::Parse("time_s,winding_C,winding_res_C\n0,40,41.5\n", "truth.csv");
-  EXPECT_EQ(plant.Column("winding_resistance_C"), std::vector<double>{41.5});
+  EXPECT_EQ(plant.Column("winding_resistance_degC"), std::vector<double>{41.5});
   EXPECT_FALSE(plant.Has("winding_res_C"));
   ASSERT_EQ(plant.deprecations().size(), 1U);
   EXPECT_EQ(plant.deprecations()[0],
-            "truth.csv:1: column 'winding_res_C' is deprecated: read as 'winding_resistance_C'");
+            "truth.csv:1: column 'winding_res_C' is deprecated: read as 'winding_resistance_degC'");
   const auto identify = CsvTable::Parse("time_s,winding_degC\n0,30\n", "rs.csv");
-  EXPECT_EQ(identify.Column("winding_resistance_C"), std::vector<double>{30.0});
+  EXPECT_EQ(identify.Column("winding_resistance_degC"), std::vector<double>{30.0});
+  // The daemon's CSV before one name per quantity: the frame sensor's reading.
+  const auto daemon = CsvTable::Parse("time_s,frame_C,frame_measured_C\n0,40,39.5\n", "p.csv");
+  EXPECT_EQ(daemon.Column("frame_sensor_degC"), std::vector<double>{39.5});
+  EXPECT_EQ(daemon.Column("frame_degC"), std::vector<double>{40.0});
   // A file with the current name is read as it is, and one with both keeps both.
   const auto both = CsvTable::Parse("time_s,winding_res_C,winding_resistance_C\n0,1,2\n", "b.csv");
   EXPECT_TRUE(both.deprecations().empty());

@@ -89,30 +89,33 @@ TEST(DiscrepancyCli, GuidesCaseNamesTheCoolingThenTheSensorsLag) {
   std::filesystem::remove_all(dir);
 }
 
-// One name per quantity (docs/daemon.md, "Names"): the same data with `_degC` and a node's
-// measurement as `<node>_sensor_degC` give the same report as with `_C`.
+// One name per quantity (docs/daemon.md, "Names"): the same data with `_C` (files written before)
+// and with a node's measurement as `<node>_sensor_degC` give the same report as with `_degC`.
 TEST(DiscrepancyCli, ReadsTheNamesOfTheNamesTable) {
   auto [train, validate] = pumptherm::tests::HiddenCase(
       "saheba2010-baseline", {{"iron_loss_scale", {2.0}, {}}}, 4.0, 60.0);
   const std::string dir = Dir() + "/names";
   std::filesystem::create_directories(dir);
   for (const auto& [name, data] : {std::pair{"train", &train}, std::pair{"validate", &validate}}) {
-    pd::WriteData(dir + "/" + name + "_C.csv", *data, false);
-    std::string text = ReadFile(dir + "/" + name + "_C.csv");
-    std::string header = text.substr(0, text.find('\n'));
+    pd::WriteData(dir + "/" + name + "_degC.csv", *data, false);
+    const std::string text = ReadFile(dir + "/" + name + "_degC.csv");
+    const std::string written = text.substr(0, text.find('\n'));
     const std::string rest = text.substr(text.find('\n'));
+    std::string old_header = written, sensor_header = written;
     for (const auto& [from, to] :
-         {std::pair{"ambient_C", "ambient_degC"}, std::pair{"frame_C", "frame_sensor_degC"},
-          std::pair{"rotor_C", "rotor_degC"}}) {
-      const std::size_t at = header.find(from);
-      ASSERT_NE(at, std::string::npos) << header;
-      header.replace(at, std::string(from).size(), to);
+         {std::pair{"ambient_degC", "ambient_C"}, std::pair{"frame_degC", "frame_C"},
+          std::pair{"rotor_degC", "rotor_C"}}) {
+      const std::size_t at = old_header.find(from);
+      ASSERT_NE(at, std::string::npos) << written;
+      old_header.replace(at, std::string(from).size(), to);
     }
-    std::ofstream(dir + "/" + name + "_degC.csv") << header << rest;
+    sensor_header.replace(sensor_header.find("frame_degC"), 10, "frame_sensor_degC");
+    std::ofstream(dir + "/" + name + "_C.csv") << old_header << rest;
+    std::ofstream(dir + "/" + name + "_sensor.csv") << sensor_header << rest;
   }
-  std::string reports[2];
-  for (int k = 0; k < 2; ++k) {
-    const std::string suffix = k == 0 ? "_C" : "_degC";
+  std::string reports[3];
+  for (int k = 0; k < 3; ++k) {
+    const std::string suffix = k == 0 ? "_C" : k == 1 ? "_degC" : "_sensor";
     const CliRun r =
         Discrepancy("--model saheba2010-baseline --train " + dir + "/train" + suffix +
                     ".csv --validate " + dir + "/validate" + suffix + ".csv --out " + dir + "/out" +
@@ -123,6 +126,7 @@ TEST(DiscrepancyCli, ReadsTheNamesOfTheNamesTable) {
     reports[k] = reports[k].substr(0, reports[k].find("\"run_time_s\""));
   }
   EXPECT_EQ(reports[0], reports[1]);
+  EXPECT_EQ(reports[2], reports[1]);
   std::filesystem::remove_all(dir);
 }
 

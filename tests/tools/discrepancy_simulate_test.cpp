@@ -122,7 +122,7 @@ double Compare(const std::string& model_path, const std::string& csv, const std:
     EXPECT_LT(row, t.size());
     if (row >= t.size()) break;
     for (std::size_t i = 0; i < w.nodes.size(); ++i, ++n) {
-      const double e = w.temps_degC[i][j] - s.at(w.nodes[i] + "_C")[row];
+      const double e = w.temps_degC[i][j] - s.at(w.nodes[i] + "_degC")[row];
       hottest = std::max(hottest, w.temps_degC[i][j]);
       ss += e * e;
     }

@@ -18,7 +18,7 @@ run loose --magnet-column magnet_C --magnet-sd-K 10
 run tight --magnet-column magnet_C --magnet-sd-K 1
 # col FILE NAME: the last row's value of column NAME.
 col() { awk -F, -v n="$2" 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == n) c = i; next } { v = $c } END { print v }' "$1"; }
-r0=$(col "$tmp/none.csv" rotor_C); r1=$(col "$tmp/loose.csv" rotor_C); r2=$(col "$tmp/tight.csv" rotor_C)
+r0=$(col "$tmp/none.csv" rotor_degC); r1=$(col "$tmp/loose.csv" rotor_degC); r2=$(col "$tmp/tight.csv" rotor_degC)
 echo "rotor at 600 s: no magnet $r0, sd 10 K $r1, sd 1 K $r2 (reading 50)"
 awk -v a="$r0" -v b="$r1" -v c="$r2" 'BEGIN { exit !(a < b && b < c && c > 45 && c <= 50.5) }' ||
   fail "the rotor does not move towards the magnet reading in order of its sd"

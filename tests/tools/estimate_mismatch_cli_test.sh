@@ -18,10 +18,10 @@ fail() { echo "FAIL: $*"; exit 1; }
 } > "$tmp/in.csv"
 sed 's/resistance_K_per_W = 0.6 /resistance_K_per_W = 2.4 /' "$models/tmp-generic.toml" > "$tmp/cooling-lost.toml"
 cmp -s "$models/tmp-generic.toml" "$tmp/cooling-lost.toml" && fail "the frame-to-ambient edge was not edited"
-# measured FILE MODEL: the inputs with the simulated frame as frame_C, the truth kept in truth_MODEL.
+# measured FILE MODEL: the inputs with the simulated frame as frame_degC, the truth kept in truth_MODEL.
 measured() {
   "$exe" simulate --model "$2" --input "$tmp/in.csv" --initial-C 22 --output "$tmp/truth_$1.csv"
-  paste -d, "$tmp/in.csv" <(awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == "frame_C") c = i; print "frame_C"; next } { print $c }' "$tmp/truth_$1.csv") > "$tmp/meas_$1.csv"
+  paste -d, "$tmp/in.csv" <(awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == "frame_degC") c = i; print "frame_degC"; next } { print $c }' "$tmp/truth_$1.csv") > "$tmp/meas_$1.csv"
 }
 measured healthy "$models/tmp-generic.toml"
 measured lost "$tmp/cooling-lost.toml"
@@ -41,9 +41,9 @@ v=$(col "$tmp/est_lost_std.csv" mismatch_value)
 echo "verdict at 3600 s: nominal $h; cooling lost $s, $e $v"
 [[ $h == consistent ]] || fail "nominal data: verdict $h, not consistent"
 [[ $s == plant_change ]] || fail "cooling lost: verdict $s, not plant_change"
-truth=$(col "$tmp/truth_lost.csv" rotor_C)
-r_std=$(col "$tmp/est_lost_std.csv" rotor_C); sd_std=$(col "$tmp/est_lost_std.csv" rotor_sd_K)
-r_dist=$(col "$tmp/est_lost_dist.csv" rotor_C); sd_dist=$(col "$tmp/est_lost_dist.csv" rotor_sd_K)
+truth=$(col "$tmp/truth_lost.csv" rotor_degC)
+r_std=$(col "$tmp/est_lost_std.csv" rotor_degC); sd_std=$(col "$tmp/est_lost_std.csv" rotor_sd_K)
+r_dist=$(col "$tmp/est_lost_dist.csv" rotor_degC); sd_dist=$(col "$tmp/est_lost_dist.csv" rotor_sd_K)
 echo "rotor at 3600 s: truth $truth; standard $r_std +- $sd_std; disturbance states $r_dist +- $sd_dist"
 awk -v t="$truth" -v a="$r_std" -v sa="$sd_std" -v b="$r_dist" -v sb="$sd_dist" 'function abs(x) { return x < 0 ? -x : x }
   BEGIN { exit !(abs(b - t) <= 2 * sb && abs(a - t) > 2 * sa && abs(b - t) < abs(a - t)) }' ||
@@ -53,7 +53,7 @@ awk -v t="$truth" -v a="$r_std" -v sa="$sd_std" -v b="$r_dist" -v sb="$sd_dist" 
 awk -F, 'BEGIN { OFS = "," } NR > 1 && $1 >= 1800 { $NF = $NF + 3 } { print }' "$tmp/meas_healthy.csv" > "$tmp/meas_offset.csv"
 est offset dist
 o=$(col "$tmp/est_offset_dist.csv" frame_sensor_offset_K)
-f=$(col "$tmp/est_offset_dist.csv" frame_C); ft=$(col "$tmp/truth_healthy.csv" frame_C)
+f=$(col "$tmp/est_offset_dist.csv" frame_degC); ft=$(col "$tmp/truth_healthy.csv" frame_degC)
 echo "reading +3 K from 1800 s: offset $o K at 3600 s; frame $f against $ft true"
 awk -v o="$o" -v f="$f" -v t="$ft" 'function abs(x) { return x < 0 ? -x : x }
   BEGIN { exit !(abs(o - 3) <= 0.5 && abs(f - t) <= 1) }' ||
@@ -62,7 +62,7 @@ awk -v o="$o" -v f="$f" -v t="$ft" 'function abs(x) { return x < 0 ? -x : x }
 "$exe" estimate --model tmp-generic --input "$tmp/meas_offset.csv" \
   --output "$tmp/est_offset_split.csv" --max-step-s 1
 o=$(col "$tmp/est_offset_split.csv" frame_sensor_offset_K)
-f=$(col "$tmp/est_offset_split.csv" frame_C)
+f=$(col "$tmp/est_offset_split.csv" frame_degC)
 echo "the same in 1 s steps: offset $o K; frame $f against $ft true"
 awk -v o="$o" -v f="$f" -v t="$ft" 'function abs(x) { return x < 0 ? -x : x }
   BEGIN { exit !(abs(o - 3) <= 0.5 && abs(f - t) <= 1) }' ||

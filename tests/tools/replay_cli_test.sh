@@ -31,7 +31,7 @@ for pump in pump1 pump2 pump3; do
   # first_warning first_trip from the daemon's CSV (time_s since the first frame), "never" if none.
   read -r warn trip < <(awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) c[$i] = i; next }
     { l = $c["alarm_level"]; t = $c["time_s"] }
-    l >= 1 && w == "" { w = sprintf("%.0f", t) } l == 2 && p == "" { p = sprintf("%.0f", t) }
+    l != "normal" && l != "" && w == "" { w = sprintf("%.0f", t) } l == "trip" && p == "" { p = sprintf("%.0f", t) }
     END { print (w == "" ? "never" : w), (p == "" ? "never" : p) }' "$tmp/csv/$pump.csv")
   [[ $warn != never ]] && warn="$warn s"
   [[ $trip != never ]] && trip="$trip s"

@@ -32,16 +32,16 @@ awk '{ split($3, f, "#"); n = length(f[2]) / 2; s = ""
 cmp -s "$tmp/p3log.csv" "$tmp/p3screen.csv" || fail "the screen format gives other rows than the log format"
 rows=$(($(wc -l < "$tmp/p3.csv") - 1))
 [ "$rows" -ge 5900 ] && [ "$rows" -le 6000 ] || fail "$rows rows for 60 s at 100 Hz"
-head -n 1 "$tmp/p3.csv" | grep -qx "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm,frame_C,ambient_C" || fail "header: $(head -n 1 "$tmp/p3.csv")"
+head -n 1 "$tmp/p3.csv" | grep -qx "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm,frame_degC,ambient_degC" || fail "header: $(head -n 1 "$tmp/p3.csv")"
 # The last frame temperature against the simulator's measured sensor (both 0.1 K steps).
 python3 - "$tmp/p3.csv" "$tmp/d/pump3.measured.csv" <<'PY' || fail "frame temperature"
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))
 meas = list(csv.DictReader(open(sys.argv[2])))
-last, truth = float(rows[-1]["frame_C"]), float(meas[-1]["frame_C"])
+last, truth = float(rows[-1]["frame_degC"]), float(meas[-1]["frame_degC"])
 assert abs(last - truth) <= 0.3, (last, truth)
 assert all(len(r["iq_A"]) < 14 for r in rows), "numbers carry binary noise"
-print(f"frame_C at the end: {last} (simulator's sensor {truth}); {len(rows)} rows")
+print(f"frame_degC at the end: {last} (simulator's sensor {truth}); {len(rows)} rows")
 PY
 # The same recording with candump -t z stamps (since the first frame) and -t d stamps (since the
 # previous frame): both read as seconds since the start, the same rows as Unix time's.

@@ -42,8 +42,9 @@ struct RenamedColumn {
   std::string_view old_name, name;
 };
 constexpr RenamedColumn kRenamedColumns[] = {
-    {"winding_res_C", "winding_resistance_C"},  // pumptherm plant's truth
-    {"winding_degC", "winding_resistance_C"},   // pumptherm identify
+    {"winding_res_C", "winding_resistance_degC"},  // pumptherm plant's truth
+    {"winding_degC", "winding_resistance_degC"},   // pumptherm identify
+    {"frame_measured_C", "frame_sensor_degC"},     // pumpthermd --csv-dir
 };
 
 }  // namespace

@@ -1,6 +1,7 @@
 #pragma once
 /// Numeric CSV tables for the tools (docs/architecture.md, "Files people write or read"): a header
-/// row, then one row of numbers per line; units in the column names (`time_s`, `iq_A`, `frame_C`).
+/// row, then one row of numbers per line; units in the column names (`time_s`, `iq_A`,
+/// `frame_degC`).
 ///
 /// Reading checks every cell as it is asked for and throws `CsvError` naming the file, the row
 /// (1-based line number in the file) and the column name. Nothing is silently converted.
@@ -66,7 +67,7 @@ class CsvTable {
   std::size_t LineOf(std::size_t row) const { return lines_[row]; }
 
   /// One line per header column read under its current name because the file has the old one
-  /// (`winding_res_C` -> `winding_resistance_C`); Parse also prints each as a warning on stderr.
+  /// (`winding_res_C` -> `winding_resistance_degC`); Parse also prints each as a warning on stderr.
   const std::vector<std::string>& deprecations() const { return deprecations_; }
 
  private:

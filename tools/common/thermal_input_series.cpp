@@ -35,8 +35,8 @@ ThermalInputSeries ReadThermalInputs(const CsvTable& csv, const ThermalInputColu
     s.id_A = csv.Column(name("id_A"));
     s.iq_A = csv.Column(name("iq_A"));
   }
-  s.ambient_degC = csv.Column(name("ambient_C"));
-  s.coolant_degC = columns.coolant ? csv.Column(name("coolant_C")) : s.ambient_degC;
+  s.ambient_degC = csv.Column(name("ambient_degC"));
+  s.coolant_degC = columns.coolant ? csv.Column(name("coolant_degC")) : s.ambient_degC;
   return s;
 }
 

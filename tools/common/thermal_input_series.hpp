@@ -25,10 +25,10 @@ struct ThermalInputSeries {
 
 /// How ReadThermalInputs finds its columns.
 struct ThermalInputColumns {
-  /// The table's name for each of the project's names (time_s, speed_rpm, id_A, iq_A, ambient_C,
-  /// coolant_C); empty: the project's names.
+  /// The table's name for each of the project's names (time_s, speed_rpm, id_A, iq_A, ambient_degC,
+  /// coolant_degC); empty: the project's names.
   std::function<std::string(const std::string&)> name;
-  /// Read coolant_C; otherwise the coolant equals the ambient.
+  /// Read coolant_degC; otherwise the coolant equals the ambient.
   bool coolant = false;
   /// Without id_A and iq_A, take phase_current_rms_A as id = 0, iq = sqrt(2) I_rms
   /// (amplitude-invariant dq, the same copper loss).

@@ -19,9 +19,9 @@ Data ReadData(const std::string& path, const estimators::ThermalModel& model) {
   static_cast<ThermalInputSeries&>(d) = ReadThermalInputs(csv, columns);
   d.source = path;
   // A node's measurement: `<node>_sensor_degC` (docs/daemon.md, "Names"), or `<node>_degC` /
-  // `<node>_C` as measured CSV files have written it.
+  // `<node>_C` as measured CSV files write it (either suffix).
   for (const auto& node : model.Nodes()) {
-    for (const std::string& column : {node.name + "_sensor_degC", node.name + "_C"}) {
+    for (const std::string& column : {node.name + "_sensor_degC", node.name + "_degC"}) {
       if (!csv.Has(column)) continue;
       d.measured.push_back({node.name, csv.Column(column)});
       break;
@@ -38,9 +38,9 @@ Data ReadData(const std::string& path, const estimators::ThermalModel& model) {
 }
 
 void WriteData(const std::string& path, const Data& data, bool with_coolant) {
-  std::vector<std::string> cols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C"};
-  if (with_coolant) cols.push_back("coolant_C");
-  for (const auto& m : data.measured) cols.push_back(m.node + "_C");
+  std::vector<std::string> cols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_degC"};
+  if (with_coolant) cols.push_back("coolant_degC");
+  for (const auto& m : data.measured) cols.push_back(m.node + "_degC");
   CsvWriter w(path, cols);
   std::vector<double> row;
   for (std::size_t k = 0; k < data.size(); ++k) {

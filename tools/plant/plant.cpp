@@ -372,17 +372,17 @@ std::unique_ptr<PumpState> SetUpPump(const Scenario& sc, const PlantResources& r
       ps->active_model = ps->model_of_fault[fi];
   }
 
-  std::vector<std::string> tcols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C"};
-  for (const auto& n : m.Nodes()) tcols.push_back(n.name + "_C");
-  tcols.insert(tcols.end(), {"winding_resistance_C", "resistance_ohm", "flux_Wb"});
+  std::vector<std::string> tcols{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_degC"};
+  for (const auto& n : m.Nodes()) tcols.push_back(n.name + "_degC");
+  tcols.insert(tcols.end(), {"winding_resistance_degC", "resistance_ohm", "flux_Wb"});
   for (const auto& n : m.Nodes()) tcols.push_back("loss_" + n.name + "_W");
   tcols.insert(tcols.end(), {"loss_total_W", "cooling_model", "drive_state"});
   ps->truth = std::make_unique<tools::CsvWriter>(
       (fs::path(out_dir) / (spec.name + ".truth.csv")).string(), tcols);
   ps->measured = std::make_unique<tools::CsvWriter>(
       (fs::path(out_dir) / (spec.name + ".measured.csv")).string(),
-      std::vector<std::string>{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_C",
-                               spec.frame_sensor.node + "_C"});
+      std::vector<std::string>{"time_s", "speed_rpm", "id_A", "iq_A", "ambient_degC",
+                               spec.frame_sensor.node + "_degC"});
   return ps;
 }
 

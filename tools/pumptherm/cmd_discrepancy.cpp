@@ -92,8 +92,8 @@ const SubcommandRegistrar kRegistrar{
           ->required();
       app.add_option(
              "--train", o->train,
-             "CSV to fit on: time_s, speed_rpm, id_A+iq_A or phase_current_rms_A, ambient_C "
-             "(coolant_C), <node>_C per measured node")
+             "CSV to fit on: time_s, speed_rpm, id_A+iq_A or phase_current_rms_A, ambient_degC "
+             "(coolant_degC), <node>_degC per measured node")
           ->required();
       app.add_option("--validate", o->validate, "CSV to score on (same columns, other data)")
           ->required();

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <iostream>
 #include <iterator>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <vector>
@@ -42,8 +43,9 @@ struct EstimateOptions {
   double sensor_lag_s = 0.0;
   std::string filter = "auto";  ///< auto (what the daemon ships), disturbance, standard
   double thermal_period_s = 1.0;
-  double csv_time_origin_s = 0.0;  ///< --log: subtracted from the Unix time in time_s
-  RecordingSource recording;       ///< --log: a candump recording
+  /// --log: subtracted from the Unix time in time_s (NaN: the recording's first whole second).
+  double csv_time_origin_s = std::numeric_limits<double>::quiet_NaN();
+  RecordingSource recording;  ///< --log: a candump recording
   // The CSV's columns and steps.
   std::string columns;
   double max_step_s = 0.0;
@@ -228,7 +230,7 @@ CsvData ReadCsv(const EstimateOptions& o, const estimators::ThermalModel& model,
         csv, {[&](const std::string& standard) { return InputColumn(o.columns, standard); },
               model.UsesCoolant()});
     for (const auto& node : nodes)
-      d.measured.push_back(csv.ColumnAllowingNaN(InputColumn(o.columns, node + "_C")));
+      d.measured.push_back(csv.ColumnAllowingNaN(InputColumn(o.columns, node + "_degC")));
     if (!o.winding_column.empty()) d.winding = csv.ColumnAllowingNaN(o.winding_column);
     if (!o.magnet_column.empty()) d.magnet = csv.ColumnAllowingNaN(o.magnet_column);
     if (d.series.size() > 0 && o.paper_filter && o.initial == "first-row" &&
@@ -320,7 +322,7 @@ int RunCsvEstimator(const EstimateOptions& o) {
   std::ostream& out = o.output == "-" ? std::cout : (file.open(o.output), file);
   if (!out) throw InputError(fmt::format("--output {}: cannot create", o.output));
   std::string line = "time_s";
-  for (const auto& n : model.StateNames()) line += fmt::format(",{}_C,{}_sd_K", n, n);
+  for (const auto& n : model.StateNames()) line += fmt::format(",{}_degC,{}_sd_K", n, n);
   out << line << daemon::CsvHeader() << '\n';
   const bool linear = o.interpolation == "linear";
   const auto& t = d.series.time_s;
@@ -389,7 +391,7 @@ int RunPaperFilter(EstimateOptions& o) {
   }
   vts.Initialise(d.x_first.size() == n ? d.x_first : Eigen::VectorXd::Constant(n, x0));
   std::vector<std::string> columns{"time_s"};
-  for (const auto& node : model.Nodes()) columns.push_back(node.name + "_C");
+  for (const auto& node : model.Nodes()) columns.push_back(node.name + "_degC");
   for (const auto& node : model.Nodes()) columns.push_back(node.name + "_sd_K");
   columns.push_back("nis");
   CsvWriter out(o.output, columns);
@@ -502,7 +504,7 @@ void AddPaperOptions(CLI::App& app, EstimateOptions& o) {
       app.add_option(
              "--initial", o.initial,
              "with --paper-filter: 'measured' (every node at the mean of the first measured "
-             "values) or 'first-row' (each node at its <node>_C of the first row)")
+             "values) or 'first-row' (each node at its <node>_degC of the first row)")
           ->capture_default_str());
 }
 
@@ -516,10 +518,11 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--pump", o->pump, "with --config: the [[pump]] to run");
       app.add_option("--model,-m", o->model, "Without --config: shipped model name or path")
           ->capture_default_str();
-      app.add_option("--input,-i", o->input,
-                     "CSV with time_s, speed_rpm, id_A, iq_A, ambient_C (coolant_C if the model "
-                     "has a coolant) and <node>_C of the measured node (empty or nan: not "
-                     "measured); or --log");
+      app.add_option(
+          "--input,-i", o->input,
+          "CSV with time_s, speed_rpm, id_A, iq_A, ambient_degC (coolant_degC if the model "
+          "has a coolant) and <node>_degC of the measured node (empty or nan: not "
+          "measured); or --log");
       AddRecordingOptions(app, o->recording);
       app.add_option("--motor", o->recording.motor, "Without --config: motor preset or file")
           ->capture_default_str();
@@ -548,8 +551,8 @@ const SubcommandRegistrar kRegistrar{
           ->capture_default_str();
       app.add_option("--csv-time-origin", o->csv_time_origin_s,
                      "With --log: subtracted from the frames' Unix time in time_s (as "
-                     "pumpthermd's --csv-time-origin)")
-          ->capture_default_str();
+                     "pumpthermd's --csv-time-origin; default: the recording's first whole "
+                     "second; 0: Unix time)");
       app.add_option("--winding-column", o->winding_column,
                      "With --input: column with the winding temperature from resistance "
                      "identification, degC (the identifier's, tracking)");

@@ -51,7 +51,7 @@ int Run(const std::string& input, const RecordingSource& recording, const std::s
   config.min_current_A = min_current_A;
   est::ResistanceIdentifier identifier(motor, config);
   // Column names as the daemon's CSV names the same quantities (docs/daemon.md, "Names").
-  CsvWriter out(output, {"time_s", "resistance_ohm", "flux_Wb", "winding_resistance_C", "status",
+  CsvWriter out(output, {"time_s", "resistance_ohm", "flux_Wb", "winding_resistance_degC", "status",
                          "winding_resistance_sd_K", "flux_sd_Wb"});
   // The first sample's period is taken from the second (the data give no earlier time).
   const double first_dt = t.size() > 1 ? t[1] - t[0] : 0.0;
@@ -88,7 +88,7 @@ const SubcommandRegistrar kRegistrar{
       AddRecordingOptions(app, opt->recording);
       app.add_option(
              "--output,-o", opt->output,
-             "CSV written with time_s, resistance_ohm, flux_Wb, winding_resistance_C, status, "
+             "CSV written with time_s, resistance_ohm, flux_Wb, winding_resistance_degC, status, "
              "winding_resistance_sd_K, flux_sd_Wb; "
              "'-' is standard output (the default)")
           ->capture_default_str();

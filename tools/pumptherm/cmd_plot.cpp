@@ -228,7 +228,7 @@ std::vector<double> Interpolate(const std::vector<double>& t, const std::vector<
 }
 
 /// What a column is, as a person reads it: a node's name, "winding from resistance" for
-/// `winding_resistance_C`, "magnet from flux" for `magnet_flux_C`, spaces for underscores.
+/// `winding_resistance_degC`, "magnet from flux" for `magnet_flux_degC`, spaces for underscores.
 std::string ReadableName(std::string column) {
   for (const char* suffix : {"_degC", "_C"}) {
     const std::string s(suffix);
@@ -239,7 +239,7 @@ std::string ReadableName(std::string column) {
   }
   if (column == "winding_resistance") return "winding from resistance";
   if (column == "magnet_flux") return "magnet from flux";
-  if (column == "frame_measured") return "frame sensor";
+  if (column == "frame_sensor" || column == "frame_measured") return "frame sensor";
   std::replace(column.begin(), column.end(), '_', ' ');
   return column;
 }
@@ -331,8 +331,8 @@ std::string TemperatureLines(const Series& s, std::size_t i, const TimeAxis& axi
     if (!time.empty()) fig.t_max_min = std::max(fig.t_max_min, time.back() / 60.0);
     std::vector<std::size_t> colours;
     for (std::size_t k = 0; k < fig.nodes.size(); ++k) {
-      if (!t.Has(fig.nodes[k] + "_C")) continue;
-      cols.push_back(Col(t, fig.nodes[k] + "_C"));
+      if (!t.Has(fig.nodes[k] + "_degC")) continue;
+      cols.push_back(Col(t, fig.nodes[k] + "_degC"));
       colours.push_back(k);
     }
     const fs::path file = fig.dir / fmt::format("p{}_{}.dat", i, tag);
@@ -348,8 +348,8 @@ std::string TemperatureLines(const Series& s, std::size_t i, const TimeAxis& axi
     std::vector<std::size_t> colours;
     for (std::size_t k = 0; k < fig.nodes.size(); ++k) {
       const std::string& n = fig.nodes[k];
-      if (!t.Has(n + "_C") || !t.Has(n + "_sd_K")) continue;
-      const auto v = Col(t, n + "_C");
+      if (!t.Has(n + "_degC") || !t.Has(n + "_sd_K")) continue;
+      const auto v = Col(t, n + "_degC");
       const auto sd = Col(t, n + "_sd_K");
       std::vector<double> lo(v.size()), hi(v.size());
       for (std::size_t r = 0; r < v.size(); ++r) {
@@ -432,12 +432,12 @@ std::string ErrorLines(const Series& s, std::size_t i, const TimeAxis& axis, con
       if (std::isfinite(v)) abs_errors.push_back(std::abs(v));
   };
   auto truth_at = [&](const std::string& node) {
-    return Interpolate(t_tr, Col(tr, node + "_C"), t_est);
+    return Interpolate(t_tr, Col(tr, node + "_degC"), t_est);
   };
   for (std::size_t k = 0; k < fig.nodes.size(); ++k) {
     const std::string& n = fig.nodes[k];
-    if (!tr.Has(n + "_C") || !est.Has(n + "_C")) continue;
-    const auto x = Col(est, n + "_C");
+    if (!tr.Has(n + "_degC") || !est.Has(n + "_degC")) continue;
+    const auto x = Col(est, n + "_degC");
     const auto truth = truth_at(n);
     std::vector<double> e(x.size());
     for (std::size_t r = 0; r < x.size(); ++r) e[r] = x[r] - truth[r];
@@ -467,7 +467,7 @@ std::string ErrorLines(const Series& s, std::size_t i, const TimeAxis& axis, con
   for (const auto& [column, colour] : fig.extras) {
     if (colour == 0) continue;
     const std::string& n = fig.nodes[colour - 1];
-    if (!tr.Has(n + "_C")) continue;
+    if (!tr.Has(n + "_degC")) continue;
     const auto x = Col(est, column);
     if (!AnyFinite(x)) continue;
     const auto truth = truth_at(n);
@@ -644,25 +644,27 @@ void CheckCounts(const PlotOptions& o, std::size_t n) {
     throw InputError(fmt::format("--out '{}': the name must end in .png or .svg", o.out));
 }
 
-/// Nodes: given, or every <node>_C column the truth and the estimate share (else the truth's).
+/// Nodes: given, or every <node>_degC column the truth and the estimate share (else the truth's).
 std::vector<std::string> ChooseNodes(const PlotOptions& o, const std::vector<Series>& series) {
   std::vector<std::string> nodes = o.nodes;
   if (nodes.empty()) {
     const CsvTable& ref = series[0].truth ? *series[0].truth : *series[0].estimate;
     for (const std::string& c : ref.columns()) {
-      if (!c.ends_with("_C") || c == "ambient_C" || c == "time_s") continue;
+      const std::size_t suffix = c.ends_with("_degC") ? 5 : c.ends_with("_C") ? 2 : 0;
+      if (suffix == 0 || c == "ambient_C" || c == "ambient_degC") continue;
       if (series[0].truth && series[0].estimate && !series[0].estimate->Has(c)) continue;
-      nodes.push_back(c.substr(0, c.size() - 2));
+      nodes.push_back(c.substr(0, c.size() - suffix));
     }
     if (nodes.empty())
-      throw InputError(fmt::format("{}: no <node>_C columns to plot; give --nodes", ref.source()));
+      throw InputError(
+          fmt::format("{}: no <node>_degC columns to plot; give --nodes", ref.source()));
   }
   for (const Series& s : series) {
     for (const std::string& node : nodes) {
-      const bool in_truth = s.truth && s.truth->Has(node + "_C");
-      const bool in_est = s.estimate && s.estimate->Has(node + "_C");
+      const bool in_truth = s.truth && s.truth->Has(node + "_degC");
+      const bool in_est = s.estimate && s.estimate->Has(node + "_degC");
       if (!in_truth && !in_est) {
-        throw InputError(fmt::format("column '{}_C' is in neither {} nor {}", node,
+        throw InputError(fmt::format("column '{}_degC' is in neither {} nor {}", node,
                                      s.truth ? s.truth->source() : "(no truth)",
                                      s.estimate ? s.estimate->source() : "(no estimate)"));
       }
@@ -768,9 +770,9 @@ int RunPlot(const PlotOptions& o) {
     fig.any_estimate = fig.any_estimate || s.estimate.has_value();
     if (s.truth) {
       AddFaultMarks(*s.truth, axis, s.marks);
-      if (std::isfinite(o.warning_degC) && s.truth->Has(level_node + "_C")) {
+      if (std::isfinite(o.warning_degC) && s.truth->Has(level_node + "_degC")) {
         const auto t = Times(*s.truth, axis);
-        const auto v = Col(*s.truth, level_node + "_C");
+        const auto v = Col(*s.truth, level_node + "_degC");
         s.truth_warning_s = FirstAtOrAbove(t, v, o.warning_degC);
         if (std::isfinite(o.trip_degC)) s.truth_trip_s = FirstAtOrAbove(t, v, o.trip_degC);
       }
@@ -884,9 +886,9 @@ const SubcommandRegistrar kRegistrar{
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<PlotOptions>();
       app.add_option("--truth,-t", o->truth,
-                     "Truth CSV per pump (time_s, <node>_C), e.g. from `pumptherm plant`");
+                     "Truth CSV per pump (time_s, <node>_degC), e.g. from `pumptherm plant`");
       app.add_option("--estimate,-e", o->estimate,
-                     "Estimate CSV per pump (time_s, <node>_C, <node>_sd_K; alarm_level and "
+                     "Estimate CSV per pump (time_s, <node>_degC, <node>_sd_K; alarm_level and "
                      "mismatch_state if present)");
       app.add_option(
           "--events", o->events,
@@ -894,13 +896,13 @@ const SubcommandRegistrar kRegistrar{
           "the estimate CSV when it has alarm_level");
       app.add_option("--label", o->labels, "Panel title per pump (default: the file name)");
       app.add_option("--nodes,-n", o->nodes,
-                     "Nodes to plot (default: every <node>_C column both files have)")
+                     "Nodes to plot (default: every <node>_degC column both files have)")
           ->delimiter(',');
       app.add_option(
              "--extra", o->extras,
              "Estimate columns drawn as points, COLUMN or COLUMN=NODE (in that node's colour, and "
              "their error against that node's truth), e.g. "
-             "winding_resistance_C=winding,magnet_flux_C=rotor")
+             "winding_resistance_degC=winding,magnet_flux_degC=rotor")
           ->delimiter(',');
       app.add_option("--mark", o->marks,
                      "A moment to mark on every panel, SECONDS=TEXT (e.g. 240=cooling fails); the "
@@ -931,7 +933,7 @@ const SubcommandRegistrar kRegistrar{
       app.add_option(
           "--time-origin", o->time_origin_s,
           "Unix time (s) drawn as t = 0 for files whose time_s is Unix time (the daemon's CSV "
-          "without --csv-time-origin), e.g. the recording's first timestamp; default: the "
+          "with --csv-time-origin 0), e.g. the recording's first timestamp; default: the "
           "earliest such file's first whole second");
       app.footer(
           "Example:\n"
@@ -945,7 +947,8 @@ const SubcommandRegistrar kRegistrar{
           "then the alarm timeline. One legend at the top. Vertical lines: the truth's cooling\n"
           "failures, the daemon's diagnosis (mismatch_state), the first warning and trip (solid)\n"
           "and the truth's level crossings (dotted), listed in minutes in each panel's corner.\n"
-          "Time: a file whose time_s is Unix time (pumpthermd --csv-dir) is put on the axis of "
+          "Time: a file whose time_s is Unix time (pumpthermd --csv-time-origin 0) is put on the "
+          "axis of "
           "the\n"
           "relative files (plant, estimate) by --time-origin; standard error says, per file, how.");
       return [o] { return RunPlot(*o); };

@@ -53,7 +53,7 @@ int RunSimulate(const SimulateOptions& o) {
   const bool linear = o.interpolation == "linear";
   const int n = model.StateCount();
   std::vector<std::string> columns{"time_s"};
-  for (const auto& node : model.Nodes()) columns.push_back(node.name + "_C");
+  for (const auto& node : model.Nodes()) columns.push_back(node.name + "_degC");
   CsvWriter out(o.output, columns);
   std::vector<double> row(columns.size());
   estimators::ThermalLinearModel lin;
@@ -89,16 +89,16 @@ const SubcommandRegistrar kRegistrar{
           ->required();
       app.add_option(
              "--input,-i", o->input,
-             "CSV with time_s, speed_rpm, id_A, iq_A, ambient_C (and coolant_C if the model "
+             "CSV with time_s, speed_rpm, id_A, iq_A, ambient_degC (and coolant_degC if the model "
              "has a coolant); '-' = stdin")
           ->required();
       app.add_option("--output,-o", o->output,
-                     "CSV to write: time_s and <node>_C per node ('-' = stdout)");
+                     "CSV to write: time_s and <node>_degC per node ('-' = stdout)");
       app.add_option("--initial-C", o->initial_degC,
                      "Initial temperature of every node, degC (overrides --initial)");
       app.add_option("--initial", o->initial,
-                     "Initial temperatures: 'ambient' (every node at the first ambient_C) or "
-                     "'first-row' (each node at its <node>_C of the first row)")
+                     "Initial temperatures: 'ambient' (every node at the first ambient_degC) or "
+                     "'first-row' (each node at its <node>_degC of the first row)")
           ->capture_default_str();
       app.add_option(
           "--columns", o->columns,

@@ -47,8 +47,8 @@ const SubcommandRegistrar kRegistrar{
       app.add_option("--output,-o", o->output, "CSV to write ('-' = stdout)")
           ->capture_default_str();
       app.footer(
-          "Columns: time_s (from the first row), id_A, iq_A, ud_V, uq_V, speed_rpm, frame_C, "
-          "ambient_C.\n"
+          "Columns: time_s (from the first row), id_A, iq_A, ud_V, uq_V, speed_rpm, frame_degC, "
+          "ambient_degC.\n"
           "Example:\n"
           "  pumptherm telemetry --log demo.log --node-id 3 -o pump3.csv\n"
           "  pumptherm identify --log demo.log --node-id 3 -o rs.csv     (the same, in one step)");

@@ -158,7 +158,7 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
   std::istream& in = s.log == "-" ? std::cin : file;
   const std::string where = s.log == "-" ? "<stdin>" : s.log;
   std::ostringstream csv;
-  csv << "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm,frame_C,ambient_C\n";
+  csv << "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm,frame_degC,ambient_degC\n";
   const bool status_mapped = mapping.input(MappingInput::kFrameTempDegC).has_value() &&
                              mapping.input(MappingInput::kAmbientTempDegC).has_value();
   Assembler assembler(motor, status_mapped, csv, counts);

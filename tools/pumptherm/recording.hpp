@@ -1,6 +1,6 @@
 #pragma once
 /// One pump's drive telemetry from a candump recording, as the tools' CSV convention
-/// (time_s, id_A, iq_A, ud_V, uq_V, speed_rpm, frame_C, ambient_C), so that `identify`,
+/// (time_s, id_A, iq_A, ud_V, uq_V, speed_rpm, frame_degC, ambient_degC), so that `identify`,
 /// `estimate` and `telemetry` read a recording directly. The frames are decoded with a DBC and
 /// the signal mapping the daemon uses; a current frame and a voltage frame make one row when
 /// they are paired as the daemon pairs them (same rolling counter, at most 50 ms apart); the

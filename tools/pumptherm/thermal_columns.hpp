@@ -1,6 +1,7 @@
 #pragma once
 /// Input columns of `pumptherm simulate` and `pumptherm estimate`: the project's names
-/// (`speed_rpm`, `id_A`, `iq_A`, `ambient_C`, `coolant_C`, `<node>_C`), or those of a known data
+/// (`speed_rpm`, `id_A`, `iq_A`, `ambient_degC`, `coolant_degC`, `<node>_degC`; files read under
+/// `_C` too, tools/common/csv.hpp), or those of a known data
 /// set (`--columns paderborn`), and the initial temperatures (`--initial`).
 
 #include <fmt/core.h>
@@ -18,7 +19,7 @@ namespace pumptherm::tools {
 /// The CSV column that holds `standard` (one of the project's names above) under `preset`:
 /// "" keeps the project's names; "paderborn" reads the Paderborn data set (Kaggle "Electric
 /// Motor Temperature", Kirchgaessner, Wallscheid, Boecker): motor_speed, i_d, i_q, ambient,
-/// coolant, and node temperatures without the `_C` suffix. Throws InputError for an unknown
+/// coolant, and node temperatures without the `_degC` suffix. Throws InputError for an unknown
 /// preset.
 inline std::string InputColumn(const std::string& preset, const std::string& standard) {
   if (preset.empty()) return standard;
@@ -28,16 +29,14 @@ inline std::string InputColumn(const std::string& preset, const std::string& sta
   if (standard == "speed_rpm") return "motor_speed";
   if (standard == "id_A") return "i_d";
   if (standard == "iq_A") return "i_q";
-  if (standard == "ambient_C") return "ambient";
-  if (standard == "coolant_C") return "coolant";
-  if (standard.size() > 2 && standard.compare(standard.size() - 2, 2, "_C") == 0) {
-    return standard.substr(0, standard.size() - 2);
-  }
+  if (standard == "ambient_degC") return "ambient";
+  if (standard == "coolant_degC") return "coolant";
+  if (standard.ends_with("_degC")) return standard.substr(0, standard.size() - 5);
   return standard;
 }
 
 /// Initial state temperatures from `--initial` (`ambient`: every state at the first ambient
-/// temperature; `first-row`: each state at its measured `<node>_C` of the first row) unless
+/// temperature; `first-row`: each state at its measured `<node>_degC` of the first row) unless
 /// `initial_degC` (a number from `--initial-C`) is given. Throws InputError for another word,
 /// and CsvError (naming row and column) when a first-row column is missing or not a number.
 inline Eigen::VectorXd InitialTemperatures_degC(const estimators::ThermalModel& model,
@@ -52,8 +51,8 @@ inline Eigen::VectorXd InitialTemperatures_degC(const estimators::ThermalModel& 
   }
   Eigen::VectorXd x(n);
   for (int s = 0; s < n; ++s) {
-    x(s) =
-        csv.Column(InputColumn(preset, model.StateNames()[static_cast<std::size_t>(s)] + "_C"))[0];
+    x(s) = csv.Column(
+        InputColumn(preset, model.StateNames()[static_cast<std::size_t>(s)] + "_degC"))[0];
   }
   return x;
 }
