@@ -157,10 +157,9 @@ void PrintFusedSummary(const CsvTable& csv, const est::MotorDescription& motor,
     if (std::isfinite(w[k])) published_s += t[k] - t[k - 1];
   }
   fmt::print(stderr,
-             "identify, the daemon's estimator (model {}): {} rows over {:.0f} s; winding from "
-             "resistance published "
-             "{:.1f} % of the time; voltage row fused in {:.1f} % of the rows; the DFRLS "
-             "identifier's own winding (tracking) in {:.1f} %\n",
+             "identify, the daemon's estimator (model {}): {} rows over {:.0f} s; winding "
+             "from resistance published {:.1f} % of the time; voltage row fused in {:.1f} % "
+             "of the rows; the DFRLS identifier's own winding (tracking) in {:.1f} %\n",
              model, t.size(), total_s, total_s > 0.0 ? 100.0 * published_s / total_s : 0.0,
              Percent(fused, t.size()), Percent(paper_rows, t.size()));
   const std::ptrdiff_t last = LastFinite(w);
