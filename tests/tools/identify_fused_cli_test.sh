@@ -1,12 +1,13 @@
 #!/bin/sh
 # pumptherm identify --model / --config: the daemon's fused estimator over a recording, one pump,
 # through the same Gateway path as `pumptherm estimate --log`. Checks, on a 3-minute demo
-# recording (pump1: its winding from resistance is published from about 2 minutes on): every
-# column identify writes (the winding from resistance among them) equals the daemon's CSV from
-# `estimate --log` row for row, with --model and with the demo's configuration; the winding from
-# resistance is published in some rows (so the comparison is not of empty columns); the summary
-# is on stderr; --model with --input, --config without --pump and --block with --model are usage
-# errors (exit 2) that say why; without --model identify --log still writes the DFRLS columns.
+# recording (pumps 2 and 1: their winding from resistance is published from about 2 minutes
+# on): every column identify writes (the winding from resistance among them) equals the daemon's
+# CSV from `estimate --log` row for row, with --model and with the demo's configuration; the
+# winding from resistance is published in some rows (so the comparison is not of empty columns);
+# the summary is on stderr; --model with --input, --config without --pump and --block with
+# --model are usage errors (exit 2) that say why; without --model identify --log still writes
+# the DFRLS columns.
 #   identify_fused_cli_test.sh PUMPTHERM SOURCE_DIR
 set -u
 exe=$1
@@ -19,9 +20,9 @@ fail() { echo "FAIL: $*"; exit 1; }
 log="$tmp/d/demo.log"
 conf="$src/tools/demo/pumpthermd-demo.toml"
 
-"$exe" identify --model tmp-generic --log "$log" --node-id 1 -o "$tmp/i.csv" 2> "$tmp/i.txt" ||
+"$exe" identify --model tmp-generic --log "$log" --node-id 2 -o "$tmp/i.csv" 2> "$tmp/i.txt" ||
   { cat "$tmp/i.txt"; fail "identify --model"; }
-"$exe" estimate --model tmp-generic --log "$log" --node-id 1 -o "$tmp/e.csv" 2>/dev/null ||
+"$exe" estimate --model tmp-generic --log "$log" --node-id 2 -o "$tmp/e.csv" 2>/dev/null ||
   fail "estimate --log"
 "$exe" identify --config "$conf" --pump pump1 --log "$log" -o "$tmp/ic.csv" 2> "$tmp/ic.txt" ||
   { cat "$tmp/ic.txt"; fail "identify --config"; }
