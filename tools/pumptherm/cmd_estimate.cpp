@@ -26,6 +26,7 @@
 #include "tools/common/thermal_input_series.hpp"
 #include "tools/pumptherm/model_files.hpp"
 #include "tools/pumptherm/recording.hpp"
+#include "tools/pumptherm/recording_pump.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 #include "tools/pumptherm/thermal_columns.hpp"
 
@@ -64,27 +65,6 @@ struct EstimateOptions {
 // ---------------------------------------------------------------------------------------------
 // The pump as the daemon configures it.
 
-/// Pump `name` of the daemon's configuration at `path`, and the configuration itself.
-daemon::DaemonConfig ConfigWithPump(const std::string& path, const std::string& name) {
-  daemon::DaemonConfig c;
-  try {
-    c = daemon::LoadConfig(path);
-  } catch (const daemon::ConfigError& e) {
-    throw InputError(e.what());
-  }
-  auto it = std::find_if(c.pumps.begin(), c.pumps.end(),
-                         [&](const daemon::PumpConfig& p) { return p.name == name; });
-  if (name.empty() || it == c.pumps.end()) {
-    std::string names;
-    for (const auto& p : c.pumps) names += (names.empty() ? "" : ", ") + p.name;
-    throw InputError(fmt::format("--pump '{}': {} has no such [[pump]] (it has: {})", name, path,
-                                 names.empty() ? "none" : names));
-  }
-  const daemon::PumpConfig pump = *it;
-  c.pumps = {pump};
-  return c;
-}
-
 /// The settings the daemon ships for a pump of `o.model` (daemon::PumpConfig's defaults), with
 /// what a user would change on the command line.
 daemon::PumpConfig DefaultPump(const EstimateOptions& o) {
@@ -106,91 +86,16 @@ daemon::PumpConfig DefaultPump(const EstimateOptions& o) {
 // ---------------------------------------------------------------------------------------------
 // A recording: the daemon's own pipeline for that one pump.
 
-/// The first interface named in the candump lines of `in`, or "" (reads only up to it).
-std::string FirstInterface(std::istream& in) {
-  std::string line;
-  while (std::getline(in, line)) {
-    const protocol::CandumpParse p = protocol::ParseCandumpLine(line);
-    if (p.ok && !p.skip) return std::string(p.record.interface);
-  }
-  return {};
-}
-
-/// The recording as a stream the daemon's offline loop reads block by block, as `pumpthermd -r`
-/// does: a file is opened twice (once to find its first interface when none is named), standard
-/// input, which cannot be read twice, is held in memory.
-struct RecordingStream {
-  std::ifstream file;
-  std::istringstream held;
-  std::istream* in = nullptr;
-  std::string first_interface;
-};
-
-void OpenRecording(const std::string& path, bool need_interface, RecordingStream& r) {
-  try {
-    if (path == "-") {
-      std::ostringstream ss;
-      ss << std::cin.rdbuf();
-      r.held.str(ss.str());
-      if (need_interface) {
-        r.first_interface = FirstInterface(r.held);
-        r.held.clear();
-        r.held.seekg(0);
-      }
-      r.in = &r.held;
-      return;
-    }
-    if (need_interface) {
-      std::ifstream peek = daemon::OpenLog(path);
-      r.first_interface = FirstInterface(peek);
-    }
-    r.file = daemon::OpenLog(path);
-    r.in = &r.file;
-  } catch (const std::runtime_error& e) {
-    throw InputError(fmt::format("--log {}", e.what()));
-  }
-}
-
 int RunRecording(const EstimateOptions& o) {
-  RecordingStream log;
-  OpenRecording(o.recording.log, o.recording.interface.empty(), log);
-  daemon::DaemonConfig c;
-  if (!o.config.empty()) {
-    c = ConfigWithPump(o.config, o.pump);
-  } else {
-    c.source = "pumptherm estimate";
-    c.dbc.file = o.recording.dbc;
-    c.dbc.mapping = o.recording.mapping;
-    c.gateway.thermal_period_s = o.thermal_period_s;
-    c.pumps.push_back(DefaultPump(o));
-  }
-  // The pump listens on the recording's interface unless one is named.
-  c.interfaces.clear();
-  daemon::PumpConfig& pump = c.pumps.front();
-  pump.interface = !o.recording.interface.empty() ? o.recording.interface : log.first_interface;
-  if (pump.interface.empty()) {
-    throw InputError(fmt::format("--log {}: no CAN frame in it", o.recording.log));
-  }
-  c.lcm.url.clear();
-  c.gateway.state_directory.clear();
-  // The other pumps of the recording are left out on purpose: no warning for each.
-  c.gateway.warn_unconfigured_nodes = false;
-  std::unique_ptr<daemon::Gateway> gateway;
-  try {
-    gateway = std::make_unique<daemon::Gateway>(c);
-  } catch (const std::exception& e) {
-    throw InputError(e.what());
-  }
-  daemon::OfflineOptions offline;
-  offline.csv_file = o.output;
-  offline.csv_time_origin_s = o.csv_time_origin_s;
-  const std::string source = o.recording.log == "-" ? "<stdin>" : o.recording.log;
-  daemon::RunOffline(*log.in, source, *gateway, offline);
-  if (gateway->pumps().front()->counters().thermal_steps == 0) {
-    throw InputError(fmt::format(
-        "{}: no thermal step for node ID {} on {} (no frame of this pump, or none paired)", source,
-        pump.node_id, pump.interface));
-  }
+  PumpRecordingRun run;
+  run.config = o.config;
+  run.config_pump = o.pump;
+  run.pump = DefaultPump(o);
+  run.thermal_period_s = o.thermal_period_s;
+  run.recording = o.recording;
+  run.csv_time_origin_s = o.csv_time_origin_s;
+  run.csv_file = o.output;
+  RunPumpOnRecording(run);
   return 0;
 }
 
