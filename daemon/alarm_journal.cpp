@@ -74,7 +74,7 @@ std::string ImplausibleText(const AlarmCondition& c, const std::string& sensor,
 
 /// What the condition says, with its value in its unit.
 std::string ConditionText(const AlarmCondition& c, const std::vector<std::string>& names,
-                          const estimators::AlarmConfig& k) {
+                          const estimators::AlarmConfig& k, std::int64_t wall_offset_us) {
   const std::string node = NodeWords(c.node, names);
   const std::string sensor = c.node >= 0 ? node : std::string("frame");
   switch (c.reason) {
@@ -84,7 +84,15 @@ std::string ConditionText(const AlarmCondition& c, const std::vector<std::string
       return fmt::format("{} rising {:.1f} K/min (limit {} K/min)", node, c.value,
                          Short(k.max_rise_K_per_min));
     case AlarmReason::kStaleTelemetry:
-      return fmt::format("no telemetry for {:.1f} s (limit {} s)", c.value, Short(k.stale_after_s));
+      // The age was taken when the warning was raised; the last frame's time stays true on
+      // every later line of the same silence.
+      if (std::isfinite(c.value)) {
+        const auto last_us =
+            static_cast<std::int64_t>(std::floor((c.raised_at_s - c.value) * 1e6)) + wall_offset_us;
+        return fmt::format("no telemetry since {} (limit {} s)", LocalTimeText(last_us),
+                           Short(k.stale_after_s));
+      }
+      return fmt::format("no telemetry (limit {} s)", Short(k.stale_after_s));
     case AlarmReason::kImplausibleSensor:
       return ImplausibleText(c, sensor, k);
     case AlarmReason::kEstimatorNotConverged:
@@ -189,7 +197,7 @@ JournalEntry AlarmEntry(const AlarmLineInputs& in) {
     const AlarmCondition& c = in.conditions.front();
     e.text += c.reason == AlarmReason::kEstimatedOverTemperature
                   ? OverTemperatureText(a, c, names, k)
-                  : ConditionText(c, names, k);
+                  : ConditionText(c, names, k, in.wall_offset_us);
     if (const std::string node = AlarmNodeName(c.node, names); !node.empty())
       e.fields.push_back({"NODE", node});
     const double value = c.reason == AlarmReason::kEstimatedOverTemperature ? a.value : c.value;

@@ -157,9 +157,12 @@ TEST_F(AlarmJournal, SecondsAreSecondsNeverDegC) {
   a.node = -1;
   a.value = 4.0;
   a.active_reasons = Bit(AlarmReason::kStaleTelemetry);
-  e = Entry(a,
-            {{AlarmLevel::kWarning, AlarmReason::kStaleTelemetry, "", -1, 4.0, NAN, 0.0, false}});
-  EXPECT_EQ(e.text, "pump3: warning: no telemetry for 4.0 s (limit 2 s); raised: stale telemetry");
+  e = Entry(a, {{AlarmLevel::kWarning, AlarmReason::kStaleTelemetry, "", -1, 4.0, NAN,
+                 kOnset_s + 4.25, false}});
+  // The last frame's time, which stays true on a later line of the same silence.
+  EXPECT_EQ(e.text,
+            "pump3: warning: no telemetry since 2026-01-01 00:04:01 UTC (limit 2 s); raised: "
+            "stale telemetry");
   EXPECT_EQ(Fields(e).count("VALUE_DEGC"), 0u);
   EXPECT_EQ(Fields(e).count("NODE"), 0u);
 }
