@@ -219,7 +219,7 @@ int RunFused(const Options& opt) {
   run.recording = opt.recording;
   const TemporaryFile daemon_csv;
   run.csv_file = daemon_csv.path;
-  const daemon::DaemonConfig config = RunPumpOnRecording(run);
+  const PumpRecordingResult ran = RunPumpOnRecording(run);
   try {
     const CsvTable csv = CsvTable::Read(daemon_csv.path);
     std::vector<std::vector<std::string>> columns;
@@ -231,8 +231,8 @@ int RunFused(const Options& opt) {
       out.Row({}, row);
     }
     out.Close();
-    PrintFusedSummary(csv, PumpMotor(config),
-                      opt.config.empty() ? opt.model : config.pumps.front().thermal_model);
+    PrintFusedSummary(csv, ran.motor,
+                      opt.config.empty() ? opt.model : ran.config.pumps.front().thermal_model);
   } catch (const CsvError& e) {
     throw std::runtime_error(fmt::format("the daemon's CSV: {}", e.what()));
   }

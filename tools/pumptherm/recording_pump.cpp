@@ -10,9 +10,7 @@
 
 #include "daemon/gateway.hpp"
 #include "daemon/offline.hpp"
-#include "daemon/resources.hpp"
 #include "protocol/candump_log.hpp"
-#include "tools/pumptherm/model_files.hpp"
 #include "tools/pumptherm/subcommand.hpp"
 
 namespace pumptherm::tools {
@@ -85,7 +83,7 @@ daemon::DaemonConfig ConfigWithPump(const std::string& path, const std::string& 
   return c;
 }
 
-daemon::DaemonConfig RunPumpOnRecording(const PumpRecordingRun& run) {
+PumpRecordingResult RunPumpOnRecording(const PumpRecordingRun& run) {
   RecordingStream log;
   OpenRecording(run.recording.log, run.recording.interface.empty(), log);
   daemon::DaemonConfig c;
@@ -125,19 +123,7 @@ daemon::DaemonConfig RunPumpOnRecording(const PumpRecordingRun& run) {
         "{}: no thermal step for node ID {} on {} (no frame of this pump, or none paired)", source,
         pump.node_id, pump.interface));
   }
-  return c;
-}
-
-estimators::MotorDescription PumpMotor(const daemon::DaemonConfig& config) {
-  const daemon::PumpConfig& pump = config.pumps.front();
-  std::string motor = pump.motor;
-  try {
-    if (estimators::MotorPresetText(motor).empty())
-      motor = daemon::ResolveResource(daemon::ResourceKind::kMotor, motor, config.dbc.base_dir);
-  } catch (const std::exception& e) {
-    throw InputError(fmt::format("pump {}: {}", pump.name, e.what()));
-  }
-  return LoadMotor(motor);
+  return {c, gateway->pumps().front()->motor()};
 }
 
 }  // namespace pumptherm::tools

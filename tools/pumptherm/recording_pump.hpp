@@ -29,13 +29,15 @@ struct PumpRecordingRun {
   std::string csv_file = "-";  ///< the daemon's CSV of the pump ("-": standard output)
 };
 
-/// Runs the pump over the recording into `run.csv_file` and returns the configuration it ran
-/// (one pump, listening on the recording's interface). Throws InputError for an unreadable log
-/// or configuration, a log without frames, or no thermal step for the pump.
-daemon::DaemonConfig RunPumpOnRecording(const PumpRecordingRun& run);
+/// What ran: the configuration (one pump, listening on the recording's interface) and the
+/// motor description the daemon loaded for that pump.
+struct PumpRecordingResult {
+  daemon::DaemonConfig config;
+  estimators::MotorDescription motor;
+};
 
-/// The motor description of the configuration's (first) pump, a file found from the
-/// configuration's folder as the daemon finds it. Throws InputError.
-estimators::MotorDescription PumpMotor(const daemon::DaemonConfig& config);
+/// Runs the pump over the recording into `run.csv_file`. Throws InputError for an unreadable log
+/// or configuration, a log without frames, or no thermal step for the pump.
+PumpRecordingResult RunPumpOnRecording(const PumpRecordingRun& run);
 
 }  // namespace pumptherm::tools
