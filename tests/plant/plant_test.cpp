@@ -393,6 +393,131 @@ TEST(Plant, WindingTemperatureFeedsTheResistance) {
   }
 }
 
+/// One pump ("a", 40 s: a 10 s run-up, then 2 A, then a gas load drifting from 2 to 3 A) with
+/// the given keys added to the pump, and a nameplate twin ("b") without them.
+std::string TrueMotorScenario(const std::string& keys) {
+  return R"(
+[scenario]
+name = "m"
+duration_s = 40
+seed = 3
+[defaults]
+model = "tmp-generic"
+initial_C = 40
+[profile.p]
+segments = [ { duration_s = 10, speed_rpm = 21000, iq_A = 3.0 }, { duration_s = 20, iq_A = 2.0 },
+             { duration_s = 10, iq_A = 2.0, iq_end_A = 3.0 } ]
+[[pump]]
+name = "a"
+node_id = 1
+profile = "p"
+)" + keys +
+         R"(
+[[pump]]
+name = "b"
+node_id = 2
+profile = "p"
+)";
+}
+
+TEST(Plant, TrueMotorDiffersFromTheNameplateInResistanceFluxAndLosses) {
+  const fs::path out = OutDir("true_motor");
+  RunScenario(TrueMotorScenario("motor_r0_scale = 1.1\nmotor_flux_scale = 0.95\n"), out);
+  const tools::CsvTable a = tools::CsvTable::Read((out / "a.truth.csv").string());
+  const tools::CsvTable b = tools::CsvTable::Read((out / "b.truth.csv").string());
+  const auto rs = a.Column("resistance_ohm"), tw = a.Column("winding_resistance_C");
+  const auto flux = a.Column("flux_Wb");
+  const auto loss_a = a.Column("loss_winding_W"), loss_b = b.Column("loss_winding_W");
+  const auto tw_b = b.Column("winding_resistance_C");
+  auto copper = [](double t_degC) { return 1.0 + 4.1e-3 * (t_degC - 27.2); };  // Han 2019 eq. 2
+  for (std::size_t i = 0; i < rs.size(); ++i) {
+    EXPECT_NEAR(rs[i], 1.1 * 0.28 * copper(tw[i]), 1e-9) << i;
+    EXPECT_NEAR(flux[i], 0.95 * 0.0182, 1e-12) << i;  // no magnet node: the flux is constant
+    // Same true currents in both pumps: the copper loss is 1.1 times the nameplate's law.
+    if (loss_b[i] > 0.0) {
+      EXPECT_NEAR(loss_a[i] / copper(tw[i]), 1.1 * loss_b[i] / copper(tw_b[i]), 1e-9) << i;
+    }
+  }
+  EXPECT_NEAR(b.Column("resistance_ohm")[5], 0.28 * copper(tw_b[5]), 1e-9);
+}
+
+TEST(Plant, GasLoadDriftsWithinASegment) {
+  const fs::path out = OutDir("drift");
+  RunScenario(TrueMotorScenario(""), out);
+  const tools::CsvTable a = tools::CsvTable::Read((out / "a.truth.csv").string());
+  const auto t = a.Time();
+  const auto iq = a.Column("iq_A");
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    if (t[i] < 31.0) continue;
+    // The set point ramps 0.1 A/s from 2 A at 30 s; the current loop (0.2 s) lags it by 0.02 A.
+    EXPECT_NEAR(iq[i], 2.0 + 0.1 * (t[i] - 30.0) - 0.1 * 0.2, 2e-3) << "t " << t[i];
+  }
+  EXPECT_NEAR(iq[25], 2.0, 1e-6);  // constant where no end value is given
+}
+
+TEST(Plant, DeadTimeAndSpeedRippleAreInUqNotInTheReportedSpeed) {
+  const fs::path out = OutDir("ripple");
+  constexpr double kDeadTimeV = 0.2, kRippleRpm = 30.0, kRippleHz = 0.5;
+  RunScenario(TrueMotorScenario("drive = { dead_time_V = 0.2, speed_ripple_rpm = 30.0, "
+                                "speed_ripple_hz = 0.5 }\n"),
+              out);
+  const auto frames = DecodeLog(out / "m.log");
+  const auto fast = Select(frames, "can0", 0x101);
+  const auto volts = Select(frames, "can0", 0x111);
+  ASSERT_EQ(fast.size(), 4000u);
+  ASSERT_EQ(volts.size(), 4000u);
+  const tools::CsvTable truth = tools::CsvTable::Read((out / "a.truth.csv").string());
+  const auto rs = truth.Column("resistance_ohm");
+  // From 12 s to 30 s at 2 A (the current settled): uq against Han 2019 eq. 4 at the nominal
+  // speed plus the dead-time voltage (tanh law along the current); what is left is noise,
+  // quantisation and the back-EMF of the speed ripple. Its amplitude, by correlation with the
+  // ripple's sine over whole periods, is w_ripple psi_f.
+  const double w0 = 21000.0 * 2.0 * M_PI / 60.0;
+  const double dead_q = kDeadTimeV * std::tanh(2.0 / 0.5);
+  double mean = 0.0, sin_sum = 0.0, speed_sin_sum = 0.0;
+  int n = 0;
+  for (int k = 1200; k < 3000; ++k) {
+    const double t_s = 0.01 * k;
+    const double expected = rs[static_cast<std::size_t>(k / 100)] * 2.0 + w0 * 0.0182 + dead_q;
+    const double r = volts[static_cast<std::size_t>(k)].values.at("Uq_V") - expected;
+    const double s = std::sin(2.0 * M_PI * kRippleHz * t_s);
+    mean += r;
+    sin_sum += r * s;
+    speed_sin_sum += fast[static_cast<std::size_t>(k)].values.at("SpeedElec_rad_per_s") * s;
+    ++n;
+  }
+  mean /= n;
+  const double ripple_V = 2.0 * sin_sum / n;
+  const double speed_ripple_rpm = 2.0 * speed_sin_sum / n * 60.0 / (2.0 * M_PI);
+  const double expected_V = kRippleRpm * 2.0 * M_PI / 60.0 * 0.0182;  // 57 mV
+  EXPECT_NEAR(mean, 0.0, 0.005) << "dead time and eq. 4 explain the mean of uq";
+  EXPECT_NEAR(ripple_V, expected_V, 0.005);
+  EXPECT_LT(std::abs(speed_ripple_rpm), 0.5) << "the speed estimate shows no mechanical ripple";
+}
+
+TEST(Plant, ScaleCopperLosses) {
+  const std::string model = R"(
+[[loss]]
+name = "copper"
+power_W = "r0_ohm * i2_A2"
+temperature_coefficient_per_K = 4.1e-3
+shares = { w = 1 }
+[[loss]]
+name = "iron"
+power_W = 20.0
+shares = { s = 1 }
+)";
+  const std::string scaled = ScaleCopperLosses(model, "m", 1.02);
+  EXPECT_NE(scaled.find("(r0_ohm * i2_A2) * 1.02"), std::string::npos) << scaled;
+  EXPECT_NE(scaled.find("power_W = 20.0"), std::string::npos) << scaled;  // iron untouched
+  try {
+    ScaleCopperLosses("[[loss]]\nname = \"iron\"\npower_W = 3.0\n", "m.toml", 1.02);
+    FAIL();
+  } catch (const ScenarioError& e) {
+    EXPECT_NE(std::string(e.what()).find("m.toml: no copper loss"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Plant, ScaleEdgeResistance) {
   const std::string model = R"(
 [[node]]

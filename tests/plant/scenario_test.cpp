@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -111,6 +112,50 @@ end_s = 8
   EXPECT_DOUBLE_EQ(sc.bus_offs[0].end_s, 8.0);
 }
 
+TEST(PlantScenario, TrueMotorRippleAndLoadDriftParse) {
+  std::string text = kMinimal;
+  text.replace(text.find("model = \"tmp-generic\"\n"), 22,
+               "model = \"tmp-generic\"\nmotor_r0_scale = 1.02\n"
+               "drive = { speed_ripple_rpm = 3.0, dead_time_V = 0.15 }\n");
+  text.replace(text.find("iq_A = 1.0,"), 11, "iq_A = 1.0, iq_end_A = 1.5,");
+  text += "motor_flux_scale = 0.984\ndrive = { speed_ripple_hz = 0.5 }\n";
+  const Scenario sc = ParseScenario(text, "s.toml");
+  const PumpSpec& p = sc.pumps.at(0);
+  EXPECT_DOUBLE_EQ(p.motor_r0_scale, 1.02);  // from [defaults]
+  EXPECT_DOUBLE_EQ(p.motor_flux_scale, 0.984);
+  EXPECT_DOUBLE_EQ(p.drive.speed_ripple_rpm, 3.0);  // drive keys merge key by key
+  EXPECT_DOUBLE_EQ(p.drive.speed_ripple_hz, 0.5);
+  EXPECT_DOUBLE_EQ(p.drive.dead_time_V, 0.15);
+  EXPECT_TRUE(std::isnan(p.segments.at(0).iq_end_A));
+  EXPECT_DOUBLE_EQ(p.segments.at(1).iq_end_A, 1.5);
+  // Without the keys: the nameplate motor, no ripple.
+  const PumpSpec& q = ParseScenario(kMinimal, "s.toml").pumps.at(0);
+  EXPECT_DOUBLE_EQ(q.motor_r0_scale, 1.0);
+  EXPECT_DOUBLE_EQ(q.motor_flux_scale, 1.0);
+  EXPECT_DOUBLE_EQ(q.drive.speed_ripple_rpm, 0.0);
+
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "motor_r0_scale = 3\n")
+                .find("s.toml:13: pump[0].motor_r0_scale: 3 is outside [0.5, 2]"),
+            std::string::npos)
+      << ErrorOf(std::string(kMinimal) + "motor_r0_scale = 3\n");
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "motor_flux_scale = \"x\"\n")
+                .find("s.toml:13: pump[0].motor_flux_scale: expected a finite number"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "drive = { speed_ripple_hz = 0 }\n")
+                .find("s.toml:13: pump[0].drive.speed_ripple_hz: 0 is outside"),
+            std::string::npos)
+      << ErrorOf(std::string(kMinimal) + "drive = { speed_ripple_hz = 0 }\n");
+  EXPECT_NE(ErrorOf(std::string(kMinimal) + "drive = { speed_ripple_rpm = -1 }\n")
+                .find("pump[0].drive.speed_ripple_rpm: -1 is outside"),
+            std::string::npos);
+  text = kMinimal;
+  text.replace(text.find("iq_A = 1.0,"), 11, "iq_A = 1.0, iq_end_A = true,");
+  EXPECT_NE(
+      ErrorOf(text).find("s.toml:8: profile.p.segments[1].iq_end_A: expected a finite number"),
+      std::string::npos)
+      << ErrorOf(text);
+}
+
 TEST(PlantScenario, ProfileRepeatRunsTheSegmentsAgain) {
   std::string text = kMinimal;
   text.replace(text.find("[profile.p]\n"), 12, "[profile.p]\nrepeat = 3\n");
@@ -166,11 +211,15 @@ TEST(PlantScenario, ErrorsNameLineAndKey) {
 TEST(PlantScenario, BundledScenariosParse) {
   const char* dir = std::getenv("PUMPTHERM_SOURCE_DIR");
   ASSERT_NE(dir, nullptr);
-  for (const char* name : {"demo", "fleet32", "saheba2010-fig4", "saheba2010-fig5",
-                           "saheba2010-fig7", "saheba2010-fig8"}) {
-    const std::string path = std::string(dir) + "/tools/plant/scenarios/" + name + ".toml";
+  int bundled = 0;
+  for (const auto& entry :
+       std::filesystem::directory_iterator(std::string(dir) + "/tools/plant/scenarios")) {
+    if (entry.path().extension() != ".toml") continue;
+    const std::string path = entry.path().string();
     EXPECT_NO_THROW(ParseScenario(test_files::ReadFile(path), path)) << path;
+    ++bundled;
   }
+  EXPECT_GE(bundled, 13);
   const Scenario fleet = ParseScenario(
       test_files::ReadFile(std::string(dir) + "/tools/plant/scenarios/fleet32.toml"), "fleet32");
   EXPECT_EQ(fleet.pumps.size(), 32u);

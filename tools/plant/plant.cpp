@@ -68,7 +68,8 @@ class Profile {
         piece.speed0 = piece.speed1;
         piece.amb0 = piece.amb1;
       }
-      piece.iq = s.iq_A;
+      piece.iq0 = s.iq_A;
+      piece.iq1 = std::isnan(s.iq_end_A) ? s.iq_A : s.iq_end_A;
       piece.id = s.id_A;
       pieces_.push_back(piece);
       t = piece.t1;
@@ -84,12 +85,13 @@ class Profile {
     if (t >= p.t1) {  // past the last segment: hold its end values
       sp.speed_rpm = p.speed1;
       sp.ambient_degC = p.amb1;
+      sp.iq_A = p.iq1;
     } else {
       const double f = (t - p.t0) / (p.t1 - p.t0);
       sp.speed_rpm = p.speed0 + f * (p.speed1 - p.speed0);
       sp.ambient_degC = p.amb0 + f * (p.amb1 - p.amb0);
+      sp.iq_A = p.iq0 + f * (p.iq1 - p.iq0);
     }
-    sp.iq_A = p.iq;
     sp.id_A = p.id;
     if (t < p.t1 && p.speed1 > p.speed0) {
       sp.drive_state = 1;
@@ -103,7 +105,7 @@ class Profile {
 
  private:
   struct Piece {
-    double t0, t1, speed0, speed1, amb0, amb1, iq, id;
+    double t0, t1, speed0, speed1, amb0, amb1, iq0, iq1, id;
   };
   std::vector<Piece> pieces_;
   std::size_t index_ = 0;
@@ -266,6 +268,11 @@ void LoadTruthModels(PumpState& state, const PumpSpec& spec, const PlantResource
         model_text.source += fmt::format(" +{}", e.name);
       }
     }
+    if (spec.motor_r0_scale != 1.0) {
+      // The true motor's R0 differs from the nameplate: so do its copper losses.
+      model_text.text = ScaleCopperLosses(model_text.text, model_text.source, spec.motor_r0_scale);
+      model_text.source += fmt::format(" (copper x {})", spec.motor_r0_scale);
+    }
     ps->models.push_back(std::make_unique<ThermalModel>(
         ThermalModel::Parse(model_text.text, model_text.source, files)));
     for (const Fault& f : spec.faults) {
@@ -308,6 +315,9 @@ std::unique_ptr<PumpState> SetUpPump(const Scenario& sc, const PlantResources& r
   ps->spec = &spec;
   const std::string where = fmt::format("{}:{}: pump '{}'", sc.source, spec.line, spec.name);
   ps->motor = PumpMotor(spec, res, where);
+  // The true motor: the nameplate's R0 and flux scaled as the scenario says.
+  ps->motor.copper.r0_ohm *= spec.motor_r0_scale;
+  ps->motor.flux_Wb *= spec.motor_flux_scale;
   LoadTruthModels(*ps, spec, res, where);
   const ThermalModel& m = *ps->models[0];
   if (m.UsesCoolant()) {
@@ -485,14 +495,20 @@ struct DriveReport {
   double ud_V = 0.0, uq_V = 0.0, dc_link_V = 0.0;
 };
 
-/// One control step of the drive: the true dq voltages (Han 2019 eq. 4, the SPMSM's voltage
-/// equations, plus the dead-time voltage), and the reported values with offset ripple, noise and
-/// 12-bit quantisation. `first`: no current derivative yet.
-DriveReport ReportDrive(PumpState& p, const SetPoint& sp, double rs_ohm, double flux_Wb, bool first,
-                        double iq_prev_A, double id_prev_A, double step_s) {
+/// One control step of the drive at time `t_s`: the true dq voltages (Han 2019 eq. 4, the SPMSM's
+/// voltage equations, plus the dead-time voltage) at the true speed (the set point plus the
+/// rotor's mechanical ripple), and the reported values with offset ripple, noise and 12-bit
+/// quantisation; the reported speed is the drive's estimate, without the mechanical ripple.
+/// `first`: no current derivative yet.
+DriveReport ReportDrive(PumpState& p, const SetPoint& sp, double t_s, double rs_ohm, double flux_Wb,
+                        bool first, double iq_prev_A, double id_prev_A, double step_s) {
   const auto& motor = p.motor;
   const DriveSpec& drive = p.spec->drive;
-  const double w = estimators::ElectricalSpeed_rad_per_s(motor, sp.speed_rpm);
+  const double ripple_rpm =
+      sp.speed_rpm > 0.0 && drive.speed_ripple_rpm > 0.0
+          ? drive.speed_ripple_rpm * std::sin(2.0 * std::numbers::pi * drive.speed_ripple_hz * t_s)
+          : 0.0;
+  const double w = estimators::ElectricalSpeed_rad_per_s(motor, sp.speed_rpm + ripple_rpm);
   const double diq = first ? 0.0 : (p.iq_A - iq_prev_A) / step_s;
   const double did = first ? 0.0 : (p.id_A - id_prev_A) / step_s;
   double uq =
@@ -742,6 +758,39 @@ std::string ScaleEdgeResistance(std::string_view model_text, const std::string& 
   throw ScenarioError(fmt::format("{}: no edge named '{}' (edges: {})", source, edge, list));
 }
 
+std::string ScaleCopperLosses(std::string_view model_text, const std::string& source,
+                              double factor) {
+  toml::table root;
+  try {
+    root = toml::parse(model_text, source);
+  } catch (const toml::parse_error& e) {
+    throw ScenarioError(fmt::format("{}:{}: {}", source, e.source().begin.line, e.description()));
+  }
+  int scaled = 0;
+  if (toml::array* losses = root["loss"].as_array()) {
+    for (toml::node& n : *losses) {
+      toml::table* t = n.as_table();
+      // A copper loss is the one with a temperature coefficient (docs/thermal-model.md).
+      if (t == nullptr || t->get("temperature_coefficient_per_K") == nullptr) continue;
+      toml::node* power = t->get("power_W");
+      if (power == nullptr) continue;  // the model parser reports the missing key
+      if (std::optional<double> v = power->value<double>()) {
+        t->insert_or_assign("power_W", *v * factor);
+      } else if (std::optional<std::string> e = power->value<std::string>()) {
+        t->insert_or_assign("power_W", fmt::format("({}) * {}", *e, FormatNumber(factor)));
+      }
+      ++scaled;
+    }
+  }
+  if (scaled == 0) {
+    throw ScenarioError(fmt::format(
+        "{}: no copper loss (a [[loss]] with temperature_coefficient_per_K) to scale", source));
+  }
+  std::ostringstream os;
+  os << root;
+  return os.str();
+}
+
 PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::string& out_dir,
                      const std::function<void(double)>& progress) {
   namespace fs = std::filesystem;
@@ -844,7 +893,7 @@ PlantResult RunPlant(const Scenario& sc, const PlantResources& res, const std::s
 
       if (electrical) {
         const DriveReport drive =
-            ReportDrive(p, sp, rs_ohm, flux_Wb, k == 0, iq_prev, id_prev, step_s);
+            ReportDrive(p, sp, t, rs_ohm, flux_Wb, k == 0, iq_prev, id_prev, step_s);
         frames.ControlStep(p, static_cast<std::uint32_t>(pi), k, t, sp, drive, faults,
                            k % status_every == 0);
       } else {

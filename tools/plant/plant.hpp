@@ -11,7 +11,9 @@
 /// ambient) add lag, offset, noise and quantisation. Frames are encoded through the DBC and the
 /// signal mapping, time-stamped with jitter, merged in time order across pumps and written as a
 /// candump log. Faults: dropped frames, stale sensor, stuck sensor, bus-off bursts, cooling
-/// failure (an edge's resistance scaled). Same scenario and seed => the same bytes.
+/// failure (an edge's resistance scaled). The true motor may differ from the nameplate (R0 and
+/// flux scaled); the rotor may carry a mechanical speed ripple that the speed estimate does not
+/// show. Same scenario and seed => the same bytes.
 
 #include <cstdint>
 #include <functional>
@@ -82,5 +84,12 @@ PlantResult RunPlant(const Scenario& scenario, const PlantResources& resources,
 /// text does not parse as TOML.
 std::string ScaleEdgeResistance(std::string_view model_text, const std::string& source,
                                 const std::string& edge, double factor);
+
+/// Model text with every copper loss (a `[[loss]]` with `temperature_coefficient_per_K`)
+/// multiplied by `factor`: a true motor whose R0 is `factor` times the nameplate's. A number is
+/// multiplied; an expression becomes "(expr) * factor". Throws ScenarioError when the model has
+/// no copper loss or the text does not parse as TOML.
+std::string ScaleCopperLosses(std::string_view model_text, const std::string& source,
+                              double factor);
 
 }  // namespace pumptherm::plant

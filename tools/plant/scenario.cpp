@@ -128,7 +128,8 @@ std::vector<Segment> ParseSegments(const toml::node& node, const std::string& so
     const toml::table* t = (*arr)[i].as_table();
     const std::string at = fmt::format("{}[{}].", where, i);
     if (t == nullptr) Fail(source, LineOf((*arr)[i]), at, "expected a table");
-    CheckKeys(*t, {"duration_s", "speed_rpm", "iq_A", "id_A", "ambient_C", "step"}, source, at);
+    CheckKeys(*t, {"duration_s", "speed_rpm", "iq_A", "iq_end_A", "id_A", "ambient_C", "step"},
+              source, at);
     Reader r(t, nullptr, source, at, LineOf(*t));
     Segment s;
     s.line = LineOf(*t);
@@ -136,6 +137,7 @@ std::vector<Segment> ParseSegments(const toml::node& node, const std::string& so
     s.duration_s = r.Positive("duration_s", 0.0);
     s.speed_rpm = r.Number("speed_rpm", kNotGiven, 0.0, 200000.0);
     s.iq_A = r.Number("iq_A", 0.0, -1000.0, 1000.0);
+    s.iq_end_A = r.Number("iq_end_A", kNotGiven, -1000.0, 1000.0);
     s.id_A = r.Number("id_A", 0.0, -1000.0, 1000.0);
     s.ambient_degC = r.Number("ambient_C", kNotGiven, -60.0, 200.0);
     s.step = r.Bool("step", false);
@@ -180,7 +182,8 @@ DriveSpec ParseDrive(const toml::table* pump, const toml::table* defaults,
     CheckKeys(*t,
               {"current_response_s", "current_noise_A", "current_range_A", "phase_offset_A",
                "voltage_noise_V", "dc_link_V", "dc_link_noise_V", "speed_noise_rpm", "dead_time_V",
-               "dead_time_knee_A", "magnet_node", "flux_temperature_coefficient_per_K"},
+               "dead_time_knee_A", "magnet_node", "flux_temperature_coefficient_per_K",
+               "speed_ripple_rpm", "speed_ripple_hz"},
               source, at);
   }
   Reader r(p, d, source, at, 0);
@@ -198,6 +201,8 @@ DriveSpec ParseDrive(const toml::table* pump, const toml::table* defaults,
   s.magnet_node = r.String("magnet_node", s.magnet_node);
   s.flux_temperature_coefficient_per_K = r.Number("flux_temperature_coefficient_per_K",
                                                   s.flux_temperature_coefficient_per_K, -0.1, 0.1);
+  s.speed_ripple_rpm = r.Number("speed_ripple_rpm", s.speed_ripple_rpm, 0.0, 1000.0);
+  s.speed_ripple_hz = r.Number("speed_ripple_hz", s.speed_ripple_hz, 0.001, 1000.0);
   return s;
 }
 
@@ -381,14 +386,16 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
   const toml::table* profiles = SubTable(&root, "profile", source, "");
   const toml::table* defaults = SubTable(&root, "defaults", source, "");
   const std::initializer_list<std::string_view> pump_keys = {
-      "name",   "node_id",      "count",          "stagger_s",       "interface", "model",
-      "motor",  "ambient_C",    "initial_C",      "process_noise_K", "profile",   "segments",
-      "faults", "frame_sensor", "ambient_sensor", "drive",           "effects"};
+      "name",         "node_id",         "count",          "stagger_s",        "interface",
+      "model",        "motor",           "motor_r0_scale", "motor_flux_scale", "ambient_C",
+      "initial_C",    "process_noise_K", "profile",        "segments",         "faults",
+      "frame_sensor", "ambient_sensor",  "drive",          "effects"};
   if (defaults != nullptr) {
-    CheckKeys(*defaults,
-              {"interface", "model", "motor", "ambient_C", "initial_C", "process_noise_K",
-               "profile", "frame_sensor", "ambient_sensor", "drive"},
-              source, "defaults.");
+    CheckKeys(
+        *defaults,
+        {"interface", "model", "motor", "motor_r0_scale", "motor_flux_scale", "ambient_C",
+         "initial_C", "process_noise_K", "profile", "frame_sensor", "ambient_sensor", "drive"},
+        source, "defaults.");
   }
   if (profiles != nullptr) {
     for (const auto& [key, value] : *profiles) {
@@ -429,6 +436,9 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
     if (base.model.empty())
       Fail(source, LineOf(pt), at + "model", "missing (a shipped model name or a path)");
     base.motor = r.String("motor", base.motor);
+    // A real motor differs from its datasheet by a few percent (realistic-signals.md).
+    base.motor_r0_scale = r.Number("motor_r0_scale", base.motor_r0_scale, 0.5, 2.0);
+    base.motor_flux_scale = r.Number("motor_flux_scale", base.motor_flux_scale, 0.5, 2.0);
     base.ambient_degC = r.Number("ambient_C", base.ambient_degC, -60.0, 200.0);
     base.initial_degC = r.Number("initial_C", base.initial_degC, -60.0, 400.0);
     base.process_noise_K = r.Number("process_noise_K", base.process_noise_K, 0.0, 10.0);

@@ -33,8 +33,11 @@ inline constexpr double kForever = std::numeric_limits<double>::infinity();
 /// current-loop time constant.
 struct Segment {
   double duration_s = 0.0;
-  double speed_rpm = kNotGiven;     ///< mechanical speed at the segment's end
-  double iq_A = 0.0;                ///< q-axis current set point (torque: acceleration, gas load)
+  double speed_rpm = kNotGiven;  ///< mechanical speed at the segment's end
+  double iq_A = 0.0;             ///< q-axis current set point (torque: acceleration, gas load)
+  /// q-axis set point at the segment's end (NaN = iq_A all along): the set point ramps linearly
+  /// from iq_A to it over the segment, a gas load drifting with the pressure.
+  double iq_end_A = kNotGiven;
   double id_A = 0.0;                ///< d-axis current set point
   double ambient_degC = kNotGiven;  ///< ambient at the segment's end
   bool step = false;                ///< jump to speed_rpm / ambient_degC at the start instead
@@ -65,6 +68,10 @@ struct DriveSpec {
   double dead_time_knee_A = 0.5;    ///< current where the dead-time error reaches 76 % (tanh)
   std::string magnet_node;          ///< node whose temperature sets the flux (empty = constant)
   double flux_temperature_coefficient_per_K = -1e-3;  ///< NdFeB, relative to flux at T0
+  /// Mechanical speed ripple of the rotor: amplitude (0 = off) and frequency. It is in the true
+  /// speed behind the back-EMF, not in the drive's speed estimate.
+  double speed_ripple_rpm = 0.0;
+  double speed_ripple_hz = 0.37;
 };
 
 enum class FaultKind {
@@ -100,9 +107,14 @@ struct PumpSpec {
   std::uint32_t node_id = 0;
   std::string model;                  ///< truth thermal model: shipped name or path
   std::string motor = "han2019-tmp";  ///< motor preset name or path
-  double ambient_degC = 25.0;         ///< ambient at t = 0
-  double initial_degC = kNotGiven;    ///< every state at t = 0 (NaN = the ambient)
-  double process_noise_K = 0.005;     ///< truth process noise per state, K per sqrt(s)
+  /// The true motor against `motor`'s nameplate (which the daemon is given): its R0 and its
+  /// flux at the magnet's reference temperature are these multiples of the nameplate's. R0 also
+  /// scales the truth model's copper losses, so losses and resistance agree.
+  double motor_r0_scale = 1.0;
+  double motor_flux_scale = 1.0;
+  double ambient_degC = 25.0;       ///< ambient at t = 0
+  double initial_degC = kNotGiven;  ///< every state at t = 0 (NaN = the ambient)
+  double process_noise_K = 0.005;   ///< truth process noise per state, K per sqrt(s)
   std::vector<Segment> segments;
   TemperatureSensorSpec frame_sensor;
   TemperatureSensorSpec ambient_sensor;
