@@ -27,7 +27,7 @@ AlarmValues::AlarmValues(const ThermalModel& model, const AlarmConfig& config, d
 
 void AlarmValues::Step(const AlarmValuesStep& s) {
   StepBlind(s);
-  Remember(s.end_us, s.valid, *s.x_degC);
+  Remember(s);
   // A filter that models the sensor's lag gets no bias (lagging_degC NaN).
   lag_bias_.Step(s.lagging_degC);
   if (!s.valid) {
@@ -47,7 +47,7 @@ void AlarmValues::StepBlind(const AlarmValuesStep& s) {
   if (!Blind() && s.fault == SensorFault::kStuck) {
     // A stuck reading is fused until the stuck test finds it (flat_after_s): the estimate has
     // followed a frozen value since, low if the pump warmed. The worst case starts from the
-    // estimate of the step that fused the reading's last change, run to now in one step.
+    // band's top at the step that fused the reading's last change, run to now in one step.
     const auto changed_us = static_cast<std::int64_t>(std::llround(s.reading_changed_s * 1e6));
     std::int64_t from_us = -1;
     Eigen::Index from = -1;
@@ -65,16 +65,31 @@ void AlarmValues::StepBlind(const AlarmValuesStep& s) {
       return;
     }
   }
-  blind_.Step(model_, *s.inputs, s.period_s, *s.x_degC);
+  // The worst case starts from the top of the band the estimate had (x + k sd), not from the
+  // estimate: what the pump may already have been when it went blind. Only the first blind step
+  // reads it (BlindBound::Step).
+  if (!Blind()) UpperBand(s, blind_start_degC_);
+  blind_.Step(model_, *s.inputs, s.period_s, blind_start_degC_);
 }
 
-void AlarmValues::Remember(std::int64_t end_us, bool valid, const Eigen::VectorXd& x_degC) {
-  if (!valid) {
+void AlarmValues::UpperBand(const AlarmValuesStep& s, Eigen::VectorXd& out_degC) {
+  out_degC = *s.x_degC;
+  if (s.sd_K != nullptr && s.sd_K->size() == out_degC.size()) {
+    out_degC += s.trip_sd_factor * s.sd_K->cwiseMax(0.0);
+  }
+}
+
+void AlarmValues::Remember(const AlarmValuesStep& s) {
+  if (!s.valid) {
     std::fill(recent_us_.begin(), recent_us_.end(), -1);
     return;
   }
-  recent_degC_.col(static_cast<Eigen::Index>(recent_next_)) = x_degC;
-  recent_us_[recent_next_] = end_us;
+  auto col = recent_degC_.col(static_cast<Eigen::Index>(recent_next_));
+  col = *s.x_degC;
+  if (s.sd_K != nullptr && s.sd_K->size() == col.size()) {
+    col += s.trip_sd_factor * s.sd_K->cwiseMax(0.0);
+  }
+  recent_us_[recent_next_] = s.end_us;
   recent_next_ = (recent_next_ + 1) % recent_us_.size();
 }
 

@@ -4,8 +4,9 @@
 /// estimate is known to run low:
 ///  - while running blind (no temperature measured: the frame sensor failed and no other
 ///    reading stands in), the worst case of a cooling failure nothing could see (BlindBound),
-///    started from the estimate when the measurements stopped (for a stuck sensor, from the
-///    step that fused the reading's last change: it was fused until the stuck test found it);
+///    started from the top of the estimate's band, x + k sd, when the measurements stopped (for
+///    a stuck sensor, from that of the step that fused the reading's last change: it was fused
+///    until the stuck test found it);
 ///  - during a telemetry silence, the worst case of the motor's largest current from the
 ///    estimate at its start, as it was silence_delay_s ago; after it, the load that may have
 ///    risen unseen (SilenceBound);
@@ -77,13 +78,16 @@ class AlarmValues {
 
  private:
   void StepBlind(const AlarmValuesStep& s);
-  void Remember(std::int64_t end_us, bool valid, const Eigen::VectorXd& x_degC);
+  void Remember(const AlarmValuesStep& s);
+  /// x + k sd of the step (k: trip_sd_factor), into `out_degC` (sized: no allocation).
+  static void UpperBand(const AlarmValuesStep& s, Eigen::VectorXd& out_degC);
 
   const ThermalModel& model_;
   BlindBound blind_;
   LagBias lag_bias_;
   SilenceBound silence_;
-  // The blind bound's starting estimates of the last steps (columns, a ring; time -1: none).
+  // The blind bound's starting points of the last steps, each the top of its step's band
+  // x + k sd (columns, a ring; time -1: none).
   Eigen::MatrixXd recent_degC_;
   std::vector<std::int64_t> recent_us_;
   std::size_t recent_next_ = 0;
