@@ -121,7 +121,7 @@ double FilterStatus(const FieldSource& s) {
 /// message and signal, LCM field, CSV column and format, value, CSV word, old key.
 const std::array kFields = std::to_array<PublishedField>({
   {"winding_resistance_degC", "degC", "GW_TEMPS_A", "WindingResistance_degC",
-   &T::resistance_winding_degC,
+   &T::winding_resistance_degC,
    "winding_resistance_degC", {Kind::kFixed, 4},
    [](const FieldSource& s) { return E(s).winding_resistance_degC; }, nullptr,
    "winding_res_temp_degC"},
@@ -176,7 +176,7 @@ const std::array kFields = std::to_array<PublishedField>({
      AppendWord(out, estimators::SensorFaultName(E(s).sensor_fault));
    }, {}, true},
   {"winding_resistance_sd_K", "K", "GW_IDENT_SD", "WindingResistanceSd_K",
-   &T::resistance_winding_sd_K,
+   &T::winding_resistance_sd_K,
    "winding_resistance_sd_K", {Kind::kFixed, 4},
    // Only with the temperature it belongs to.
    [](const FieldSource& s) {
