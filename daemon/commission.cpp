@@ -135,8 +135,8 @@ class Census {
       r.why = std::move(why);
     };
     switch (i) {
-      case MappingInput::kFrameTempDegC:
-      case MappingInput::kAmbientTempDegC:
+      case MappingInput::kFrameSensorDegC:
+      case MappingInput::kAmbientDegC:
         narrow(m.sensor_min_degC, m.sensor_max_degC,
                fmt::format("alarms.sensor_min_degC..sensor_max_degC ({}..{})", m.sensor_min_degC,
                            m.sensor_max_degC));

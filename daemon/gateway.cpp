@@ -84,7 +84,7 @@ void Gateway::OnFrame(std::size_t iface, const protocol::TimedFrame& tf) {
   if (im.status) {
     io.status_us = tf.time_us;
     pump.OnStatus(tf.time_us, at(MappingInput::kSpeedMechRpm), at(MappingInput::kDriveState),
-                  at(MappingInput::kFrameTempDegC), at(MappingInput::kAmbientTempDegC));
+                  at(MappingInput::kFrameSensorDegC), at(MappingInput::kAmbientDegC));
   }
   // A pump's first frame starts its thermal steps and outputs at the next Advance.
   if (!pump.heard() && pump.last_frame_us() >= 0) MarkDue(r.pump);

@@ -61,8 +61,8 @@ void Gateway::FillTelemetry(std::size_t p, pumptherm::telemetry_t& m) const {
   m.rolling_counter = static_cast<std::int16_t>(std::isfinite(counter) ? counter : -1);
   const double state = at(MappingInput::kDriveState);
   m.drive_state = static_cast<std::int8_t>(std::isfinite(state) ? state : -1);
-  m.frame_degC = at(MappingInput::kFrameTempDegC);
-  m.ambient_degC = at(MappingInput::kAmbientTempDegC);
+  m.frame_sensor_degC = at(MappingInput::kFrameSensorDegC);
+  m.ambient_degC = at(MappingInput::kAmbientDegC);
   m.coolant_degC = kNaN;
   m.dc_link_V = at(MappingInput::kDcLinkV);
   m.status_age_s =

@@ -26,7 +26,7 @@ bool IsCurrentInput(MappingInput i) { return i == MappingInput::kIdA || i == Map
 bool IsVoltageInput(MappingInput i) { return i == MappingInput::kUdV || i == MappingInput::kUqV; }
 bool IsStatusInput(MappingInput i) {
   return i == MappingInput::kSpeedMechRpm || i == MappingInput::kDriveState ||
-         i == MappingInput::kFrameTempDegC || i == MappingInput::kAmbientTempDegC ||
+         i == MappingInput::kFrameSensorDegC || i == MappingInput::kAmbientDegC ||
          i == MappingInput::kDcLinkV;
 }
 

@@ -120,7 +120,8 @@ double FilterStatus(const FieldSource& s) {
 /// The fields, in the CSV's column order. Columns: name (mapping key), unit, default DBC
 /// message and signal, LCM field, CSV column and format, value, CSV word, old key.
 const std::array kFields = std::to_array<PublishedField>({
-  {"winding_resistance_degC", "degC", "GW_TEMPS_A", "WindingRes_degC", &T::resistance_winding_degC,
+  {"winding_resistance_degC", "degC", "GW_TEMPS_A", "WindingResistance_degC",
+   &T::winding_resistance_degC,
    "winding_resistance_degC", {Kind::kFixed, 4},
    [](const FieldSource& s) { return E(s).winding_resistance_degC; }, nullptr,
    "winding_res_temp_degC"},
@@ -130,9 +131,10 @@ const std::array kFields = std::to_array<PublishedField>({
   {"magnet_flux_sd_K", "K", "GW_IDENT_SD", "MagnetFluxSd_K", &T::magnet_flux_sd_K,
    "magnet_flux_sd_K", {Kind::kFixed, 4},
    [](const FieldSource& s) { return E(s).magnet_flux_sd_K; }},
-  {"rs_ohm", "ohm", "GW_IDENT", "Rs_ohm", &T::resistance_ohm, "resistance_ohm",
+  {"resistance_ohm", "ohm", "GW_IDENT", "Resistance_ohm", &T::resistance_ohm, "resistance_ohm",
    {Kind::kFixed, 6},
-   [](const FieldSource& s) { return Identified(s) ? E(s).resistance.resistance_ohm : kNaN; }},
+   [](const FieldSource& s) { return Identified(s) ? E(s).resistance.resistance_ohm : kNaN; },
+   nullptr, "rs_ohm"},
   {"resistance_sd_ohm", "ohm", "", "", &T::resistance_sd_ohm, "", {},
    [](const FieldSource& s) {
      return Identified(s) ? E(s).resistance.resistance_sigma_ohm : kNaN;
@@ -173,7 +175,8 @@ const std::array kFields = std::to_array<PublishedField>({
    [](const FieldSource& s, std::string& out) {
      AppendWord(out, estimators::SensorFaultName(E(s).sensor_fault));
    }, {}, true},
-  {"winding_resistance_sd_K", "K", "GW_IDENT_SD", "WindingResSd_K", &T::resistance_winding_sd_K,
+  {"winding_resistance_sd_K", "K", "GW_IDENT_SD", "WindingResistanceSd_K",
+   &T::winding_resistance_sd_K,
    "winding_resistance_sd_K", {Kind::kFixed, 4},
    // Only with the temperature it belongs to.
    [](const FieldSource& s) {

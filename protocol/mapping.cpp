@@ -19,10 +19,46 @@ constexpr std::array<std::string_view, kMappingInputCount> kInputNames = {"id_A"
                                                                           "speed_mech_rpm",
                                                                           "rolling_counter",
                                                                           "drive_state",
-                                                                          "frame_temp_degC",
-                                                                          "ambient_temp_degC",
+                                                                          "frame_sensor_degC",
+                                                                          "ambient_degC",
                                                                           "dc_link_V",
                                                                           "alarm_clear"};
+
+/// Input keys of before protocol version "pumptherm 2", still read: old key, index of the current.
+struct OldInputKey {
+  std::string_view key;
+  MappingInput input;
+};
+constexpr std::array<OldInputKey, 2> kOldInputKeys = {{
+    {"frame_temp_degC", MappingInput::kFrameSensorDegC},
+    {"ambient_temp_degC", MappingInput::kAmbientDegC},
+}};
+
+/// Signals of protocol/pumptherm.dbc renamed by its version "pumptherm 2" (one name per quantity,
+/// docs/daemon.md "Names"): message, the name in "pumptherm 1", the name now.
+struct SignalRename {
+  std::string_view message;
+  std::string_view before;
+  std::string_view now;
+};
+constexpr std::array<SignalRename, 5> kSignalRenames = {{
+    {"PUMP_STATUS", "FrameTemp_degC", "FrameSensor_degC"},
+    {"PUMP_STATUS", "AmbientTemp_degC", "Ambient_degC"},
+    {"GW_TEMPS_A", "WindingRes_degC", "WindingResistance_degC"},
+    {"GW_IDENT", "Rs_ohm", "Resistance_ohm"},
+    {"GW_IDENT_SD", "WindingResSd_K", "WindingResistanceSd_K"},
+}};
+
+/// The other name of signal `signal` of message `message` across the rename (its current name
+/// for a "pumptherm 1" name, and the reverse); empty when it was not renamed.
+std::string_view RenamedSignal(std::string_view message, std::string_view signal) {
+  for (const SignalRename& r : kSignalRenames) {
+    if (r.message != message) continue;
+    if (r.before == signal) return r.now;
+    if (r.now == signal) return r.before;
+  }
+  return {};
+}
 
 std::string Where(const toml::source_region& r) {
   const std::string file = r.path ? *r.path : std::string("<mapping>");
@@ -53,7 +89,36 @@ double NumberOr(const toml::table& t, std::string_view name, double fallback,
   Fail(*n, key + "." + std::string(name), "expected a number");
 }
 
-SignalRef Resolve(const toml::node& node, const std::string& key, const Dbc& dbc) {
+/// The signal `ref` names in message `m`, or else its name across the rename (recorded in
+/// `deprecations`); -1 when the message has neither.
+int FindSignalOrRenamed(const DbcMessage& m, SignalRef& ref, const toml::node& at,
+                        const std::string& key, const Dbc& dbc,
+                        std::vector<std::string>* deprecations) {
+  const int index = m.FindSignal(ref.signal);
+  if (index >= 0) return index;
+  const std::string_view other = RenamedSignal(ref.message, ref.signal);
+  if (other.empty()) return -1;
+  const int other_index = m.FindSignal(std::string(other));
+  if (other_index < 0) return -1;
+  // The DBC has the old name (a site's copy of "pumptherm 1"), or the mapping has it.
+  const bool dbc_is_older = std::any_of(
+      kSignalRenames.begin(), kSignalRenames.end(),
+      [&](const SignalRename& r) { return r.message == ref.message && r.before == other; });
+  deprecations->push_back(
+      dbc_is_older
+          ? fmt::format("{}: key {}: {} has signal {} of {} under its name before protocol "
+                        "version \"pumptherm 2\": read as {}",
+                        Where(at.source()), key, dbc.file_name, ref.signal, ref.message, other)
+          : fmt::format("{}: key {}: signal {} of {} is {} in {} (protocol version \"pumptherm "
+                        "2\" renamed it): read as {}",
+                        Where(at.source()), key, ref.signal, ref.message, other, dbc.file_name,
+                        other));
+  ref.signal = std::string(other);
+  return other_index;
+}
+
+SignalRef Resolve(const toml::node& node, const std::string& key, const Dbc& dbc,
+                  std::vector<std::string>* deprecations) {
   const toml::table* t = node.as_table();
   if (t == nullptr) Fail(node, key, "expected a table { message = \"...\", signal = \"...\" }");
   for (const auto& [k, v] : *t) {
@@ -76,7 +141,7 @@ SignalRef Resolve(const toml::node& node, const std::string& key, const Dbc& dbc
          fmt::format("unknown message {} in {}", ref.message, dbc.file_name));
   }
   ref.message_index = static_cast<int>(m - dbc.messages.data());
-  ref.signal_index = m->FindSignal(ref.signal);
+  ref.signal_index = FindSignalOrRenamed(*m, ref, *sig, key, dbc, deprecations);
   if (ref.signal_index < 0) {
     Fail(*sig, key + ".signal",
          fmt::format("unknown signal {} in message {} of {}", ref.signal, ref.message,
@@ -87,22 +152,39 @@ SignalRef Resolve(const toml::node& node, const std::string& key, const Dbc& dbc
   return ref;
 }
 
-template <std::size_t N, typename Slot>
-void ResolveInputs(const toml::table& root, const std::array<std::string_view, N>& names,
-                   std::array<Slot, N>& out, const Dbc& dbc) {
+/// The input of key `k` (its current key, or an old one, recorded in `deprecations`); nullopt
+/// when unknown.
+std::optional<std::size_t> FindInput(std::string_view k, const toml::node& at,
+                                     std::vector<std::string>* deprecations) {
+  if (const auto index = KeyIndex(k, kInputNames)) return index;
+  for (const OldInputKey& o : kOldInputKeys) {
+    if (o.key != k) continue;
+    deprecations->push_back(fmt::format("{}: key inputs.{} is deprecated: it is now inputs.{}",
+                                        Where(at.source()), k, MappingInputName(o.input)));
+    return static_cast<std::size_t>(o.input);
+  }
+  return std::nullopt;
+}
+
+void ResolveInputs(const toml::table& root, SignalMapping& mapping, const Dbc& dbc) {
   const toml::node* n = root.get("inputs");
   if (n == nullptr) return;
   const toml::table* t = n->as_table();
   if (t == nullptr) Fail(*n, "inputs", "expected a table");
   for (const auto& [k, v] : *t) {
     const std::string key = fmt::format("inputs.{}", k.str());
-    const std::optional<std::size_t> index = KeyIndex(k.str(), names);
+    const std::optional<std::size_t> index = FindInput(k.str(), v, &mapping.deprecations);
     if (!index) {
       std::string known;
-      for (auto name : names) known += fmt::format("{}{}", known.empty() ? "" : ", ", name);
+      for (auto name : kInputNames) known += fmt::format("{}{}", known.empty() ? "" : ", ", name);
       Fail(v, key, fmt::format("unknown inputs (known: {})", known));
     }
-    out[*index] = Resolve(v, key, dbc);
+    if (mapping.inputs[*index]) {
+      Fail(v, key,
+           fmt::format("inputs.{} is given twice (under its old and its current name)",
+                       kInputNames[*index]));
+    }
+    mapping.inputs[*index] = Resolve(v, key, dbc, &mapping.deprecations);
   }
 }
 
@@ -155,22 +237,33 @@ void ResolveOutputs(const toml::table& root, std::span<const OutputSpec> outputs
       Fail(
           v, key,
           fmt::format("outputs.{} is given twice (under its old and its current name)", spec->key));
-    mapping.outputs.emplace(std::string(spec->key), Resolve(v, key, dbc));
+    mapping.outputs.emplace(std::string(spec->key), Resolve(v, key, dbc, &mapping.deprecations));
   }
 }
 
 /// The declared default binding of every output the mapping does not name, where the DBC has
-/// that message and signal.
+/// that message and signal (or the signal under its "pumptherm 1" name: a site's copy of the
+/// DBC from before the rename, recorded in the mapping's deprecations).
 void BindDefaults(std::span<const OutputSpec> outputs, const Dbc& dbc, SignalMapping& mapping) {
   for (const OutputSpec& o : outputs) {
     if (o.default_message.empty() || mapping.outputs.contains(o.key)) continue;
     const DbcMessage* m = dbc.FindMessage(std::string(o.default_message));
     if (m == nullptr) continue;
-    const int signal = m->FindSignal(std::string(o.default_signal));
-    if (signal < 0) continue;
+    std::string_view name = o.default_signal;
+    int signal = m->FindSignal(std::string(name));
+    if (signal < 0) {
+      name = RenamedSignal(o.default_message, o.default_signal);
+      if (name.empty()) continue;
+      signal = m->FindSignal(std::string(name));
+      if (signal < 0) continue;
+      mapping.deprecations.push_back(fmt::format(
+          "{}: message {} has signal {}, the name before protocol version \"pumptherm 2\" (now "
+          "{}): output {} goes to it",
+          dbc.file_name, o.default_message, name, o.default_signal, o.key));
+    }
     SignalRef ref;
     ref.message = std::string(o.default_message);
-    ref.signal = std::string(o.default_signal);
+    ref.signal = std::string(name);
     ref.message_index = static_cast<int>(m - dbc.messages.data());
     ref.signal_index = signal;
     mapping.outputs.emplace(std::string(o.key), ref);
@@ -223,15 +316,16 @@ SignalMapping MappingFromTable(const toml::table& table, const Dbc& dbc,
       Fail(*n, "node_id_limit", "expected an integer from 1 to 65536");
     mapping.node_id_limit = static_cast<std::uint32_t>(*v);
   }
-  ResolveInputs(table, kInputNames, mapping.inputs, dbc);
+  ResolveInputs(table, mapping, dbc);
   const toml::table* nodes = nullptr;
   bool defaults = true;
   ResolveOutputs(table, outputs, mapping, dbc, &nodes, &defaults);
   if (defaults) BindDefaults(outputs, dbc, mapping);
   if (nodes != nullptr) {
     for (const auto& [k, v] : *nodes) {
-      mapping.node_temperatures.emplace(std::string(k.str()),
-                                        Resolve(v, fmt::format("outputs.nodes.{}", k.str()), dbc));
+      mapping.node_temperatures.emplace(
+          std::string(k.str()),
+          Resolve(v, fmt::format("outputs.nodes.{}", k.str()), dbc, &mapping.deprecations));
     }
   }
 

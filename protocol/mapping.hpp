@@ -8,9 +8,9 @@
 ///     [inputs]
 ///     id_A = { message = "PUMP_FAST_I", signal = "Id_A" }
 ///     speed_elec_rad_per_s = { message = "PUMP_FAST_I", signal = "SpeedElec_rad_per_s" }
-///     frame_temp_degC = { message = "PUMP_STATUS", signal = "FrameTemp_degC", scale = 1.0, offset
-///     = 0.0 } [outputs] winding_resistance_degC = { message = "GW_TEMPS_A", signal =
-///     "WindingRes_degC" } node_index = { message = "GW_NODE_TEMP", signal = "NodeIndex" }    #
+///     frame_sensor_degC = { message = "PUMP_STATUS", signal = "FrameSensor_degC", scale = 1.0,
+///     offset = 0.0 } [outputs] winding_resistance_degC = { message = "GW_TEMPS_A", signal =
+///     "WindingResistance_degC" } node_index = { message = "GW_NODE_TEMP", signal = "NodeIndex" } #
 ///     node-indexed message: node_temp_degC = { message = "GW_NODE_TEMP", signal = "NodeTemp_degC"
 ///     }  # any model's nodes [outputs.nodes]                     # thermal-model node name ->
 ///     signal, degC frame = { message = "GW_TEMPS_A", signal = "Frame_degC" }
@@ -18,6 +18,12 @@
 /// Node ID rule: the DBC defines each message for node ID 0; pump n uses CAN ID = DBC ID + n,
 /// with 0 <= n < node_id_limit (docs/protocol.md). Each mapped message therefore owns a block of
 /// node_id_limit IDs, and the blocks must not overlap.
+///
+/// Names of protocol version "pumptherm 2" (docs/protocol.md, "Protocol versions"): a mapping
+/// that still uses an input key or an output key of before, or a signal of pumptherm.dbc by its
+/// name in "pumptherm 1", is read as the current one and the change is listed in
+/// SignalMapping::deprecations; a DBC that still has a signal's "pumptherm 1" name (a site's
+/// copy) gets its defaults bound to that name, also listed.
 ///
 /// Value rule: estimator value = scale * DBC value + offset (defaults 1 and 0), so a DBC in other
 /// units (mA, rpm for an electrical speed, ...) maps without recompiling.
@@ -48,8 +54,8 @@ enum class MappingInput {
   kSpeedMechRpm,      ///< speed_mech_rpm: mechanical speed, r/min
   kRollingCounter,    ///< rolling_counter: counter of the fast telemetry frames
   kDriveState,        ///< drive_state: 0 stopped, 1 accelerating, 2 steady, 3 braking, 4 fault
-  kFrameTempDegC,     ///< frame_temp_degC: frame temperature sensor
-  kAmbientTempDegC,   ///< ambient_temp_degC: ambient or coolant temperature
+  kFrameSensorDegC,   ///< frame_sensor_degC: frame temperature sensor (frame_temp_degC before)
+  kAmbientDegC,       ///< ambient_degC: ambient or coolant temperature (ambient_temp_degC before)
   kDcLinkV,           ///< dc_link_V: DC-link voltage
   kAlarmClear,        ///< alarm_clear: a command frame; 1 clears the pump's latched trips
 };
@@ -96,8 +102,9 @@ struct SignalMapping {
   std::map<std::string, SignalRef, std::less<>> outputs;
   std::map<std::string, SignalRef, std::less<>> node_temperatures;  ///< node name -> signal, degC
   std::uint32_t node_id_limit = 16;
-  /// One line per deprecated key the file used (source:line:column, old and current name); the
-  /// caller reports them. The old keys still work.
+  /// One line per deprecated key or signal name the file used (source:line:column, old and
+  /// current name), and per default bound to a signal's old name in the DBC; the caller reports
+  /// them. The old names still work.
   std::vector<std::string> deprecations;
 
   const std::optional<SignalRef>& input(MappingInput i) const noexcept {

@@ -129,7 +129,7 @@ int Run(const Options& options) {
       telemetry.rolling_counter = static_cast<std::int16_t>(tick % 16);
       telemetry.drive_state = ramping ? pumptherm::telemetry_t::DRIVE_STATE_ACCELERATING
                                       : pumptherm::telemetry_t::DRIVE_STATE_STEADY;
-      telemetry.frame_degC = std::round((ambient_degC + 0.4 * rise_K) * 10.0) / 10.0;
+      telemetry.frame_sensor_degC = std::round((ambient_degC + 0.4 * rise_K) * 10.0) / 10.0;
       telemetry.ambient_degC = ambient_degC;
       telemetry.coolant_degC = kNaN;
       telemetry.dc_link_V = 48.0 + 0.1 * unit_noise(rng);
@@ -148,8 +148,8 @@ int Run(const Options& options) {
       temps.resistance_sd_ohm = 0.002;
       temps.flux_Wb = motor.psi_Wb * (1.0 - 1e-3 * 0.6 * rise_K);
       temps.flux_sd_Wb = 5e-5;
-      temps.resistance_winding_degC = winding_degC + 0.5 * unit_noise(rng);
-      temps.resistance_winding_sd_K = 1.5;
+      temps.winding_resistance_degC = winding_degC + 0.5 * unit_noise(rng);
+      temps.winding_resistance_sd_K = 1.5;
       temps.magnet_flux_degC = ambient_degC + 0.6 * rise_K + 2.0 * unit_noise(rng);
       temps.magnet_flux_sd_K = 3.0;
       temps.ident_status = ramping ? pumptherm::temperatures_t::IDENT_CONVERGING

@@ -30,7 +30,7 @@ sed 's/^stale_after_s = 2.0/stale_after_s = 0.05/' "$demo" > "$tmp/stale.toml"
 expect 2 "change: pump1: PUMP_STATUS comes every 0.10 s, not more often than alarms.stale_after_s = 0.05 s" -- "$bin" --check-config "$tmp/stale.toml" --against "$recording" --no-lag-fit
 # A sensor range the frame readings (about 22-24 degC) leave.
 sed 's/^hold_s = 2.0/hold_s = 2.0\nsensor_max_degC = 23.0/' "$demo" > "$tmp/range.toml"
-expect 2 "change: pump1: frame_temp_degC outside its plausible range \[-40, 23\] \(alarms.sensor_min_degC..sensor_max_degC \(-40..23\)\) in [0-9]+ of [0-9]+ frames, first [0-9.]+ at line [0-9]+" -- "$bin" --check-config "$tmp/range.toml" --against "$recording" --no-lag-fit
+expect 2 "change: pump1: frame_sensor_degC outside its plausible range \[-40, 23\] \(alarms.sensor_min_degC..sensor_max_degC \(-40..23\)\) in [0-9]+ of [0-9]+ frames, first [0-9.]+ at line [0-9]+" -- "$bin" --check-config "$tmp/range.toml" --against "$recording" --no-lag-fit
 # Recorded on vcan0, configured for can0: read as the same bus, said so.
 sed 's/ can0 / vcan0 /' "$recording" > "$tmp/vcan.log"
 expect 0 "note: the recording is of vcan0, the configuration listens on can0: read as the same bus" -- "$bin" --check-config "$tmp/demo.toml" --against "$tmp/vcan.log" --no-lag-fit

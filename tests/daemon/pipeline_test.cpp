@@ -184,8 +184,8 @@ class Bench {
         Frame("PUMP_STATUS", t + 400,
               {{"SpeedMech_rpm", 800.0},
                {"DriveState", 2.0},
-               {"FrameTemp_degC", truth_(0) + frame_offset_K},
-               {"AmbientTemp_degC", 25.0},
+               {"FrameSensor_degC", truth_(0) + frame_offset_K},
+               {"Ambient_degC", 25.0},
                {"DcLink_V", 48.0},
                {"RollingCounter", static_cast<double>(k / 10 % 16)}});
       } else {
@@ -339,7 +339,8 @@ TEST(Pipeline, WindingResistanceSdIsNotAvailableWithoutItsTemperature) {
       << estimators::ToString(s.resistance.status);
   const auto frames = b.Frames("GW_IDENT_SD");
   ASSERT_FALSE(frames.empty());
-  EXPECT_TRUE(std::isnan(frames.back().at("WindingResSd_K"))) << frames.back().at("WindingResSd_K");
+  EXPECT_TRUE(std::isnan(frames.back().at("WindingResistanceSd_K")))
+      << frames.back().at("WindingResistanceSd_K");
 }
 
 TEST(Pipeline, ANodeWithoutCanOutputIsAConfigurationErrorNamingIt) {

@@ -106,8 +106,8 @@ TEST(PublishedFields, OneEstimateReachesLcmAndTheCsvAlike) {
   pumptherm::alarm_t a{};
   FillLcm(s, t);
   FillLcm(s, a);
-  EXPECT_EQ(t.resistance_winding_degC, 81.25);
-  EXPECT_EQ(t.resistance_winding_sd_K, 1.5);
+  EXPECT_EQ(t.winding_resistance_degC, 81.25);
+  EXPECT_EQ(t.winding_resistance_sd_K, 1.5);
   EXPECT_EQ(t.magnet_flux_sd_K, 3.25);
   EXPECT_EQ(t.resistance_ohm, 0.3125);
   EXPECT_EQ(t.ident_status, 2);
@@ -167,7 +167,7 @@ TEST(PublishedFields, OneEstimateReachesLcmAndTheCsvAlike) {
   FillLcm(n, a);
   EXPECT_EQ(a.level, -1);
   FillLcm(n, t);
-  EXPECT_TRUE(std::isnan(t.resistance_winding_degC));
+  EXPECT_TRUE(std::isnan(t.winding_resistance_degC));
 }
 
 }  // namespace

@@ -180,7 +180,7 @@ TEST(Plant, FramesDecodeToTheSimulatedValues) {
     EXPECT_NEAR(f.values.at("Id_A"), id[row], 0.0025 + 1e-9) << "t " << t[row];
     EXPECT_NEAR(f.values.at("SpeedElec_rad_per_s"), speed[row] * 2.0 * M_PI / 60.0, 0.005 + 1e-9);
     const Decoded& s = status[k / 10];
-    EXPECT_NEAR(s.values.at("FrameTemp_degC"), frame[row], 0.05 + 1e-9) << "t " << t[row];
+    EXPECT_NEAR(s.values.at("FrameSensor_degC"), frame[row], 0.05 + 1e-9) << "t " << t[row];
     EXPECT_NEAR(s.values.at("SpeedMech_rpm"), speed[row], 1.0 + 1e-9);
   }
   // The physics behind the frames: at rated speed uq is the back-EMF w psi plus Rs iq
@@ -304,11 +304,11 @@ TEST(Plant, StuckSensorHoldsItsValueWhileTheFrameHeats) {
   std::vector<double> stuck, free_running;
   for (const Decoded& d : Select(frames, "can0", 0x181)) {
     if (static_cast<double>(d.time_us - kEpochUs) / 1e6 > 10.05)
-      stuck.push_back(d.values.at("FrameTemp_degC"));
+      stuck.push_back(d.values.at("FrameSensor_degC"));
   }
   for (const Decoded& d : Select(frames, "can0", 0x182)) {
     if (static_cast<double>(d.time_us - kEpochUs) / 1e6 > 10.05)
-      free_running.push_back(d.values.at("FrameTemp_degC"));
+      free_running.push_back(d.values.at("FrameSensor_degC"));
   }
   ASSERT_GT(stuck.size(), 150u);
   for (double v : stuck) EXPECT_EQ(v, stuck.front());
@@ -330,7 +330,7 @@ TEST(Plant, SensorOffsetShiftsTheReadingWhileItLasts) {
     for (const Decoded& d : Select(frames, "can0", id)) {
       const double t_s = static_cast<double>(d.time_us - kEpochUs) / 1e6;
       if (t_s > a_s && t_s < b_s) {
-        sum += d.values.at("FrameTemp_degC");
+        sum += d.values.at("FrameSensor_degC");
         ++n;
       }
     }

@@ -23,6 +23,11 @@ public final class SpyPluginCheck {
   /** Alarm messages the views read, filled by the checks instead of an LCM subscription. */
   private static final PumpthermSpyPlugin.AlarmFeed alarms = new PumpthermSpyPlugin.AlarmFeed();
 
+  /** A temperatures_t field under its name of protocol version "pumptherm 1" (an old jar). */
+  public static final class Version1Temperatures {
+    public double resistance_winding_degC = 61.25;
+  }
+
   private static PumpthermSpyPlugin.View view(String channel, Object message) {
     ChannelData cd = new ChannelData();
     cd.name = channel;
@@ -124,7 +129,7 @@ public final class SpyPluginCheck {
     // Telemetry with the digits a reader needs (lcm-spy's structure view prints 100.70000000000002).
     pumptherm.telemetry_t m = new pumptherm.telemetry_t();
     m.pump = "p1";
-    m.frame_degC = 100.70000000000002;
+    m.frame_sensor_degC = 100.70000000000002;
     m.ambient_degC = 22.2;
     m.coolant_degC = Double.NaN;
     m.drive_state = pumptherm.telemetry_t.DRIVE_STATE_STEADY;
@@ -160,6 +165,14 @@ public final class SpyPluginCheck {
     expect(plugin.canHandle(pumptherm.telemetry_t.LCM_FINGERPRINT), "takes telemetry_t");
     expect(plugin.canHandle(pumptherm.gateway_health_t.LCM_FINGERPRINT), "takes gateway_health_t");
     expect(!plugin.canHandle(pumptherm.alarm_clear_t.LCM_FINGERPRINT), "leaves alarm_clear_t to lcm-spy");
+    // A message of the types before "pumptherm 2" (an old log under the old jar) reads the same.
+    Object v1 = PumpthermSpyPlugin.get(
+        new Version1Temperatures(), "winding_resistance_degC", "resistance_winding_degC");
+    expect(Double.valueOf(61.25).equals(v1), "the field under its pumptherm 1 name: " + v1);
+    t.winding_resistance_degC = 84.25;
+    t.resistance_ohm = 0.3;
+    Object v2 = PumpthermSpyPlugin.get(t, "winding_resistance_degC", "resistance_winding_degC");
+    expect(Double.valueOf(84.25).equals(v2), "the field under its current name: " + v2);
     System.out.println(failures == 0 ? "pumptherm view: all checks passed" : failures + " checks failed");
     System.exit(failures == 0 ? 0 : 1);  // also stops the views' timers
   }

@@ -67,7 +67,7 @@ void FlattenInto(Flat& f, const std::string& p, const telemetry_t& m) {
   f.Number(p + ".speed_rpm", m.speed_rpm);
   f.Integer(p + ".rolling_counter", m.rolling_counter);
   f.Integer(p + ".drive_state", m.drive_state);
-  f.Number(p + ".frame_degC", m.frame_degC);
+  f.Number(p + ".frame_sensor_degC", m.frame_sensor_degC);
   f.Number(p + ".ambient_degC", m.ambient_degC);
   f.Number(p + ".coolant_degC", m.coolant_degC);
   f.Number(p + ".dc_link_V", m.dc_link_V);
@@ -81,8 +81,8 @@ void FlattenInto(Flat& f, const std::string& p, const temperatures_t& m) {
   f.Number(p + ".resistance_sd_ohm", m.resistance_sd_ohm);
   f.Number(p + ".flux_Wb", m.flux_Wb);
   f.Number(p + ".flux_sd_Wb", m.flux_sd_Wb);
-  f.Number(p + ".resistance_winding_degC", m.resistance_winding_degC);
-  f.Number(p + ".resistance_winding_sd_K", m.resistance_winding_sd_K);
+  f.Number(p + ".winding_resistance_degC", m.winding_resistance_degC);
+  f.Number(p + ".winding_resistance_sd_K", m.winding_resistance_sd_K);
   f.Number(p + ".magnet_flux_degC", m.magnet_flux_degC);
   f.Number(p + ".magnet_flux_sd_K", m.magnet_flux_sd_K);
   f.Integer(p + ".ident_status", m.ident_status);

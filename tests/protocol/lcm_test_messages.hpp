@@ -48,7 +48,7 @@ inline telemetry_t SampleTelemetry() {
   m.speed_rpm = 21000.5;
   m.rolling_counter = std::numeric_limits<std::int16_t>::min();
   m.drive_state = telemetry_t::DRIVE_STATE_BRAKING;
-  m.frame_degC = 41.3;
+  m.frame_sensor_degC = 41.3;
   m.ambient_degC = 22.0;
   m.coolant_degC = kNaN;
   m.dc_link_V = 47.9;
@@ -67,7 +67,7 @@ inline void ExpectSame(const telemetry_t& e, const telemetry_t& a) {
   EXPECT_TRUE(SameBits(e.speed_rpm, a.speed_rpm));
   EXPECT_EQ(e.rolling_counter, a.rolling_counter);
   EXPECT_EQ(e.drive_state, a.drive_state);
-  EXPECT_TRUE(SameBits(e.frame_degC, a.frame_degC));
+  EXPECT_TRUE(SameBits(e.frame_sensor_degC, a.frame_sensor_degC));
   EXPECT_TRUE(SameBits(e.ambient_degC, a.ambient_degC));
   EXPECT_TRUE(SameBits(e.coolant_degC, a.coolant_degC));
   EXPECT_TRUE(SameBits(e.dc_link_V, a.dc_link_V));
@@ -85,8 +85,8 @@ inline temperatures_t SampleTemperatures(std::vector<std::string> nodes = {
   m.resistance_sd_ohm = 0.0021;
   m.flux_Wb = 0.01815;
   m.flux_sd_Wb = 4.0e-5;
-  m.resistance_winding_degC = 61.25;
-  m.resistance_winding_sd_K = 1.4;
+  m.winding_resistance_degC = 61.25;
+  m.winding_resistance_sd_K = 1.4;
   m.magnet_flux_degC = 48.5;
   m.magnet_flux_sd_K = 2.2;
   m.ident_status = temperatures_t::IDENT_NOT_IDENTIFIABLE;
@@ -108,8 +108,8 @@ inline void ExpectSame(const temperatures_t& e, const temperatures_t& a) {
   EXPECT_TRUE(SameBits(e.resistance_sd_ohm, a.resistance_sd_ohm));
   EXPECT_TRUE(SameBits(e.flux_Wb, a.flux_Wb));
   EXPECT_TRUE(SameBits(e.flux_sd_Wb, a.flux_sd_Wb));
-  EXPECT_TRUE(SameBits(e.resistance_winding_degC, a.resistance_winding_degC));
-  EXPECT_TRUE(SameBits(e.resistance_winding_sd_K, a.resistance_winding_sd_K));
+  EXPECT_TRUE(SameBits(e.winding_resistance_degC, a.winding_resistance_degC));
+  EXPECT_TRUE(SameBits(e.winding_resistance_sd_K, a.winding_resistance_sd_K));
   EXPECT_TRUE(SameBits(e.magnet_flux_degC, a.magnet_flux_degC));
   EXPECT_TRUE(SameBits(e.magnet_flux_sd_K, a.magnet_flux_sd_K));
   EXPECT_EQ(e.ident_status, a.ident_status);

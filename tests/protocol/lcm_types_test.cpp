@@ -64,7 +64,7 @@ TEST(LcmTypes, TelemetryRoundTrip) {
   ExpectRoundTrip(SampleTelemetry());
   telemetry_t all_missing = SampleTelemetry();
   all_missing.pump = "";
-  all_missing.frame_degC = all_missing.ambient_degC = all_missing.dc_link_V = kNaN;
+  all_missing.frame_sensor_degC = all_missing.ambient_degC = all_missing.dc_link_V = kNaN;
   all_missing.drive_state = telemetry_t::DRIVE_STATE_UNKNOWN;
   ExpectRoundTrip(all_missing);
 }

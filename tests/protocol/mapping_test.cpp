@@ -24,8 +24,9 @@ uq_V = { message = "PUMP_FAST_U", signal = "Uq_V" }
 /// Outputs as a daemon declares them (daemon/published_fields.cpp has the daemon's own): a key,
 /// its default message and signal, an old key.
 constexpr OutputSpec kOutputs[] = {
-    {"winding_resistance_degC", "GW_TEMPS_A", "WindingRes_degC", "winding_res_temp_degC"},
-    {"winding_resistance_sd_K", "GW_IDENT_SD", "WindingResSd_K", "winding_res_sd_K"},
+    {"winding_resistance_degC", "GW_TEMPS_A", "WindingResistance_degC", "winding_res_temp_degC"},
+    {"winding_resistance_sd_K", "GW_IDENT_SD", "WindingResistanceSd_K", "winding_res_sd_K"},
+    {"resistance_ohm", "GW_IDENT", "Resistance_ohm", "rs_ohm"},
     {"magnet_flux_degC", "GW_IDENT", "MagnetFlux_degC", "magnet_flux_temp_degC"},
     {"alarm_level", "GW_ALARM", "AlarmLevel", ""},
     {"node_index", "GW_NODE_TEMP", "NodeIndex", ""},
@@ -103,8 +104,9 @@ TEST(MappingTest, OldOutputKeysStillWorkAndAreReportedDeprecated) {
   const SignalMapping m = ParseMapping(
       kWithSpeed +
           "[outputs]\n"
-          "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n"
-          "winding_res_sd_K = { message = \"GW_IDENT_SD\", signal = \"WindingResSd_K\" }\n"
+          "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = \"WindingResistance_degC\" "
+          "}\n"
+          "winding_res_sd_K = { message = \"GW_IDENT_SD\", signal = \"WindingResistanceSd_K\" }\n"
           "magnet_flux_temp_degC = { message = \"GW_IDENT\", signal = \"MagnetFlux_degC\" }\n",
       "m.toml", dbc);
   EXPECT_NE(m.output("winding_resistance_degC"), nullptr);
@@ -128,17 +130,83 @@ TEST(MappingTest, OldOutputKeysStillWorkAndAreReportedDeprecated) {
       std::string::npos)
       << all;
   // The current names give no such line; both names at once are an error.
-  const SignalMapping now = ParseMapping(kWithSpeed +
-                                             "[outputs]\nwinding_resistance_degC = { message = "
-                                             "\"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
-                                         "m.toml", dbc);
+  const SignalMapping now =
+      ParseMapping(kWithSpeed +
+                       "[outputs]\nwinding_resistance_degC = { message = "
+                       "\"GW_TEMPS_A\", signal = \"WindingResistance_degC\" }\n",
+                   "m.toml", dbc);
   EXPECT_TRUE(now.deprecations.empty());
-  ExpectMappingError(
-      kWithSpeed +
+  ExpectMappingError(kWithSpeed +
+                         "[outputs]\n"
+                         "winding_resistance_degC = { message = \"GW_TEMPS_A\", signal = "
+                         "\"WindingResistance_degC\" }\n"
+                         "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = "
+                         "\"WindingResistance_degC\" }\n",
+                     dbc, {"outputs.winding_resistance_degC is given twice"});
+}
+
+TEST(MappingTest, NamesOfProtocolVersion1StillWorkAndAreReportedDeprecated) {
+  const Dbc dbc = PumpthermDbc();
+  // A mapping written for "pumptherm 1": old input keys, old signal names of pumptherm.dbc.
+  const SignalMapping m = ParseMapping(
+      std::string(kMinimal) +
+          "frame_temp_degC = { message = \"PUMP_STATUS\", signal = \"FrameTemp_degC\" }\n"
+          "ambient_temp_degC = { message = \"PUMP_STATUS\", signal = \"AmbientTemp_degC\" }\n"
+          "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n"
           "[outputs]\n"
-          "winding_resistance_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n"
-          "winding_res_temp_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
-      dbc, {"outputs.winding_resistance_degC is given twice"});
+          "rs_ohm = { message = \"GW_IDENT\", signal = \"Rs_ohm\" }\n"
+          "winding_resistance_degC = { message = \"GW_TEMPS_A\", signal = \"WindingRes_degC\" }\n",
+      "m.toml", dbc);
+  ASSERT_TRUE(m.input(MappingInput::kFrameSensorDegC).has_value());
+  EXPECT_EQ(m.input(MappingInput::kFrameSensorDegC)->signal, "FrameSensor_degC");
+  ASSERT_TRUE(m.input(MappingInput::kAmbientDegC).has_value());
+  EXPECT_EQ(m.input(MappingInput::kAmbientDegC)->signal, "Ambient_degC");
+  ASSERT_NE(m.output("resistance_ohm"), nullptr);
+  EXPECT_EQ(m.output("resistance_ohm")->signal, "Resistance_ohm");
+  EXPECT_EQ(m.output("winding_resistance_degC")->signal, "WindingResistance_degC");
+  std::string all;
+  for (const auto& d : m.deprecations) all += d + "\n";
+  EXPECT_EQ(m.deprecations.size(), 7u) << all;  // 3 keys, 4 signals
+  for (const char* line :
+       {"m.toml:7:19: key inputs.frame_temp_degC is deprecated: it is now inputs.frame_sensor_degC",
+        "key inputs.ambient_temp_degC is deprecated: it is now inputs.ambient_degC",
+        "key outputs.rs_ohm is deprecated: it is now outputs.resistance_ohm",
+        "key inputs.frame_temp_degC: signal FrameTemp_degC of PUMP_STATUS is FrameSensor_degC in "
+        "pumptherm.dbc (protocol version \"pumptherm 2\" renamed it): read as FrameSensor_degC",
+        "signal AmbientTemp_degC of PUMP_STATUS is Ambient_degC",
+        "signal Rs_ohm of GW_IDENT is Resistance_ohm",
+        "signal WindingRes_degC of GW_TEMPS_A is WindingResistance_degC"}) {
+    EXPECT_NE(all.find(line), std::string::npos) << line << "\nin:\n" << all;
+  }
+  ExpectMappingError(
+      std::string(kMinimal) +
+          "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n"
+          "frame_sensor_degC = { message = \"PUMP_STATUS\", signal = \"FrameSensor_degC\" }\n"
+          "frame_temp_degC = { message = \"PUMP_STATUS\", signal = \"FrameSensor_degC\" }\n",
+      dbc, {"inputs.frame_sensor_degC is given twice"});
+
+  // A site's copy of the DBC of "pumptherm 1": the defaults go to the old names, reported.
+  std::string old_text = test::ReadFile(test::PumpthermDbc());
+  for (const auto& [now, before] : {std::pair{"WindingResistanceSd_K", "WindingResSd_K"},
+                                    std::pair{"WindingResistance_degC", "WindingRes_degC"}}) {
+    for (std::size_t at = old_text.find(now); at != std::string::npos; at = old_text.find(now))
+      old_text.replace(at, std::string_view(now).size(), before);
+  }
+  const Dbc old_dbc = ParseDbc(old_text, "site-v1.dbc");
+  const SignalMapping on_old = ParseMapping(
+      std::string(kMinimal) +
+          "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n",
+      "m.toml", old_dbc);
+  ASSERT_NE(on_old.output("winding_resistance_degC"), nullptr);
+  EXPECT_EQ(on_old.output("winding_resistance_degC")->signal, "WindingRes_degC");
+  EXPECT_EQ(on_old.output("winding_resistance_sd_K")->signal, "WindingResSd_K");
+  all.clear();
+  for (const auto& d : on_old.deprecations) all += d + "\n";
+  EXPECT_NE(all.find("site-v1.dbc: message GW_TEMPS_A has signal WindingRes_degC, the name before "
+                     "protocol version \"pumptherm 2\" (now WindingResistance_degC): output "
+                     "winding_resistance_degC goes to it"),
+            std::string::npos)
+      << all;
 }
 
 TEST(MappingTest, DefaultsCanBeTurnedOffAndOverridden) {
@@ -147,13 +215,13 @@ TEST(MappingTest, DefaultsCanBeTurnedOffAndOverridden) {
       std::string(kMinimal) +
       "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n";
   // Only what is named, with `defaults = false`.
-  const SignalMapping only =
-      ParseMapping(with_speed +
-                       "[outputs]\ndefaults = false\n"
-                       "no_default = { message = \"GW_IDENT\", signal = \"Rs_ohm\", scale = 2 }\n",
-                   "m.toml", dbc);
+  const SignalMapping only = ParseMapping(
+      with_speed +
+          "[outputs]\ndefaults = false\n"
+          "no_default = { message = \"GW_IDENT\", signal = \"Resistance_ohm\", scale = 2 }\n",
+      "m.toml", dbc);
   ASSERT_EQ(only.outputs.size(), 1u);
-  EXPECT_EQ(only.output("no_default")->signal, "Rs_ohm");
+  EXPECT_EQ(only.output("no_default")->signal, "Resistance_ohm");
   EXPECT_EQ(only.output("no_default")->scale, 2.0);
   // A named output wins over its default.
   const SignalMapping over = ParseMapping(

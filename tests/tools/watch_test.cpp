@@ -20,8 +20,8 @@ namespace {
 pumptherm::temperatures_t Temps(const std::string& pump) {
   pumptherm::temperatures_t m{};
   m.pump = pump;
-  m.resistance_winding_degC = 84.25;
-  m.resistance_winding_sd_K = 0.5;
+  m.winding_resistance_degC = 84.25;
+  m.winding_resistance_sd_K = 0.5;
   m.ident_status = 2;
   m.num_nodes = 2;
   m.node_names = {"frame", "winding"};
@@ -115,7 +115,7 @@ TEST_F(PumpWatchUtc, DetailTellsThePumpsStory) {
   w.OnAlarm(TrippedWithEverything("pump3"), 1'000'000);
   pumptherm::telemetry_t m{};
   m.pump = "pump3";
-  m.frame_degC = 100.70000000000002;
+  m.frame_sensor_degC = 100.70000000000002;
   m.ambient_degC = 22.2;
   m.speed_rpm = 21000;
   m.iq_A = 4.5;

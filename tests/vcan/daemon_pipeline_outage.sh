@@ -163,9 +163,9 @@ last_stamp() {
 }
 near() { awk -v a="$1" -v b="$2" -v d="$3" 'BEGIN { x = a - b; if (x < 0) x = -x; exit !(x <= d) }'; }
 for node in 1 2 3; do
-  # WindingRes_degC (resistance-based: "not available" while the identifier does not track, which
-  # 40 s of this recording need not reach; then it must be so live and offline alike) and
-  # Frame_degC (tmp-generic has no yoke; always available).
+  # WindingResistance_degC (resistance-based: "not available" while the identifier does not
+  # track, which 40 s of this recording need not reach; then it must be so live and offline
+  # alike) and Frame_degC (tmp-generic has no yoke; always available).
   for field in 0 1; do
     # The live gateway goes on for about a second after the offline run's end: its frame of the
     # offline run's last thermal step is the one stamped nearest that step's (a step moves the

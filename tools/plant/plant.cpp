@@ -231,7 +231,7 @@ void LoadFrameLayout(const PlantResources& res, FrameLayout& layout) {
   };
   layout.fast_i = plan_of(MappingInput::kIqA, "iq_A");
   layout.fast_u = plan_of(MappingInput::kUqV, "uq_V");
-  layout.status = plan_of(MappingInput::kFrameTempDegC, "frame_temp_degC");
+  layout.status = plan_of(MappingInput::kFrameSensorDegC, "frame_sensor_degC");
 }
 
 /// The pump's motor: a preset or a file the scenario names.
@@ -360,7 +360,7 @@ std::unique_ptr<PumpState> SetUpPump(const Scenario& sc, const PlantResources& r
     c.noise_sd = s.noise_sd_K;
     c.offset = std::isnan(s.offset_K) ? s.accuracy_K * (2.0 * unit(rng_setup) - 1.0) : s.offset_K;
     c.lsb = s.resolution_K;
-    c.min = -50.0;  // the DBC's FrameTemp_degC / AmbientTemp_degC range
+    c.min = -50.0;  // the DBC's FrameSensor_degC / Ambient_degC range
     c.max = 359.4;
     c.lag_tau_s = s.lag_s;
     return c;
@@ -633,8 +633,8 @@ struct FrameEmitter {
     }
     layout.Set(layout.status, MappingInput::kSpeedMechRpm, p.rep_speed_rpm);
     layout.Set(layout.status, MappingInput::kDriveState, sp.drive_state);
-    layout.Set(layout.status, MappingInput::kFrameTempDegC, p.frame_reading_degC);
-    layout.Set(layout.status, MappingInput::kAmbientTempDegC, p.ambient_reading_degC);
+    layout.Set(layout.status, MappingInput::kFrameSensorDegC, p.frame_reading_degC);
+    layout.Set(layout.status, MappingInput::kAmbientDegC, p.ambient_reading_degC);
     layout.Set(layout.status, MappingInput::kDcLinkV, drive.dc_link_V);
     Emit(p, pump, layout.status, status_counter, t_s, 2, off, faults);
   }

@@ -51,10 +51,10 @@ class Assembler {
     if (status) {
       if (std::isfinite(at(MappingInput::kSpeedMechRpm)))
         speed_rpm_ = at(MappingInput::kSpeedMechRpm);
-      if (std::isfinite(at(MappingInput::kFrameTempDegC)))
-        frame_C_ = at(MappingInput::kFrameTempDegC);
-      if (std::isfinite(at(MappingInput::kAmbientTempDegC)))
-        ambient_C_ = at(MappingInput::kAmbientTempDegC);
+      if (std::isfinite(at(MappingInput::kFrameSensorDegC)))
+        frame_C_ = at(MappingInput::kFrameSensorDegC);
+      if (std::isfinite(at(MappingInput::kAmbientDegC)))
+        ambient_C_ = at(MappingInput::kAmbientDegC);
     }
     const double counter = at(MappingInput::kRollingCounter);
     protocol::DqPair pair;
@@ -159,8 +159,8 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
   const std::string where = s.log == "-" ? "<stdin>" : s.log;
   std::ostringstream csv;
   csv << "time_s,id_A,iq_A,ud_V,uq_V,speed_rpm,frame_degC,ambient_degC\n";
-  const bool status_mapped = mapping.input(MappingInput::kFrameTempDegC).has_value() &&
-                             mapping.input(MappingInput::kAmbientTempDegC).has_value();
+  const bool status_mapped = mapping.input(MappingInput::kFrameSensorDegC).has_value() &&
+                             mapping.input(MappingInput::kAmbientDegC).has_value();
   Assembler assembler(motor, status_mapped, csv, counts);
   std::vector<double> values(64);
   // The stamps' time base (Unix time, or candump -t z / -t d), from the first ones, as the
@@ -229,7 +229,7 @@ std::string RecordingToCsv(const RecordingSource& s, RecordingCounts* out_counts
           b.scale * values[static_cast<std::size_t>(b.signal)] + b.offset;
       currents = currents || b.input == MappingInput::kIqA;
       voltages = voltages || b.input == MappingInput::kUqV;
-      status = status || b.input == MappingInput::kFrameTempDegC ||
+      status = status || b.input == MappingInput::kFrameSensorDegC ||
                b.input == MappingInput::kSpeedMechRpm;
     }
     assembler.OnFrame(time_us, v, currents, voltages, status);

@@ -312,7 +312,7 @@ std::string PumpWatch::Detail(const std::string& pump, std::int64_t now_us,
   out += "direct readings:\n";
   if (e.telemetry_rx_us >= 0) {
     const pumptherm::telemetry_t& m = e.telemetry;
-    out += fmt::format("  {:<24} {} degC\n", measured + " sensor", Num(m.frame_degC, 1));
+    out += fmt::format("  {:<24} {} degC\n", measured + " sensor", Num(m.frame_sensor_degC, 1));
     out += fmt::format("  {:<24} {} degC\n", "ambient", Num(m.ambient_degC, 1));
     out +=
         fmt::format("  {:<24} {} r/min, iq {} A\n", "speed", Num(m.speed_rpm, 0), Num(m.iq_A, 2));
@@ -324,9 +324,9 @@ std::string PumpWatch::Detail(const std::string& pump, std::int64_t now_us,
     const std::string ident = IdentStatusName(t.ident_status);
     out += fmt::format(
         "  {:<24} {}\n", "winding from resistance",
-        std::isfinite(t.resistance_winding_degC)
+        std::isfinite(t.winding_resistance_degC)
             ? fmt::format("{} degC (identification {})",
-                          Band(t.resistance_winding_degC, t.resistance_winding_sd_K), ident)
+                          Band(t.winding_resistance_degC, t.winding_resistance_sd_K), ident)
             : fmt::format("not available (identification {})", ident));
     out += fmt::format("  {:<24} {}\n", "magnet from flux",
                        std::isfinite(t.magnet_flux_degC)

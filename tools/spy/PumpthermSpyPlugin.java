@@ -154,6 +154,16 @@ public class PumpthermSpyPlugin implements SpyPlugin {
     }
   }
 
+  /**
+   * Field `name` of `o`, or else its name of protocol version "pumptherm 1" (`before`): a log
+   * recorded before the rename is decoded only by the types jar of that version (the
+   * fingerprint changed), and this view shows it the same (docs/lcm.md, "Protocol versions").
+   */
+  static Object get(Object o, String name, String before) {
+    Object v = get(o, name);
+    return v != null ? v : get(o, before);
+  }
+
   /** The static constant of `cls` whose name starts with `prefix` and equals `code`. */
   static String codeName(Class<?> cls, String prefix, Object code) {
     if (code == null) return "-";
@@ -388,7 +398,8 @@ public class PumpthermSpyPlugin implements SpyPlugin {
           get(m, "pump"), alarmText(alarm), diagnosis.isEmpty() ? "" : "<br>diagnosis: " + diagnosis,
           codeName(c, "IDENT_", get(m, "ident_status")), codeName(c, "FILTER_", get(m, "filter_status")),
           num(get(m, "nis"), "%.2f"),
-          degC(band(get(m, "resistance_winding_degC"), get(m, "resistance_winding_sd_K"))),
+          degC(band(get(m, "winding_resistance_degC", "resistance_winding_degC"),
+              get(m, "winding_resistance_sd_K", "resistance_winding_sd_K"))),
           degC(band(get(m, "magnet_flux_degC"), get(m, "magnet_flux_sd_K"))),
           num(get(m, "resistance_ohm"), "%.4f")));
       Object names = get(m, "node_names");
@@ -449,7 +460,7 @@ public class PumpthermSpyPlugin implements SpyPlugin {
                                    codeName(c, "DRIVE_STATE_", get(m, "drive_state")),
                                    localTime(get(m, "utime"))));
       Object[][] rows = {
-          {"frame sensor", num(get(m, "frame_degC"), "%.1f"), "degC"},
+          {"frame sensor", num(get(m, "frame_sensor_degC", "frame_degC"), "%.1f"), "degC"},
           {"ambient", num(get(m, "ambient_degC"), "%.1f"), "degC"},
           {"coolant", num(get(m, "coolant_degC"), "%.1f"), "degC"},
           {"speed", num(get(m, "speed_rpm"), "%.0f"), "r/min"},
