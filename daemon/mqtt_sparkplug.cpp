@@ -118,6 +118,15 @@ void FillDeviceValues(const FieldSource& source, std::span<double> out) {
   if (k != out.size()) throw std::out_of_range("mqtt: fewer metrics than values");
 }
 
+bool RebirthRequested(std::string_view payload) {
+  pb::Payload p;
+  if (!p.ParseFromArray(payload.data(), static_cast<int>(payload.size()))) return false;
+  for (const auto& m : p.metrics())
+    if (m.name() == "Node Control/Rebirth" && m.has_boolean_value() && m.boolean_value())
+      return true;
+  return false;
+}
+
 std::uint64_t Alias(std::size_t device, std::size_t metric) {
   return (static_cast<std::uint64_t>(device + 1) << 32U) | static_cast<std::uint64_t>(metric);
 }

@@ -55,6 +55,10 @@ std::vector<MetricSpec> DeviceMetrics(std::span<const std::string> node_names);
 /// read from `source.estimate`. Allocates nothing: the loop calls it.
 void FillDeviceValues(const FieldSource& source, std::span<double> out);
 
+/// Whether an NCMD payload asks for a rebirth: a metric "Node Control/Rebirth" that is true
+/// (spec 6.4.19). False for anything that does not decode.
+bool RebirthRequested(std::string_view payload);
+
 /// A pump as the encoder sees it: its device id and its metrics.
 struct Device {
   std::string id;
