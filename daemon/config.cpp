@@ -181,6 +181,67 @@ void ReadClearAuth(TableReader& r, const std::string& base_dir, const std::strin
   }
 }
 
+/// Whether `host` is this machine (a broker reached without leaving it).
+bool LocalHost(const std::string& host) {
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
+}
+
+/// [mqtt]: the broker, the Sparkplug ids, TLS and credentials (docs/daemon.md, "[mqtt]").
+void ReadMqtt(TableReader& r, const std::string& base_dir, MqttConfig& m) {
+  const std::string empty;
+  auto path = [&](std::string_view key) {
+    std::string p = r.String(key, &empty);
+    if (!p.empty() && p[0] != '/') p = base_dir + "/" + p;
+    return p;
+  };
+  auto id = [&](std::string_view key, const std::string& fallback) {
+    std::string v = r.String(key, &fallback);
+    const bool ok = !v.empty() && v.size() <= 255 && v.find_first_of("/+#") == std::string::npos &&
+                    std::all_of(v.begin(), v.end(), [](char c) {
+                      return static_cast<unsigned char>(c) >= 0x20 && c != 0x7f;
+                    });
+    if (!ok && !(v.empty() && fallback.empty()))
+      r.Fail(r.table().get(key), key, "1 to 255 printable characters without '/', '+' or '#'");
+    return v;
+  };
+  m.enabled = true;
+  m.line = static_cast<int>(r.table().source().begin.line);
+  m.host = r.String("host", nullptr);
+  if (m.host.empty()) r.Fail(r.table().get("host"), "host", "expected a host name or address");
+  m.group_id = id("group_id", m.group_id);
+  m.edge_node_id = id("edge_node_id", empty);
+  m.ca_file = path("ca_file");
+  m.cert_file = path("cert_file");
+  m.key_file = path("key_file");
+  m.username = r.String("username", &empty);
+  m.password_file = path("password_file");
+  m.allow_plaintext = r.Bool("allow_plaintext", false);
+  m.keepalive_s = r.Number("keepalive_s", m.keepalive_s, 5.0, 3600.0);
+  m.queue_steps = static_cast<std::size_t>(
+      r.Integer("queue_steps", static_cast<std::int64_t>(m.queue_steps), 1, 65536));
+  m.alarm_queue_steps = static_cast<std::size_t>(
+      r.Integer("alarm_queue_steps", static_cast<std::int64_t>(m.alarm_queue_steps), 1, 65536));
+  const bool tls = !m.ca_file.empty();
+  m.port = static_cast<int>(r.Integer("port", tls ? 8883 : 1883, 1, 65535));
+  if (m.cert_file.empty() != m.key_file.empty())
+    r.Fail(r.table().get(m.cert_file.empty() ? "key_file" : "cert_file"),
+           m.cert_file.empty() ? "cert_file" : "key_file",
+           "missing: a client certificate needs its key, and the key its certificate");
+  if (!tls && !m.cert_file.empty())
+    r.Fail(r.table().get("cert_file"), "ca_file",
+           "missing: a client certificate is only sent over TLS; name the broker's CA");
+  if (!m.password_file.empty() && m.username.empty())
+    r.Fail(r.table().get("password_file"), "username", "missing: a password needs a user name");
+  if (!tls && !LocalHost(m.host) && !m.allow_plaintext) {
+    r.Fail(r.table().get("host"), "host",
+           fmt::format("'{}' is not this host and no ca_file is given: the connection would be "
+                       "plain text (passwords and alarms readable on the network); give ca_file, "
+                       "or say allow_plaintext = true",
+                       m.host));
+  }
+  r.RejectUnknown();
+}
+
 }  // namespace
 
 DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
@@ -268,6 +329,10 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
     r.RejectUnknown();
   }
 
+  if (const toml::table* t = top.Table("mqtt")) {
+    TableReader r(*t, "mqtt", source);
+    ReadMqtt(r, config.dbc.base_dir, config.mqtt);
+  }
   if (const toml::table* t = top.Table("lcm")) {
     TableReader r(*t, "lcm", source);
     const std::string empty;

@@ -93,6 +93,25 @@ struct LcmConfig {
   std::vector<std::string> receive_interfaces;
 };
 
+/// The MQTT Sparkplug B sink (docs/mqtt.md, docs/daemon.md "[mqtt]"); off without an [mqtt]
+/// table. Paths are absolute (relative ones are taken from the config file's directory).
+struct MqttConfig {
+  bool enabled = false;  ///< an [mqtt] table was given
+  std::string host;      ///< the broker
+  int port = 0;          ///< 0: 8883 with TLS, 1883 without
+  std::string group_id = "pumptherm";
+  std::string edge_node_id;         ///< empty: the gateway's name
+  std::string ca_file;              ///< the broker's CA (PEM): TLS on when given
+  std::string cert_file, key_file;  ///< this gateway's client certificate and key (PEM), or none
+  std::string username;
+  std::string password_file;     ///< a file holding the password (LoadCredential=), or none
+  bool allow_plaintext = false;  ///< a non-local broker without TLS, said explicitly
+  double keepalive_s = 10.0;
+  std::size_t queue_steps = 256;         ///< data messages waiting; the oldest dropped
+  std::size_t alarm_queue_steps = 1024;  ///< alarm transitions waiting, kept across outages
+  int line = 0;                          ///< line of the [mqtt] table
+};
+
 /// Alarm levels of one node (or of the measured sensor, key "sensor").
 struct LevelsConfig {
   estimators::TemperatureLimits limits;
@@ -176,6 +195,7 @@ struct DaemonConfig {
   GatewayConfig gateway;
   DbcConfig dbc;
   LcmConfig lcm;
+  MqttConfig mqtt;
   AlarmsConfig alarms;         ///< defaults for every pump
   ClearAuthConfig clear_auth;  ///< from [alarms]: clear_operators, clear_window_s, shared key
   std::map<std::string, double> output_periods_s;  ///< DBC message name -> period override

@@ -26,6 +26,7 @@
 #include "daemon/gateway.hpp"
 #include "daemon/lcm_bridge.hpp"
 #include "daemon/log.hpp"
+#include "daemon/mqtt_sink.hpp"
 #include "daemon/publish_digest.hpp"
 #include "daemon/safety_state.hpp"
 #include "daemon/state_store.hpp"
@@ -78,6 +79,7 @@ struct LiveLoop::Impl : OutputSink {
   LiveOptions options;
   std::unique_ptr<Gateway> gateway;
   std::unique_ptr<LcmBridge> lcm;
+  std::unique_ptr<MqttSink> mqtt;  // the MQTT Sparkplug B sink: [mqtt] only (docs/mqtt.md)
   UniqueFd epoll;
   UniqueFd signal_fd;
   UniqueFd timer_fd;
@@ -212,6 +214,19 @@ struct LiveLoop::Impl : OutputSink {
     }
   }
 
+  /// The MQTT sink of this configuration and gateway (none without [mqtt]); the one before it
+  /// sends what it holds (up to 1 s) and its NDEATH first. Throws as MqttSink does.
+  void StartMqtt() {
+    if (mqtt) mqtt->Stop(1.0);
+    mqtt.reset();
+    if (!config.mqtt.enabled) return;
+    mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway, false);
+    Log(LogLevel::kNotice, "mqtt: publishing to {}:{} as spBv1.0/{}/.../{} ({})", config.mqtt.host,
+        config.mqtt.port, config.mqtt.group_id,
+        config.mqtt.edge_node_id.empty() ? config.gateway.name : config.mqtt.edge_node_id,
+        config.mqtt.ca_file.empty() ? "plain text" : "TLS");
+  }
+
   void StartLcm() {
     lcm.reset();
     if (config.lcm.url.empty()) return;
@@ -341,6 +356,7 @@ struct LiveLoop::Impl : OutputSink {
   void AdvanceGateway() {
     gateway->SetWallClockOffset(WallMinusMonotonicUs());
     gateway->Advance(ClockUs(CLOCK_MONOTONIC), *this);
+    if (mqtt) mqtt->Offer(*gateway);
     SaveIfTripLatched();
   }
 
@@ -460,6 +476,7 @@ struct LiveLoop::Impl : OutputSink {
     if (!state_path.empty())
       s += fmt::format("; state {} saved, {} failed", save_report.successes(),
                        save_report.failures());
+    if (mqtt) s += "; " + mqtt->StatusText();
     if (const auto drops = lcm ? lcm->ReceiveDrops() : std::nullopt; drops && *drops > 0)
       s +=
           fmt::format("; lcm {} received dropped (outside the boundary, or a full buffer)", *drops);
@@ -563,6 +580,11 @@ struct LiveLoop::Impl : OutputSink {
       for (std::size_t i = 0; i < sockets.size(); ++i) Watch(sockets[i].fd(), kFirstSocketTag + i);
     }
     MapSockets();
+    try {
+      StartMqtt();  // the pumps may have changed: new devices, new births
+    } catch (const std::exception& e) {
+      Log(LogLevel::kError, "MQTT after reload: {}; MQTT is off until the next reload", e.what());
+    }
     if (lcm_changed) {
       try {
         StartLcm();
@@ -696,6 +718,7 @@ LiveLoop::LiveLoop(const DaemonConfig& config, std::string config_path, LiveOpti
   m.OpenSockets();
   m.StartLcm();
   m.RestoreState();
+  m.StartMqtt();
 }
 
 LiveLoop::~LiveLoop() = default;

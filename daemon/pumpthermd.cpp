@@ -13,6 +13,7 @@
 #include "daemon/gateway.hpp"
 #include "daemon/live_loop.hpp"
 #include "daemon/log.hpp"
+#include "daemon/mqtt_sink.hpp"
 #include "daemon/offline.hpp"
 
 namespace {
@@ -180,9 +181,20 @@ int main(int argc, char** argv) {
           "replay it with lcm-logplayer --lcm-url=URL FILE",
           offline.lcm_log.empty() ? "none given" : offline.lcm_log,
           config.lcm.url.empty() ? "unset" : config.lcm.url);
+    // The MQTT sink, when configured: every step is sent (Offer waits for room; an offline run
+    // has no timing to keep), then NDEATH.
+    std::unique_ptr<MqttSink> mqtt;
     OfflineResult r;
     try {
+      if (config.mqtt.enabled) {
+        mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway, true);
+        offline.after_advance = [&](const Gateway& g, std::int64_t) { mqtt->Offer(g); };
+      }
       r = RunOffline(*in, source, *gateway, offline);
+      if (mqtt) {
+        mqtt->Stop(30.0);
+        fmt::print("{}\n", mqtt->StatusText());
+      }
     } catch (const std::exception& e) {
       Log(LogLevel::kError, "{}", e.what());
       return kExitRunFailed;

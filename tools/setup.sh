@@ -18,6 +18,8 @@ packages=(
   chromium
   lintian dpkg-dev groff-base time
   python3-canmatrix   # the independent DBC decoder of tests/protocol/codec_canmatrix_test.cpp
+  libmosquitto-dev protobuf-compiler libprotobuf-dev   # the MQTT Sparkplug B sink (docs/mqtt.md)
+  mosquitto python3-paho-mqtt python3-protobuf openssl # its broker test: broker, subscriber, test CA
 )
 
 want_guest=1

@@ -1,0 +1,370 @@
+// The MQTT Sparkplug B sink (daemon/mqtt_sink.hpp, docs/mqtt.md).
+#include "daemon/mqtt_sink.hpp"
+
+#include <fmt/format.h>
+#include <mosquitto.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+
+#include "daemon/clear_keys.hpp"
+#include "daemon/gateway.hpp"
+#include "daemon/gateway_detail.hpp"
+#include "daemon/log.hpp"
+
+namespace pumptherm::daemon {
+namespace {
+
+using mqtt::MessageType;
+using Clock = std::chrono::steady_clock;
+
+constexpr auto kBackoffMin = std::chrono::milliseconds(500);
+constexpr auto kBackoffMax = std::chrono::seconds(30);
+constexpr int kLoopTimeoutMs = 20;
+/// Messages published per turn of the sink's loop before it reads the socket again.
+constexpr int kBurst = 64;
+
+std::uint64_t WallMs() {
+  return static_cast<std::uint64_t>(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch())
+                                        .count());
+}
+
+/// The secret's file: checked as the clear key is, then read (the first line, no newline).
+std::string ReadSecretFile(const std::string& path, std::string_view what) {
+  if (const std::string problem = SecretKeyFileProblem(path, KeyOwner::kCallerOrRoot);
+      !problem.empty())
+    throw std::runtime_error(fmt::format("mqtt.{}: {}", what, problem));
+  std::ifstream f(path);
+  if (!f) throw std::runtime_error(fmt::format("mqtt.{}: cannot read '{}'", what, path));
+  std::string line;
+  std::getline(f, line);
+  return line;
+}
+
+void RequireReadable(const std::string& path, std::string_view what) {
+  if (path.empty()) return;
+  std::ifstream f(path);
+  if (!f) throw std::runtime_error(fmt::format("mqtt.{}: cannot read '{}'", what, path));
+}
+
+std::vector<mqtt::Device> Devices(const Gateway& g) {
+  std::vector<mqtt::Device> out;
+  for (const auto& p : g.pumps())
+    out.push_back({p->config().name, mqtt::DeviceMetrics(p->model().StateNames())});
+  return out;
+}
+
+std::size_t Width(const std::vector<mqtt::Device>& devices) {
+  std::size_t w = 0;
+  for (const auto& d : devices) w = std::max(w, d.metrics.size());
+  return w;
+}
+
+}  // namespace
+
+MqttSink::MqttSink(const MqttConfig& config, const std::string& gateway_name,
+                   const Gateway& gateway, bool wait_for_room)
+    : config_(config),
+      edge_node_id_(config.edge_node_id.empty() ? gateway_name : config.edge_node_id),
+      encoder_(Devices(gateway)),
+      wait_for_room_(wait_for_room),
+      data_(config.queue_steps, Width(encoder_.devices())),
+      alarms_(config.alarm_queue_steps, Width(encoder_.devices())),
+      scratch_(Width(encoder_.devices())),
+      last_time_us_(gateway.pumps().size(), std::numeric_limits<std::int64_t>::min()),
+      last_alarm_changes_(gateway.pumps().size(), 0),
+      step_values_(Width(encoder_.devices())) {
+  if (!mqtt::ValidId(edge_node_id_))
+    throw std::runtime_error(fmt::format(
+        "mqtt: the edge node id '{}' (the gateway's name unless mqtt.edge_node_id is given) "
+        "cannot be a Sparkplug id: no '/', '+' or '#'",
+        edge_node_id_));
+  for (const auto& d : encoder_.devices()) {
+    if (!mqtt::ValidId(d.id))
+      throw std::runtime_error(
+          fmt::format("mqtt: pump name '{}' cannot be a Sparkplug device id", d.id));
+    topics_data_.push_back(mqtt::Topic(config_.group_id, MessageType::kDData, edge_node_id_, d.id));
+    topics_birth_.push_back(
+        mqtt::Topic(config_.group_id, MessageType::kDBirth, edge_node_id_, d.id));
+    latest_.emplace_back(d.metrics.size(), kNaN);
+  }
+  topic_nbirth_ = mqtt::Topic(config_.group_id, MessageType::kNBirth, edge_node_id_);
+  topic_ndeath_ = mqtt::Topic(config_.group_id, MessageType::kNDeath, edge_node_id_);
+  topic_ncmd_ = mqtt::Topic(config_.group_id, MessageType::kNCmd, edge_node_id_);
+  RequireReadable(config_.ca_file, "ca_file");
+  RequireReadable(config_.cert_file, "cert_file");
+  if (!config_.key_file.empty()) (void)ReadSecretFile(config_.key_file, "key_file");
+  if (!config_.password_file.empty())
+    password_ = ReadSecretFile(config_.password_file, "password_file");
+
+  mosquitto_lib_init();
+  mosq_ = mosquitto_new(edge_node_id_.c_str(), true, this);
+  if (mosq_ == nullptr) throw std::runtime_error("mqtt: libmosquitto could not make a client");
+  // Publishes only queue; mosquitto_loop (this sink's thread) writes them. Writing inline from
+  // mosquitto_publish, libmosquitto 2.0.11 corrupted the stream here (the broker closed the
+  // connection: "out of memory") when a QoS 1 acknowledgement came between two publishes.
+  mosquitto_threaded_set(mosq_, true);
+  mosquitto_int_option(mosq_, MOSQ_OPT_PROTOCOL_VERSION, MQTT_PROTOCOL_V311);
+  mosquitto_connect_callback_set(mosq_, &MqttSink::OnConnect);
+  mosquitto_disconnect_callback_set(mosq_, &MqttSink::OnDisconnect);
+  mosquitto_message_callback_set(mosq_, &MqttSink::OnMessage);
+  mosquitto_publish_callback_set(mosq_, &MqttSink::OnPublish);
+  if (!config_.ca_file.empty()) {
+    const int rc =
+        mosquitto_tls_set(mosq_, config_.ca_file.c_str(), nullptr,
+                          config_.cert_file.empty() ? nullptr : config_.cert_file.c_str(),
+                          config_.key_file.empty() ? nullptr : config_.key_file.c_str(), nullptr);
+    if (rc != MOSQ_ERR_SUCCESS)
+      throw std::runtime_error(fmt::format("mqtt: TLS setup refused: {}", mosquitto_strerror(rc)));
+  }
+  if (!config_.username.empty()) {
+    const int rc = mosquitto_username_pw_set(mosq_, config_.username.c_str(),
+                                             password_.empty() ? nullptr : password_.c_str());
+    if (rc != MOSQ_ERR_SUCCESS)
+      throw std::runtime_error(fmt::format("mqtt: username refused: {}", mosquitto_strerror(rc)));
+  }
+  thread_ = std::thread([this] { Run(); });
+}
+
+MqttSink::~MqttSink() {
+  Stop(0.0);
+  if (mosq_ != nullptr) mosquitto_destroy(mosq_);
+  mosquitto_lib_cleanup();
+}
+
+void MqttSink::Offer(const Gateway& gateway) {
+  const auto& pumps = gateway.pumps();
+  for (std::size_t i = 0; i < pumps.size(); ++i) {
+    const PumpSnapshot& s = pumps[i]->snapshot();
+    const bool alarm = s.alarm_changes != last_alarm_changes_[i];
+    // As the CSV: a step with an estimate, or an alarm before the first estimate.
+    if (s.time_us == last_time_us_[i] && !alarm) continue;
+    if (!gateway_detail::AlarmKnown(s)) continue;
+    last_time_us_[i] = s.time_us;
+    last_alarm_changes_[i] = s.alarm_changes;
+    const FieldSource source = gateway.Source(*pumps[i]);
+    const std::size_t n = encoder_.devices()[i].metrics.size();
+    mqtt::FillDeviceValues(source, std::span<double>(scratch_.data(), n));
+    // The step's time to the nearest ms, as the CSV rounds it.
+    const double time_ms =
+        std::round((static_cast<double>(s.time_us) + source.wall_offset_us) / 1000.0);
+    const mqtt::QueuedStep step{static_cast<std::uint32_t>(i),
+                                static_cast<std::uint64_t>(std::max(0.0, time_ms)), 0, n};
+    std::unique_lock lock(mutex_);
+    if (wait_for_room_) {
+      // A broker that takes nothing for 30 s: from then on full queues drop, as live.
+      mqtt::StepQueue& q = alarm ? alarms_ : data_;
+      if (!cv_.wait_for(lock, std::chrono::seconds(30),
+                        [&] { return q.size() < q.capacity() || stop_; })) {
+        wait_for_room_ = false;
+        Log(LogLevel::kWarning,
+            "mqtt: the broker took nothing for 30 s: dropping the oldest steps");
+      }
+    }
+    mqtt::QueuedStep queued = step;
+    queued.order = order_++;
+    if (alarm) {
+      if (alarms_.Push(queued, std::span<const double>(scratch_.data(), n)))
+        ++counts_.alarms_dropped;
+    } else if (data_.Push(queued, std::span<const double>(scratch_.data(), n))) {
+      ++counts_.dropped;
+    }
+    lock.unlock();
+    cv_.notify_all();
+  }
+}
+
+void MqttSink::Stop(double drain_timeout_s) {
+  {
+    std::lock_guard lock(mutex_);
+    if (!thread_.joinable()) return;
+    drain_timeout_s_ = drain_timeout_s;
+    stop_ = true;
+  }
+  cv_.notify_all();
+  thread_.join();
+}
+
+MqttCounts MqttSink::counts() const {
+  std::lock_guard lock(mutex_);
+  MqttCounts c = counts_;
+  c.connected = connected_;
+  return c;
+}
+
+std::string MqttSink::StatusText() const {
+  const MqttCounts c = counts();
+  return fmt::format("mqtt {} {}:{}, {} sent, {} alarms sent, {} dropped, {} alarms dropped",
+                     c.connected ? "connected to" : "not connected to", config_.host, config_.port,
+                     c.sent, c.alarms_sent, c.dropped, c.alarms_dropped);
+}
+
+void MqttSink::OnConnect(mosquitto* m, void* self, int rc) {
+  auto* sink = static_cast<MqttSink*>(self);
+  if (rc != 0) {
+    Log(LogLevel::kWarning, "mqtt: {}:{} refused the connection: {}", sink->config_.host,
+        sink->config_.port, mosquitto_connack_string(rc));
+    return;
+  }
+  mosquitto_subscribe(m, nullptr, sink->topic_ncmd_.c_str(), 0);
+  sink->need_birth_ = true;
+  sink->unacked_.clear();  // a new session: what the old one did not acknowledge is not waited for
+  sink->connected_ = true;
+}
+
+void MqttSink::OnDisconnect(mosquitto*, void* self, int rc) {
+  auto* sink = static_cast<MqttSink*>(self);
+  if (sink->connected_ && rc != 0)
+    Log(LogLevel::kWarning, "mqtt: connection to {}:{} lost; reconnecting", sink->config_.host,
+        sink->config_.port);
+  sink->connected_ = false;
+}
+
+void MqttSink::OnMessage(mosquitto*, void* self, const mosquitto_message* msg) {
+  auto* sink = static_cast<MqttSink*>(self);
+  if (msg->topic == nullptr || sink->topic_ncmd_ != msg->topic) return;
+  const std::string_view payload(static_cast<const char*>(msg->payload),
+                                 static_cast<std::size_t>(std::max(0, msg->payloadlen)));
+  if (mqtt::RebirthRequested(payload)) sink->rebirth_ = true;
+}
+
+void MqttSink::OnPublish(mosquitto*, void* self, int mid) {
+  // QoS 0 messages call this too, once written; QoS 1 once acknowledged.
+  auto& unacked = static_cast<MqttSink*>(self)->unacked_;
+  unacked.erase(std::remove(unacked.begin(), unacked.end(), mid), unacked.end());
+}
+
+bool MqttSink::Publish(const std::string& topic, const std::string& payload, int qos) {
+  int mid = 0;
+  const int rc = mosquitto_publish(mosq_, &mid, topic.c_str(), static_cast<int>(payload.size()),
+                                   payload.data(), qos, false);
+  if (rc == MOSQ_ERR_SUCCESS && qos > 0) unacked_.push_back(mid);
+  return rc == MOSQ_ERR_SUCCESS;
+}
+
+void MqttSink::AwaitAcks(int timeout_ms) {
+  const auto end = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (!unacked_.empty() && connected_ && Clock::now() < end) mosquitto_loop(mosq_, 20, 1);
+}
+
+bool MqttSink::ConnectOnce() {
+  ++bd_seq_;
+  const std::string death = mqtt::Encoder::NodeDeath(bd_seq_);
+  mosquitto_will_set(mosq_, topic_ndeath_.c_str(), static_cast<int>(death.size()), death.data(), 1,
+                     false);
+  const int rc = mosquitto_connect(mosq_, config_.host.c_str(), config_.port,
+                                   static_cast<int>(config_.keepalive_s));
+  if (rc != MOSQ_ERR_SUCCESS) {
+    Log(LogLevel::kWarning, "mqtt: cannot connect to {}:{}: {}", config_.host, config_.port,
+        rc == MOSQ_ERR_ERRNO ? std::strerror(errno) : mosquitto_strerror(rc));
+    return false;
+  }
+  return true;
+}
+
+void MqttSink::Births() {
+  const std::uint64_t now_ms = WallMs();
+  Publish(topic_nbirth_, encoder_.NodeBirth(bd_seq_, now_ms), 0);
+  for (std::size_t d = 0; d < latest_.size(); ++d)
+    Publish(topics_birth_[d], encoder_.DeviceBirth(d, latest_[d], now_ms), 0);
+  need_birth_ = false;
+  std::lock_guard lock(mutex_);
+  ++counts_.connects;
+}
+
+bool MqttSink::PublishOne() {
+  mqtt::QueuedStep step;
+  bool alarm = false;
+  {
+    std::lock_guard lock(mutex_);
+    if (data_.empty() && alarms_.empty()) return false;
+    // The older of the two fronts first: a pump's steps go out in the order they came.
+    alarm = data_.empty() || (!alarms_.empty() && alarms_.Front().order < data_.Front().order);
+    const mqtt::StepQueue& q = alarm ? alarms_ : data_;
+    step = q.Front();
+    std::copy(q.FrontValues().begin(), q.FrontValues().end(), step_values_.begin());
+  }
+  const std::span<const double> values(step_values_.data(), step.count);
+  const std::string payload = encoder_.DeviceData(step.device, values, step.time_ms);
+  const bool ok = payload.empty() || Publish(topics_data_[step.device], payload, alarm ? 1 : 0);
+  if (!ok && alarm) return false;  // kept: sent after the next connection's births
+  std::copy(values.begin(), values.end(), latest_[step.device].begin());
+  {
+    std::lock_guard lock(mutex_);
+    mqtt::StepQueue& q = alarm ? alarms_ : data_;
+    if (!q.empty() && q.Front().order == step.order) q.Pop();
+    if (!ok) ++counts_.dropped;  // a data step the broker did not take: not sent again
+    if (ok && !payload.empty()) ++(alarm ? counts_.alarms_sent : counts_.sent);
+  }
+  cv_.notify_all();
+  return true;
+}
+
+void MqttSink::Run() {
+  auto backoff = std::chrono::duration_cast<Clock::duration>(kBackoffMin);
+  auto next_attempt = Clock::now();
+  bool socket_open = false;
+  std::optional<Clock::time_point> drain_until;
+  for (;;) {
+    {
+      std::unique_lock lock(mutex_);
+      if (stop_ && !drain_until)
+        drain_until = Clock::now() + std::chrono::milliseconds(
+                                         static_cast<std::int64_t>(drain_timeout_s_ * 1000.0));
+      const bool empty = data_.empty() && alarms_.empty();
+      if (drain_until && (empty || Clock::now() >= *drain_until)) break;
+    }
+    if (!socket_open) {
+      if (Clock::now() < next_attempt) {
+        std::unique_lock lock(mutex_);
+        cv_.wait_until(lock, next_attempt, [&] { return stop_ && !drain_until; });
+        continue;
+      }
+      socket_open = ConnectOnce();
+      if (!socket_open) {
+        next_attempt = Clock::now() + backoff;
+        backoff = std::min(backoff * 2, std::chrono::duration_cast<Clock::duration>(kBackoffMax));
+        continue;
+      }
+    }
+    const int rc = mosquitto_loop(mosq_, kLoopTimeoutMs, 1);
+    if (rc != MOSQ_ERR_SUCCESS) {
+      connected_ = false;
+      socket_open = false;
+      mosquitto_disconnect(mosq_);
+      next_attempt = Clock::now() + backoff;
+      backoff = std::min(backoff * 2, std::chrono::duration_cast<Clock::duration>(kBackoffMax));
+      continue;
+    }
+    if (!connected_) continue;
+    backoff = std::chrono::duration_cast<Clock::duration>(kBackoffMin);
+    if (rebirth_.exchange(false)) {
+      need_birth_ = true;
+      std::lock_guard lock(mutex_);
+      ++counts_.rebirths;
+    }
+    if (need_birth_) Births();
+    for (int k = 0; k < kBurst && PublishOne(); ++k) {
+    }
+  }
+  if (socket_open && connected_) {
+    // A clean end is a death too (spec: an edge node going offline publishes NDEATH).
+    // Sent QoS 1 and acknowledged before the DISCONNECT: the broker has then read every message
+    // before it (a broker that finds the socket closed while it acknowledges drops the rest).
+    Publish(topic_ndeath_, mqtt::Encoder::NodeDeath(bd_seq_), 1);
+    AwaitAcks(2000);
+    mosquitto_disconnect(mosq_);
+    for (int k = 0; k < 10 && connected_; ++k) mosquitto_loop(mosq_, 20, 1);
+  }
+}
+
+}  // namespace pumptherm::daemon
