@@ -152,7 +152,7 @@ class BlindBound {
 /// What the model-mismatch test says about heat inside the pump, for InsideHeatBound.
 enum class InsideHeatVerdict {
   kUnchanged,  ///< nothing new (consistent, learning, not named yet, a sensor fault)
-  kInside,     ///< a plant change named as heat inside (rotor loss, or every loss scaled)
+  kInside,     ///< a plant change named as heat on the rotor (rotor_loss)
   kFramePath,  ///< a plant change named on the frame path (cooling, an unmeasured ambient)
 };
 

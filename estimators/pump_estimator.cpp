@@ -120,15 +120,15 @@ InsideHeatNodes InsideNodes(const PumpEstimatorConfig& c, const ThermalModel& mo
   return nodes;
 }
 
-/// What a finding says about heat inside: a plant change named as rotor heat or as every loss
-/// scaled is inside; one named on the frame path (cooling, ambient) is not. The names of the
-/// plant effects lie close (docs/virtual-sensor.md, "Model mismatch"), so rotor heat named as
-/// the losses' scale counts as inside too.
+/// What a finding says about heat inside: a plant change named as rotor heat is inside; one
+/// named on the frame path (cooling, ambient) is not. Every loss scaled is left to the filter's
+/// loss-scale state (it covers +40 % losses), and lost cooling is first named so in most runs:
+/// taken as inside, the bound put the cooling's frame-path heat on the rotor until the right name
+/// came (docs/virtual-sensor.md, "Heat inside, from the frame alone").
 InsideHeatVerdict InsideVerdictOf(const MismatchFinding& f) {
   if (f.state != MismatchState::kPlantChange) return InsideHeatVerdict::kUnchanged;
   switch (f.effect) {
     case MismatchEffect::kRotorLoss:
-    case MismatchEffect::kLossScale:
       return InsideHeatVerdict::kInside;
     case MismatchEffect::kFrameAmbientResistance:
     case MismatchEffect::kUnmeasuredAmbient:
