@@ -86,6 +86,9 @@ class AlarmValues {
   double PublishedSd_K(int i, double filter_sd_K, double above_K) const;
   /// The inside-heat bound (latched, its heat).
   const InsideHeatBound& inside_heat() const { return inside_; }
+  /// Forgets the inside-heat bound (a restore: the mismatch test that named the heat starts
+  /// afresh, and the frame-path heat it was measured on may restart from its prior).
+  void ForgetInsideHeat() { inside_.Reset(); }
   /// A blind bound is running (the previous step was blind).
   bool Blind() const { return blind_.bound_degC().size() > 0; }
   /// A silence from `start_s` (a restart: the time down), from the saved estimate and inputs;

@@ -122,9 +122,9 @@ InsideHeatNodes InsideNodes(const PumpEstimatorConfig& c, const ThermalModel& mo
 
 /// What a finding says about heat inside: a plant change named as rotor heat is inside; one
 /// named on the frame path (cooling, ambient) is not. Every loss scaled is left to the filter's
-/// loss-scale state (it covers +40 % losses), and lost cooling is first named so in most runs:
-/// taken as inside, the bound put the cooling's frame-path heat on the rotor until the right name
-/// came (docs/virtual-sensor.md, "Heat inside, from the frame alone").
+/// loss-scale state (it covers +40 % losses), and lost cooling is named `loss_scale` first in most
+/// runs: taken as inside, the bound put the cooling's frame-path heat on the rotor until the right
+/// name came (docs/virtual-sensor.md, "Heat inside, from the frame alone").
 InsideHeatVerdict InsideVerdictOf(const MismatchFinding& f) {
   if (f.state != MismatchState::kPlantChange) return InsideHeatVerdict::kUnchanged;
   switch (f.effect) {
@@ -599,7 +599,9 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   // The time the daemon was down is a telemetry silence: the load may have risen in it.
   values_.BeginSilence(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6, x,
                        static_cast<double>(now_us) * 1e-6);
-  // The mismatch test starts afresh (learning) from the restored level.
+  // The mismatch test starts afresh (learning) from the restored level, and with it the
+  // inside-heat bound it latched.
+  values_.ForgetInsideHeat();
   mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0,
                        static_cast<double>(now_us) * 1e-6);
   last_inputs_ = state.inputs;
