@@ -181,4 +181,85 @@ void BlindBound::Step(const ThermalModel& model, const ThermalInputs& in, double
   }
 }
 
+InsideHeatBound::InsideHeatBound(const ThermalModel& model, int measured, int rotor,
+                                 double history_s, double sample_s)
+    : sample_s_(sample_s) {
+  if (!(history_s > 0.0) || !(sample_s > 0.0)) {
+    throw std::invalid_argument("InsideHeatBound: the history and the sample period must be > 0 s");
+  }
+  const auto kept = static_cast<std::size_t>(std::ceil(history_s / sample_s)) + 2;
+  kept_s_.assign(kept, std::numeric_limits<double>::quiet_NaN());
+  kept_W_.assign(kept, 0.0);
+  const int n = model.StateCount();
+  if (measured < 0 || rotor < 0 || measured == rotor || measured >= n || rotor >= n) return;
+  // Conduction alone: at standstill every loss is zero (so is copper's temperature term), and
+  // the network's a is the conductances over the capacities.
+  ThermalInputs in;
+  in.ambient_degC = in.coolant_degC = 20.0;
+  ThermalLinearModel lin;
+  try {
+    model.Linearise(in, Eigen::VectorXd::Constant(n, 20.0), lin);
+  } catch (const std::exception&) {
+    return;  // no bound for a network that cannot be linearised at rest
+  }
+  const Eigen::VectorXd& cap = model.Capacities_J_per_K();
+  Eigen::MatrixXd heat = Eigen::MatrixXd::Zero(n, 2);  // 1 W on the rotor, 1 W on the measured
+  heat(rotor, 0) = 1.0 / cap(rotor);
+  heat(measured, 1) = 1.0 / cap(measured);
+  const Eigen::FullPivLU<Eigen::MatrixXd> lu(lin.a_per_s);
+  if (!lu.isInvertible()) return;  // no path to the boundary: no steady state
+  const Eigen::MatrixXd rise = -lu.solve(heat);
+  // Only raises: a node that heating the rotor would warm less than heating the frame is left.
+  gain_K_per_W_ = (rise.col(0) - rise.col(1)).cwiseMax(0.0);
+  if (!gain_K_per_W_.allFinite()) gain_K_per_W_.resize(0);
+}
+
+void InsideHeatBound::Reset() {
+  std::fill(kept_s_.begin(), kept_s_.end(), std::numeric_limits<double>::quiet_NaN());
+  next_ = 0;
+  last_kept_s_ = -std::numeric_limits<double>::infinity();
+  latched_ = false;
+  base_W_ = heat_W_ = 0.0;
+}
+
+double InsideHeatBound::KeptAt(double t_s) const {
+  double best_s = -std::numeric_limits<double>::infinity(), best_W = 0.0;
+  double oldest_s = std::numeric_limits<double>::infinity(), oldest_W = 0.0;
+  for (std::size_t k = 0; k < kept_s_.size(); ++k) {
+    const double s = kept_s_[k];
+    if (std::isnan(s)) continue;
+    if (s < oldest_s) {
+      oldest_s = s;
+      oldest_W = kept_W_[k];
+    }
+    if (s <= t_s && s > best_s) {
+      best_s = s;
+      best_W = kept_W_[k];
+    }
+  }
+  return std::isfinite(best_s) ? best_W : oldest_W;
+}
+
+void InsideHeatBound::Step(double now_s, double frame_path_W, InsideHeatVerdict verdict,
+                           double onset_s) {
+  const bool known = std::isfinite(frame_path_W);
+  if (known && now_s - last_kept_s_ >= sample_s_) {
+    kept_s_[next_] = now_s;
+    kept_W_[next_] = frame_path_W;
+    next_ = (next_ + 1) % kept_s_.size();
+    last_kept_s_ = now_s;
+  }
+  if (verdict == InsideHeatVerdict::kFramePath) latched_ = false;
+  if (verdict == InsideHeatVerdict::kInside && !latched_ && known) {
+    // From the fitted onset: the heat found before it is the pump's usual model error.
+    latched_ = true;
+    base_W_ = KeptAt(std::isnan(onset_s) ? -std::numeric_limits<double>::infinity() : onset_s);
+  }
+  if (!latched_ || gain_K_per_W_.size() == 0) {
+    heat_W_ = 0.0;
+  } else if (known) {
+    heat_W_ = std::max(frame_path_W - base_W_, 0.0);
+  }
+}
+
 }  // namespace pumptherm::estimators

@@ -6,6 +6,7 @@
 
 #include <Eigen/Dense>
 #include <cstddef>
+#include <limits>
 #include <vector>
 
 #include "estimators/thermal_model.hpp"
@@ -146,6 +147,70 @@ class BlindBound {
  private:
   ThermalLinearModel lin_;
   Eigen::VectorXd bound_degC_;
+};
+
+/// What the model-mismatch test says about heat inside the pump, for InsideHeatBound.
+enum class InsideHeatVerdict {
+  kUnchanged,  ///< nothing new (consistent, learning, not named yet, a sensor fault)
+  kInside,     ///< a plant change named as heat on the rotor (rotor_loss)
+  kFramePath,  ///< a plant change named on the frame path (cooling, an unmeasured ambient)
+};
+
+/// Heat the model lacks that the frame sensor sees may be on the frame path (lost cooling, an
+/// unmeasured ambient) or inside the pump (a bearing, gas friction, eddy currents: heat on the
+/// rotor). Where the boundary reaches the network through the measured node alone
+/// (BoundaryOnlyThrough), the two heat the frame alike at steady state, and the frame-path heat
+/// of the disturbance-state filter (a fast random walk) takes either at once: heat on the rotor
+/// leaves its estimate low by about K_i W (K below) while its rotor-heat state keeps its prior
+/// (docs/virtual-sensor.md, "Heat inside, from the frame alone").
+///
+/// Once the mismatch test names heat inside, this bound is the nodes as they would be if the
+/// frame-path heat found since the fitted onset, W = max(d_f(t) - d_f(onset), 0), were on the
+/// rotor instead: x_i + K_i W with K = G_rotor - G_measured, where G_j = -A^-1 e_j / C_j is the
+/// network's steady-state rise per watt put on node j (A at standstill: conduction alone; C_j
+/// node j's heat capacity). Steady-state gains also hold through the rise: the rotor's excess
+/// over the frame is proportional to the heat leaving it, which is what reaches the frame and
+/// what d_f follows. The bound is the rotor hypothesis's central value, not a worst case, so
+/// the published band reaches past it by the filter's own 2 sd (AlarmValues::PublishedSd_K). It
+/// holds (latched) until the test names a frame-path cause or the filter restarts: the test
+/// clears hours into a lasting fault (its low-noise filter adapts), the heat stays.
+///
+/// Pure logic; allocates at construction only.
+class InsideHeatBound {
+ public:
+  /// Gains from `model` between `rotor` and `measured` (state indices; either negative or both
+  /// the same: no bound). The fitted onset may lie up to `history_s` back (the test's fit
+  /// window); d_f is kept every `sample_s` to find it. Throws std::invalid_argument for a
+  /// history or a sample period that is not positive.
+  InsideHeatBound(const ThermalModel& model, int measured, int rotor, double history_s,
+                  double sample_s);
+  /// One step ending at `now_s` (monotonic) with the filter's frame-path heat `frame_path_W`
+  /// (NaN: none this step) and the test's `verdict` with its fitted onset `onset_s` (NaN: none,
+  /// the oldest kept value is taken).
+  void Step(double now_s, double frame_path_W, InsideHeatVerdict verdict, double onset_s);
+  /// Forgets everything (the filter was reset or restarted).
+  void Reset();
+  bool latched() const { return latched_; }
+  /// The heat the bound puts on the rotor, W (0 when not latched).
+  double heat_W() const { return heat_W_; }
+  /// How far node i's bound lies above its estimate, K (>= 0).
+  double shift_K(int i) const {
+    return gain_K_per_W_.size() > i ? gain_K_per_W_(i) * heat_W_ : 0.0;
+  }
+  /// K per watt, per state (empty: no bound for this model).
+  const Eigen::VectorXd& gain_K_per_W() const { return gain_K_per_W_; }
+
+ private:
+  /// The kept frame-path heat at the latest sample at or before `t_s` (the oldest when none is).
+  double KeptAt(double t_s) const;
+
+  Eigen::VectorXd gain_K_per_W_;
+  double sample_s_ = 10.0;
+  std::vector<double> kept_s_, kept_W_;  ///< a ring (time NaN: empty)
+  std::size_t next_ = 0;
+  double last_kept_s_ = -std::numeric_limits<double>::infinity();
+  bool latched_ = false;
+  double base_W_ = 0.0, heat_W_ = 0.0;
 };
 
 /// `lin` with its heat paths to the boundary (ambient or coolant at `boundary_degC`) removed: a

@@ -14,8 +14,12 @@ constexpr double kPublishedBandSds = 2.0;
 }  // namespace
 
 AlarmValues::AlarmValues(const ThermalModel& model, const AlarmConfig& config, double lag_s,
-                         double period_s, const SilenceWorstLoad& silence)
-    : model_(model), lag_bias_(lag_s, period_s), silence_(silence, config.silence_delay_s) {
+                         double period_s, const SilenceWorstLoad& silence,
+                         const InsideHeatNodes& inside)
+    : model_(model),
+      lag_bias_(lag_s, period_s),
+      silence_(silence, config.silence_delay_s),
+      inside_(model, inside.measured, inside.rotor, inside.history_s, std::max(period_s, 10.0)) {
   const int n = model.StateCount();
   // The ring reaches back over the stuck test's flat time and the fault's hold, plus a margin.
   const double reach_s = config.flat_after_s + config.hold_s + 2.0 * period_s;
@@ -32,8 +36,11 @@ void AlarmValues::Step(const AlarmValuesStep& s) {
   lag_bias_.Step(s.lagging_degC);
   if (!s.valid) {
     silence_.Reset();
+    inside_.Reset();
     return;
   }
+  inside_.Step(static_cast<double>(s.end_us) * 1e-6, s.frame_path_heat_W, s.inside_verdict,
+               s.inside_onset_s);
   silence_.Step(model_, *s.inputs, s.fresh_inputs, *s.x_degC, *s.sd_K,
                 static_cast<double>(s.end_us) * 1e-6, s.period_s, s.stale_after_s,
                 s.trip_sd_factor);
@@ -95,9 +102,9 @@ void AlarmValues::Remember(const AlarmValuesStep& s) {
 
 double AlarmValues::Value_degC(int i, double estimate_degC) const {
   // The highest of: the estimate raised by the lagging reading's bias, the worst case while
-  // running blind, the worst case of a telemetry silence (as it was silence_delay_s ago) and
-  // the bound after one.
-  double v = estimate_degC + lag_bias_.bias_K();
+  // running blind, the worst case of a telemetry silence (as it was silence_delay_s ago), the
+  // bound after one, and the nodes as if the heat found on the frame path were inside.
+  double v = estimate_degC + std::max(lag_bias_.bias_K(), inside_.shift_K(i));
   for (const Eigen::VectorXd* b :
        {&blind_.bound_degC(), &silence_.bound_degC(), &silence_.delayed_worst_degC()}) {
     if (b->size() > i && !std::isnan((*b)(i))) v = std::max(v, (*b)(i));
@@ -111,14 +118,18 @@ double AlarmValues::BandTop_degC(int i, double estimate_degC) const {
   return w.size() > i && !std::isnan(w(i)) ? std::max(v, w(i)) : v;
 }
 
-double AlarmValues::PublishedSd_K(double filter_sd_K, double above_K) {
+double AlarmValues::PublishedSd_K(int i, double filter_sd_K, double above_K) const {
   // Where the levels act on a bound above the estimate (running blind, after a silence, behind
   // a lagging sensor), the truth may lie up to that bound: the published band reaches it, so
   // that a node that cannot be seen says so through its sd. The estimate itself stays the
   // model's most likely value, and the alarms keep the filter's own sd (the bound already
-  // stands for the worst case).
-  if (!(above_K > 0.0)) return filter_sd_K;
-  return std::max(filter_sd_K, above_K / kPublishedBandSds);
+  // stands for the worst case). The inside-heat bound is the other hypothesis's central value,
+  // with the filter's own uncertainty about it: the band reaches that far past it.
+  const double inside_K = inside_.shift_K(i);
+  double sd = filter_sd_K;
+  if (inside_K > 0.0) sd = filter_sd_K + inside_K / kPublishedBandSds;
+  if (!(above_K > 0.0)) return sd;
+  return std::max(sd, above_K / kPublishedBandSds);
 }
 
 }  // namespace pumptherm::estimators

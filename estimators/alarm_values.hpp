@@ -11,13 +11,17 @@
 ///    estimate at its start, as it was silence_delay_s ago; after it, the load that may have
 ///    risen unseen (SilenceBound);
 ///  - with a filter that fuses a lagging reading as the node itself, the reading's rise over
-///    its lag (LagBias).
+///    its lag (LagBias);
+///  - once the mismatch test has named heat inside, the nodes as if the frame-path heat found
+///    since its onset were on the rotor (InsideHeatBound).
 /// Where a bound lies above the estimate, the published sd is widened so that the band
-/// x +- 2 sd reaches it (during a silence, the worst case now: BandTop_degC). Pure library: time
-/// enters as arguments; no allocation per step outside a silence.
+/// x +- 2 sd reaches it (during a silence, the worst case now: BandTop_degC; the inside-heat
+/// bound, a central value: past it by the filter's own 2 sd). Pure library: time enters as
+/// arguments; no allocation per step outside a silence.
 
 #include <Eigen/Dense>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "estimators/alarm_bounds.hpp"
@@ -46,6 +50,18 @@ struct AlarmValuesStep {
   double lagging_degC = 0.0;
   double stale_after_s = 2.0;   ///< a silence is longer than this
   double trip_sd_factor = 2.0;  ///< the upper bound x + k sd that ends a silence's bound
+  /// The observer's frame-path heat, W (NaN: an observer without it), and what the mismatch test
+  /// says of heat inside with its fitted onset (InsideHeatBound).
+  double frame_path_heat_W = std::numeric_limits<double>::quiet_NaN();
+  InsideHeatVerdict inside_verdict = InsideHeatVerdict::kUnchanged;
+  double inside_onset_s = std::numeric_limits<double>::quiet_NaN();
+};
+
+/// Where AlarmValues finds the nodes of the inside-heat bound.
+struct InsideHeatNodes {
+  int measured = -1;          ///< the frame sensor's node (-1: no bound)
+  int rotor = -1;             ///< where heat inside is put (-1: no bound)
+  double history_s = 1200.0;  ///< how far back the mismatch test's fitted onset may lie
 };
 
 class AlarmValues {
@@ -53,10 +69,11 @@ class AlarmValues {
   /// For a network of `model`'s nodes; `lag_s` the lag of a reading the filter does not model
   /// (0: none); the ring of recent estimates reaches over the stuck test's flat time and the
   /// fault's hold (`config`); `silence` the load a telemetry silence may hide (its worst case
-  /// acts config.silence_delay_s late). Throws std::invalid_argument for a period that is not
-  /// positive or a negative delay, current or speed.
+  /// acts config.silence_delay_s late); `inside` the nodes of the inside-heat bound (default:
+  /// none). Throws std::invalid_argument for a period that is not positive or a negative delay,
+  /// current or speed.
   AlarmValues(const ThermalModel& model, const AlarmConfig& config, double lag_s, double period_s,
-              const SilenceWorstLoad& silence = {});
+              const SilenceWorstLoad& silence = {}, const InsideHeatNodes& inside = {});
 
   void Step(const AlarmValuesStep& step);
   /// The value node i's levels act on, for its estimate `estimate_degC`.
@@ -64,9 +81,15 @@ class AlarmValues {
   /// The top of the band published for node i: the value its levels act on, or during a silence
   /// the worst case now when higher (the levels see it silence_delay_s late).
   double BandTop_degC(int i, double estimate_degC) const;
-  /// The sd published for a node whose filter sd is `filter_sd_K` and whose alarm value lies
-  /// `above_K` above its estimate (NaN or <= 0: none): at least above_K / 2.
-  static double PublishedSd_K(double filter_sd_K, double above_K);
+  /// The sd published for node i whose filter sd is `filter_sd_K` and whose alarm value lies
+  /// `above_K` above its estimate (NaN or <= 0: none): at least above_K / 2, and at least
+  /// filter_sd_K plus half the inside-heat bound's shift.
+  double PublishedSd_K(int i, double filter_sd_K, double above_K) const;
+  /// The inside-heat bound (latched, its heat).
+  const InsideHeatBound& inside_heat() const { return inside_; }
+  /// Forgets the inside-heat bound (a restore: the mismatch test that named the heat starts
+  /// afresh, and the frame-path heat it was measured on may restart from its prior).
+  void ForgetInsideHeat() { inside_.Reset(); }
   /// A blind bound is running (the previous step was blind).
   bool Blind() const { return blind_.bound_degC().size() > 0; }
   /// A silence from `start_s` (a restart: the time down), from the saved estimate and inputs;
@@ -86,6 +109,7 @@ class AlarmValues {
   BlindBound blind_;
   LagBias lag_bias_;
   SilenceBound silence_;
+  InsideHeatBound inside_;
   // The blind bound's starting points of the last steps, each the top of its step's band
   // x + k sd (columns, a ring; time -1: none).
   Eigen::MatrixXd recent_degC_;

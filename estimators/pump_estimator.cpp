@@ -108,6 +108,36 @@ bool ResolveDisturbance(const PumpEstimatorConfig& c, const ThermalModel& model)
   return BoundaryOnlyThrough(model, c.measured_node);
 }
 
+/// The nodes of the inside-heat bound: for the disturbance-state filter only (the frame-path heat
+/// it finds is what may lie inside), the measured node and the rotor's.
+InsideHeatNodes InsideNodes(const PumpEstimatorConfig& c, const ThermalModel& model,
+                            bool disturbance) {
+  InsideHeatNodes nodes;
+  if (!disturbance || !c.inside_heat_bound) return nodes;
+  nodes.measured = model.StateIndex(c.measured_node);
+  nodes.rotor = model.StateIndex(RotorNode(c));
+  nodes.history_s = c.mismatch.fit_window_s;
+  return nodes;
+}
+
+/// What a finding says about heat inside: a plant change named as rotor heat is inside; one
+/// named on the frame path (cooling, ambient) is not. Every loss scaled is left to the filter's
+/// loss-scale state (it covers +40 % losses), and lost cooling is named `loss_scale` first in most
+/// runs: taken as inside, the bound put the cooling's frame-path heat on the rotor until the right
+/// name came (docs/virtual-sensor.md, "Heat inside, from the frame alone").
+InsideHeatVerdict InsideVerdictOf(const MismatchFinding& f) {
+  if (f.state != MismatchState::kPlantChange) return InsideHeatVerdict::kUnchanged;
+  switch (f.effect) {
+    case MismatchEffect::kRotorLoss:
+      return InsideHeatVerdict::kInside;
+    case MismatchEffect::kFrameAmbientResistance:
+    case MismatchEffect::kUnmeasuredAmbient:
+      return InsideHeatVerdict::kFramePath;
+    default:
+      return InsideHeatVerdict::kUnchanged;
+  }
+}
+
 /// Whether a finding changed enough to be announced: its state or effect (refits that only move
 /// the size or the fitted start are published, not announced).
 bool NewVerdict(const MismatchFinding& a, const MismatchFinding& b) {
@@ -146,7 +176,8 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
       mismatch_(model, MismatchConfig(config, model)),
       alarms_(MakeAlarms()),
       values_(model, config.alarms, observer_->ModelsSensorLag() ? 0.0 : config.frame_sensor_lag_s,
-              config.period_s, SilenceWorstLoad{motor.max_current_A, motor.rated_speed_rpm}),
+              config.period_s, SilenceWorstLoad{motor.max_current_A, motor.rated_speed_rpm},
+              InsideNodes(config, model, disturbance_states_)),
       forecast_(model.StateCount()) {
   if (!(config_.period_s > 0.0)) throw std::invalid_argument("thermal period must be positive");
   if (!config_.rotor_node.empty() && model_.StateIndex(config_.rotor_node) < 0) {
@@ -161,6 +192,7 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
   const auto nn = static_cast<std::size_t>(n);
   x_degC_ = Eigen::VectorXd::Zero(n);
   sd_K_ = Eigen::VectorXd::Zero(n);
+  found_heat_.f_K_per_s = Eigen::VectorXd::Zero(n);
   estimate_.node_degC.assign(nn, kNaN);
   estimate_.node_sd_K.assign(nn, kNaN);
   estimate_.node_filter_sd_K.assign(nn, kNaN);
@@ -388,15 +420,27 @@ void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
   s.lagging_degC = observer_->ModelsSensorLag() ? kNaN : frame_.offered_degC();
   s.stale_after_s = config_.alarms.stale_after_s;
   s.trip_sd_factor = config_.alarms.trip_sd_factor;
+  s.frame_path_heat_W = FramePathHeat_W();
+  s.inside_verdict = InsideVerdictOf(estimate_.mismatch);
+  s.inside_onset_s = estimate_.mismatch.onset_s;
   values_.Step(s);
   for (int i = 0; i < x_degC_.size(); ++i) {
     const auto k = static_cast<std::size_t>(i);
     alarm_values_[k] = diverged ? kNaN : values_.Value_degC(i, x_degC_(i));
     alarm_sd_[k] = estimate_.node_sd_K[k];
     const double top_degC = diverged ? kNaN : values_.BandTop_degC(i, x_degC_(i));
-    estimate_.node_sd_K[k] = AlarmValues::PublishedSd_K(alarm_sd_[k], top_degC - x_degC_(i));
+    estimate_.node_sd_K[k] = values_.PublishedSd_K(i, alarm_sd_[k], top_degC - x_degC_(i));
   }
   alarm_values_.back() = estimate_.winding_resistance_degC;
+}
+
+double PumpEstimator::FramePathHeat_W() {
+  if (!disturbance_states_ || measured_state_ < 0) return kNaN;
+  // The heat the observer has found, per node (ThermalObserver::AddFoundHeat, K/s), at the
+  // measured node: its frame-path heat.
+  found_heat_.f_K_per_s.setZero();
+  observer_->AddFoundHeat(found_heat_);
+  return found_heat_.f_K_per_s(measured_state_) * model_.Capacities_J_per_K()(measured_state_);
 }
 
 void PumpEstimator::StepAlarms(const PumpPeriod& p, bool diverged) {
@@ -555,7 +599,9 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   // The time the daemon was down is a telemetry silence: the load may have risen in it.
   values_.BeginSilence(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6, x,
                        static_cast<double>(now_us) * 1e-6);
-  // The mismatch test starts afresh (learning) from the restored level.
+  // The mismatch test starts afresh (learning) from the restored level, and with it the
+  // inside-heat bound it latched.
+  values_.ForgetInsideHeat();
   mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0,
                        static_cast<double>(now_us) * 1e-6);
   last_inputs_ = state.inputs;

@@ -84,6 +84,9 @@ struct PumpEstimatorConfig {
   MismatchDetectorConfig mismatch;
   /// The magnet reading also enters the mismatch test's naming fit (a second channel).
   bool mismatch_magnet = true;
+  /// The inside-heat bound (InsideHeatBound, estimators/alarm_bounds.hpp) with the
+  /// disturbance-state filter; off only to measure what it does.
+  bool inside_heat_bound = true;
 };
 
 /// Everything published about one pump at one moment (fields declared for CAN, LCM, CSV and
@@ -244,6 +247,8 @@ class PumpEstimator {
   void PublishFromVoltage(const PumpPeriod& period);
   /// The bounds the levels act on, the alarm values and the published sds.
   void StepBounds(const PumpPeriod& period, bool diverged);
+  /// The observer's frame-path heat, W (NaN: not the disturbance-state filter).
+  double FramePathHeat_W();
   /// The forecast and the alarms; counts a change worth publishing.
   void StepAlarms(const PumpPeriod& period, bool diverged);
   /// A period with telemetry but no temperature to start the filter from: the alarms alone.
@@ -280,6 +285,7 @@ class PumpEstimator {
   ThermalInputs last_inputs_;  ///< the last step's (saved: held while the daemon is down)
   ThermalReadings readings_;
   Eigen::VectorXd x_degC_, sd_K_;     ///< the observer's nodes and sds this step
+  ThermalLinearModel found_heat_;     ///< the observer's found heat (f only, n)
   std::vector<double> alarm_values_;  ///< per alarm node (n states + the winding)
   std::vector<double> alarm_sd_;
   PumpEstimate estimate_;

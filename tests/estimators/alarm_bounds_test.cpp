@@ -205,7 +205,7 @@ TEST(AlarmValues, WhileSilentTheLevelsSeeTheDelayedWorstCaseTheBandTheWorstNow) 
   const double then = Closed(30.0, 20.0, 50.0, 20.0), now = Closed(30.0, 20.0, 50.0, 30.0);
   EXPECT_NEAR(values.Value_degC(0, 30.0), then, 1e-9);
   EXPECT_NEAR(values.BandTop_degC(0, 30.0), now, 1e-9);
-  EXPECT_NEAR(AlarmValues::PublishedSd_K(0.5, now - 30.0), (now - 30.0) / 2.0, 1e-12);
+  EXPECT_NEAR(values.PublishedSd_K(0, 0.5, now - 30.0), (now - 30.0) / 2.0, 1e-12);
   s.end_us += 1'000'000;
   s.fresh_inputs = true;  // the frames are back at the same load: nothing above the estimate
   values.Step(s);
@@ -264,6 +264,75 @@ TEST(BlindBound, TheNetworkWithoutItsBoundaryPathsFromTheLastEstimate) {
   EXPECT_NEAR(blind.bound_degC()(0), 55.0, 1e-9);  // from 50 (the first step's estimate), 10 s
   blind.Reset();
   EXPECT_EQ(blind.bound_degC().size(), 0);
+}
+
+// Two nodes in a chain, rotor - frame - ambient (R 2 and 1 K/W): 1 W on the rotor raises the
+// frame by 1 K and the rotor by 1 + 2 K at steady state, 1 W on the frame raises both by 1 K, so
+// K = G_rotor - G_frame is 2 K/W on the rotor and 0 on the frame.
+constexpr const char* kRotorFrame = R"(
+[model]
+name = "two"
+[[node]]
+name = "frame"
+capacity_J_per_K = 100
+[[node]]
+name = "rotor"
+capacity_J_per_K = 50
+[[edge]]
+between = ["rotor", "frame"]
+resistance_K_per_W = 2.0
+[[edge]]
+between = ["frame", "ambient"]
+resistance_K_per_W = 1.0
+[[loss]]
+name = "joule"
+power_W = "2.0 * iq_A^2"
+shares = { frame = 1 }
+)";
+
+TEST(InsideHeatBound, GainsAreTheSteadyStateRiseOfTheRotorOverTheFrame) {
+  const ThermalModel model = ThermalModel::Parse(kRotorFrame, "two");
+  const int frame = model.StateIndex("frame"), rotor = model.StateIndex("rotor");
+  const InsideHeatBound bound(model, frame, rotor, 1200.0, 10.0);
+  ASSERT_EQ(bound.gain_K_per_W().size(), 2);
+  EXPECT_NEAR(bound.gain_K_per_W()(rotor), 2.0, 1e-9);
+  EXPECT_NEAR(bound.gain_K_per_W()(frame), 0.0, 1e-9);
+  // No bound where the rotor is the measured node, or either is missing.
+  EXPECT_EQ(InsideHeatBound(model, frame, frame, 1200.0, 10.0).gain_K_per_W().size(), 0);
+  EXPECT_EQ(InsideHeatBound(model, -1, rotor, 1200.0, 10.0).gain_K_per_W().size(), 0);
+  EXPECT_THROW(InsideHeatBound(model, frame, rotor, 0.0, 10.0), std::invalid_argument);
+  EXPECT_THROW(InsideHeatBound(model, frame, rotor, 1200.0, 0.0), std::invalid_argument);
+}
+
+TEST(InsideHeatBound, PutsTheFramePathHeatFoundSinceTheOnsetOnTheRotorUntilAFramePathName) {
+  const ThermalModel model = ThermalModel::Parse(kRotorFrame, "two");
+  const int frame = model.StateIndex("frame"), rotor = model.StateIndex("rotor");
+  InsideHeatBound bound(model, frame, rotor, 1200.0, 10.0);
+  // 1 W of usual model error, 5 W from 300 s on; named inside at 400 s with its onset at 300 s.
+  for (int t = 1; t < 400; ++t) {
+    bound.Step(t, t <= 300 ? 1.0 : 5.0, InsideHeatVerdict::kUnchanged, kNaN);
+    EXPECT_EQ(bound.shift_K(rotor), 0.0) << t;
+  }
+  bound.Step(400.0, 5.0, InsideHeatVerdict::kInside, 300.0);
+  EXPECT_TRUE(bound.latched());
+  EXPECT_NEAR(bound.heat_W(), 4.0, 1e-12);
+  EXPECT_NEAR(bound.shift_K(rotor), 8.0, 1e-9);
+  EXPECT_NEAR(bound.shift_K(frame), 0.0, 1e-9);
+  // Held once the test clears (the heat stays), following the frame-path heat.
+  bound.Step(401.0, 7.0, InsideHeatVerdict::kUnchanged, kNaN);
+  EXPECT_NEAR(bound.heat_W(), 6.0, 1e-12);
+  bound.Step(402.0, kNaN, InsideHeatVerdict::kUnchanged, kNaN);  // none this step: held
+  EXPECT_NEAR(bound.heat_W(), 6.0, 1e-12);
+  bound.Step(403.0, 0.5, InsideHeatVerdict::kUnchanged, kNaN);  // below the base: none
+  EXPECT_EQ(bound.heat_W(), 0.0);
+  bound.Step(404.0, 7.0, InsideHeatVerdict::kFramePath, kNaN);  // named on the frame path
+  EXPECT_FALSE(bound.latched());
+  EXPECT_EQ(bound.shift_K(rotor), 0.0);
+  bound.Step(405.0, 7.0, InsideHeatVerdict::kInside, kNaN);  // no onset: the oldest kept, 1 W
+  EXPECT_NEAR(bound.heat_W(), 6.0, 1e-12);
+  bound.Reset();
+  EXPECT_FALSE(bound.latched());
+  EXPECT_EQ(bound.heat_W(), 0.0);
 }
 
 }  // namespace

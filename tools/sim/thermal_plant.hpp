@@ -27,6 +27,10 @@ class ThermalPlant {
 
   /// Advances `dt_s` with `inputs` held, returns the new state temperatures (degC).
   const Eigen::VectorXd& Step(const estimators::ThermalInputs& inputs, double dt_s);
+  /// Heat the model lacks, W per state (n; held over each step until set again): a fault that
+  /// changes with time (a bearing's heat rising on the rotor) without re-parsing the model. An
+  /// empty vector: none. Throws std::invalid_argument for another size or a non-finite value.
+  void SetExtraHeat_W(const Eigen::VectorXd& heat_W);
 
   const Eigen::VectorXd& State_degC() const { return x_; }
   /// All node temperatures (massless ones solved) at the last inputs.
@@ -40,6 +44,7 @@ class ThermalPlant {
   estimators::ThermalLinearModel lin_;
   estimators::ThermalDiscretiser discretiser_{1e-6};
   Eigen::VectorXd x_, next_;
+  Eigen::VectorXd extra_K_per_s_;  ///< SetExtraHeat_W over the capacities (empty: none)
   std::mt19937_64 rng_;
   std::normal_distribution<double> normal_{0.0, 1.0};
 };
