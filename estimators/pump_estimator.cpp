@@ -251,11 +251,15 @@ void PumpEstimator::PrepareReadings(const PumpPeriod& p) {
   // The voltage itself, not the identifier's back-EMF line fitted to the same samples: the two
   // would count one measurement twice. Without the frame's level the voltage is left out
   // (VoltageReading::Prepare) and the line stands in for it, as for an observer without voltage.
+  // A period left out for a load change inside it gets neither: the line takes the nameplate's
+  // flux, which the voltage rows have corrected, so a single line there would move the magnet by
+  // the nameplate's error (a few kelvin per tenth of a percent of flux) for good.
   if (observer_->TakesVoltage()) {
     voltage_.Prepare(p.drive, frame_.fault() != SensorFault::kNone);
     voltage_.Offer(readings_);
   }
-  if (!voltage_.Offered()) magnet_.Offer(readings_);
+  const bool gated = observer_->TakesVoltage() && voltage_.status().state == ReadingState::kGated;
+  if (!voltage_.Offered() && !gated) magnet_.Offer(readings_);
 }
 
 void PumpEstimator::RecordReadings(const ObserverReport& report) {
