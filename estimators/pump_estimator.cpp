@@ -251,15 +251,23 @@ void PumpEstimator::PrepareReadings(const PumpPeriod& p) {
   // The voltage itself, not the identifier's back-EMF line fitted to the same samples: the two
   // would count one measurement twice. Without the frame's level the voltage is left out
   // (VoltageReading::Prepare) and the line stands in for it, as for an observer without voltage.
-  // A period left out for a load change inside it gets neither: the line takes the nameplate's
-  // flux, which the voltage rows have corrected, so a single line there would move the magnet by
-  // the nameplate's error (a few kelvin per tenth of a percent of flux) for good.
+  // A period left out for a load change inside it gets the line only while the filter knows
+  // psi0 no better than the line does: the line takes the nameplate's flux, anchored within its
+  // bias sd. Once the voltage rows have learnt psi0 more closely (a cold start), a single line
+  // would move the magnet by the nameplate's error (10 K per percent of flux) for good.
   if (observer_->TakesVoltage()) {
     voltage_.Prepare(p.drive, frame_.fault() != SensorFault::kNone);
     voltage_.Offer(readings_);
   }
   const bool gated = observer_->TakesVoltage() && voltage_.status().state == ReadingState::kGated;
-  if (!voltage_.Offered() && !gated) magnet_.Offer(readings_);
+  if (!voltage_.Offered() && !(gated && FluxKnownBetterThanTheLine())) magnet_.Offer(readings_);
+}
+
+bool PumpEstimator::FluxKnownBetterThanTheLine() const {
+  // The line's anchor as a relative flux: its bias sd (K) times the magnet law's coefficient.
+  const double anchor_rel =
+      config_.magnet.min_sd_K * std::abs(motor_.magnet.flux_temperature_coefficient_per_K);
+  return observer_->VoltageCalibration().dpsi_sd < anchor_rel;
 }
 
 void PumpEstimator::RecordReadings(const ObserverReport& report) {

@@ -235,6 +235,8 @@ class PumpEstimator {
   /// Starts the observer and the mismatch test when they have not (false: nothing to start
   /// from yet).
   bool StartIfNeeded(const PumpPeriod& period);
+  /// The filter's psi0 is known more closely than the back-EMF line's nameplate anchor.
+  bool FluxKnownBetterThanTheLine() const;
   void PrepareReadings(const PumpPeriod& period);
   void RecordReadings(const ObserverReport& report);
   /// The mismatch test on this step; counts a changed verdict.
