@@ -129,7 +129,8 @@ TEST(PlantScenario, TrueMotorRippleAndLoadDriftParse) {
   EXPECT_TRUE(std::isnan(p.segments.at(0).iq_end_A));
   EXPECT_DOUBLE_EQ(p.segments.at(1).iq_end_A, 1.5);
   // Without the keys: the nameplate motor, no ripple.
-  const PumpSpec& q = ParseScenario(kMinimal, "s.toml").pumps.at(0);
+  const Scenario minimal = ParseScenario(kMinimal, "s.toml");
+  const PumpSpec& q = minimal.pumps.at(0);
   EXPECT_DOUBLE_EQ(q.motor_r0_scale, 1.0);
   EXPECT_DOUBLE_EQ(q.motor_flux_scale, 1.0);
   EXPECT_DOUBLE_EQ(q.drive.speed_ripple_rpm, 0.0);
