@@ -184,7 +184,11 @@ JournalEntry AlarmEntry(const AlarmLineInputs& in) {
   const std::vector<std::string>& names = *in.node_names;
   const estimators::AlarmConfig& k = *in.config;
   JournalEntry e;
-  e.level = a.level == AlarmLevel::kNone ? LogLevel::kNotice : LogLevel::kWarning;
+  // The journal's priority follows the level: a trip is an error (`journalctl -p err` lists
+  // every trip), a warning a warning, the return to normal a notice.
+  e.level = a.level == AlarmLevel::kTrip   ? LogLevel::kError
+            : a.level == AlarmLevel::kNone ? LogLevel::kNotice
+                                           : LogLevel::kWarning;
   const std::string level =
       a.level == AlarmLevel::kNone ? "normal" : estimators::AlarmLevelName(a.level);
   e.fields.push_back({"PUMP", std::string(in.pump)});
