@@ -35,7 +35,7 @@ readonly kSuite=bookworm
 # libnss-systemd resolves DynamicUser= names (ps, ls -l, getent).
 readonly kPackages=(systemd systemd-sysv libnss-systemd udev kmod iproute2 procps can-utils
   libc6 libstdc++6 libgcc-s1 libsystemd0 libfmt9 libtomlplusplus3 libmuparser2v5 libgomp1
-  liblcm1 liblcm-bin libglib2.0-0 libsodium23
+  liblcm1 liblcm-bin libglib2.0-0 libsodium23 libmosquitto1 libssl3 libprotobuf32 zlib1g
   libgoogle-glog0v6 libcholmod3 libcxsparse3 libspqr2 liblapack3 libatlas3-base)
 # Loaded by the initramfs, with their dependencies from modules.dep; crc32c is ext4's checksum
 # (a soft dependency, which modules.dep does not list).
