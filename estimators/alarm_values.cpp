@@ -79,7 +79,7 @@ void AlarmValues::StepBlind(const AlarmValuesStep& s) {
   blind_.Step(model_, *s.inputs, s.period_s, blind_start_degC_);
 }
 
-void AlarmValues::UpperBand(const AlarmValuesStep& s, Eigen::VectorXd& out_degC) {
+void AlarmValues::UpperBand(const AlarmValuesStep& s, Eigen::Ref<Eigen::VectorXd> out_degC) {
   out_degC = *s.x_degC;
   if (s.sd_K != nullptr && s.sd_K->size() == out_degC.size()) {
     out_degC += s.trip_sd_factor * s.sd_K->cwiseMax(0.0);
@@ -91,11 +91,7 @@ void AlarmValues::Remember(const AlarmValuesStep& s) {
     std::fill(recent_us_.begin(), recent_us_.end(), -1);
     return;
   }
-  auto col = recent_degC_.col(static_cast<Eigen::Index>(recent_next_));
-  col = *s.x_degC;
-  if (s.sd_K != nullptr && s.sd_K->size() == col.size()) {
-    col += s.trip_sd_factor * s.sd_K->cwiseMax(0.0);
-  }
+  UpperBand(s, recent_degC_.col(static_cast<Eigen::Index>(recent_next_)));
   recent_us_[recent_next_] = s.end_us;
   recent_next_ = (recent_next_ + 1) % recent_us_.size();
 }

@@ -103,7 +103,7 @@ class AlarmValues {
   void StepBlind(const AlarmValuesStep& s);
   void Remember(const AlarmValuesStep& s);
   /// x + k sd of the step (k: trip_sd_factor), into `out_degC` (sized: no allocation).
-  static void UpperBand(const AlarmValuesStep& s, Eigen::VectorXd& out_degC);
+  static void UpperBand(const AlarmValuesStep& s, Eigen::Ref<Eigen::VectorXd> out_degC);
 
   const ThermalModel& model_;
   BlindBound blind_;
