@@ -255,12 +255,33 @@ void PumpEstimator::PrepareReadings(const PumpPeriod& p) {
   // psi0 no better than the line does: the line takes the nameplate's flux, anchored within its
   // bias sd. Once the voltage rows have learnt psi0 more closely (a cold start), a single line
   // would move the magnet by the nameplate's error (10 K per percent of flux) for good.
+  held_magnet_ = VoltageMagnet{};
   if (observer_->TakesVoltage()) {
-    voltage_.Prepare(p.drive, frame_.fault() != SensorFault::kNone);
+    const bool frame_failed = frame_.fault() != SensorFault::kNone;
+    voltage_.Prepare(p.drive, frame_failed);
     voltage_.Offer(readings_);
+    // Without the frame the voltage is no row, but the calibration it taught the filter still
+    // holds: the magnet it gives with that calibration stands in for the line, which would
+    // take the nameplate's R0 and psi0 (a 10-16 K bias on a motor 1.6 % off its flux) and,
+    // fused in the periods between, kick a filter that has no frame to hold it.
+    if (frame_failed) {
+      HoldMagnet();
+      if (held_magnet_.Valid()) {
+        readings_.magnet_degC = held_magnet_.z_degC;
+        readings_.magnet_sd_K = held_magnet_.sd_K;
+        readings_.magnet_winding_gain = held_magnet_.winding_gain;
+      }
+      return;
+    }
   }
   const bool gated = observer_->TakesVoltage() && voltage_.status().state == ReadingState::kGated;
   if (!voltage_.Offered() && !(gated && FluxKnownBetterThanTheLine())) magnet_.Offer(readings_);
+}
+
+void PumpEstimator::HoldMagnet() {
+  if (voltage_magnet_state_ < 0) return;
+  held_magnet_ = voltage_.CalibratedMagnet(observer_->VoltageCalibration(),
+                                           observer_->Weighted_degC(model_.WindingWeights()));
 }
 
 bool PumpEstimator::FluxKnownBetterThanTheLine() const {
@@ -367,8 +388,13 @@ void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& r
     estimate_.winding_resistance_degC = winding_.degC();
     estimate_.winding_resistance_sd_K = winding_.sd_K();
     estimate_.magnet_flux_degC = estimate_.magnet_flux_sd_K = kNaN;
-    if (estimate_.initialised)
+    // With the voltage taken, the line (the nameplate's flux) is never published: a period
+    // without the held magnet (a load change inside it) publishes none.
+    if (estimate_.initialised && held_magnet_.Valid()) {
+      PublishHeldMagnet();
+    } else if (estimate_.initialised && !observer_->TakesVoltage()) {
       magnet_.Publish(*observer_, estimate_.magnet_flux_degC, estimate_.magnet_flux_sd_K);
+    }
   }
   estimate_.frame_measured_degC = frame_.offered_degC();
   estimate_.sensor_fault = frame_.fault();
@@ -382,6 +408,15 @@ void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& r
   estimate_.sensor_steps = static_cast<std::uint64_t>(observer_->SensorSteps());
   estimate_.last_sensor_step_K = observer_->LastSensorStep_K();
   estimate_.stepped_offset_K = observer_->SteppedOffset_K();
+}
+
+void PumpEstimator::PublishHeldMagnet() {
+  // The reading at the filter's winding, with the winding's uncertainty through its gain.
+  const Eigen::VectorXd& w = model_.WindingWeights();
+  const double g = held_magnet_.winding_gain;
+  estimate_.magnet_flux_degC = held_magnet_.z_degC - g * observer_->Weighted_degC(w);
+  estimate_.magnet_flux_sd_K =
+      std::sqrt(held_magnet_.sd_K * held_magnet_.sd_K + g * g * observer_->WeightedVariance_K2(w));
 }
 
 void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
@@ -414,9 +449,14 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
 void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
   // Blind: the sensor itself failed and no other reading stands in. A silent link alone is
   // stale telemetry (the estimate runs on with the last inputs), but it does not end a blind
-  // stretch that began before it.
+  // stretch that began before it. The magnet held from the voltage stands in only while its sd
+  // is within the line's anchor (a calibration learnt at a cold start): with a calibration still
+  // a nameplate's few percent, the rotor it gives is too vague to see a lost cooling, and the
+  // worst case must run.
   const bool measured_again =
-      frame_.fault() == SensorFault::kNone || std::isfinite(winding_.degC()) || magnet_.Offered();
+      frame_.fault() == SensorFault::kNone || std::isfinite(winding_.degC()) ||
+      (magnet_.Offered() && !observer_->TakesVoltage()) ||
+      (held_magnet_.Valid() && held_magnet_.sd_K <= config_.magnet.min_sd_K);
   AlarmValuesStep s;
   s.end_us = p.end_us;
   s.period_s = config_.period_s;

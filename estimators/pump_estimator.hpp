@@ -238,6 +238,7 @@ class PumpEstimator {
   /// The filter's psi0 is known more closely than the back-EMF line's nameplate anchor.
   bool FluxKnownBetterThanTheLine() const;
   void PrepareReadings(const PumpPeriod& period);
+  void HoldMagnet();
   void RecordReadings(const ObserverReport& report);
   /// The mismatch test on this step; counts a changed verdict.
   void CheckModel(const PumpPeriod& period, double measured_degC);
@@ -247,6 +248,7 @@ class PumpEstimator {
   void PublishReadings(const PumpPeriod& period, const ObserverReport& report);
   /// The winding from resistance and the magnet from flux as the voltage reading gives them.
   void PublishFromVoltage(const PumpPeriod& period);
+  void PublishHeldMagnet();
   /// The bounds the levels act on, the alarm values and the published sds.
   void StepBounds(const PumpPeriod& period, bool diverged);
   /// The observer's frame-path heat, W (NaN: not the disturbance-state filter).
@@ -275,7 +277,10 @@ class PumpEstimator {
   MagnetFluxReading magnet_;
   WindingResistanceReading winding_;
   VoltageReading voltage_;
-  int voltage_magnet_state_ = -1;       ///< the node the flux follows (-1: no voltage reading)
+  int voltage_magnet_state_ = -1;  ///< the node the flux follows (-1: no voltage reading)
+  /// The magnet from the period's voltage at the held calibration, while the frame sensor has
+  /// failed (invalid otherwise): fused and published instead of the identifier's line.
+  VoltageMagnet held_magnet_;
   std::int64_t voltage_fused_us_ = -1;  ///< the last step that fused the voltage
   MismatchDetector mismatch_;
   AlarmMonitor alarms_;

@@ -1,6 +1,7 @@
 #include "estimators/readings/voltage_reading.hpp"
 
 #include <cmath>
+#include <limits>
 
 namespace pumptherm::estimators {
 
@@ -9,26 +10,30 @@ VoltageReading::VoltageReading(const MotorDescription& motor, VoltageReadingConf
 
 void VoltageReading::Prepare(const DriveAverages& d, bool frame_failed) {
   offered_ = false;
+  frame_failed_ = frame_failed;
   uq_V_ = std::nan("");
   status_.Reset(ReadingState::kAbsent);
   if (d.samples <= 0) return;
+  ReadingState state = ReadingState::kRejected;  // usable, until the update says it was fused
+  if (d.samples < config_.min_samples || !std::isfinite(d.uq_V) || !std::isfinite(d.iq_A) ||
+      !std::isfinite(d.w_rad_per_s) || !std::isfinite(d.id_A)) {
+    state = ReadingState::kStale;
+  } else if (!(d.iq_sd_A <= config_.max_iq_sd_A)) {
+    state = ReadingState::kGated;  // a load change inside the period
+  } else {
+    uq_V_ = d.uq_V - QAxisKnownTerms_V(motor_, d.id_A, d.iq_A, d.w_rad_per_s);
+    uq_sd_V_ = config_.uq_noise_V / std::sqrt(static_cast<double>(d.samples));
+    iq_A_ = d.iq_A;
+    w_rad_per_s_ = d.w_rad_per_s;
+  }
   if (frame_failed) {
     status_.state = ReadingState::kSensorFault;
     return;
   }
-  if (d.samples < config_.min_samples || !std::isfinite(d.uq_V) || !std::isfinite(d.iq_A) ||
-      !std::isfinite(d.w_rad_per_s) || !std::isfinite(d.id_A)) {
-    status_.state = ReadingState::kStale;
+  if (state != ReadingState::kRejected) {
+    status_.state = state;
     return;
   }
-  if (!(d.iq_sd_A <= config_.max_iq_sd_A)) {
-    status_.state = ReadingState::kGated;  // a load change inside the period
-    return;
-  }
-  uq_V_ = d.uq_V - QAxisKnownTerms_V(motor_, d.id_A, d.iq_A, d.w_rad_per_s);
-  uq_sd_V_ = config_.uq_noise_V / std::sqrt(static_cast<double>(d.samples));
-  iq_A_ = d.iq_A;
-  w_rad_per_s_ = d.w_rad_per_s;
   status_.observation = uq_V_;
   status_.sd_K = std::nan("");  // a voltage: the sd is in V (uq_sd_V_), not K
   offered_ = config_.fuse;
@@ -54,8 +59,8 @@ void VoltageReading::Record(const ReadingRow& row, bool taken) {
 
 double VoltageReading::MagnetAt_degC(const ThermalObserver& observer, const ThermalModel& model,
                                      int magnet_state) const {
-  if (!std::isfinite(uq_V_) || magnet_state < 0 || !(std::abs(w_rad_per_s_) > 0.0) ||
-      law_.beta_per_K == 0.0) {
+  if (frame_failed_ || !std::isfinite(uq_V_) || magnet_state < 0 ||
+      !(std::abs(w_rad_per_s_) > 0.0) || law_.beta_per_K == 0.0) {
     return std::nan("");
   }
   const ThermalObserver::Calibration c = observer.VoltageCalibration();
@@ -74,6 +79,66 @@ double VoltageReading::MagnetAt_degC(const ThermalObserver& observer, const Ther
   const double at_t0 = QAxisVoltage_V(law_, p, s);
   const double slope = QAxisGradientAt(law_, p, s).magnet_V_per_K;
   return law_.magnet_t0_degC + (uq_V_ - at_t0) / slope;
+}
+
+}  // namespace pumptherm::estimators
+
+namespace pumptherm::estimators {
+namespace {
+
+/// z = Tm + gain Tw from uq at a calibration: the equation is linear in Tw and Tm (its gradient
+/// in them does not depend on them), so it is solved at the laws' reference temperatures.
+VoltageMagnet SolveMagnet(const VoltageLaw& law, const QAxisPoint& p, QAxisState s, double uq_V) {
+  s.winding_degC = law.t0_degC;
+  s.magnet_degC = law.magnet_t0_degC;
+  const QAxisGradient g = QAxisGradientAt(law, p, s);
+  VoltageMagnet m;
+  if (!(std::abs(g.magnet_V_per_K) > 0.0)) return m;
+  m.winding_gain = g.winding_V_per_K / g.magnet_V_per_K;
+  m.z_degC = law.magnet_t0_degC + m.winding_gain * law.t0_degC +
+             (uq_V - QAxisVoltage_V(law, p, s)) / g.magnet_V_per_K;
+  m.sd_K = 0.0;
+  return m;
+}
+
+double Finite(double v) { return std::isfinite(v) ? v : 0.0; }
+
+}  // namespace
+
+VoltageMagnet VoltageReading::CalibratedMagnet(const ThermalObserver::Calibration& c,
+                                               double winding_degC) const {
+  VoltageMagnet m;
+  if (!std::isfinite(uq_V_) || !(std::abs(w_rad_per_s_) > 0.0) || law_.beta_per_K == 0.0 ||
+      !std::isfinite(c.dr) || !std::isfinite(c.dpsi) || !std::isfinite(c.u0_V) ||
+      !std::isfinite(winding_degC)) {
+    return m;
+  }
+  const QAxisPoint p{iq_A_, w_rad_per_s_};
+  QAxisState s;
+  s.dr = c.dr;
+  s.dpsi = c.dpsi;
+  s.dbeta = Finite(c.dbeta);
+  s.u0_V = c.u0_V;
+  m = SolveMagnet(law_, p, s, uq_V_);
+  if (!std::isfinite(m.z_degC)) return VoltageMagnet{};
+  const double magnet_degC = m.z_degC - m.winding_gain * winding_degC;
+  // Each calibration term moved by its sd: how far the magnet at this winding moves with it.
+  double var_K2 = 0.0;
+  const auto add = [&](double QAxisState::*term, double sd) {
+    if (!(std::isfinite(sd) && sd > 0.0)) return;
+    QAxisState moved = s;
+    moved.*term += sd;
+    const VoltageMagnet v = SolveMagnet(law_, p, moved, uq_V_);
+    const double d = v.z_degC - v.winding_gain * winding_degC - magnet_degC;
+    var_K2 += std::isfinite(d) ? d * d : std::numeric_limits<double>::infinity();
+  };
+  add(&QAxisState::dr, c.dr_sd);
+  add(&QAxisState::dpsi, c.dpsi_sd);
+  add(&QAxisState::dbeta, c.dbeta_sd);
+  add(&QAxisState::u0_V, c.u0_sd_V);
+  const double noise_K = uq_sd_V_ / std::abs(QAxisGradientAt(law_, p, s).magnet_V_per_K);
+  m.sd_K = std::sqrt(var_K2 + noise_K * noise_K);
+  return m;
 }
 
 }  // namespace pumptherm::estimators

@@ -10,6 +10,9 @@
 /// equation does not hold through the current loop's transient), and the observer's own
 /// innovation gate. Stop: either lost.
 
+#include <cmath>
+#include <limits>
+
 #include "estimators/motor.hpp"
 #include "estimators/pump_period.hpp"
 #include "estimators/readings/reading_status.hpp"
@@ -18,6 +21,15 @@
 #include "estimators/voltage_equation.hpp"
 
 namespace pumptherm::estimators {
+
+/// A reading of the magnet node from one period's voltage: z = Tm + winding_gain Tw, the
+/// equation solved for the magnet at a given winding (the form of MagnetFluxReading's row).
+struct VoltageMagnet {
+  double z_degC = std::numeric_limits<double>::quiet_NaN();
+  double sd_K = std::numeric_limits<double>::quiet_NaN();  ///< at a known winding
+  double winding_gain = 0.0;
+  bool Valid() const { return std::isfinite(z_degC) && std::isfinite(sd_K); }
+};
 
 struct VoltageReadingConfig {
   bool fuse = true;           ///< offered to an observer that takes it
@@ -30,10 +42,18 @@ class VoltageReading {
  public:
   VoltageReading(const MotorDescription& motor, VoltageReadingConfig config);
 
-  /// `frame_failed`: the frame sensor has a fault. The voltage is then left out: without the
-  /// frame's level, its innovations would move the frame-path heat and the calibration states
-  /// instead of the winding and magnet (the frame drifted 10 K in 10 min on a stuck sensor).
+  /// `frame_failed`: the frame sensor has a fault. The voltage is then left out as a row:
+  /// without the frame's level, its innovations would move the frame-path heat and the
+  /// calibration states instead of the winding and magnet (the frame drifted 10 K in 10 min on a
+  /// stuck sensor). It stays available to CalibratedMagnet().
   void Prepare(const DriveAverages& drive, bool frame_failed);
+  /// The magnet this period's voltage gives with the calibration held at `c` (the observer's R0,
+  /// psi0, magnet-law and offset errors, learnt while it fused the voltage, not re-learnt here),
+  /// at the winding `winding_degC`: for a period whose voltage is not a row because the frame
+  /// sensor failed. The identifier's line would take the nameplate instead, 10 K off per
+  /// percent of flux. Its sd: the voltage's noise and each calibration term moved by its sd.
+  /// Invalid without a voltage, a magnet law or a calibration.
+  VoltageMagnet CalibratedMagnet(const ThermalObserver::Calibration& c, double winding_degC) const;
   /// The reading into `readings` when it is fused (started, within its gate).
   void Offer(ThermalReadings& readings) const;
   /// The update's row for it; `taken`: the observer takes the voltage at all.
@@ -55,6 +75,7 @@ class VoltageReading {
   double iq_A_ = std::numeric_limits<double>::quiet_NaN();
   double w_rad_per_s_ = std::numeric_limits<double>::quiet_NaN();
   bool offered_ = false;
+  bool frame_failed_ = false;
   ReadingStatus status_;
 };
 

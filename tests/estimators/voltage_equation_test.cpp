@@ -104,4 +104,56 @@ TEST(VoltageReading, LeavesOutWhatTheSteadyEquationDoesNotDescribe) {
   EXPECT_TRUE(std::isnan(r.uq_V));
 }
 
+TEST(VoltageReading, CalibratedMagnetSolvesTheEquationAtTheHeldCalibration) {
+  // A voltage made by the equation at a known winding, magnet and calibration: with the frame
+  // failed the reading is no row, but solved at that calibration it gives the magnet back.
+  const pe::VoltageLaw law = pe::VoltageLawOf(Motor());
+  pe::QAxisState truth;
+  truth.winding_degC = 95.0;
+  truth.magnet_degC = 72.0;
+  truth.dr = 0.02;
+  truth.dpsi = -0.016;
+  truth.u0_V = 0.04;
+  pe::DriveAverages d = Steady(100, 0.01);
+  const pe::QAxisPoint p{d.iq_A, d.w_rad_per_s};
+  d.uq_V = pe::QAxisVoltage_V(law, p, truth) +
+           pe::QAxisKnownTerms_V(Motor(), d.id_A, d.iq_A, d.w_rad_per_s);
+  pe::VoltageReading reading(Motor(), pe::VoltageReadingConfig{});
+  reading.Prepare(d, true);
+  ASSERT_FALSE(reading.Offered());
+  pe::ThermalObserver::Calibration c;
+  c.dr = truth.dr;
+  c.dpsi = truth.dpsi;
+  c.dbeta = 0.0;
+  c.u0_V = truth.u0_V;
+  c.dr_sd = c.dpsi_sd = c.dbeta_sd = c.u0_sd_V = 0.0;
+  const pe::VoltageMagnet m = reading.CalibratedMagnet(c, truth.winding_degC);
+  ASSERT_TRUE(m.Valid());
+  EXPECT_NEAR(m.z_degC - m.winding_gain * truth.winding_degC, truth.magnet_degC, 1e-6);
+  // Only the voltage's noise is left: 1 mV over a slope of w psi0 beta.
+  const double slope = std::abs(pe::QAxisGradientAt(law, p, truth).magnet_V_per_K);
+  EXPECT_NEAR(m.sd_K, pe::VoltageReadingConfig{}.uq_noise_V / 10.0 / slope, 1e-9);
+  // The nameplate instead (the identifier's line takes it) is off by the flux's 1.6 %: about
+  // 16 K at 0.1 %/K. An sd of psi0 of that size says so.
+  pe::ThermalObserver::Calibration nameplate;
+  nameplate.dr = nameplate.dpsi = nameplate.dbeta = nameplate.u0_V = 0.0;
+  const pe::VoltageMagnet n = reading.CalibratedMagnet(nameplate, truth.winding_degC);
+  EXPECT_GT(std::abs(n.z_degC - n.winding_gain * truth.winding_degC - truth.magnet_degC), 10.0);
+  c.dpsi_sd = 0.016;
+  const pe::VoltageMagnet wide = reading.CalibratedMagnet(c, truth.winding_degC);
+  EXPECT_GT(wide.sd_K, 10.0);
+  EXPECT_LT(wide.sd_K, 25.0);
+}
+
+TEST(VoltageReading, CalibratedMagnetNeedsAVoltageAndACalibration) {
+  pe::VoltageReading reading(Motor(), pe::VoltageReadingConfig{});
+  pe::ThermalObserver::Calibration c;  // NaN: an observer without the voltage's states
+  reading.Prepare(Steady(100, 0.01), true);
+  EXPECT_FALSE(reading.CalibratedMagnet(c, 80.0).Valid());
+  c.dr = c.dpsi = c.dbeta = c.u0_V = 0.0;
+  EXPECT_TRUE(reading.CalibratedMagnet(c, 80.0).Valid());
+  reading.Prepare(Steady(100, 0.5), true);  // a load change: the steady equation does not hold
+  EXPECT_FALSE(reading.CalibratedMagnet(c, 80.0).Valid());
+}
+
 }  // namespace
