@@ -801,8 +801,10 @@ std::string NodeFailText(const NodeVerdict& v) {
 
 }  // namespace
 
-ModelRightNow CheckModelRightNow(const Result& r, const ReportContext& context) {
-  const Analysis a = Analyse(r, context);
+namespace {
+
+/// The answer from an analysis already made (the page and report.json make theirs once).
+ModelRightNow RightNow(const Result& r, const Analysis& a) {
   std::vector<std::string> failing;
   bool tested = false, driven = false;
   for (const NodeVerdict& v : a.verdicts) {
@@ -811,27 +813,33 @@ ModelRightNow CheckModelRightNow(const Result& r, const ReportContext& context) 
     const std::string f = NodeFailText(v);
     if (!f.empty()) failing.push_back(f);
   }
-  std::vector<std::string> inputs;
-  for (const InputStrip& u : a.tested) inputs.push_back(u.name);
-  const std::string cross = inputs.empty()
-                                ? "(cross-correlation not tested: no validation inputs given)"
-                                : "and cross-correlation with " + Join(inputs, ", ");
   if (!tested)
     return {"untested",
-            "Model right now: untested: the validation data have fewer than 8 points "
-            "per node, too few for the residual tests"};
+            "Model right now: untested: no measured node has the 8 validation points the "
+            "residual tests need"};
+  std::vector<std::string> inputs;
+  for (const InputStrip& u : a.tested) inputs.push_back(u.name);
+  const std::string not_tested = "cross-correlation not tested: no validation inputs given";
   if (failing.empty())
     return {"yes", fmt::format("Model right now: yes: every tested node passes whiteness {} on the "
                                "validation data {}; {}",
-                               cross, EffectsText(r), FitsText(a.verdicts))};
-  const std::string meaning =
-      driven ? "an input still drives the residual: an effect the model misses"
-             : "no input drives it: a slow error the inputs do not explain (the plant's own "
-               "disturbances, or an effect outside the vocabulary); weigh it with the fit and "
-               "RMSE";
-  return {"not yet", fmt::format("Model right now: not yet: {} {}; {}; {}{}", Join(failing, "; "),
-                                 EffectsText(r), FitsText(a.verdicts), meaning,
-                                 inputs.empty() ? " " + cross : "")};
+                               inputs.empty() ? "(" + not_tested + ")"
+                                              : "and cross-correlation with " + Join(inputs, ", "),
+                               EffectsText(r), FitsText(a.verdicts))};
+  std::string meaning = "an input still drives the residual: an effect the model misses";
+  if (!driven)
+    meaning = inputs.empty() ? not_tested
+                             : "no input drives it: a slow error the inputs do not explain (the "
+                               "plant's own disturbances, or an effect outside the vocabulary); "
+                               "weigh it with the fit and RMSE";
+  return {"not yet", fmt::format("Model right now: not yet: {} {}; {}; {}", Join(failing, "; "),
+                                 EffectsText(r), FitsText(a.verdicts), meaning)};
+}
+
+}  // namespace
+
+ModelRightNow CheckModelRightNow(const Result& r, const ReportContext& context) {
+  return RightNow(r, Analyse(r, context));
 }
 
 namespace {
@@ -847,10 +855,10 @@ std::string LagTestJson(const LagTest& t) {
 }
 
 std::string RightNowJson(const Result& r, const ReportContext& context) {
-  const ModelRightNow m = CheckModelRightNow(r, context);
+  const Analysis a = Analyse(r, context);
+  const ModelRightNow m = RightNow(r, a);
   std::string j =
       fmt::format("{{\"answer\": {}, \"line\": {}, \"nodes\": [", Str(m.answer), Str(m.line));
-  const Analysis a = Analyse(r, context);
   for (std::size_t i = 0; i < a.verdicts.size(); ++i) {
     const NodeVerdict& v = a.verdicts[i];
     std::string tests;
@@ -986,7 +994,8 @@ std::string ReportHtml(const Result& r, const std::string& model, const std::str
       ".ctx{color:#555}.gap{color:#999}.crit{font-size:90%;color:#333}td.pass{color:#1a7f37}"
       "td.fail{color:#c62828}p.now{font-size:115%;padding:6px;border-left:6px solid}p.now.pass{"
       "border-color:#1a7f37}p.now.fail{border-color:#c62828}</style></head><body>";
-  const ModelRightNow right_now = CheckModelRightNow(r, context);
+  const Analysis a = Analyse(r, context);
+  const ModelRightNow right_now = RightNow(r, a);
   h += fmt::format("<p class='now {}'><b>{}</b></p>", right_now.answer == "yes" ? "pass" : "fail",
                    Html(right_now.line));
   h += fmt::format(
@@ -1018,7 +1027,6 @@ std::string ReportHtml(const Result& r, const std::string& model, const std::str
         Html(r.validate_before[i].node), r.train_before[i].rmse_K, r.train_after[i].rmse_K,
         r.validate_before[i].rmse_K, r.validate_after[i].rmse_K, r.validate_before[i].max_abs_K,
         r.validate_after[i].max_abs_K);
-  const Analysis a = Analyse(r, context);
   h += "</table>" + TestsHtml(a.verdicts) + CriterionHtml(context.options);
   for (std::size_t ri = 0; ri < r.rounds.size(); ++ri)
     h += RoundHtml(ri, r.rounds[ri], context.options);
