@@ -141,11 +141,11 @@ const std::array kFields = std::to_array<PublishedField>({
    }},
   {"flux_Wb", "Wb", "GW_IDENT", "Flux_Wb", &T::flux_Wb, "flux_Wb", {Kind::kFixed, 7},
    [](const FieldSource& s) { return Identified(s) ? E(s).resistance.flux_Wb : kNaN; }},
-  {"rs_status", "", "GW_IDENT", "RsStatus", &T::ident_status, "ident_status", {Kind::kWord, 0},
+  {"ident_status", "", "GW_IDENT", "RsStatus", &T::ident_status, "ident_status", {Kind::kWord, 0},
    [](const FieldSource& s) { return Code(E(s).resistance.status); },
    [](const FieldSource& s, std::string& out) {
      Append(out, estimators::ToString(E(s).resistance.status));
-   }, {}, true},
+   }, "rs_status", true},
   {"frame_sensor_degC", "degC", "", "", {}, "frame_sensor_degC", {Kind::kFixed, 2},
    [](const FieldSource& s) { return E(s).frame_measured_degC; }, nullptr,
    "frame_measured_degC"},

@@ -83,6 +83,32 @@ TEST(PublishedFields, TheShippedMappingSendsEveryDefault) {
   EXPECT_TRUE(m.deprecations.empty());
 }
 
+// The identifier's status is `ident_status` everywhere (CSV, LCM, mapping key, MQTT metric); a
+// mapping written with its old key `rs_status` still sends it, with a deprecation line.
+TEST(PublishedFields, TheIdentifiersStatusIsIdentStatusAndItsOldKeyStillReads) {
+  const PublishedField* f = FindPublishedField("ident_status");
+  ASSERT_NE(f, nullptr);
+  EXPECT_EQ(f->csv_column, "ident_status");
+  EXPECT_EQ(FindPublishedField("rs_status"), nullptr);
+  const protocol::SignalMapping m = protocol::ParseMapping(
+      "[inputs]\n"
+      "id_A = { message = \"PUMP_FAST_I\", signal = \"Id_A\" }\n"
+      "iq_A = { message = \"PUMP_FAST_I\", signal = \"Iq_A\" }\n"
+      "ud_V = { message = \"PUMP_FAST_U\", signal = \"Ud_V\" }\n"
+      "uq_V = { message = \"PUMP_FAST_U\", signal = \"Uq_V\" }\n"
+      "speed_mech_rpm = { message = \"PUMP_STATUS\", signal = \"SpeedMech_rpm\" }\n"
+      "[outputs]\n"
+      "defaults = false\n"
+      "rs_status = { message = \"GW_IDENT\", signal = \"RsStatus\" }\n",
+      "m.toml", ShippedDbc(), MappingOutputs());
+  const protocol::SignalRef* ref = m.output("ident_status");
+  ASSERT_NE(ref, nullptr);
+  EXPECT_EQ(ref->signal, "RsStatus");
+  ASSERT_EQ(m.deprecations.size(), 1u);
+  EXPECT_EQ(m.deprecations[0],
+            "m.toml:9:13: key outputs.rs_status is deprecated: it is now outputs.ident_status");
+}
+
 TEST(PublishedFields, OneEstimateReachesLcmAndTheCsvAlike) {
   estimators::PumpEstimate e;
   e.initialised = true;

@@ -86,6 +86,14 @@ TEST(DiscrepancyCli, GuidesCaseNamesTheCoolingThenTheSensorsLag) {
   EXPECT_EQ(html.find("0000000000"), std::string::npos);
   // The residual x current test fails after round 1 alone, passes with the lag (the page).
   EXPECT_NE(html.find("<td>x current</td><td class='why pass'>passes"), std::string::npos);
+  // The first line's answer: no input drives the residual after both effects, but it is not
+  // white (docs/operator-guide.md, section 9, says what that means).
+  EXPECT_NE(json.find("\"model_right_now\": {\"answer\": \"not yet\", \"line\": \"Model right "
+                      "now: not yet: frame's residual is not white (fails at lags 0.2 to "),
+            std::string::npos)
+      << json.substr(0, 800);
+  EXPECT_NE(json.find("no input drives it"), std::string::npos);
+  EXPECT_LT(html.find("<p class='now fail'><b>Model right now: not yet"), html.find("<h1>"));
   std::filesystem::remove_all(dir);
 }
 
@@ -230,10 +238,10 @@ TEST(DiscrepancyCli, ReportRendersInChromium) {
   EXPECT_TRUE(std::filesystem::exists(dir + "/out/model.toml") &&
               std::filesystem::exists(dir + "/out/report.json"));
   for (const char* must :
-       {"Verdict: named", "iron_loss_scale = ", "(95 % ", "why not named", "named",
-        "Is the model right now?", "fit, RMSE", "whiteness", "x current", "- power_W = 'k_e_W_s2",
-        "+ power_W = 'iron_loss_scale * (", "lower is better", "W/(1000 r/min)^2", "J/K",
-        "Round 1: named", "Round 2: "})
+       {"Which effects the model misses: named", "iron_loss_scale = ", "(95 % ", "why not named",
+        "named", "Is the model right now?", "fit, RMSE", "whiteness", "x current",
+        "- power_W = 'k_e_W_s2", "+ power_W = 'iron_loss_scale * (", "lower is better",
+        "W/(1000 r/min)^2", "J/K", "Round 1: named", "Round 2: "})
     EXPECT_NE(text.find(must), std::string::npos) << must << "\n" << text.substr(0, 3000);
   // The named effect's interval is printed with digits that show its width.
   const std::size_t v = text.find("iron_loss_scale = ");

@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
+#include <random>
 #include <string>
+#include <vector>
 
 #include "tools/discrepancy/report.hpp"
 #include "tools/discrepancy/workflow.hpp"
@@ -172,4 +175,102 @@ TEST(DiscrepancyReport, ResidualTestsBeforeAndAfterWithTheirLags) {
   EXPECT_NE(h.find("after: fit 99.2 %, RMSE 0.03 K"), std::string::npos);
   EXPECT_NE(h.find("frame before: residual x current"), std::string::npos);
   EXPECT_NE(h.find("frame after: residual autocorrelation"), std::string::npos);
+}
+
+namespace {
+
+// Two hours at 10 s of one node, the current stepping 1 A / 4 A every 15 min; the "after"
+// residual is `after_residual(k, current)`. The validation inputs in `d`.
+constexpr unsigned kWhiteSeed = 6;
+
+pd::Result OneNode(pd::Data& d, const std::function<double(int, double)>& after_residual) {
+  pd::Result r = TwoRounds();
+  pd::PlotSeries& v = r.validate_plot;
+  v.time_s.clear();
+  v.measured = v.before = v.after = {{}};
+  d = {};
+  for (int k = 0; k < 720; ++k) {
+    const double t = 10.0 * k;
+    const double current = (k / 90) % 2 == 0 ? 1.0 : 4.0;
+    v.time_s.push_back(t);
+    v.measured[0].push_back(40.0 + 2.0 * current);
+    v.before[0].push_back(40.0 + 1.5 * current);
+    v.after[0].push_back(40.0 + 2.0 * current + after_residual(k, current));
+    d.time_s.push_back(t);
+    d.speed_rpm.push_back(21000.0 + (k % 7));
+    d.id_A.push_back(0.0);
+    d.iq_A.push_back(current);
+    d.ambient_degC.push_back(22.0);
+    d.coolant_degC.push_back(22.0);
+  }
+  return r;
+}
+
+}  // namespace
+
+// The report's first line answers "is the model right now?" from the residual tests after the
+// effects; report.json and the page say the same.
+TEST(DiscrepancyReport, ModelRightNowYesWhenEveryTestPasses) {
+  pd::Data d;
+  // Uniform noise of +-0.05 K from std::mt19937 (its sequence is fixed by the standard), seed
+  // 6: a sample that passes every lag of all three tests. Most samples of white noise do not:
+  // seeds 1 to 39 passed in 2 cases (6, 22), each lag failing by chance with 5 % probability
+  // (docs/discrepancy.md, "Residual tests").
+  std::mt19937 gen(kWhiteSeed);
+  std::vector<double> noise;
+  for (int k = 0; k < 720; ++k) noise.push_back(0.1 * (gen() / 4294967296.0 - 0.5));
+  const pd::Result r =
+      OneNode(d, [&](int k, double) { return noise[static_cast<std::size_t>(k)]; });
+  pd::ReportContext ctx;
+  ctx.validate = &d;
+  const pd::ModelRightNow m = pd::CheckModelRightNow(r, ctx);
+  EXPECT_EQ(m.answer, "yes") << m.line;
+  EXPECT_EQ(m.line.rfind("Model right now: yes: every tested node passes whiteness and "
+                         "cross-correlation with speed, current on the validation data after "
+                         "adding frame_ambient_resistance; frame: fit ",
+                         0),
+            0u)
+      << m.line;
+  // RMSE of uniform noise of width 0.1 K: 0.1 / sqrt(12) = 0.0289 K; this sample 0.028 K.
+  EXPECT_NE(m.line.find("frame: fit 99.1 %, RMSE 0.028 K"), std::string::npos) << m.line;
+  const std::string h = pd::ReportHtml(r, "m.toml", "t.csv", "v.csv", ctx);
+  const std::size_t first = h.find("Model right now: yes");
+  ASSERT_NE(first, std::string::npos);
+  EXPECT_LT(first, h.find("<h1>")) << "the answer comes before everything else";
+  const std::string json = pd::ReportJson(r, "m.toml", "t.csv", "v.csv", ctx);
+  EXPECT_NE(json.find("\"model_right_now\": {\"answer\": \"yes\", \"line\": \"" + m.line + "\""),
+            std::string::npos)
+      << json.substr(0, 800);
+}
+
+TEST(DiscrepancyReport, ModelRightNowNotYetNamesTheNodeTheTestAndItsLags) {
+  pd::Data d;
+  // A loss the model still misses: the residual follows the current.
+  const pd::Result r = OneNode(d, [](int, double current) { return -0.3 * current; });
+  pd::ReportContext ctx;
+  ctx.validate = &d;
+  const pd::ModelRightNow m = pd::CheckModelRightNow(r, ctx);
+  EXPECT_EQ(m.answer, "not yet") << m.line;
+  EXPECT_NE(m.line.find("Model right now: not yet: frame's residual follows the current (fails "
+                        "at lags -4.7 to 4.7 min; peak 1.00, band 0.41)"),
+            std::string::npos)
+      << m.line;
+  EXPECT_NE(m.line.find("after adding frame_ambient_resistance; frame: fit "), std::string::npos)
+      << m.line;
+  EXPECT_NE(m.line.find("an input still drives the residual"), std::string::npos) << m.line;
+  const std::string json = pd::ReportJson(r, "m.toml", "t.csv", "v.csv", ctx);
+  EXPECT_NE(json.find("\"answer\": \"not yet\""), std::string::npos);
+  EXPECT_NE(json.find("{\"test\": \"x current\", \"pass\": false, \"failing_lags_min\": [-4.66667"),
+            std::string::npos)
+      << json.substr(0, 1500);
+  const std::string h = pd::ReportHtml(r, "m.toml", "t.csv", "v.csv", ctx);
+  EXPECT_LT(h.find("<p class='now fail'><b>Model right now: not yet"), h.find("<h1>"));
+  // Without the validation inputs only whiteness can be tested, and the line says so.
+  const pd::ModelRightNow w = pd::CheckModelRightNow(r, {});
+  EXPECT_NE(w.line.find("cross-correlation not tested: no validation inputs given"),
+            std::string::npos)
+      << w.line;
+  // Too few points for any test.
+  pd::Result few = TwoRounds();
+  EXPECT_EQ(pd::CheckModelRightNow(few, ctx).answer, "untested");
 }

@@ -33,6 +33,9 @@ std::string Str(const std::string& s) {
 
 std::string Num(double v) { return std::isfinite(v) ? fmt::format("{:.6g}", v) : "null"; }
 
+/// report.json's "model_right_now" object (defined with the residual tests below).
+std::string RightNowJson(const Result& r, const ReportContext& context);
+
 std::string Html(const std::string& s) {
   std::string out;
   for (char c : s) {
@@ -460,10 +463,11 @@ std::string ModelEditHtml(const std::string& before, const std::string& after) {
 }  // namespace
 
 std::string ReportJson(const Result& r, const std::string& model, const std::string& train,
-                       const std::string& validate) {
+                       const std::string& validate, const ReportContext& context) {
   std::string j = "{\n";
   j += fmt::format("  \"model\": {},\n  \"train\": {},\n  \"validate\": {},\n", Str(model),
                    Str(train), Str(validate));
+  j += "  \"model_right_now\": " + RightNowJson(r, context) + ",\n";
   j += fmt::format("  \"verdict\": {},\n", Str(r.verdict));
   j += fmt::format("  \"effect\": {},\n",
                    Str(r.effects.empty() ? "none" : r.effects.front().effect.name));
@@ -577,6 +581,7 @@ struct LagTest {
   std::string input;  ///< "" for the whiteness test (the autocorrelation), else the input
   double band = 0.0;
   double peak = 0.0, peak_lag_min = 0.0;  ///< the largest |correlation| and its lag
+  double step_min = 0.0;                  ///< the lag grid's step
   std::vector<double> failing_lags_min;
   bool pass() const { return failing_lags_min.empty(); }
 };
@@ -619,6 +624,7 @@ ResidualCheck CheckResiduals(const std::vector<double>& t_s, const std::vector<d
     LagTest t;
     t.input = input;
     t.band = band;
+    t.step_min = step_min;
     for (int k = from; k < static_cast<int>(r.size()); ++k) {
       const double a = std::abs(r[static_cast<std::size_t>(k)]);
       if (a > t.peak) {
@@ -640,15 +646,11 @@ ResidualCheck CheckResiduals(const std::vector<double>& t_s, const std::vector<d
   return rc;
 }
 
-/// "fails at lags 0.5 to 3.0, 5.0 min (peak 0.72 at 1.0 min, band 0.55)", "passes (peak 0.31
-/// at 2.0 min, band 0.55)".
-std::string LagTestText(const LagTest& t) {
-  if (t.pass())
-    return fmt::format("passes (peak {:.2f} at {:.1f} min, band {:.2f})", t.peak, t.peak_lag_min,
-                       t.band);
+/// The failing lags in minutes, neighbours joined into ranges: "0.5 to 3.0, 5.0".
+std::string FailingLagsText(const LagTest& t) {
   std::string lags;
   const std::vector<double>& f = t.failing_lags_min;
-  const double step = f.size() > 1 ? std::abs(f[1] - f[0]) : 0.0;
+  const double step = t.step_min;
   for (std::size_t i = 0; i < f.size();) {
     std::size_t j = i;
     while (j + 1 < f.size() && std::abs(f[j + 1] - f[j] - step) < 1e-6 * (1 + step) && step > 0)
@@ -657,8 +659,17 @@ std::string LagTestText(const LagTest& t) {
             (j > i ? fmt::format("{:.1f} to {:.1f}", f[i], f[j]) : fmt::format("{:.1f}", f[i]));
     i = j + 1;
   }
-  return fmt::format("FAILS at lags {} min (peak {:.2f} at {:.1f} min, band {:.2f})", lags, t.peak,
-                     t.peak_lag_min, t.band);
+  return lags;
+}
+
+/// "FAILS at lags 0.5 to 3.0, 5.0 min (peak 0.72 at 1.0 min, band 0.55)", "passes (peak 0.31
+/// at 2.0 min, band 0.55)".
+std::string LagTestText(const LagTest& t) {
+  if (t.pass())
+    return fmt::format("passes (peak {:.2f} at {:.1f} min, band {:.2f})", t.peak, t.peak_lag_min,
+                       t.band);
+  return fmt::format("FAILS at lags {} min (peak {:.2f} at {:.1f} min, band {:.2f})",
+                     FailingLagsText(t), t.peak, t.peak_lag_min, t.band);
 }
 
 /// MATLAB compare's fit: 100 (1 - |y - yhat| / |y - mean(y)|), %, grid points 1.. (point 0 is
@@ -729,6 +740,134 @@ std::vector<NodeVerdict> Verdicts(const PlotSeries& v, const std::vector<InputSt
     out.push_back(std::move(nv));
   }
   return out;
+}
+
+/// The validation inputs, those the residuals are tested against, and each node's verdict.
+struct Analysis {
+  std::vector<InputStrip> inputs, tested;
+  std::vector<NodeVerdict> verdicts;
+};
+
+Analysis Analyse(const Result& r, const ReportContext& context) {
+  Analysis a;
+  a.inputs = Inputs(r.validate_plot, context.validate);
+  for (const InputStrip& u : a.inputs)
+    if (u.tested) a.tested.push_back(u);
+  a.verdicts = Verdicts(r.validate_plot, a.tested);
+  return a;
+}
+
+std::string Join(const std::vector<std::string>& parts, const std::string& sep) {
+  std::string out;
+  for (const std::string& p : parts) out += (out.empty() ? "" : sep) + p;
+  return out;
+}
+
+/// "after adding frame_ambient_resistance, sensor_lag(frame)" or "with no effect added".
+std::string EffectsText(const Result& r) {
+  std::vector<std::string> names;
+  for (const AddedEffect& e : r.effects)
+    names.push_back(e.effect.name + (e.effect.node.empty() ? "" : "(" + e.effect.node + ")"));
+  return names.empty() ? "with no effect added" : "after adding " + Join(names, ", ");
+}
+
+/// "frame: fit 93.5 %, RMSE 0.493 K; winding: ..." (after the effects), nodes with tests only.
+std::string FitsText(const std::vector<NodeVerdict>& verdicts) {
+  std::vector<std::string> parts;
+  for (const NodeVerdict& v : verdicts)
+    if (!v.after.tests.empty())
+      parts.push_back(
+          std::isfinite(v.fit_after)
+              ? fmt::format("{}: fit {:.1f} %, RMSE {:.3f} K", v.node, v.fit_after, v.rmse_after)
+              : fmt::format("{}: RMSE {:.3f} K", v.node, v.rmse_after));
+  return Join(parts, "; ");
+}
+
+/// "frame's residual follows the current (fails at lags -0.2 to 3.8 min; peak 0.73, band 0.54)
+/// and is not white (...)"; "" when every test of the node passes.
+std::string NodeFailText(const NodeVerdict& v) {
+  std::vector<std::string> clauses;
+  auto detail = [](const LagTest& t) {
+    return fmt::format("(fails at lags {} min; peak {:.2f}, band {:.2f})", FailingLagsText(t),
+                       t.peak, t.band);
+  };
+  for (const LagTest& t : v.after.tests)
+    if (!t.pass() && !t.input.empty())
+      clauses.push_back("follows the " + t.input + " " + detail(t));
+  for (const LagTest& t : v.after.tests)
+    if (!t.pass() && t.input.empty()) clauses.push_back("is not white " + detail(t));
+  return clauses.empty() ? "" : v.node + "'s residual " + Join(clauses, " and ");
+}
+
+}  // namespace
+
+namespace {
+
+/// The answer from an analysis already made (the page and report.json make theirs once).
+ModelRightNow RightNow(const Result& r, const Analysis& a) {
+  std::vector<std::string> failing;
+  bool tested = false, driven = false;
+  for (const NodeVerdict& v : a.verdicts) {
+    tested = tested || !v.after.tests.empty();
+    for (const LagTest& t : v.after.tests) driven = driven || (!t.pass() && !t.input.empty());
+    const std::string f = NodeFailText(v);
+    if (!f.empty()) failing.push_back(f);
+  }
+  if (!tested)
+    return {"untested",
+            "Model right now: untested: no measured node has the 8 validation points the "
+            "residual tests need"};
+  std::vector<std::string> inputs;
+  for (const InputStrip& u : a.tested) inputs.push_back(u.name);
+  const std::string not_tested = "cross-correlation not tested: no validation inputs given";
+  if (failing.empty())
+    return {"yes", fmt::format("Model right now: yes: every tested node passes whiteness {} on the "
+                               "validation data {}; {}",
+                               inputs.empty() ? "(" + not_tested + ")"
+                                              : "and cross-correlation with " + Join(inputs, ", "),
+                               EffectsText(r), FitsText(a.verdicts))};
+  std::string meaning = "an input still drives the residual: an effect the model misses";
+  if (!driven)
+    meaning = inputs.empty() ? not_tested
+                             : "no input drives it: a slow error the inputs do not explain (the "
+                               "plant's own disturbances, or an effect outside the vocabulary); "
+                               "weigh it with the fit and RMSE";
+  return {"not yet", fmt::format("Model right now: not yet: {} {}; {}; {}", Join(failing, "; "),
+                                 EffectsText(r), FitsText(a.verdicts), meaning)};
+}
+
+}  // namespace
+
+ModelRightNow CheckModelRightNow(const Result& r, const ReportContext& context) {
+  return RightNow(r, Analyse(r, context));
+}
+
+namespace {
+
+std::string LagTestJson(const LagTest& t) {
+  std::string lags;
+  for (double l : t.failing_lags_min) lags += (lags.empty() ? "" : ", ") + Num(l);
+  return fmt::format(
+      "{{\"test\": {}, \"pass\": {}, \"failing_lags_min\": [{}], \"peak\": {}, "
+      "\"peak_lag_min\": {}, \"band\": {}}}",
+      Str(t.input.empty() ? "whiteness" : "x " + t.input), t.pass() ? "true" : "false", lags,
+      Num(t.peak), Num(t.peak_lag_min), Num(t.band));
+}
+
+std::string RightNowJson(const Result& r, const ReportContext& context) {
+  const Analysis a = Analyse(r, context);
+  const ModelRightNow m = RightNow(r, a);
+  std::string j =
+      fmt::format("{{\"answer\": {}, \"line\": {}, \"nodes\": [", Str(m.answer), Str(m.line));
+  for (std::size_t i = 0; i < a.verdicts.size(); ++i) {
+    const NodeVerdict& v = a.verdicts[i];
+    std::string tests;
+    for (const LagTest& t : v.after.tests) tests += (tests.empty() ? "" : ", ") + LagTestJson(t);
+    j += fmt::format(
+        "{}\n    {{\"node\": {}, \"fit_percent\": {}, \"rmse_K\": {}, \"tests\": [{}]}}",
+        i ? "," : "", Str(v.node), Num(v.fit_after), Num(v.rmse_after), tests);
+  }
+  return j + (a.verdicts.empty() ? "]}" : "\n  ]}");
 }
 
 /// "Is the model right now?": per node the fit and every residual test, before and after.
@@ -853,13 +992,18 @@ std::string ReportHtml(const Result& r, const std::string& model, const std::str
       "pre.diff{background:#f7f7f7;padding:6px;overflow-x:auto}.add{color:#1a7f37}.del{color:#"
       "c62828}"
       ".ctx{color:#555}.gap{color:#999}.crit{font-size:90%;color:#333}td.pass{color:#1a7f37}"
-      "td.fail{color:#c62828}</style></head><body>";
+      "td.fail{color:#c62828}p.now{font-size:115%;padding:6px;border-left:6px solid}p.now.pass{"
+      "border-color:#1a7f37}p.now.fail{border-color:#c62828}</style></head><body>";
+  const Analysis a = Analyse(r, context);
+  const ModelRightNow right_now = RightNow(r, a);
+  h += fmt::format("<p class='now {}'><b>{}</b></p>", right_now.answer == "yes" ? "pass" : "fail",
+                   Html(right_now.line));
   h += fmt::format(
       "<h1>Model discrepancy: {}</h1><p>Train: {}<br>Validate: {}<br>Files: <a href='model.toml'>"
       "model.toml</a> (the model with the effects added), <a "
       "href='report.json'>report.json</a></p>",
       Html(model), Html(train), Html(validate));
-  h += fmt::format("<h2>Verdict: {}</h2>", Html(r.verdict));
+  h += fmt::format("<h2>Which effects the model misses: {}</h2>", Html(r.verdict));
   if (!r.effects.empty()) {
     h += "<ol>";
     for (const AddedEffect& e : r.effects)
@@ -883,15 +1027,10 @@ std::string ReportHtml(const Result& r, const std::string& model, const std::str
         Html(r.validate_before[i].node), r.train_before[i].rmse_K, r.train_after[i].rmse_K,
         r.validate_before[i].rmse_K, r.validate_after[i].rmse_K, r.validate_before[i].max_abs_K,
         r.validate_after[i].max_abs_K);
-  const std::vector<InputStrip> inputs = Inputs(r.validate_plot, context.validate);
-  std::vector<InputStrip> tested;
-  for (const InputStrip& u : inputs)
-    if (u.tested) tested.push_back(u);
-  const std::vector<NodeVerdict> verdicts = Verdicts(r.validate_plot, tested);
-  h += "</table>" + TestsHtml(verdicts) + CriterionHtml(context.options);
+  h += "</table>" + TestsHtml(a.verdicts) + CriterionHtml(context.options);
   for (std::size_t ri = 0; ri < r.rounds.size(); ++ri)
     h += RoundHtml(ri, r.rounds[ri], context.options);
-  h += PlotsHtml(r.validate_plot, inputs, tested, verdicts);
+  h += PlotsHtml(r.validate_plot, a.inputs, a.tested, a.verdicts);
   if (!r.rounds.empty()) h += RankingHtml(r.rounds[0]);
   return h + "</body></html>\n";
 }
@@ -910,7 +1049,7 @@ void WriteReport(const std::string& dir, const Result& r, const std::string& mod
     if (!f)
       throw std::system_error(errno ? errno : EIO, std::generic_category(), "writing " + path);
   };
-  write("report.json", ReportJson(r, model, train, validate));
+  write("report.json", ReportJson(r, model, train, validate, context));
   write("model.toml", r.model_toml);
   write("report.html", ReportHtml(r, model, train, validate, context));
 }

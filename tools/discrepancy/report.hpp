@@ -20,9 +20,25 @@ struct ReportContext {
   const Data* validate = nullptr;
 };
 
-/// report.json text.
+/// The report's first line: is the model (with the effects added) right now, by the residual
+/// tests on the validation data (docs/discrepancy.md, "Residual tests").
+struct ModelRightNow {
+  /// "yes" (every tested node passes every test), "not yet" (a test fails), "untested" (no node
+  /// has the 8 validation points the tests need).
+  std::string answer;
+  /// One line: "Model right now: not yet: frame's residual is not white (fails at lags ...)
+  /// after adding frame_ambient_resistance; fit 90.2 %, RMSE 0.743 K" and what that means.
+  std::string line;
+};
+
+/// The answer from the after-effects residuals of `r.validate_plot`; the cross-correlation
+/// tests need `context.validate` (without it only whiteness is tested, and the line says so).
+ModelRightNow CheckModelRightNow(const Result& r, const ReportContext& context = {});
+
+/// report.json text; `context` as for ReportHtml (its validation data give the residual tests'
+/// inputs).
 std::string ReportJson(const Result& r, const std::string& model, const std::string& train,
-                       const std::string& validate);
+                       const std::string& validate, const ReportContext& context = {});
 
 /// report.html text: the story, measured against simulated per node before and after, the
 /// residuals, the candidate ranking.

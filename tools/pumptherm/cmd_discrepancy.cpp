@@ -76,10 +76,11 @@ int RunDiscrepancy(const DiscrepancyOptions& o) {
       named += (named.empty() ? "" : ", ") + e.effect.name +
                (e.effect.node.empty() ? "" : "(" + e.effect.node + ")");
     fmt::print(stderr,
-               "verdict: {}{}\nvalidation gap: RMSE {:.3f} -> {:.3f} K, max {:.3f} -> {:.3f} K\n"
-               "wrote {}/report.json, model.toml, report.html ({:.1f} s)\n",
-               r.verdict, named.empty() ? "" : " (" + named + ")", vb.rmse_K, va.rmse_K,
-               vb.max_abs_K, va.max_abs_K, o.out, r.seconds);
+               "{}\nverdict: {}{}\nvalidation gap: RMSE {:.3f} -> {:.3f} K, max {:.3f} -> {:.3f} "
+               "K\nwrote {}/report.json, model.toml, report.html ({:.1f} s)\n",
+               discrepancy::CheckModelRightNow(r, context).line, r.verdict,
+               named.empty() ? "" : " (" + named + ")", vb.rmse_K, va.rmse_K, vb.max_abs_K,
+               va.max_abs_K, o.out, r.seconds);
   }
   return 0;
 }
