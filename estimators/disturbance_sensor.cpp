@@ -19,13 +19,13 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
       !(c.sensor_offset_sd_K > 0.0) || !(c.node_process_sd_K > 0.0) || !(c.frame_heat_sd_W > 0.0) ||
       !(c.rotor_heat_sd_W > 0.0) || !(c.rotor_heat_tau_s > 0.0) ||
       !(c.winding_measurement_sd_K > 0.0) || !(c.loss_scale_sd >= 0.0) ||
-      !(c.loss_scale_max_sd > 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
-      !(c.winding_bias_sd_K >= 0.0) || !(c.winding_bias_tau_s > 0.0) ||
-      !(c.magnet_bias_sd_K >= 0.0) || !(c.magnet_bias_tau_s > 0.0) ||
-      !(c.magnet_min_white_sd_K > 0.0) || !(c.sensor_step_gate_sd >= 0.0) || !(c.r0_sd_rel > 0.0) ||
-      !(c.psi0_sd_rel > 0.0) || !(c.calibration_walk_per_sqrt_h >= 0.0) ||
-      !(c.voltage_offset_sd_V > 0.0) || !(c.voltage_offset_tau_s > 0.0) || !(c.uq_min_sd_V > 0.0) ||
-      !(c.voltage_gate_sd >= 0.0)) {
+      !(c.loss_scale_max_sd > 0.0) || !(c.copper_loss_sd_rel >= 0.0) || !(c.sd_floor_K >= 0.0) ||
+      !(c.initial_spread_sd_K > 0.0) || !(c.winding_bias_sd_K >= 0.0) ||
+      !(c.winding_bias_tau_s > 0.0) || !(c.magnet_bias_sd_K >= 0.0) ||
+      !(c.magnet_bias_tau_s > 0.0) || !(c.magnet_min_white_sd_K > 0.0) ||
+      !(c.sensor_step_gate_sd >= 0.0) || !(c.r0_sd_rel > 0.0) || !(c.psi0_sd_rel > 0.0) ||
+      !(c.calibration_walk_per_sqrt_h >= 0.0) || !(c.voltage_offset_sd_V > 0.0) ||
+      !(c.voltage_offset_tau_s > 0.0) || !(c.uq_min_sd_V > 0.0) || !(c.voltage_gate_sd >= 0.0)) {
     throw std::invalid_argument(
         "disturbance sensor: standard deviations and times must be positive");
   }
@@ -80,8 +80,8 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   lin_block_.f_K_per_s = Eigen::VectorXd::Zero(nb);
   sensor_model_.AddLagRow(lin_block_.a_per_s);
   const Eigen::VectorXd& cap = model_.Capacities_J_per_K();
-  heat_in_ = Eigen::MatrixXd::Zero(nb, 3);  // K/s per unit of d_f, d_r, s
-  phi_heat_ = Eigen::MatrixXd::Zero(nb, 3);
+  heat_in_ = Eigen::MatrixXd::Zero(nb, 4);  // K/s per unit of d_f, d_r, s, dR
+  phi_heat_ = Eigen::MatrixXd::Zero(nb, 4);
   heat_in_(frame, 0) = 1.0 / cap(frame);
   if (dr_ >= 0) heat_in_(rotor_, 1) = 1.0 / cap(rotor_);
   ad_ = Eigen::MatrixXd::Identity(n_aug_, n_aug_);
@@ -304,30 +304,57 @@ void DisturbanceThermalSensor::AddFoundHeat(ThermalLinearModel& lin) const {
   if (dr_ >= 0) lin.f_K_per_s(rotor_) += filter_.State()(dr_) / cap(rotor_);
 }
 
+void DisturbanceThermalSensor::LossColumns() {
+  // A loss's share of dx/dt at the estimate: (a x + f) at one set of inputs minus another.
+  const auto share = [&](const ThermalLinearModel& with, const ThermalLinearModel& without,
+                         int column) {
+    auto col = heat_in_.col(column).head(n_);
+    col.noalias() = with.a_per_s * x_nodes_;
+    col += with.f_K_per_s;
+    col.noalias() -= without.a_per_s * x_nodes_;
+    col -= without.f_K_per_s;
+  };
+  if (dr_state_ >= 0) {
+    // With the voltage rows the copper loss is measured, not modelled: the currents are read
+    // and the resistance R0 (1 + dR)(1 + alpha (Tw - T0)) is what the rows identify (Han 2019
+    // eq. 2). So dR scales the copper loss (its column: the copper's share), and the loss scale
+    // s stands for the losses nothing measures (iron, rotor, friction), and for the copper's
+    // only by copper_loss_sd_rel / loss_scale_max_sd of it: the copper no longer widens the
+    // winding's rise by the whole of s (95 % of the demo's winding variance before).
+    share(lin_still_, lin_idle_, 3);
+    if (ls_ >= 0) {
+      share(lin_, lin_still_, 2);
+      heat_in_.col(2).head(n_) +=
+          (config_.copper_loss_sd_rel / config_.loss_scale_max_sd) * heat_in_.col(3).head(n_);
+    }
+  } else if (ls_ >= 0) {
+    share(lin_, lin_idle_, 2);
+  }
+}
+
 bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   const auto& c = config_;
   const int nb = static_cast<int>(lin_block_.f_K_per_s.size());
   x_nodes_ = filter_.State().head(n_);
   try {
     model_.Linearise(in, x_nodes_, lin_);
-    if (ls_ >= 0) {
+    if (ls_ >= 0 || dr_state_ >= 0) {
       ThermalInputs idle = in;
       idle.speed_rpm = idle.id_A = idle.iq_A = 0.0;
       model_.Linearise(idle, x_nodes_, lin_idle_);
+    }
+    if (dr_state_ >= 0) {
+      // The currents at standstill: the copper loss alone (the speed's losses are zero there).
+      ThermalInputs still = in;
+      still.speed_rpm = 0.0;
+      model_.Linearise(still, x_nodes_, lin_still_);
     }
   } catch (const std::exception&) {
     return false;  // a massless sub-network singular at this operating point
   }
   lin_block_.a_per_s.topLeftCorner(n_, n_) = lin_.a_per_s;
   lin_block_.f_K_per_s.head(n_) = lin_.f_K_per_s;
-  if (ls_ >= 0) {
-    // The losses' share of dx/dt at the estimate: (a x + f) under load minus at rest.
-    auto col = heat_in_.col(2).head(n_);
-    col.noalias() = lin_.a_per_s * x_nodes_;
-    col += lin_.f_K_per_s;
-    col.noalias() -= lin_idle_.a_per_s * x_nodes_;
-    col -= lin_idle_.f_K_per_s;
-  }
+  LossColumns();
   discretiser_.Update(lin_block_, dt_s);
   const ThermalDiscreteModel& d = discretiser_.Current();
   ad_.topLeftCorner(nb, nb) = d.ad;
@@ -340,6 +367,7 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
     ad_(dr_, dr_) = std::exp(-dt_s / c.rotor_heat_tau_s);
   }
   if (ls_ >= 0) ad_.col(ls_).head(nb) = phi_heat_.col(2);
+  if (dr_state_ >= 0) ad_.col(dr_state_).head(nb) = phi_heat_.col(3);
   const double q = c.node_process_sd_K * c.node_process_sd_K * dt_s;
   for (int i = 0; i < n_; ++i) sp_(i, i) = q;
   sp_(df_, df_) = c.frame_heat_sd_W * c.frame_heat_sd_W * dt_s;

@@ -64,6 +64,11 @@ struct DisturbanceSensorConfig {
   /// s, and the interior's sd with it, grow without bound, and x + 2 sd reach a trip level on a
   /// healthy pump.
   double loss_scale_max_sd = 0.3;
+  /// With the voltage rows: how far the copper loss may still be off, relative, at the loss
+  /// scale's stationary sd (the rows measure the resistance; left are the skin and proximity
+  /// losses a DC resistance misses, the winding's hot spot against its mean, and dR's own
+  /// error). Without them the copper is in the loss scale like every other loss.
+  double copper_loss_sd_rel = 0.10;
   double sd_floor_K = 1.0;  ///< added in quadrature to every reported node sd
   /// A step of the reading between readings fused at consecutive steps (or the last one before
   /// a gap and the first after ReopenSensorOffset()) that differs from the step the filter
@@ -225,6 +230,8 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// The voltage row (extended: linearised at the predicted state); false when its innovation
   /// fails the gate (voltage_gate_sd).
   bool VoltageRow(const ThermalReadings& r);
+  /// The loss scale's and dR's columns of heat_in_ at the predicted operating point.
+  void LossColumns();
   /// The report's rows from the update.
   void ReportRows(const KalmanUpdateReport& update, const Used& used);
   /// Every node and the lag at `x0_degC` with a common sd and one of each's own; the rest at its
@@ -255,7 +262,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
   int sensor_steps_ = 0;
   double last_sensor_step_K_ = 0.0;
   double stepped_offset_K_ = 0.0;
-  ThermalLinearModel lin_, lin_block_, lin_idle_;
+  ThermalLinearModel lin_, lin_block_, lin_idle_, lin_still_;
   ThermalDiscretiser discretiser_;
   KalmanFilter filter_;
   ObserverReport report_;
@@ -264,8 +271,9 @@ class DisturbanceThermalSensor : public ThermalObserver {
   Eigen::VectorXd bu_, x_nodes_;
   Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows
   Eigen::VectorXd y0_;
-  Eigen::MatrixXd heat_in_, phi_heat_;  ///< d_f, d_r, s into the nodes (K/s per unit); Phi times it
-  Eigen::MatrixXd c_all_, sm_all_;      ///< every reading's row (m x n_aug, m x m)
+  Eigen::MatrixXd heat_in_,
+      phi_heat_;                    ///< d_f, d_r, s, dR into the nodes (K/s per unit); Phi times it
+  Eigen::MatrixXd c_all_, sm_all_;  ///< every reading's row (m x n_aug, m x m)
   Eigen::MatrixXd cw_row_, cm_row_;  ///< the winding and magnet rows (1 x n_aug), magnet without g
   Eigen::VectorXd y_all_;
   /// Workspaces of WeightedVariance_K2 and SettlingSd_K (const queries, no allocation).
