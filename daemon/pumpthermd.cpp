@@ -181,13 +181,15 @@ int main(int argc, char** argv) {
           "replay it with lcm-logplayer --lcm-url=URL FILE",
           offline.lcm_log.empty() ? "none given" : offline.lcm_log,
           config.lcm.url.empty() ? "unset" : config.lcm.url);
-    // The MQTT sink, when configured: every step is sent (Offer waits for room; an offline run
-    // has no timing to keep), then NDEATH.
+    // The MQTT sink, when configured, then NDEATH. As fast as possible every step is sent (Offer
+    // waits for room: such a run has no timing to keep); paced, a full queue drops the oldest
+    // step, as live.
     std::unique_ptr<MqttSink> mqtt;
     OfflineResult r;
     try {
       if (config.mqtt.enabled) {
-        mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway, true);
+        mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway,
+                                          offline.pace == 0.0);
         offline.after_advance = [&](const Gateway& g, std::int64_t) { mqtt->Offer(g); };
       }
       r = RunOffline(*in, source, *gateway, offline);
