@@ -355,6 +355,7 @@ struct LiveLoop::Impl : OutputSink {
   /// forward neither stops nor skips thermal steps and holds); the wall clock only labels.
   void AdvanceGateway() {
     gateway->SetWallClockOffset(WallMinusMonotonicUs());
+    gateway->SetMqttHealth(mqtt ? mqtt->Health() : MqttHealth{});
     gateway->Advance(ClockUs(CLOCK_MONOTONIC), *this);
     if (mqtt) mqtt->Offer(*gateway);
     SaveIfTripLatched();

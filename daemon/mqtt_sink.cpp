@@ -201,6 +201,11 @@ MqttCounts MqttSink::counts() const {
   return c;
 }
 
+MqttHealth MqttSink::Health() const {
+  const MqttCounts c = counts();
+  return {true, c.connected, c.dropped, c.alarms_dropped};
+}
+
 std::string MqttSink::StatusText() const {
   const MqttCounts c = counts();
   return fmt::format("mqtt {} {}:{}, {} sent, {} alarms sent, {} dropped, {} alarms dropped",

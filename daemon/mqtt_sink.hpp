@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "daemon/config.hpp"
+#include "daemon/gateway.hpp"
 #include "daemon/mqtt_queue.hpp"
 #include "daemon/mqtt_sparkplug.hpp"
 
@@ -24,8 +25,6 @@ struct mosquitto;
 struct mosquitto_message;
 
 namespace pumptherm::daemon {
-
-class Gateway;
 
 /// What the sink did, for STATUS= and the summary.
 struct MqttCounts {
@@ -57,6 +56,8 @@ class MqttSink {
   /// Sends what is queued (up to `drain_timeout_s`), then NDEATH, and disconnects.
   void Stop(double drain_timeout_s);
   MqttCounts counts() const;
+  /// The counts as the health message carries them (no allocation: the loop calls it).
+  MqttHealth Health() const;
   /// "mqtt connected to HOST:PORT, N sent, N alarms, N dropped ..." for STATUS=.
   std::string StatusText() const;
 

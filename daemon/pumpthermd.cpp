@@ -190,7 +190,12 @@ int main(int argc, char** argv) {
       if (config.mqtt.enabled) {
         mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway,
                                           offline.pace == 0.0);
-        offline.after_advance = [&](const Gateway& g, std::int64_t) { mqtt->Offer(g); };
+        // The health messages carry the counts as of the step before (live, the loop hands them
+        // in before each Advance).
+        offline.after_advance = [&](const Gateway& g, std::int64_t) {
+          mqtt->Offer(g);
+          gateway->SetMqttHealth(mqtt->Health());
+        };
       }
       r = RunOffline(*in, source, *gateway, offline);
       if (mqtt) {
