@@ -220,6 +220,7 @@ struct LiveLoop::Impl : OutputSink {
     if (mqtt) mqtt->Stop(1.0);
     mqtt.reset();
     if (!config.mqtt.enabled) return;
+    CheckMqttFiles(config);
     mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway, false);
     Log(LogLevel::kNotice, "mqtt: publishing to {}:{} as spBv1.0/{}/.../{} ({})", config.mqtt.host,
         config.mqtt.port, config.mqtt.group_id,

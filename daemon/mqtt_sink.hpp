@@ -26,6 +26,15 @@ struct mosquitto_message;
 
 namespace pumptherm::daemon {
 
+/// Checks the files an [mqtt] table names, as --check-config and the sink's start do: the CA and
+/// the client certificate exist, are readable, hold a PEM certificate, and neither group nor
+/// others may write them (a CA others can replace lets anyone pose as the broker); the key and
+/// the password file as the clear key (SecretKeyFileProblem: this user's or root's, no group or
+/// other access, not in a folder others can write), readable, the key a PEM private key, the
+/// password file's first line not empty. Throws ConfigError "SOURCE:LINE: key 'mqtt.KEY': ...".
+/// Nothing without [mqtt].
+void CheckMqttFiles(const DaemonConfig& config);
+
 /// What the sink did, for STATUS= and the summary.
 struct MqttCounts {
   bool connected = false;

@@ -51,6 +51,7 @@ int CheckConfig(const std::string& path, const std::string& against, bool lag_fi
       Log(LogLevel::kWarning, "{}", w);
     Gateway g(c);  // also checks the DBC, mapping, motors and models it names
     g.LoadClearKeys(CredentialsDirectory());  // and the key files' permissions
+    CheckMqttFiles(c);                        // the broker's CA, the client's key, the password
     RequireServiceConfig(c);
     if (!against.empty()) {
       CommissionOptions options;
@@ -188,6 +189,7 @@ int main(int argc, char** argv) {
     OfflineResult r;
     try {
       if (config.mqtt.enabled) {
+        CheckMqttFiles(config);
         mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway,
                                           offline.pace == 0.0);
         // The health messages carry the counts as of the step before (live, the loop hands them
