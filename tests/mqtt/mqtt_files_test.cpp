@@ -40,12 +40,13 @@ class MqttFiles : public ::testing::Test {
   }
   /// CheckMqttFiles' error for the usual [mqtt] table over this test's files ("" if none).
   std::string ErrorOf() const {
-    const std::string text = "[gateway]\nname = \"gw\"\n\n[mqtt]\nhost = \"broker.plant\"\n"
-                             "ca_file = \"ca.pem\"\n"       // line 6
-                             "cert_file = \"gw.pem\"\n"     // line 7
-                             "key_file = \"gw.key\"\n"      // line 8
-                             "username = \"gw7\"\n"
-                             "password_file = \"password\"\n";  // line 10
+    const std::string text =
+        "[gateway]\nname = \"gw\"\n\n[mqtt]\nhost = \"broker.plant\"\n"
+        "ca_file = \"ca.pem\"\n"    // line 6
+        "cert_file = \"gw.pem\"\n"  // line 7
+        "key_file = \"gw.key\"\n"   // line 8
+        "username = \"gw7\"\n"
+        "password_file = \"password\"\n";  // line 10
     const DaemonConfig c = ParseConfig(text, dir_ + "/p.toml");
     try {
       CheckMqttFiles(c);
