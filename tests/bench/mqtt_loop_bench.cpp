@@ -60,9 +60,10 @@ double Percentile(std::vector<double> v, double q) {
 }
 
 std::string Figures(const std::vector<double>& us) {
-  return fmt::format(R"({{"n": {}, "p50_us": {:.2f}, "p99_us": {:.2f}, "p999_us": {:.2f}, "max_us": {:.1f}}})",
-                     us.size(), Percentile(us, 0.5), Percentile(us, 0.99), Percentile(us, 0.999),
-                     us.empty() ? 0.0 : *std::max_element(us.begin(), us.end()));
+  return fmt::format(
+      R"({{"n": {}, "p50_us": {:.2f}, "p99_us": {:.2f}, "p999_us": {:.2f}, "max_us": {:.1f}}})",
+      us.size(), Percentile(us, 0.5), Percentile(us, 0.99), Percentile(us, 0.999),
+      us.empty() ? 0.0 : *std::max_element(us.begin(), us.end()));
 }
 
 void Run(const std::vector<std::string>& lines, pd::DaemonConfig config, bool with_sink) {
@@ -107,10 +108,11 @@ void Run(const std::vector<std::string>& lines, pd::DaemonConfig config, bool wi
     steps = s;
   }
   const pd::MqttHealth h = sink ? sink->Health() : pd::MqttHealth{};
-  fmt::print(R"({{"mqtt": "{}", "frames": {}, "thermal_steps": {}, "mqtt_dropped": {}, "all": {}, "step_frames": {}}})"
-             "\n",
-             with_sink ? "broker absent" : "none", all_us.size(), steps, h.dropped, Figures(all_us),
-             Figures(step_us));
+  fmt::print(
+      R"({{"mqtt": "{}", "frames": {}, "thermal_steps": {}, "mqtt_dropped": {}, "all": {}, "step_frames": {}}})"
+      "\n",
+      with_sink ? "broker absent" : "none", all_us.size(), steps, h.dropped, Figures(all_us),
+      Figures(step_us));
   if (sink) sink->Stop(0.0);
 }
 
