@@ -189,7 +189,8 @@ bool LocalHost(const std::string& host) {
 /// [mqtt]: the broker, the Sparkplug ids, TLS and credentials (docs/daemon.md, "[mqtt]").
 void ReadMqtt(TableReader& r, const std::string& base_dir, MqttConfig& m) {
   const std::string empty;
-  auto path = [&](std::string_view key) {
+  auto path = [&](std::string_view key, int& line) {
+    if (const toml::node* n = r.table().get(key)) line = static_cast<int>(n->source().begin.line);
     std::string p = r.String(key, &empty);
     if (!p.empty() && p[0] != '/') p = base_dir + "/" + p;
     return p;
@@ -210,11 +211,11 @@ void ReadMqtt(TableReader& r, const std::string& base_dir, MqttConfig& m) {
   if (m.host.empty()) r.Fail(r.table().get("host"), "host", "expected a host name or address");
   m.group_id = id("group_id", m.group_id);
   m.edge_node_id = id("edge_node_id", empty);
-  m.ca_file = path("ca_file");
-  m.cert_file = path("cert_file");
-  m.key_file = path("key_file");
+  m.ca_file = path("ca_file", m.ca_file_line);
+  m.cert_file = path("cert_file", m.cert_file_line);
+  m.key_file = path("key_file", m.key_file_line);
   m.username = r.String("username", &empty);
-  m.password_file = path("password_file");
+  m.password_file = path("password_file", m.password_file_line);
   m.allow_plaintext = r.Bool("allow_plaintext", false);
   m.keepalive_s = r.Number("keepalive_s", m.keepalive_s, 5.0, 3600.0);
   m.queue_steps = static_cast<std::size_t>(

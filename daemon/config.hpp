@@ -110,6 +110,8 @@ struct MqttConfig {
   std::size_t queue_steps = 256;         ///< data messages waiting; the oldest dropped
   std::size_t alarm_queue_steps = 1024;  ///< alarm transitions waiting, kept across outages
   int line = 0;                          ///< line of the [mqtt] table
+  /// Lines of the file keys (0: not given), for CheckMqttFiles' file:line errors.
+  int ca_file_line = 0, cert_file_line = 0, key_file_line = 0, password_file_line = 0;
 };
 
 /// Alarm levels of one node (or of the measured sensor, key "sensor").

@@ -45,6 +45,15 @@ class OutputSink {
 };
 
 /// Gateway-wide counters beyond the per-interface ones.
+/// The MQTT sink's figures for the health message (gateway_health_t), handed in by the loop
+/// that runs the sink; all zero without one.
+struct MqttHealth {
+  bool enabled = false;
+  bool connected = false;
+  std::uint64_t dropped = 0;         ///< data steps dropped: its queue was full
+  std::uint64_t alarms_dropped = 0;  ///< alarm transitions dropped: their queue was full
+};
+
 struct GatewayCounters {
   std::uint64_t rx_unknown_id = 0;  ///< frames whose ID no configured pump uses
   /// Of those, frames of a mapped input message for a node ID no pump on that interface has
@@ -145,6 +154,8 @@ class Gateway {
   FrameCounter& counter() { return counter_; }
   const FrameCounter& counter() const { return counter_; }
   const GatewayCounters& counters() const { return counters_; }
+  /// The MQTT sink's figures that the next health messages carry.
+  void SetMqttHealth(const MqttHealth& h) { mqtt_health_ = h; }
   const std::vector<std::unique_ptr<Pump>>& pumps() const { return pumps_; }
   const DaemonConfig& config() const { return config_; }
 
@@ -350,6 +361,7 @@ class Gateway {
   protocol::SignalMapping mapping_;
   FrameCounter counter_;
   GatewayCounters counters_;
+  MqttHealth mqtt_health_;
   std::int64_t wall_offset_us_ = 0;
   std::vector<InputMessage> inputs_;
   std::vector<std::unique_ptr<Pump>> pumps_;

@@ -162,6 +162,10 @@ void Gateway::FillHealth(std::int64_t now_us, pumptherm::gateway_health_t& m) co
   m.clears_accepted = static_cast<std::int64_t>(counters_.clears_accepted);
   m.clears_refused = static_cast<std::int64_t>(counters_.clears_refused);
   m.clears_unauthenticated = static_cast<std::int64_t>(counters_.clears_unauthenticated);
+  m.mqtt_enabled = mqtt_health_.enabled;
+  m.mqtt_connected = mqtt_health_.connected;
+  m.mqtt_dropped = static_cast<std::int64_t>(mqtt_health_.dropped);
+  m.mqtt_alarms_dropped = static_cast<std::int64_t>(mqtt_health_.alarms_dropped);
   const auto& interfaces = counter_.interfaces();
   m.interfaces.resize(interfaces.size());
   for (std::size_t k = 0; k < interfaces.size(); ++k) {

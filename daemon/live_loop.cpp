@@ -220,6 +220,7 @@ struct LiveLoop::Impl : OutputSink {
     if (mqtt) mqtt->Stop(1.0);
     mqtt.reset();
     if (!config.mqtt.enabled) return;
+    CheckMqttFiles(config);
     mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway, false);
     Log(LogLevel::kNotice, "mqtt: publishing to {}:{} as spBv1.0/{}/.../{} ({})", config.mqtt.host,
         config.mqtt.port, config.mqtt.group_id,
@@ -355,6 +356,7 @@ struct LiveLoop::Impl : OutputSink {
   /// forward neither stops nor skips thermal steps and holds); the wall clock only labels.
   void AdvanceGateway() {
     gateway->SetWallClockOffset(WallMinusMonotonicUs());
+    gateway->SetMqttHealth(mqtt ? mqtt->Health() : MqttHealth{});
     gateway->Advance(ClockUs(CLOCK_MONOTONIC), *this);
     if (mqtt) mqtt->Offer(*gateway);
     SaveIfTripLatched();

@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 #include <mosquitto.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -10,6 +11,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <optional>
 #include <sstream>
@@ -50,10 +52,31 @@ std::string ReadSecretFile(const std::string& path, std::string_view what) {
   return line;
 }
 
+/// "" when `path` can be read and holds a line starting with `begin` ("-----BEGIN ..."), else
+/// what is wrong.
+std::string PemProblem(const std::string& path, std::string_view begin) {
+  std::ifstream f(path);
+  if (!f) return fmt::format("'{}': cannot be read: {}", path, std::strerror(errno));
+  for (std::string line; std::getline(f, line);)
+    if (line.rfind(begin, 0) == 0) return "";
+  return fmt::format("'{}' holds no '{}' (PEM) block", path, begin);
+}
+
 void RequireReadable(const std::string& path, std::string_view what) {
   if (path.empty()) return;
   std::ifstream f(path);
   if (!f) throw std::runtime_error(fmt::format("mqtt.{}: cannot read '{}'", what, path));
+}
+
+/// What is wrong with a PEM file others may read (a certificate): "" when nothing is.
+std::string PublicPemProblem(const std::string& path, std::string_view begin) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return fmt::format("'{}': {}", path, std::strerror(errno));
+  if (!S_ISREG(st.st_mode)) return fmt::format("'{}' is not a regular file", path);
+  if ((st.st_mode & (S_IWGRP | S_IWOTH)) != 0)
+    return fmt::format("'{}' may be written by its group or others (mode {:04o}): chmod go-w", path,
+                       st.st_mode & 07777);
+  return PemProblem(path, begin);
 }
 
 std::vector<mqtt::Device> Devices(const Gateway& g) {
@@ -70,6 +93,48 @@ std::size_t Width(const std::vector<mqtt::Device>& devices) {
 }
 
 }  // namespace
+
+void CheckMqttFiles(const DaemonConfig& config) {
+  const MqttConfig& m = config.mqtt;
+  if (!m.enabled) return;
+  auto fail = [&](std::string_view key, int line, const std::string& problem) {
+    if (problem.empty()) return;
+    std::string text = fmt::format("{}:{}: key 'mqtt.{}': {}", config.source, line, key, problem);
+    if (m.password_file.rfind("/run/credentials/", 0) == 0 && key == "password_file")
+      text += " (a LoadCredential= copy exists only while the service runs: check its source)";
+    throw ConfigError(text);
+  };
+  if (!m.ca_file.empty())
+    fail("ca_file", m.ca_file_line, PublicPemProblem(m.ca_file, "-----BEGIN CERTIFICATE-----"));
+  if (!m.cert_file.empty())
+    fail("cert_file", m.cert_file_line,
+         PublicPemProblem(m.cert_file, "-----BEGIN CERTIFICATE-----"));
+  if (!m.key_file.empty()) {
+    fail("key_file", m.key_file_line, SecretKeyFileProblem(m.key_file, KeyOwner::kCallerOrRoot));
+    // "-----BEGIN PRIVATE KEY-----", "-----BEGIN RSA PRIVATE KEY-----", "-----BEGIN EC ...".
+    std::string problem = PemProblem(m.key_file, "-----BEGIN ");
+    if (problem.empty()) {
+      std::ifstream f(m.key_file);
+      std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+      if (text.find("PRIVATE KEY-----") == std::string::npos)
+        problem = fmt::format("'{}' holds no PEM private key", m.key_file);
+    }
+    fail("key_file", m.key_file_line, problem);
+  }
+  if (!m.password_file.empty()) {
+    fail("password_file", m.password_file_line,
+         SecretKeyFileProblem(m.password_file, KeyOwner::kCallerOrRoot));
+    std::ifstream f(m.password_file);
+    std::string line;
+    if (!f)
+      fail("password_file", m.password_file_line,
+           fmt::format("'{}': cannot be read: {}", m.password_file, std::strerror(errno)));
+    std::getline(f, line);
+    if (line.empty())
+      fail("password_file", m.password_file_line,
+           fmt::format("'{}': the first line (the password) is empty", m.password_file));
+  }
+}
 
 MqttSink::MqttSink(const MqttConfig& config, const std::string& gateway_name,
                    const Gateway& gateway, bool wait_for_room)
@@ -199,6 +264,11 @@ MqttCounts MqttSink::counts() const {
   MqttCounts c = counts_;
   c.connected = connected_;
   return c;
+}
+
+MqttHealth MqttSink::Health() const {
+  const MqttCounts c = counts();
+  return {true, c.connected, c.dropped, c.alarms_dropped};
 }
 
 std::string MqttSink::StatusText() const {

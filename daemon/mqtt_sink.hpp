@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "daemon/config.hpp"
+#include "daemon/gateway.hpp"
 #include "daemon/mqtt_queue.hpp"
 #include "daemon/mqtt_sparkplug.hpp"
 
@@ -25,7 +26,14 @@ struct mosquitto_message;
 
 namespace pumptherm::daemon {
 
-class Gateway;
+/// Checks the files an [mqtt] table names, as --check-config and the sink's start do: the CA and
+/// the client certificate exist, are readable, hold a PEM certificate, and neither group nor
+/// others may write them (a CA others can replace lets anyone pose as the broker); the key and
+/// the password file as the clear key (SecretKeyFileProblem: this user's or root's, no group or
+/// other access, not in a folder others can write), readable, the key a PEM private key, the
+/// password file's first line not empty. Throws ConfigError "SOURCE:LINE: key 'mqtt.KEY': ...".
+/// Nothing without [mqtt].
+void CheckMqttFiles(const DaemonConfig& config);
 
 /// What the sink did, for STATUS= and the summary.
 struct MqttCounts {
@@ -57,6 +65,8 @@ class MqttSink {
   /// Sends what is queued (up to `drain_timeout_s`), then NDEATH, and disconnects.
   void Stop(double drain_timeout_s);
   MqttCounts counts() const;
+  /// The counts as the health message carries them (no allocation: the loop calls it).
+  MqttHealth Health() const;
   /// "mqtt connected to HOST:PORT, N sent, N alarms, N dropped ..." for STATUS=.
   std::string StatusText() const;
 

@@ -51,6 +51,7 @@ int CheckConfig(const std::string& path, const std::string& against, bool lag_fi
       Log(LogLevel::kWarning, "{}", w);
     Gateway g(c);  // also checks the DBC, mapping, motors and models it names
     g.LoadClearKeys(CredentialsDirectory());  // and the key files' permissions
+    CheckMqttFiles(c);                        // the broker's CA, the client's key, the password
     RequireServiceConfig(c);
     if (!against.empty()) {
       CommissionOptions options;
@@ -181,14 +182,22 @@ int main(int argc, char** argv) {
           "replay it with lcm-logplayer --lcm-url=URL FILE",
           offline.lcm_log.empty() ? "none given" : offline.lcm_log,
           config.lcm.url.empty() ? "unset" : config.lcm.url);
-    // The MQTT sink, when configured: every step is sent (Offer waits for room; an offline run
-    // has no timing to keep), then NDEATH.
+    // The MQTT sink, when configured, then NDEATH. As fast as possible every step is sent (Offer
+    // waits for room: such a run has no timing to keep); paced, a full queue drops the oldest
+    // step, as live.
     std::unique_ptr<MqttSink> mqtt;
     OfflineResult r;
     try {
       if (config.mqtt.enabled) {
-        mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway, true);
-        offline.after_advance = [&](const Gateway& g, std::int64_t) { mqtt->Offer(g); };
+        CheckMqttFiles(config);
+        mqtt = std::make_unique<MqttSink>(config.mqtt, config.gateway.name, *gateway,
+                                          offline.pace == 0.0);
+        // The health messages carry the counts as of the step before (live, the loop hands them
+        // in before each Advance).
+        offline.after_advance = [&](const Gateway& g, std::int64_t) {
+          mqtt->Offer(g);
+          gateway->SetMqttHealth(mqtt->Health());
+        };
       }
       r = RunOffline(*in, source, *gateway, offline);
       if (mqtt) {

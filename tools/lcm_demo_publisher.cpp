@@ -218,6 +218,13 @@ int Run(const Options& options) {
       health.uptime_s = t_s;
       health.num_pumps = static_cast<std::int32_t>(options.pumps.size());
       health.lcm_publish_failures = failures;
+      health.clears_accepted = 0;
+      health.clears_refused = 0;
+      health.clears_unauthenticated = 0;
+      health.mqtt_enabled = false;
+      health.mqtt_connected = false;
+      health.mqtt_dropped = 0;
+      health.mqtt_alarms_dropped = 0;
       for (const char* name : {"can0", "can1"}) {
         pumptherm::interface_health_t interface;
         interface.name = name;

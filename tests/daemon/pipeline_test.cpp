@@ -371,6 +371,23 @@ TEST(Pipeline, ANodeWithoutCanOutputIsAConfigurationErrorNamingIt) {
   std::remove(path.c_str());
 }
 
+TEST(Pipeline, TheHealthMessageCarriesTheMqttSinksDrops) {
+  Gateway g(ParseConfig(GenericConfig(""),
+                        std::string(PUMPTHERM_SOURCE_DIR) + "/tests/daemon/pipeline.toml"));
+  pumptherm::gateway_health_t m;
+  auto bytes = g.EncodeHealth(1'000'000);
+  ASSERT_GT(m.decode(bytes.data(), 0, static_cast<int>(bytes.size())), 0);
+  EXPECT_FALSE(m.mqtt_enabled);
+  EXPECT_EQ(m.mqtt_dropped, 0);
+  g.SetMqttHealth({true, false, 441, 2});
+  bytes = g.EncodeHealth(2'000'000);
+  ASSERT_GT(m.decode(bytes.data(), 0, static_cast<int>(bytes.size())), 0);
+  EXPECT_TRUE(m.mqtt_enabled);
+  EXPECT_FALSE(m.mqtt_connected);
+  EXPECT_EQ(m.mqtt_dropped, 441);
+  EXPECT_EQ(m.mqtt_alarms_dropped, 2);
+}
+
 /// The last GW_ALARM of node 1, decoded: (MismatchState, MismatchEffect).
 std::pair<double, double> LastMismatchOnCan(const Bench& b) {
   const protocol::DbcMessage* alarm = b.dbc_.FindMessage("GW_ALARM");

@@ -6,11 +6,18 @@ the schema compiled by protoc (python3-protobuf), and writes one JSON line per m
 {"topic", "seq", "timestamp", "metrics": [{"name", "alias", "datatype", "is_null", "value"}]}.
 Exits after the NDEATH of --edge-node (or --timeout seconds, exit 1). Prints "subscribed" on
 stdout once the subscription is granted, so the test starts the daemon only then.
+With --persistent: a persistent session (clean_session false, QoS 1), reconnecting when the broker
+comes back; it exits once --stop-file exists and the NDEATH of the newest NBIRTH's bdSeq came
+(a will the broker sent for an earlier session does not count). On each connection after the
+first it asks the edge node for a rebirth (NCMD Node Control/Rebirth, as a Sparkplug host that
+comes back does): births are QoS 0, so a gateway that reconnected first is not seen otherwise.
 """
 import argparse
 import json
 import math
+import os
 import sys
+import time
 
 import paho.mqtt.client as mqtt
 
@@ -37,12 +44,24 @@ def main():
     ap.add_argument("--edge-node", required=True)
     ap.add_argument("--deaths", type=int, default=1, help="NDEATHs to wait for")
     ap.add_argument("--timeout", type=float, default=120.0)
+    ap.add_argument("--persistent", action="store_true")
+    ap.add_argument("--group", default="plant", help="for the rebirth request")
+    ap.add_argument("--stop-file")
     a = ap.parse_args()
     out = open(a.out, "w")
-    state = {"deaths": 0}
+    state = {"connects": 0, "deaths": 0, "birth_bd": None, "final_death": False}
 
     def on_connect(client, userdata, flags, rc):
         client.subscribe("spBv1.0/#", qos=1)
+        state["connects"] += 1
+        if a.persistent and state["connects"] > 1:
+            p = spb.Payload()
+            p.timestamp = int(time.time() * 1000)
+            m = p.metrics.add()
+            m.name = "Node Control/Rebirth"
+            m.datatype = 11  # Boolean
+            m.boolean_value = True
+            client.publish(f"spBv1.0/{a.group}/NCMD/{a.edge_node}", p.SerializeToString(), qos=0)
 
     def on_subscribe(client, userdata, mid, granted):
         print("subscribed", flush=True)
@@ -70,25 +89,36 @@ def main():
         out.write(json.dumps(rec) + "\n")
         out.flush()
         parts = msg.topic.split("/")
+        bd = [x["value"] for x in rec["metrics"] if x["name"] == "bdSeq"]
+        if len(parts) == 4 and parts[2] == "NBIRTH" and parts[3] == a.edge_node:
+            state["birth_bd"] = bd[0] if bd else None
+            state["final_death"] = False
         if len(parts) == 4 and parts[2] == "NDEATH" and parts[3] == a.edge_node:
+            state["final_death"] = bool(bd) and bd[0] == state["birth_bd"]
             state["deaths"] += 1
-            if state["deaths"] >= a.deaths:
+            if state["deaths"] >= a.deaths and not a.stop_file:
                 client.disconnect()
 
-    c = mqtt.Client(client_id="pumptherm-test-subscriber", clean_session=True)
+    c = mqtt.Client(client_id="pumptherm-test-subscriber", clean_session=not a.persistent)
+    c.reconnect_delay_set(min_delay=0.1, max_delay=0.2)
     c.tls_set(ca_certs=a.ca, certfile=a.cert, keyfile=a.key)
     c.on_connect = on_connect
     c.on_subscribe = on_subscribe
     c.on_message = on_message
     c.connect("127.0.0.1", a.port, keepalive=30)
     c.loop_start()
-    import time
 
     end = time.monotonic() + a.timeout
-    while state["deaths"] < a.deaths and time.monotonic() < end:
+    def done():
+        if a.stop_file:
+            return os.path.exists(a.stop_file) and state["final_death"]
+        return state["deaths"] >= a.deaths
+
+    while not done() and time.monotonic() < end:
         time.sleep(0.05)
+    c.disconnect()
     c.loop_stop()
-    if state["deaths"] < a.deaths:
+    if not done():
         print(f"subscriber: no NDEATH of {a.edge_node} within {a.timeout} s", file=sys.stderr)
         return 1
     return 0

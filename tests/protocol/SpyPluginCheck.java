@@ -157,6 +157,15 @@ public final class SpyPluginCheck {
     hd.last = g2;
     hv.refresh();
     expect("1000".equals(hv.model.getValueAt(0, 2)), "rx frames/s from the counts: " + hv.model.getValueAt(0, 2));
+    expect(!hv.header.getText().contains("MQTT"), "no MQTT without the sink: " + hv.header.getText());
+    pumptherm.gateway_health_t g3 = g2.copy();
+    g3.mqtt_enabled = true;
+    g3.mqtt_dropped = 441;
+    g3.mqtt_alarms_dropped = 0;
+    hd.last = g3;
+    hv.refresh();
+    expect(hv.header.getText().contains("MQTT not connected, dropped: 441 steps, 0 alarms"),
+           "the MQTT sink's drops: " + hv.header.getText());
 
     expect(PumpthermSpyPlugin.get(t, "no_such_field_degC") == null, "a field the type lacks reads as absent");
     PumpthermSpyPlugin plugin = new PumpthermSpyPlugin();

@@ -157,6 +157,10 @@ void FlattenInto(Flat& f, const std::string& p, const gateway_health_t& m) {
   f.Integer(p + ".clears_accepted", m.clears_accepted);
   f.Integer(p + ".clears_refused", m.clears_refused);
   f.Integer(p + ".clears_unauthenticated", m.clears_unauthenticated);
+  f.Bool(p + ".mqtt_enabled", m.mqtt_enabled);
+  f.Bool(p + ".mqtt_connected", m.mqtt_connected);
+  f.Integer(p + ".mqtt_dropped", m.mqtt_dropped);
+  f.Integer(p + ".mqtt_alarms_dropped", m.mqtt_alarms_dropped);
   f.Integer(p + ".num_interfaces", m.num_interfaces);
   for (std::size_t i = 0; i < m.interfaces.size(); ++i) {
     const std::string c = Index(p + ".interfaces", i);

@@ -248,6 +248,10 @@ inline gateway_health_t SampleGatewayHealth(int interfaces = 2) {
   m.clears_accepted = 3;
   m.clears_refused = 200'017;
   m.clears_unauthenticated = 200'001;
+  m.mqtt_enabled = true;
+  m.mqtt_connected = false;
+  m.mqtt_dropped = 4'000'000'000;
+  m.mqtt_alarms_dropped = 7;
   for (int i = 0; i < interfaces; ++i) {
     interface_health_t h;
     h.name = "can" + std::to_string(i);
@@ -277,6 +281,10 @@ inline void ExpectSame(const gateway_health_t& e, const gateway_health_t& a) {
   EXPECT_EQ(e.clears_accepted, a.clears_accepted);
   EXPECT_EQ(e.clears_refused, a.clears_refused);
   EXPECT_EQ(e.clears_unauthenticated, a.clears_unauthenticated);
+  EXPECT_EQ(e.mqtt_enabled, a.mqtt_enabled);
+  EXPECT_EQ(e.mqtt_connected, a.mqtt_connected);
+  EXPECT_EQ(e.mqtt_dropped, a.mqtt_dropped);
+  EXPECT_EQ(e.mqtt_alarms_dropped, a.mqtt_alarms_dropped);
   ASSERT_EQ(e.num_interfaces, a.num_interfaces);
   ASSERT_EQ(a.interfaces.size(), static_cast<std::size_t>(a.num_interfaces));
   for (std::size_t i = 0; i < e.interfaces.size(); ++i) {

@@ -124,9 +124,10 @@ TEST(LcmTypes, DecodingAsTheWrongTypeIsRefused) {
 TEST(LcmTypes, InflatedArrayCountIsRefused) {
   std::vector<std::uint8_t> bytes = Encode(SampleGatewayHealth(1));
   // num_interfaces is the int32 just before the only interface's name; it sits after
-  // hash(8) utime(8) uptime_s(8) num_pumps(4) lcm_publish_failures(8) and the three clear
-  // counters (8 each), big-endian.
-  constexpr std::size_t kCountOffset = 8 + 8 + 8 + 4 + 8 + 3 * 8;
+  // hash(8) utime(8) uptime_s(8) num_pumps(4) lcm_publish_failures(8), the three clear
+  // counters (8 each), mqtt_enabled and mqtt_connected (1 each) and the two MQTT drop counts
+  // (8 each), big-endian.
+  constexpr std::size_t kCountOffset = 8 + 8 + 8 + 4 + 8 + 3 * 8 + 2 * 1 + 2 * 8;
   ASSERT_EQ(bytes[kCountOffset + 3], 1);
   bytes[kCountOffset + 3] = 2;
   gateway_health_t decoded;

@@ -494,13 +494,24 @@ public class PumpthermSpyPlugin implements SpyPlugin {
                                 get(k, "rx_rejected"), get(k, "error_frames"), get(k, "reopens")};
       }
       header.setText(String.format(
-          "<html>gateway up %s &nbsp; %s pumps &nbsp; LCM messages not sent: %s<br>at %s</html>",
+          "<html>gateway up %s &nbsp; %s pumps &nbsp; LCM messages not sent: %s%s<br>at %s</html>",
           duration(get(m, "uptime_s")), get(m, "num_pumps"), get(m, "lcm_publish_failures"),
-          localTime(get(m, "utime"))));
+          mqtt(m), localTime(get(m, "utime"))));
       summarise(String.format("%d interfaces, up %s", n, duration(get(m, "uptime_s"))));
       model.setDataVector(rows, new Object[] {"interface", "bus", "rx frames/s", "tx frames/s", "rx frames",
                                               "tx frames", "rx dropped", "tx dropped", "rx rejected",
                                               "error frames", "reopens"});
+    }
+
+    /**
+     * The MQTT sink's part of the header: "" without [mqtt] (or in a message of a type before
+     * the sink's fields).
+     */
+    private static String mqtt(Object m) {
+      if (!Boolean.TRUE.equals(get(m, "mqtt_enabled"))) return "";
+      return String.format(" &nbsp; MQTT %s, dropped: %s steps, %s alarms",
+                           Boolean.TRUE.equals(get(m, "mqtt_connected")) ? "connected" : "not connected",
+                           get(m, "mqtt_dropped"), get(m, "mqtt_alarms_dropped"));
     }
 
     /**
