@@ -584,7 +584,10 @@ struct LagTest {
   double peak = 0.0, peak_lag_min = 0.0;  ///< the largest |correlation| and its lag
   double step_min = 0.0;                  ///< the lag grid's step
   std::vector<double> failing_lags_min;
-  bool pass() const { return failing_lags_min.empty(); }
+  /// A band at or above 1: no correlation can fail it, so the test cannot tell (a residual and
+  /// an input that move too slowly for the validation data's length).
+  bool powerless() const { return band >= 1.0; }
+  bool pass() const { return failing_lags_min.empty() && !powerless(); }
 };
 
 /// The residuals of one node against the inputs: correlations, bands and tests.
@@ -686,6 +689,11 @@ std::string FailingLagsText(const LagTest& t) {
 /// "FAILS at lags 0.5 to 3.0, 5.0 min (peak 0.72 at 1.0 min, band 0.55)", "passes (peak 0.31
 /// at 2.0 min, band 0.55)".
 std::string LagTestText(const LagTest& t) {
+  if (t.powerless())
+    return fmt::format(
+        "cannot tell (peak {:.2f} at {:.1f} min, band {:.2f}: no correlation "
+        "reaches it)",
+        t.peak, t.peak_lag_min, t.band);
   if (t.pass())
     return fmt::format("passes (peak {:.2f} at {:.1f} min, band {:.2f})", t.peak, t.peak_lag_min,
                        t.band);
@@ -813,10 +821,17 @@ std::string NodeFailText(const NodeVerdict& v) {
                        t.peak, t.band);
   };
   for (const LagTest& t : v.after.tests)
-    if (!t.pass() && !t.input.empty())
+    if (!t.failing_lags_min.empty() && !t.input.empty())
       clauses.push_back("follows the " + t.input + " " + detail(t));
   for (const LagTest& t : v.after.tests)
-    if (!t.pass() && t.input.empty()) clauses.push_back("is not white " + detail(t));
+    if (!t.failing_lags_min.empty() && t.input.empty())
+      clauses.push_back("is not white " + detail(t));
+  for (const LagTest& t : v.after.tests)
+    if (t.powerless())
+      clauses.push_back(
+          fmt::format("cannot be tested against the {} (band {:.2f}: more "
+                      "validation data needed)",
+                      t.input.empty() ? "lags" : t.input, t.band));
   return clauses.empty() ? "" : v.node + "'s residual " + Join(clauses, " and ");
 }
 
@@ -827,10 +842,13 @@ namespace {
 /// The answer from an analysis already made (the page and report.json make theirs once).
 ModelRightNow RightNow(const Result& r, const Analysis& a) {
   std::vector<std::string> failing;
-  bool tested = false, driven = false;
+  bool tested = false, driven = false, failed = false;
   for (const NodeVerdict& v : a.verdicts) {
     tested = tested || !v.after.tests.empty();
-    for (const LagTest& t : v.after.tests) driven = driven || (!t.pass() && !t.input.empty());
+    for (const LagTest& t : v.after.tests) {
+      driven = driven || (!t.failing_lags_min.empty() && !t.input.empty());
+      failed = failed || !t.failing_lags_min.empty();
+    }
     const std::string f = NodeFailText(v);
     if (!f.empty()) failing.push_back(f);
   }
@@ -848,7 +866,11 @@ ModelRightNow RightNow(const Result& r, const Analysis& a) {
                                               : "and cross-correlation with " + Join(inputs, ", "),
                                EffectsText(r), FitsText(a.verdicts))};
   std::string meaning = "an input still drives the residual: an effect the model misses";
-  if (!driven)
+  if (!failed)
+    meaning =
+        "the tests cannot decide on this validation data: record a longer one, or one whose "
+        "inputs change more often";
+  else if (!driven)
     meaning = inputs.empty() ? not_tested
                              : "no input drives it: a slow error the inputs do not explain (the "
                                "plant's own disturbances, or an effect outside the vocabulary); "
