@@ -414,7 +414,7 @@ void PumpEstimator::PublishHeldMagnet() {
   // The reading at the filter's winding, with the winding's uncertainty through its gain.
   const Eigen::VectorXd& w = model_.WindingWeights();
   const double g = held_magnet_.winding_gain;
-  estimate_.magnet_flux_degC = held_magnet_.z_degC - g * observer_->Weighted_degC(w);
+  estimate_.magnet_flux_degC = held_magnet_.MagnetAt_degC(observer_->Weighted_degC(w));
   estimate_.magnet_flux_sd_K =
       std::sqrt(held_magnet_.sd_K * held_magnet_.sd_K + g * g * observer_->WeightedVariance_K2(w));
 }

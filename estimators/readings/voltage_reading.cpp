@@ -4,6 +4,36 @@
 #include <limits>
 
 namespace pumptherm::estimators {
+namespace {
+
+/// z = Tm + gain Tw from uq at a calibration: the equation is linear in Tw and Tm (its gradient
+/// in them does not depend on them), so it is solved at the laws' reference temperatures.
+VoltageMagnet SolveMagnet(const VoltageLaw& law, const QAxisPoint& p, QAxisState s, double uq_V) {
+  s.winding_degC = law.t0_degC;
+  s.magnet_degC = law.magnet_t0_degC;
+  const QAxisGradient g = QAxisGradientAt(law, p, s);
+  VoltageMagnet m;
+  if (!(std::abs(g.magnet_V_per_K) > 0.0)) return m;
+  m.winding_gain = g.winding_V_per_K / g.magnet_V_per_K;
+  m.z_degC = law.magnet_t0_degC + m.winding_gain * law.t0_degC +
+             (uq_V - QAxisVoltage_V(law, p, s)) / g.magnet_V_per_K;
+  m.sd_K = 0.0;
+  return m;
+}
+
+double Finite(double v) { return std::isfinite(v) ? v : 0.0; }
+
+/// The equation's calibration terms as the observer has them (dbeta 0 where it has none).
+QAxisState CalibratedState(const ThermalObserver::Calibration& c) {
+  QAxisState s;
+  s.dr = c.dr;
+  s.dpsi = c.dpsi;
+  s.dbeta = Finite(c.dbeta);
+  s.u0_V = c.u0_V;
+  return s;
+}
+
+}  // namespace
 
 VoltageReading::VoltageReading(const MotorDescription& motor, VoltageReadingConfig config)
     : motor_(motor), law_(VoltageLawOf(motor)), config_(config) {}
@@ -65,45 +95,10 @@ double VoltageReading::MagnetAt_degC(const ThermalObserver& observer, const Ther
   }
   const ThermalObserver::Calibration c = observer.VoltageCalibration();
   if (!std::isfinite(c.dr)) return std::nan("");
-  const Eigen::VectorXd& w = model.WindingWeights();
-  const double winding_degC = observer.Weighted_degC(w);
-  // The equation at the magnet's reference temperature, and its slope in Tm: linear in Tm.
-  QAxisState s;
-  s.winding_degC = winding_degC;
-  s.magnet_degC = law_.magnet_t0_degC;
-  s.dr = c.dr;
-  s.dpsi = c.dpsi;
-  s.dbeta = c.dbeta;
-  s.u0_V = c.u0_V;
-  const QAxisPoint p{iq_A_, w_rad_per_s_};
-  const double at_t0 = QAxisVoltage_V(law_, p, s);
-  const double slope = QAxisGradientAt(law_, p, s).magnet_V_per_K;
-  return law_.magnet_t0_degC + (uq_V_ - at_t0) / slope;
+  const double winding_degC = observer.Weighted_degC(model.WindingWeights());
+  return SolveMagnet(law_, QAxisPoint{iq_A_, w_rad_per_s_}, CalibratedState(c), uq_V_)
+      .MagnetAt_degC(winding_degC);
 }
-
-}  // namespace pumptherm::estimators
-
-namespace pumptherm::estimators {
-namespace {
-
-/// z = Tm + gain Tw from uq at a calibration: the equation is linear in Tw and Tm (its gradient
-/// in them does not depend on them), so it is solved at the laws' reference temperatures.
-VoltageMagnet SolveMagnet(const VoltageLaw& law, const QAxisPoint& p, QAxisState s, double uq_V) {
-  s.winding_degC = law.t0_degC;
-  s.magnet_degC = law.magnet_t0_degC;
-  const QAxisGradient g = QAxisGradientAt(law, p, s);
-  VoltageMagnet m;
-  if (!(std::abs(g.magnet_V_per_K) > 0.0)) return m;
-  m.winding_gain = g.winding_V_per_K / g.magnet_V_per_K;
-  m.z_degC = law.magnet_t0_degC + m.winding_gain * law.t0_degC +
-             (uq_V - QAxisVoltage_V(law, p, s)) / g.magnet_V_per_K;
-  m.sd_K = 0.0;
-  return m;
-}
-
-double Finite(double v) { return std::isfinite(v) ? v : 0.0; }
-
-}  // namespace
 
 VoltageMagnet VoltageReading::CalibratedMagnet(const ThermalObserver::Calibration& c,
                                                double winding_degC) const {
@@ -114,22 +109,17 @@ VoltageMagnet VoltageReading::CalibratedMagnet(const ThermalObserver::Calibratio
     return m;
   }
   const QAxisPoint p{iq_A_, w_rad_per_s_};
-  QAxisState s;
-  s.dr = c.dr;
-  s.dpsi = c.dpsi;
-  s.dbeta = Finite(c.dbeta);
-  s.u0_V = c.u0_V;
+  const QAxisState s = CalibratedState(c);
   m = SolveMagnet(law_, p, s, uq_V_);
   if (!std::isfinite(m.z_degC)) return VoltageMagnet{};
-  const double magnet_degC = m.z_degC - m.winding_gain * winding_degC;
+  const double magnet_degC = m.MagnetAt_degC(winding_degC);
   // Each calibration term moved by its sd: how far the magnet at this winding moves with it.
   double var_K2 = 0.0;
   const auto add = [&](double QAxisState::*term, double sd) {
     if (!(std::isfinite(sd) && sd > 0.0)) return;
     QAxisState moved = s;
     moved.*term += sd;
-    const VoltageMagnet v = SolveMagnet(law_, p, moved, uq_V_);
-    const double d = v.z_degC - v.winding_gain * winding_degC - magnet_degC;
+    const double d = SolveMagnet(law_, p, moved, uq_V_).MagnetAt_degC(winding_degC) - magnet_degC;
     var_K2 += std::isfinite(d) ? d * d : std::numeric_limits<double>::infinity();
   };
   add(&QAxisState::dr, c.dr_sd);

@@ -29,6 +29,8 @@ struct VoltageMagnet {
   double sd_K = std::numeric_limits<double>::quiet_NaN();  ///< at a known winding
   double winding_gain = 0.0;
   bool Valid() const { return std::isfinite(z_degC) && std::isfinite(sd_K); }
+  /// The magnet the reading gives at a winding temperature, degC.
+  double MagnetAt_degC(double winding_degC) const { return z_degC - winding_gain * winding_degC; }
 };
 
 struct VoltageReadingConfig {

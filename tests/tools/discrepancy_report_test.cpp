@@ -206,19 +206,23 @@ pd::Result OneNode(pd::Data& d, const std::function<double(int, double)>& after_
   return r;
 }
 
+/// OneNode with white residuals after the effects: uniform noise of +-0.05 K from std::mt19937
+/// (its sequence is fixed by the standard) with `seed`.
+pd::Result WhiteResiduals(pd::Data& d, unsigned seed) {
+  std::mt19937 gen(seed);
+  std::vector<double> noise;
+  for (int k = 0; k < 720; ++k) noise.push_back(0.1 * (gen() / 4294967296.0 - 0.5));
+  return OneNode(d, [&](int k, double) { return noise[static_cast<std::size_t>(k)]; });
+}
+
 }  // namespace
 
 // The report's first line answers "is the model right now?" from the residual tests after the
 // effects; report.json and the page say the same.
 TEST(DiscrepancyReport, ModelRightNowYesWhenEveryTestPasses) {
   pd::Data d;
-  // Uniform noise of +-0.05 K from std::mt19937 (its sequence is fixed by the standard), seed
-  // 6: a sample that passes all three tests.
-  std::mt19937 gen(kWhiteSeed);
-  std::vector<double> noise;
-  for (int k = 0; k < 720; ++k) noise.push_back(0.1 * (gen() / 4294967296.0 - 0.5));
-  const pd::Result r =
-      OneNode(d, [&](int k, double) { return noise[static_cast<std::size_t>(k)]; });
+  // Seed 6: a sample that passes all three tests.
+  const pd::Result r = WhiteResiduals(d, kWhiteSeed);
   pd::ReportContext ctx;
   ctx.validate = &d;
   const pd::ModelRightNow m = pd::CheckModelRightNow(r, ctx);
@@ -247,11 +251,7 @@ TEST(DiscrepancyReport, ModelRightNowYesForMostSamplesOfWhiteResiduals) {
   int yes = 0;
   for (unsigned seed = 1; seed <= 40; ++seed) {
     pd::Data d;
-    std::mt19937 gen(seed);
-    std::vector<double> noise;
-    for (int k = 0; k < 720; ++k) noise.push_back(0.1 * (gen() / 4294967296.0 - 0.5));
-    const pd::Result r =
-        OneNode(d, [&](int k, double) { return noise[static_cast<std::size_t>(k)]; });
+    const pd::Result r = WhiteResiduals(d, seed);
     pd::ReportContext ctx;
     ctx.validate = &d;
     if (pd::CheckModelRightNow(r, ctx).answer == "yes") ++yes;
