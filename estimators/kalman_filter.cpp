@@ -1,132 +1,48 @@
 #include "estimators/kalman_filter.hpp"
 
 #include <cmath>
-#include <type_traits>
+
+#include "estimators/kalman_filter_fixed.hpp"
 
 namespace pumptherm::estimators {
 namespace {
 
-// Fixed-size versions for the state counts of the shipped models (4: tmp-generic,
-// 7: saheba2010-*), of the mismatch test on them (5-6: a sensor's lag and offset added) and of
-// tmp-generic's disturbance-state filter (8-11 with its added states):
-// Eigen unrolls fixed-size products on the stack, where its dynamic-size products spend most of
-// their instructions dispatching and packing (docs/virtual-sensor.md, benchmark). They map the
-// dynamic members in place (column-major, contiguous) and compute the same equations.
+// The dynamic-size path (state counts without a fixed-size one: the disturbance-state filter
+// with the voltage rows has 14) takes its products column by column and skips the zero
+// coefficients of A_D and C: their augmented states are constants or first-order processes and
+// a measurement reads a few states, so most coefficients are zero, and at these sizes Eigen's
+// general product spends most of its time packing. The sums are the same equations.
 
-template <int N>
-void PredictFixed(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu, const Eigen::MatrixXd& sp,
-                  Eigen::VectorXd& x, Eigen::MatrixXd& s) {
-  using M = Eigen::Matrix<double, N, N>;
-  using V = Eigen::Matrix<double, N, 1>;
-  const Eigen::Map<const M> a(ad.data());
-  Eigen::Map<V> xm(x.data());
-  Eigen::Map<M> sm(s.data());
-  const V xn = a * xm + Eigen::Map<const V>(bu.data());
-  xm = xn;
-  const M as = a * sm;
-  sm.noalias() = as * a.transpose();
-  sm += Eigen::Map<const M>(sp.data());
-}
-
-/// One scalar measurement (m = 1): the innovation covariance is a number, so its "Cholesky
-/// solve" is a division (fails, like LLT, when it is not positive).
-template <int N>
-void UpdateFixed1(const Eigen::MatrixXd& c, const Eigen::VectorXd& y, const Eigen::MatrixXd& sm,
-                  CovarianceUpdate form, Eigen::VectorXd& x, Eigen::MatrixXd& s, Eigen::MatrixXd& k,
-                  KalmanUpdateReport& report) {
-  using M = Eigen::Matrix<double, N, N>;
-  using V = Eigen::Matrix<double, N, 1>;
-  using R = Eigen::Matrix<double, 1, N>;
-  const Eigen::Map<const R> cr(c.data());
-  Eigen::Map<V> xm(x.data());
-  Eigen::Map<M> sx(s.data());
-  const double nu = y(0) - cr.dot(xm.transpose());
-  const V h = sx * cr.transpose();
-  const double r = sm(0, 0);
-  const double s_nu = cr.dot(h.transpose()) + r;
-  report.innovation(0) = nu;
-  report.innovation_var(0) = s_nu;
-  if (!(s_nu > 0.0)) {
-    report.ok = false;
-    return;
-  }
-  const V gain = h / s_nu;  // eq. 34
-  report.nis = nu * nu / s_nu;
-  xm += gain * nu;  // eq. 32
-  k = gain;
-  const M ikc = M::Identity() - gain * cr;
-  if (form == CovarianceUpdate::kJoseph) {
-    const M t = ikc * sx;
-    M sn = t * ikc.transpose();
-    sn += (r * gain) * gain.transpose();
-    sx = 0.5 * (sn + sn.transpose());
-  } else {
-    const M t = ikc * sx;  // eq. 33
-    sx = t;
+/// out = s m^T for a square s (n x n) and m (r x n): out.col(i) = sum_k m(i, k) s.col(k).
+void TimesTransposed(const Eigen::MatrixXd& s, const Eigen::MatrixXd& m, Eigen::MatrixXd& out) {
+  const Eigen::Index n = s.rows();
+  out.resize(n, m.rows());
+  for (Eigen::Index i = 0; i < m.rows(); ++i) {
+    auto col = out.col(i);
+    col.setZero();
+    for (Eigen::Index k = 0; k < n; ++k) {
+      const double v = m(i, k);
+      if (v != 0.0) col += v * s.col(k);
+    }
   }
 }
 
-/// Mm measurements at once (Mm x Mm innovation covariance, Cholesky).
-template <int N, int Mm>
-void UpdateFixed(const Eigen::MatrixXd& c, const Eigen::VectorXd& y, const Eigen::MatrixXd& sm,
-                 CovarianceUpdate form, Eigen::VectorXd& x, Eigen::MatrixXd& s, Eigen::MatrixXd& k,
-                 KalmanUpdateReport& report) {
-  using M = Eigen::Matrix<double, N, N>;
-  using V = Eigen::Matrix<double, N, 1>;
-  using G = Eigen::Matrix<double, N, Mm>;
-  using Sq = Eigen::Matrix<double, Mm, Mm>;
-  using Y = Eigen::Matrix<double, Mm, 1>;
-  const Eigen::Map<const Eigen::Matrix<double, Mm, N>> cm(c.data());
-  Eigen::Map<V> xm(x.data());
-  Eigen::Map<M> sx(s.data());
-  const Eigen::Map<const Sq> r(sm.data());
-  const Y nu = Eigen::Map<const Y>(y.data()) - cm * xm;
-  const G sct = sx * cm.transpose();
-  const Sq innov = cm * sct + r;
-  report.innovation = nu;
-  report.innovation_var = innov.diagonal();
-  const Eigen::LLT<Sq> llt(innov);
-  if (llt.info() != Eigen::Success) {
-    report.ok = false;
-    return;
-  }
-  const G gain = llt.solve(sct.transpose()).transpose();  // eq. 34
-  report.nis = nu.dot(llt.solve(nu));
-  xm += gain * nu;  // eq. 32
-  k = gain;
-  const M ikc = M::Identity() - gain * cm;
-  if (form == CovarianceUpdate::kJoseph) {
-    const M t = ikc * sx;
-    M sn = t * ikc.transpose();
-    sn += gain * r * gain.transpose();
-    sx = 0.5 * (sn + sn.transpose());
-  } else {
-    const M t = ikc * sx;  // eq. 33
-    sx = t;
+/// m v for m (r x n) and v (n), skipping m's zeros.
+void TimesVector(const Eigen::MatrixXd& m, const Eigen::VectorXd& v, Eigen::VectorXd& out) {
+  out.setZero(m.rows());
+  for (Eigen::Index k = 0; k < m.cols(); ++k) {
+    for (Eigen::Index i = 0; i < m.rows(); ++i) {
+      const double a = m(i, k);
+      if (a != 0.0) out(i) += a * v(k);
+    }
   }
 }
 
-/// The fixed-size update for n states and m measurements, if there is one.
-template <int N>
-bool UpdateFixedN(Eigen::Index m, const Eigen::MatrixXd& c, const Eigen::VectorXd& y,
-                  const Eigen::MatrixXd& sm, CovarianceUpdate form, Eigen::VectorXd& x,
-                  Eigen::MatrixXd& s, Eigen::MatrixXd& k, KalmanUpdateReport& report) {
-  if (m == 1) UpdateFixed1<N>(c, y, sm, form, x, s, k, report);
-  if (m == 2) UpdateFixed<N, 2>(c, y, sm, form, x, s, k, report);
-  if (m == 3) UpdateFixed<N, 3>(c, y, sm, form, x, s, k, report);
-  return m >= 1 && m <= 3;
-}
-
-/// Calls f(std::integral_constant<int, N>{}) when n is one of the fixed sizes N (4 to 11);
-/// false when it is not.
-template <int N = 4, class F>
-bool WithFixedSize(Eigen::Index n, F&& f) {
-  if constexpr (N > 11) {
-    return false;
-  } else {
-    if (n != N) return WithFixedSize<N + 1>(n, f);
-    f(std::integral_constant<int, N>{});
-    return true;
+/// s += sum_r a.col(r) b.col(r)^T (n x n, rank m).
+void AddOuterProducts(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b, Eigen::MatrixXd& s) {
+  for (Eigen::Index j = 0; j < s.cols(); ++j) {
+    auto col = s.col(j);
+    for (Eigen::Index r = 0; r < a.cols(); ++r) col += b(j, r) * a.col(r);
   }
 }
 
@@ -137,8 +53,7 @@ KalmanFilter::KalmanFilter(int n)
       xtmp_(n),
       s_(Eigen::MatrixXd::Identity(n, n)),
       ntmp_(n, n),
-      ntmp2_(n, n),
-      ikc_(n, n) {}
+      ntmp2_(n, n) {}
 
 void KalmanFilter::Reset(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
   x_ = x;
@@ -147,7 +62,6 @@ void KalmanFilter::Reset(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
   xtmp_.resize(n);
   ntmp_.resize(n, n);
   ntmp2_.resize(n, n);
-  ikc_.resize(n, n);
 }
 
 void KalmanFilter::AddVariance(int i, double var) {
@@ -157,14 +71,13 @@ void KalmanFilter::AddVariance(int i, double var) {
 
 void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
                            const Eigen::MatrixXd& sp) {
-  if (WithFixedSize(x_.size(),
-                    [&](auto size) { PredictFixed<decltype(size)::value>(ad, bu, sp, x_, s_); })) {
-    return;
-  }
-  xtmp_.noalias() = ad * x_;
+  if (detail::PredictFixedSize(ad, bu, sp, x_, s_)) return;
+  // x = A_D x + bu; S = A_D S A_D^T + Sp as W = (S A_D^T)^T = A_D S, then W A_D^T (eqs. 30-31).
+  TimesVector(ad, x_, xtmp_);
   x_ = xtmp_ + bu;
-  ntmp_.noalias() = ad * s_;
-  s_.noalias() = ntmp_ * ad.transpose();
+  TimesTransposed(s_, ad, ntmp_);
+  ntmp2_ = ntmp_.transpose();
+  TimesTransposed(ntmp2_, ad, s_);
   s_ += sp;
 }
 
@@ -179,22 +92,16 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
   report_.innovation_var.resize(m);
   if (m == 0) return report_;
   k_.resize(n, m);
-  bool fixed = false;
-  WithFixedSize(n, [&](auto size) {
-    fixed = UpdateFixedN<decltype(size)::value>(m, c, y, sm, form, x_, s_, k_, report_);
-  });
-  if (fixed) return report_;
-  sct_.resize(n, m);
+  if (detail::UpdateFixedSize(c, y, sm, form, x_, s_, k_, report_)) return report_;
   innov_cov_.resize(m, m);
-  kt_.resize(m, n);
-  ksm_.resize(n, m);
-  nu_.resize(m);
   s_inv_nu_.resize(m);
 
-  nu_.noalias() = -c * x_;
-  nu_ += y;
-  sct_.noalias() = s_ * c.transpose();
-  innov_cov_.noalias() = c * sct_;
+  TimesVector(c, x_, nu_);
+  nu_ = y - nu_;
+  TimesTransposed(s_, c, sct_);  // S- C^T (n x m)
+  for (Eigen::Index j = 0; j < m; ++j) {
+    for (Eigen::Index i = 0; i < m; ++i) innov_cov_(i, j) = c.row(i).dot(sct_.col(j));
+  }
   innov_cov_ += sm;
   report_.innovation = nu_;
   report_.innovation_var = innov_cov_.diagonal();
@@ -210,21 +117,22 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
   s_inv_nu_ = nu_;
   llt_.solveInPlace(s_inv_nu_);
   report_.nis = nu_.dot(s_inv_nu_);
+  for (Eigen::Index r = 0; r < m; ++r) x_ += nu_(r) * k_.col(r);  // eq. 32
 
-  x_.noalias() += k_ * nu_;  // eq. 32
-  ikc_.setIdentity();
-  ikc_.noalias() -= k_ * c;
+  // T = [I - K C] S- = S- - K (S- C^T)^T: eq. 33, the textbook form.
+  ntmp_ = s_;
+  ksm_ = -k_;
+  AddOuterProducts(ksm_, sct_, ntmp_);
   if (form == CovarianceUpdate::kJoseph) {
-    ntmp_.noalias() = ikc_ * s_;
-    s_.noalias() = ntmp_ * ikc_.transpose();
+    // [I - K C] S- [I - K C]^T + K Sm K^T = T - (T C^T) K^T + (K Sm) K^T = T + G K^T with
+    // G = K Sm - T C^T (n x m): the Joseph form in O(n^2 m).
+    TimesTransposed(ntmp_, c, sct_);
     ksm_.noalias() = k_ * sm;
-    s_.noalias() += ksm_ * k_.transpose();
+    ksm_ -= sct_;
+    AddOuterProducts(ksm_, k_, ntmp_);
     // Remove the rounding asymmetry.
-    ntmp_ = s_.transpose();
-    s_ += ntmp_;
-    s_ *= 0.5;
+    s_ = 0.5 * (ntmp_ + ntmp_.transpose());
   } else {
-    ntmp_.noalias() = ikc_ * s_;  // eq. 33
     s_ = ntmp_;
   }
   return report_;

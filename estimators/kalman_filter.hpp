@@ -68,7 +68,7 @@ class KalmanFilter {
 
  private:
   Eigen::VectorXd x_, xtmp_;
-  Eigen::MatrixXd s_, ntmp_, ntmp2_, ikc_;
+  Eigen::MatrixXd s_, ntmp_, ntmp2_;
   Eigen::MatrixXd sct_, innov_cov_, k_, kt_, ksm_;
   Eigen::VectorXd nu_, s_inv_nu_;
   Eigen::LLT<Eigen::MatrixXd> llt_;

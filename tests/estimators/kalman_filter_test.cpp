@@ -188,3 +188,67 @@ TEST(KalmanFilter, FixedSizePathReportsANonPositiveInnovationCovariance) {
     EXPECT_EQ(kf.State(), Eigen::VectorXd::Ones(n)) << n;
   }
 }
+
+// The dynamic-size path skips the zero coefficients of A_D and C. With the disturbance-state
+// filter's structure (a dense block of node temperatures, states that are constants or
+// first-order processes, heat states driving the nodes, measurement rows that read a few states)
+// both covariance forms must equal the equations written out in dense Eigen.
+TEST(KalmanFilter, DynamicPathWithSparseMatricesMatchesTheEquationsWrittenOut) {
+  for (const int n : {12, 14, 16}) {
+    for (const auto form : {pe::CovarianceUpdate::kJoseph, pe::CovarianceUpdate::kTextbook}) {
+      const int nodes = 5, m = 3;
+      std::mt19937_64 rng(29 + static_cast<unsigned>(n));
+      std::normal_distribution<double> nd;
+      Eigen::MatrixXd a = Eigen::MatrixXd::Zero(n, n), c = Eigen::MatrixXd::Zero(m, n);
+      for (int i = 0; i < nodes; ++i) {
+        for (int j = 0; j < nodes; ++j) a(i, j) = 0.05 * nd(rng) + (i == j ? 0.9 : 0.0);
+        for (int j = nodes; j < nodes + 4; ++j) a(i, j) = 0.01 * nd(rng);  // heat states
+      }
+      for (int i = nodes; i < n; ++i) a(i, i) = i % 2 == 0 ? 1.0 : 0.99;
+      c(0, 0) = 1.0;
+      c(0, n - 1) = 1.0;  // a sensor and its offset
+      for (const int j : {1, 2, nodes + 1, n - 3, n - 2}) c(1, j) = nd(rng);  // a voltage row
+      c(2, 3) = 1.0;
+      Eigen::MatrixXd l(n, n);
+      for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) l(i, j) = nd(rng);
+      Eigen::MatrixXd s = l * l.transpose() + Eigen::MatrixXd::Identity(n, n);
+      const Eigen::MatrixXd q = 0.02 * Eigen::MatrixXd::Identity(n, n);
+      Eigen::MatrixXd r = 0.4 * Eigen::MatrixXd::Identity(m, m);
+      r(0, 1) = r(1, 0) = 0.1;
+      Eigen::VectorXd x = Eigen::VectorXd::Zero(n);
+      pe::KalmanFilter kf(n);
+      kf.Reset(x, s);
+      const std::string what = "n=" + std::to_string(n) +
+                               (form == pe::CovarianceUpdate::kJoseph ? " Joseph" : " textbook");
+      for (int k = 0; k < 30; ++k) {
+        Eigen::VectorXd u(n), y(m);
+        for (int i = 0; i < n; ++i) u(i) = 0.1 * nd(rng);
+        for (int i = 0; i < m; ++i) y(i) = nd(rng);
+        x = a * x + u;
+        s = a * s * a.transpose() + q;
+        const Eigen::MatrixXd sy = c * s * c.transpose() + r;
+        const Eigen::MatrixXd gain = s * c.transpose() * sy.inverse();
+        const Eigen::VectorXd nu = y - c * x;
+        x += gain * nu;
+        const Eigen::MatrixXd ikc = Eigen::MatrixXd::Identity(n, n) - gain * c;
+        s = form == pe::CovarianceUpdate::kJoseph
+                ? Eigen::MatrixXd(ikc * s * ikc.transpose() + gain * r * gain.transpose())
+                : Eigen::MatrixXd(ikc * s);
+        s = 0.5 * (s + s.transpose()).eval();
+        kf.Predict(a, u, q);
+        const pe::KalmanUpdateReport& rep = kf.Update(c, y, r, form);
+        ASSERT_TRUE(rep.ok) << what;
+        EXPECT_NEAR(rep.nis, nu.dot(sy.inverse() * nu), 1e-9 * (1 + rep.nis)) << what;
+        EXPECT_LT((kf.Gain() - gain).cwiseAbs().maxCoeff(), 1e-10) << what;
+      }
+      EXPECT_LT((kf.State() - x).cwiseAbs().maxCoeff(), 1e-9) << what;
+      EXPECT_LT((kf.Covariance() - s).cwiseAbs().maxCoeff(), 1e-9 * s.cwiseAbs().maxCoeff())
+          << what;
+      if (form == pe::CovarianceUpdate::kJoseph) {
+        EXPECT_EQ((kf.Covariance() - kf.Covariance().transpose()).cwiseAbs().maxCoeff(), 0.0)
+            << what;
+      }
+    }
+  }
+}
