@@ -343,12 +343,14 @@ void MqttSink::AwaitAcks(int timeout_ms) {
 }
 
 bool MqttSink::ConnectOnce() {
-  ++bd_seq_;
-  const std::string death = mqtt::Encoder::NodeDeath(bd_seq_);
+  const std::string death = mqtt::Encoder::NodeDeath(bd_seq_.ForNextConnect());
   mosquitto_will_set(mosq_, topic_ndeath_.c_str(), static_cast<int>(death.size()), death.data(), 1,
                      false);
   const int rc = mosquitto_connect(mosq_, config_.host.c_str(), config_.port,
                                    static_cast<int>(config_.keepalive_s));
+  // libmosquitto returns success once the CONNECT packet (with this will) is written or queued;
+  // on an error no CONNECT went out and its bdSeq is kept for the next attempt.
+  if (rc == MOSQ_ERR_SUCCESS) bd_seq_.ConnectSent();
   if (rc != MOSQ_ERR_SUCCESS) {
     Log(LogLevel::kWarning, "mqtt: cannot connect to {}:{}: {}", config_.host, config_.port,
         rc == MOSQ_ERR_ERRNO ? std::strerror(errno) : mosquitto_strerror(rc));
@@ -359,7 +361,7 @@ bool MqttSink::ConnectOnce() {
 
 void MqttSink::Births() {
   const std::uint64_t now_ms = WallMs();
-  Publish(topic_nbirth_, encoder_.NodeBirth(bd_seq_, now_ms), 0);
+  Publish(topic_nbirth_, encoder_.NodeBirth(bd_seq_.Current(), now_ms), 0);
   for (std::size_t d = 0; d < latest_.size(); ++d)
     Publish(topics_birth_[d], encoder_.DeviceBirth(d, latest_[d], now_ms), 0);
   need_birth_ = false;
@@ -453,7 +455,7 @@ void MqttSink::Run() {
     // A clean end is a death too (spec: an edge node going offline publishes NDEATH).
     // Sent QoS 1 and acknowledged before the DISCONNECT: the broker has then read every message
     // before it (a broker that finds the socket closed while it acknowledges drops the rest).
-    Publish(topic_ndeath_, mqtt::Encoder::NodeDeath(bd_seq_), 1);
+    Publish(topic_ndeath_, mqtt::Encoder::NodeDeath(bd_seq_.Current()), 1);
     AwaitAcks(2000);
     mosquitto_disconnect(mosq_);
     for (int k = 0; k < 10 && connected_; ++k) mosquitto_loop(mosq_, 20, 1);

@@ -117,7 +117,7 @@ class MqttSink {
   std::atomic<bool> rebirth_{false};
   std::vector<int> unacked_;  ///< message ids of QoS 1 messages not acknowledged yet
   bool need_birth_ = false;
-  std::uint64_t bd_seq_ = 0;
+  mqtt::BdSeq bd_seq_;
   std::vector<std::vector<double>> latest_;  ///< per pump, the newest step taken from a queue
   std::vector<double> step_values_;
   std::thread thread_;

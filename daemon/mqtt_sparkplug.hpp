@@ -59,6 +59,31 @@ void FillDeviceValues(const FieldSource& source, std::span<double> out);
 /// (spec 6.4.19). False for anything that does not decode.
 bool RebirthRequested(std::string_view payload);
 
+/// The edge node's birth/death sequence number, bdSeq (Sparkplug 3.0.0, "Edge Node Birth":
+/// tck-id-message-flow-edge-node-birth-publish-will-message-payload-bdSeq): the will (NDEATH)
+/// of each MQTT CONNECT packet carries the value of the previous CONNECT packet's plus one,
+/// 255 wrapping to 0; the NBIRTH of that connection carries the same value
+/// (tck-id-payloads-nbirth-bdseq-repeat). It counts CONNECT packets, not sessions that came up:
+/// a CONNECT the broker refused or that was lost before its NBIRTH still used its number, and an
+/// attempt that never sent a CONNECT (the broker unreachable) uses none. Starts at 0.
+class BdSeq {
+ public:
+  /// The value for the will of the next CONNECT packet.
+  std::uint64_t ForNextConnect() const { return next_; }
+  /// A CONNECT packet with ForNextConnect() in its will went out: that value is now the
+  /// session's (Current()), and the next CONNECT takes the one after it.
+  void ConnectSent() {
+    current_ = next_;
+    next_ = (next_ + 1) % 256;
+  }
+  /// The value of the last CONNECT sent: for the NBIRTH and the NDEATH of its session.
+  std::uint64_t Current() const { return current_; }
+
+ private:
+  std::uint64_t next_ = 0;
+  std::uint64_t current_ = 0;
+};
+
 /// A pump as the encoder sees it: its device id and its metrics.
 struct Device {
   std::string id;
