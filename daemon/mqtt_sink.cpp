@@ -382,7 +382,9 @@ bool MqttSink::PublishOne() {
     std::copy(front.begin(), front.end(), step_values_.begin());
   }
   const std::span<const double> values(step_values_.data(), step.count);
-  const std::string payload = encoder_.DeviceData(step.device, values, step.time_ms);
+  // An alarm transition carries every metric: complete in itself, and not empty when it goes
+  // again after a new connection's DBIRTH already carried its values.
+  const std::string payload = encoder_.DeviceData(step.device, values, step.time_ms, alarm);
   int mid = 0;
   const bool ok =
       payload.empty() || Publish(topics_data_[step.device], payload, alarm ? 1 : 0, &mid);

@@ -114,8 +114,11 @@ class Encoder {
   std::string DeviceBirth(std::size_t device, std::span<const double> values,
                           std::uint64_t time_ms);
   /// DDATA of `device`: the metrics whose value differs from the last sent (by alias, no
-  /// name); empty when nothing changed (nothing to send).
-  std::string DeviceData(std::size_t device, std::span<const double> values, std::uint64_t time_ms);
+  /// name); empty when nothing changed (nothing to send). `every_metric`: all of them, changed
+  /// or not (never empty: an alarm transition, complete in itself, also when it is sent again
+  /// after births that already carried its values).
+  std::string DeviceData(std::size_t device, std::span<const double> values, std::uint64_t time_ms,
+                         bool every_metric = false);
 
  private:
   std::uint64_t NextSeq();

@@ -260,6 +260,20 @@ TEST_F(SparkplugSession, DeviceDataCarriesOnlyWhatChangedByAlias) {
   EXPECT_EQ(enc_.DeviceData(0, values_, 4000), "");
 }
 
+TEST_F(SparkplugSession, DeviceDataWithEveryMetricCarriesAllOfThem) {
+  enc_.NodeBirth(0, 1000);
+  enc_.DeviceBirth(0, values_, 1000);
+  // Nothing changed since the birth: still every metric, by alias, with the step's time.
+  const pb::Payload d = Decode(enc_.DeviceData(0, values_, 2000, true));
+  ASSERT_EQ(d.metrics_size(), static_cast<int>(metrics_.size()));
+  for (int k = 0; k < d.metrics_size(); ++k) {
+    EXPECT_EQ(d.metrics(k).alias(), Alias(0, static_cast<std::size_t>(k)));
+    EXPECT_EQ(d.metrics(k).timestamp(), 2000U);
+  }
+  EXPECT_EQ(d.seq(), 2U);
+  EXPECT_EQ(enc_.DeviceData(0, values_, 3000), "") << "then by change again";
+}
+
 TEST_F(SparkplugSession, SeqWrapsAfter255AndNodeBirthStartsAgain) {
   enc_.NodeBirth(0, 0);
   enc_.DeviceBirth(0, values_, 0);  // seq 1
