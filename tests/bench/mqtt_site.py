@@ -99,6 +99,7 @@ def main():
     ap.add_argument("--duration-s", type=float, default=90.0)
     ap.add_argument("--warm-s", type=float, default=10.0)
     ap.add_argument("--work", default="/tmp/pumptherm-site")
+    ap.add_argument("--dump", help="write each DDATA's (gateway, pump, timestamp_ms, arrival_s)")
     a = ap.parse_args()
     os.makedirs(a.work, exist_ok=True)
     log = recording(a)
@@ -126,6 +127,7 @@ def main():
     lock = threading.Lock()
     seen = {"msgs": 0, "ddata": 0, "births": 0, "deaths": 0, "bytes": 0}
     delays = {}  # edge node -> [arrival - timestamp, s]
+    dump = []
 
     def on_message(client, userdata, msg):
         now = time.time()
@@ -138,6 +140,8 @@ def main():
                 p.ParseFromString(msg.payload)
                 seen["ddata"] += 1
                 delays.setdefault(parts[3], []).append(now - p.timestamp / 1000.0)
+                if a.dump:
+                    dump.append((parts[3], parts[4], p.timestamp, now))
             elif parts[2] in ("NBIRTH", "DBIRTH"):
                 seen["births"] += 1
             elif parts[2] == "NDEATH":
@@ -231,6 +235,9 @@ def main():
         "load_avg_1min_max": max(load or [0]),
     }
     print(json.dumps(result))
+    if a.dump:
+        with open(a.dump, "w") as f:
+            json.dump(dump, f)
     return 0
 
 
