@@ -227,9 +227,11 @@ void MqttSink::Offer(const Gateway& gateway) {
     std::unique_lock lock(mutex_);
     if (wait_for_room_) {
       // A broker that takes nothing for 30 s: from then on full queues drop, as live.
-      mqtt::StepQueue& q = alarm ? alarms_ : data_;
-      if (!cv_.wait_for(lock, std::chrono::seconds(30),
-                        [&] { return q.size() < q.capacity() || stop_; })) {
+      const auto room = [&] {
+        return stop_ ||
+               (alarm ? alarms_.size() < alarms_.capacity() : data_.size() < data_.capacity());
+      };
+      if (!cv_.wait_for(lock, std::chrono::seconds(30), room)) {
         wait_for_room_ = false;
         Log(LogLevel::kWarning,
             "mqtt: the broker took nothing for 30 s: dropping the oldest steps");
@@ -273,9 +275,10 @@ MqttHealth MqttSink::Health() const {
 
 std::string MqttSink::StatusText() const {
   const MqttCounts c = counts();
-  return fmt::format("mqtt {} {}:{}, {} sent, {} alarms sent, {} dropped, {} alarms dropped",
-                     c.connected ? "connected to" : "not connected to", config_.host, config_.port,
-                     c.sent, c.alarms_sent, c.dropped, c.alarms_dropped);
+  return fmt::format(
+      "mqtt {} {}:{}, {} sent, {} alarms sent, {} dropped, {} alarms dropped, {} alarms sent again",
+      c.connected ? "connected to" : "not connected to", config_.host, config_.port, c.sent,
+      c.alarms_sent, c.dropped, c.alarms_dropped, c.alarms_resent);
 }
 
 void MqttSink::OnConnect(mosquitto* m, void* self, int rc) {
@@ -288,6 +291,11 @@ void MqttSink::OnConnect(mosquitto* m, void* self, int rc) {
   mosquitto_subscribe(m, nullptr, sink->topic_ncmd_.c_str(), 0);
   sink->need_birth_ = true;
   sink->unacked_.clear();  // a new session: what the old one did not acknowledge is not waited for
+  {
+    // Alarm transitions the old connection did not see acknowledged go again, after the births.
+    std::lock_guard lock(sink->mutex_);
+    sink->counts_.alarms_resent += sink->alarms_.RequeueInFlight();
+  }
   sink->connected_ = true;
 }
 
@@ -308,16 +316,24 @@ void MqttSink::OnMessage(mosquitto*, void* self, const mosquitto_message* msg) {
 }
 
 void MqttSink::OnPublish(mosquitto*, void* self, int mid) {
-  // QoS 0 messages call this too, once written; QoS 1 once acknowledged.
-  auto& unacked = static_cast<MqttSink*>(self)->unacked_;
+  // QoS 0 messages call this too, once written; QoS 1 once acknowledged (PUBACK).
+  auto* sink = static_cast<MqttSink*>(self);
+  auto& unacked = sink->unacked_;
   unacked.erase(std::remove(unacked.begin(), unacked.end(), mid), unacked.end());
+  {
+    std::lock_guard lock(sink->mutex_);
+    if (sink->alarms_.Ack(mid)) ++sink->counts_.alarms_sent;
+  }
+  sink->cv_.notify_all();
 }
 
-bool MqttSink::Publish(const std::string& topic, const std::string& payload, int qos) {
+bool MqttSink::Publish(const std::string& topic, const std::string& payload, int qos,
+                       int* mid_out) {
   int mid = 0;
   const int rc = mosquitto_publish(mosq_, &mid, topic.c_str(), static_cast<int>(payload.size()),
                                    payload.data(), qos, false);
   if (rc == MOSQ_ERR_SUCCESS && qos > 0) unacked_.push_back(mid);
+  if (mid_out != nullptr) *mid_out = mid;
   return rc == MOSQ_ERR_SUCCESS;
 }
 
@@ -327,12 +343,14 @@ void MqttSink::AwaitAcks(int timeout_ms) {
 }
 
 bool MqttSink::ConnectOnce() {
-  ++bd_seq_;
-  const std::string death = mqtt::Encoder::NodeDeath(bd_seq_);
+  const std::string death = mqtt::Encoder::NodeDeath(bd_seq_.ForNextConnect());
   mosquitto_will_set(mosq_, topic_ndeath_.c_str(), static_cast<int>(death.size()), death.data(), 1,
                      false);
   const int rc = mosquitto_connect(mosq_, config_.host.c_str(), config_.port,
                                    static_cast<int>(config_.keepalive_s));
+  // libmosquitto returns success once the CONNECT packet (with this will) is written or queued;
+  // on an error no CONNECT went out and its bdSeq is kept for the next attempt.
+  if (rc == MOSQ_ERR_SUCCESS) bd_seq_.ConnectSent();
   if (rc != MOSQ_ERR_SUCCESS) {
     Log(LogLevel::kWarning, "mqtt: cannot connect to {}:{}: {}", config_.host, config_.port,
         rc == MOSQ_ERR_ERRNO ? std::strerror(errno) : mosquitto_strerror(rc));
@@ -343,7 +361,7 @@ bool MqttSink::ConnectOnce() {
 
 void MqttSink::Births() {
   const std::uint64_t now_ms = WallMs();
-  Publish(topic_nbirth_, encoder_.NodeBirth(bd_seq_, now_ms), 0);
+  Publish(topic_nbirth_, encoder_.NodeBirth(bd_seq_.Current(), now_ms), 0);
   for (std::size_t d = 0; d < latest_.size(); ++d)
     Publish(topics_birth_[d], encoder_.DeviceBirth(d, latest_[d], now_ms), 0);
   need_birth_ = false;
@@ -356,24 +374,33 @@ bool MqttSink::PublishOne() {
   bool alarm = false;
   {
     std::lock_guard lock(mutex_);
-    if (data_.empty() && alarms_.empty()) return false;
+    if (data_.empty() && !alarms_.HasNext()) return false;
     // The older of the two fronts first: a pump's steps go out in the order they came.
-    alarm = data_.empty() || (!alarms_.empty() && alarms_.Front().order < data_.Front().order);
-    const mqtt::StepQueue& q = alarm ? alarms_ : data_;
-    step = q.Front();
-    std::copy(q.FrontValues().begin(), q.FrontValues().end(), step_values_.begin());
+    alarm = data_.empty() || (alarms_.HasNext() && alarms_.Next().order < data_.Front().order);
+    step = alarm ? alarms_.Next() : data_.Front();
+    const std::span<const double> front = alarm ? alarms_.NextValues() : data_.FrontValues();
+    std::copy(front.begin(), front.end(), step_values_.begin());
   }
   const std::span<const double> values(step_values_.data(), step.count);
-  const std::string payload = encoder_.DeviceData(step.device, values, step.time_ms);
-  const bool ok = payload.empty() || Publish(topics_data_[step.device], payload, alarm ? 1 : 0);
+  // An alarm transition carries every metric: complete in itself, and not empty when it goes
+  // again after a new connection's DBIRTH already carried its values.
+  const std::string payload = encoder_.DeviceData(step.device, values, step.time_ms, alarm);
+  int mid = 0;
+  const bool ok =
+      payload.empty() || Publish(topics_data_[step.device], payload, alarm ? 1 : 0, &mid);
   if (!ok && alarm) return false;  // kept: sent after the next connection's births
   std::copy(values.begin(), values.end(), latest_[step.device].begin());
   {
     std::lock_guard lock(mutex_);
-    mqtt::StepQueue& q = alarm ? alarms_ : data_;
-    if (!q.empty() && q.Front().order == step.order) q.Pop();
-    if (!ok) ++counts_.dropped;  // a data step the broker did not take: not sent again
-    if (ok && !payload.empty()) ++(alarm ? counts_.alarms_sent : counts_.sent);
+    if (alarm) {
+      // In flight until its PUBACK (OnPublish); a step that changed nothing has no message and
+      // is done at once.
+      if (alarms_.MarkSent(step.order, mid) && payload.empty()) alarms_.Ack(mid);
+    } else {
+      if (!data_.empty() && data_.Front().order == step.order) data_.Pop();
+      if (!ok) ++counts_.dropped;  // a data step the broker did not take: not sent again
+      if (ok && !payload.empty()) ++counts_.sent;
+    }
   }
   cv_.notify_all();
   return true;
@@ -430,7 +457,7 @@ void MqttSink::Run() {
     // A clean end is a death too (spec: an edge node going offline publishes NDEATH).
     // Sent QoS 1 and acknowledged before the DISCONNECT: the broker has then read every message
     // before it (a broker that finds the socket closed while it acknowledges drops the rest).
-    Publish(topic_ndeath_, mqtt::Encoder::NodeDeath(bd_seq_), 1);
+    Publish(topic_ndeath_, mqtt::Encoder::NodeDeath(bd_seq_.Current()), 1);
     AwaitAcks(2000);
     mosquitto_disconnect(mosq_);
     for (int k = 0; k < 10 && connected_; ++k) mosquitto_loop(mosq_, 20, 1);

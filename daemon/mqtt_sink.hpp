@@ -40,7 +40,8 @@ struct MqttCounts {
   bool connected = false;
   std::uint64_t connects = 0;        ///< connections made (each a session: NBIRTH, DBIRTHs)
   std::uint64_t sent = 0;            ///< DDATA published (QoS 0)
-  std::uint64_t alarms_sent = 0;     ///< alarm transitions published (QoS 1)
+  std::uint64_t alarms_sent = 0;     ///< alarm transitions the broker acknowledged (QoS 1)
+  std::uint64_t alarms_resent = 0;   ///< alarm transitions sent again on a new connection
   std::uint64_t dropped = 0;         ///< data steps dropped: the queue was full
   std::uint64_t alarms_dropped = 0;  ///< alarm transitions dropped: their queue was full
   std::uint64_t rebirths = 0;        ///< NCMD Node Control/Rebirth answered
@@ -67,7 +68,8 @@ class MqttSink {
   MqttCounts counts() const;
   /// The counts as the health message carries them (no allocation: the loop calls it).
   MqttHealth Health() const;
-  /// "mqtt connected to HOST:PORT, N sent, N alarms, N dropped ..." for STATUS=.
+  /// "mqtt connected to HOST:PORT, N sent, N alarms sent, N dropped, N alarms dropped, N alarms
+  /// sent again" for STATUS= and the summary.
   std::string StatusText() const;
 
  private:
@@ -75,7 +77,9 @@ class MqttSink {
   bool ConnectOnce();
   void Births();
   bool PublishOne();
-  bool Publish(const std::string& topic, const std::string& payload, int qos);
+  /// Hands a message to libmosquitto; `mid_out` (when given) receives its message id.
+  bool Publish(const std::string& topic, const std::string& payload, int qos,
+               int* mid_out = nullptr);
   static void OnConnect(mosquitto* m, void* self, int rc);
   static void OnDisconnect(mosquitto* m, void* self, int rc);
   static void OnMessage(mosquitto* m, void* self, const mosquitto_message* msg);
@@ -95,7 +99,8 @@ class MqttSink {
   // Shared with the loop, under mutex_.
   mutable std::mutex mutex_;
   std::condition_variable cv_;
-  mqtt::StepQueue data_, alarms_;
+  mqtt::StepQueue data_;
+  mqtt::AlarmRing alarms_;  ///< alarm transitions, until the broker acknowledged each
   std::uint64_t order_ = 0;
   MqttCounts counts_;
   bool stop_ = false;
@@ -112,7 +117,7 @@ class MqttSink {
   std::atomic<bool> rebirth_{false};
   std::vector<int> unacked_;  ///< message ids of QoS 1 messages not acknowledged yet
   bool need_birth_ = false;
-  std::uint64_t bd_seq_ = 0;
+  mqtt::BdSeq bd_seq_;
   std::vector<std::vector<double>> latest_;  ///< per pump, the newest step taken from a queue
   std::vector<double> step_values_;
   std::thread thread_;

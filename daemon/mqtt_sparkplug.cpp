@@ -197,14 +197,14 @@ std::string Encoder::DeviceBirth(std::size_t device, std::span<const double> val
 }
 
 std::string Encoder::DeviceData(std::size_t device, std::span<const double> values,
-                                std::uint64_t time_ms) {
+                                std::uint64_t time_ms, bool every_metric) {
   const Device& d = devices_.at(device);
   if (values.size() != d.metrics.size()) throw std::out_of_range("mqtt: DDATA value count");
   std::vector<double>& sent = sent_[device];
   if (sent.size() != values.size()) throw std::logic_error("mqtt: DDATA before the DBIRTH");
   pb::Payload p;
   for (std::size_t k = 0; k < values.size(); ++k) {
-    if (Same(values[k], sent[k])) continue;
+    if (!every_metric && Same(values[k], sent[k])) continue;
     auto* m = p.add_metrics();
     m->set_alias(Alias(device, k));
     m->set_timestamp(time_ms);

@@ -59,6 +59,31 @@ void FillDeviceValues(const FieldSource& source, std::span<double> out);
 /// (spec 6.4.19). False for anything that does not decode.
 bool RebirthRequested(std::string_view payload);
 
+/// The edge node's birth/death sequence number, bdSeq (Sparkplug 3.0.0, "Edge Node Birth":
+/// tck-id-message-flow-edge-node-birth-publish-will-message-payload-bdSeq): the will (NDEATH)
+/// of each MQTT CONNECT packet carries the value of the previous CONNECT packet's plus one,
+/// 255 wrapping to 0; the NBIRTH of that connection carries the same value
+/// (tck-id-payloads-nbirth-bdseq-repeat). It counts CONNECT packets, not sessions that came up:
+/// a CONNECT the broker refused or that was lost before its NBIRTH still used its number, and an
+/// attempt that never sent a CONNECT (the broker unreachable) uses none. Starts at 0.
+class BdSeq {
+ public:
+  /// The value for the will of the next CONNECT packet.
+  std::uint64_t ForNextConnect() const { return next_; }
+  /// A CONNECT packet with ForNextConnect() in its will went out: that value is now the
+  /// session's (Current()), and the next CONNECT takes the one after it.
+  void ConnectSent() {
+    current_ = next_;
+    next_ = (next_ + 1) % 256;
+  }
+  /// The value of the last CONNECT sent: for the NBIRTH and the NDEATH of its session.
+  std::uint64_t Current() const { return current_; }
+
+ private:
+  std::uint64_t next_ = 0;
+  std::uint64_t current_ = 0;
+};
+
 /// A pump as the encoder sees it: its device id and its metrics.
 struct Device {
   std::string id;
@@ -89,8 +114,11 @@ class Encoder {
   std::string DeviceBirth(std::size_t device, std::span<const double> values,
                           std::uint64_t time_ms);
   /// DDATA of `device`: the metrics whose value differs from the last sent (by alias, no
-  /// name); empty when nothing changed (nothing to send).
-  std::string DeviceData(std::size_t device, std::span<const double> values, std::uint64_t time_ms);
+  /// name); empty when nothing changed (nothing to send). `every_metric`: all of them, changed
+  /// or not (never empty: an alarm transition, complete in itself, also when it is sent again
+  /// after births that already carried its values).
+  std::string DeviceData(std::size_t device, std::span<const double> values, std::uint64_t time_ms,
+                         bool every_metric = false);
 
  private:
   std::uint64_t NextSeq();

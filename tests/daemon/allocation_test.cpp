@@ -4,19 +4,28 @@
 // build time) through the offline pipeline's per-frame path (daemon/offline.cpp RunOffline:
 // parse the candump line, Gateway::OnFrame, Gateway::Advance into a sink that writes nothing),
 // and counts the allocations after a warm-up of 60 s of log time. The counted part holds
-// thermal steps, alarm evaluations, forecasts, CAN outputs, LCM encodings and health messages.
+// thermal steps, alarm evaluations, forecasts, CAN outputs, LCM encodings and health messages;
+// one case adds the MQTT sink as the live loop calls it (MqttSink::Offer and Health after each
+// Advance), its broker absent so that its queues fill and drop. Only the loop's thread is
+// counted: the sink's own thread (encoding, connecting) may allocate.
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <memory>
 #include <new>
 #include <string>
 #include <vector>
 
 #include "daemon/config.hpp"
 #include "daemon/gateway.hpp"
+#include "daemon/mqtt_sink.hpp"
 #include "daemon/resources.hpp"
 #include "protocol/candump_log.hpp"
 
@@ -40,7 +49,8 @@
 #endif
 
 namespace {
-std::atomic<bool> g_counting{false};
+// Per thread: the loop's thread counts, other threads (the MQTT sink's) do not.
+thread_local bool g_counting = false;
 std::atomic<std::uint64_t> g_allocations{0};
 std::atomic<std::uint64_t> g_bytes{0};
 // PUMPTHERM_ABORT_ON_ALLOCATION=1 aborts at the first counted allocation (run under gdb to see
@@ -48,7 +58,7 @@ std::atomic<std::uint64_t> g_bytes{0};
 bool g_abort = false;
 
 void Count(std::size_t n) {
-  if (g_counting.load(std::memory_order_relaxed)) {
+  if (g_counting) {
     g_allocations.fetch_add(1, std::memory_order_relaxed);
     g_bytes.fetch_add(n, std::memory_order_relaxed);
     if (g_abort) std::abort();
@@ -132,14 +142,38 @@ struct NullSink : OutputSink {
   }
 };
 
+/// A loopback TCP port nothing listens on (bound, then closed: a connect is refused).
+int ClosedPort() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t n = sizeof a;
+  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
 /// The demo's configuration over the pipeline recording; `disturbance_states` switches every
-/// pump to the disturbance-state filter.
-void ExpectNoAllocationPerFrame(bool disturbance_states) {
+/// pump to the disturbance-state filter; `with_mqtt` adds the MQTT sink (broker absent, small
+/// queues so that they overflow in the counted window).
+void ExpectNoAllocationPerFrame(bool disturbance_states, bool with_mqtt = false) {
   const std::string config_path =
       std::string(PUMPTHERM_SOURCE_DIR) + "/tools/demo/pumpthermd-demo.toml";
   DaemonConfig config = LoadConfig(config_path);
   for (auto& pump : config.pumps) pump.disturbance_states = disturbance_states;
   Gateway gateway(config);
+  std::unique_ptr<MqttSink> mqtt;
+  if (with_mqtt) {
+    config.mqtt = MqttConfig{};
+    config.mqtt.enabled = true;
+    config.mqtt.host = "127.0.0.1";
+    config.mqtt.port = ClosedPort();
+    config.mqtt.queue_steps = 4;
+    config.mqtt.alarm_queue_steps = 2;
+    mqtt = std::make_unique<MqttSink>(config.mqtt, "alloc", gateway, false);
+  }
   std::ifstream in(PUMPTHERM_ALLOCATION_RECORDING);
   ASSERT_TRUE(in) << PUMPTHERM_ALLOCATION_RECORDING
                   << ": cannot open (built by vcan_pipeline_recording)";
@@ -187,6 +221,10 @@ void ExpectNoAllocationPerFrame(bool disturbance_states) {
     }
     gateway.OnFrame(iface, protocol::TimedFrame{now, p.record.frame});
     gateway.Advance(now, sink);
+    if (mqtt) {
+      mqtt->Offer(gateway);
+      gateway.SetMqttHealth(mqtt->Health());
+    }
     last_us = now;
     if (g_counting) ++counted_frames;
   }
@@ -210,6 +248,13 @@ void ExpectNoAllocationPerFrame(bool disturbance_states) {
   ASSERT_GE(steps, 3U * 30U);
   ASSERT_GT(counted_outputs, 1000U);
   ASSERT_GT(counted_lcm, 3U * 3U * 30U);
+  if (mqtt) {
+    const MqttCounts c = mqtt->counts();
+    std::printf("mqtt (broker absent): %llu steps dropped, %llu alarm transitions dropped\n",
+                static_cast<unsigned long long>(c.dropped),
+                static_cast<unsigned long long>(c.alarms_dropped));
+    ASSERT_GT(c.dropped, 3U * 30U);  // Offer queued every step and the full ring dropped
+  }
   EXPECT_EQ(g_allocations.load(), 0U)
       << "heap allocations in the per-frame path after warm-up ("
       << static_cast<double>(g_allocations.load()) / static_cast<double>(counted_frames)
@@ -220,6 +265,10 @@ TEST(Allocation, NoHeapAllocationPerFrameInSteadyState) { ExpectNoAllocationPerF
 
 TEST(Allocation, NoHeapAllocationPerFrameWithDisturbanceStates) {
   ExpectNoAllocationPerFrame(true);
+}
+
+TEST(Allocation, NoHeapAllocationPerFrameWithTheMqttSink) {
+  ExpectNoAllocationPerFrame(false, true);
 }
 
 }  // namespace

@@ -7,11 +7,15 @@
   within the CSV's rounding, alarm_level as docs/daemon.md numbers it, a code the same word
   each time).
 - The broker went away: there are at least two NBIRTHs, and a DBIRTH of each pump after the
-  last one.
+  last one. bdSeq counts CONNECT packets (Sparkplug 3.0.0; docs/mqtt.md, "Payloads"): the first
+  NBIRTH carries 0, and the last 1, since the attempts while the broker was down sent no
+  CONNECT (connection refused); a rebirth repeats its session's bdSeq.
 - The data steps that did not arrive are counted by the daemon: --dropped (its summary's
   "N dropped") is at least 1, and the steps missing beyond it (QoS 0 messages written to a
   connection that was already gone: libmosquitto took them, the broker never read them) are at
   most --max-lost.
+With --no-restart (a run without a broker outage, the slow-consumer test): no NBIRTH, bdSeq or
+"dropped at least 1" checks; the alarm transitions and the missing steps as above.
 Prints the figures; exits 1 on a mismatch.
 """
 import argparse
@@ -35,13 +39,17 @@ def main():
     ap.add_argument("--origin-s", type=float, required=True)
     ap.add_argument("--dropped", type=int, required=True, help="the daemon's 'N dropped'")
     ap.add_argument("--max-lost", type=int, required=True)
+    ap.add_argument("--no-restart", action="store_true")
     a = ap.parse_args()
     msgs = [json.loads(line) for line in open(a.messages)]
     base = f"spBv1.0/{a.group}/"
     errors = []
     nbirths = [i for i, m in enumerate(msgs) if m["topic"] == f"{base}NBIRTH/{a.edge_node}"]
-    if len(nbirths) < 2:
+    if len(nbirths) < 2 and not a.no_restart:
         errors.append(f"{len(nbirths)} NBIRTH: the daemon did not connect again")
+    bd_seqs = [[x["value"] for x in msgs[i]["metrics"] if x["name"] == "bdSeq"][0] for i in nbirths]
+    if bd_seqs and not a.no_restart and (bd_seqs[0] != 0 or bd_seqs[-1] != 1 or bd_seqs != sorted(bd_seqs)):
+        errors.append(f"NBIRTH bdSeq {bd_seqs}: want 0 first, 1 last (one CONNECT after the outage)")
     words = defaultdict(dict)
     steps = received = transitions = 0
     for pump in a.pumps:
@@ -89,9 +97,9 @@ def main():
         if seen_at != sorted(seen_at):
             errors.append(f"{pump}: alarm transitions out of order")
     lost = steps - received - a.dropped
-    print(f"{len(nbirths)} NBIRTH; {transitions} alarm transitions in the CSV; {steps} steps, "
+    print(f"{len(nbirths)} NBIRTH (bdSeq {bd_seqs}); {transitions} alarm transitions in the CSV; {steps} steps, "
           f"{received} DDATA received, {a.dropped} dropped (counted), {lost} missing beyond them")
-    if a.dropped < 1:
+    if a.dropped < 1 and not a.no_restart:
         errors.append("nothing dropped: the outage did not fill the queue")
     if transitions < 1:
         errors.append("no alarm transition in the CSV: the test proves nothing")

@@ -1,6 +1,8 @@
 // The [mqtt] table (docs/daemon.md, "[mqtt]") and the sink's bounded queue
 // (daemon/mqtt_queue.hpp): defaults, file:line errors, plain text refused off this host; the
-// oldest step dropped when full, order and values kept.
+// oldest step dropped when full, order and values kept; the alarm ring's bookkeeping (a step
+// leaves only on its acknowledgement, in any order; a new connection sends the unacknowledged
+// again, in order; a full ring drops the oldest and says so), without a broker.
 #include <gtest/gtest.h>
 
 #include <string>
@@ -100,6 +102,96 @@ TEST(MqttQueue, KeepsOrderAndDropsTheOldestWhenFull) {
   EXPECT_EQ(orders, (std::vector<std::uint64_t>{1, 2, 3}));
   EXPECT_THROW(q.Push({}, std::vector<double>{1.0, 2.0, 3.0}), std::out_of_range);
   EXPECT_THROW(mqtt::StepQueue(0, 1), std::invalid_argument);
+}
+
+// The alarm ring: pushes 0..n-1, each with one value equal to its order.
+mqtt::AlarmRing RingOf(std::size_t capacity, std::uint64_t n) {
+  mqtt::AlarmRing r(capacity, 2);
+  for (std::uint64_t k = 0; k < n; ++k)
+    EXPECT_FALSE(r.Push({0, 1000 + k, k, 0}, std::vector<double>{double(k)}));
+  return r;
+}
+
+// Sends every waiting step, message ids from `first_mid` up; returns the orders sent.
+std::vector<std::uint64_t> SendAll(mqtt::AlarmRing& r, int first_mid) {
+  std::vector<std::uint64_t> sent;
+  for (int mid = first_mid; r.HasNext(); ++mid) {
+    const std::uint64_t order = r.Next().order;
+    EXPECT_EQ(r.NextValues().size(), 1U);
+    EXPECT_EQ(r.NextValues()[0], double(order));
+    sent.push_back(order);
+    EXPECT_TRUE(r.MarkSent(order, mid));
+  }
+  return sent;
+}
+
+TEST(MqttAlarmRing, AStepLeavesOnlyWhenAcknowledged) {
+  mqtt::AlarmRing r = RingOf(4, 3);
+  EXPECT_EQ(SendAll(r, 10), (std::vector<std::uint64_t>{0, 1, 2}));
+  EXPECT_EQ(r.size(), 3U);  // accepted by the client, not acknowledged: still there
+  EXPECT_EQ(r.in_flight(), 3U);
+  EXPECT_FALSE(r.HasNext());
+  EXPECT_FALSE(r.Ack(9));  // another message's id
+  EXPECT_TRUE(r.Ack(10));
+  EXPECT_EQ(r.size(), 2U);
+  EXPECT_FALSE(r.Ack(10));  // acknowledged once only
+}
+
+TEST(MqttAlarmRing, AcknowledgementsOutOfOrderKeepTheRest) {
+  mqtt::AlarmRing r = RingOf(8, 5);
+  SendAll(r, 20);  // orders 0..4 as ids 20..24
+  EXPECT_TRUE(r.Ack(23));
+  EXPECT_TRUE(r.Ack(21));
+  EXPECT_EQ(r.size(), 3U);
+  EXPECT_EQ(r.in_flight(), 3U);
+  // A new connection: the unacknowledged (orders 0, 2, 4) go again, in order, with their values.
+  EXPECT_EQ(r.RequeueInFlight(), 3U);
+  EXPECT_EQ(SendAll(r, 30), (std::vector<std::uint64_t>{0, 2, 4}));
+  EXPECT_FALSE(r.Ack(20));  // the old connection's id of order 0: no longer in flight
+  EXPECT_TRUE(r.Ack(32));
+  EXPECT_TRUE(r.Ack(30));
+  EXPECT_TRUE(r.Ack(31));
+  EXPECT_TRUE(r.empty());
+}
+
+TEST(MqttAlarmRing, ANewConnectionSendsTheInFlightBeforeTheWaiting) {
+  mqtt::AlarmRing r = RingOf(8, 2);
+  SendAll(r, 1);
+  r.Push({0, 2000, 2, 0}, std::vector<double>{2.0});  // waiting, not sent yet
+  EXPECT_EQ(r.in_flight(), 2U);
+  EXPECT_EQ(r.RequeueInFlight(), 2U);
+  EXPECT_EQ(r.in_flight(), 0U);
+  EXPECT_EQ(SendAll(r, 5), (std::vector<std::uint64_t>{0, 1, 2}));
+  EXPECT_EQ(r.RequeueInFlight(), 3U);  // lost again before any acknowledgement
+  EXPECT_EQ(SendAll(r, 8), (std::vector<std::uint64_t>{0, 1, 2}));
+}
+
+TEST(MqttAlarmRing, AFullRingDropsTheOldestUnacknowledged) {
+  mqtt::AlarmRing r = RingOf(3, 3);
+  SendAll(r, 1);          // orders 0, 1, 2 in flight as 1, 2, 3
+  EXPECT_TRUE(r.Ack(1));  // order 0 acknowledged: room for one
+  EXPECT_FALSE(r.Push({0, 3, 3, 0}, std::vector<double>{3.0}));
+  EXPECT_TRUE(r.Push({0, 4, 4, 0}, std::vector<double>{4.0}));  // drops order 1 (in flight)
+  EXPECT_EQ(r.size(), 3U);
+  EXPECT_EQ(r.in_flight(), 1U);
+  EXPECT_FALSE(r.Ack(2));  // the dropped step's id matches nothing
+  EXPECT_EQ(r.RequeueInFlight(), 1U);
+  EXPECT_EQ(SendAll(r, 10), (std::vector<std::uint64_t>{2, 3, 4}));
+  // Full of waiting steps: the oldest waiting one goes.
+  mqtt::AlarmRing w = RingOf(2, 2);
+  EXPECT_TRUE(w.Push({0, 5, 5, 0}, std::vector<double>{5.0}));
+  EXPECT_EQ(SendAll(w, 1), (std::vector<std::uint64_t>{1, 5}));
+}
+
+TEST(MqttAlarmRing, AStepDroppedWhileBeingSentIsNotMarked) {
+  mqtt::AlarmRing r = RingOf(2, 2);
+  const std::uint64_t order = r.Next().order;                   // taken out to publish...
+  EXPECT_TRUE(r.Push({0, 2, 2, 0}, std::vector<double>{2.0}));  // ...and dropped meanwhile
+  EXPECT_FALSE(r.MarkSent(order, 7));
+  EXPECT_EQ(r.in_flight(), 0U);
+  EXPECT_EQ(SendAll(r, 8), (std::vector<std::uint64_t>{1, 2}));
+  EXPECT_THROW(r.Push({}, std::vector<double>{1.0, 2.0, 3.0}), std::out_of_range);
+  EXPECT_THROW(mqtt::AlarmRing(0, 1), std::invalid_argument);
 }
 
 }  // namespace

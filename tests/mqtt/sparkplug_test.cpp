@@ -144,6 +144,38 @@ TEST(SparkplugEncoder, NodeBirthAndDeathCarryTheSession) {
   EXPECT_EQ(death.metrics(0).long_value(), 7U);
 }
 
+// Sparkplug 3.0.0, tck-id-message-flow-edge-node-birth-publish-will-message-payload-bdSeq: each
+// CONNECT packet's will carries the previous CONNECT's bdSeq + 1, 255 wrapping to 0; attempts
+// that sent no CONNECT use no number; the NBIRTH and NDEATH of a session carry its CONNECT's.
+TEST(SparkplugBdSeq, OnePerConnectPacketWrappingAt255) {
+  BdSeq bd;
+  EXPECT_EQ(bd.ForNextConnect(), 0U);
+  // Three attempts with the broker unreachable: no CONNECT went out, the number is kept.
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(bd.ForNextConnect(), 0U);
+  bd.ConnectSent();
+  EXPECT_EQ(bd.Current(), 0U);  // the session's NBIRTH and NDEATH
+  EXPECT_EQ(bd.ForNextConnect(), 1U);
+  // A CONNECT the broker refused (or a session lost before its NBIRTH) still used its number.
+  bd.ConnectSent();
+  bd.ConnectSent();
+  EXPECT_EQ(bd.Current(), 2U);
+  EXPECT_EQ(bd.ForNextConnect(), 3U);
+  std::vector<std::uint64_t> seen;
+  for (int k = 3; k < 260; ++k) {
+    const std::uint64_t will = bd.ForNextConnect();
+    bd.ConnectSent();
+    EXPECT_EQ(bd.Current(), will);
+    seen.push_back(will);
+  }
+  EXPECT_EQ(seen[252], 255U);  // the CONNECT after 255 carries 0
+  EXPECT_EQ(seen[253], 0U);
+  EXPECT_EQ(seen.back(), 3U);
+  // The will and the birth of a session carry the same value.
+  Encoder enc({});
+  EXPECT_EQ(Decode(Encoder::NodeDeath(bd.Current())).metrics(0).long_value(),
+            Decode(enc.NodeBirth(bd.Current(), 1)).metrics(0).long_value());
+}
+
 class SparkplugSession : public ::testing::Test {
  protected:
   SparkplugSession()
@@ -226,6 +258,20 @@ TEST_F(SparkplugSession, DeviceDataCarriesOnlyWhatChangedByAlias) {
   EXPECT_TRUE(by_alias.at(Alias(0, IndexOf(metrics_, "winding_resistance_sd_K")))->is_null());
   // Unchanged NaN is not a change either.
   EXPECT_EQ(enc_.DeviceData(0, values_, 4000), "");
+}
+
+TEST_F(SparkplugSession, DeviceDataWithEveryMetricCarriesAllOfThem) {
+  enc_.NodeBirth(0, 1000);
+  enc_.DeviceBirth(0, values_, 1000);
+  // Nothing changed since the birth: still every metric, by alias, with the step's time.
+  const pb::Payload d = Decode(enc_.DeviceData(0, values_, 2000, true));
+  ASSERT_EQ(d.metrics_size(), static_cast<int>(metrics_.size()));
+  for (int k = 0; k < d.metrics_size(); ++k) {
+    EXPECT_EQ(d.metrics(k).alias(), Alias(0, static_cast<std::size_t>(k)));
+    EXPECT_EQ(d.metrics(k).timestamp(), 2000U);
+  }
+  EXPECT_EQ(d.seq(), 2U);
+  EXPECT_EQ(enc_.DeviceData(0, values_, 3000), "") << "then by change again";
 }
 
 TEST_F(SparkplugSession, SeqWrapsAfter255AndNodeBirthStartsAgain) {

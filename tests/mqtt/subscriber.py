@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """An independent Sparkplug B subscriber for the MQTT sink's broker test (docs/mqtt.md).
 
-Subscribes to spBv1.0/# over TLS with Debian's python3-paho-mqtt, decodes every payload with
+Subscribes to spBv1.0/# (over TLS when --ca is given) with Debian's python3-paho-mqtt, decodes every payload with
 the schema compiled by protoc (python3-protobuf), and writes one JSON line per message:
 {"topic", "seq", "timestamp", "metrics": [{"name", "alias", "datatype", "is_null", "value"}]}.
 Exits after the NDEATH of --edge-node (or --timeout seconds, exit 1). Prints "subscribed" on
@@ -11,11 +11,15 @@ comes back; it exits once --stop-file exists and the NDEATH of the newest NBIRTH
 (a will the broker sent for an earlier session does not count). On each connection after the
 first it asks the edge node for a rebirth (NCMD Node Control/Rebirth, as a Sparkplug host that
 comes back does): births are QoS 0, so a gateway that reconnected first is not seen otherwise.
+With --sleep-s: a slow consumer, sleeping that long after each message in the client's network
+thread (so the socket is read that slowly), with a small socket receive buffer (--rcvbuf) so
+that the broker's per-client queue, not the kernel's buffers, takes the backlog.
 """
 import argparse
 import json
 import math
 import os
+import socket
 import sys
 import time
 
@@ -37,9 +41,12 @@ def value_of(m):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--port", type=int, required=True)
-    ap.add_argument("--ca", required=True)
-    ap.add_argument("--cert", required=True)
-    ap.add_argument("--key", required=True)
+    ap.add_argument("--ca", help="the broker's CA: TLS (else plain text)")
+    ap.add_argument("--cert")
+    ap.add_argument("--key")
+    ap.add_argument("--client-id", default="pumptherm-test-subscriber")
+    ap.add_argument("--sleep-s", type=float, default=0.0, help="a slow consumer: per message")
+    ap.add_argument("--rcvbuf", type=int, default=0, help="SO_RCVBUF in bytes (0: the default)")
     ap.add_argument("--out", required=True)
     ap.add_argument("--edge-node", required=True)
     ap.add_argument("--deaths", type=int, default=1, help="NDEATHs to wait for")
@@ -52,6 +59,8 @@ def main():
     state = {"connects": 0, "deaths": 0, "birth_bd": None, "final_death": False}
 
     def on_connect(client, userdata, flags, rc):
+        if a.rcvbuf:
+            client.socket().setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, a.rcvbuf)
         client.subscribe("spBv1.0/#", qos=1)
         state["connects"] += 1
         if a.persistent and state["connects"] > 1:
@@ -88,6 +97,8 @@ def main():
         }
         out.write(json.dumps(rec) + "\n")
         out.flush()
+        if a.sleep_s:
+            time.sleep(a.sleep_s)
         parts = msg.topic.split("/")
         bd = [x["value"] for x in rec["metrics"] if x["name"] == "bdSeq"]
         if len(parts) == 4 and parts[2] == "NBIRTH" and parts[3] == a.edge_node:
@@ -99,9 +110,10 @@ def main():
             if state["deaths"] >= a.deaths and not a.stop_file:
                 client.disconnect()
 
-    c = mqtt.Client(client_id="pumptherm-test-subscriber", clean_session=not a.persistent)
+    c = mqtt.Client(client_id=a.client_id, clean_session=not a.persistent)
     c.reconnect_delay_set(min_delay=0.1, max_delay=0.2)
-    c.tls_set(ca_certs=a.ca, certfile=a.cert, keyfile=a.key)
+    if a.ca:
+        c.tls_set(ca_certs=a.ca, certfile=a.cert, keyfile=a.key)
     c.on_connect = on_connect
     c.on_subscribe = on_subscribe
     c.on_message = on_message
