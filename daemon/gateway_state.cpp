@@ -57,6 +57,8 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
   if (s.observer_x.size() > 0) {
     t.insert("disturbance_x", Flattened(s.observer_x));
     t.insert("disturbance_s", Flattened(s.observer_s));
+    // Whether that calibration was learnt from a cold start (absent in older files: not).
+    t.insert("disturbance_cold_started", s.cold_started);
   }
   // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
   // consecutive rejections.
@@ -209,6 +211,7 @@ bool ReadDisturbances(const toml::table& t, int count, PumpSavedState& s) {
   s.observer_s =
       Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
           vs.data(), count, count);
+  s.cold_started = t["disturbance_cold_started"].value_or(false);
   return true;
 }
 

@@ -232,6 +232,7 @@ bool PumpEstimator::StartIfNeeded(const PumpPeriod& p) {
   const bool cold = std::isfinite(measured) && std::isfinite(p.ambient_degC) &&
                     std::abs(measured - p.ambient_degC) <= config_.cold_start_band_K &&
                     rated_rpm > 0.0 && std::abs(p.inputs.speed_rpm) < 0.1 * rated_rpm;
+  cold_started_ = cold;
   if (cold) {
     observer_->InitialiseKnown(x0, config_.cold_start_sd_K);
   } else {
@@ -282,6 +283,18 @@ void PumpEstimator::HoldMagnet() {
   if (voltage_magnet_state_ < 0) return;
   held_magnet_ = voltage_.CalibratedMagnet(observer_->VoltageCalibration(),
                                            observer_->Weighted_degC(model_.WindingWeights()));
+}
+
+double PumpEstimator::UncalibratedMagnetSd_K() const {
+  // Until the filter has learnt psi0 against known temperatures (a cold start, in this run or
+  // the saved one), the back-EMF line anchors it to the nameplate within the line's bias sd and
+  // the filter's sd says psi0 is known; but this pump's flux may be anywhere within the
+  // nameplate's tolerance, so the flux tells the magnet no better than psi0_sd_rel through the
+  // magnet law (20 K for 2 % at -0.1 %/K). A law without temperature coefficient makes the
+  // voltage no measurement of the magnet, and the filter's own sd stands.
+  if (!observer_->TakesVoltage() || (cold_started_ && FluxKnownBetterThanTheLine())) return 0.0;
+  const double law_per_K = std::abs(motor_.magnet.flux_temperature_coefficient_per_K);
+  return law_per_K > 0.0 ? config_.psi0_sd_rel / law_per_K : 0.0;
 }
 
 bool PumpEstimator::FluxKnownBetterThanTheLine() const {
@@ -374,6 +387,13 @@ void PumpEstimator::PublishNodes(bool diverged) {
     estimate_.node_degC[k] = diverged ? kNaN : x_degC_(i);
     estimate_.node_filter_sd_K[k] = estimate_.node_sd_K[k] = diverged ? kNaN : sd_K_(i);
   }
+  // The magnet's node is published no narrower than psi0's calibration allows (the levels on it
+  // act on that); the bounds of the blind and silent stretches start from the filter's own sd,
+  // which carries the thermal model's knowledge of that node.
+  if (!diverged && voltage_magnet_state_ >= 0) {
+    double& sd = estimate_.node_sd_K[static_cast<std::size_t>(voltage_magnet_state_)];
+    sd = std::max(sd, UncalibratedMagnetSd_K());
+  }
   estimate_.initialised = !diverged;
   estimate_.filter_converged = !diverged && observer_->SettlingSd_K() < kConvergedSd_K;
 }
@@ -427,9 +447,13 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
       voltage_fused_us_ >= 0 &&
       static_cast<double>(p.end_us - voltage_fused_us_) * 1e-6 <= config_.alarms.stale_after_s;
   if (!fresh || !e.initialised) return;
-  // The flux follows the magnet: its node, as the filter has it with the voltage.
-  e.magnet_flux_degC = observer_->Node_degC(voltage_magnet_state_);
-  e.magnet_flux_sd_K = observer_->NodeSd_K(voltage_magnet_state_);
+  // The flux follows the magnet: its node, as the filter has it with the voltage, while psi0 is
+  // known (a flux with psi0 a nameplate's few percent off tells the magnet no better than the
+  // thermal model does).
+  if (UncalibratedMagnetSd_K() == 0.0) {
+    e.magnet_flux_degC = observer_->Node_degC(voltage_magnet_state_);
+    e.magnet_flux_sd_K = observer_->NodeSd_K(voltage_magnet_state_);
+  }
   // The resistance follows the copper: the winding weights, while R0 is known (a resistance
   // with R0 a nameplate's few percent off tells the winding no better than the frame does).
   const Eigen::VectorXd& w = model_.WindingWeights();
@@ -588,6 +612,7 @@ PumpEstimatorState PumpEstimator::Save() const {
     // priors, the interior took the slack of a fault for minutes (docs/daemon.md, "State").
     s.observer_x = observer_->State();
     s.observer_s = observer_->Covariance();
+    s.cold_started = cold_started_;
   }
   const auto& names = model_.StateNames();
   for (const auto& t : alarms_.LatchedTrips()) {
@@ -648,6 +673,7 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   }
   if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
   RestoreObserver(state, whole, gap_s, x, s);
+  cold_started_ = whole && state.cold_started;
   // The time the daemon was down is a telemetry silence: the load may have risen in it.
   values_.BeginSilence(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6, x,
                        static_cast<double>(now_us) * 1e-6);

@@ -169,6 +169,9 @@ struct PumpEstimatorState {
   /// disturbance-state filter); empty: not saved (an older file, another configuration).
   Eigen::VectorXd observer_x;
   Eigen::MatrixXd observer_s;
+  /// Whether the filter's calibration (R0, psi0) was learnt from a cold start (with the whole
+  /// state only).
+  bool cold_started = false;
 };
 
 class PumpEstimator {
@@ -237,6 +240,9 @@ class PumpEstimator {
   bool StartIfNeeded(const PumpPeriod& period);
   /// The filter's psi0 is known more closely than the back-EMF line's nameplate anchor.
   bool FluxKnownBetterThanTheLine() const;
+  /// The least sd of the magnet's node while psi0 is not learnt (0 once it is, or without the
+  /// voltage reading).
+  double UncalibratedMagnetSd_K() const;
   void PrepareReadings(const PumpPeriod& period);
   void HoldMagnet();
   void RecordReadings(const ObserverReport& report);
@@ -289,6 +295,9 @@ class PumpEstimator {
   std::vector<double> trip_degC_;  ///< per node, for the forecast (infinity: no trip level)
   int measured_state_ = -1;
   bool initialised_ = false;
+  /// Whether the filter started cold (every node at the frame's temperature), in this run or in
+  /// the run whose whole state was restored: psi0 learnt against known temperatures.
+  bool cold_started_ = false;
   ThermalInputs last_inputs_;  ///< the last step's (saved: held while the daemon is down)
   ThermalReadings readings_;
   Eigen::VectorXd x_degC_, sd_K_;     ///< the observer's nodes and sds this step

@@ -1,0 +1,123 @@
+// The magnet from the flux is only as good as this pump's psi0 (docs/virtual-sensor.md, "The
+// magnet before psi0 is learnt"): a pump started warm publishes no magnet from the flux and a
+// magnet node no narrower than the nameplate's flux tolerance; a cold start learns psi0, and the
+// calibration stays learnt across a saved state.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <string>
+
+#include "daemon/config.hpp"
+#include "daemon/pump.hpp"
+#include "estimators/voltage_equation.hpp"
+#include "tests/common/test_files.hpp"
+
+namespace pd = pumptherm::daemon;
+namespace pe = pumptherm::estimators;
+
+namespace {
+
+std::shared_ptr<const pe::ThermalModel> TmpGeneric() {
+  const std::string path = pumptherm::test_files::ModelPath("tmp-generic");
+  return std::make_shared<const pe::ThermalModel>(
+      pe::ThermalModel::Parse(pumptherm::test_files::ReadFile(path), "tmp-generic",
+                              pe::ThermalModelFiles{pumptherm::test_files::DirectoryOf(path),
+                                                    &pumptherm::test_files::ReadFile}));
+}
+
+pd::PumpConfig Config() {
+  pd::PumpConfig c;
+  c.name = "p";
+  c.magnet_node = "rotor";
+  c.frame_sensor_lag_s = 30.0;
+  c.disturbance_states = true;
+  c.disturbance_states_explicit = true;
+  return c;
+}
+
+class MagnetCalibration : public ::testing::Test {
+ protected:
+  /// One period ending at second `k` of a plant that is the model itself (its nodes integrated
+  /// from `x_degC`, an ambient of 22 degC): ten paired current and voltage frames at
+  /// `speed_rpm` and 3 A, uq the motor's own at the plant's winding and rotor, and a status
+  /// frame with the plant's frame temperature.
+  void Period(pd::Pump& pump, int k, double speed_rpm) {
+    pe::ThermalInputs in;
+    in.speed_rpm = speed_rpm;
+    in.iq_A = 3.0;
+    in.ambient_degC = in.coolant_degC = 22.0;
+    pe::ThermalLinearModel lin;
+    for (int j = 0; j < 10; ++j) {
+      model_->Linearise(in, x_degC, lin);
+      x_degC += 0.1 * (lin.a_per_s * x_degC + lin.f_K_per_s);
+    }
+    const double w = pe::ElectricalSpeed_rad_per_s(motor_, speed_rpm);
+    pe::QAxisState at;
+    at.winding_degC = x_degC(winding_);
+    at.magnet_degC = x_degC(rotor_);
+    const double uq_V =
+        pe::QAxisVoltage_V(law_, {in.iq_A, w}, at) + pe::QAxisKnownTerms_V(motor_, 0.0, in.iq_A, w);
+    const std::int64_t t_us = static_cast<std::int64_t>(k) * 1'000'000;
+    for (int j = 10; j > 0; --j) {
+      const std::int64_t t = t_us - 20'000 - 10'000 * static_cast<std::int64_t>(j - 1);
+      pump.OnCurrents(t, 0.0, in.iq_A, w, 3.0);
+      pump.OnVoltages(t + 1'000, -0.01, uq_V, 3.0);
+    }
+    pump.OnStatus(t_us - 10'000, speed_rpm, 2.0, std::round(10.0 * x_degC(frame_)) / 10.0, 22.0);
+    pump.Advance(t_us);
+  }
+
+  const pe::MotorDescription motor_ = pe::MotorPreset("han2019-tmp");
+  const pe::VoltageLaw law_ = pe::VoltageLawOf(motor_);
+  const std::shared_ptr<const pe::ThermalModel> model_ = TmpGeneric();
+  const int frame_ = model_->StateIndex("frame");
+  const int winding_ = model_->StateIndex("winding");
+  const int rotor_ = model_->StateIndex("rotor");
+  Eigen::VectorXd x_degC = Eigen::VectorXd::Constant(model_->StateCount(), 22.0);
+  /// psi0's prior sd (2 %) through the motor's magnet law (-0.1 %/K).
+  const double tolerance_K = 0.02 / std::abs(motor_.magnet.flux_temperature_coefficient_per_K);
+};
+
+TEST_F(MagnetCalibration, AWarmStartPublishesNoMagnetAndTheNameplatesToleranceOnTheRotor) {
+  pd::Pump pump(Config(), motor_, model_, 1.0);
+  x_degC.setConstant(45.0);  // warm from an earlier run, cooling towards the ambient
+  for (int k = 1; k <= 300; ++k) Period(pump, k, 21000.0);
+  const auto& s = pump.snapshot();
+  ASSERT_TRUE(s.initialised);
+  EXPECT_EQ(s.voltage_reading.state, pe::ReadingState::kFused);
+  EXPECT_TRUE(std::isnan(s.magnet_flux_degC)) << s.magnet_flux_degC;
+  EXPECT_GE(s.node_sd_K[static_cast<std::size_t>(rotor_)], tolerance_K - 1e-9);
+  EXPECT_LT(s.node_filter_sd_K[static_cast<std::size_t>(rotor_)], 0.5 * tolerance_K) << "the filter's own sd is kept";
+  EXPECT_LT(s.node_sd_K[static_cast<std::size_t>(winding_)], 5.0) << "the other nodes are not widened";
+}
+
+TEST_F(MagnetCalibration, AColdStartLearnsPsi0AndTheSavedStateKeepsIt) {
+  pd::Pump pump(Config(), motor_, model_, 1.0);
+  // At rest, at the ambient, when the estimate starts: a cold start.
+  for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+  ASSERT_TRUE(pump.snapshot().initialised);
+  for (int k = 4; k <= 300; ++k) Period(pump, k, 21000.0);
+  const auto& s = pump.snapshot();
+  ASSERT_TRUE(s.initialised);
+  ASSERT_TRUE(std::isfinite(s.magnet_flux_degC));
+  EXPECT_LT(s.node_sd_K[static_cast<std::size_t>(rotor_)], 0.5 * tolerance_K);
+
+  const pd::PumpSavedState saved = pump.Save();
+  EXPECT_TRUE(saved.cold_started);
+  pd::Pump restored(Config(), motor_, model_, 1.0);
+  ASSERT_TRUE(restored.Restore(saved, saved.time_us));
+  for (int k = 301; k <= 305; ++k) Period(restored, k, 21000.0);
+  EXPECT_TRUE(std::isfinite(restored.snapshot().magnet_flux_degC));
+
+  // The same state from a run that started warm: the calibration is the nameplate's.
+  pd::PumpSavedState warm = saved;
+  warm.cold_started = false;
+  pd::Pump from_warm(Config(), motor_, model_, 1.0);
+  ASSERT_TRUE(from_warm.Restore(warm, warm.time_us));
+  for (int k = 301; k <= 305; ++k) Period(from_warm, k, 21000.0);
+  EXPECT_TRUE(std::isnan(from_warm.snapshot().magnet_flux_degC));
+  EXPECT_GE(from_warm.snapshot().node_sd_K[static_cast<std::size_t>(rotor_)], tolerance_K - 1e-9);
+}
+
+}  // namespace
