@@ -88,8 +88,10 @@ TEST_F(MagnetCalibration, AWarmStartPublishesNoMagnetAndTheNameplatesToleranceOn
   EXPECT_EQ(s.voltage_reading.state, pe::ReadingState::kFused);
   EXPECT_TRUE(std::isnan(s.magnet_flux_degC)) << s.magnet_flux_degC;
   EXPECT_GE(s.node_sd_K[static_cast<std::size_t>(rotor_)], tolerance_K - 1e-9);
-  EXPECT_LT(s.node_filter_sd_K[static_cast<std::size_t>(rotor_)], 0.5 * tolerance_K) << "the filter's own sd is kept";
-  EXPECT_LT(s.node_sd_K[static_cast<std::size_t>(winding_)], 5.0) << "the other nodes are not widened";
+  EXPECT_LT(s.node_filter_sd_K[static_cast<std::size_t>(rotor_)], 0.5 * tolerance_K)
+      << "the filter's own sd is kept";
+  EXPECT_LT(s.node_sd_K[static_cast<std::size_t>(winding_)], 5.0)
+      << "the other nodes are not widened";
 }
 
 TEST_F(MagnetCalibration, AColdStartLearnsPsi0AndTheSavedStateKeepsIt) {
