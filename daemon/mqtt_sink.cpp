@@ -245,8 +245,9 @@ void MqttSink::Offer(const Gateway& gateway) {
     } else if (data_.Push(queued, std::span<const double>(scratch_.data(), n))) {
       ++counts_.dropped;
     }
-    lock.unlock();
-    cv_.notify_all();
+    // No notify: the sink's thread takes the step at its next turn of mosquitto_loop, and only
+    // Stop ends its wait between connection attempts (a wake per step would cost the loop a
+    // system call and the lock's hand-over while the broker is gone).
   }
 }
 

@@ -4,12 +4,14 @@
 // writes nothing, and with the sink MqttSink::Offer, which the live loop calls after each
 // Advance), each frame's step timed with the steady clock. The sink's broker is a loopback
 // port nothing listens on, so its thread keeps reconnecting with backoff and its queue drops the
-// oldest step, as live with the broker stopped. Runs alternate (none, absent, none, absent) so
-// that drift of the machine's load shows as a difference between runs of one kind. Prints one
+// oldest step, as live with the broker stopped. Given a port, a third kind of run sends to a
+// broker listening there (plain MQTT on loopback: the broker running). Runs alternate (none,
+// absent[, present], twice) so that drift of the machine's load shows as a difference between
+// runs of one kind. Prints one
 // JSON object per run: p50, p99, p99.9 and max of all frames' step time, and of the frames whose
 // Advance made a thermal step (the Offer's copies happen there), in microseconds.
 //
-//   mqtt_loop_bench LOG [CONFIG]   (CONFIG: the demo's configuration)
+//   mqtt_loop_bench LOG [CONFIG [BROKER_PORT]]   (CONFIG: the demo's configuration)
 #include <arpa/inet.h>
 #include <fmt/format.h>
 #include <netinet/in.h>
@@ -18,6 +20,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <fstream>
 #include <memory>
 #include <string>
@@ -66,12 +69,14 @@ std::string Figures(const std::vector<double>& us) {
       us.empty() ? 0.0 : *std::max_element(us.begin(), us.end()));
 }
 
-void Run(const std::vector<std::string>& lines, pd::DaemonConfig config, bool with_sink) {
+/// The sink's broker: none (no sink), a closed port (absent), or a broker on this port.
+void Run(const std::vector<std::string>& lines, pd::DaemonConfig config, int broker_port) {
+  const bool with_sink = broker_port != 0;
   if (with_sink) {
     config.mqtt = pd::MqttConfig{};
     config.mqtt.enabled = true;
     config.mqtt.host = "127.0.0.1";
-    config.mqtt.port = ClosedPort();
+    config.mqtt.port = broker_port > 0 ? broker_port : ClosedPort();
   }
   pd::Gateway gateway(config);
   std::unique_ptr<pd::MqttSink> sink;
@@ -111,8 +116,10 @@ void Run(const std::vector<std::string>& lines, pd::DaemonConfig config, bool wi
   fmt::print(
       R"({{"mqtt": "{}", "frames": {}, "thermal_steps": {}, "mqtt_dropped": {}, "all": {}, "step_frames": {}}})"
       "\n",
-      with_sink ? "broker absent" : "none", all_us.size(), steps, h.dropped, Figures(all_us),
-      Figures(step_us));
+      !with_sink        ? "none"
+      : broker_port > 0 ? "broker present"
+                        : "broker absent",
+      all_us.size(), steps, h.dropped, Figures(all_us), Figures(step_us));
   if (sink) sink->Stop(0.0);
 }
 
@@ -120,7 +127,7 @@ void Run(const std::vector<std::string>& lines, pd::DaemonConfig config, bool wi
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    fmt::print(stderr, "usage: mqtt_loop_bench LOG [CONFIG]\n");
+    fmt::print(stderr, "usage: mqtt_loop_bench LOG [CONFIG [BROKER_PORT]]\n");
     return 2;
   }
   const std::string config_path =
@@ -133,9 +140,12 @@ int main(int argc, char** argv) {
   }
   std::vector<std::string> lines;
   for (std::string line; std::getline(in, line);) lines.push_back(line);
+  // With a port, a broker listening there (plain MQTT on loopback) joins the alternation.
+  const int port = argc > 3 ? std::atoi(argv[3]) : 0;
   for (int k = 0; k < 2; ++k) {
-    Run(lines, config, false);
-    Run(lines, config, true);
+    Run(lines, config, 0);
+    Run(lines, config, -1);
+    if (port > 0) Run(lines, config, port);
   }
   return 0;
 }
