@@ -7,8 +7,10 @@
 # receive buffer small). Checks:
 # - the broker dropped messages for the slow client (its log says so), and that client got
 #   fewer messages than the normal one (else the test proves nothing);
-# - run B took no longer than run A (wall time, at most 10 % + 0.5 s more), and the daemon
-#   dropped no more steps in B than in A (+8): its loop and its sink are not held back;
+# - run B took no longer than run A (wall time, at most 50 % + 2 s more: a loaded machine moves a
+#   paced run by a second or more, and a daemon held back by the slow client would take minutes),
+#   and the daemon dropped no more steps in B than in A (+64): its loop and its sink are not held
+#   back;
 # - the normal subscriber of run B saw every alarm transition, each metric equal to the CSV,
 #   and every step the daemon did not count as dropped (check_restart.py --no-restart).
 #
@@ -125,9 +127,9 @@ grep -i "dropped" "$tmp/mosquitto.log" || true
 grep -q "Outgoing messages are being dropped for client slow" "$tmp/mosquitto.log" ||
   { echo "FAIL: the broker dropped nothing for the slow client: the test proves nothing"; exit 1; }
 ((n_slow < n_normal)) || { echo "FAIL: the slow client got as many messages as the normal one"; exit 1; }
-$py -c "import sys; a, b = $wall_a, $wall_b; sys.exit(0 if b <= a * 1.1 + 0.5 else 1)" ||
+$py -c "import sys; a, b = $wall_a, $wall_b; sys.exit(0 if b <= a * 1.5 + 2.0 else 1)" ||
   { echo "FAIL: run B took ${wall_b} s against ${wall_a} s without the slow consumer"; exit 1; }
-((d_b <= d_a + 8)) || { echo "FAIL: the daemon dropped $d_b steps with the slow consumer, $d_a without"; exit 1; }
+((d_b <= d_a + 64)) || { echo "FAIL: the daemon dropped $d_b steps with the slow consumer, $d_a without"; exit 1; }
 grep -qE '^mqtt .*, 0 alarms dropped' "$tmp/out-b.txt" || { echo "FAIL: alarms dropped"; exit 1; }
 $py "$here/check_restart.py" --messages "$tmp/normal-b.jsonl" --csv-dir "$tmp/est-b" \
   --group plant --edge-node gw1 --pumps pump1 pump2 pump3 --origin-s "$first" \

@@ -19,6 +19,7 @@ import argparse
 import json
 import math
 import os
+import signal
 import socket
 import sys
 import time
@@ -54,9 +55,15 @@ def main():
     ap.add_argument("--persistent", action="store_true")
     ap.add_argument("--group", default="plant", help="for the rebirth request")
     ap.add_argument("--stop-file")
+    ap.add_argument("--pause-device",
+                    help="when this device's warning (alarm_level 1) arrives, SIGSTOP the process "
+                         "whose pid is in --pause-pid-file and create --paused-file")
+    ap.add_argument("--pause-pid-file")
+    ap.add_argument("--paused-file")
     a = ap.parse_args()
     out = open(a.out, "w")
-    state = {"connects": 0, "deaths": 0, "birth_bd": None, "final_death": False}
+    state = {"connects": 0, "deaths": 0, "birth_bd": None, "final_death": False,
+             "level_alias": None, "paused": False}
 
     def on_connect(client, userdata, flags, rc):
         if a.rcvbuf:
@@ -74,6 +81,19 @@ def main():
 
     def on_subscribe(client, userdata, mid, granted):
         print("subscribed", flush=True)
+
+    def pause_on_warning(topic, rec):
+        # Freezes the daemon the moment its warning is here, so that a test can act on the
+        # broker between two alarm transitions however slowly the machine runs.
+        if topic.endswith(f"/DBIRTH/{a.edge_node}/{a.pause_device}"):
+            state["level_alias"] = [x["alias"] for x in rec["metrics"]
+                                    if x["name"] == "alarm_level"][0]
+        elif topic.endswith(f"/DDATA/{a.edge_node}/{a.pause_device}") and any(
+                x["alias"] == state["level_alias"] and x["value"] == 1 for x in rec["metrics"]):
+            with open(a.pause_pid_file) as f:
+                os.kill(int(f.read()), signal.SIGSTOP)
+            open(a.paused_file, "w").close()
+            state["paused"] = True
 
     def on_message(client, userdata, msg):
         p = spb.Payload()
@@ -99,6 +119,8 @@ def main():
         out.flush()
         if a.sleep_s:
             time.sleep(a.sleep_s)
+        if a.pause_device and not state["paused"]:
+            pause_on_warning(msg.topic, rec)
         parts = msg.topic.split("/")
         bd = [x["value"] for x in rec["metrics"] if x["name"] == "bdSeq"]
         if len(parts) == 4 and parts[2] == "NBIRTH" and parts[3] == a.edge_node:
