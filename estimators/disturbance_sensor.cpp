@@ -297,6 +297,18 @@ double DisturbanceThermalSensor::SettlingSd_K() const {
   return std::sqrt(largest + config_.sd_floor_K * config_.sd_floor_K);
 }
 
+bool DisturbanceThermalSensor::SettledWithin(double sd_K) const {
+  const Eigen::MatrixXd& p = filter_.Covariance();
+  double largest = 0.0;
+  for (int i = 0; i < n_; ++i) {
+    if (i == rotor_ && dr_ >= 0) continue;  // as in SettlingSd_K
+    largest = std::max(largest, p(i, i));
+  }
+  const double floor2 = config_.sd_floor_K * config_.sd_floor_K;
+  if (std::sqrt(largest + floor2) < sd_K) return true;
+  return SettlingSd_K() < sd_K;
+}
+
 void DisturbanceThermalSensor::AddFoundHeat(ThermalLinearModel& lin) const {
   const Eigen::VectorXd& cap = model_.Capacities_J_per_K();
   const int frame = sensor_model_.node();

@@ -168,6 +168,9 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// restart leaves to settle. The rotor's large sd without a magnet reading comes from the rotor
   /// heat state and is not counted.
   double SettlingSd_K() const override;
+  /// Without the Schur complement while every counted node's own sd, floor included, is below
+  /// `sd_K`: conditioning on the other states never widens a node.
+  bool SettledWithin(double sd_K) const override;
   /// Every node's estimate and reported sd into `x_degC`, `sd_K` (sized n; no allocation).
   void Nodes(Eigen::VectorXd& x_degC, Eigen::VectorXd& sd_K) const;
   /// Adds the disturbance heats (frame path, rotor) to the forcing of `lin` (n nodes), so that a
@@ -208,8 +211,11 @@ class DisturbanceThermalSensor : public ThermalObserver {
   void ReopenSensorOffset() override { reopen_offset_ = true; }
   bool TakesVoltage() const override { return row_v_ >= 0; }
   Calibration VoltageCalibration() const override;
-  /// The magnet reading's estimated bias, K (0 without a magnet reading).
-  double MagnetBias_K() const { return mb_ >= 0 ? filter_.State()(mb_) : 0.0; }
+  double MagnetBias_K() const override { return mb_ >= 0 ? filter_.State()(mb_) : 0.0; }
+  double MagnetBiasSd_K() const override {
+    return mb_ >= 0 ? std::sqrt(filter_.Covariance()(mb_, mb_))
+                    : std::numeric_limits<double>::quiet_NaN();
+  }
   const KalmanFilter& Filter() const { return filter_; }
 
  private:

@@ -44,6 +44,22 @@ bool TakesVoltage(const PumpEstimatorConfig& c, const MotorDescription& motor,
          !VoltageMagnetNode(c, model).empty();
 }
 
+/// Without the voltage rows nothing learns psi0, and the back-EMF line takes the nameplate's: its
+/// bias is then psi0's tolerance through the magnet law (20 K for 2 % at -0.1 %/K), a constant
+/// the run-up of a cold start teaches the filter (every node known). The bias state's stationary
+/// sd becomes that tolerance, with a correlation time that keeps the short-term drift of the
+/// line's anchor (min_sd_K over magnet_bias_tau_s): same variance growth per second.
+void LineBiasCoversPsi0(const PumpEstimatorConfig& c, const MotorDescription& motor,
+                        DisturbanceSensorConfig& d) {
+  const double law_per_K = std::abs(motor.magnet.flux_temperature_coefficient_per_K);
+  if (!(law_per_K > 0.0) || !(d.magnet_bias_sd_K > 0.0)) return;
+  const double tolerance_K = c.psi0_sd_rel / law_per_K;
+  if (!(tolerance_K > d.magnet_bias_sd_K)) return;
+  const double widening = tolerance_K / d.magnet_bias_sd_K;
+  d.magnet_bias_tau_s *= widening * widening;
+  d.magnet_bias_sd_K = tolerance_K;
+}
+
 std::unique_ptr<ThermalObserver> MakeObserver(const PumpEstimatorConfig& c,
                                               const MotorDescription& motor,
                                               const ThermalModel& model, bool disturbance) {
@@ -61,6 +77,7 @@ std::unique_ptr<ThermalObserver> MakeObserver(const PumpEstimatorConfig& c,
     d.magnet_node = MagnetNodeIn(c, model);
     d.magnet_bias_sd_K = c.magnet.min_sd_K;
     d.voltage_reading = TakesVoltage(c, motor, model);
+    if (!d.voltage_reading) LineBiasCoversPsi0(c, motor, d);
     if (d.voltage_reading) {
       d.voltage_law = VoltageLawOf(motor);
       d.voltage_magnet_node = VoltageMagnetNode(c, model);
@@ -297,6 +314,12 @@ double PumpEstimator::UncalibratedMagnetSd_K() const {
   return law_per_K > 0.0 ? config_.psi0_sd_rel / law_per_K : 0.0;
 }
 
+bool PumpEstimator::LineCalibrated() const {
+  // A filter that follows the line's bias learns it at a cold start (every node known), as the
+  // voltage rows learn psi0; without one its bias stays psi0's tolerance, 20 K for han2019-tmp.
+  return cold_started_ || std::isnan(observer_->MagnetBiasSd_K());
+}
+
 bool PumpEstimator::FluxKnownBetterThanTheLine() const {
   // The line's anchor as a relative flux: its bias sd (K) times the magnet law's coefficient.
   const double anchor_rel =
@@ -395,7 +418,7 @@ void PumpEstimator::PublishNodes(bool diverged) {
     sd = std::max(sd, UncalibratedMagnetSd_K());
   }
   estimate_.initialised = !diverged;
-  estimate_.filter_converged = !diverged && observer_->SettlingSd_K() < kConvergedSd_K;
+  estimate_.filter_converged = !diverged && observer_->SettledWithin(kConvergedSd_K);
 }
 
 void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& report) {
@@ -412,7 +435,7 @@ void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& r
     // without the held magnet (a load change inside it) publishes none.
     if (estimate_.initialised && held_magnet_.Valid()) {
       PublishHeldMagnet();
-    } else if (estimate_.initialised && !observer_->TakesVoltage()) {
+    } else if (estimate_.initialised && !observer_->TakesVoltage() && LineCalibrated()) {
       magnet_.Publish(*observer_, estimate_.magnet_flux_degC, estimate_.magnet_flux_sd_K);
     }
   }
@@ -476,7 +499,8 @@ void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
   // stretch that began before it. The magnet held from the voltage stands in only while its sd
   // is within the line's anchor (a calibration learnt at a cold start): with a calibration still
   // a nameplate's few percent, the rotor it gives is too vague to see a lost cooling, and the
-  // worst case must run.
+  // worst case must run. The line counts whenever it is fused: the filter follows its bias as a
+  // slow state, so a lost cooling still shows in the rotor it gives.
   const bool measured_again =
       frame_.fault() == SensorFault::kNone || std::isfinite(winding_.degC()) ||
       (magnet_.Offered() && !observer_->TakesVoltage()) ||
@@ -672,8 +696,8 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
     return false;
   }
   if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
-  RestoreObserver(state, whole, gap_s, x, s);
-  cold_started_ = whole && state.cold_started;
+  // A calibration from a cold start holds only while the state that carries it was kept.
+  cold_started_ = RestoreObserver(state, whole, gap_s, x, s) && state.cold_started;
   // The time the daemon was down is a telemetry silence: the load may have risen in it.
   values_.BeginSilence(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6, x,
                        static_cast<double>(now_us) * 1e-6);
@@ -690,13 +714,13 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
     estimate_.node_filter_sd_K[k] = estimate_.node_sd_K[k] = observer_->NodeSd_K(i);
   }
   estimate_.initialised = true;
-  estimate_.filter_converged = observer_->SettlingSd_K() < kConvergedSd_K;
+  estimate_.filter_converged = observer_->SettledWithin(kConvergedSd_K);
   estimate_.time_us = now_us;
   Relatch(trips, now_us);
   return true;
 }
 
-void PumpEstimator::RestoreObserver(const PumpEstimatorState& state, bool whole, double gap_s,
+bool PumpEstimator::RestoreObserver(const PumpEstimatorState& state, bool whole, double gap_s,
                                     const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
   const bool offset_saved = !std::isnan(state.sensor_offset_K);
   if (whole) {
@@ -704,12 +728,12 @@ void PumpEstimator::RestoreObserver(const PumpEstimatorState& state, bool whole,
     // on heating), the inputs held; no reading, so no step test against the saved one.
     observer_->Restore(state.observer_x, state.observer_s);
     observer_->RestoreSteppedOffset(offset_saved ? state.stepped_offset_K : 0.0);
-    if (gap_s <= 0.0) return;
+    if (gap_s <= 0.0) return true;
     const ObserverReport& report = observer_->Step(state.inputs, gap_s, ThermalReadings{});
     const int n = model_.StateCount();
     if (!report.refused && observer_->State().allFinite() && observer_->Covariance().allFinite() &&
         InEstimateRange(observer_->State().head(n))) {
-      return;
+      return true;
     }
   }
   // From the restored nodes, the rest at its prior (an older file, another configuration, a
@@ -719,6 +743,7 @@ void PumpEstimator::RestoreObserver(const PumpEstimatorState& state, bool whole,
     observer_->RestoreSensorOffset(state.sensor_offset_K, state.sensor_offset_sd_K,
                                    state.stepped_offset_K);
   }
+  return false;
 }
 
 bool PumpEstimator::TripIndices(const PumpEstimatorState& state,

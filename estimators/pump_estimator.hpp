@@ -240,6 +240,9 @@ class PumpEstimator {
   bool StartIfNeeded(const PumpPeriod& period);
   /// The filter's psi0 is known more closely than the back-EMF line's nameplate anchor.
   bool FluxKnownBetterThanTheLine() const;
+  /// Whether the back-EMF line's magnet is published without the voltage rows: its bias was
+  /// learnt at a cold start, or the filter takes the line as unbiased.
+  bool LineCalibrated() const;
   /// The least sd of the magnet's node while psi0 is not learnt (0 once it is, or without the
   /// voltage reading).
   double UncalibratedMagnetSd_K() const;
@@ -270,8 +273,8 @@ class PumpEstimator {
   void Relatch(const std::vector<AlarmMonitor::LatchedTrip>& trips, std::int64_t now_us);
   /// The observer from `state`: its whole state when `whole` (saved and fitting), aged over
   /// `gap_s`; else (or when that ages out of range) from the restored nodes `x`, `s` with the
-  /// saved sensor offset.
-  void RestoreObserver(const PumpEstimatorState& state, bool whole, double gap_s,
+  /// saved sensor offset. True when the whole state was kept.
+  bool RestoreObserver(const PumpEstimatorState& state, bool whole, double gap_s,
                        const Eigen::VectorXd& x, const Eigen::MatrixXd& s);
 
   PumpEstimatorConfig config_;

@@ -119,6 +119,8 @@ class ThermalObserver {
   /// disturbance filter's rotor, whose temperature integrates the history of an unknown heat),
   /// only what knowing the level and the dynamics removes.
   virtual double SettlingSd_K() const = 0;
+  /// Whether SettlingSd_K() < `sd_K`; a filter may answer without computing it.
+  virtual bool SettledWithin(double sd_K) const { return SettlingSd_K() < sd_K; }
 
   /// Whether the filter models the frame sensor's first-order lag (a state of its own): a
   /// filter that does not fuses the lagging reading as the node itself.
@@ -148,6 +150,11 @@ class ThermalObserver {
   }
   /// The sum of the offset's steps, restored with the whole state (Restore()).
   virtual void RestoreSteppedOffset(double stepped_K) { (void)stepped_K; }
+
+  /// The magnet reading's bias as the filter estimates it, K, and its sd (0 and NaN for a filter
+  /// without a bias state: its magnet reading is taken as unbiased).
+  virtual double MagnetBias_K() const { return 0.0; }
+  virtual double MagnetBiasSd_K() const { return std::numeric_limits<double>::quiet_NaN(); }
 
   /// Whether the filter takes the drive's q-axis voltage as a reading (ThermalReadings::uq_V).
   virtual bool TakesVoltage() const { return false; }

@@ -99,10 +99,17 @@ double MagnetFluxReading::MagnetAt_degC(double winding_degC) const {
 void MagnetFluxReading::Publish(const ThermalObserver& observer, double& degC, double& sd_K) const {
   degC = sd_K = std::nan("");
   if (!std::isfinite(z_degC_) || gated_) return;
+  // A filter with a bias state follows the line's bias (the nameplate's psi0 and the inverter's
+  // error): the line is published corrected by it, with its sd. A filter without one takes the
+  // anchor as the bias.
+  const double bias_sd_K = observer.MagnetBiasSd_K();
+  const bool bias_state = std::isfinite(bias_sd_K);
+  const double bias_K = bias_state ? observer.MagnetBias_K() : 0.0;
+  const double z_sd_K =
+      bias_state ? std::hypot(z_sd_K_, bias_sd_K) : std::max(z_sd_K_, config_.min_sd_K);
   const Eigen::VectorXd& w = model_.WindingWeights();
   const double winding_degC = observer.Weighted_degC(w);
-  const double z_sd_K = std::max(z_sd_K_, config_.min_sd_K);
-  degC = z_degC_ - gain_ * winding_degC;
+  degC = z_degC_ - bias_K - gain_ * winding_degC;
   sd_K = std::sqrt(z_sd_K * z_sd_K + gain_ * gain_ * observer.WeightedVariance_K2(w));
 }
 

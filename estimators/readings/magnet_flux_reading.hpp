@@ -60,8 +60,9 @@ class MagnetFluxReading {
   /// magnet node.
   double MagnetAt_degC(double winding_degC) const;
   /// The magnet temperature at the observer's winding estimate and its sd,
-  /// var = max(sd_z, min_sd_K)^2 + g^2 w^T S w (w: the model's winding weights); NaN without a
-  /// reading within its gate.
+  /// var = max(sd_z, min_sd_K)^2 + g^2 w^T S w (w: the model's winding weights); with a bias
+  /// state in the observer, corrected by the bias it estimates and var = sd_z^2 + sd_b^2 +
+  /// g^2 w^T S w. NaN without a reading within its gate.
   void Publish(const ThermalObserver& observer, double& degC, double& sd_K) const;
   const ReadingStatus& status() const { return status_; }
   /// The node it is fused into (-1: none).

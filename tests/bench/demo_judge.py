@@ -118,7 +118,11 @@ def main():
                     help="a node's own bound instead of --max-error-K (a known shortfall: say why "
                          "where it is used); repeatable")
     ap.add_argument("--min-coverage", type=float, default=0.9, help="goal for every node's coverage")
+    ap.add_argument("--pump-setting", action="append", default=[], metavar="KEY=VALUE",
+                    help="add this TOML line to every [[pump]] of --config (a copy in --out)")
     a = ap.parse_args()
+    if a.pump_setting and not a.reuse:
+        a.config = WithPumpSettings(a.config, a.pump_setting, a.out)
 
     est_dir = os.path.join(a.out, "estimates")
     if not a.reuse:
@@ -184,6 +188,24 @@ def main():
             print("MISSED: " + m)
         return 1 if missed else 0
     return 0
+
+
+def WithPumpSettings(config, settings, out):
+    """A copy of `config` in `out` with each KEY=VALUE line added to every [[pump]] table."""
+    for item in settings:
+        if "=" not in item:
+            sys.exit(f"--pump-setting {item}: expected KEY=VALUE")
+    lines = []
+    with open(config) as f:
+        for line in f:
+            lines.append(line)
+            if line.strip() == "[[pump]]":
+                lines += [item + "\n" for item in settings]
+    os.makedirs(out, exist_ok=True)
+    path = os.path.join(out, "pumpthermd.toml")
+    with open(path, "w") as f:
+        f.writelines(lines)
+    return path
 
 
 def Missed(report, max_error_K, min_coverage, node_max_error_K=None):

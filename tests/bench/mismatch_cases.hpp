@@ -249,7 +249,9 @@ inline std::string FaultedModelTextByEffects(const std::string& nominal, const s
 /// The pump estimator of a case: the daemon's settings for a pump whose frame sensor sits on
 /// `frame_node` with the case's lag, the magnet reading fused into `rotor_node` when the case
 /// emulates one, the observer forced to `disturbance`.
-inline pe::PumpEstimatorConfig EstimatorConfig(const CaseSpec& spec, const std::string& frame_node,
+inline pe::PumpEstimatorConfig EstimatorConfig(const CaseSpec& spec,
+                                               const pe::MotorDescription& motor,
+                                               const std::string& frame_node,
                                                const std::string& rotor_node, bool disturbance,
                                                const pe::VirtualSensorConfig& vts_config,
                                                const pe::DisturbanceSensorConfig& dc) {
@@ -263,8 +265,11 @@ inline pe::PumpEstimatorConfig EstimatorConfig(const CaseSpec& spec, const std::
   if (spec.winding_noise_sd_K > 0.0) c.winding.model_sd_K = spec.winding_noise_sd_K;
   c.standard = vts_config;
   c.disturbance = dc;
-  // The pump sets the magnet reading's bias sd from its least sd (magnet_min_sd_K).
+  // The pump sets the magnet reading's bias sd from its least sd (magnet_min_sd_K). The cases'
+  // reading is a calibrated line: psi0 known within that bias (not the nameplate's 2 %, which
+  // would widen the bias state to psi0's tolerance).
   c.magnet.min_sd_K = dc.magnet_bias_sd_K;
+  c.psi0_sd_rel = dc.magnet_bias_sd_K * std::abs(motor.magnet.flux_temperature_coefficient_per_K);
   // The cases emulate the identifier's outputs, not the drive's voltages: the magnet reading
   // from the back-EMF line is the one to fuse.
   c.voltage.fuse = false;
@@ -360,10 +365,10 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   std::normal_distribution<double> normal(0.0, 1.0);
 
   const pe::MotorDescription motor = pe::MotorPreset("han2019-tmp");
-  pe::PumpEstimator standard(EstimatorConfig(spec, frame_node, rotor_node, false, vts_config, dc),
-                             motor, nominal);
-  pe::PumpEstimator dist(EstimatorConfig(spec, frame_node, rotor_node, true, vts_config, dc), motor,
-                         nominal);
+  pe::PumpEstimator standard(
+      EstimatorConfig(spec, motor, frame_node, rotor_node, false, vts_config, dc), motor, nominal);
+  pe::PumpEstimator dist(EstimatorConfig(spec, motor, frame_node, rotor_node, true, vts_config, dc),
+                         motor, nominal);
   const int rotor = nominal.StateIndex(rotor_node);
   const int frame = nominal.StateIndex(frame_node);
   std::mt19937_64 magnet_rng(spec.seed * 104729 +
