@@ -1,8 +1,9 @@
 #pragma once
 /// The Kalman filter's fixed-size paths (estimators/kalman_filter.cpp's KalmanFilter uses them):
 /// the same equations on fixed-size Eigen matrices for the small state counts of the shipped
-/// models, in a translation unit of their own (their instantiations take most of the filter's
-/// compile time).
+/// models. kalman_filter_fixed.cpp dispatches on the state count; each count's instantiation is a
+/// translation unit of its own (kalman_filter_fixed/states_N.cpp): together they take most of
+/// the filter's compile time.
 
 #include <Eigen/Dense>
 

@@ -36,8 +36,10 @@ CC=clang CXX=clang++ cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=Debug 
   "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g1" "-DCMAKE_C_FLAGS_DEBUG=-O1 -g1" -DPUMPTHERM_WERROR=ON \
   -DPUMPTHERM_SANITIZE=ON -DPUMPTHERM_FUZZ=ON -DPUMPTHERM_BUILD_BENCHMARKS=OFF
 cmake --build build-asan -j "$jobs"
+# Label long (docs/testing.md, "Labels"): long simulations that repeat what shorter cases run
+# under the sanitizers; they ran in the unit stage above.
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-  ctest --test-dir build-asan -L unit -j "$jobs" --output-on-failure
+  ctest --test-dir build-asan -L unit -LE long -j "$jobs" --output-on-failure
 
 stage "fuzz targets, ${fuzz_seconds} s each"
 tests/fuzz/run.sh build-asan "$fuzz_seconds"

@@ -1,0 +1,6 @@
+// The fixed-size Kalman filter for 5 states (kalman_filter_fixed/fixed_size.hpp).
+#include "estimators/kalman_filter_fixed/fixed_size_impl.hpp"
+
+namespace pumptherm::estimators::detail {
+template struct FixedSize<5>;
+}  // namespace pumptherm::estimators::detail
