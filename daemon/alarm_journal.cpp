@@ -265,4 +265,44 @@ JournalEntry DiagnosisEntry(std::string_view pump, const MismatchFinding& f,
   return e;
 }
 
+namespace {
+
+std::string_view StartName(estimators::EstimateStart start) {
+  switch (start) {
+    case estimators::EstimateStart::kCold:
+      return "cold";
+    case estimators::EstimateStart::kWarm:
+      return "warm";
+    case estimators::EstimateStart::kRestored:
+      return "restored";
+    case estimators::EstimateStart::kNone:
+      break;
+  }
+  return "none";
+}
+
+}  // namespace
+
+JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e, bool calibrated) {
+  JournalEntry j;
+  j.fields.push_back({"PUMP", std::string(pump)});
+  j.fields.push_back({"START", std::string(StartName(e.start))});
+  std::string what;
+  if (e.start == estimators::EstimateStart::kRestored) {
+    what = "estimate restored from the saved state";
+  } else {
+    what = fmt::format("estimate started {} (frame {:.1f} degC, ambient {:.1f} degC, {:.0f} r/min)",
+                       StartName(e.start), e.frame_measured_degC, e.ambient_degC, e.speed_rpm);
+  }
+  if (calibrated) {
+    what += e.calibrated_at_cold_start
+                ? ": this pump's R0 and psi0 are learnt from a cold start"
+                : ": the magnet from the flux waits for a cold start (the pump at rest at the "
+                  "ambient) to learn this pump's psi0, and its node is published with the "
+                  "nameplate flux's tolerance until then";
+  }
+  j.text = fmt::format("{}: {}", pump, what);
+  return j;
+}
+
 }  // namespace pumptherm::daemon

@@ -16,6 +16,7 @@
 #include "daemon/operator_text.hpp"
 #include "estimators/alarms.hpp"
 #include "estimators/mismatch_detector.hpp"
+#include "estimators/pump_estimator.hpp"
 
 namespace pumptherm::daemon {
 
@@ -63,5 +64,13 @@ JournalEntry AlarmEntry(const AlarmLineInputs& in);
 /// DIAGNOSIS (the state's name), CAUSE (the effect's name, when one is named).
 JournalEntry DiagnosisEntry(std::string_view pump, const estimators::MismatchFinding& f,
                             std::string_view measured_node, std::int64_t wall_offset_us);
+
+/// The line for a start of the estimate (notice): cold (at rest at the ambient: this pump's R0
+/// and psi0 are learnt in the run-up), warm (the readings that need them wait for a cold start)
+/// or restored (with the saved calibration, or the nameplate's), e.g. "pump3: estimate started
+/// warm (frame 45.0 degC, ambient 22.0 degC, 21000 r/min): ...". `calibrated` is false for a
+/// pump whose readings do not depend on a calibration (no magnet node): no clause about it.
+/// Fields: PUMP, START (cold, warm, restored).
+JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e, bool calibrated);
 
 }  // namespace pumptherm::daemon

@@ -165,7 +165,8 @@ std::int64_t Gateway::PumpDueUs(std::size_t p) const {
   if (never_heard && pump.snapshot().alarm.level == estimators::AlarmLevel::kNone) return due;
   if (pump.snapshot().alarm_changes != io.alarm_changes_sent ||
       pump.snapshot().mismatch_changes != io.mismatch_changes_logged ||
-      pump.snapshot().sensor_steps != io.sensor_steps_logged) {
+      pump.snapshot().sensor_steps != io.sensor_steps_logged ||
+      pump.snapshot().starts != io.starts_logged) {
     return kDueNow;
   }
   for (const OutputPlan& plan : io.outputs) {
@@ -225,6 +226,12 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
                     &pump.snapshot().mismatch, wall_offset_us_, pump.motor().max_current_A});
     LogLine(entry.level, entry.text, entry.fields);
     io.logged_active_reasons = a.active_reasons;
+  }
+  if (pump.snapshot().starts != io.starts_logged) {
+    io.starts_logged = pump.snapshot().starts;
+    const JournalEntry entry =
+        StartEntry(name, pump.snapshot(), !pump.config().magnet_node.empty());
+    LogLine(entry.level, entry.text, entry.fields);
   }
   if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
     io.mismatch_changes_logged = pump.snapshot().mismatch_changes;

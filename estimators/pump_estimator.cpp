@@ -250,6 +250,9 @@ bool PumpEstimator::StartIfNeeded(const PumpPeriod& p) {
                     std::abs(measured - p.ambient_degC) <= config_.cold_start_band_K &&
                     rated_rpm > 0.0 && std::abs(p.inputs.speed_rpm) < 0.1 * rated_rpm;
   cold_started_ = cold;
+  estimate_.start = cold ? EstimateStart::kCold : EstimateStart::kWarm;
+  estimate_.calibrated_at_cold_start = cold;
+  ++estimate_.starts;
   if (cold) {
     observer_->InitialiseKnown(x0, config_.cold_start_sd_K);
   } else {
@@ -698,6 +701,9 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
   // A calibration from a cold start holds only while the state that carries it was kept.
   cold_started_ = RestoreObserver(state, whole, gap_s, x, s) && state.cold_started;
+  estimate_.start = EstimateStart::kRestored;
+  estimate_.calibrated_at_cold_start = cold_started_;
+  ++estimate_.starts;
   // The time the daemon was down is a telemetry silence: the load may have risen in it.
   values_.BeginSilence(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6, x,
                        static_cast<double>(now_us) * 1e-6);

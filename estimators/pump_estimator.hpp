@@ -91,6 +91,10 @@ struct PumpEstimatorConfig {
 
 /// Everything published about one pump at one moment (fields declared for CAN, LCM, CSV and
 /// state in daemon/published_fields.cpp).
+/// How the estimate last started: at rest at the ambient (its calibration learnt in the run-up),
+/// warm, or from a saved state.
+enum class EstimateStart : std::uint8_t { kNone, kCold, kWarm, kRestored };
+
 struct PumpEstimate {
   std::int64_t time_us = 0;
   /// False until the first step and after a filter reset: publish "not available".
@@ -136,6 +140,11 @@ struct PumpEstimate {
   std::uint64_t alarm_changes = 0;     ///< increments whenever `alarm` changes
   MismatchFinding mismatch;            ///< is the model right? (docs/daemon.md)
   std::uint64_t mismatch_changes = 0;  ///< increments when its state or effect changes
+  EstimateStart start = EstimateStart::kNone;
+  /// R0 and psi0 (or, without the voltage rows, the back-EMF line's bias) were learnt at a cold
+  /// start, in this run or the restored one's (docs/virtual-sensor.md).
+  bool calibrated_at_cold_start = false;
+  std::uint64_t starts = 0;  ///< increments at every start, restart after a reset, or restore
 };
 
 /// Counters of what the estimator refused (never silent).

@@ -213,6 +213,41 @@ TEST_F(AlarmJournal, TheWindingFromResistanceHasItsName) {
   EXPECT_EQ(Fields(e).at("NODE"), "winding_resistance");
 }
 
+TEST_F(AlarmJournal, AStartSaysWhetherTheCalibrationCameFromAColdStart) {
+  estimators::PumpEstimate s;
+  s.start = estimators::EstimateStart::kWarm;
+  s.frame_measured_degC = 45.04;
+  s.ambient_degC = 22.0;
+  s.speed_rpm = 21000.0;
+  JournalEntry e = StartEntry("pump3", s, true);
+  EXPECT_EQ(e.text,
+            "pump3: estimate started warm (frame 45.0 degC, ambient 22.0 degC, 21000 r/min): the "
+            "magnet from the flux waits for a cold start (the pump at rest at the ambient) to "
+            "learn this pump's psi0, and its node is published with the nameplate flux's "
+            "tolerance until then");
+  EXPECT_EQ(e.level, LogLevel::kNotice);
+  EXPECT_EQ(Fields(e).at("START"), "warm");
+  e = StartEntry("pump3", s, false);
+  EXPECT_EQ(e.text,
+            "pump3: estimate started warm (frame 45.0 degC, ambient 22.0 degC, 21000 r/min)");
+
+  s.start = estimators::EstimateStart::kCold;
+  s.calibrated_at_cold_start = true;
+  s.frame_measured_degC = s.ambient_degC = 22.0;
+  s.speed_rpm = 0.0;
+  e = StartEntry("pump1", s, true);
+  EXPECT_EQ(e.text,
+            "pump1: estimate started cold (frame 22.0 degC, ambient 22.0 degC, 0 r/min): this "
+            "pump's R0 and psi0 are learnt from a cold start");
+
+  s.start = estimators::EstimateStart::kRestored;
+  e = StartEntry("pump1", s, true);
+  EXPECT_EQ(e.text,
+            "pump1: estimate restored from the saved state: this pump's R0 and psi0 are learnt "
+            "from a cold start");
+  EXPECT_EQ(Fields(e).at("START"), "restored");
+}
+
 TEST_F(AlarmJournal, DiagnosisSaysTheCauseFirstAndTheTestLast) {
   JournalEntry e = DiagnosisEntry("pump3", CoolingLost(), "frame", 0);
   EXPECT_EQ(e.text,

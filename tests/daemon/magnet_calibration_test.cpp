@@ -96,6 +96,9 @@ TEST_F(MagnetCalibration, AWarmStartPublishesNoMagnetAndTheNameplatesToleranceOn
       << "the filter's own sd is kept";
   EXPECT_LT(s.node_sd_K[static_cast<std::size_t>(winding_)], 5.0)
       << "the other nodes are not widened";
+  EXPECT_EQ(s.start, pe::EstimateStart::kWarm);
+  EXPECT_FALSE(s.calibrated_at_cold_start);
+  EXPECT_EQ(s.starts, 1u);
 }
 
 TEST_F(MagnetCalibration, AColdStartLearnsPsi0AndTheSavedStateKeepsIt) {
@@ -108,6 +111,8 @@ TEST_F(MagnetCalibration, AColdStartLearnsPsi0AndTheSavedStateKeepsIt) {
   ASSERT_TRUE(s.initialised);
   ASSERT_TRUE(std::isfinite(s.magnet_flux_degC));
   EXPECT_LT(s.node_sd_K[static_cast<std::size_t>(rotor_)], 0.5 * tolerance_K);
+  EXPECT_EQ(s.start, pe::EstimateStart::kCold);
+  EXPECT_TRUE(s.calibrated_at_cold_start);
 
   const pd::PumpSavedState saved = pump.Save();
   EXPECT_TRUE(saved.cold_started);
@@ -115,6 +120,8 @@ TEST_F(MagnetCalibration, AColdStartLearnsPsi0AndTheSavedStateKeepsIt) {
   ASSERT_TRUE(restored.Restore(saved, saved.time_us));
   for (int k = 301; k <= 305; ++k) Period(restored, k, 21000.0);
   EXPECT_TRUE(std::isfinite(restored.snapshot().magnet_flux_degC));
+  EXPECT_EQ(restored.snapshot().start, pe::EstimateStart::kRestored);
+  EXPECT_TRUE(restored.snapshot().calibrated_at_cold_start);
 
   // The same state from a run that started warm: the calibration is the nameplate's.
   pd::PumpSavedState warm = saved;
