@@ -249,7 +249,6 @@ bool PumpEstimator::StartIfNeeded(const PumpPeriod& p) {
   const bool cold = std::isfinite(measured) && std::isfinite(p.ambient_degC) &&
                     std::abs(measured - p.ambient_degC) <= config_.cold_start_band_K &&
                     rated_rpm > 0.0 && std::abs(p.inputs.speed_rpm) < 0.1 * rated_rpm;
-  cold_started_ = cold;
   estimate_.start = cold ? EstimateStart::kCold : EstimateStart::kWarm;
   estimate_.calibrated_at_cold_start = cold;
   ++estimate_.starts;
@@ -312,7 +311,9 @@ double PumpEstimator::UncalibratedMagnetSd_K() const {
   // nameplate's tolerance, so the flux tells the magnet no better than psi0_sd_rel through the
   // magnet law (20 K for 2 % at -0.1 %/K). A law without temperature coefficient makes the
   // voltage no measurement of the magnet, and the filter's own sd stands.
-  if (!observer_->TakesVoltage() || (cold_started_ && FluxKnownBetterThanTheLine())) return 0.0;
+  if (!observer_->TakesVoltage() ||
+      (estimate_.calibrated_at_cold_start && FluxKnownBetterThanTheLine()))
+    return 0.0;
   const double law_per_K = std::abs(motor_.magnet.flux_temperature_coefficient_per_K);
   return law_per_K > 0.0 ? config_.psi0_sd_rel / law_per_K : 0.0;
 }
@@ -320,7 +321,7 @@ double PumpEstimator::UncalibratedMagnetSd_K() const {
 bool PumpEstimator::LineCalibrated() const {
   // A filter that follows the line's bias learns it at a cold start (every node known), as the
   // voltage rows learn psi0; without one its bias stays psi0's tolerance, 20 K for han2019-tmp.
-  return cold_started_ || std::isnan(observer_->MagnetBiasSd_K());
+  return estimate_.calibrated_at_cold_start || std::isnan(observer_->MagnetBiasSd_K());
 }
 
 bool PumpEstimator::FluxKnownBetterThanTheLine() const {
@@ -639,7 +640,7 @@ PumpEstimatorState PumpEstimator::Save() const {
     // priors, the interior took the slack of a fault for minutes (docs/daemon.md, "State").
     s.observer_x = observer_->State();
     s.observer_s = observer_->Covariance();
-    s.cold_started = cold_started_;
+    s.cold_started = estimate_.calibrated_at_cold_start;
   }
   const auto& names = model_.StateNames();
   for (const auto& t : alarms_.LatchedTrips()) {
@@ -700,9 +701,9 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   }
   if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
   // A calibration from a cold start holds only while the state that carries it was kept.
-  cold_started_ = RestoreObserver(state, whole, gap_s, x, s) && state.cold_started;
+  estimate_.calibrated_at_cold_start =
+      RestoreObserver(state, whole, gap_s, x, s) && state.cold_started;
   estimate_.start = EstimateStart::kRestored;
-  estimate_.calibrated_at_cold_start = cold_started_;
   ++estimate_.starts;
   // The time the daemon was down is a telemetry silence: the load may have risen in it.
   values_.BeginSilence(state.x_degC, state.inputs, static_cast<double>(state.time_us) * 1e-6, x,

@@ -307,9 +307,6 @@ class PumpEstimator {
   std::vector<double> trip_degC_;  ///< per node, for the forecast (infinity: no trip level)
   int measured_state_ = -1;
   bool initialised_ = false;
-  /// Whether the filter started cold (every node at the frame's temperature), in this run or in
-  /// the run whose whole state was restored: psi0 learnt against known temperatures.
-  bool cold_started_ = false;
   ThermalInputs last_inputs_;  ///< the last step's (saved: held while the daemon is down)
   ThermalReadings readings_;
   Eigen::VectorXd x_degC_, sd_K_;     ///< the observer's nodes and sds this step
