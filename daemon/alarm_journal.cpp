@@ -115,16 +115,36 @@ std::string ConditionText(const AlarmCondition& c, const std::vector<std::string
   return "";
 }
 
+/// What an estimated over-temperature's value is, by the rule that set it.
+std::string_view RuleValueWords(estimators::AlarmRule rule) {
+  switch (rule) {
+    case estimators::AlarmRule::kBand:
+      return "estimate";
+    case estimators::AlarmRule::kLaggingSensor:
+      return "estimate raised by the sensor's lag";
+    case estimators::AlarmRule::kInsideHeat:
+      return "estimate with the heat found inside on the rotor";
+    case estimators::AlarmRule::kBlind:
+      return "blind worst case of an unseen cooling failure";
+    case estimators::AlarmRule::kSilence:
+      return "worst case of the load the telemetry silence may hide";
+  }
+  return "estimate";
+}
+
 /// The estimated over-temperature: "winding 121.3 degC (bound 126.1 = estimate + 2 sd) >= 120
-/// degC"; the bound shown when the rule's estimate + k sd lies above the value.
+/// degC"; the bound shown when the rule's estimate + k sd lies above the value. Where a bound
+/// raised the value, it says which: "(bound 126.1 = blind worst case of an unseen cooling
+/// failure + 2 sd)".
 std::string OverTemperatureText(const estimators::AlarmState& a, const AlarmCondition& c,
                                 const std::vector<std::string>& names,
-                                const estimators::AlarmConfig& k) {
+                                const estimators::AlarmConfig& k, estimators::AlarmRule rule) {
   std::string out = NodeWords(c.node, names);
   const double factor = a.level == AlarmLevel::kTrip ? k.trip_sd_factor : k.warning_sd_factor;
   if (std::isfinite(a.value)) out += fmt::format(" {:.1f} degC", a.value);
   if (std::isfinite(a.bound) && a.bound > a.value) {
-    out += fmt::format(" (bound {:.1f} = estimate + {} sd)", a.bound, Short(factor));
+    out +=
+        fmt::format(" (bound {:.1f} = {} + {} sd)", a.bound, RuleValueWords(rule), Short(factor));
   } else if (std::isfinite(a.value) && std::isfinite(c.threshold) && a.value < c.threshold) {
     // The bound is not known (a trip latched again after a restart keeps only its value), but
     // it reached the level: say so rather than "116.8 degC >= 120 degC".
@@ -164,15 +184,17 @@ std::string CauseText(const MismatchFinding& f, std::string_view measured_node) 
   return daemon::CauseText(f.state, f.effect, f.value, measured_node);
 }
 
-/// An estimated over-temperature raised while the telemetry is silent, on a motor whose largest
-/// current is stated: the levels act on that current's worst case (AlarmValues).
+/// An estimated over-temperature raised on the worst case of a telemetry silence (its rule),
+/// while the telemetry is silent, on a motor whose largest current is stated: the levels act on
+/// that current's worst case (AlarmValues). Running blind through a silence of the status frames
+/// alone, the blind worst case is the rule, and the line names that instead.
 bool SilenceWorstCase(const AlarmLineInputs& in) {
   const estimators::AlarmState& a = *in.state;
   const auto bit = [](AlarmReason r) {
     return static_cast<std::uint16_t>(1u << static_cast<unsigned>(r));
   };
-  return in.silence_worst_current_A > 0.0 && a.level != AlarmLevel::kNone &&
-         !in.conditions.empty() &&
+  return in.rule == estimators::AlarmRule::kSilence && in.silence_worst_current_A > 0.0 &&
+         a.level != AlarmLevel::kNone && !in.conditions.empty() &&
          in.conditions.front().reason == AlarmReason::kEstimatedOverTemperature &&
          (a.active_reasons & bit(AlarmReason::kStaleTelemetry)) != 0;
 }
@@ -200,7 +222,7 @@ JournalEntry AlarmEntry(const AlarmLineInputs& in) {
   } else {
     const AlarmCondition& c = in.conditions.front();
     e.text += c.reason == AlarmReason::kEstimatedOverTemperature
-                  ? OverTemperatureText(a, c, names, k)
+                  ? OverTemperatureText(a, c, names, k, in.rule)
                   : ConditionText(c, names, k, in.wall_offset_us);
     if (const std::string node = AlarmNodeName(c.node, names); !node.empty())
       e.fields.push_back({"NODE", node});
@@ -208,6 +230,8 @@ JournalEntry AlarmEntry(const AlarmLineInputs& in) {
     if (IsTemperature(c) && std::isfinite(value))
       e.fields.push_back({"VALUE_DEGC", fmt::format("{:.2f}", value)});
     if (std::isfinite(c.threshold)) e.fields.push_back({"THRESHOLD_DEGC", Short(c.threshold)});
+    if (c.reason == AlarmReason::kEstimatedOverTemperature)
+      e.fields.push_back({"RULE", estimators::AlarmRuleName(in.rule)});
   }
   if (SilenceWorstCase(in)) {
     e.text += fmt::format(

@@ -14,6 +14,7 @@
 
 #include "daemon/log.hpp"
 #include "daemon/operator_text.hpp"
+#include "estimators/alarm_values.hpp"
 #include "estimators/alarms.hpp"
 #include "estimators/mismatch_detector.hpp"
 #include "estimators/pump_estimator.hpp"
@@ -50,6 +51,9 @@ struct AlarmLineInputs {
   /// stated, an estimated over-temperature acts on the worst case of that current, and the line
   /// says so: the value is what the winding could have reached, not what was seen.
   double silence_worst_current_A = 0.0;
+  /// For an estimated over-temperature, the rule that set the value its level acted on: the
+  /// line names it (field RULE) and says what the value is (the estimate, or a worst case).
+  estimators::AlarmRule rule = estimators::AlarmRule::kBand;
 };
 
 /// The line for an alarm change, e.g. "pump3: warning: no telemetry for 4.0 s (limit 2 s)";

@@ -220,10 +220,10 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
     publish_alarm();
     const auto& a = pump.snapshot().alarm;
     pump.ActiveConditions(conditions_);
-    const JournalEntry entry =
-        AlarmEntry({name, &a, conditions_, &pump.model().StateNames(), io.logged_active_reasons,
-                    &pump.config().alarms.monitor, pump.config().measured_node,
-                    &pump.snapshot().mismatch, wall_offset_us_, pump.motor().max_current_A});
+    const JournalEntry entry = AlarmEntry(
+        {name, &a, conditions_, &pump.model().StateNames(), io.logged_active_reasons,
+         &pump.config().alarms.monitor, pump.config().measured_node, &pump.snapshot().mismatch,
+         wall_offset_us_, pump.motor().max_current_A, pump.snapshot().alarm_rule});
     LogLine(entry.level, entry.text, entry.fields);
     io.logged_active_reasons = a.active_reasons;
   }

@@ -82,6 +82,17 @@ void ReasonWord(const FieldSource& s, std::string& out) {
   if (AlarmKnown(s)) AppendWord(out, estimators::AlarmReasonName(E(s).alarm.reason));
 }
 
+/// For an estimated over-temperature, the rule that set the value its level acted on
+/// (estimators::AlarmRule); not available for any other alarm or none.
+double AlarmRuleCode(const FieldSource& s) {
+  const bool temp = AlarmKnown(s) && E(s).alarm.reason == AlarmReason::kEstimatedOverTemperature;
+  return temp ? Code(E(s).alarm_rule) : kNaN;
+}
+
+void AlarmRuleWord(const FieldSource& s, std::string& out) {
+  if (std::isfinite(AlarmRuleCode(s))) Append(out, estimators::AlarmRuleName(E(s).alarm_rule));
+}
+
 /// The alarm's node by name: a model node, `winding_resistance`, or empty for none.
 void AlarmNodeWord(const FieldSource& s, std::string& out) {
   const double code = AlarmNode(s);
@@ -215,6 +226,7 @@ const std::array kFields = std::to_array<PublishedField>({
    [](const FieldSource& s) { return E(s).calibration.dpsi; }},
   {"voltage_offset_V", "V", "", "", {}, "voltage_offset_V", {Kind::kFixed, 4},
    [](const FieldSource& s) { return E(s).calibration.u0_V; }},
+  {"alarm_rule", "", "", "", {}, "alarm_rule", {Kind::kWord, 0}, AlarmRuleCode, AlarmRuleWord},
   {"flux_status", "", "GW_IDENT", "FluxStatus", {}, "", {},
    // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
    [](const FieldSource& s) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 
 namespace pumptherm::estimators {
 namespace {
@@ -96,14 +97,46 @@ void AlarmValues::Remember(const AlarmValuesStep& s) {
   recent_next_ = (recent_next_ + 1) % recent_us_.size();
 }
 
+const char* AlarmRuleName(AlarmRule rule) {
+  switch (rule) {
+    case AlarmRule::kBand:
+      return "band";
+    case AlarmRule::kLaggingSensor:
+      return "lagging_sensor";
+    case AlarmRule::kInsideHeat:
+      return "inside_heat";
+    case AlarmRule::kBlind:
+      return "blind";
+    case AlarmRule::kSilence:
+      return "silence";
+  }
+  return "band";
+}
+
 double AlarmValues::Value_degC(int i, double estimate_degC) const {
-  // The highest of: the estimate raised by the lagging reading's bias, the worst case while
-  // running blind, the worst case of a telemetry silence (as it was silence_delay_s ago), the
-  // bound after one, and the nodes as if the heat found on the frame path were inside.
-  double v = estimate_degC + std::max(lag_bias_.bias_K(), inside_.shift_K(i));
-  for (const Eigen::VectorXd* b :
-       {&blind_.bound_degC(), &silence_.bound_degC(), &silence_.delayed_worst_degC()}) {
-    if (b->size() > i && !std::isnan((*b)(i))) v = std::max(v, (*b)(i));
+  return ValueAndRule(i, estimate_degC).first;
+}
+
+std::pair<double, AlarmRule> AlarmValues::ValueAndRule(int i, double estimate_degC) const {
+  // The highest of: the estimate raised by the lagging reading's bias, the nodes as if the heat
+  // found on the frame path were inside, the worst case while running blind, the worst case of a
+  // telemetry silence (as it was silence_delay_s ago), and the bound after one.
+  std::pair<double, AlarmRule> v{estimate_degC, AlarmRule::kBand};
+  const auto raise = [&v](double candidate_degC, AlarmRule rule) {
+    if (candidate_degC > v.first) v = {candidate_degC, rule};
+  };
+  const double lag_K = lag_bias_.bias_K();
+  const double inside_K = inside_.shift_K(i);
+  if (lag_K > 0.0 || inside_K > 0.0) {
+    raise(estimate_degC + std::max(lag_K, inside_K),
+          inside_K > lag_K ? AlarmRule::kInsideHeat : AlarmRule::kLaggingSensor);
+  }
+  const std::pair<const Eigen::VectorXd*, AlarmRule> bounds[] = {
+      {&blind_.bound_degC(), AlarmRule::kBlind},
+      {&silence_.bound_degC(), AlarmRule::kSilence},
+      {&silence_.delayed_worst_degC(), AlarmRule::kSilence}};
+  for (const auto& [b, rule] : bounds) {
+    if (b->size() > i && !std::isnan((*b)(i))) raise((*b)(i), rule);
   }
   return v;
 }

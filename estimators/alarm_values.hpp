@@ -22,6 +22,7 @@
 #include <Eigen/Dense>
 #include <cstdint>
 #include <limits>
+#include <utility>
 #include <vector>
 
 #include "estimators/alarm_bounds.hpp"
@@ -29,6 +30,19 @@
 #include "estimators/thermal_model.hpp"
 
 namespace pumptherm::estimators {
+
+/// The rule that set a node's alarm value (AlarmValues::Rule): the estimate itself, whose levels
+/// act on x + k sd (the band rule), or the bound that raised it above the estimate.
+enum class AlarmRule : std::uint8_t {
+  kBand = 0,           ///< the estimate: x + k sd with the filter's own sd
+  kLaggingSensor = 1,  ///< a lagging reading's rise over its lag (LagBias)
+  kInsideHeat = 2,     ///< heat named inside, put on the rotor (InsideHeatBound)
+  kBlind = 3,          ///< running blind: the worst case of an unseen cooling failure
+  kSilence = 4,        ///< a telemetry silence: the worst case of the load it may hide
+};
+/// The rule's word in the CSV and the journal ("band", "lagging_sensor", "inside_heat", "blind",
+/// "silence").
+const char* AlarmRuleName(AlarmRule rule);
 
 /// One step's facts for AlarmValues::Step.
 struct AlarmValuesStep {
@@ -78,6 +92,10 @@ class AlarmValues {
   void Step(const AlarmValuesStep& step);
   /// The value node i's levels act on, for its estimate `estimate_degC`.
   double Value_degC(int i, double estimate_degC) const;
+  /// Value_degC with the rule that set it: the bound that raised it above the estimate (the
+  /// highest where several do; of equal ones the first in the order lagging sensor or inside
+  /// heat, blind, silence), or kBand where none did.
+  std::pair<double, AlarmRule> ValueAndRule(int i, double estimate_degC) const;
   /// The top of the band published for node i: the value its levels act on, or during a silence
   /// the worst case now when higher (the levels see it silence_delay_s late).
   double BandTop_degC(int i, double estimate_degC) const;

@@ -215,6 +215,7 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
   estimate_.node_filter_sd_K.assign(nn, kNaN);
   alarm_values_.assign(nn + 1, kNaN);
   alarm_sd_.assign(nn + 1, kNaN);
+  alarm_rules_.assign(nn + 1, AlarmRule::kBand);
   for (const auto& name : model_.StateNames()) {
     auto it = config_.levels.find(name);
     trip_degC_.push_back(it == config_.levels.end() ? kInf : it->second.trip_degC);
@@ -530,12 +531,15 @@ void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
   values_.Step(s);
   for (int i = 0; i < x_degC_.size(); ++i) {
     const auto k = static_cast<std::size_t>(i);
-    alarm_values_[k] = diverged ? kNaN : values_.Value_degC(i, x_degC_(i));
+    const auto [value_degC, rule] = values_.ValueAndRule(i, x_degC_(i));
+    alarm_values_[k] = diverged ? kNaN : value_degC;
+    alarm_rules_[k] = diverged ? AlarmRule::kBand : rule;
     alarm_sd_[k] = estimate_.node_sd_K[k];
     const double top_degC = diverged ? kNaN : values_.BandTop_degC(i, x_degC_(i));
     estimate_.node_sd_K[k] = values_.PublishedSd_K(i, alarm_sd_[k], top_degC - x_degC_(i));
   }
   alarm_values_.back() = estimate_.winding_resistance_degC;
+  alarm_rules_.back() = AlarmRule::kBand;
 }
 
 double PumpEstimator::FramePathHeat_W() {
@@ -585,6 +589,13 @@ void PumpEstimator::StepAlarms(const PumpPeriod& p, bool diverged) {
   if (now.level != before.level || now.reason != before.reason || now.node != before.node ||
       now.active_reasons != before.active_reasons || now.trip_latched != before.trip_latched) {
     ++estimate_.alarm_changes;
+  }
+  if (now.level != before.level || now.reason != before.reason || now.node != before.node) {
+    const auto node = static_cast<std::size_t>(now.node);
+    estimate_.alarm_rule = now.reason == AlarmReason::kEstimatedOverTemperature && now.node >= 0 &&
+                                   node < alarm_rules_.size()
+                               ? alarm_rules_[node]
+                               : AlarmRule::kBand;
   }
 }
 

@@ -136,6 +136,10 @@ struct PumpEstimate {
   double nis = std::numeric_limits<double>::quiet_NaN();           ///< the frame row's
   ReadingStatus frame_reading, winding_reading, magnet_reading, voltage_reading;
   AlarmState alarm;
+  /// For an estimated over-temperature, the rule that set the value its level acted on when
+  /// the alarm was raised (the band x + k sd, or the bound that raised the value: blind,
+  /// silence, inside heat, a lagging sensor).
+  AlarmRule alarm_rule = AlarmRule::kBand;
   int time_to_trip_node = -1;          ///< state index the forecast is about (-1: none)
   std::uint64_t alarm_changes = 0;     ///< increments whenever `alarm` changes
   MismatchFinding mismatch;            ///< is the model right? (docs/daemon.md)
@@ -313,6 +317,7 @@ class PumpEstimator {
   ThermalLinearModel found_heat_;     ///< the observer's found heat (f only, n)
   std::vector<double> alarm_values_;  ///< per alarm node (n states + the winding)
   std::vector<double> alarm_sd_;
+  std::vector<AlarmRule> alarm_rules_;  ///< per alarm node, the rule that set its value
   PumpEstimate estimate_;
   PumpEstimatorCounters counters_;
 };

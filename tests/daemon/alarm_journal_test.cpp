@@ -89,6 +89,30 @@ TEST_F(AlarmJournal, TripSaysTheBoundTheLevelAndTheCauseWithItsDate) {
   EXPECT_EQ(m.at("VALUE_DEGC"), "121.34");
   EXPECT_EQ(m.at("THRESHOLD_DEGC"), "120");
   EXPECT_EQ(m.at("CAUSE"), "frame_ambient_resistance");
+  EXPECT_EQ(m.at("RULE"), "band");
+}
+
+// Running blind, the value is the worst case of a cooling failure nothing could see: the line
+// says so rather than calling it the estimate, and RULE finds such trips. The status frames'
+// silence that made it blind is no telemetry silence's worst case: no such cause.
+TEST_F(AlarmJournal, ATripOnTheBlindWorstCaseSaysSo) {
+  AlarmState a;
+  a.level = AlarmLevel::kTrip;
+  a.reason = AlarmReason::kEstimatedOverTemperature;
+  a.node = 2;
+  a.value = 118.2;
+  a.bound = 121.0;
+  a.active_reasons = Bit(AlarmReason::kEstimatedOverTemperature) |
+                     Bit(AlarmReason::kStaleTelemetry) | Bit(AlarmReason::kSensorFault);
+  conditions_ = {{AlarmLevel::kTrip, AlarmReason::kEstimatedOverTemperature, "", 2, 118.2, 120.0,
+                  1767225757.0, true}};
+  const JournalEntry e = AlarmEntry({"pump3", &a, conditions_, &kNodes, a.active_reasons, &config_,
+                                     "frame", nullptr, 0, 15.0, estimators::AlarmRule::kBlind});
+  EXPECT_EQ(e.text,
+            "pump3: trip: winding 118.2 degC (bound 121.0 = blind worst case of an unseen cooling "
+            "failure + 2 sd) >= 120 degC; also active: stale telemetry, sensor fault");
+  EXPECT_EQ(Fields(e).at("RULE"), "blind");
+  EXPECT_EQ(Fields(e).count("CAUSE"), 0u);
 }
 
 TEST_F(AlarmJournal, ATripDuringASilenceSaysItActsOnTheLargestCurrentsWorstCase) {
@@ -107,14 +131,16 @@ TEST_F(AlarmJournal, ATripDuringASilenceSaysItActsOnTheLargestCurrentsWorstCase)
       {AlarmLevel::kWarning, AlarmReason::kStaleTelemetry, "", -1, 4.1, NAN, 1767225724.0, false}};
   const auto f = CoolingLost();
   const std::uint16_t logged = Bit(AlarmReason::kStaleTelemetry);
-  const JournalEntry e =
-      AlarmEntry({"pump3", &a, conditions_, &kNodes, logged, &config_, "frame", &f, 0, 15.0});
+  const JournalEntry e = AlarmEntry({"pump3", &a, conditions_, &kNodes, logged, &config_, "frame",
+                                     &f, 0, 15.0, estimators::AlarmRule::kSilence});
   EXPECT_EQ(e.text,
-            "pump3: trip: winding 124.1 degC (bound 129.3 = estimate + 2 sd) >= 120 degC; cause: "
-            "no telemetry: the level acts on the worst case of the drive's largest current (15 A) "
+            "pump3: trip: winding 124.1 degC (bound 129.3 = worst case of the load the telemetry "
+            "silence may hide + 2 sd) >= 120 degC; cause: no telemetry: the level acts on the "
+            "worst case of the drive's largest current (15 A) "
             "since the last frame; also active: stale telemetry; raised: estimated over "
             "temperature; trip latched until cleared");
   EXPECT_EQ(Fields(e).at("CAUSE"), "telemetry_silence");
+  EXPECT_EQ(Fields(e).at("RULE"), "silence");
   // Without the largest current stated, the levels act on the estimate: no such cause.
   const JournalEntry plain =
       AlarmEntry({"pump3", &a, conditions_, &kNodes, logged, &config_, "frame", nullptr, 0, 0.0});

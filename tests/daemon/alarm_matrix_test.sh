@@ -30,19 +30,21 @@ origin=$(head -n 1 "$log" | sed 's/^(\([0-9]*\)\..*/\1/')
 # published estimate + 2 sd: a published band never confidently low, also while the pump runs
 # blind or after a silence (the band then reaches the bound the levels act on; a stuck reading's
 # worst case starts from before it froze); lossy_link's first reading may come a minute in, on
-# a pump already hot inside, which the filter's start does not know (81-100 % over plant seeds).
-cases="healthy - 0 30 - 85
-frozen_cooling 60 2 30 wrong 85
-missing_cooling 60 2 30 - 85
-frozen_load 60 2 30 wrong 85
-outage_step_inside - 4 30 - 85
-outage_step_before - 4 30 - 85
-fast_rise - 2 30 - 85
-band - 2 30 - 85
-lossy_link 0 4 30 - 75
-offset_cooling - 2 30 wrong 85
-outage_12A - 4 30 - 85
-outage_short_hot - 2 30 - 85"
+# a pump already hot inside, which the filter's start does not know (81-100 % over plant seeds);
+# the rule its trip acts on (docs/daemon.md, "Alarm rule"; "-": no trip): `blind` where the RTD
+# fails before the crossing, `silence` where the telemetry stops, `band` (x + 2 sd) elsewhere.
+cases="healthy - 0 30 - 85 -
+frozen_cooling 60 2 30 wrong 85 blind
+missing_cooling 60 2 30 - 85 blind
+frozen_load 60 2 30 wrong 85 blind
+outage_step_inside - 4 30 - 85 silence
+outage_step_before - 4 30 - 85 silence
+fast_rise - 2 30 - 85 band
+band - 2 30 - 85 band
+lossy_link 0 4 30 - 75 blind
+offset_cooling - 2 30 wrong 85 band
+outage_12A - 4 30 - 85 silence
+outage_short_hot - 2 30 - 85 -"
 
 # first CSV COLUMN THRESHOLD: first time_s where COLUMN >= THRESHOLD ("none" if never).
 first() {
@@ -68,6 +70,11 @@ above() {
       rows++; good += ok }
     END { printf "%.0f", rows ? 100 * good / rows : 0 }' "$2" "$1"
 }
+# word_at CSV COLUMN TIME_S: COLUMN in the row at TIME_S (as the CSV writes it), "-" if empty.
+word_at() {
+  awk -F, -v col="$2" -v t="$3" 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == col) c = i; next }
+    $1 == t { w = $c; found = 1; exit } END { print (found && w != "") ? w : "-" }' "$1"
+}
 changes() {
   awk -F, 'NR == 1 { for (i = 1; i <= NF; i++) if ($i == "alarm_level") c = i; next }
     NR > 2 && $c != last { n++ } { last = $c } END { print n + 0 }' "$1"
@@ -76,21 +83,24 @@ changes() {
 fail=0
 # run NAME LOG SHIFT_FROM_S SHIFT_S EXTRA_CHANGES: judge the daemon on LOG, in which the daemon's
 # time after SHIFT_FROM_S of the recording differs from the truth's by SHIFT_S; EXTRA_CHANGES
-# alarm level changes are allowed beyond the case's (a stale-telemetry warning over a gap).
+# alarm level changes are allowed beyond the case's (a stale-telemetry warning over a gap), and
+# EXTRA_RULE is a trip's rule allowed beside the case's (a clock stepped forward is a silence).
 run() {
-  local name=$1 in=$2 shift_from=$3 shift_s=$4 extra=$5
+  local name=$1 in=$2 shift_from=$3 shift_s=$4 extra=$5 extra_rule=${6:-}
   local est=$tmp/est-$name
   mkdir -p "$est"
   "$pumpthermd" --config "$src/tests/daemon/alarm_matrix.toml" -r "$in" --csv-dir "$est" \
     --csv-time-origin "$origin" >"$tmp/out-$name.txt" 2>"$tmp/err-$name.txt"
-  echo "| run | pump | true trip crossing s | trip s | delay s | truth at trip degC | sensor fault s | level changes | truth <= x + 2 sd % |"
-  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"
-  while read -r pump failed_s max_changes max_delay reading least_above; do
+  echo "| run | pump | true trip crossing s | trip s | delay s | rule | truth at trip degC | sensor fault s | level changes | truth <= x + 2 sd % |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+  while read -r pump failed_s max_changes max_delay reading least_above want_rule; do
     max_changes=$((max_changes + extra))
     local truth=$tmp/$pump.truth.csv csv=$est/$pump.csv
     local tt at sf ch tat
     tt=$(first "$truth" winding_resistance_degC 120)
     at=$(first_word "$csv" alarm_level trip)
+    local rule=-
+    [[ $at != none ]] && rule=$(word_at "$csv" alarm_rule "$at")
     # Map the daemon's time back to the recording's time.
     if [[ $at != none ]]; then
       at=$(awk -v a="$at" -v f="$shift_from" -v s="$shift_s" 'BEGIN { print (a >= f + s && s != 0) ? a - s : a }')
@@ -103,7 +113,7 @@ run() {
     [[ $tt != none && $at != none ]] && delay=$(awk -v a="$at" -v t="$tt" 'BEGIN { printf "%.1f", a - t }')
     local share=-
     [[ $name == recorded ]] && share=$(above "$csv" "$truth" 0)
-    echo "| $name | $pump | $tt | $at | $delay | $tat | $sf | $ch | $share |"
+    echo "| $name | $pump | $tt | $at | $delay | $rule | $tat | $sf | $ch | $share |"
     if [[ $tt == none ]]; then
       [[ $at == none ]] || { echo "FAIL: $name/$pump: false trip at $at s"; fail=1; }
     elif [[ $at == none ]]; then
@@ -111,6 +121,8 @@ run() {
     else
       awk -v d="$delay" -v m="$max_delay" 'BEGIN { exit !(d <= m && d >= -150) }' ||
         { echo "FAIL: $name/$pump: trip $delay s from the truth's crossing, outside [-150, $max_delay]"; fail=1; }
+      [[ $rule == "$want_rule" || $rule == "$extra_rule" ]] ||
+        { echo "FAIL: $name/$pump: the trip's rule is '$rule', expected '$want_rule'"; fail=1; }
     fi
     if [[ $failed_s == - ]]; then
       [[ $sf == none ]] ||
@@ -153,7 +165,7 @@ shift_log() {
 shift_log -100 >"$tmp/back.log"
 shift_log 30 >"$tmp/fwd.log"
 run clock_back "$tmp/back.log" 100 0 0 | tail -n +3 | tee -a "$tmp/table.md"
-run clock_forward "$tmp/fwd.log" 100 30 2 | tail -n +3 | tee -a "$tmp/table.md"
+run clock_forward "$tmp/fwd.log" 100 30 2 silence | tail -n +3 | tee -a "$tmp/table.md"
 grep -q FAIL "$tmp/table.md" && fail=1
 [[ -z $table_out ]] || grep -v FAIL "$tmp/table.md" >"$table_out"
 exit $fail

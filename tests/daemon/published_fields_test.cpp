@@ -7,7 +7,6 @@
 
 #include <cmath>
 #include <set>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -22,11 +21,15 @@ protocol::Dbc ShippedDbc() {
   return protocol::ParseDbc(ReadTextFile(path), path);
 }
 
+/// The cells of a CSV line, an empty last cell included ("a," is two cells).
 std::vector<std::string> Split(const std::string& s) {
   std::vector<std::string> out;
-  std::stringstream ss(s);
-  std::string cell;
-  while (std::getline(ss, cell, ',')) out.push_back(cell);
+  std::size_t from = 0;
+  for (std::size_t comma = s.find(','); comma != std::string::npos; comma = s.find(',', from)) {
+    out.push_back(s.substr(from, comma - from));
+    from = comma + 1;
+  }
+  out.push_back(s.substr(from));
   return out;
 }
 
@@ -164,6 +167,7 @@ TEST(PublishedFields, OneEstimateReachesLcmAndTheCsvAlike) {
   EXPECT_EQ(cell("time_to_trip_s"), "");
   EXPECT_EQ(cell("mismatch_state"), "plant_change");
   EXPECT_EQ(cell("mismatch_effect"), "rotor_loss");
+  EXPECT_EQ(cell("alarm_rule"), "");  // a warning without an over-temperature: no rule
   // The alarm's node by its name, every active reason joined by '+', a fault's kind as a word.
   e.alarm.level = estimators::AlarmLevel::kTrip;
   e.alarm.reason = estimators::AlarmReason::kEstimatedOverTemperature;
@@ -186,6 +190,17 @@ TEST(PublishedFields, OneEstimateReachesLcmAndTheCsvAlike) {
   EXPECT_EQ(word("alarm_active_reasons"), "stale_telemetry+sensor_fault");
   EXPECT_EQ(word("sensor_fault"), "out_of_range");
   EXPECT_EQ(word("time_to_trip_s"), "276");
+  EXPECT_EQ(word("alarm_rule"), "band");
+  e.alarm_rule = estimators::AlarmRule::kSilence;
+  row.clear();
+  AppendCsvRow(s, row);
+  const std::vector<std::string> again = Split(row.substr(1));
+  ASSERT_EQ(again.size(), header.size());
+  for (std::size_t i = 0; i < header.size(); ++i) {
+    if (header[i] == "alarm_rule") {
+      EXPECT_EQ(again[i], "silence");
+    }
+  }
   // Not available: NaN in LCM doubles and the CSV, -1 in LCM codes.
   estimators::PumpEstimate none;
   FieldSource n;

@@ -204,13 +204,43 @@ TEST(AlarmValues, WhileSilentTheLevelsSeeTheDelayedWorstCaseTheBandTheWorstNow) 
   }
   const double then = Closed(30.0, 20.0, 50.0, 20.0), now = Closed(30.0, 20.0, 50.0, 30.0);
   EXPECT_NEAR(values.Value_degC(0, 30.0), then, 1e-9);
+  EXPECT_EQ(values.ValueAndRule(0, 30.0).second, AlarmRule::kSilence);
   EXPECT_NEAR(values.BandTop_degC(0, 30.0), now, 1e-9);
   EXPECT_NEAR(values.PublishedSd_K(0, 0.5, now - 30.0), (now - 30.0) / 2.0, 1e-12);
   s.end_us += 1'000'000;
   s.fresh_inputs = true;  // the frames are back at the same load: nothing above the estimate
   values.Step(s);
   EXPECT_EQ(values.Value_degC(0, 30.0), 30.0);
+  EXPECT_EQ(values.ValueAndRule(0, 30.0).second, AlarmRule::kBand);
   EXPECT_EQ(values.BandTop_degC(0, 30.0), 30.0);
+}
+
+// Running blind, the value is the worst case of an unseen cooling failure from the band's top
+// when the measurements stopped, and the rule says so; an estimate above that worst case is the
+// band rule's again.
+TEST(AlarmValues, RunningBlindTheRuleIsBlindWhileItsWorstCaseIsTheHighest) {
+  const ThermalModel model = ThermalModel::Parse(kOneNode, "one.toml");
+  AlarmValues values(model, AlarmConfig{}, 0.0, 1.0);
+  Eigen::VectorXd x = Eigen::VectorXd::Constant(1, 30.0), sd = Eigen::VectorXd::Constant(1, 0.5);
+  const ThermalInputs in = Load(1.0);
+  AlarmValuesStep s;
+  s.period_s = 1.0;
+  s.inputs = &in;
+  s.fresh_inputs = true;
+  s.x_degC = &x;
+  s.sd_K = &sd;
+  s.lagging_degC = kNaN;
+  for (int k = 0; k < 20; ++k) {
+    s.end_us = (k + 1) * 1'000'000;
+    s.blind = k >= 10;
+    values.Step(s);
+  }
+  ASSERT_TRUE(values.Blind());
+  const auto [value_degC, rule] = values.ValueAndRule(0, 30.0);
+  EXPECT_GT(value_degC, 31.0);  // from 30 + 2 x 0.5, warming at 1 A without its cooling
+  EXPECT_EQ(rule, AlarmRule::kBlind);
+  EXPECT_EQ(values.ValueAndRule(0, value_degC + 1.0).second, AlarmRule::kBand);
+  EXPECT_STREQ(AlarmRuleName(AlarmRule::kBlind), "blind");
 }
 
 TEST(WorstInputs, TheLargestCurrentOnTheQAxisAtTheLargestSpeed) {
