@@ -230,7 +230,8 @@ JournalEntry AlarmEntry(const AlarmLineInputs& in) {
     if (IsTemperature(c) && std::isfinite(value))
       e.fields.push_back({"VALUE_DEGC", fmt::format("{:.2f}", value)});
     if (std::isfinite(c.threshold)) e.fields.push_back({"THRESHOLD_DEGC", Short(c.threshold)});
-    if (c.reason == AlarmReason::kEstimatedOverTemperature)
+    // A trip latched again after a restart keeps only its value: its rule is not known either.
+    if (c.reason == AlarmReason::kEstimatedOverTemperature && std::isfinite(a.bound))
       e.fields.push_back({"RULE", estimators::AlarmRuleName(in.rule)});
   }
   if (SilenceWorstCase(in)) {

@@ -31,8 +31,8 @@
 
 namespace pumptherm::estimators {
 
-/// The rule that set a node's alarm value (AlarmValues::Rule): the estimate itself, whose levels
-/// act on x + k sd (the band rule), or the bound that raised it above the estimate.
+/// The rule that set a node's alarm value (AlarmValues::ValueAndRule): the estimate itself, whose
+/// levels act on x + k sd (the band rule), or the bound that raised it above the estimate.
 enum class AlarmRule : std::uint8_t {
   kBand = 0,           ///< the estimate: x + k sd with the filter's own sd
   kLaggingSensor = 1,  ///< a lagging reading's rise over its lag (LagBias)

@@ -162,6 +162,7 @@ TEST_F(AlarmJournal, ATripLatchedAgainAfterARestartSaysItsBoundReachedTheLevel) 
   EXPECT_EQ(e.text,
             "pump3: trip: winding 116.8 degC with estimate + 2 sd >= 120 degC; raised: estimated "
             "over temperature; trip latched until cleared");
+  EXPECT_EQ(Fields(e).count("RULE"), 0u);  // not saved, like the bound
 }
 
 TEST_F(AlarmJournal, SecondsAreSecondsNeverDegC) {
