@@ -25,7 +25,7 @@ static_assert(crypto_kx_SESSIONKEYBYTES == 32 && crypto_kx_PUBLICKEYBYTES == 32)
 
 constexpr std::string_view kPublicKeyPrefix = "ed25519:";
 
-void StartSodium() {
+void StartSodiumForKeys() {
   // libsodium asks for sodium_init() before any other call; it is idempotent and thread-safe.
   static const int init = sodium_init();
   if (init < 0) throw std::runtime_error("libsodium cannot start (sodium_init)");
@@ -53,7 +53,7 @@ std::array<std::uint8_t, 32> KxPublicOf(const PublicKey& ed_public) {
   return out;
 }
 
-std::string ModeText(mode_t mode) { return fmt::format("{:04o}", mode & 07777); }
+std::string KeyFileModeText(mode_t mode) { return fmt::format("{:04o}", mode & 07777); }
 
 std::string DirectoryOfPath(const std::string& path) {
   const std::size_t slash = path.rfind('/');
@@ -81,14 +81,14 @@ void WriteNewFile(const std::string& path, std::string_view contents, mode_t mod
 }  // namespace
 
 SigningKey::SigningKey(const Seed& seed) : seed_(seed) {
-  StartSodium();
+  StartSodiumForKeys();
   if (std::all_of(seed.begin(), seed.end(), [](std::uint8_t b) { return b == 0; }))
     throw std::invalid_argument("the key is all zero bytes: not a key");
   crypto_sign_seed_keypair(public_key_.data(), secret_.data(), seed_.data());
 }
 
 SigningKey SigningKey::Generate() {
-  StartSodium();
+  StartSodiumForKeys();
   Seed seed{};
   randombytes_buf(seed.data(), seed.size());
   SigningKey key(seed);
@@ -138,12 +138,12 @@ TagKey SigningKey::GatewayTagKey(const PublicKey& op) const {
 
 bool VerifySignature(const PublicKey& key, std::span<const std::uint8_t> bytes,
                      const std::uint8_t* signature) {
-  StartSodium();
+  StartSodiumForKeys();
   return crypto_sign_verify_detached(signature, bytes.data(), bytes.size(), key.data()) == 0;
 }
 
 std::array<std::uint8_t, 32> Tag(const TagKey& key, std::span<const std::uint8_t> bytes) {
-  StartSodium();
+  StartSodiumForKeys();
   std::array<std::uint8_t, 32> out{};
   crypto_generichash(out.data(), out.size(), bytes.data(), bytes.size(), key.data(), key.size());
   return out;
@@ -155,7 +155,7 @@ bool VerifyTag(const TagKey& key, std::span<const std::uint8_t> bytes, const std
 }
 
 std::string KeyId(const PublicKey& key) {
-  StartSodium();
+  StartSodiumForKeys();
   std::array<std::uint8_t, 16> h{};
   crypto_generichash(h.data(), h.size(), key.data(), key.size(), nullptr, 0);
   std::string out;
@@ -164,7 +164,7 @@ std::string KeyId(const PublicKey& key) {
 }
 
 std::string FormatPublicKey(const PublicKey& key) {
-  StartSodium();
+  StartSodiumForKeys();
   constexpr int kVariant = sodium_base64_VARIANT_ORIGINAL;
   std::string b64(sodium_base64_ENCODED_LEN(32, kVariant), '\0');
   sodium_bin2base64(b64.data(), b64.size(), key.data(), key.size(), kVariant);
@@ -173,7 +173,7 @@ std::string FormatPublicKey(const PublicKey& key) {
 }
 
 std::optional<PublicKey> ParsePublicKey(std::string_view text, std::string* problem) {
-  StartSodium();
+  StartSodiumForKeys();
   while (!text.empty() && (text.front() == ' ' || text.front() == '\t')) text.remove_prefix(1);
   while (!text.empty() && (text.back() == ' ' || text.back() == '\t' || text.back() == '\n'))
     text.remove_suffix(1);
@@ -212,7 +212,7 @@ std::string SecretKeyFileProblem(const std::string& path, KeyOwner owner) {
   }
   if ((st.st_mode & (S_IRWXG | S_IRWXO)) != 0) {
     return fmt::format("{} is open to its group or others (mode {}): make it 0600 (chmod 0600 {})",
-                       path, ModeText(st.st_mode), path);
+                       path, KeyFileModeText(st.st_mode), path);
   }
   const std::string dir = DirectoryOfPath(path);
   struct stat ds {};
@@ -222,7 +222,7 @@ std::string SecretKeyFileProblem(const std::string& path, KeyOwner owner) {
     return fmt::format(
         "{} is in {}, which others may write (mode {}): they could swap the key; keep it in a "
         "folder only its owner writes",
-        path, dir, ModeText(ds.st_mode));
+        path, dir, KeyFileModeText(ds.st_mode));
   }
   if (ds.st_uid != me && ds.st_uid != 0) {
     return fmt::format(

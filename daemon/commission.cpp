@@ -26,7 +26,6 @@ namespace {
 
 using protocol::MappingInput;
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kRadPerSPerRpm = 2.0 * 3.14159265358979323846 / 60.0;
 /// Chi-square quantile, 1 degree of freedom, 95 %: the likelihood-ratio interval of the lag.
 constexpr double kChiSquare1Dof95 = 3.841;

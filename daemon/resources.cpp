@@ -6,7 +6,7 @@ namespace pumptherm::daemon {
 
 namespace {
 
-shipped::FileKind Kind(ResourceKind kind) {
+shipped::FileKind ShippedKindOf(ResourceKind kind) {
   switch (kind) {
     case ResourceKind::kModel:
       return shipped::FileKind::kModel;
@@ -22,7 +22,7 @@ shipped::FileKind Kind(ResourceKind kind) {
 
 std::string ResolveResource(ResourceKind kind, const std::string& reference,
                             const std::string& base_dir) {
-  return shipped::Resolve(Kind(kind), reference, base_dir);
+  return shipped::Resolve(ShippedKindOf(kind), reference, base_dir);
 }
 
 std::string ReadTextFile(const std::string& path) { return shipped::ReadTextFile(path); }

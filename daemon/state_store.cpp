@@ -18,7 +18,7 @@ namespace {
   throw std::system_error(err, std::generic_category(), what);
 }
 
-std::string DirectoryOf(const std::string& path) {
+std::string StateDirectoryOf(const std::string& path) {
   const auto slash = path.rfind('/');
   if (slash == std::string::npos) return ".";
   if (slash == 0) return "/";
@@ -73,7 +73,7 @@ void WriteFileAtomically(const std::string& path, const std::string& contents, i
     ::unlink(tmp.c_str());
     Throw(err, "cannot rename " + tmp + " to " + path);
   }
-  const std::string dir = DirectoryOf(path);
+  const std::string dir = StateDirectoryOf(path);
   UniqueFd dfd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
   if (!dfd.valid() || ::fsync(dfd.get()) < 0) Throw(errno, "cannot fsync directory " + dir);
 }

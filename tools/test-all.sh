@@ -27,9 +27,9 @@ stage "unit tests"
 ctest --test-dir build -L unit -j "$jobs" --output-on-failure
 
 stage "unit tests under AddressSanitizer + UndefinedBehaviorSanitizer (clang; the same build has the fuzz targets)"
-# One clang build for both: every source carries ASan + UBSan and libFuzzer's coverage
-# instrumentation (cmake/PumpthermFlags.cmake), so the fuzz targets link the same libraries the
-# sanitized unit tests use. -O1 -g1 (line tables only) with assertions on: the sanitizers' reports
+# One clang build for both: every source carries ASan + UBSan, and the libraries the fuzz targets
+# link carry libFuzzer's coverage instrumentation too (cmake/PumpthermFlags.cmake), so the fuzz
+# targets link the same libraries the sanitized unit tests use. -O1 -g1 (line tables only) with assertions on: the sanitizers' reports
 # keep file:line. clang compiles our sources under the sanitizers about 40 % faster than GCC 12
 # (measured per file, docs/testing.md), and one build instead of two saves the second one.
 CC=clang CXX=clang++ cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=Debug \

@@ -109,7 +109,7 @@ Settings Resolve(const ClearTripOptions& o, const daemon::DaemonConfig& c) {
   return s;
 }
 
-std::int64_t NowUs() {
+std::int64_t ClearTripNowUs() {
   timespec ts{};
   clock_gettime(CLOCK_REALTIME, &ts);
   return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000 + ts.tv_nsec / 1000;
@@ -180,7 +180,7 @@ int RunLcmClear(const ClearTripOptions& o, const Settings& s) {
   m.pump = o.pump;
   m.node = o.node;
   m.comment = o.comment;
-  m.utime = NowUs();
+  m.utime = ClearTripNowUs();
   m.counter = m.utime;  // grows by itself while this host's clock does
   SignFor(s, gateway, m);
   lcm::LCM lcm(s.url);
@@ -289,7 +289,7 @@ int RunClearTrip(const ClearTripOptions& o) {
   return RunLcmClear(o, Resolve(o, c));
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kClearTripRegistrar{
     "clear-trip",
     "Clear a pump's latched trip through the gateway (signed LCM command, or PUMP_CLEAR on CAN)",
     [](CLI::App& app) -> std::function<int()> {

@@ -707,7 +707,7 @@ int Export(const ExportOptions& o) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kDbcRegistrar{
     "dbc", "DBC files: check one, or decode a candump log with one",
     [](CLI::App& app) -> std::function<int()> {
       app.require_subcommand(1);

@@ -85,7 +85,7 @@ int RunDiscrepancy(const DiscrepancyOptions& o) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kDiscrepancyRegistrar{
     "discrepancy", "Name the effect a thermal model misses, add it, show the gap shrink",
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<DiscrepancyOptions>();

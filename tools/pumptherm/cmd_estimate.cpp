@@ -413,7 +413,7 @@ void AddPaperOptions(CLI::App& app, EstimateOptions& o) {
           ->capture_default_str());
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kEstimateRegistrar{
     "estimate",
     "The daemon's pump estimator over a recording or a CSV (or the paper's filter alone)",
     [](CLI::App& app) -> std::function<int()> {

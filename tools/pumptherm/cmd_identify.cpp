@@ -239,7 +239,7 @@ int RunFused(const Options& opt) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kIdentifyRegistrar{
     "identify", "stator resistance, flux and winding temperature from dq telemetry",
     [](CLI::App& app) {
       auto opt = std::make_shared<Options>();

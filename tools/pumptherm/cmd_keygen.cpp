@@ -65,7 +65,7 @@ int RunKeygen(const KeygenOptions& o) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kKeygenRegistrar{
     "keygen", "Make an Ed25519 key pair for signed alarm clears (an operator's or the gateway's)",
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<KeygenOptions>();

@@ -99,7 +99,7 @@ int RunPlacement(PlacementOptions& o) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kPlacementRegistrar{
     "placement", "Kalman-filter mean-square error for each candidate sensor node",
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<PlacementOptions>();

@@ -168,7 +168,7 @@ int RunPlantCommand(const PlantOptions& o) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kPlantRegistrar{
     "plant",
     "Simulate pumps (drive, thermal truth, sensors, faults): candump log + truth/measured CSVs",
     [](CLI::App& app) -> std::function<int()> {

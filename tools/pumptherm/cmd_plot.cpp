@@ -879,7 +879,7 @@ int RunPlot(const PlotOptions& o) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kPlotRegistrar{
     "plot",
     "Plot estimated against true temperatures, the estimate's error and the alarm timeline "
     "(PNG/SVG via gnuplot)",

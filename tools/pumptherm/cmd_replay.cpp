@@ -30,7 +30,7 @@ using daemon::DaemonConfig;
 using daemon::Gateway;
 using daemon::PumpSnapshot;
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kReplayNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 /// Alarm changes listed per pump; the rest are counted.
 constexpr std::size_t kListedEvents = 8;
@@ -47,13 +47,13 @@ struct ReplayOptions {
 struct LevelOverride {
   std::string pump;  // empty: every pump
   std::string node;
-  double warning_degC = kNaN, trip_degC = kNaN;
+  double warning_degC = kReplayNaN, trip_degC = kReplayNaN;
 };
 
 double ParseLevel(const std::string& text, const std::string& arg) {
-  if (text.empty()) return kNaN;
+  if (text.empty()) return kReplayNaN;
   std::size_t used = 0;
-  double v = kNaN;
+  double v = kReplayNaN;
   try {
     v = std::stod(text, &used);
   } catch (const std::exception&) {
@@ -114,8 +114,8 @@ void ApplyLevels(DaemonConfig& config, const std::vector<LevelOverride>& overrid
 /// The closest a value came to one level: least margin (level - bound, K) and when.
 struct Margin {
   double least_K = kInf;
-  double at_s = kNaN;
-  double first_crossed_s = kNaN;  ///< when the bound first reached the level
+  double at_s = kReplayNaN;
+  double first_crossed_s = kReplayNaN;  ///< when the bound first reached the level
 };
 
 /// Per level node of one pump, over the replay.
@@ -123,9 +123,9 @@ struct NodeWatch {
   std::string node;
   int state = -1;  ///< model node index; -1: "sensor" or "winding_resistance"
   estimators::TemperatureLimits limits;
-  double peak_degC = -kInf, peak_at_s = kNaN;
+  double peak_degC = -kInf, peak_at_s = kReplayNaN;
   Margin warning, trip;
-  double time_to_trip_at_worst_s = kNaN;
+  double time_to_trip_at_worst_s = kReplayNaN;
 };
 
 struct PumpWatch {
@@ -135,14 +135,14 @@ struct PumpWatch {
   estimators::AlarmLevel level = estimators::AlarmLevel::kNone;
   estimators::AlarmReason reason = estimators::AlarmReason::kNone;
   int node = -1;
-  double first_warning_s = kNaN, first_trip_s = kNaN;
-  double least_ttt_s = kInf, least_ttt_at_s = kNaN;
+  double first_warning_s = kReplayNaN, first_trip_s = kReplayNaN;
+  double least_ttt_s = kInf, least_ttt_at_s = kReplayNaN;
   std::vector<NodeWatch> nodes;
 };
 
 /// The value and sd the levels of `w` act on at this step (NaN: not known now).
 void ValueOf(const PumpSnapshot& s, const NodeWatch& w, double& x, double& sd) {
-  x = kNaN;
+  x = kReplayNaN;
   sd = 0.0;
   if (w.state >= 0) {
     if (!s.initialised) return;
@@ -337,7 +337,7 @@ int RunReplay(const ReplayOptions& o) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kReplayRegistrar{
     "replay",
     "the daemon's pipeline over a past recording with what-if alarm levels: when each alarm "
     "would have fired, margins, time to trip",

@@ -81,7 +81,7 @@ int RunSimulate(const SimulateOptions& o) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kSimulateRegistrar{
     "simulate", "Run a thermal network model over a load profile (no measurements)",
     [](CLI::App& app) -> std::function<int()> {
       auto o = std::make_shared<SimulateOptions>();

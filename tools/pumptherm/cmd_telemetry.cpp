@@ -36,7 +36,7 @@ int RunTelemetry(const TelemetryOptions& o) {
   return 0;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kTelemetryRegistrar{
     "telemetry",
     "one pump's dq telemetry from a candump recording, as identify's and estimate's CSV",
     [](CLI::App& app) {

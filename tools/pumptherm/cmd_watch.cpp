@@ -174,7 +174,7 @@ int RunWatch(WatchOptions o) {
   return (o.pump.empty() ? rx.watch.PumpCount() > 0 : rx.watch.Has(o.pump)) ? 0 : 1;
 }
 
-const SubcommandRegistrar kRegistrar{
+const SubcommandRegistrar kWatchRegistrar{
     "watch",
     "live view of every pump (or of one) from the gateway's LCM messages (any host on the LAN)",
     [](CLI::App& app) {
