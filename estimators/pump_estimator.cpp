@@ -215,6 +215,7 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
   estimate_.node_filter_sd_K.assign(nn, kNaN);
   alarm_values_.assign(nn + 1, kNaN);
   alarm_sd_.assign(nn + 1, kNaN);
+  // The last, the winding from resistance, keeps the band rule: no bound acts on it.
   alarm_rules_.assign(nn + 1, AlarmRule::kBand);
   for (const auto& name : model_.StateNames()) {
     auto it = config_.levels.find(name);
@@ -539,7 +540,6 @@ void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
     estimate_.node_sd_K[k] = values_.PublishedSd_K(i, alarm_sd_[k], top_degC - x_degC_(i));
   }
   alarm_values_.back() = estimate_.winding_resistance_degC;
-  alarm_rules_.back() = AlarmRule::kBand;
 }
 
 double PumpEstimator::FramePathHeat_W() {
