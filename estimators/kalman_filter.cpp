@@ -1,6 +1,8 @@
 #include "estimators/kalman_filter.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "estimators/kalman_filter_fixed.hpp"
 
@@ -13,16 +15,54 @@ namespace {
 // a measurement reads a few states, so most coefficients are zero, and at these sizes Eigen's
 // general product spends most of its time packing. The sums are the same equations.
 
+/// The number of leading rows of `a` that hold an off-diagonal coefficient. The rows after them
+/// are diagonal: states that are constants or first-order processes of their own.
+Eigen::Index CoupledRows(const Eigen::MatrixXd& a) {
+  Eigen::Index head = 0;
+  for (Eigen::Index k = 0; k < a.cols(); ++k) {
+    for (Eigen::Index i = a.rows() - 1; i >= head; --i) {
+      if (i != k && a(i, k) != 0.0) {
+        head = i + 1;
+        break;
+      }
+    }
+  }
+  return head;
+}
+
+/// The columns with a nonzero coefficient in the first `head` rows of `a`, into `active` (sized
+/// a.cols() by the caller); returns their count.
+Eigen::Index ActiveColumns(const Eigen::MatrixXd& a, Eigen::Index head,
+                           std::vector<Eigen::Index>& active) {
+  Eigen::Index count = 0;
+  for (Eigen::Index k = 0; k < a.cols(); ++k) {
+    bool any = false;
+    for (Eigen::Index i = 0; i < head && !any; ++i) any = a(i, k) != 0.0;
+    if (any) active[static_cast<std::size_t>(count++)] = k;
+  }
+  return count;
+}
+
+/// y += v x over n contiguous doubles, a pair (one SIMD packet) at a time: Eigen's
+/// dynamic-size column expressions spend more instructions on their set-up than on the 14
+/// coefficients of a column.
+inline void Axpy(double v, const double* x, double* y, Eigen::Index n) {
+  using Pair = Eigen::Map<Eigen::Vector2d>;
+  using ConstPair = Eigen::Map<const Eigen::Vector2d>;
+  Eigen::Index i = 0;
+  for (; i + 2 <= n; i += 2) Pair(y + i) += v * ConstPair(x + i);
+  if (i < n) y[i] += v * x[i];
+}
+
 /// out = s m^T for a square s (n x n) and m (r x n): out.col(i) = sum_k m(i, k) s.col(k).
 void TimesTransposed(const Eigen::MatrixXd& s, const Eigen::MatrixXd& m, Eigen::MatrixXd& out) {
   const Eigen::Index n = s.rows();
   out.resize(n, m.rows());
+  out.setZero();
   for (Eigen::Index i = 0; i < m.rows(); ++i) {
-    auto col = out.col(i);
-    col.setZero();
     for (Eigen::Index k = 0; k < n; ++k) {
       const double v = m(i, k);
-      if (v != 0.0) col += v * s.col(k);
+      if (v != 0.0) Axpy(v, s.col(k).data(), out.col(i).data(), n);
     }
   }
 }
@@ -40,9 +80,9 @@ void TimesVector(const Eigen::MatrixXd& m, const Eigen::VectorXd& v, Eigen::Vect
 
 /// s += sum_r a.col(r) b.col(r)^T (n x n, rank m).
 void AddOuterProducts(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b, Eigen::MatrixXd& s) {
+  const Eigen::Index n = s.rows();
   for (Eigen::Index j = 0; j < s.cols(); ++j) {
-    auto col = s.col(j);
-    for (Eigen::Index r = 0; r < a.cols(); ++r) col += b(j, r) * a.col(r);
+    for (Eigen::Index r = 0; r < a.cols(); ++r) Axpy(b(j, r), a.col(r).data(), s.col(j).data(), n);
   }
 }
 
@@ -53,7 +93,7 @@ KalmanFilter::KalmanFilter(int n)
       xtmp_(n),
       s_(Eigen::MatrixXd::Identity(n, n)),
       ntmp_(n, n),
-      ntmp2_(n, n) {}
+      active_(static_cast<std::size_t>(n)) {}
 
 void KalmanFilter::Reset(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
   x_ = x;
@@ -61,7 +101,7 @@ void KalmanFilter::Reset(const Eigen::VectorXd& x, const Eigen::MatrixXd& s) {
   const Eigen::Index n = x.size();
   xtmp_.resize(n);
   ntmp_.resize(n, n);
-  ntmp2_.resize(n, n);
+  active_.resize(static_cast<std::size_t>(n));
 }
 
 void KalmanFilter::AddVariance(int i, double var) {
@@ -72,12 +112,46 @@ void KalmanFilter::AddVariance(int i, double var) {
 void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
                            const Eigen::MatrixXd& sp) {
   if (detail::PredictFixedSize(ad, bu, sp, x_, s_)) return;
-  // x = A_D x + bu; S = A_D S A_D^T + Sp as W = (S A_D^T)^T = A_D S, then W A_D^T (eqs. 30-31).
-  TimesVector(ad, x_, xtmp_);
-  x_ = xtmp_ + bu;
-  TimesTransposed(s_, ad, ntmp_);
-  ntmp2_ = ntmp_.transpose();
-  TimesTransposed(ntmp2_, ad, s_);
+  // By blocks, A_D = [A11 A12; 0 D] with D diagonal (its first `head` rows coupled, the rest
+  // constants or first-order processes), and only A_D's nonzero columns in the coupled rows:
+  //   x = A_D x + bu                                   (eq. 30)
+  //   S = A_D S A_D^T + Sp                             (eq. 31) with W^T = S [A11 A12]^T:
+  //   S11 = [A11 A12] W^T, S12 = W^T(tail rows)^T D, S22 = D S22 D.
+  const Eigen::Index n = x_.size();
+  const Eigen::Index head = CoupledRows(ad);
+  const Eigen::Index na = ActiveColumns(ad, head, active_);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    double sum = i < head ? 0.0 : ad(i, i) * x_(i);
+    for (Eigen::Index a = 0; a < na && i < head; ++a) {
+      const Eigen::Index k = active_[static_cast<std::size_t>(a)];
+      sum += ad(i, k) * x_(k);
+    }
+    xtmp_(i) = sum + bu(i);
+  }
+  x_.swap(xtmp_);
+  for (Eigen::Index i = 0; i < head; ++i) {  // ntmp_.col(i) = S A_D.row(i)^T
+    double* col = ntmp_.col(i).data();
+    std::fill(col, col + n, 0.0);
+    for (Eigen::Index a = 0; a < na; ++a) {
+      const Eigen::Index k = active_[static_cast<std::size_t>(a)];
+      Axpy(ad(i, k), s_.col(k).data(), col, n);
+    }
+  }
+  for (Eigen::Index j = 0; j < head; ++j) {
+    for (Eigen::Index i = 0; i <= j; ++i) {
+      double sum = 0.0;
+      for (Eigen::Index a = 0; a < na; ++a) {
+        const Eigen::Index k = active_[static_cast<std::size_t>(a)];
+        sum += ad(j, k) * ntmp_(k, i);
+      }
+      s_(i, j) = s_(j, i) = sum;
+    }
+  }
+  for (Eigen::Index j = head; j < n; ++j) {
+    const double dj = ad(j, j);
+    for (Eigen::Index i = 0; i < head; ++i) s_(i, j) = s_(j, i) = ntmp_(j, i) * dj;
+    for (Eigen::Index i = head; i < n; ++i) s_(i, j) *= ad(i, i) * dj;
+  }
   s_ += sp;
 }
 
@@ -110,30 +184,42 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
     report_.ok = false;
     return report_;
   }
-  // K^T = (C S- C^T + Sm)^-1 C S-  (eq. 34, transposed; S- symmetric).
-  kt_ = sct_.transpose();
-  llt_.solveInPlace(kt_);
-  k_ = kt_.transpose();
-  s_inv_nu_ = nu_;
-  llt_.solveInPlace(s_inv_nu_);
+  // K = S- C^T (C S- C^T + Sm)^-1 (eq. 34) through the m x m inverse: m is a few readings, and
+  // a solve with the n columns of S- C^T spends more on Eigen's dynamic-size set-up than on
+  // arithmetic.
+  innov_cov_inv_ = llt_.solve(Eigen::MatrixXd::Identity(m, m));
+  k_.setZero();
+  for (Eigen::Index r = 0; r < m; ++r) {
+    for (Eigen::Index q = 0; q < m; ++q)
+      Axpy(innov_cov_inv_(q, r), sct_.col(q).data(), k_.col(r).data(), n);
+  }
+  s_inv_nu_.noalias() = innov_cov_inv_ * nu_;
   report_.nis = nu_.dot(s_inv_nu_);
   for (Eigen::Index r = 0; r < m; ++r) x_ += nu_(r) * k_.col(r);  // eq. 32
 
-  // T = [I - K C] S- = S- - K (S- C^T)^T: eq. 33, the textbook form.
-  ntmp_ = s_;
-  ksm_ = -k_;
-  AddOuterProducts(ksm_, sct_, ntmp_);
   if (form == CovarianceUpdate::kJoseph) {
-    // [I - K C] S- [I - K C]^T + K Sm K^T = T - (T C^T) K^T + (K Sm) K^T = T + G K^T with
-    // G = K Sm - T C^T (n x m): the Joseph form in O(n^2 m).
-    TimesTransposed(ntmp_, c, sct_);
-    ksm_.noalias() = k_ * sm;
-    ksm_ -= sct_;
-    AddOuterProducts(ksm_, k_, ntmp_);
-    // Remove the rounding asymmetry.
-    s_ = 0.5 * (ntmp_ + ntmp_.transpose());
+    // [I - K C] S- [I - K C]^T + K Sm K^T = S- - K U^T - U K^T + K Sy K^T with U = S- C^T and
+    // Sy = C S- C^T + Sm. With G = K Sy - U (zero for the exact gain: what is left is the gain's
+    // rounding) that is S- + (H K^T + K H^T) / 2, H = G - U = K Sy - 2 U: the Joseph form for
+    // any gain, exactly symmetric, on the upper triangle in O(n^2 m).
+    h_ = -2.0 * sct_;
+    for (Eigen::Index r = 0; r < m; ++r) {
+      for (Eigen::Index q = 0; q < m; ++q) {
+        Axpy(innov_cov_(q, r), k_.col(q).data(), h_.col(r).data(), n);
+      }
+    }
+    for (Eigen::Index j = 0; j < n; ++j) {
+      double* col = s_.col(j).data();
+      for (Eigen::Index r = 0; r < m; ++r) {
+        Axpy(0.5 * h_(j, r), k_.col(r).data(), col, j + 1);
+        Axpy(0.5 * k_(j, r), h_.col(r).data(), col, j + 1);
+      }
+      for (Eigen::Index i = 0; i < j; ++i) s_(j, i) = col[i];
+    }
   } else {
-    s_ = ntmp_;
+    // [I - K C] S- = S- - K (S- C^T)^T: eq. 33, the textbook form.
+    h_ = -k_;
+    AddOuterProducts(h_, sct_, s_);
   }
   return report_;
 }

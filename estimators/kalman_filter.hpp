@@ -19,6 +19,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
+#include <vector>
 
 namespace pumptherm::estimators {
 
@@ -68,9 +69,11 @@ class KalmanFilter {
 
  private:
   Eigen::VectorXd x_, xtmp_;
-  Eigen::MatrixXd s_, ntmp_, ntmp2_;
-  Eigen::MatrixXd sct_, innov_cov_, k_, kt_, ksm_;
+  Eigen::MatrixXd s_, ntmp_;
+  Eigen::MatrixXd sct_, innov_cov_, innov_cov_inv_, k_;
+  Eigen::MatrixXd h_;  ///< the covariance update's factor: K Sy - 2 S- C^T (Joseph), -K (textbook)
   Eigen::VectorXd nu_, s_inv_nu_;
+  std::vector<Eigen::Index> active_;  ///< A_D's nonzero columns in its coupled rows
   Eigen::LLT<Eigen::MatrixXd> llt_;
   KalmanUpdateReport report_;
 };

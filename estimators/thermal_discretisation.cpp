@@ -3,6 +3,7 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <unsupported/Eigen/MatrixFunctions>
 
@@ -34,11 +35,24 @@ double RelativeChangeFixed(const Eigen::MatrixXd& a0_inv, const Eigen::MatrixXd&
   return r.norm();
 }
 
+/// RelativeChangeFixed for the sizes of the shipped models' networks (4: tmp-generic, 7:
+/// saheba2010-*) with a sensor's lag and offset added (up to 9); NaN for other sizes.
+template <int N = 4>
+double RelativeChangeOfSize(const Eigen::MatrixXd& a0_inv, const Eigen::MatrixXd& a0,
+                            const Eigen::MatrixXd& a) {
+  if constexpr (N > 9) {
+    return std::numeric_limits<double>::quiet_NaN();
+  } else {
+    if (a.rows() != N) return RelativeChangeOfSize<N + 1>(a0_inv, a0, a);
+    return RelativeChangeFixed<N>(a0_inv, a0, a);
+  }
+}
+
 }  // namespace
 
 double ThermalDiscretiser::RelativeChange(const Eigen::MatrixXd& a_per_s) {
-  if (a_per_s.rows() == 7) return RelativeChangeFixed<7>(a_last_inv_, a_last_, a_per_s);
-  if (a_per_s.rows() == 4) return RelativeChangeFixed<4>(a_last_inv_, a_last_, a_per_s);
+  const double fixed = RelativeChangeOfSize(a_last_inv_, a_last_, a_per_s);
+  if (!std::isnan(fixed)) return fixed;
   diff_ = a_per_s - a_last_;
   rel_.noalias() = a_last_inv_ * diff_;
   return rel_.norm();

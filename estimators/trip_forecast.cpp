@@ -9,6 +9,16 @@ namespace pumptherm::estimators {
 
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
+
+/// steady = -A^-1 f (A x + f = 0) on a fixed size N: the LU of a dynamic-size 4 x 4 spends most
+/// of its instructions on its set-up.
+template <int N>
+void SteadyStateFixed(const Eigen::MatrixXd& a, const Eigen::VectorXd& f, Eigen::VectorXd& steady) {
+  using M = Eigen::Matrix<double, N, N>;
+  using V = Eigen::Matrix<double, N, 1>;
+  const Eigen::PartialPivLU<M> lu(Eigen::Map<const M>(a.data()));
+  Eigen::Map<V>(steady.data()) = -lu.solve(Eigen::Map<const V>(f.data()));
+}
 }  // namespace
 
 TripForecast::TripForecast(int states) : x_(states), next_(states), steady_(states) {}
@@ -35,9 +45,17 @@ double TripForecast::TimeToTrip_s(const ThermalModel& model, const ThermalInputs
     // members: no allocation per call. A singular A gives non-finite values: no forecast.
     model.Linearise(in, lin_);
     if (observer) observer->AddFoundHeat(lin_);
-    lu_.compute(lin_.a_per_s);
-    steady_.noalias() = lu_.solve(lin_.f_K_per_s);
-    steady_ = -steady_;
+    const auto rows = lin_.a_per_s.rows();
+    const bool sized = steady_.size() == rows && lin_.f_K_per_s.size() == rows;
+    if (sized && rows == 4) {  // tmp-generic's nodes
+      SteadyStateFixed<4>(lin_.a_per_s, lin_.f_K_per_s, steady_);
+    } else if (sized && rows == 7) {  // saheba2010-*'s
+      SteadyStateFixed<7>(lin_.a_per_s, lin_.f_K_per_s, steady_);
+    } else {
+      lu_.compute(lin_.a_per_s);
+      steady_.noalias() = lu_.solve(lin_.f_K_per_s);
+      steady_ = -steady_;
+    }
     if (!steady_.allFinite()) return kInf;
     bool reaches = false;
     for (std::size_t i = 0; i < n; ++i)
