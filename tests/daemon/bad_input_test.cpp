@@ -39,7 +39,7 @@ std::string Replace(std::string text, const std::string& from, const std::string
 }
 
 // --- configuration ---
-std::string Config(const std::string& text) {
+std::string ConfigVerdict(const std::string& text) {
   try {
     const DaemonConfig c = ParseConfig(text, "/etc/pumptherm/p.toml");
     return "accepted (" + std::to_string(c.pumps.size()) + " pumps)";
@@ -131,7 +131,7 @@ std::string Dbc(const std::string& text) {
 SigningKey Panel() { return SigningKey(Seed{1, 1}); }
 SigningKey OldPanel() { return SigningKey(Seed{2, 2}); }
 SigningKey Mallory() { return SigningKey(Seed{3, 3}); }
-SigningKey GatewayKey() { return SigningKey(Seed{9, 9}); }
+SigningKey BadInputGatewayKey() { return SigningKey(Seed{9, 9}); }
 
 const std::string kGatewayConfig = R"(
 [gateway]
@@ -206,13 +206,13 @@ std::string Clear(const std::string& pump, const std::string& source) {
          std::to_string(g.counters().clears_unauthenticated);
 }
 
-constexpr std::int64_t kNowUs = 1'700'000'000'000'000;
+constexpr std::int64_t kClearNowUs = 1'700'000'000'000'000;
 
-/// Counts what a gateway with GatewayKey() made of LCM clear commands `messages` (nullptr:
+/// Counts what a gateway with BadInputGatewayKey() made of LCM clear commands `messages` (nullptr:
 /// bytes that did not decode), the replies it published and the verdict of the last one.
 std::string LcmClear(const std::vector<const pumptherm::alarm_clear_t*>& messages) {
   Gateway g(ParseConfig(kGatewayConfig, std::string(PUMPTHERM_SOURCE_DIR) + "/p.toml"));
-  g.SetGatewayKey(GatewayKey());
+  g.SetGatewayKey(BadInputGatewayKey());
   g.LoadClearKeys("");
   struct ReplySink : NullSink {
     std::string last;
@@ -228,7 +228,7 @@ std::string LcmClear(const std::vector<const pumptherm::alarm_clear_t*>& message
     }
   } sink;
   bool ok = false;
-  for (const auto* m : messages) ok = g.ClearFromLcm(m, kNowUs, sink);
+  for (const auto* m : messages) ok = g.ClearFromLcm(m, kClearNowUs, sink);
   return std::string(ok ? "accepted" : "refused") + ", logged; clears_accepted " +
          std::to_string(g.counters().clears_accepted) + ", clears_refused " +
          std::to_string(g.counters().clears_refused) + ", clears_unauthenticated " +
@@ -241,7 +241,7 @@ std::string LcmClear(const std::vector<const pumptherm::alarm_clear_t*>& message
 /// A clear command for `pump` of gateway `gateway`, node `node`, signed with `key` (nullptr:
 /// not signed, with `key_id` claimed).
 pumptherm::alarm_clear_t ClearCommand(const std::string& pump, const SigningKey* key,
-                                      std::int64_t utime = kNowUs, std::int64_t counter = 5,
+                                      std::int64_t utime = kClearNowUs, std::int64_t counter = 5,
                                       const std::string& gateway = "pumptherm",
                                       const std::string& node = "") {
   pumptherm::alarm_clear_t m;
@@ -254,7 +254,7 @@ pumptherm::alarm_clear_t ClearCommand(const std::string& pump, const SigningKey*
   m.counter = counter;
   std::fill(std::begin(m.tag), std::end(m.tag), std::uint8_t{0});
   std::fill(std::begin(m.signature), std::end(m.signature), std::uint8_t{0});
-  if (key) SignCommand(*key, GatewayKey().public_key(), "PUMPTHERM", m);
+  if (key) SignCommand(*key, BadInputGatewayKey().public_key(), "PUMPTHERM", m);
   return m;
 }
 
@@ -302,28 +302,30 @@ std::vector<Row> Catalogue() {
   const auto first_x = state.find("x_degC = [ ") + 11;
   std::vector<Row> rows = {
       // --- configuration ---
-      {"config", "truncated", "`[gateway`", [] { return Config("[gateway"); }, "p.toml:1:"},
+      {"config", "truncated", "`[gateway`", [] { return ConfigVerdict("[gateway"); }, "p.toml:1:"},
       {"config", "wrong type", "`heartbeat_period_s = \"1\"`",
-       [] { return Config("[gateway]\nheartbeat_period_s = \"1\"\n"); }, "heartbeat_period_s"},
+       [] { return ConfigVerdict("[gateway]\nheartbeat_period_s = \"1\"\n"); },
+       "heartbeat_period_s"},
       {"config", "out of range", "`thermal_period_s = 0`",
-       [] { return Config("[gateway]\nthermal_period_s = 0\n"); }, "thermal_period_s"},
+       [] { return ConfigVerdict("[gateway]\nthermal_period_s = 0\n"); }, "thermal_period_s"},
       {"config", "NaN", "`thermal_period_s = nan`",
-       [] { return Config("[gateway]\nthermal_period_s = nan\n"); }, "thermal_period_s"},
+       [] { return ConfigVerdict("[gateway]\nthermal_period_s = nan\n"); }, "thermal_period_s"},
       {"config", "Inf", "`heartbeat_period_s = inf`",
-       [] { return Config("[gateway]\nheartbeat_period_s = inf\n"); }, "heartbeat_period_s"},
+       [] { return ConfigVerdict("[gateway]\nheartbeat_period_s = inf\n"); }, "heartbeat_period_s"},
       {"config", "duplicate", "two `[[pump]]` named `a`",
-       [] { return Config(kPump + "[[pump]]\nname = \"a\"\nnode_id = 2\n"); }, "listed twice"},
+       [] { return ConfigVerdict(kPump + "[[pump]]\nname = \"a\"\nnode_id = 2\n"); },
+       "listed twice"},
       {"config", "duplicate", "a key twice",
-       [] { return Config("[gateway]\nname = \"x\"\nname = \"y\"\n"); }, "p.toml:3:"},
+       [] { return ConfigVerdict("[gateway]\nname = \"x\"\nname = \"y\"\n"); }, "p.toml:3:"},
       {"config", "unknown", "`[gateway] colour = 1`",
-       [] { return Config("[gateway]\ncolour = 1\n"); }, "colour"},
+       [] { return ConfigVerdict("[gateway]\ncolour = 1\n"); }, "colour"},
       {"config", "huge", "`node_id = 99999999999`",
-       [] { return Config("[[pump]]\nname = \"a\"\nnode_id = 99999999999\n"); }, "node_id"},
-      {"config", "empty", "empty file", [] { return Config(""); }, "accepted (0 pumps)"},
+       [] { return ConfigVerdict("[[pump]]\nname = \"a\"\nnode_id = 99999999999\n"); }, "node_id"},
+      {"config", "empty", "empty file", [] { return ConfigVerdict(""); }, "accepted (0 pumps)"},
       {"config", "non-UTF-8", "`name = \"\\xff\"`",
-       [] { return Config("[gateway]\nname = \"\xff\"\n"); }, "p.toml:2:"},
+       [] { return ConfigVerdict("[gateway]\nname = \"\xff\"\n"); }, "p.toml:2:"},
       {"config", "wrong value", "pump name with `/`",
-       [] { return Config("[[pump]]\nname = \"a/b\"\nnode_id = 1\n"); }, "name"},
+       [] { return ConfigVerdict("[[pump]]\nname = \"a/b\"\nnode_id = 1\n"); }, "name"},
       // --- thermal model ---
       {"model", "truncated", "file cut after `capacity_J_per_K =`",
        [] { return Model(kModel.substr(0, kModel.find("10.0"))); }, "m.toml:"},
@@ -473,13 +475,13 @@ std::vector<Row> Catalogue() {
       {"LCM clear", "other gateway", "a valid command for gateway `hall9`",
        [] {
          const SigningKey k = Panel();
-         return LcmClear(ClearCommand("tmp1", &k, kNowUs, 5, "hall9"));
+         return LcmClear(ClearCommand("tmp1", &k, kClearNowUs, 5, "hall9"));
        },
        "no reply"},
       {"LCM clear", "old", "a valid command issued 31 s ago",
        [] {
          const SigningKey k = Panel();
-         return LcmClear(ClearCommand("tmp1", &k, kNowUs - 31'000'000));
+         return LcmClear(ClearCommand("tmp1", &k, kClearNowUs - 31'000'000));
        },
        "window 30 s"},
       {"LCM clear", "huge", "a valid command with `utime` INT64_MIN",
@@ -491,7 +493,7 @@ std::vector<Row> Catalogue() {
       {"LCM clear", "unknown", "a valid command for node `frame`, which is not latched",
        [] {
          const SigningKey k = Panel();
-         return LcmClear(ClearCommand("tmp1", &k, kNowUs, 5, "pumptherm", "frame"));
+         return LcmClear(ClearCommand("tmp1", &k, kClearNowUs, 5, "pumptherm", "frame"));
        },
        "node 'frame' has no latched trip"},
       {"LCM clear", "unknown", "pump `nope`",

@@ -15,15 +15,15 @@
 namespace pumptherm::daemon {
 namespace {
 
-constexpr std::int64_t kNowUs = 1'763'776'803'000'000;
+constexpr std::int64_t kStateNowUs = 1'763'776'803'000'000;
 
 SafetyState Sample() {
   SafetyState s;
   s.latched["tmp1"] = {{"winding", 131.25}, {"sensor", 90.0}};
   s.latched["tmp-2"] = {};
-  s.counters["tmp1"]["0123456789abcdef"] = kNowUs + 5;
+  s.counters["tmp1"]["0123456789abcdef"] = kStateNowUs + 5;
   s.counters["tmp1"]["shared:operator"] = 17;
-  s.refused_up_to_us = kNowUs - 60'000'000;
+  s.refused_up_to_us = kStateNowUs - 60'000'000;
   return s;
 }
 
@@ -37,9 +37,9 @@ TEST(SafetyState, RoundTripsThroughItsText) {
   EXPECT_EQ(back->latched.at("tmp1")[0].value_degC, 131.25);
   EXPECT_EQ(back->latched.at("tmp1")[1].node, "sensor");
   EXPECT_TRUE(back->latched.at("tmp-2").empty());
-  EXPECT_EQ(back->counters.at("tmp1").at("0123456789abcdef"), kNowUs + 5);
+  EXPECT_EQ(back->counters.at("tmp1").at("0123456789abcdef"), kStateNowUs + 5);
   EXPECT_EQ(back->counters.at("tmp1").at("shared:operator"), 17);
-  EXPECT_EQ(back->refused_up_to_us, kNowUs - 60'000'000);
+  EXPECT_EQ(back->refused_up_to_us, kStateNowUs - 60'000'000);
 }
 
 TEST(SafetyState, DamageIsFoundNotGuessed) {
@@ -105,7 +105,7 @@ TEST_F(LostSafetyStateTest, EveryPumpStartsLatchedAndOldCommandsCannotReplay) {
   g.SetGatewayKey(Gw());
   g.LoadClearKeys("");
   testing::internal::CaptureStderr();
-  g.SafetyStateLost("safety.toml is missing, while state.toml is there", 0, kNowUs);
+  g.SafetyStateLost("safety.toml is missing, while state.toml is there", 0, kStateNowUs);
   const std::string log = testing::internal::GetCapturedStderr();
   EXPECT_NE(log.find("pump tmp1: latched trip 'safety state lost': safety.toml is missing"),
             std::string::npos)
@@ -118,19 +118,19 @@ TEST_F(LostSafetyStateTest, EveryPumpStartsLatchedAndOldCommandsCannotReplay) {
     EXPECT_TRUE(a.trip_latched);
   }
   // A command captured before the start (inside its window, counter never seen): refused.
-  const auto captured = Signed(kNowUs - 5'000'000);
-  EXPECT_FALSE(g.ClearFromLcm(&captured, kNowUs, *this));
+  const auto captured = Signed(kStateNowUs - 5'000'000);
+  EXPECT_FALSE(g.ClearFromLcm(&captured, kStateNowUs, *this));
   EXPECT_EQ(Latched(g, 0), std::vector<std::string>{"safety_state_lost"});
   // A fresh one, after the pump was checked, clears that latch by name.
-  const auto fresh = Signed(kNowUs + 1'000'000, "safety_state_lost");
-  EXPECT_TRUE(g.ClearFromLcm(&fresh, kNowUs + 1'000'000, *this));
+  const auto fresh = Signed(kStateNowUs + 1'000'000, "safety_state_lost");
+  EXPECT_TRUE(g.ClearFromLcm(&fresh, kStateNowUs + 1'000'000, *this));
   EXPECT_TRUE(Latched(g, 0).empty());
   EXPECT_EQ(Latched(g, 1), std::vector<std::string>{"safety_state_lost"});
   // The latch is part of the safety state (so a second restart keeps it).
   const SafetyState s = g.CollectSafetyState();
   ASSERT_EQ(s.latched.at("tmp2").size(), 1U);
   EXPECT_EQ(s.latched.at("tmp2")[0].node, "safety_state_lost");
-  EXPECT_EQ(s.refused_up_to_us, kNowUs);
+  EXPECT_EQ(s.refused_up_to_us, kStateNowUs);
 }
 
 TEST_F(LostSafetyStateTest, WarnOnlyLeavesThePumpsUnlatchedButStillRefusesOldCommands) {
@@ -138,11 +138,11 @@ TEST_F(LostSafetyStateTest, WarnOnlyLeavesThePumpsUnlatchedButStillRefusesOldCom
   g.SetGatewayKey(Gw());
   g.LoadClearKeys("");
   testing::internal::CaptureStderr();
-  g.SafetyStateLost("safety.toml is damaged", 0, kNowUs);
+  g.SafetyStateLost("safety.toml is damaged", 0, kStateNowUs);
   EXPECT_NE(testing::internal::GetCapturedStderr().find("lost_safety_state = \"warn\""),
             std::string::npos);
   EXPECT_TRUE(Latched(g, 0).empty());
-  EXPECT_EQ(g.clear_auth().refused_up_to_us(), kNowUs);
+  EXPECT_EQ(g.clear_auth().refused_up_to_us(), kStateNowUs);
 }
 
 TEST_F(LostSafetyStateTest, TheSavedLatchesOverrideTheEstimatorStates) {

@@ -12,7 +12,7 @@
 namespace pumptherm::estimators {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kNoReading = std::numeric_limits<double>::quiet_NaN();
 
 using test::kOneNode;
 
@@ -45,11 +45,11 @@ TEST(LagBias, RiseOverTheLagIsTheFirstOrderLagOfARamp) {
 TEST(LagBias, CoolingUnknownAndNoLagGiveZero) {
   LagBias bias(3.0, 1.0);
   for (double y : {60.0, 59.0, 58.0}) EXPECT_EQ(bias.Step(y), 0.0);  // 3 steps ago: not known yet
-  EXPECT_EQ(bias.Step(57.0), 0.0);   // against 60: cooling, the safe side
-  EXPECT_EQ(bias.Step(kNaN), 0.0);   // no reading
-  EXPECT_EQ(bias.Step(70.0), 12.0);  // against 58
-  EXPECT_EQ(bias.Step(72.0), 15.0);  // against 57
-  EXPECT_EQ(bias.Step(73.0), 0.0);   // against the missing reading
+  EXPECT_EQ(bias.Step(57.0), 0.0);        // against 60: cooling, the safe side
+  EXPECT_EQ(bias.Step(kNoReading), 0.0);  // no reading
+  EXPECT_EQ(bias.Step(70.0), 12.0);       // against 58
+  EXPECT_EQ(bias.Step(72.0), 15.0);       // against 57
+  EXPECT_EQ(bias.Step(73.0), 0.0);        // against the missing reading
   LagBias none(0.0, 1.0);
   EXPECT_EQ(none.Step(80.0), 0.0);
   EXPECT_THROW(LagBias(-1.0, 1.0), std::invalid_argument);
@@ -196,7 +196,7 @@ TEST(AlarmValues, WhileSilentTheLevelsSeeTheDelayedWorstCaseTheBandTheWorstNow) 
   s.inputs = &in;
   s.x_degC = &x;
   s.sd_K = &sd;
-  s.lagging_degC = kNaN;
+  s.lagging_degC = kNoReading;
   for (int k = 0; k <= 30; ++k) {
     s.end_us = (k + 1) * 1'000'000;
     s.fresh_inputs = k == 0;  // silent after the first step
@@ -229,7 +229,7 @@ TEST(AlarmValues, RunningBlindTheRuleIsBlindWhileItsWorstCaseIsTheHighest) {
   s.fresh_inputs = true;
   s.x_degC = &x;
   s.sd_K = &sd;
-  s.lagging_degC = kNaN;
+  s.lagging_degC = kNoReading;
   for (int k = 0; k < 20; ++k) {
     s.end_us = (k + 1) * 1'000'000;
     s.blind = k >= 10;
@@ -340,7 +340,7 @@ TEST(InsideHeatBound, PutsTheFramePathHeatFoundSinceTheOnsetOnTheRotorUntilAFram
   InsideHeatBound bound(model, frame, rotor, 1200.0, 10.0);
   // 1 W of usual model error, 5 W from 300 s on; named inside at 400 s with its onset at 300 s.
   for (int t = 1; t < 400; ++t) {
-    bound.Step(t, t <= 300 ? 1.0 : 5.0, InsideHeatVerdict::kUnchanged, kNaN);
+    bound.Step(t, t <= 300 ? 1.0 : 5.0, InsideHeatVerdict::kUnchanged, kNoReading);
     EXPECT_EQ(bound.shift_K(rotor), 0.0) << t;
   }
   bound.Step(400.0, 5.0, InsideHeatVerdict::kInside, 300.0);
@@ -349,16 +349,16 @@ TEST(InsideHeatBound, PutsTheFramePathHeatFoundSinceTheOnsetOnTheRotorUntilAFram
   EXPECT_NEAR(bound.shift_K(rotor), 8.0, 1e-9);
   EXPECT_NEAR(bound.shift_K(frame), 0.0, 1e-9);
   // Held once the test clears (the heat stays), following the frame-path heat.
-  bound.Step(401.0, 7.0, InsideHeatVerdict::kUnchanged, kNaN);
+  bound.Step(401.0, 7.0, InsideHeatVerdict::kUnchanged, kNoReading);
   EXPECT_NEAR(bound.heat_W(), 6.0, 1e-12);
-  bound.Step(402.0, kNaN, InsideHeatVerdict::kUnchanged, kNaN);  // none this step: held
+  bound.Step(402.0, kNoReading, InsideHeatVerdict::kUnchanged, kNoReading);  // none this step: held
   EXPECT_NEAR(bound.heat_W(), 6.0, 1e-12);
-  bound.Step(403.0, 0.5, InsideHeatVerdict::kUnchanged, kNaN);  // below the base: none
+  bound.Step(403.0, 0.5, InsideHeatVerdict::kUnchanged, kNoReading);  // below the base: none
   EXPECT_EQ(bound.heat_W(), 0.0);
-  bound.Step(404.0, 7.0, InsideHeatVerdict::kFramePath, kNaN);  // named on the frame path
+  bound.Step(404.0, 7.0, InsideHeatVerdict::kFramePath, kNoReading);  // named on the frame path
   EXPECT_FALSE(bound.latched());
   EXPECT_EQ(bound.shift_K(rotor), 0.0);
-  bound.Step(405.0, 7.0, InsideHeatVerdict::kInside, kNaN);  // no onset: the oldest kept, 1 W
+  bound.Step(405.0, 7.0, InsideHeatVerdict::kInside, kNoReading);  // no onset: the oldest kept, 1 W
   EXPECT_NEAR(bound.heat_W(), 6.0, 1e-12);
   bound.Reset();
   EXPECT_FALSE(bound.latched());

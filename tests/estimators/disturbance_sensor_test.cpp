@@ -20,13 +20,13 @@ namespace mc = mismatch_cases;
 
 namespace {
 
-std::string ModelDir() {
+std::string SensorModelDir() {
   const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
   return std::string(src != nullptr ? src : PUMPTHERM_SOURCE_DIR) + "/estimators/models";
 }
 
-mc::CaseResult RunFault(mc::Fault fault, std::uint64_t seed, double magnet_white_sd_K = 0.0,
-                        double magnet_bias_sd_K = 0.0, pe::DisturbanceSensorConfig dc = {}) {
+mc::CaseResult RunSensorFault(mc::Fault fault, std::uint64_t seed, double magnet_white_sd_K = 0.0,
+                              double magnet_bias_sd_K = 0.0, pe::DisturbanceSensorConfig dc = {}) {
   mc::CaseSpec spec;
   spec.magnet_noise_sd_K = magnet_white_sd_K;
   spec.magnet_bias_sd_K = magnet_bias_sd_K;
@@ -34,7 +34,7 @@ mc::CaseResult RunFault(mc::Fault fault, std::uint64_t seed, double magnet_white
   spec.duration_s = 3600.0 + 2400.0;
   spec.fault_s = fault == mc::Fault::kNone ? spec.duration_s + 1.0 : 3600.0;
   spec.seed = seed;
-  return mc::RunCase(spec, ModelDir(), {}, dc);
+  return mc::RunCase(spec, SensorModelDir(), {}, dc);
 }
 
 /// Index of node `name` in the result (r.nodes.size() when absent).
@@ -54,11 +54,11 @@ void ExpectEveryNodeCoveredWithin(const mc::CaseResult& r, double max_error_K) {
 }
 
 TEST(DisturbanceSensor, CoversTheTruthOnAHealthyPump) {
-  ExpectEveryNodeCoveredWithin(RunFault(mc::Fault::kNone, 21), 1.5);
+  ExpectEveryNodeCoveredWithin(RunSensorFault(mc::Fault::kNone, 21), 1.5);
 }
 
 TEST(DisturbanceSensor, LostCoolingGoesIntoTheFramePathHeat) {
-  const mc::CaseResult r = RunFault(mc::Fault::kCoolingLost, 22);
+  const mc::CaseResult r = RunSensorFault(mc::Fault::kCoolingLost, 22);
   for (std::size_t i = 0; i < r.nodes.size(); ++i) {
     EXPECT_GE(r.dist_coverage[i], 0.9) << r.nodes[i];
     EXPECT_LE(r.dist_max_error_K[i], 3.0) << r.nodes[i];
@@ -69,7 +69,7 @@ TEST(DisturbanceSensor, LostCoolingGoesIntoTheFramePathHeat) {
 
 TEST(DisturbanceSensor, HeatInsideTheRotorShowsInItsSd) {
   // The frame barely sees it: the rotor is off by many kelvin, but its sd says so.
-  const mc::CaseResult r = RunFault(mc::Fault::kRotorLoss, 23);
+  const mc::CaseResult r = RunSensorFault(mc::Fault::kRotorLoss, 23);
   const std::size_t rotor = Rotor(r);
   ASSERT_LT(rotor, r.nodes.size());
   EXPECT_GT(r.dist_max_error_K[rotor], 5.0);
@@ -90,7 +90,7 @@ TEST(DisturbanceSensor, UnseenRotorHeatIsCoveredOnceNamedInside) {
     spec.duration_s = 1800.0 + 3600.0;
     spec.seed = 29;
     spec.inside_heat_bound = bound;
-    return mc::RunCase(spec, ModelDir());
+    return mc::RunCase(spec, SensorModelDir());
   };
   const mc::CaseResult without = run(false);
   EXPECT_LT(without.dist_coverage_after_fault[Rotor(without)], 0.9)
@@ -107,7 +107,7 @@ TEST(DisturbanceSensor, UnseenRotorHeatIsCoveredOnceNamedInside) {
 TEST(DisturbanceSensor, MoreLossesStayCovered) {
   // The frame puts most of the losses' heat on the frame path (the winding is 8-9 K low), but the
   // loss scale's sd says so.
-  const mc::CaseResult r = RunFault(mc::Fault::kLosses40, 26);
+  const mc::CaseResult r = RunSensorFault(mc::Fault::kLosses40, 26);
   for (std::size_t i = 0; i < r.nodes.size(); ++i) EXPECT_GE(r.dist_coverage[i], 0.9) << r.nodes[i];
 }
 
@@ -121,7 +121,7 @@ TEST(DisturbanceSensor, TheInteriorSdStaysBoundedAtAConstantLoad) {
     spec.duration_s = duration_s;
     spec.fault_s = duration_s + 1.0;
     spec.seed = 27;
-    const mc::CaseResult r = mc::RunCase(spec, ModelDir());
+    const mc::CaseResult r = mc::RunCase(spec, SensorModelDir());
     const std::size_t w = NodeIndex(r, "winding");
     EXPECT_GE(r.dist_coverage[w], 0.9);
     EXPECT_LE(r.dist_max_error_K[w], 1.0);
@@ -137,21 +137,21 @@ TEST(DisturbanceSensor, TheFluxReadingsSlowBiasIsNotAveragedAway) {
   // A reading with a 2 K slow bias, fused every second: with the bias state every node stays
   // covered; taken as white noise (no bias state), the filter averages it and the rotor's sd
   // becomes far smaller than its error.
-  const mc::CaseResult r = RunFault(mc::Fault::kNone, 1, 1.0, 2.0);
+  const mc::CaseResult r = RunSensorFault(mc::Fault::kNone, 1, 1.0, 2.0);
   for (std::size_t i = 0; i < r.nodes.size(); ++i) {
     EXPECT_GE(r.dist_coverage[i], 0.9)
         << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
   }
   pe::DisturbanceSensorConfig white;
   white.magnet_bias_sd_K = 0.0;
-  const mc::CaseResult w = RunFault(mc::Fault::kNone, 1, 1.0, 2.0, white);
+  const mc::CaseResult w = RunSensorFault(mc::Fault::kNone, 1, 1.0, 2.0, white);
   EXPECT_LT(w.dist_coverage[Rotor(w)], 0.9) << "max error " << w.dist_max_error_K[Rotor(w)] << " K";
 }
 
 TEST(DisturbanceSensor, TheFluxReadingFindsHeatInsideTheRotor) {
   // From the frame alone +6 W on the rotor leaves it more than 5 K off (above); a rotor reading
   // with 3 K of white noise and a 0.5 K bias brings it within 3 K, every node covered.
-  const mc::CaseResult r = RunFault(mc::Fault::kRotorLoss, 23, 3.0, 0.5);
+  const mc::CaseResult r = RunSensorFault(mc::Fault::kRotorLoss, 23, 3.0, 0.5);
   ASSERT_LT(Rotor(r), r.nodes.size());
   EXPECT_LE(r.dist_max_error_K[Rotor(r)], 3.0);
   for (std::size_t i = 0; i < r.nodes.size(); ++i) {
@@ -161,7 +161,7 @@ TEST(DisturbanceSensor, TheFluxReadingFindsHeatInsideTheRotor) {
 }
 
 TEST(DisturbanceSensor, LostCoolingWithTheFluxReadingStaysCovered) {
-  const mc::CaseResult r = RunFault(mc::Fault::kCoolingLost, 22, 1.0, 2.0);
+  const mc::CaseResult r = RunSensorFault(mc::Fault::kCoolingLost, 22, 1.0, 2.0);
   for (std::size_t i = 0; i < r.nodes.size(); ++i) {
     EXPECT_GE(r.dist_coverage[i], 0.9)
         << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
@@ -170,7 +170,7 @@ TEST(DisturbanceSensor, LostCoolingWithTheFluxReadingStaysCovered) {
 
 TEST(DisturbanceSensor, RejectsAnUnknownNode) {
   const auto model =
-      pe::ThermalModel::Parse(mc::ReadFile(ModelDir() + "/tmp-generic.toml"), "tmp-generic");
+      pe::ThermalModel::Parse(mc::ReadFile(SensorModelDir() + "/tmp-generic.toml"), "tmp-generic");
   pe::DisturbanceSensorConfig c;
   c.measured_node = "lid";
   EXPECT_THROW(pe::DisturbanceThermalSensor(model, c), std::invalid_argument);
@@ -184,7 +184,7 @@ TEST(DisturbanceSensor, RejectsAnUnknownNode) {
 TEST(DisturbanceSensor, BoundaryOnlyThroughTheMeasuredNode) {
   for (const char* name : {"tmp-generic", "saheba2010-baseline", "saheba2010-improved"}) {
     const auto model =
-        pe::ThermalModel::Parse(mc::ReadFile(ModelDir() + "/" + name + ".toml"), name);
+        pe::ThermalModel::Parse(mc::ReadFile(SensorModelDir() + "/" + name + ".toml"), name);
     EXPECT_TRUE(pe::BoundaryOnlyThrough(model, "frame")) << name;
     EXPECT_FALSE(pe::BoundaryOnlyThrough(model, "rotor")) << name;
     EXPECT_FALSE(pe::BoundaryOnlyThrough(model, "lid")) << name;
@@ -211,7 +211,7 @@ TEST(DisturbanceSensor, LostCoolingOnTheSahebaMachineStaysCovered) {
   spec.duration_s = 3600.0 + 2400.0;
   spec.fault_s = 3600.0;
   spec.seed = 23;
-  const mc::CaseResult r = mc::RunCase(spec, ModelDir());
+  const mc::CaseResult r = mc::RunCase(spec, SensorModelDir());
   for (std::size_t i = 0; i < r.nodes.size(); ++i) {
     EXPECT_GE(r.dist_coverage[i], 0.9)
         << r.nodes[i] << " max error " << r.dist_max_error_K[i] << " K";
@@ -222,7 +222,7 @@ TEST(DisturbanceSensor, LostCoolingOnTheSahebaMachineStaysCovered) {
 TEST(DisturbanceSensor, AReadingThatStepsIsTakenAsAStepOfTheSensorsOffset) {
   // The reading jumps +3 K between two readings: the frame cannot move that fast, so the offset
   // takes the step and every node stays on the truth.
-  ExpectEveryNodeCoveredWithin(RunFault(mc::Fault::kSensorOffset, 24), 1.5);
+  ExpectEveryNodeCoveredWithin(RunSensorFault(mc::Fault::kSensorOffset, 24), 1.5);
 }
 
 TEST(DisturbanceSensor, ASmallerStepIsFoundToo) {
@@ -235,7 +235,7 @@ TEST(DisturbanceSensor, ASmallerStepIsFoundToo) {
   spec.duration_s = 3600.0 + 2400.0;
   spec.fault_s = 3600.0;
   spec.seed = 28;
-  const mc::CaseResult r = mc::RunCase(spec, ModelDir());
+  const mc::CaseResult r = mc::RunCase(spec, SensorModelDir());
   EXPECT_EQ(r.dist_sensor_steps, 1);
   ExpectEveryNodeCoveredWithin(r, 1.5);
 }
@@ -245,7 +245,7 @@ TEST(DisturbanceSensor, WithoutTheStepTestTheFrameFollowsTheSteppedReading) {
   // step, and the frame estimate is confidently wrong (what the test above guards against).
   pe::DisturbanceSensorConfig dc;
   dc.sensor_step_gate_sd = 0.0;
-  const mc::CaseResult r = RunFault(mc::Fault::kSensorOffset, 24, 0.0, 0.0, dc);
+  const mc::CaseResult r = RunSensorFault(mc::Fault::kSensorOffset, 24, 0.0, 0.0, dc);
   const std::size_t frame = NodeIndex(r, "frame");
   ASSERT_LT(frame, r.nodes.size());
   EXPECT_GT(r.dist_max_error_K[frame], 5.0);
@@ -256,7 +256,7 @@ TEST(DisturbanceSensor, HealthyAndLostCoolingRunsFindNoSensorStep) {
   // The step test must not take a plant change for the sensor: lost cooling moves the frame fast,
   // but no faster than the frame-path heat's random walk allows.
   for (const mc::Fault f : {mc::Fault::kNone, mc::Fault::kCoolingLost, mc::Fault::kAmbientRise}) {
-    const mc::CaseResult r = RunFault(f, 25);
+    const mc::CaseResult r = RunSensorFault(f, 25);
     EXPECT_EQ(r.dist_sensor_steps, 0) << mc::FaultName(f);
   }
 }

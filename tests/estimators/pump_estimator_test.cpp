@@ -19,14 +19,15 @@ namespace mc = mismatch_cases;
 
 namespace {
 
-std::string ModelDir() {
+std::string EstimatorModelDir() {
   const char* src = std::getenv("PUMPTHERM_SOURCE_DIR");
   return std::string(src != nullptr ? src : PUMPTHERM_SOURCE_DIR) + "/estimators/models";
 }
 
 pe::ThermalModel TmpGeneric() {
-  return pe::ThermalModel::Parse(mc::ReadFile(ModelDir() + "/tmp-generic.toml"), "tmp-generic",
-                                 pe::ThermalModelFiles{ModelDir(), mc::ReadFile});
+  return pe::ThermalModel::Parse(mc::ReadFile(EstimatorModelDir() + "/tmp-generic.toml"),
+                                 "tmp-generic",
+                                 pe::ThermalModelFiles{EstimatorModelDir(), mc::ReadFile});
 }
 
 pe::ThermalInputs Running(double iq_A = 3.0) {

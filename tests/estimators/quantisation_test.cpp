@@ -21,7 +21,7 @@ struct MonteCarlo {
   double standard_error = 0.0;
 };
 
-MonteCarlo Sample(double mu, double sigma, int n, std::uint64_t seed) {
+MonteCarlo MonteCarloSample(double mu, double sigma, int n, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> noise(0.0, sigma);
   double sum = 0.0, sum2 = 0.0;
@@ -46,7 +46,7 @@ TEST(Quantisation, MeanBiasMatchesMonteCarlo) {
     const double sigma = sigma_steps * kStep_V;
     for (const double phase : {0.1, 0.25, 0.4, 0.5, 0.7, 0.9}) {
       const double mu = (1707.0 + phase) * kStep_V;  // 40.0 V + phase steps
-      const MonteCarlo mc = Sample(mu, sigma, 2'000'000, seed++);
+      const MonteCarlo mc = MonteCarloSample(mu, sigma, 2'000'000, seed++);
       const double predicted = QuantisedMeanBias(mu, sigma * sigma, kStep_V);
       EXPECT_NEAR(mc.mean - mu, predicted, 5.0 * mc.standard_error)
           << "sigma " << sigma_steps << " steps, phase " << phase;
@@ -73,7 +73,7 @@ TEST(Quantisation, VarianceOfQuantisedSamples) {
     const double sigma = sigma_steps * kStep_V;
     for (const double phase : {0.0, 0.25, 0.5}) {
       const double mu = (1707.0 + phase) * kStep_V;
-      const MonteCarlo mc = Sample(mu, sigma, 2'000'000, seed++);
+      const MonteCarlo mc = MonteCarloSample(mu, sigma, 2'000'000, seed++);
       const double periodic = -(4.0 * sigma * sigma + kStep_V * kStep_V / (kPi * kPi)) *
                               std::exp(-2.0 * kPi * kPi * sigma * sigma / (kStep_V * kStep_V)) *
                               std::cos(2.0 * kPi * phase);

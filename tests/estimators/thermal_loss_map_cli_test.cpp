@@ -27,7 +27,7 @@ const std::string kSource = [] {
   return std::string(s ? s : ".");
 }();
 const std::string kData = kSource + "/../shared/data/paderborn/profile46_every10th_dt5s.csv";
-const std::string kMap = kSource + "/../shared/reference/wallscheid-losses/total_loss_W.csv";
+const std::string kLossMapCsv = kSource + "/../shared/reference/wallscheid-losses/total_loss_W.csv";
 // Not a shipped model (its loss map may not be redistributed): named by path.
 const std::string kModel = pumptherm::test_files::ModelPath("wallscheid2017-4node");
 
@@ -47,7 +47,7 @@ Result RunCli(const std::string& args, const std::string& name) {
 }
 
 bool DataPresent(std::string& why) {
-  for (const std::string& p : {kData, kMap}) {
+  for (const std::string& p : {kData, kLossMapCsv}) {
     if (!std::ifstream(p).good()) {
       why = p +
             " is absent (the Paderborn data and the Wallscheid loss map stay outside the project)";

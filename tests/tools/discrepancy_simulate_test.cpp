@@ -29,7 +29,7 @@ namespace {
 using pumptherm::test_files::ReadFile;
 using pumptherm::test_files::SharedDir;
 
-std::string Dir() {
+std::string SimulateDir() {
   return pumptherm::test_files::TestTempDir("pumptherm_discrepancy_simulate_test");
 }
 
@@ -41,7 +41,7 @@ std::string ModelFile(const std::string& name) {
   for (std::size_t p = text.find(rel); p != std::string::npos;
        p = text.find(rel, p + shared.size()))
     text.replace(p, rel.size(), shared);
-  const std::string path = Dir() + "/" + name + ".toml";
+  const std::string path = SimulateDir() + "/" + name + ".toml";
   std::ofstream(path) << text;
   return path;
 }
@@ -75,7 +75,7 @@ std::string PaderbornCsv() {
     const auto it = kName.find(c);
     renamed += (renamed.empty() ? "" : ",") + (it == kName.end() ? c : it->second);
   }
-  const std::string path = Dir() + "/profile46.csv";
+  const std::string path = SimulateDir() + "/profile46.csv";
   std::ofstream(path) << renamed << "\n" << ss.str();
   return path;
 }
@@ -84,7 +84,7 @@ std::string PaderbornCsv() {
 std::map<std::string, std::vector<double>> Simulate(const std::string& model,
                                                     const std::string& csv,
                                                     const std::string& initial) {
-  const std::string out = Dir() + "/simulated.csv";
+  const std::string out = SimulateDir() + "/simulated.csv";
   const std::string cmd = std::string("'") + PUMPTHERM_CLI + "' simulate --model '" + model +
                           "' --input '" + csv + "' --initial " + initial + " --output '" + out +
                           "'";
@@ -150,7 +150,7 @@ std::string GeneratedCsv(const std::string& name) {
     c.max_speed_rpm = 21000.0;
     c.max_current_A = 4.5;
   }
-  const std::string path = Dir() + "/" + name + ".csv";
+  const std::string path = SimulateDir() + "/" + name + ".csv";
   pd::WriteData(path, pd::MakeHiddenEffectData(c), model.UsesCoolant());
   return path;
 }
@@ -198,13 +198,13 @@ namespace {
 std::string Rows(const std::string& path, std::size_t from, std::size_t to,
                  const std::string& out) {
   std::ifstream f(path);
-  std::ofstream o(Dir() + "/" + out);
+  std::ofstream o(SimulateDir() + "/" + out);
   std::string line;
   std::getline(f, line);
   o << line << "\n";
   for (std::size_t k = 0; std::getline(f, line); ++k)
     if (k >= from && k < to) o << line << "\n";
-  return Dir() + "/" + out;
+  return SimulateDir() + "/" + out;
 }
 
 /// The model with every speed_norm in an edge resistance set to 0 (its standstill values).
@@ -218,7 +218,7 @@ std::string StrippedModelFile() {
         line.replace(p, 10, "0");
     text += line + "\n";
   }
-  const std::string path = Dir() + "/w4-nospeed.toml";
+  const std::string path = SimulateDir() + "/w4-nospeed.toml";
   std::ofstream(path) << text;
   return path;
 }
