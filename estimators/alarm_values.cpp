@@ -141,10 +141,9 @@ std::pair<double, AlarmRule> AlarmValues::ValueAndRule(int i, double estimate_de
   return v;
 }
 
-double AlarmValues::BandTop_degC(int i, double estimate_degC) const {
-  const double v = Value_degC(i, estimate_degC);
+double AlarmValues::BandTop_degC(int i, double value_degC) const {
   const Eigen::VectorXd& w = silence_.worst_degC();
-  return w.size() > i && !std::isnan(w(i)) ? std::max(v, w(i)) : v;
+  return w.size() > i && !std::isnan(w(i)) ? std::max(value_degC, w(i)) : value_degC;
 }
 
 double AlarmValues::PublishedSd_K(int i, double filter_sd_K, double above_K) const {

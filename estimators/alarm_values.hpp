@@ -96,9 +96,10 @@ class AlarmValues {
   /// highest where several do; of equal ones the first in the order lagging sensor or inside
   /// heat, blind, silence), or kBand where none did.
   std::pair<double, AlarmRule> ValueAndRule(int i, double estimate_degC) const;
-  /// The top of the band published for node i: the value its levels act on, or during a silence
-  /// the worst case now when higher (the levels see it silence_delay_s late).
-  double BandTop_degC(int i, double estimate_degC) const;
+  /// The top of the band published for node i whose levels act on `value_degC` (Value_degC):
+  /// that value, or during a silence the worst case now when higher (the levels see it
+  /// silence_delay_s late).
+  double BandTop_degC(int i, double value_degC) const;
   /// The sd published for node i whose filter sd is `filter_sd_K` and whose alarm value lies
   /// `above_K` above its estimate (NaN or <= 0: none): at least above_K / 2, and at least
   /// filter_sd_K plus half the inside-heat bound's shift.

@@ -536,7 +536,7 @@ void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {
     alarm_values_[k] = diverged ? kNaN : value_degC;
     alarm_rules_[k] = diverged ? AlarmRule::kBand : rule;
     alarm_sd_[k] = estimate_.node_sd_K[k];
-    const double top_degC = diverged ? kNaN : values_.BandTop_degC(i, x_degC_(i));
+    const double top_degC = diverged ? kNaN : values_.BandTop_degC(i, value_degC);
     estimate_.node_sd_K[k] = values_.PublishedSd_K(i, alarm_sd_[k], top_degC - x_degC_(i));
   }
   alarm_values_.back() = estimate_.winding_resistance_degC;

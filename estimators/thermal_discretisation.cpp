@@ -3,7 +3,7 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
-#include <limits>
+#include <optional>
 #include <stdexcept>
 #include <unsupported/Eigen/MatrixFunctions>
 
@@ -36,12 +36,12 @@ double RelativeChangeFixed(const Eigen::MatrixXd& a0_inv, const Eigen::MatrixXd&
 }
 
 /// RelativeChangeFixed for the sizes of the shipped models' networks (4: tmp-generic, 7:
-/// saheba2010-*) with a sensor's lag and offset added (up to 9); NaN for other sizes.
+/// saheba2010-*) with a sensor's lag and offset added (up to 9); none for other sizes.
 template <int N = 4>
-double RelativeChangeOfSize(const Eigen::MatrixXd& a0_inv, const Eigen::MatrixXd& a0,
-                            const Eigen::MatrixXd& a) {
+std::optional<double> RelativeChangeOfSize(const Eigen::MatrixXd& a0_inv, const Eigen::MatrixXd& a0,
+                                           const Eigen::MatrixXd& a) {
   if constexpr (N > 9) {
-    return std::numeric_limits<double>::quiet_NaN();
+    return std::nullopt;
   } else {
     if (a.rows() != N) return RelativeChangeOfSize<N + 1>(a0_inv, a0, a);
     return RelativeChangeFixed<N>(a0_inv, a0, a);
@@ -51,8 +51,7 @@ double RelativeChangeOfSize(const Eigen::MatrixXd& a0_inv, const Eigen::MatrixXd
 }  // namespace
 
 double ThermalDiscretiser::RelativeChange(const Eigen::MatrixXd& a_per_s) {
-  const double fixed = RelativeChangeOfSize(a_last_inv_, a_last_, a_per_s);
-  if (!std::isnan(fixed)) return fixed;
+  if (const auto fixed = RelativeChangeOfSize(a_last_inv_, a_last_, a_per_s)) return *fixed;
   diff_ = a_per_s - a_last_;
   rel_.noalias() = a_last_inv_ * diff_;
   return rel_.norm();

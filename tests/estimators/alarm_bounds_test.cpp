@@ -205,14 +205,14 @@ TEST(AlarmValues, WhileSilentTheLevelsSeeTheDelayedWorstCaseTheBandTheWorstNow) 
   const double then = Closed(30.0, 20.0, 50.0, 20.0), now = Closed(30.0, 20.0, 50.0, 30.0);
   EXPECT_NEAR(values.Value_degC(0, 30.0), then, 1e-9);
   EXPECT_EQ(values.ValueAndRule(0, 30.0).second, AlarmRule::kSilence);
-  EXPECT_NEAR(values.BandTop_degC(0, 30.0), now, 1e-9);
+  EXPECT_NEAR(values.BandTop_degC(0, values.Value_degC(0, 30.0)), now, 1e-9);
   EXPECT_NEAR(values.PublishedSd_K(0, 0.5, now - 30.0), (now - 30.0) / 2.0, 1e-12);
   s.end_us += 1'000'000;
   s.fresh_inputs = true;  // the frames are back at the same load: nothing above the estimate
   values.Step(s);
   EXPECT_EQ(values.Value_degC(0, 30.0), 30.0);
   EXPECT_EQ(values.ValueAndRule(0, 30.0).second, AlarmRule::kBand);
-  EXPECT_EQ(values.BandTop_degC(0, 30.0), 30.0);
+  EXPECT_EQ(values.BandTop_degC(0, values.Value_degC(0, 30.0)), 30.0);
 }
 
 // Running blind, the value is the worst case of an unseen cooling failure from the band's top
