@@ -317,15 +317,6 @@ void DisturbanceThermalSensor::AddFoundHeat(ThermalLinearModel& lin) const {
 }
 
 void DisturbanceThermalSensor::LossColumns() {
-  // A loss's share of dx/dt at the estimate: (a x + f) at one set of inputs minus another.
-  const auto share = [&](const ThermalLinearModel& with, const ThermalLinearModel& without,
-                         int column) {
-    auto col = heat_in_.col(column).head(n_);
-    col.noalias() = with.a_per_s * x_nodes_;
-    col += with.f_K_per_s;
-    col.noalias() -= without.a_per_s * x_nodes_;
-    col -= without.f_K_per_s;
-  };
   if (dr_state_ >= 0) {
     // With the voltage rows the copper loss is measured, not modelled: the currents are read
     // and the resistance R0 (1 + dR)(1 + alpha (Tw - T0)) is what the rows identify (Han 2019
@@ -333,14 +324,14 @@ void DisturbanceThermalSensor::LossColumns() {
     // s stands for the losses nothing measures (iron, rotor, friction), and for the copper's
     // only by copper_loss_sd_rel / loss_scale_max_sd of it: the copper no longer widens the
     // winding's rise by the whole of s (95 % of the demo's winding variance before).
-    share(lin_still_, lin_idle_, 3);
+    heat_in_.col(3).head(n_) = loss_rates_.current_K_per_s;
     if (ls_ >= 0) {
-      share(lin_, lin_still_, 2);
+      heat_in_.col(2).head(n_) = loss_rates_.speed_K_per_s;
       heat_in_.col(2).head(n_) +=
           (config_.copper_loss_sd_rel / config_.loss_scale_max_sd) * heat_in_.col(3).head(n_);
     }
   } else if (ls_ >= 0) {
-    share(lin_, lin_idle_, 2);
+    heat_in_.col(2).head(n_) = loss_rates_.current_K_per_s + loss_rates_.speed_K_per_s;
   }
 }
 
@@ -349,17 +340,10 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   const int nb = static_cast<int>(lin_block_.f_K_per_s.size());
   x_nodes_ = filter_.State().head(n_);
   try {
-    model_.Linearise(in, x_nodes_, lin_);
     if (ls_ >= 0 || dr_state_ >= 0) {
-      ThermalInputs idle = in;
-      idle.speed_rpm = idle.id_A = idle.iq_A = 0.0;
-      model_.Linearise(idle, x_nodes_, lin_idle_);
-    }
-    if (dr_state_ >= 0) {
-      // The currents at standstill: the copper loss alone (the speed's losses are zero there).
-      ThermalInputs still = in;
-      still.speed_rpm = 0.0;
-      model_.Linearise(still, x_nodes_, lin_still_);
+      model_.Linearise(in, x_nodes_, lin_, loss_rates_);
+    } else {
+      model_.Linearise(in, x_nodes_, lin_);
     }
   } catch (const std::exception&) {
     return false;  // a massless sub-network singular at this operating point

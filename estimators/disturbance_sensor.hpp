@@ -268,7 +268,8 @@ class DisturbanceThermalSensor : public ThermalObserver {
   int sensor_steps_ = 0;
   double last_sensor_step_K_ = 0.0;
   double stepped_offset_K_ = 0.0;
-  ThermalLinearModel lin_, lin_block_, lin_idle_, lin_still_;
+  ThermalLinearModel lin_, lin_block_;
+  ThermalLossRates loss_rates_;  ///< the losses' share of dx/dt at the estimate (LossColumns)
   ThermalDiscretiser discretiser_;
   KalmanFilter filter_;
   ObserverReport report_;

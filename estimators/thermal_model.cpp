@@ -199,7 +199,10 @@ struct Expression {
   double value = 0.0;                  ///< the value when constant
   std::unique_ptr<mu::Parser> parser;  ///< set only when the expression reads an input
   std::string text;
-  bool reads_nodes = false;  ///< reads a node temperature `<node>_C`
+  bool reads_nodes = false;       ///< reads a node temperature `<node>_C`
+  bool reads_speed = false;       ///< reads `speed_rpm` or `speed_rad_per_s`
+  bool reads_currents = false;    ///< reads `id_A`, `iq_A`, `is_A` or `i2_A2`
+  bool reads_boundaries = false;  ///< reads `ambient_C` or `coolant_C`
 
   bool Varies() const { return parser != nullptr; }
   double Eval() const { return parser ? parser->Eval() : value; }
@@ -221,6 +224,9 @@ struct LossTerm {
   int reference = 0;                    ///< kAmbient / kCoolant, or 0 for reference_degC
   double reference_degC = 0.0;
   std::vector<std::pair<int, double>> shares;  ///< (node index, share)
+  /// The power at rest (speed and currents zero) when that is a constant: the expression reads
+  /// no node temperature and no boundary.
+  std::optional<double> power_at_rest_W;
 };
 
 /// The Kron-reduced network (eq. S25) for one set of resistance values.
@@ -269,10 +275,15 @@ struct ThermalModel::Impl {
   bool resistances_vary = false;
   Eigen::VectorXd winding_weights;
   Reduced cached;  ///< valid when !resistances_vary
+  /// Per loss (columns), the states' heat rate per watt, K/(s W): C^-1 G times the loss's
+  /// shares, for the cached network.
+  Eigen::MatrixXd loss_rate_per_W;
   // Scratch for Linearise (mutable: Linearise is logically const).
   mutable Reduced scratch;
   mutable Eigen::VectorXd p0;
   mutable Eigen::MatrixXd d;
+  mutable std::vector<double> power_W;  ///< per loss, at the inputs of the last Linearise
+  mutable ThermalLinearModel still_scratch, rest_scratch;
 
   int N() const { return static_cast<int>(nodes.size()); }
   int n() const { return static_cast<int>(node_of_state.size()); }
@@ -286,6 +297,22 @@ struct ThermalModel::Impl {
 
   [[noreturn]] void Fail(int line, const std::string& what) const {
     throw ThermalModelError(fmt::format("{}: {}", Where(source, line), what));
+  }
+
+  /// Which kinds of variable `e` reads through `var` (a quantity: what its value reads).
+  void MarkReads(const std::string& var, Expression& e) const {
+    for (const std::string& st : state_names) e.reads_nodes = e.reads_nodes || var == st + "_C";
+    e.reads_speed = e.reads_speed || var == "speed_rpm" || var == "speed_rad_per_s";
+    e.reads_currents =
+        e.reads_currents || var == "id_A" || var == "iq_A" || var == "is_A" || var == "i2_A2";
+    e.reads_boundaries = e.reads_boundaries || var == "ambient_C" || var == "coolant_C";
+    for (const Quantity& q : quantities) {
+      if (var != q.name) continue;
+      e.reads_nodes = e.reads_nodes || q.value.reads_nodes;
+      e.reads_speed = e.reads_speed || q.value.reads_speed;
+      e.reads_currents = e.reads_currents || q.value.reads_currents;
+      e.reads_boundaries = e.reads_boundaries || q.value.reads_boundaries;
+    }
   }
 
   Expression Compile(const toml::node& n, const std::string& key, bool inputs_allowed) const {
@@ -329,13 +356,7 @@ struct ThermalModel::Impl {
         p->SetExpr(*s);
         e.value = p->Eval();
         const auto used = p->GetUsedVar();
-        for (const auto& [used_name, ptr] : used) {
-          for (const std::string& st : state_names)
-            e.reads_nodes = e.reads_nodes || used_name == st + "_C";
-          for (const Quantity& q : quantities) {
-            e.reads_nodes = e.reads_nodes || (used_name == q.name && q.value.reads_nodes);
-          }
-        }
+        for (const auto& [used_name, ptr] : used) MarkReads(used_name, e);
         if (!used.empty()) e.parser = std::move(p);
       } catch (const mu::Parser::exception_type& err) {
         Fail(LineOf(n),
@@ -568,6 +589,7 @@ class ThermalModel::Impl::Parser {
     ParseLosses();
     SetWindingWeights();
     CheckMasslessGroups();
+    SetRestPowers();
     m_.p0.setZero(m_.N());
     m_.d.setZero(m_.N(), m_.n());
   }
@@ -1004,6 +1026,25 @@ class ThermalModel::Impl::Parser {
     if (!m_.Reduce(m_.cached)) m_.Fail(1, "the massless sub-network is singular");
   }
 
+  /// Each loss's power at rest (speed and currents zero) where it is a constant, and each loss's
+  /// heat rate per watt on the states (C^-1 G times its shares) where the network is fixed.
+  void SetRestPowers() {
+    m_.SetInputs(ThermalInputs{});
+    const int n = m_.n();
+    m_.loss_rate_per_W.setZero(n, static_cast<Eigen::Index>(m_.losses.size()));
+    for (std::size_t k = 0; k < m_.losses.size(); ++k) {
+      LossTerm& t = m_.losses[k];
+      if (!t.power_W.reads_nodes && !t.power_W.reads_boundaries) {
+        t.power_at_rest_W = t.power_W.Eval();
+      }
+      for (const auto& [node, share] : t.shares) {
+        m_.loss_rate_per_W.col(static_cast<Eigen::Index>(k)) += share * m_.cached.g.col(node);
+      }
+    }
+    m_.loss_rate_per_W.array().colwise() *= m_.inv_capacity.array();
+    m_.power_W.assign(m_.losses.size(), 0.0);
+  }
+
   void CheckMasslessGroup(const std::vector<int>& members) const {
     const int k = static_cast<int>(members.size());
     Eigen::MatrixXd y = Eigen::MatrixXd::Zero(k, k);
@@ -1079,6 +1120,63 @@ void ThermalModel::Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_d
   Linearise(in, out);
 }
 
+void ThermalModel::Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_degC,
+                             ThermalLinearModel& out, ThermalLossRates& rates) const {
+  Linearise(in, x_degC, out);
+  const Impl& m = *impl_;
+  ThermalInputs still = in;
+  still.speed_rpm = 0.0;
+  ThermalInputs rest = still;
+  rest.id_A = rest.iq_A = 0.0;
+  if (m.resistances_vary) {
+    // The network itself may change with the speed or the currents: difference the three
+    // linearisations, (a x + f) at one set of inputs minus another.
+    Linearise(still, x_degC, m.still_scratch);
+    Linearise(rest, x_degC, m.rest_scratch);
+    const auto difference = [&x_degC](const ThermalLinearModel& with,
+                                      const ThermalLinearModel& without, Eigen::VectorXd& rate) {
+      rate.noalias() = with.a_per_s * x_degC;
+      rate += with.f_K_per_s;
+      rate.noalias() -= without.a_per_s * x_degC;
+      rate -= without.f_K_per_s;
+    };
+    difference(m.still_scratch, m.rest_scratch, rates.current_K_per_s);
+    difference(out, m.still_scratch, rates.speed_K_per_s);
+    return;
+  }
+  rates.current_K_per_s.setZero(m.n());
+  rates.speed_K_per_s.setZero(m.n());
+  // A loss's value changes only with what it reads; at rest it may be a constant.
+  const ThermalInputs* set = &in;  // where the expressions' inputs are now
+  const auto power_at = [&m, &set](const ThermalInputs& where, const LossTerm& t) {
+    if (set != &where) m.SetInputs(where);
+    set = &where;
+    return t.power_W.Eval();
+  };
+  for (std::size_t k = 0; k < m.losses.size(); ++k) {
+    const LossTerm& t = m.losses[k];
+    const Expression& e = t.power_W;
+    const double p_in = m.power_W[k];
+    double p_still = p_in;
+    if (e.reads_speed) {
+      p_still = t.power_at_rest_W && !e.reads_currents ? *t.power_at_rest_W : power_at(still, t);
+    }
+    double p_rest = p_still;
+    if (e.reads_currents) p_rest = t.power_at_rest_W ? *t.power_at_rest_W : power_at(rest, t);
+    // The loss's temperature factor 1 + alpha (T - T_ref) at x, as Linearise puts it in a and f.
+    double factor = 1.0;
+    if (t.alpha_per_K != 0.0) {
+      const double ref = t.reference == 0 ? t.reference_degC : m.Boundary(t.reference);
+      double mean = 0.0;
+      for (int st : t.temperature_states) mean += x_degC(st);
+      factor += t.alpha_per_K * (mean / static_cast<double>(t.temperature_states.size()) - ref);
+    }
+    const auto col = m.loss_rate_per_W.col(static_cast<Eigen::Index>(k));
+    rates.current_K_per_s += col * ((p_still - p_rest) * factor);
+    rates.speed_K_per_s += col * ((p_in - p_still) * factor);
+  }
+}
+
 void ThermalModel::Linearise(const ThermalInputs& in, ThermalLinearModel& out) const {
   const Impl& m = *impl_;
   m.SetInputs(in);
@@ -1090,8 +1188,10 @@ void ThermalModel::Linearise(const ThermalInputs& in, ThermalLinearModel& out) c
   out.f_K_per_s.noalias() = r.b_b * tb;
   // A + G D and B_b T_b + G p0, one loss term at a time: each term touches only the columns of
   // G of its share nodes and the columns of A of its temperature nodes (cheaper than G * D).
-  for (const LossTerm& t : m.losses) {
+  for (std::size_t k = 0; k < m.losses.size(); ++k) {
+    const LossTerm& t = m.losses[k];
     const double p = t.power_W.Eval();
+    m.power_W[k] = p;
     double scale0 = 1.0;
     if (t.alpha_per_K != 0.0) {
       const double ref = t.reference == 0 ? t.reference_degC : m.Boundary(t.reference);

@@ -80,6 +80,17 @@ struct ThermalLinearModel {
   Eigen::VectorXd f_K_per_s;
 };
 
+/// The losses' share of dx/dt at one estimate, split by what makes them (K/s per state):
+///  current_K_per_s = (a x + f) at standstill (speed 0, the currents kept) - at rest (speed and
+///                    currents 0): the losses of the currents alone (the copper's);
+///  speed_K_per_s   = (a x + f) at the inputs - at standstill: the losses of the speed (iron,
+///                    rotor, friction).
+/// Their sum is the share of every loss the inputs make.
+struct ThermalLossRates {
+  Eigen::VectorXd current_K_per_s;
+  Eigen::VectorXd speed_K_per_s;
+};
+
 /// The model's typical operation, from its optional `[operating_range]` table: the defaults of
 /// tools that need operating points (sensor placement).
 struct ThermalOperatingRange {
@@ -155,6 +166,13 @@ class ThermalModel {
   /// temperatures. Throws std::domain_error also when `x_degC` is not finite or not of size n.
   void Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_degC,
                  ThermalLinearModel& out) const;
+
+  /// As above, and the losses' share of dx/dt at `x_degC` (ThermalLossRates). On a network whose
+  /// resistances are constant only the losses that read the speed or the currents are evaluated
+  /// again (none where a loss's value at rest is a constant), else the network is linearised at
+  /// standstill and at rest too.
+  void Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_degC, ThermalLinearModel& out,
+                 ThermalLossRates& rates) const;
 
   /// Losses per node (all nodes, file order), W, at temperatures `x_degC` of the states.
   Eigen::VectorXd NodeLosses_W(const ThermalInputs& in, const Eigen::VectorXd& x_degC) const;

@@ -296,3 +296,110 @@ TEST(ThermalModelOperatingRange, BadValuesNameTheTableAndLine) {
       std::string::npos)
       << error("[operating_range]\nspeed_rpm = 5\niq_A = [1.0]\nrpm = 3\n");
 }
+
+namespace {
+
+// Losses of every kind of dependence: the currents alone (with a temperature coefficient), the
+// speed alone, both through a quantity, a node temperature, the ambient; `cooling` is the
+// cooling edge's resistance (a number, or an expression of the speed).
+std::string LossRateModel(const std::string& cooling) {
+  return R"toml(
+[parameters]
+r0 = 0.3
+[[quantity]]
+name = "shaft_W"
+value = "0.002 * speed_rad_per_s * abs(iq_A)"
+[[node]]
+name = "frame"
+capacity_J_per_K = 150
+[[node]]
+name = "winding"
+capacity_J_per_K = 20
+[[node]]
+name = "rotor"
+capacity_J_per_K = 200
+[[edge]]
+between = ["frame", "ambient"]
+resistance_K_per_W = )toml" +
+         cooling + R"toml(
+[[edge]]
+between = ["winding", "frame"]
+resistance_K_per_W = 1.0
+[[edge]]
+between = ["rotor", "frame"]
+resistance_K_per_W = 5.0
+[[loss]]
+name = "copper"
+power_W = "r0 * i2_A2"
+temperature_coefficient_per_K = 0.004
+temperature_nodes = ["winding"]
+reference_C = 20
+shares = { winding = 1 }
+[[loss]]
+name = "iron"
+power_W = "1e-3 * speed_rpm + 2"
+shares = { frame = 0.7, winding = 0.3 }
+[[loss]]
+name = "rotor"
+power_W = "shaft_W + 0.5"
+shares = { rotor = 1 }
+[[loss]]
+name = "bearing"
+power_W = "0.01 * rotor_C * speed_rpm / 1000 + 0.1 * abs(id_A)"
+shares = { rotor = 0.5, frame = 0.5 }
+[[loss]]
+name = "drive"
+power_W = "0.05 * (ambient_C - 10) * is_A"
+shares = { frame = 1 }
+)toml";
+}
+
+// (a x + f) at `in` (the network's dx/dt at x, K/s).
+Eigen::VectorXd NetworkRate_K_per_s(const pe::ThermalModel& m, const pe::ThermalInputs& in,
+                                    const Eigen::VectorXd& x) {
+  pe::ThermalLinearModel lin;
+  m.Linearise(in, x, lin);
+  return lin.a_per_s * x + lin.f_K_per_s;
+}
+
+}  // namespace
+
+TEST(ThermalModel, LossRatesAreTheRatesAtStandstillAndAtRestDifferenced) {
+  for (const std::string cooling : {"0.6", "\"0.6 / (1 + speed_rpm / 30000)\""}) {
+    const auto m = pe::ThermalModel::Parse(LossRateModel(cooling), "loss_rates.toml");
+    EXPECT_EQ(m.ResistancesVary(), cooling != "0.6");
+    const Eigen::Vector3d x(41.0, 73.5, 58.25);
+    for (const double speed : {21000.0, -9000.0, 0.0}) {
+      pe::ThermalInputs in;
+      in.speed_rpm = speed;
+      in.id_A = -0.7;
+      in.iq_A = 3.2;
+      in.ambient_degC = 23.0;
+      pe::ThermalInputs still = in;
+      still.speed_rpm = 0.0;
+      pe::ThermalInputs rest = still;
+      rest.id_A = rest.iq_A = 0.0;
+      pe::ThermalLinearModel lin;
+      pe::ThermalLossRates rates;
+      m.Linearise(in, x, lin, rates);
+      const Eigen::VectorXd current =
+          NetworkRate_K_per_s(m, still, x) - NetworkRate_K_per_s(m, rest, x);
+      const Eigen::VectorXd speed_part =
+          NetworkRate_K_per_s(m, in, x) - NetworkRate_K_per_s(m, still, x);
+      const std::string where = "cooling " + cooling + ", " + std::to_string(speed) + " r/min";
+      for (int i = 0; i < 3; ++i) {
+        EXPECT_NEAR(rates.current_K_per_s(i), current(i), 1e-13) << where << ", state " << i;
+        EXPECT_NEAR(rates.speed_K_per_s(i), speed_part(i), 1e-13) << where << ", state " << i;
+      }
+      // The linearisation itself is the one Linearise(in, x, lin) gives.
+      pe::ThermalLinearModel alone;
+      m.Linearise(in, x, alone);
+      EXPECT_EQ(lin.a_per_s, alone.a_per_s) << where;
+      EXPECT_EQ(lin.f_K_per_s, alone.f_K_per_s) << where;
+      if (speed != 0.0) {
+        EXPECT_GT(speed_part.norm(), 1e-4) << where;
+      }
+      EXPECT_GT(current.norm(), 1e-4) << where;
+    }
+  }
+}
