@@ -85,7 +85,7 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   heat_in_(frame, 0) = 1.0 / cap(frame);
   if (dr_ >= 0) heat_in_(rotor_, 1) = 1.0 / cap(rotor_);
   ad_ = Eigen::MatrixXd::Identity(n_aug_, n_aug_);
-  sp_ = Eigen::MatrixXd::Zero(n_aug_, n_aug_);
+  sp_ = Eigen::VectorXd::Zero(n_aug_);
   bu_ = Eigen::VectorXd::Zero(n_aug_);
   c0_ = Eigen::MatrixXd::Zero(0, n_aug_);
   BuildRows();
@@ -139,7 +139,7 @@ void DisturbanceThermalSensor::GaussMarkov(int state, double sd, double tau_s, d
   }
   const double a = a_last;
   ad_(state, state) = a;
-  sp_(state, state) = sd * sd * (1.0 - a * a);
+  sp_(state) = sd * sd * (1.0 - a * a);
 }
 
 void DisturbanceThermalSensor::Initialise(double x0_degC) {
@@ -365,10 +365,10 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   if (ls_ >= 0) ad_.col(ls_).head(nb) = phi_heat_.col(2);
   if (dr_state_ >= 0) ad_.col(dr_state_).head(nb) = phi_heat_.col(3);
   const double q = c.node_process_sd_K * c.node_process_sd_K * dt_s;
-  for (int i = 0; i < n_; ++i) sp_(i, i) = q;
-  sp_(df_, df_) = c.frame_heat_sd_W * c.frame_heat_sd_W * dt_s;
+  sp_.head(n_).setConstant(q);
+  sp_(df_) = c.frame_heat_sd_W * c.frame_heat_sd_W * dt_s;
   if (dr_ >= 0) {  // Gauss-Markov: variance 2 sigma^2 dt / tau per step keeps sigma stationary
-    sp_(dr_, dr_) = 2.0 * c.rotor_heat_sd_W * c.rotor_heat_sd_W * dt_s / c.rotor_heat_tau_s;
+    sp_(dr_) = 2.0 * c.rotor_heat_sd_W * c.rotor_heat_sd_W * dt_s / c.rotor_heat_tau_s;
   }
   if (ls_ >= 0) {  // its walk near zero is loss_scale_sd: 2 sigma^2 / tau = loss_scale_sd^2
     const double sigma = c.loss_scale_max_sd;
@@ -378,11 +378,11 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   if (mb_ >= 0) GaussMarkov(mb_, c.magnet_bias_sd_K, c.magnet_bias_tau_s, dt_s);
   if (dr_state_ >= 0) {
     const double walk = c.calibration_walk_per_sqrt_h * c.calibration_walk_per_sqrt_h / 3600.0;
-    sp_(dr_state_, dr_state_) = sp_(dpsi_, dpsi_) = walk * dt_s;
-    sp_(dbeta_, dbeta_) = c.magnet_law_sd_rel > 0.0 ? walk * dt_s : 0.0;
+    sp_(dr_state_) = sp_(dpsi_) = walk * dt_s;
+    sp_(dbeta_) = c.magnet_law_sd_rel > 0.0 ? walk * dt_s : 0.0;
     GaussMarkov(u0_, c.voltage_offset_sd_V, c.voltage_offset_tau_s, dt_s);
   }
-  filter_.Predict(ad_, bu_, sp_);
+  filter_.Predict(ad_, bu_, sp_, nb);  // the rows after the network's: the augmented states'
   return true;
 }
 

@@ -274,7 +274,8 @@ class DisturbanceThermalSensor : public ThermalObserver {
   KalmanFilter filter_;
   ObserverReport report_;
   KalmanUpdateReport refused_;  // the update report of a refused step
-  Eigen::MatrixXd ad_, sp_;
+  Eigen::MatrixXd ad_;
+  Eigen::VectorXd sp_;  ///< Sp's diagonal: the states' process noise is uncorrelated
   Eigen::VectorXd bu_, x_nodes_;
   Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows
   Eigen::VectorXd y0_;

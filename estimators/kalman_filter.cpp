@@ -1,6 +1,7 @@
 #include "estimators/kalman_filter.hpp"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <vector>
 
@@ -54,6 +55,15 @@ inline void Axpy(double v, const double* x, double* y, Eigen::Index n) {
   if (i < n) y[i] += v * x[i];
 }
 
+/// y *= v x over n contiguous doubles, a pair at a time (as Axpy).
+inline void ScaleBy(double v, const double* x, double* y, Eigen::Index n) {
+  using Pair = Eigen::Map<Eigen::Vector2d>;
+  using ConstPair = Eigen::Map<const Eigen::Vector2d>;
+  Eigen::Index i = 0;
+  for (; i + 2 <= n; i += 2) Pair(y + i).array() *= v * ConstPair(x + i).array();
+  if (i < n) y[i] *= v * x[i];
+}
+
 /// out = s m^T for a square s (n x n) and m (r x n): out.col(i) = sum_k m(i, k) s.col(k).
 void TimesTransposed(const Eigen::MatrixXd& s, const Eigen::MatrixXd& m, Eigen::MatrixXd& out) {
   const Eigen::Index n = s.rows();
@@ -86,7 +96,40 @@ void AddOuterProducts(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b, Eigen:
   }
 }
 
+/// inv = a^-1 for a symmetric positive definite `a` of a fixed size M <= 4; false when `a` is
+/// not positive definite (its Cholesky fails). The inverse is Eigen's closed form for these
+/// sizes: a solve against the identity takes the general triangular solver, ten times longer.
+template <int M>
+bool InvertSpdFixed(const Eigen::MatrixXd& a, Eigen::MatrixXd& inv) {
+  using Mat = Eigen::Matrix<double, M, M>;
+  const Eigen::Map<const Mat> fixed(a.data());
+  if (Eigen::LLT<Mat>(fixed).info() != Eigen::Success) return false;
+  Eigen::Map<Mat>(inv.data()) = fixed.inverse();
+  return true;
+}
+
 }  // namespace
+
+bool KalmanFilter::InvertInnovationCovariance() {
+  const Eigen::Index m = innov_cov_.rows();
+  innov_cov_inv_.resize(m, m);
+  // A few readings: a dynamic-size Cholesky spends most of its instructions on its set-up.
+  switch (m) {
+    case 1:
+      return InvertSpdFixed<1>(innov_cov_, innov_cov_inv_);
+    case 2:
+      return InvertSpdFixed<2>(innov_cov_, innov_cov_inv_);
+    case 3:
+      return InvertSpdFixed<3>(innov_cov_, innov_cov_inv_);
+    case 4:
+      return InvertSpdFixed<4>(innov_cov_, innov_cov_inv_);
+    default:
+      llt_.compute(innov_cov_);
+      if (llt_.info() != Eigen::Success) return false;
+      innov_cov_inv_ = llt_.solve(Eigen::MatrixXd::Identity(m, m));
+      return true;
+  }
+}
 
 KalmanFilter::KalmanFilter(int n)
     : x_(Eigen::VectorXd::Zero(n)),
@@ -112,13 +155,33 @@ void KalmanFilter::AddVariance(int i, double var) {
 void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
                            const Eigen::MatrixXd& sp) {
   if (detail::PredictFixedSize(ad, bu, sp, x_, s_)) return;
+  PropagateByBlocks(ad, bu, CoupledRows(ad));
+  s_ += sp;
+}
+
+void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
+                           const Eigen::VectorXd& sp_diagonal, Eigen::Index coupled_rows) {
+  const Eigen::Index n = x_.size();
+  if (detail::HasFixedSize(n)) {
+    if (sp_dense_.rows() != n) sp_dense_.setZero(n, n);
+    sp_dense_.diagonal() = sp_diagonal;
+    detail::PredictFixedSize(ad, bu, sp_dense_, x_, s_);
+    return;
+  }
+  assert(CoupledRows(ad) <= coupled_rows);
+  PropagateByBlocks(ad, bu, std::min(coupled_rows, n));
+  s_.diagonal() += sp_diagonal;
+}
+
+void KalmanFilter::PropagateByBlocks(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
+                                     Eigen::Index head) {
   // By blocks, A_D = [A11 A12; 0 D] with D diagonal (its first `head` rows coupled, the rest
   // constants or first-order processes), and only A_D's nonzero columns in the coupled rows:
   //   x = A_D x + bu                                   (eq. 30)
-  //   S = A_D S A_D^T + Sp                             (eq. 31) with W^T = S [A11 A12]^T:
-  //   S11 = [A11 A12] W^T, S12 = W^T(tail rows)^T D, S22 = D S22 D.
+  //   S = A_D S A_D^T (+ Sp, by the caller)            (eq. 31) with W^T = S [A11 A12]^T:
+  //   S11 = [A11 A12] W^T, S21 = W^T(tail rows) scaled by D, S22 = D S22 D.
   const Eigen::Index n = x_.size();
-  const Eigen::Index head = CoupledRows(ad);
+  const Eigen::Index tail = n - head;
   const Eigen::Index na = ActiveColumns(ad, head, active_);
   for (Eigen::Index i = 0; i < n; ++i) {
     double sum = i < head ? 0.0 : ad(i, i) * x_(i);
@@ -147,12 +210,15 @@ void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
       s_(i, j) = s_(j, i) = sum;
     }
   }
-  for (Eigen::Index j = head; j < n; ++j) {
-    const double dj = ad(j, j);
-    for (Eigen::Index i = 0; i < head; ++i) s_(i, j) = s_(j, i) = ntmp_(j, i) * dj;
-    for (Eigen::Index i = head; i < n; ++i) s_(i, j) *= ad(i, i) * dj;
+  d_tail_.resize(tail);
+  for (Eigen::Index i = 0; i < tail; ++i) d_tail_(i) = ad(head + i, head + i);
+  for (Eigen::Index i = 0; i < head; ++i) {  // S21 (contiguous), then S12 = S21^T
+    s_.col(i).tail(tail) = ntmp_.col(i).tail(tail).cwiseProduct(d_tail_);
   }
-  s_ += sp;
+  for (Eigen::Index j = head; j < n; ++j) {
+    for (Eigen::Index i = 0; i < head; ++i) s_(i, j) = s_(j, i);
+    ScaleBy(ad(j, j), d_tail_.data(), s_.col(j).data() + head, tail);  // S22 = D S22 D
+  }
 }
 
 const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const Eigen::VectorXd& y,
@@ -173,21 +239,24 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
   TimesVector(c, x_, nu_);
   nu_ = y - nu_;
   TimesTransposed(s_, c, sct_);  // S- C^T (n x m)
-  for (Eigen::Index j = 0; j < m; ++j) {
-    for (Eigen::Index i = 0; i < m; ++i) innov_cov_(i, j) = c.row(i).dot(sct_.col(j));
+  // C S- C^T + Sm over C's nonzero coefficients (a reading reads a few states).
+  innov_cov_ = sm;
+  for (Eigen::Index k = 0; k < n; ++k) {
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const double v = c(i, k);
+      if (v == 0.0) continue;
+      for (Eigen::Index j = 0; j < m; ++j) innov_cov_(i, j) += v * sct_(k, j);
+    }
   }
-  innov_cov_ += sm;
   report_.innovation = nu_;
   report_.innovation_var = innov_cov_.diagonal();
-  llt_.compute(innov_cov_);
-  if (llt_.info() != Eigen::Success) {
-    report_.ok = false;
-    return report_;
-  }
   // K = S- C^T (C S- C^T + Sm)^-1 (eq. 34) through the m x m inverse: m is a few readings, and
   // a solve with the n columns of S- C^T spends more on Eigen's dynamic-size set-up than on
   // arithmetic.
-  innov_cov_inv_ = llt_.solve(Eigen::MatrixXd::Identity(m, m));
+  if (!InvertInnovationCovariance()) {
+    report_.ok = false;
+    return report_;
+  }
   k_.setZero();
   for (Eigen::Index r = 0; r < m; ++r) {
     for (Eigen::Index q = 0; q < m; ++q)

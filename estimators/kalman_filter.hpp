@@ -51,6 +51,13 @@ class KalmanFilter {
   /// already formed B_D u), `sp` n x n.
   void Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu, const Eigen::MatrixXd& sp);
 
+  /// As above, for process noise uncorrelated between the states (Sp diagonal, `sp_diagonal`
+  /// n) and an A_D whose rows from `coupled_rows` on are diagonal (their states constants or
+  /// first-order processes of their own), as its caller built it: the filter does not search
+  /// A_D for them (checked in builds with assertions).
+  void Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
+               const Eigen::VectorXd& sp_diagonal, Eigen::Index coupled_rows);
+
   /// Measurement update (eqs. 32-34) with `c` (m x n), `y` (m), `sm` (m x m). When the
   /// innovation covariance is not positive definite the state is left alone and ok = false.
   const KalmanUpdateReport& Update(const Eigen::MatrixXd& c, const Eigen::VectorXd& y,
@@ -68,13 +75,21 @@ class KalmanFilter {
   const KalmanUpdateReport& LastUpdate() const { return report_; }
 
  private:
+  /// innov_cov_inv_ = innov_cov_^-1 (Cholesky); false when innov_cov_ is not positive definite.
+  bool InvertInnovationCovariance();
+  /// x = A_D x + bu, S = A_D S A_D^T by blocks (the dynamic-size path, without Sp).
+  void PropagateByBlocks(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
+                         Eigen::Index coupled_rows);
+
   Eigen::VectorXd x_, xtmp_;
   Eigen::MatrixXd s_, ntmp_;
+  Eigen::VectorXd d_tail_;    ///< A_D's diagonal after its coupled rows
+  Eigen::MatrixXd sp_dense_;  ///< a diagonal Sp for the fixed-size paths
   Eigen::MatrixXd sct_, innov_cov_, innov_cov_inv_, k_;
   Eigen::MatrixXd h_;  ///< the covariance update's factor: K Sy - 2 S- C^T (Joseph), -K (textbook)
   Eigen::VectorXd nu_, s_inv_nu_;
   std::vector<Eigen::Index> active_;  ///< A_D's nonzero columns in its coupled rows
-  Eigen::LLT<Eigen::MatrixXd> llt_;
+  Eigen::LLT<Eigen::MatrixXd> llt_;   ///< for more than four readings
   KalmanUpdateReport report_;
 };
 

@@ -22,6 +22,10 @@ bool WithFixedSize(Eigen::Index n, F&& f) {
 
 }  // namespace
 
+bool HasFixedSize(Eigen::Index n) {
+  return WithFixedSize(n, [](auto) {});
+}
+
 bool PredictFixedSize(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
                       const Eigen::MatrixXd& sp, Eigen::VectorXd& x, Eigen::MatrixXd& s) {
   return WithFixedSize(

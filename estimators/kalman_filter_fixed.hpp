@@ -11,6 +11,9 @@
 
 namespace pumptherm::estimators::detail {
 
+/// Whether the state count `n` has the fixed-size paths.
+bool HasFixedSize(Eigen::Index n);
+
 /// Time update x = A x + bu, S = A S A^T + Sp on a fixed size; false (nothing done) when the
 /// state count has none.
 bool PredictFixedSize(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,

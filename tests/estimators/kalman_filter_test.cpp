@@ -194,7 +194,8 @@ TEST(KalmanFilter, FixedSizePathReportsANonPositiveInnovationCovariance) {
 // first-order processes, heat states driving the nodes, measurement rows that read a few states)
 // both covariance forms must equal the equations written out in dense Eigen.
 TEST(KalmanFilter, DynamicPathWithSparseMatricesMatchesTheEquationsWrittenOut) {
-  for (const int n : {12, 14, 16}) {
+  // 10 has a fixed-size path (the diagonal-Sp overload forms a dense Sp for it).
+  for (const int n : {10, 12, 14, 16}) {
     for (const auto form : {pe::CovarianceUpdate::kJoseph, pe::CovarianceUpdate::kTextbook}) {
       const int nodes = 5, m = 3;
       std::mt19937_64 rng(29 + static_cast<unsigned>(n));
@@ -217,8 +218,9 @@ TEST(KalmanFilter, DynamicPathWithSparseMatricesMatchesTheEquationsWrittenOut) {
       Eigen::MatrixXd r = 0.4 * Eigen::MatrixXd::Identity(m, m);
       r(0, 1) = r(1, 0) = 0.1;
       Eigen::VectorXd x = Eigen::VectorXd::Zero(n);
-      pe::KalmanFilter kf(n);
+      pe::KalmanFilter kf(n), kf_diagonal(n);
       kf.Reset(x, s);
+      kf_diagonal.Reset(x, s);
       const std::string what = "n=" + std::to_string(n) +
                                (form == pe::CovarianceUpdate::kJoseph ? " Joseph" : " textbook");
       for (int k = 0; k < 30; ++k) {
@@ -237,12 +239,19 @@ TEST(KalmanFilter, DynamicPathWithSparseMatricesMatchesTheEquationsWrittenOut) {
                 : Eigen::MatrixXd(ikc * s);
         s = 0.5 * (s + s.transpose()).eval();
         kf.Predict(a, u, q);
+        // The same with Sp as its diagonal and the coupled rows (the nodes') declared.
+        kf_diagonal.Predict(a, u, Eigen::VectorXd(q.diagonal()), nodes);
+        ASSERT_TRUE(kf_diagonal.Update(c, y, r, form).ok) << what;
         const pe::KalmanUpdateReport& rep = kf.Update(c, y, r, form);
         ASSERT_TRUE(rep.ok) << what;
         EXPECT_NEAR(rep.nis, nu.dot(sy.inverse() * nu), 1e-9 * (1 + rep.nis)) << what;
         EXPECT_LT((kf.Gain() - gain).cwiseAbs().maxCoeff(), 1e-10) << what;
       }
       EXPECT_LT((kf.State() - x).cwiseAbs().maxCoeff(), 1e-9) << what;
+      EXPECT_LT((kf_diagonal.State() - kf.State()).cwiseAbs().maxCoeff(), 1e-12) << what;
+      EXPECT_LT((kf_diagonal.Covariance() - kf.Covariance()).cwiseAbs().maxCoeff(),
+                1e-12 * s.cwiseAbs().maxCoeff())
+          << what;
       EXPECT_LT((kf.Covariance() - s).cwiseAbs().maxCoeff(), 1e-9 * s.cwiseAbs().maxCoeff())
           << what;
       if (form == pe::CovarianceUpdate::kJoseph) {
