@@ -283,6 +283,12 @@ struct ThermalModel::Impl {
   mutable Eigen::VectorXd p0;
   mutable Eigen::MatrixXd d;
   mutable std::vector<double> power_W;  ///< per loss, at the inputs of the last Linearise
+  /// The last linearisation and its inputs, kept where the result depends on the inputs alone
+  /// (constant resistances, no expression reading a node temperature): the pump's filters
+  /// linearise at the same inputs several times per period.
+  mutable ThermalLinearModel last_lin;
+  mutable ThermalInputs last_in;
+  mutable bool last_valid = false;
   mutable ThermalLinearModel still_scratch, rest_scratch;
 
   int N() const { return static_cast<int>(nodes.size()); }
@@ -1180,6 +1186,14 @@ void ThermalModel::Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_d
 void ThermalModel::Linearise(const ThermalInputs& in, ThermalLinearModel& out) const {
   const Impl& m = *impl_;
   m.SetInputs(in);
+  const bool same = in.speed_rpm == m.last_in.speed_rpm && in.id_A == m.last_in.id_A &&
+                    in.iq_A == m.last_in.iq_A && in.ambient_degC == m.last_in.ambient_degC &&
+                    (!m.uses_coolant || in.coolant_degC == m.last_in.coolant_degC);
+  if (m.last_valid && same) {
+    out.a_per_s = m.last_lin.a_per_s;
+    out.f_K_per_s = m.last_lin.f_K_per_s;
+    return;
+  }
   const Reduced& r = m.Current();
   const Eigen::Vector2d tb(m.vars->ambient_C, m.vars->coolant_C);
   out.a_per_s.resize(m.n(), m.n());
@@ -1208,6 +1222,12 @@ void ThermalModel::Linearise(const ThermalInputs& in, ThermalLinearModel& out) c
   }
   out.a_per_s.array().colwise() *= m.inv_capacity.array();
   out.f_K_per_s.array() *= m.inv_capacity.array();
+  m.last_valid = !m.resistances_vary && !m.uses_node_temperatures;
+  if (m.last_valid) {
+    m.last_lin.a_per_s = out.a_per_s;
+    m.last_lin.f_K_per_s = out.f_K_per_s;
+    m.last_in = in;
+  }
 }
 
 Eigen::VectorXd ThermalModel::NodeLosses_W(const ThermalInputs& in,

@@ -403,3 +403,28 @@ TEST(ThermalModel, LossRatesAreTheRatesAtStandstillAndAtRestDifferenced) {
     }
   }
 }
+
+TEST(ThermalModel, ALinearisationAtTheSameInputsIsTheSameAfterAnotherOne) {
+  // Kept from the last call only where it depends on the inputs alone (kStar)...
+  const auto star = pe::ThermalModel::Parse(kStar, "star.toml");
+  pe::ThermalInputs a, b;
+  a.speed_rpm = 1000.0;
+  b.speed_rpm = 2000.0;
+  pe::ThermalLinearModel first, other, again;
+  star.Linearise(a, first);
+  star.Linearise(b, other);
+  star.Linearise(a, again);
+  EXPECT_NE(first.f_K_per_s, other.f_K_per_s);
+  EXPECT_EQ(first.a_per_s, again.a_per_s);
+  EXPECT_EQ(first.f_K_per_s, again.f_K_per_s);
+  // ...not where a loss reads a node temperature: the same inputs at another rotor temperature.
+  const auto reads_rotor = pe::ThermalModel::Parse(LossRateModel("0.6"), "loss_rates.toml");
+  const auto fresh = pe::ThermalModel::Parse(LossRateModel("0.6"), "loss_rates.toml");
+  a.iq_A = 2.0;
+  const Eigen::Vector3d cold(30.0, 40.0, 35.0), hot(30.0, 40.0, 95.0);
+  reads_rotor.Linearise(a, cold, first);
+  reads_rotor.Linearise(a, hot, again);
+  fresh.Linearise(a, hot, other);
+  EXPECT_NE(first.f_K_per_s, again.f_K_per_s);
+  EXPECT_EQ(again.f_K_per_s, other.f_K_per_s);
+}
