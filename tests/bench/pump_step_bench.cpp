@@ -130,7 +130,8 @@ void BM_PumpPeriod(benchmark::State& state) {
 
 /// A healthy pump at a steady load: the frame reading (12-bit, 0.1 K steps) and uq at the
 /// model's own steady state, so the mismatch test passes and no naming fit runs. The pump's
-/// ordinary step.
+/// ordinary step. The current alternates by one 10 mA step, as a drive's reading does, so that
+/// no two periods have the same inputs.
 void BM_PumpPeriodSteady(benchmark::State& state) {
   const auto model = TmpGeneric();
   pd::Pump pump(BenchConfig(), pe::MotorPreset("han2019-tmp"), model, 1.0);
@@ -145,7 +146,8 @@ void BM_PumpPeriodSteady(benchmark::State& state) {
   std::int64_t t_us = 1'000'000;
   // Warm up at the steady state: the filter settled, the mismatch test past its learning.
   auto step = [&](long k) {
-    Period(pump, t_us, 3.0, frame_degC + 0.1 * static_cast<double>(k & 1), samples, at);
+    const double odd = static_cast<double>(k & 1);
+    Period(pump, t_us, 3.0 + 0.01 * odd, frame_degC + 0.1 * odd, samples, at);
     t_us += 1'000'000;
   };
   for (long k = 0; k < 1800; ++k) step(k);
