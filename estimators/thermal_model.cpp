@@ -492,6 +492,11 @@ struct ThermalModel::Impl {
     return scratch;
   }
 
+  /// The reference temperature of loss `t`'s temperature coefficient: its own, or a boundary's.
+  double Reference_degC(const LossTerm& t) const {
+    return t.reference == 0 ? t.reference_degC : Boundary(t.reference);
+  }
+
   /// Losses as p0 + D x (eqs. 1-8 with the copper law; eqs. 12-16), into the members p0, d.
   void LossModel() const {
     p0.setZero(N());
@@ -500,8 +505,7 @@ struct ThermalModel::Impl {
       const double p = t.power_W.Eval();
       double scale0 = 1.0;
       if (t.alpha_per_K != 0.0) {
-        const double ref = t.reference == 0 ? t.reference_degC : Boundary(t.reference);
-        scale0 = 1.0 - t.alpha_per_K * ref;
+        scale0 = 1.0 - t.alpha_per_K * Reference_degC(t);
       }
       for (const auto& [node, share] : t.shares) {
         p0(node) += share * p * scale0;
@@ -1172,7 +1176,7 @@ void ThermalModel::Linearise(const ThermalInputs& in, const Eigen::VectorXd& x_d
     // The loss's temperature factor 1 + alpha (T - T_ref) at x, as Linearise puts it in a and f.
     double factor = 1.0;
     if (t.alpha_per_K != 0.0) {
-      const double ref = t.reference == 0 ? t.reference_degC : m.Boundary(t.reference);
+      const double ref = m.Reference_degC(t);
       double mean = 0.0;
       for (int st : t.temperature_states) mean += x_degC(st);
       factor += t.alpha_per_K * (mean / static_cast<double>(t.temperature_states.size()) - ref);
@@ -1208,8 +1212,7 @@ void ThermalModel::Linearise(const ThermalInputs& in, ThermalLinearModel& out) c
     m.power_W[k] = p;
     double scale0 = 1.0;
     if (t.alpha_per_K != 0.0) {
-      const double ref = t.reference == 0 ? t.reference_degC : m.Boundary(t.reference);
-      scale0 = 1.0 - t.alpha_per_K * ref;
+      scale0 = 1.0 - t.alpha_per_K * m.Reference_degC(t);
     }
     for (const auto& [node, share] : t.shares) {
       out.f_K_per_s += r.g.col(node) * (share * p * scale0);
