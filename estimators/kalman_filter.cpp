@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <type_traits>
 #include <vector>
 
 #include "estimators/kalman_filter_fixed.hpp"
@@ -64,16 +65,58 @@ inline void ScaleBy(double v, const double* x, double* y, Eigen::Index n) {
   if (i < n) y[i] *= v * x[i];
 }
 
+/// The column lengths the block paths compile for (the disturbance-state filter with the voltage
+/// rows on networks of 3 to 7 temperature states): a sum of columns of a length known at compile
+/// time unrolls into SIMD pairs held in registers. Other lengths take the same sums at run time.
+constexpr int kFirstColumnLength = 12;
+constexpr int kLastColumnLength = 16;
+
+/// Calls f(std::integral_constant<int, N>{}) with N = n when n is one of the compiled column
+/// lengths, with N = Eigen::Dynamic otherwise.
+template <int N = kFirstColumnLength, class F>
+void WithColumnLength(Eigen::Index n, F&& f) {
+  if constexpr (N > kLastColumnLength) {
+    f(std::integral_constant<int, Eigen::Dynamic>{});
+  } else {
+    if (n != N) return WithColumnLength<N + 1>(n, f);
+    f(std::integral_constant<int, N>{});
+  }
+}
+
+/// out = first + sum_t v_t col_t over columns of n contiguous doubles, the terms added in the order
+/// `terms` gives them (each element's sum is the same sequence of additions at either length).
+/// `terms(add)` calls add(v, col) per term; `first` is null for zeros, else scaled by first_scale.
+template <int N, class Terms>
+void SumColumns(Eigen::Index n, const double* first, double first_scale, Terms&& terms,
+                double* out) {
+  if constexpr (N == Eigen::Dynamic) {
+    if (first != nullptr) {
+      for (Eigen::Index i = 0; i < n; ++i) out[i] = first_scale * first[i];
+    } else {
+      std::fill(out, out + n, 0.0);
+    }
+    terms([&](double v, const double* col) { Axpy(v, col, out, n); });
+  } else {
+    using Col = Eigen::Matrix<double, N, 1>;
+    Col acc = first != nullptr ? Col(first_scale * Eigen::Map<const Col>(first)) : Col::Zero();
+    terms([&](double v, const double* col) { acc += v * Eigen::Map<const Col>(col); });
+    Eigen::Map<Col>{out} = acc;
+  }
+}
+
 /// out = s m^T for a square s (n x n) and m (r x n): out.col(i) = sum_k m(i, k) s.col(k).
+template <int N>
 void TimesTransposed(const Eigen::MatrixXd& s, const Eigen::MatrixXd& m, Eigen::MatrixXd& out) {
   const Eigen::Index n = s.rows();
   out.resize(n, m.rows());
-  out.setZero();
   for (Eigen::Index i = 0; i < m.rows(); ++i) {
-    for (Eigen::Index k = 0; k < n; ++k) {
-      const double v = m(i, k);
-      if (v != 0.0) Axpy(v, s.col(k).data(), out.col(i).data(), n);
-    }
+    const auto terms = [&](auto&& add) {
+      for (Eigen::Index k = 0; k < n; ++k) {
+        const double v = m(i, k);
+        if (v != 0.0) add(v, s.col(k).data());
+      }
+    };
+    SumColumns<N>(n, nullptr, 0.0, terms, out.col(i).data());
   }
 }
 
@@ -175,6 +218,13 @@ void KalmanFilter::Predict(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
 
 void KalmanFilter::PropagateByBlocks(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
                                      Eigen::Index head) {
+  WithColumnLength(x_.size(),
+                   [&](auto length) { PropagateByBlocks<decltype(length)::value>(ad, bu, head); });
+}
+
+template <int N>
+void KalmanFilter::PropagateByBlocks(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
+                                     Eigen::Index head) {
   // By blocks, A_D = [A11 A12; 0 D] with D diagonal (its first `head` rows coupled, the rest
   // constants or first-order processes), and only A_D's nonzero columns in the coupled rows:
   //   x = A_D x + bu                                   (eq. 30)
@@ -193,12 +243,13 @@ void KalmanFilter::PropagateByBlocks(const Eigen::MatrixXd& ad, const Eigen::Vec
   }
   x_.swap(xtmp_);
   for (Eigen::Index i = 0; i < head; ++i) {  // ntmp_.col(i) = S A_D.row(i)^T
-    double* col = ntmp_.col(i).data();
-    std::fill(col, col + n, 0.0);
-    for (Eigen::Index a = 0; a < na; ++a) {
-      const Eigen::Index k = active_[static_cast<std::size_t>(a)];
-      Axpy(ad(i, k), s_.col(k).data(), col, n);
-    }
+    const auto terms = [&](auto&& add) {
+      for (Eigen::Index a = 0; a < na; ++a) {
+        const Eigen::Index k = active_[static_cast<std::size_t>(a)];
+        add(ad(i, k), s_.col(k).data());
+      }
+    };
+    SumColumns<N>(n, nullptr, 0.0, terms, ntmp_.col(i).data());
   }
   for (Eigen::Index j = 0; j < head; ++j) {
     for (Eigen::Index i = 0; i <= j; ++i) {
@@ -233,12 +284,22 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
   if (m == 0) return report_;
   k_.resize(n, m);
   if (detail::UpdateFixedSize(c, y, sm, form, x_, s_, k_, report_)) return report_;
+  WithColumnLength(n,
+                   [&](auto length) { UpdateByColumns<decltype(length)::value>(c, y, sm, form); });
+  return report_;
+}
+
+template <int N>
+void KalmanFilter::UpdateByColumns(const Eigen::MatrixXd& c, const Eigen::VectorXd& y,
+                                   const Eigen::MatrixXd& sm, CovarianceUpdate form) {
+  const Eigen::Index m = c.rows();
+  const Eigen::Index n = x_.size();
   innov_cov_.resize(m, m);
   s_inv_nu_.resize(m);
 
   TimesVector(c, x_, nu_);
   nu_ = y - nu_;
-  TimesTransposed(s_, c, sct_);  // S- C^T (n x m)
+  TimesTransposed<N>(s_, c, sct_);  // S- C^T (n x m)
   // C S- C^T + Sm over C's nonzero coefficients (a reading reads a few states).
   innov_cov_ = sm;
   for (Eigen::Index k = 0; k < n; ++k) {
@@ -255,12 +316,13 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
   // arithmetic.
   if (!InvertInnovationCovariance()) {
     report_.ok = false;
-    return report_;
+    return;
   }
-  k_.setZero();
   for (Eigen::Index r = 0; r < m; ++r) {
-    for (Eigen::Index q = 0; q < m; ++q)
-      Axpy(innov_cov_inv_(q, r), sct_.col(q).data(), k_.col(r).data(), n);
+    const auto terms = [&](auto&& add) {
+      for (Eigen::Index q = 0; q < m; ++q) add(innov_cov_inv_(q, r), sct_.col(q).data());
+    };
+    SumColumns<N>(n, nullptr, 0.0, terms, k_.col(r).data());
   }
   s_inv_nu_.noalias() = innov_cov_inv_ * nu_;
   report_.nis = nu_.dot(s_inv_nu_);
@@ -270,27 +332,44 @@ const KalmanUpdateReport& KalmanFilter::Update(const Eigen::MatrixXd& c, const E
     // [I - K C] S- [I - K C]^T + K Sm K^T = S- - K U^T - U K^T + K Sy K^T with U = S- C^T and
     // Sy = C S- C^T + Sm. With G = K Sy - U (zero for the exact gain: what is left is the gain's
     // rounding) that is S- + (H K^T + K H^T) / 2, H = G - U = K Sy - 2 U: the Joseph form for
-    // any gain, exactly symmetric, on the upper triangle in O(n^2 m).
-    h_ = -2.0 * sct_;
+    // any gain, exactly symmetric, in O(n^2 m).
+    h_.resize(n, m);
     for (Eigen::Index r = 0; r < m; ++r) {
-      for (Eigen::Index q = 0; q < m; ++q) {
-        Axpy(innov_cov_(q, r), k_.col(q).data(), h_.col(r).data(), n);
-      }
+      const auto terms = [&](auto&& add) {
+        for (Eigen::Index q = 0; q < m; ++q) add(innov_cov_(q, r), k_.col(q).data());
+      };
+      SumColumns<N>(n, sct_.col(r).data(), -2.0, terms, h_.col(r).data());
     }
-    for (Eigen::Index j = 0; j < n; ++j) {
-      double* col = s_.col(j).data();
-      for (Eigen::Index r = 0; r < m; ++r) {
-        Axpy(0.5 * h_(j, r), k_.col(r).data(), col, j + 1);
-        Axpy(0.5 * k_(j, r), h_.col(r).data(), col, j + 1);
-      }
-      for (Eigen::Index i = 0; i < j; ++i) s_(j, i) = col[i];
-    }
+    AddJosephTerms<N>();
   } else {
     // [I - K C] S- = S- - K (S- C^T)^T: eq. 33, the textbook form.
     h_ = -k_;
     AddOuterProducts(h_, sct_, s_);
   }
-  return report_;
+}
+
+template <int N>
+void KalmanFilter::AddJosephTerms() {
+  // S += (H K^T + K H^T) / 2 on the upper triangle, mirrored: column j's rows 0..j. With the
+  // column's length known at compile time the whole column is summed in registers (its rows
+  // below j are overwritten by the mirror of the later columns, which do not read them).
+  const Eigen::Index n = s_.rows();
+  const Eigen::Index m = k_.cols();
+  for (Eigen::Index j = 0; j < n; ++j) {
+    double* col = s_.col(j).data();
+    const auto terms = [&](auto&& add) {
+      for (Eigen::Index r = 0; r < m; ++r) {
+        add(0.5 * h_(j, r), k_.col(r).data());
+        add(0.5 * k_(j, r), h_.col(r).data());
+      }
+    };
+    if constexpr (N == Eigen::Dynamic) {
+      terms([&](double v, const double* x) { Axpy(v, x, col, j + 1); });
+    } else {
+      SumColumns<N>(n, col, 1.0, terms, col);
+    }
+    for (Eigen::Index i = 0; i < j; ++i) s_(j, i) = col[i];
+  }
 }
 
 }  // namespace pumptherm::estimators

@@ -80,6 +80,17 @@ class KalmanFilter {
   /// x = A_D x + bu, S = A_D S A_D^T by blocks (the dynamic-size path, without Sp).
   void PropagateByBlocks(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
                          Eigen::Index coupled_rows);
+  /// The same with the states' count N known at compile time (Eigen::Dynamic: at run time).
+  template <int N>
+  void PropagateByBlocks(const Eigen::MatrixXd& ad, const Eigen::VectorXd& bu,
+                         Eigen::Index coupled_rows);
+  /// The measurement update's dynamic-size path, column by column (N as above).
+  template <int N>
+  void UpdateByColumns(const Eigen::MatrixXd& c, const Eigen::VectorXd& y,
+                       const Eigen::MatrixXd& sm, CovarianceUpdate form);
+  /// The Joseph form's S += (H K^T + K H^T) / 2 from h_ and k_ (N as above).
+  template <int N>
+  void AddJosephTerms();
 
   Eigen::VectorXd x_, xtmp_;
   Eigen::MatrixXd s_, ntmp_;

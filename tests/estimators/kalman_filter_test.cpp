@@ -194,8 +194,9 @@ TEST(KalmanFilter, FixedSizePathReportsANonPositiveInnovationCovariance) {
 // first-order processes, heat states driving the nodes, measurement rows that read a few states)
 // both covariance forms must equal the equations written out in dense Eigen.
 TEST(KalmanFilter, DynamicPathWithSparseMatricesMatchesTheEquationsWrittenOut) {
-  // 10 has a fixed-size path (the diagonal-Sp overload forms a dense Sp for it).
-  for (const int n : {10, 12, 14, 16}) {
+  // 10 has a fixed-size path (the diagonal-Sp overload forms a dense Sp for it); 12 to 16 take
+  // the block paths with their column length known at compile time, 18 at run time.
+  for (const int n : {10, 12, 14, 16, 18}) {
     for (const auto form : {pe::CovarianceUpdate::kJoseph, pe::CovarianceUpdate::kTextbook}) {
       const int nodes = 5, m = 3;
       std::mt19937_64 rng(29 + static_cast<unsigned>(n));
