@@ -92,7 +92,7 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   x_nodes_ = Eigen::VectorXd::Zero(n_);
   sw_ = Eigen::VectorXd::Zero(n_);
   cv_row_ = Eigen::RowVectorXd::Zero(n_aug_);
-  pv_ = Eigen::VectorXd::Zero(n_aug_);
+  row_nonzero_.assign(static_cast<std::size_t>(n_aug_), 0);
   const int aux = n_aug_ - nb;
   aux_cov_ = Eigen::MatrixXd::Zero(aux, aux);
   aux_cross_ = Eigen::MatrixXd::Zero(aux, n_);
@@ -447,9 +447,24 @@ bool DisturbanceThermalSensor::VoltageRow(const ThermalReadings& r) {
       std::isfinite(r.uq_sd_V) ? std::max(r.uq_sd_V, config_.uq_min_sd_V) : config_.uq_min_sd_V;
   const double gate = config_.voltage_gate_sd;
   if (!(gate > 0.0)) return true;
-  pv_.noalias() = filter_.Covariance() * cv_row_.transpose();
-  const double var = cv_row_.dot(pv_) + uq_sd_V_ * uq_sd_V_;
-  return innovation_V * innovation_V <= gate * gate * var;
+  return innovation_V * innovation_V <= gate * gate * RowVariance(uq_sd_V_);
+}
+
+double DisturbanceThermalSensor::RowVariance(double sd) {
+  // c S c^T + sd^2 over the row's nonzero coefficients: it reads a few of the states.
+  std::size_t count = 0;
+  for (Eigen::Index k = 0; k < cv_row_.size(); ++k) {
+    if (cv_row_(k) != 0.0) row_nonzero_[count++] = k;
+  }
+  const Eigen::MatrixXd& s = filter_.Covariance();
+  double quad = 0.0;
+  for (std::size_t a = 0; a < count; ++a) {
+    const Eigen::Index i = row_nonzero_[a];
+    double sum = 0.0;
+    for (std::size_t b = 0; b < count; ++b) sum += s(i, row_nonzero_[b]) * cv_row_(row_nonzero_[b]);
+    quad += cv_row_(i) * sum;
+  }
+  return quad + sd * sd;
 }
 
 void DisturbanceThermalSensor::FillRows(const ThermalReadings& r, const Used& used) {

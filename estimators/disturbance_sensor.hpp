@@ -236,6 +236,8 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// The voltage row (extended: linearised at the predicted state); false when its innovation
   /// fails the gate (voltage_gate_sd).
   bool VoltageRow(const ThermalReadings& r);
+  /// The voltage row's innovation variance c S- c^T + sd^2.
+  double RowVariance(double sd);
   /// The loss scale's and dR's columns of heat_in_ at the predicted operating point.
   void LossColumns();
   /// The report's rows from the update.
@@ -255,11 +257,11 @@ class DisturbanceThermalSensor : public ThermalObserver {
   int row_w_ = -1, row_m_ = -1;          ///< their rows in the update (-1: none)
   /// The voltage reading: R0's and psi0's relative errors, the offset, the flux's node, its row.
   int dr_state_ = -1, dpsi_ = -1, dbeta_ = -1, u0_ = -1, vmagnet_ = -1, row_v_ = -1;
-  Eigen::RowVectorXd cv_row_;      ///< this step's voltage row (1 x n_aug)
-  Eigen::VectorXd pv_;             ///< the covariance times it (the gate's workspace)
-  double yv_ = 0.0;                ///< its linearised observation
-  double uq_sd_V_ = 0.0;           ///< its sd
-  bool frame_fused_last_ = false;  ///< the previous step fused a frame reading
+  Eigen::RowVectorXd cv_row_;              ///< this step's voltage row (1 x n_aug)
+  std::vector<Eigen::Index> row_nonzero_;  ///< its nonzero coefficients (the gate's workspace)
+  double yv_ = 0.0;                        ///< its linearised observation
+  double uq_sd_V_ = 0.0;                   ///< its sd
+  bool frame_fused_last_ = false;          ///< the previous step fused a frame reading
   /// The last fused frame reading, the filter's reading of it after that update and its variance.
   double last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
   double last_predicted_degC_ = 0.0;
