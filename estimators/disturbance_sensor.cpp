@@ -2,11 +2,31 @@
 
 #include <fmt/core.h>
 
+#include <algorithm>
 #include <cmath>
 #include <exception>
 #include <stdexcept>
 
 namespace pumptherm::estimators {
+namespace {
+
+/// ad's column `to` (its first phi.rows() rows) = phi times heat's column `from`, over that
+/// column's nonzero coefficients in order: the frame's and the rotor's heat enter one node each.
+/// The sums are those of the full product (a zero coefficient adds an exact zero).
+void PhiTimesColumn(const Eigen::MatrixXd& phi, const Eigen::MatrixXd& heat, Eigen::Index from,
+                    Eigen::MatrixXd& ad, Eigen::Index to) {
+  const Eigen::Index rows = phi.rows();
+  double* out = ad.col(to).data();
+  std::fill(out, out + rows, 0.0);
+  for (Eigen::Index k = 0; k < rows; ++k) {
+    const double h = heat(k, from);
+    if (h == 0.0) continue;
+    for (Eigen::Index i = 0; i < rows; ++i) out[i] += phi(i, k) * h;
+  }
+}
+
+}  // namespace
+
 DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
                                                    DisturbanceSensorConfig config)
     : model_(model),
@@ -81,7 +101,6 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   sensor_model_.AddLagRow(lin_block_.a_per_s);
   const Eigen::VectorXd& cap = model_.Capacities_J_per_K();
   heat_in_ = Eigen::MatrixXd::Zero(nb, 4);  // K/s per unit of d_f, d_r, s, dR
-  phi_heat_ = Eigen::MatrixXd::Zero(nb, 4);
   heat_in_(frame, 0) = 1.0 / cap(frame);
   if (dr_ >= 0) heat_in_(rotor_, 1) = 1.0 / cap(rotor_);
   ad_ = Eigen::MatrixXd::Identity(n_aug_, n_aug_);
@@ -356,14 +375,13 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   ad_.topLeftCorner(nb, nb) = d.ad;
   bu_.head(nb).noalias() = d.phi_s * lin_block_.f_K_per_s;
   // Disturbances held over the step: x(k+1) += Phi b d (eq. 21 with d as an input).
-  phi_heat_.noalias() = d.phi_s * heat_in_;
-  ad_.col(df_).head(nb) = phi_heat_.col(0);
+  PhiTimesColumn(d.phi_s, heat_in_, 0, ad_, df_);
   if (dr_ >= 0) {
-    ad_.col(dr_).head(nb) = phi_heat_.col(1);
+    PhiTimesColumn(d.phi_s, heat_in_, 1, ad_, dr_);
     ad_(dr_, dr_) = std::exp(-dt_s / c.rotor_heat_tau_s);
   }
-  if (ls_ >= 0) ad_.col(ls_).head(nb) = phi_heat_.col(2);
-  if (dr_state_ >= 0) ad_.col(dr_state_).head(nb) = phi_heat_.col(3);
+  if (ls_ >= 0) PhiTimesColumn(d.phi_s, heat_in_, 2, ad_, ls_);
+  if (dr_state_ >= 0) PhiTimesColumn(d.phi_s, heat_in_, 3, ad_, dr_state_);
   const double q = c.node_process_sd_K * c.node_process_sd_K * dt_s;
   sp_.head(n_).setConstant(q);
   sp_(df_) = c.frame_heat_sd_W * c.frame_heat_sd_W * dt_s;

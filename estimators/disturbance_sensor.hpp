@@ -281,8 +281,8 @@ class DisturbanceThermalSensor : public ThermalObserver {
   Eigen::VectorXd bu_, x_nodes_;
   Eigen::MatrixXd c0_, sm0_;  ///< no reading: an update of no rows
   Eigen::VectorXd y0_;
-  /// d_f, d_r, s and dR into the nodes (K/s per unit of each), and Phi times that.
-  Eigen::MatrixXd heat_in_, phi_heat_;
+  /// d_f, d_r, s and dR into the nodes (K/s per unit of each).
+  Eigen::MatrixXd heat_in_;
   Eigen::MatrixXd c_all_, sm_all_;   ///< every reading's row (m x n_aug, m x m)
   Eigen::MatrixXd cw_row_, cm_row_;  ///< the winding and magnet rows (1 x n_aug), magnet without g
   Eigen::VectorXd y_all_;
