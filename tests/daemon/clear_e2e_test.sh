@@ -109,8 +109,10 @@ PY
 # listens. Sets $daemon_pid and $bus_pid.
 start() {
   local dir=$1 replay=${2:-}
-  in_ns python3 "$src/tests/daemon/can_bus.py" "$dir/can" can0 --record "$dir/out.txt" \
-    ${replay:+--replay "$replay"} >"$dir/bus.txt" 2>&1 &
+  # Not through in_ns: a function run in the background is a subshell, and $! would be that
+  # subshell's, whose TERM leaves the bus running. ip netns exec execs the bus itself.
+  ip netns exec "$ns" python3 "$src/tests/daemon/can_bus.py" "$dir/can" can0 \
+    --record "$dir/out.txt" ${replay:+--replay "$replay"} >"$dir/bus.txt" 2>&1 &
   bus_pid=$!
   pids+=("$bus_pid")
   # Under the sanitizers (CI's ASan build) the shim is preloaded ahead of their runtime.
