@@ -8,6 +8,7 @@
 #include <charconv>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -169,6 +170,49 @@ class ZohCache {
   std::unordered_map<std::string, pe::ThermalDiscreteModel> map_;
 };
 
+using NodeSeries = std::vector<std::vector<double>>;  ///< [node][grid point]
+
+/// Simulate(...)'s results of one run by grid and model effects (names and values, bit for
+/// bit), and the run's ZohCache. A run simulates the same network many times: every sensor
+/// candidate's fit and the final scores simulate the current model's network again, and a fit
+/// evaluates some parameter values more than once (in Ceres's iterations, then for the
+/// covariance and the scores at the solution). The same model text on the same grid simulates
+/// to the same values, so a hit changes no result.
+class SimulationCache {
+ public:
+  ZohCache zoh;
+
+  /// The series of the model with `model_effects` on `g`; `simulate` makes it when it is not
+  /// held (and may throw: nothing is kept then).
+  const NodeSeries& Get(const void* g, const std::vector<pe::Effect>& model_effects,
+                        const std::function<NodeSeries()>& simulate) {
+    std::string key(reinterpret_cast<const char*>(&g), sizeof g);
+    for (const pe::Effect& e : model_effects) {
+      key += e.name;
+      key += '\0';
+      key.append(reinterpret_cast<const char*>(e.values.data()), sizeof(double) * e.values.size());
+      key += '\0';
+    }
+    const auto it = map_.find(key);
+    if (it != map_.end()) return it->second;
+    NodeSeries s = simulate();
+    std::size_t bytes = key.size();
+    for (const auto& v : s) bytes += sizeof(double) * v.size();
+    // Bounded memory: start again when full.
+    if (bytes_ + bytes > kMaxBytes) {
+      map_.clear();
+      bytes_ = 0;
+    }
+    bytes_ += bytes;
+    return map_.emplace(std::move(key), std::move(s)).first->second;
+  }
+
+ private:
+  static constexpr std::size_t kMaxBytes = std::size_t{128} << 20;
+  std::size_t bytes_ = 0;
+  std::unordered_map<std::string, NodeSeries> map_;
+};
+
 /// Simulates `model` over the grid's rows; returns the measured nodes' temperatures at the grid
 /// points [node][j].
 std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const Grid& g,
@@ -224,8 +268,12 @@ std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const G
 class Evaluator {
  public:
   Evaluator(const std::string& text, const std::string& source, const pe::ThermalModelFiles& files,
-            std::vector<pe::Effect> effects, ZohCache& zoh)
-      : text_(text), source_(source), files_(files), effects_(std::move(effects)), zoh_(&zoh) {
+            std::vector<pe::Effect> effects, SimulationCache& simulations)
+      : text_(text),
+        source_(source),
+        files_(files),
+        effects_(std::move(effects)),
+        simulations_(&simulations) {
     for (const auto& e : effects_) specs_.push_back(pe::FindEffect(e.name));
   }
   std::size_t size() const { return effects_.size(); }
@@ -242,45 +290,29 @@ class Evaluator {
     return out;
   }
 
-  /// Simulated measured series on `g` at internal parameters p. The network part is cached on
-  /// the model effects' values, so changing only sensor parameters costs no simulation.
+  /// Simulated measured series on `g` at internal parameters p. The network part comes from the
+  /// run's SimulationCache, so changing only sensor parameters costs no simulation.
   std::vector<std::vector<double>> Series(const double* p, const Grid& g) {
     std::vector<pe::Effect> model_effects, sensor_effects;
-    std::vector<double> key;
-    for (const pe::Effect& e : EffectsAt(p)) {
+    for (const pe::Effect& e : EffectsAt(p))
       (pe::FindEffect(e.name)->sensor ? sensor_effects : model_effects).push_back(e);
-      if (!pe::FindEffect(e.name)->sensor) key.push_back(e.values[0]);
-    }
-    Cache& c = cache_[&g];
-    if (!c.valid || c.key != key) {
+    std::vector<std::vector<double>> s = simulations_->Get(&g, model_effects, [&] {
       const pe::ThermalModel m = pe::ThermalModel::Parse(
           pe::ApplyModelEffects(text_, source_, model_effects), source_, files_);
-      c.series = Simulate(m, g, *zoh_);
-      c.key = key;
-      c.valid = true;
-      ++simulations_;
-    }
-    std::vector<std::vector<double>> s = c.series;
+      return Simulate(m, g, simulations_->zoh);
+    });
     for (const pe::Effect& e : sensor_effects)
       for (std::size_t i = 0; i < g.nodes.size(); ++i)
         if (g.nodes[i] == e.node) pe::ApplySensorEffect(e, g.t_s, s[i]);
     return s;
   }
-  long simulations() const { return simulations_; }
 
  private:
-  struct Cache {
-    bool valid = false;
-    std::vector<double> key;
-    std::vector<std::vector<double>> series;
-  };
   std::string text_, source_;
   pe::ThermalModelFiles files_;
   std::vector<pe::Effect> effects_;
   std::vector<const pe::EffectSpec*> specs_;
-  std::map<const Grid*, Cache> cache_;
-  ZohCache* zoh_;
-  long simulations_ = 0;
+  SimulationCache* simulations_;
 };
 
 /// Residuals simulated - measured, every node, grid points 1.. (point 0 is the start).
@@ -576,8 +608,8 @@ Result Run(const std::string& text, const std::string& source, const Data& train
 
   Result res;
   std::vector<pe::Effect> added;  // with their fitted values
-  ZohCache zoh;                   // shared by every simulation of this run
-  Evaluator base_ev(text, source, files, {}, zoh);
+  SimulationCache simulations;    // shared by every simulation of this run
+  Evaluator base_ev(text, source, files, {}, simulations);
   FitResult current = Fit(base_ev, {}, gt, o);
   const auto before_train = current.train_series;
   const auto before_val = base_ev.Series(nullptr, gv);
@@ -608,7 +640,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
         continue;
       std::vector<pe::Effect> effects = added;
       effects.push_back(cand);
-      Evaluator ev(text, source, files, effects, zoh);
+      Evaluator ev(text, source, files, effects, simulations);
       std::vector<double> p0;
       for (std::size_t e = 0; e < effects.size(); ++e)
         p0.push_back(ev.Internal(e, effects[e].values[0]));
@@ -695,7 +727,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
     current_val_rmse = rd.candidates[best].validate_rmse_K;
     // Every added effect's parameters, re-fitted jointly in this round.
     res.effects.clear();
-    Evaluator ev(text, source, files, added, zoh);
+    Evaluator ev(text, source, files, added, simulations);
     for (std::size_t e = 0; e < added.size(); ++e) {
       AddedEffect ae;
       ae.effect = added[e];
@@ -712,7 +744,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
   }
   res.verdict = res.rounds.empty() ? "none" : res.rounds.front().verdict;
 
-  Evaluator final_ev(text, source, files, added, zoh);
+  Evaluator final_ev(text, source, files, added, simulations);
   std::vector<double> pf;
   for (std::size_t e = 0; e < added.size(); ++e)
     pf.push_back(final_ev.Internal(e, added[e].values[0]));
