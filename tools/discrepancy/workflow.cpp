@@ -8,9 +8,12 @@
 #include <charconv>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <memory>
 #include <stdexcept>
+#include <string>
+#include <unordered_map>
 
 #include "estimators/thermal_discretisation.hpp"
 #include "estimators/thermal_model.hpp"
@@ -138,9 +141,82 @@ Grid MakeGrid(const Data& d, const Options& o, const pe::ThermalModel& base) {
   return g;
 }
 
+/// Discretisations by (a, step), matched bit for bit. DiscretiseZoh (a matrix exponential) is
+/// most of a simulation's time, and the same a recurs: within a simulation (the measured
+/// currents are quantised, and a depends on the inputs alone unless an expression reads a node
+/// temperature), across the simulations of a fit whose effect leaves a alone (a loss, a sensor),
+/// and across candidates (every fit starts at the input model). Equal arguments give equal
+/// results, so a hit changes no simulated value.
+class ZohCache {
+ public:
+  void Discretise(const Eigen::MatrixXd& a_per_s, double dt_s, pe::ThermalDiscreteModel& out) {
+    key_.assign(reinterpret_cast<const char*>(a_per_s.data()),
+                sizeof(double) * static_cast<std::size_t>(a_per_s.size()));
+    key_.append(reinterpret_cast<const char*>(&dt_s), sizeof dt_s);
+    const auto it = map_.find(key_);
+    if (it != map_.end()) {
+      out = it->second;
+      return;
+    }
+    pe::DiscretiseZoh(a_per_s, dt_s, out);
+    // Bounded memory (about 1.3 kB an entry for 7 states): start again when full.
+    if (map_.size() >= kMaxEntries) map_.clear();
+    map_.emplace(key_, out);
+  }
+
+ private:
+  static constexpr std::size_t kMaxEntries = 8192;
+  std::string key_;
+  std::unordered_map<std::string, pe::ThermalDiscreteModel> map_;
+};
+
+using NodeSeries = std::vector<std::vector<double>>;  ///< [node][grid point]
+
+/// Simulate(...)'s results of one run by grid and model effects (names and values, bit for
+/// bit), and the run's ZohCache. A run simulates the same network many times: every sensor
+/// candidate's fit and the final scores simulate the current model's network again, and a fit
+/// evaluates some parameter values more than once (in Ceres's iterations, then for the
+/// covariance and the scores at the solution). The same model text on the same grid simulates
+/// to the same values, so a hit changes no result.
+class SimulationCache {
+ public:
+  ZohCache zoh;
+
+  /// The series of the model with `model_effects` on `g`; `simulate` makes it when it is not
+  /// held (and may throw: nothing is kept then).
+  const NodeSeries& Get(const void* g, const std::vector<pe::Effect>& model_effects,
+                        const std::function<NodeSeries()>& simulate) {
+    std::string key(reinterpret_cast<const char*>(&g), sizeof g);
+    for (const pe::Effect& e : model_effects) {
+      key += e.name;
+      key += '\0';
+      key.append(reinterpret_cast<const char*>(e.values.data()), sizeof(double) * e.values.size());
+      key += '\0';
+    }
+    const auto it = map_.find(key);
+    if (it != map_.end()) return it->second;
+    NodeSeries s = simulate();
+    std::size_t bytes = key.size();
+    for (const auto& v : s) bytes += sizeof(double) * v.size();
+    // Bounded memory: start again when full.
+    if (bytes_ + bytes > kMaxBytes) {
+      map_.clear();
+      bytes_ = 0;
+    }
+    bytes_ += bytes;
+    return map_.emplace(std::move(key), std::move(s)).first->second;
+  }
+
+ private:
+  static constexpr std::size_t kMaxBytes = std::size_t{128} << 20;
+  std::size_t bytes_ = 0;
+  std::unordered_map<std::string, NodeSeries> map_;
+};
+
 /// Simulates `model` over the grid's rows; returns the measured nodes' temperatures at the grid
 /// points [node][j].
-std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const Grid& g) {
+std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const Grid& g,
+                                          ZohCache& zoh) {
   const int n = model.StateCount();
   std::vector<int> state(g.nodes.size()), all(g.nodes.size());
   bool need_all = false;
@@ -179,7 +255,7 @@ std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const G
   std::size_t j = 1;
   for (std::size_t k = 0; j < g.at.size(); ++k) {
     model.Linearise(g.in[k], x, lin);
-    if (g.rediscretise[k]) pe::DiscretiseZoh(lin.a_per_s, g.row_t_s[k + 1] - g.row_t_s[k], disc);
+    if (g.rediscretise[k]) zoh.Discretise(lin.a_per_s, g.row_t_s[k + 1] - g.row_t_s[k], disc);
     next.noalias() = disc.ad * x + disc.phi_s * lin.f_K_per_s;
     x = next;
     if (k + 1 == g.at[j]) record(j++, g.in[g.averaged ? k : k + 1]);
@@ -192,8 +268,12 @@ std::vector<std::vector<double>> Simulate(const pe::ThermalModel& model, const G
 class Evaluator {
  public:
   Evaluator(const std::string& text, const std::string& source, const pe::ThermalModelFiles& files,
-            std::vector<pe::Effect> effects)
-      : text_(text), source_(source), files_(files), effects_(std::move(effects)) {
+            std::vector<pe::Effect> effects, SimulationCache& simulations)
+      : text_(text),
+        source_(source),
+        files_(files),
+        effects_(std::move(effects)),
+        simulations_(&simulations) {
     for (const auto& e : effects_) specs_.push_back(pe::FindEffect(e.name));
   }
   std::size_t size() const { return effects_.size(); }
@@ -210,44 +290,29 @@ class Evaluator {
     return out;
   }
 
-  /// Simulated measured series on `g` at internal parameters p. The network part is cached on
-  /// the model effects' values, so changing only sensor parameters costs no simulation.
+  /// Simulated measured series on `g` at internal parameters p. The network part comes from the
+  /// run's SimulationCache, so changing only sensor parameters costs no simulation.
   std::vector<std::vector<double>> Series(const double* p, const Grid& g) {
     std::vector<pe::Effect> model_effects, sensor_effects;
-    std::vector<double> key;
-    for (const pe::Effect& e : EffectsAt(p)) {
+    for (const pe::Effect& e : EffectsAt(p))
       (pe::FindEffect(e.name)->sensor ? sensor_effects : model_effects).push_back(e);
-      if (!pe::FindEffect(e.name)->sensor) key.push_back(e.values[0]);
-    }
-    Cache& c = cache_[&g];
-    if (!c.valid || c.key != key) {
+    std::vector<std::vector<double>> s = simulations_->Get(&g, model_effects, [&] {
       const pe::ThermalModel m = pe::ThermalModel::Parse(
           pe::ApplyModelEffects(text_, source_, model_effects), source_, files_);
-      c.series = Simulate(m, g);
-      c.key = key;
-      c.valid = true;
-      ++simulations_;
-    }
-    std::vector<std::vector<double>> s = c.series;
+      return Simulate(m, g, simulations_->zoh);
+    });
     for (const pe::Effect& e : sensor_effects)
       for (std::size_t i = 0; i < g.nodes.size(); ++i)
         if (g.nodes[i] == e.node) pe::ApplySensorEffect(e, g.t_s, s[i]);
     return s;
   }
-  long simulations() const { return simulations_; }
 
  private:
-  struct Cache {
-    bool valid = false;
-    std::vector<double> key;
-    std::vector<std::vector<double>> series;
-  };
   std::string text_, source_;
   pe::ThermalModelFiles files_;
   std::vector<pe::Effect> effects_;
   std::vector<const pe::EffectSpec*> specs_;
-  std::map<const Grid*, Cache> cache_;
-  long simulations_ = 0;
+  SimulationCache* simulations_;
 };
 
 /// Residuals simulated - measured, every node, grid points 1.. (point 0 is the start).
@@ -407,14 +472,16 @@ double AveragingCost(const pe::ThermalModel& base, const Data& d, const Options&
                      const std::vector<std::vector<double>>& averaged) {
   Options exact = o;
   exact.max_exact_rows = static_cast<long>(d.size());
-  return SeriesRmse(Simulate(base, MakeGrid(d, exact, base)), averaged);
+  ZohCache zoh;
+  return SeriesRmse(Simulate(base, MakeGrid(d, exact, base), zoh), averaged);
 }
 
 }  // namespace
 
 Simulated SimulateModel(const pe::ThermalModel& model, const Data& data, const Options& options) {
   const Grid g = MakeGrid(data, options, model);
-  return {g.t_s, g.nodes, Simulate(model, g), g.averaged};
+  ZohCache zoh;
+  return {g.t_s, g.nodes, Simulate(model, g, zoh), g.averaged};
 }
 
 std::string ShortestFloats(std::string_view toml) {
@@ -541,7 +608,8 @@ Result Run(const std::string& text, const std::string& source, const Data& train
 
   Result res;
   std::vector<pe::Effect> added;  // with their fitted values
-  Evaluator base_ev(text, source, files, {});
+  SimulationCache simulations;    // shared by every simulation of this run
+  Evaluator base_ev(text, source, files, {}, simulations);
   FitResult current = Fit(base_ev, {}, gt, o);
   const auto before_train = current.train_series;
   const auto before_val = base_ev.Series(nullptr, gv);
@@ -572,7 +640,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
         continue;
       std::vector<pe::Effect> effects = added;
       effects.push_back(cand);
-      Evaluator ev(text, source, files, effects);
+      Evaluator ev(text, source, files, effects, simulations);
       std::vector<double> p0;
       for (std::size_t e = 0; e < effects.size(); ++e)
         p0.push_back(ev.Internal(e, effects[e].values[0]));
@@ -659,7 +727,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
     current_val_rmse = rd.candidates[best].validate_rmse_K;
     // Every added effect's parameters, re-fitted jointly in this round.
     res.effects.clear();
-    Evaluator ev(text, source, files, added);
+    Evaluator ev(text, source, files, added, simulations);
     for (std::size_t e = 0; e < added.size(); ++e) {
       AddedEffect ae;
       ae.effect = added[e];
@@ -676,7 +744,7 @@ Result Run(const std::string& text, const std::string& source, const Data& train
   }
   res.verdict = res.rounds.empty() ? "none" : res.rounds.front().verdict;
 
-  Evaluator final_ev(text, source, files, added);
+  Evaluator final_ev(text, source, files, added, simulations);
   std::vector<double> pf;
   for (std::size_t e = 0; e < added.size(); ++e)
     pf.push_back(final_ev.Internal(e, added[e].values[0]));
