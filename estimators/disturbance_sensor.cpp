@@ -68,6 +68,7 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
   sensor_model_.PlaceOffset(k++);
   if (has_winding && c.winding_bias_sd_K > 0.0) wb_ = k++;
   if (magnet_ >= 0 && c.magnet_bias_sd_K > 0.0) mb_ = k++;
+  if (mb_ >= 0 && c.line_voltage_error_sd_V > 0.0 && !c.voltage_reading) mu_ = k++;
   if (c.voltage_reading) {
     const std::string& node = !c.voltage_magnet_node.empty() ? c.voltage_magnet_node
                               : !c.magnet_node.empty()       ? c.magnet_node
@@ -180,6 +181,7 @@ void DisturbanceThermalSensor::InitialiseWith(double x0_degC, double common_sd_K
   if (ls_ >= 0) s(ls_, ls_) = 0.01;  // 10 % either way at the start
   if (wb_ >= 0) s(wb_, wb_) = c.winding_bias_sd_K * c.winding_bias_sd_K;
   if (mb_ >= 0) s(mb_, mb_) = c.magnet_bias_sd_K * c.magnet_bias_sd_K;
+  if (mu_ >= 0) s(mu_, mu_) = c.line_voltage_error_sd_V * c.line_voltage_error_sd_V;
   VoltagePriors(x, s);
   filter_.Reset(x, s);
   frame_fused_last_ = reopen_offset_ = false;
@@ -394,6 +396,7 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   }
   if (wb_ >= 0) GaussMarkov(wb_, c.winding_bias_sd_K, c.winding_bias_tau_s, dt_s);
   if (mb_ >= 0) GaussMarkov(mb_, c.magnet_bias_sd_K, c.magnet_bias_tau_s, dt_s);
+  if (mu_ >= 0) GaussMarkov(mu_, c.line_voltage_error_sd_V, c.line_voltage_error_tau_s, dt_s);
   if (dr_state_ >= 0) {
     const double walk = c.calibration_walk_per_sqrt_h * c.calibration_walk_per_sqrt_h / 3600.0;
     sp_(dr_state_) = sp_(dpsi_) = walk * dt_s;
@@ -435,6 +438,23 @@ const ObserverReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, do
   if (used.frame) RememberReading(r.frame_degC);
   ReportRows(update, used);
   return report_;
+}
+
+double DisturbanceThermalSensor::MagnetBias_K(double voltage_gain_K_per_V) const {
+  if (mb_ < 0) return 0.0;
+  const Eigen::VectorXd& x = filter_.State();
+  return x(mb_) + (mu_ >= 0 ? voltage_gain_K_per_V * x(mu_) : 0.0);
+}
+
+double DisturbanceThermalSensor::MagnetBiasSd_K(double voltage_gain_K_per_V) const {
+  if (mb_ < 0) return std::numeric_limits<double>::quiet_NaN();
+  const Eigen::MatrixXd& s = filter_.Covariance();
+  double var = s(mb_, mb_);
+  if (mu_ >= 0) {
+    const double h = voltage_gain_K_per_V;
+    var += h * h * s(mu_, mu_) + 2.0 * h * s(mb_, mu_);
+  }
+  return std::sqrt(std::max(var, 0.0));
 }
 
 bool DisturbanceThermalSensor::VoltageRow(const ThermalReadings& r) {
@@ -509,9 +529,10 @@ void DisturbanceThermalSensor::FillRows(const ThermalReadings& r, const Used& us
   if (row_m_ >= 0) {
     sm_all_(row_m_, row_m_) = 1.0;
     if (magnet) {
-      // z = T_magnet + g T_winding + bias + white noise.
+      // z = T_magnet + g T_winding + bias + h e + white noise (h: the voltage gain).
       c_all_.row(row_m_) = cm_row_.row(0);
       c_all_.row(row_m_).head(n_) += r.magnet_winding_gain * model_.WindingWeights().transpose();
+      if (mu_ >= 0) c_all_(row_m_, mu_) = r.magnet_voltage_gain_K_per_V;
       const double sd = std::isfinite(r.magnet_sd_K)
                             ? std::max(r.magnet_sd_K, c.magnet_min_white_sd_K)
                             : c.magnet_min_white_sd_K;

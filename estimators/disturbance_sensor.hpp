@@ -94,6 +94,13 @@ struct DisturbanceSensorConfig {
   double magnet_bias_tau_s = 3600.0;
   /// Least white sd of the magnet reading (its own sd, from the identifier, may be smaller).
   double magnet_min_white_sd_K = 0.3;
+  /// Stationary sd and correlation time of the drive's q-voltage error as the magnet reading
+  /// sees it (a Gauss-Markov state, V, entering the magnet row with the reading's voltage gain):
+  /// the inverter's dead time, whose share of the reading grows as the speed falls, so a cold
+  /// start's run-up would otherwise teach the bias state the low-speed error. 0 = no state; off
+  /// with the voltage rows (their own offset state takes it).
+  double line_voltage_error_sd_V = 0.2;
+  double line_voltage_error_tau_s = 86400.0;
   double initial_sd_K = 20.0;  ///< as VirtualSensorConfig
   double initial_spread_sd_K = 5.0;
   /// The drive's q-axis voltage as a reading (estimators/voltage_equation.hpp): an extended row
@@ -211,11 +218,8 @@ class DisturbanceThermalSensor : public ThermalObserver {
   void ReopenSensorOffset() override { reopen_offset_ = true; }
   bool TakesVoltage() const override { return row_v_ >= 0; }
   Calibration VoltageCalibration() const override;
-  double MagnetBias_K() const override { return mb_ >= 0 ? filter_.State()(mb_) : 0.0; }
-  double MagnetBiasSd_K() const override {
-    return mb_ >= 0 ? std::sqrt(filter_.Covariance()(mb_, mb_))
-                    : std::numeric_limits<double>::quiet_NaN();
-  }
+  double MagnetBias_K(double voltage_gain_K_per_V) const override;
+  double MagnetBiasSd_K(double voltage_gain_K_per_V) const override;
   const KalmanFilter& Filter() const { return filter_; }
 
  private:
@@ -254,6 +258,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
 
   int n_ = 0, df_ = 0, dr_ = -1, ls_ = -1, n_aug_ = 0, rotor_ = -1;
   int wb_ = -1, mb_ = -1, magnet_ = -1;  ///< winding and magnet reading biases, the magnet node
+  int mu_ = -1;                          ///< the magnet reading's voltage error, V (-1: none)
   int row_w_ = -1, row_m_ = -1;          ///< their rows in the update (-1: none)
   /// The voltage reading: R0's and psi0's relative errors, the offset, the flux's node, its row.
   int dr_state_ = -1, dpsi_ = -1, dbeta_ = -1, u0_ = -1, vmagnet_ = -1, row_v_ = -1;

@@ -323,7 +323,7 @@ double PumpEstimator::UncalibratedMagnetSd_K() const {
 bool PumpEstimator::LineCalibrated() const {
   // A filter that follows the line's bias learns it at a cold start (every node known), as the
   // voltage rows learn psi0; without one its bias stays psi0's tolerance, 20 K for han2019-tmp.
-  return estimate_.calibrated_at_cold_start || std::isnan(observer_->MagnetBiasSd_K());
+  return estimate_.calibrated_at_cold_start || std::isnan(observer_->MagnetBiasSd_K(0.0));
 }
 
 bool PumpEstimator::FluxKnownBetterThanTheLine() const {

@@ -32,6 +32,10 @@ struct ThermalReadings {
   double magnet_degC = std::numeric_limits<double>::quiet_NaN();
   double magnet_sd_K = std::numeric_limits<double>::quiet_NaN();
   double magnet_winding_gain = 0.0;
+  /// How far the magnet reading moves per volt of a constant error in the drive's reported q
+  /// voltage (its inverter's dead time), K/V: the line is fitted to uq/w, so such an error moves
+  /// it by e/w, more at low speed (MagnetFluxReading). 0: the reading has no such error.
+  double magnet_voltage_gain_K_per_V = 0.0;
   /// The drive's q-axis voltage averaged over the period, less its known terms
   /// (QAxisKnownTerms_V), at the period's mean q current and electrical speed, and the white sd
   /// of that mean (estimators/voltage_equation.hpp); NaN uq: none.
@@ -152,9 +156,17 @@ class ThermalObserver {
   virtual void RestoreSteppedOffset(double stepped_K) { (void)stepped_K; }
 
   /// The magnet reading's bias as the filter estimates it, K, and its sd (0 and NaN for a filter
-  /// without a bias state: its magnet reading is taken as unbiased).
-  virtual double MagnetBias_K() const { return 0.0; }
-  virtual double MagnetBiasSd_K() const { return std::numeric_limits<double>::quiet_NaN(); }
+  /// without a bias state: its magnet reading is taken as unbiased), for a reading whose voltage
+  /// gain (ThermalReadings::magnet_voltage_gain_K_per_V) is `voltage_gain_K_per_V`: the bias
+  /// state plus that gain times the line's voltage-error state, where the filter has one.
+  virtual double MagnetBias_K(double voltage_gain_K_per_V) const {
+    (void)voltage_gain_K_per_V;
+    return 0.0;
+  }
+  virtual double MagnetBiasSd_K(double voltage_gain_K_per_V) const {
+    (void)voltage_gain_K_per_V;
+    return std::numeric_limits<double>::quiet_NaN();
+  }
 
   /// Whether the filter takes the drive's q-axis voltage as a reading (ThermalReadings::uq_V).
   virtual bool TakesVoltage() const { return false; }

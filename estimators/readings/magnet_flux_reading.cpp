@@ -69,6 +69,7 @@ void MagnetFluxReading::Prepare(const IdentifierOutput& id, double iq_A, double 
   const bool winding = model_.WindingWeights().sum() > 0.0;
   gain_ = winding ? cu.r0_ohm * cu.alpha_per_K * u / psi0_beta : 0.0;
   gated_ = std::abs(gain_) > config_.max_winding_gain;
+  voltage_gain_ = 1.0 / (w * psi0_beta);  // an error e on uq moves E by e/w
   const double drop = winding ? cu.r0_ohm * u : r.resistance_ohm * u;
   z_degC_ = motor_.magnet.t0_degC + (e - drop - motor_.flux_Wb) / psi0_beta + gain_ * cu.t0_degC;
   z_sd_K_ = std::sqrt(std::max(var_e, 0.0)) / std::abs(psi0_beta);
@@ -85,6 +86,7 @@ void MagnetFluxReading::Offer(ThermalReadings& readings) const {
   readings.magnet_degC = z_degC_;
   readings.magnet_sd_K = z_sd_K_;
   readings.magnet_winding_gain = gain_;
+  readings.magnet_voltage_gain_K_per_V = voltage_gain_;
 }
 
 void MagnetFluxReading::Record(const ReadingRow& row) {
@@ -102,9 +104,9 @@ void MagnetFluxReading::Publish(const ThermalObserver& observer, double& degC, d
   // A filter with a bias state follows the line's bias (the nameplate's psi0 and the inverter's
   // error): the line is published corrected by it, with its sd. A filter without one takes the
   // anchor as the bias.
-  const double bias_sd_K = observer.MagnetBiasSd_K();
+  const double bias_sd_K = observer.MagnetBiasSd_K(voltage_gain_);
   const bool bias_state = std::isfinite(bias_sd_K);
-  const double bias_K = bias_state ? observer.MagnetBias_K() : 0.0;
+  const double bias_K = bias_state ? observer.MagnetBias_K(voltage_gain_) : 0.0;
   const double z_sd_K =
       bias_state ? std::hypot(z_sd_K_, bias_sd_K) : std::max(z_sd_K_, config_.min_sd_K);
   const Eigen::VectorXd& w = model_.WindingWeights();

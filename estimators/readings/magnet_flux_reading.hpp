@@ -75,6 +75,7 @@ class MagnetFluxReading {
   int magnet_state_ = -1;
   double z_degC_ = std::numeric_limits<double>::quiet_NaN();
   double gain_ = 0.0;
+  double voltage_gain_ = 0.0;  ///< K per V of the drive's q-voltage error
   double z_sd_K_ = std::numeric_limits<double>::quiet_NaN();
   bool gated_ = false;
   bool offered_ = false;

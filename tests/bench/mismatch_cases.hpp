@@ -270,6 +270,9 @@ inline pe::PumpEstimatorConfig EstimatorConfig(const CaseSpec& spec,
   // would widen the bias state to psi0's tolerance).
   c.magnet.min_sd_K = dc.magnet_bias_sd_K;
   c.psi0_sd_rel = dc.magnet_bias_sd_K * std::abs(motor.magnet.flux_temperature_coefficient_per_K);
+  // Nor does the emulated line carry an inverter voltage error (the line's bias is constant
+  // over speed): no state for one.
+  c.disturbance.line_voltage_error_sd_V = 0.0;
   // The cases emulate the identifier's outputs, not the drive's voltages: the magnet reading
   // from the back-EMF line is the one to fuse.
   c.voltage.fuse = false;

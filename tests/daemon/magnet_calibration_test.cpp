@@ -4,6 +4,7 @@
 // calibration stays learnt across a saved state.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <memory>
@@ -58,8 +59,11 @@ class MagnetCalibration : public ::testing::Test {
     at.winding_degC = x_degC(winding_);
     at.magnet_degC = x_degC(rotor_);
     at.dpsi = plant_dpsi;
-    const double uq_V =
-        pe::QAxisVoltage_V(law_, {in.iq_A, w}, at) + pe::QAxisKnownTerms_V(motor_, 0.0, in.iq_A, w);
+    // The inverter's dead time: the drive reports more voltage than the motor sees, along the
+    // current (realistic-signals.md).
+    const double dead_time_V = plant_voltage_error_V * std::tanh(in.iq_A / 0.5);
+    const double uq_V = pe::QAxisVoltage_V(law_, {in.iq_A, w}, at) +
+                        pe::QAxisKnownTerms_V(motor_, 0.0, in.iq_A, w) + dead_time_V;
     const std::int64_t t_us = static_cast<std::int64_t>(k) * 1'000'000;
     for (int j = 10; j > 0; --j) {
       const std::int64_t t = t_us - 20'000 - 10'000 * static_cast<std::int64_t>(j - 1);
@@ -79,6 +83,7 @@ class MagnetCalibration : public ::testing::Test {
   Eigen::VectorXd x_degC = Eigen::VectorXd::Constant(model_->StateCount(), 22.0);
   double plant_dpsi = 0.0;         ///< the plant's flux relative to the nameplate's psi0, minus one
   double plant_load_step_A = 0.0;  ///< iq is 3 A -+ this, changing every minute
+  double plant_voltage_error_V = 0.0;  ///< the reported uq less the motor's, at full current
   /// psi0's prior sd (2 %) through the motor's magnet law (-0.1 %/K).
   const double tolerance_K = 0.02 / std::abs(motor_.magnet.flux_temperature_coefficient_per_K);
 };
@@ -181,6 +186,48 @@ TEST_F(MagnetCalibration, WithoutTheVoltageTheLinesBiasIsLearntOnlyAtAColdStart)
   EXPECT_EQ(published, states[static_cast<std::size_t>(pe::ReadingState::kFused)]);
   EXPECT_GT(published, 100) << "the magnet from the flux, of 571 periods; line states "
                             << ::testing::PrintToString(states);
+}
+
+// The identifier's line is fitted to uq/w, so the inverter's voltage error moves it by e/w: 3.8 K
+// at 21000 r/min, twice that at half the speed. A pump that waits at half speed after its cold
+// start (a standby) would, taking that error as part of a constant bias, learn the bias at half
+// speed and be short by the difference at full speed; the filter's state for the error, which
+// enters with the line's 1/w gain, tells the two apart from the two speeds.
+TEST_F(MagnetCalibration, WithoutTheVoltageTwoSpeedsTellTheInvertersErrorFromTheFluxTolerance) {
+  pd::PumpConfig config = Config();
+  config.voltage_reading = false;
+  plant_dpsi = -0.016;
+  plant_load_step_A = 0.5;
+  plant_voltage_error_V = 0.15;
+  const auto rotor = static_cast<std::size_t>(rotor_);
+  pd::Pump cold(config, motor_, model_, 1.0);
+  for (int k = 1; k <= 3; ++k) Period(cold, k, 0.0);
+  auto speed_rpm = [](int k) {  // 1 min up to half speed, 4 min there, 1 min up to full speed
+    if (k < 60) return 10500.0 * k / 60.0;
+    if (k < 300) return 10500.0;
+    return std::min(10500.0 * (1.0 + (k - 300) / 60.0), 21000.0);
+  };
+  double largest_K = 0.0;
+  int published = 0;
+  for (int k = 4; k <= 1200; ++k) {
+    Period(cold, k, speed_rpm(k));
+    const auto& s = cold.snapshot();
+    if (k < 420) continue;
+    const double error_K = s.node_degC[rotor] - x_degC(rotor_);
+    largest_K = std::max(largest_K, std::abs(error_K));
+    ASSERT_LE(std::abs(error_K), 2.0 * s.node_sd_K[rotor])
+        << "t " << k << " s: rotor " << s.node_degC[rotor] << " sd " << s.node_sd_K[rotor]
+        << " truth " << x_degC(rotor_);
+    if (std::isnan(s.magnet_flux_degC)) continue;
+    ++published;
+    ASSERT_LE(std::abs(s.magnet_flux_degC - x_degC(rotor_)), 2.0 * s.magnet_flux_sd_K)
+        << "t " << k << " s: magnet " << s.magnet_flux_degC << " sd " << s.magnet_flux_sd_K;
+  }
+  // Taken as part of the bias, the error learnt at half speed leaves the rotor 2.5-3.9 K high at
+  // full speed on this plant; with the state the rotor is 0.9-2.8 K low (the rest is not the
+  // voltage error's: the line also lags the ramps).
+  EXPECT_LE(largest_K, 3.0);
+  EXPECT_GT(published, 100);
 }
 
 }  // namespace
