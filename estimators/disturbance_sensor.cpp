@@ -45,7 +45,9 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
       !(c.magnet_bias_tau_s > 0.0) || !(c.magnet_min_white_sd_K > 0.0) ||
       !(c.sensor_step_gate_sd >= 0.0) || !(c.r0_sd_rel > 0.0) || !(c.psi0_sd_rel > 0.0) ||
       !(c.calibration_walk_per_sqrt_h >= 0.0) || !(c.voltage_offset_sd_V > 0.0) ||
-      !(c.voltage_offset_tau_s > 0.0) || !(c.uq_min_sd_V > 0.0) || !(c.voltage_gate_sd >= 0.0)) {
+      !(c.voltage_offset_tau_s > 0.0) || !(c.uq_min_sd_V > 0.0) || !(c.voltage_gate_sd >= 0.0) ||
+      !(c.line_voltage_error_sd_V >= 0.0) || !(c.line_voltage_error_tau_s > 0.0) ||
+      !(c.rotor_heat_found_sds >= 0.0)) {
     throw std::invalid_argument(
         "disturbance sensor: standard deviations and times must be positive");
   }
@@ -389,6 +391,7 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   sp_(df_) = c.frame_heat_sd_W * c.frame_heat_sd_W * dt_s;
   if (dr_ >= 0) {  // Gauss-Markov: variance 2 sigma^2 dt / tau per step keeps sigma stationary
     sp_(dr_) = 2.0 * c.rotor_heat_sd_W * c.rotor_heat_sd_W * dt_s / c.rotor_heat_tau_s;
+    sp_(dr_) += RotorHeatDeficit_W2();
   }
   if (ls_ >= 0) {  // its walk near zero is loss_scale_sd: 2 sigma^2 / tau = loss_scale_sd^2
     const double sigma = c.loss_scale_max_sd;
@@ -455,6 +458,14 @@ double DisturbanceThermalSensor::MagnetBiasSd_K(double voltage_gain_K_per_V) con
     var += h * h * s(mu_, mu_) + 2.0 * h * s(mb_, mu_);
   }
   return std::sqrt(std::max(var, 0.0));
+}
+
+double DisturbanceThermalSensor::RotorHeatDeficit_W2() const {
+  const double sds = config_.rotor_heat_found_sds;
+  if (!(sds > 0.0)) return 0.0;
+  const double found_W = std::abs(filter_.State()(dr_)) / sds;
+  if (!(found_W > config_.rotor_heat_sd_W)) return 0.0;
+  return std::max(found_W * found_W - filter_.Covariance()(dr_, dr_), 0.0);
 }
 
 bool DisturbanceThermalSensor::VoltageRow(const ThermalReadings& r) {

@@ -55,6 +55,12 @@ struct DisturbanceSensorConfig {
   double frame_heat_sd_W = 3.0;      ///< random walk of d_f, W per sqrt(s)
   double rotor_heat_sd_W = 5.0;      ///< stationary sd of d_r, W
   double rotor_heat_tau_s = 1800.0;  ///< its correlation time
+  /// Once the filter finds more rotor heat than this many of d_r's stationary sds, d_r's variance
+  /// is held at least at (d_r / this)^2 (an added process noise): heat beyond the prior says the
+  /// prior was too narrow for this pump, and a d_r held at the prior's width would keep the
+  /// filter confident in its first split of that heat between the rotor and whatever else
+  /// explains the readings (the magnet reading's bias, the loss scale, the calibration). 0 = off.
+  double rotor_heat_found_sds = 2.0;
   /// Short-term random walk of a relative loss scale s (every loss times 1 + s), per sqrt(s);
   /// 0 = no state.
   double loss_scale_sd = 0.003;
@@ -240,6 +246,9 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// The voltage row (extended: linearised at the predicted state); false when its innovation
   /// fails the gate (voltage_gate_sd).
   bool VoltageRow(const ThermalReadings& r);
+  /// What d_r's variance lacks of (d_r / rotor_heat_found_sds)^2 once d_r is beyond that many
+  /// stationary sds (W^2; 0 otherwise).
+  double RotorHeatDeficit_W2() const;
   /// The voltage row's innovation variance c S- c^T + sd^2.
   double RowVariance(double sd);
   /// The loss scale's and dR's columns of heat_in_ at the predicted operating point.
