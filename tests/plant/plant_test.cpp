@@ -380,6 +380,42 @@ TEST(Plant, CoolingFailureRaisesTemperatures) {
   EXPECT_EQ(b.Column("cooling_model").front(), 0.0);
 }
 
+TEST(Plant, EffectsWithAStartChangeTheTruthFromThen) {
+  const fs::path ok = OutDir("effect_ok"), later = OutDir("effect_later");
+  RunScenario(ScenarioText(), ok);
+  // Pump c: 44 W more on the rotor at 21000 r/min from 15 s on.
+  RunScenario(
+      ScenarioText("", R"(effects = [ { name = "rotor_loss", values = [0.1], start_s = 15 } ])"),
+      later);
+  const tools::CsvTable a = tools::CsvTable::Read((ok / "c.truth.csv").string());
+  const tools::CsvTable b = tools::CsvTable::Read((later / "c.truth.csv").string());
+  const auto& t = b.Column("time_s");
+  const auto& rotor_ok = a.Column("rotor_degC");
+  const auto& rotor = b.Column("rotor_degC");
+  ASSERT_EQ(rotor.size(), rotor_ok.size());
+  for (std::size_t i = 0; i < t.size() && t[i] < 15.0; ++i) {
+    ASSERT_EQ(rotor[i], rotor_ok[i]) << "t " << t[i] << " s: the effect began early";
+  }
+  EXPECT_GT(rotor.back() - rotor_ok.back(), 1.0) << rotor_ok.back() << " vs " << rotor.back();
+  EXPECT_EQ(b.Column("cooling_model").front(), 0.0);
+  EXPECT_EQ(b.Column("cooling_model").back(), 1.0);
+  // One onset per pump, and not beside a cooling failure (one changed model at a time).
+  EXPECT_THROW(ParseScenario(ScenarioText("", R"(effects = [
+    { name = "rotor_loss", values = [0.1], start_s = 15 },
+    { name = "iron_loss_scale", values = [1.2], start_s = 16 } ])"),
+                             "test.toml"),
+               plant::ScenarioError);
+  EXPECT_THROW(ParseScenario(ScenarioText("", R"(
+[[pump]]
+name = "d"
+node_id = 3
+profile = "p"
+faults = [ { kind = "cooling_failure", start_s = 5, edge = "cooling", factor = 2 } ]
+effects = [ { name = "rotor_loss", values = [0.1], start_s = 15 } ])"),
+                             "test.toml"),
+               plant::ScenarioError);
+}
+
 TEST(Plant, WindingTemperatureFeedsTheResistance) {
   const fs::path out = OutDir("rs");
   RunScenario(ScenarioText(), out);

@@ -147,6 +147,7 @@ struct PumpState {
   std::vector<std::unique_ptr<ThermalModel>> models;  // [0] healthy; then one per cooling fault
   std::vector<int> model_of_fault;                    // fault index -> models index (or -1)
   int active_model = 0;
+  int effects_model = -1;  // the model with effects that begin later (-1: none)
   Eigen::VectorXd x;
   Eigen::VectorXd next;
   estimators::ThermalLinearModel lin;
@@ -260,6 +261,21 @@ void LoadTruthModels(PumpState& state, const PumpSpec& spec, const PlantResource
     const estimators::ThermalModelFiles files{
         slash == std::string::npos ? std::string(".") : model_text.source.substr(0, slash),
         res.read_file};
+    // The true motor's R0 differs from the nameplate: so do its copper losses.
+    auto true_copper = [&](LoadedText& t) {
+      if (spec.motor_r0_scale == 1.0) return;
+      t.text = ScaleCopperLosses(t.text, t.source, spec.motor_r0_scale);
+      t.source += fmt::format(" (copper x {})", spec.motor_r0_scale);
+    };
+    if (!spec.effects.empty() && spec.effects_start_s > 0.0) {
+      // Effects that begin later: the model without them until their start, then the one with
+      // them (switched to as a cooling fault's model is).
+      LoadedText before = model_text;
+      true_copper(before);
+      ps->models.push_back(
+          std::make_unique<ThermalModel>(ThermalModel::Parse(before.text, before.source, files)));
+      ps->effects_model = 1;
+    }
     if (!spec.effects.empty()) {
       // Hidden effects: the truth is the model with the workflow's effects added.
       model_text.text =
@@ -268,11 +284,7 @@ void LoadTruthModels(PumpState& state, const PumpSpec& spec, const PlantResource
         model_text.source += fmt::format(" +{}", e.name);
       }
     }
-    if (spec.motor_r0_scale != 1.0) {
-      // The true motor's R0 differs from the nameplate: so do its copper losses.
-      model_text.text = ScaleCopperLosses(model_text.text, model_text.source, spec.motor_r0_scale);
-      model_text.source += fmt::format(" (copper x {})", spec.motor_r0_scale);
-    }
+    true_copper(model_text);
     ps->models.push_back(std::make_unique<ThermalModel>(
         ThermalModel::Parse(model_text.text, model_text.source, files)));
     for (const Fault& f : spec.faults) {
@@ -702,7 +714,7 @@ void AdvanceTruth(PumpState& p, double thermal_dt_s, double t_next_s) {
   const double sd = spec.process_noise_K * std::sqrt(thermal_dt_s);
   for (Eigen::Index i = 0; i < p.next.size(); ++i) p.next(i) += sd * p.normal(p.rng_thermal);
   p.x = p.next;
-  int model_next = 0;
+  int model_next = p.effects_model >= 0 && t_next_s >= spec.effects_start_s ? p.effects_model : 0;
   for (std::size_t fi = 0; fi < spec.faults.size(); ++fi) {
     const Fault& f = spec.faults[fi];
     if (f.kind == FaultKind::kCoolingFailure && t_next_s >= f.start_s && t_next_s < f.end_s) {

@@ -209,7 +209,7 @@ DriveSpec ParseDrive(const toml::table* pump, const toml::table* defaults,
 // effects = [{ name = "frame_thermal_mass", values = [2700.0] }, ...]: the discrepancy
 // workflow's model effects, switched on in the truth (docs/plant-simulator.md).
 std::vector<estimators::Effect> ParseEffects(const toml::node& node, const std::string& source,
-                                             const std::string& where) {
+                                             const std::string& where, double& start_s) {
   const toml::array* arr = node.as_array();
   if (arr == nullptr) Fail(source, LineOf(node), where, "expected an array of tables");
   std::vector<estimators::Effect> out;
@@ -218,7 +218,14 @@ std::vector<estimators::Effect> ParseEffects(const toml::node& node, const std::
     const toml::table* t = (*arr)[i].as_table();
     const std::string at = fmt::format("{}[{}].", where, i);
     if (t == nullptr) Fail(source, LineOf((*arr)[i]), at, "expected a table");
-    CheckKeys(*t, {"name", "values"}, source, at);
+    CheckKeys(*t, {"name", "values", "start_s"}, source, at);
+    Reader r(t, nullptr, source, at, LineOf(*t));
+    const double start = r.Number("start_s", 0.0, 0.0, 1e9);
+    if (i > 0 && start != start_s) {
+      Fail(source, LineOf(*t), at + "start_s",
+           fmt::format("{} s, but {} s before: a pump's effects begin together", start, start_s));
+    }
+    start_s = start;
     const auto name = t->get_as<std::string>("name");
     if (name == nullptr) Fail(source, LineOf(*t), at + "name", "missing (an effect name)");
     const estimators::EffectSpec* spec = estimators::FindEffect(name->get());
@@ -477,7 +484,16 @@ Scenario ParseScenario(std::string_view toml_text, const std::string& source) {
     if (const toml::node* f = pt.get("faults"))
       base.faults = ParseFaults(*f, source, at + "faults");
     if (const toml::node* e = pt.get("effects"))
-      base.effects = ParseEffects(*e, source, at + "effects");
+      base.effects = ParseEffects(*e, source, at + "effects", base.effects_start_s);
+    if (base.effects_start_s > 0.0) {
+      for (const Fault& f : base.faults) {
+        if (f.kind == FaultKind::kCoolingFailure) {
+          Fail(source, f.line, at + "faults",
+               "a cooling_failure and effects with a start_s on one pump: the truth switches to "
+               "one changed model at a time");
+        }
+      }
+    }
 
     for (std::uint32_t k = 0; k < count; ++k) {
       PumpSpec p = base;

@@ -123,6 +123,9 @@ struct PumpSpec {
   /// Effects of the discrepancy workflow's vocabulary switched on in the truth model (model
   /// effects only; estimators/model_effects.hpp, docs/discrepancy.md): hidden-effect data.
   std::vector<estimators::Effect> effects;
+  /// When the effects begin, s (their tables' `start_s`, one for all of a pump's effects): before
+  /// it the truth is the model without them, as a fault that begins then (0: from the start).
+  double effects_start_s = 0.0;
   int line = 0;
 };
 
