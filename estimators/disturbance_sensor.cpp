@@ -187,6 +187,7 @@ void DisturbanceThermalSensor::InitialiseWith(double x0_degC, double common_sd_K
   VoltagePriors(x, s);
   filter_.Reset(x, s);
   frame_fused_last_ = reopen_offset_ = false;
+  voltage_rejected_run_ = 0;
   stepped_offset_K_ = 0.0;
   last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
 }
@@ -496,7 +497,21 @@ bool DisturbanceThermalSensor::VoltageRow(const ThermalReadings& r) {
       std::isfinite(r.uq_sd_V) ? std::max(r.uq_sd_V, config_.uq_min_sd_V) : config_.uq_min_sd_V;
   const double gate = config_.voltage_gate_sd;
   if (!(gate > 0.0)) return true;
-  return innovation_V * innovation_V <= gate * gate * RowVariance(uq_sd_V_);
+  const double variance = RowVariance(uq_sd_V_);
+  const double beyond = innovation_V * innovation_V - gate * gate * variance;
+  if (!(beyond > 0.0)) {
+    voltage_rejected_run_ = 0;
+    return true;
+  }
+  const int release = config_.voltage_gate_release_periods;
+  if (release <= 0 || ++voltage_rejected_run_ < release) return false;
+  // Released: the magnet's variance raised by what puts the row's innovation at the gate. With
+  // the calibration learnt, a voltage that stays beyond the gate is heat the model lacks on the
+  // magnet's side (the frame watches the rest); the rotor-heat state then follows the magnet.
+  const double gm = cv_row_(vmagnet_);
+  if (!(std::abs(gm) > 0.0)) return false;
+  filter_.AddVariance(vmagnet_, beyond / (gate * gate * gm * gm));
+  return true;
 }
 
 double DisturbanceThermalSensor::RowVariance(double sd) {

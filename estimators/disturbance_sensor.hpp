@@ -135,6 +135,11 @@ struct DisturbanceSensorConfig {
   /// A voltage row whose innovation lies beyond this many of its sds is left out (an outlier:
   /// a transient the steady-state equation does not describe).
   double voltage_gate_sd = 5.0;
+  /// A voltage row beyond its gate this many periods running is no transient: the filter is what
+  /// is off (heat of a size it did not expect arrived on the magnet's side). From then on the
+  /// magnet node's variance is raised until the row's innovation sits at the gate and the row is
+  /// fused, so the estimate follows the voltage instead of never taking it again. 0 = never.
+  int voltage_gate_release_periods = 10;
 };
 
 /// The readings of one period (the observer interface's).
@@ -275,6 +280,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
   std::vector<Eigen::Index> row_nonzero_;  ///< its nonzero coefficients (the gate's workspace)
   double yv_ = 0.0;                        ///< its linearised observation
   double uq_sd_V_ = 0.0;                   ///< its sd
+  int voltage_rejected_run_ = 0;           ///< voltage rows beyond the gate in a row
   bool frame_fused_last_ = false;          ///< the previous step fused a frame reading
   /// The last fused frame reading, the filter's reading of it after that update and its variance.
   double last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
