@@ -402,11 +402,13 @@ case_readers() {
   local forger=$!
   local out
   out=$(in_ns "$pumptherm" watch --url "$url" --prefix HALL1 --gateway-key "$tmp/hall1.key.pub" \
-    --period-s 4 --count 2)
+    --period-s 2 --count 4)
   wait "$forger"
   stop
   echo "$out" | tail -n 8
-  echo "$out" | tail -n 8 | grep -q "^pump1 .*  signed$" || failed "pump1 is not shown as signed"
+  # A table printed between a message and the digest that lists it shows the message pending,
+  # which a loaded machine makes likely: pump1 must show as signed in one of the four tables.
+  echo "$out" | grep -q "^pump1 .*  signed$" || failed "pump1 is never shown as signed"
   echo "$out" | tail -n 8 | grep -q "^phantom .*NOT FROM THE GATEWAY" || failed "the phantom pump is not marked"
 }
 
