@@ -26,42 +26,16 @@ cmake --build build -j "$jobs"
 stage "unit tests"
 ctest --test-dir build -L unit -j "$jobs" --output-on-failure
 
-stage "guest stage started in the background: vcan tests (native vcan, or a QEMU guest), package checks, slow tests, system tests (Debian guest with systemd)"
-# Verbose, so the log shows each test's mode line ("vcan: mode=guest kernel=...") and its
-# scenario's output: proof that they ran rather than skipped. The log is printed at the end, so
-# that CTest's summary line closes the output. The guest stage leaves a fifth of the two cores idle
-# (paced replays, guests waiting on timers); the sanitizer build below runs beside it under
-# SCHED_IDLE and takes only that idle time. More guests at once (-j3) or a build at normal priority
-# beside them made the emulated guests slower than the time gained (docs/testing.md, "What CI costs").
-guest_log=build/vcan-system-tests.log
-rm -f build/guest-stage.rc build/guest-stage.end
-# Its own process group (setsid), so that a failure further on stops its guests with it.
-export start
-setsid bash -c 'ctest --test-dir build -L "vcan|system|package|slow" -j "$1" -V >"$2" 2>&1
-  echo $? >build/guest-stage.rc
-  echo $(( $(date +%s) - start )) >build/guest-stage.end' guest-stage "$jobs" "$guest_log" &
-guest_pid=$!
-trap 'kill -- -"$guest_pid" 2>/dev/null || true' EXIT
-
-stage "sanitizer build (clang, ASan + UBSan, the fuzz targets too), under SCHED_IDLE beside the guest stage"
+stage "unit tests under AddressSanitizer + UndefinedBehaviorSanitizer (clang; the same build has the fuzz targets)"
 # One clang build for both: every source carries ASan + UBSan, and the libraries the fuzz targets
 # link carry libFuzzer's coverage instrumentation too (cmake/PumpthermFlags.cmake), so the fuzz
-# targets link the same libraries the sanitized unit tests use. -O1 -g1 (line tables only) with
-# assertions on: the sanitizers' reports keep file:line. clang compiles our sources under the
-# sanitizers about 40 % faster than GCC 12 (measured per file, docs/testing.md), and one build
-# instead of two saves the second one.
+# targets link the same libraries the sanitized unit tests use. -O1 -g1 (line tables only) with assertions on: the sanitizers' reports
+# keep file:line. clang compiles our sources under the sanitizers about 40 % faster than GCC 12
+# (measured per file, docs/testing.md), and one build instead of two saves the second one.
 CC=clang CXX=clang++ cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=Debug \
   "-DCMAKE_CXX_FLAGS_DEBUG=-O1 -g1" "-DCMAKE_C_FLAGS_DEBUG=-O1 -g1" -DPUMPTHERM_WERROR=ON \
   -DPUMPTHERM_SANITIZE=ON -DPUMPTHERM_FUZZ=ON -DPUMPTHERM_BUILD_BENCHMARKS=OFF
-chrt --idle 0 cmake --build build-asan -j "$jobs"
-
-stage "waiting for the guest stage (the sanitizer tests and the fuzz runs need both cores)"
-wait "$guest_pid" || true
-trap - EXIT
-guest_rc=$(cat build/guest-stage.rc 2>/dev/null || echo 1)
-echo "guest stage ended at $(cat build/guest-stage.end 2>/dev/null || echo '?') s, CTest exit status $guest_rc"
-
-stage "unit tests under AddressSanitizer + UndefinedBehaviorSanitizer"
+cmake --build build-asan -j "$jobs"
 # Label long (docs/testing.md, "Labels"): long simulations that repeat what shorter cases run
 # under the sanitizers; they ran in the unit stage above.
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
@@ -70,7 +44,14 @@ ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:ha
 stage "fuzz targets, ${fuzz_seconds} s each"
 tests/fuzz/run.sh build-asan "$fuzz_seconds"
 
-stage "the guest stage's log (vcan, package, slow and system tests)"
+stage "vcan tests (native vcan, or a QEMU guest), package checks, slow tests, system tests (Debian guest with systemd)"
+# Verbose, so the log shows each test's mode line ("vcan: mode=guest kernel=...") and its
+# scenario's output: proof that they ran rather than skipped. Unit tests ran above. The log is
+# printed when CTest is done, so that CTest's summary line closes the output.
+set +e
+ctest --test-dir build -L 'vcan|system|package|slow' -j "$jobs" -V >build/vcan-system-tests.log 2>&1
+rc=$?
+set -e
 grep -vE '^[0-9]+: (Test command|Working Directory|Environment variables|Test timeout|UpdateCTestConfiguration)|^UpdateCTestConfiguration|^Parse Config|^ Add coverage|^Constructing a list|^Updating test list|^Checking test dependency|^test [0-9]+$|^ +Start [0-9]+:' \
-  "$guest_log"
-exit "$guest_rc"
+  build/vcan-system-tests.log
+exit $rc
