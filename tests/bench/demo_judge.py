@@ -223,10 +223,11 @@ def Missed(report, max_error_K, min_coverage, node_max_error_K=None, resistance_
                 out.append(f"{p['name']} {node}: coverage {v['coverage_2sd']} < {min_coverage}")
         # The winding from resistance: published most of the time, and honest when it is.
         w = p["extra"].get("winding_from_resistance")
-        if resistance_goal and (w is None or w["available"] is None or w["available"] < 0.8):
-            out.append(f"{p['name']} winding from resistance: available {w and w['available']} < 0.8")
-        elif resistance_goal and (w["coverage_2sd"] is None or w["coverage_2sd"] < min_coverage):
-            out.append(f"{p['name']} winding from resistance: coverage {w['coverage_2sd']} < {min_coverage}")
+        if resistance_goal:
+            if w is None or w["available"] is None or w["available"] < 0.8:
+                out.append(f"{p['name']} winding from resistance: available {w and w['available']} < 0.8")
+            elif w["coverage_2sd"] is None or w["coverage_2sd"] < min_coverage:
+                out.append(f"{p['name']} winding from resistance: coverage {w['coverage_2sd']} < {min_coverage}")
         al = p["alarms"]
         for level in ("warning", "trip"):
             got, truth = al[level + "_s"], al["true_" + level + "_s"]
