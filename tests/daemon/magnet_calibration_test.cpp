@@ -233,9 +233,9 @@ TEST_F(MagnetCalibration, WithoutTheVoltageTwoSpeedsTellTheInvertersErrorFromThe
 }
 
 // 40 W on the rotor from 10 min on, with the voltage rows: uq moves faster than the filter
-// expects and its rows fail the gate. Left out for good, the rotor ran away from its estimate
-// (60-110 K off on the plant simulator's steps); after ten rejections in a row the row is fused
-// again with the magnet's variance raised to meet it.
+// expects and its rows fail the gate. Left out for good, they would leave the rotor to run away
+// from its estimate; after ten rejections in a row the row is fused again with the magnet's
+// variance raised to meet it.
 TEST_F(MagnetCalibration, AVoltageBeyondItsGateForLongIsFusedAgain) {
   pd::Pump pump(Config(), motor_, model_, 1.0);
   plant_load_step_A = 0.5;
