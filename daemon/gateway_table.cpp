@@ -41,24 +41,16 @@ std::string Gateway::StatusLine() const {
 
 namespace {
 
-/// The table's Rs, as current as the winding it stands for: the copper law at the published
-/// winding from resistance and this pump's R0 (the voltage fused in the filter); else the
-/// identifier's while it tracks or converges; "held" while it holds an old value (it would read
-/// as current), "-" before identification, "implaus." outside the motor's plausible band.
+/// The table's Rs as published (estimators::PublishedIdentification): the pump filter's with the
+/// voltage fused, else the identifier's; "held" while the identifier holds an old value (it would
+/// read as current), "-" before identification, "implaus." outside the motor's plausible band.
 template <typename Num>
-std::string RsCell(const PumpSnapshot& s, const estimators::MotorDescription& motor, Num num) {
-  const auto& cu = motor.copper;
-  if (std::isfinite(s.winding_resistance_degC) && std::isfinite(s.calibration.dr)) {
-    return num(cu.r0_ohm * (1.0 + s.calibration.dr) *
-                   (1.0 + cu.alpha_per_K * (s.winding_resistance_degC - cu.t0_degC)),
-               4);
-  }
+std::string RsCell(const PumpSnapshot& s, Num num) {
   using S = estimators::ResistanceStatus;
-  const estimators::ResistanceEstimate& r = s.resistance;
-  if (r.status == S::kInitialising) return "-";
-  if (r.status == S::kImplausible) return "implaus.";
-  if (r.status == S::kHeld || r.status == S::kNotIdentifiable) return "held";
-  return num(r.resistance_ohm, 4);
+  const estimators::PublishedIdentification& id = s.identification;
+  if (id.status == S::kImplausible) return "implaus.";
+  if (id.status == S::kHeld || id.status == S::kNotIdentifiable) return "held";
+  return num(id.resistance_ohm, 4);
 }
 
 /// The table's alarm column; a pump never heard from says so with its alarm.
@@ -107,7 +99,7 @@ std::string Gateway::PumpTable() const {
             : "-";
     out += fmt::format("{:<12} {:>7} {:>13} {:>20} {:>14} {:>8}  {}\n", p->config().name,
                        num(s.speed_rpm, 0), sensor, hot, num(s.winding_resistance_degC, 1),
-                       RsCell(s, p->motor(), num), TableAlarmCell(*p, alarm));
+                       RsCell(s, num), TableAlarmCell(*p, alarm));
   }
   return out;
 }

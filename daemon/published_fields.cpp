@@ -15,7 +15,6 @@ namespace {
 
 using estimators::AlarmReason;
 using estimators::PumpEstimate;
-using estimators::ResistanceStatus;
 using Kind = CsvFormat::Kind;
 using T = pumptherm::temperatures_t;
 using A = pumptherm::alarm_t;
@@ -24,11 +23,9 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 const PumpEstimate& E(const FieldSource& s) { return *s.estimate; }
 
-/// The identifier has a line fitted to data (not the nameplate, not from invalid input).
-bool Identified(const FieldSource& s) {
-  const auto st = E(s).resistance.status;
-  return st != ResistanceStatus::kInitialising && st != ResistanceStatus::kInvalidInput;
-}
+/// The identification as published (PublishedIdentification): the pump filter's with the
+/// voltage as a reading, else the identifier's.
+const estimators::PublishedIdentification& Id(const FieldSource& s) { return E(s).identification; }
 /// Whether the alarm state is worth sending: with an estimate, with a latched trip (also while
 /// the filter has none), or with any condition raised (a pump never heard from is stale).
 bool AlarmKnown(const FieldSource& s) {
@@ -144,19 +141,16 @@ const std::array kFields = std::to_array<PublishedField>({
    [](const FieldSource& s) { return E(s).magnet_flux_sd_K; }},
   {"resistance_ohm", "ohm", "GW_IDENT", "Resistance_ohm", &T::resistance_ohm, "resistance_ohm",
    {Kind::kFixed, 6},
-   [](const FieldSource& s) { return Identified(s) ? E(s).resistance.resistance_ohm : kNaN; },
+   [](const FieldSource& s) { return Id(s).resistance_ohm; },
    nullptr, "rs_ohm"},
   {"resistance_sd_ohm", "ohm", "", "", &T::resistance_sd_ohm, "", {},
-   [](const FieldSource& s) {
-     return Identified(s) ? E(s).resistance.resistance_sigma_ohm : kNaN;
-   }},
+   [](const FieldSource& s) { return Id(s).resistance_sd_ohm; }},
   {"flux_Wb", "Wb", "GW_IDENT", "Flux_Wb", &T::flux_Wb, "flux_Wb", {Kind::kFixed, 7},
-   [](const FieldSource& s) { return Identified(s) ? E(s).resistance.flux_Wb : kNaN; }},
+   [](const FieldSource& s) { return Id(s).flux_Wb; }},
   {"ident_status", "", "GW_IDENT", "RsStatus", &T::ident_status, "ident_status", {Kind::kWord, 0},
-   [](const FieldSource& s) { return Code(E(s).resistance.status); },
-   [](const FieldSource& s, std::string& out) {
-     Append(out, estimators::ToString(E(s).resistance.status));
-   }, "rs_status", true},
+   [](const FieldSource& s) { return Code(Id(s).status); },
+   [](const FieldSource& s, std::string& out) { Append(out, estimators::ToString(Id(s).status)); },
+   "rs_status", true},
   {"frame_sensor_degC", "degC", "", "", {}, "frame_sensor_degC", {Kind::kFixed, 2},
    [](const FieldSource& s) { return E(s).frame_measured_degC; }, nullptr,
    "frame_measured_degC"},
@@ -195,7 +189,7 @@ const std::array kFields = std::to_array<PublishedField>({
    },
    nullptr, "winding_res_sd_K"},
   {"flux_sd_Wb", "Wb", "", "", &T::flux_sd_Wb, "flux_sd_Wb", {Kind::kGeneral, 3},
-   [](const FieldSource& s) { return Identified(s) ? E(s).resistance.flux_sd_Wb : kNaN; }},
+   [](const FieldSource& s) { return Id(s).flux_sd_Wb; }},
   {"mismatch_state", "", "GW_ALARM", "MismatchState", &A::mismatch_state, "mismatch_state",
    {Kind::kWord, 0},
    [](const FieldSource& s) { return E(s).initialised ? Code(E(s).mismatch.state) : kNaN; },
@@ -214,6 +208,12 @@ const std::array kFields = std::to_array<PublishedField>({
    [](const FieldSource& s) { return E(s).sensor_offset_K; }},
   {"identifier_winding_degC", "degC", "", "", {}, "identifier_winding_degC", {Kind::kFixed, 4},
    [](const FieldSource& s) { return E(s).identifier_winding_degC; }},
+  // The identifier's own status (the paper's method beside the pump filter's identification).
+  {"identifier_status", "", "", "", {}, "identifier_status", {Kind::kWord, 0},
+   [](const FieldSource& s) { return Code(E(s).resistance.status); },
+   [](const FieldSource& s, std::string& out) {
+     Append(out, estimators::ToString(E(s).resistance.status));
+   }, {}, true},
   {"voltage_reading", "", "", "", {}, "voltage_reading", {Kind::kWord, 0},
    [](const FieldSource& s) { return Code(E(s).voltage_reading.state); },
    [](const FieldSource& s, std::string& out) {
@@ -228,11 +228,7 @@ const std::array kFields = std::to_array<PublishedField>({
    [](const FieldSource& s) { return E(s).calibration.u0_V; }},
   {"alarm_rule", "", "", "", {}, "alarm_rule", {Kind::kWord, 0}, AlarmRuleCode, AlarmRuleWord},
   {"flux_status", "", "GW_IDENT", "FluxStatus", {}, "", {},
-   // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
-   [](const FieldSource& s) {
-     const auto st = E(s).resistance.status;
-     return Code(st == ResistanceStatus::kNotIdentifiable ? ResistanceStatus::kTracking : st);
-   }, nullptr, {}, true},
+   [](const FieldSource& s) { return Code(Id(s).flux_status); }, nullptr, {}, true},
   {"mismatch_since_us", "us", "", "", &A::mismatch_since_utime, "", {},
    // Since the Unix epoch (the pipeline's clock is monotonic live); 0: none.
    [](const FieldSource& s) {

@@ -284,6 +284,13 @@ ThermalObserver::Calibration DisturbanceThermalSensor::VoltageCalibration() cons
   return out;
 }
 
+double DisturbanceThermalSensor::CalibrationCovariance(CalibrationEntry entry,
+                                                       const Eigen::VectorXd& w) const {
+  const int k = entry == CalibrationEntry::kR0 ? dr_state_ : dpsi_;
+  if (k < 0) return 0.0;
+  return filter_.Covariance().row(k).head(w.size()).dot(w.transpose());
+}
+
 double DisturbanceThermalSensor::NodeSd_K(int i) const {
   const double v = std::max(filter_.Covariance()(i, i), 0.0);
   return std::sqrt(v + config_.sd_floor_K * config_.sd_floor_K);

@@ -229,6 +229,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
   void ReopenSensorOffset() override { reopen_offset_ = true; }
   bool TakesVoltage() const override { return row_v_ >= 0; }
   Calibration VoltageCalibration() const override;
+  double CalibrationCovariance(CalibrationEntry entry, const Eigen::VectorXd& w) const override;
   double MagnetBias_K(double voltage_gain_K_per_V) const override;
   double MagnetBiasSd_K(double voltage_gain_K_per_V) const override;
   const KalmanFilter& Filter() const { return filter_; }

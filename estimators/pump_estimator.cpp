@@ -6,6 +6,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "estimators/magnet.hpp"
+
 namespace pumptherm::estimators {
 namespace {
 
@@ -34,6 +36,28 @@ std::string VoltageMagnetNode(const PumpEstimatorConfig& c, const ThermalModel& 
   if (!magnet.empty()) return magnet;
   const std::string rotor = RotorNode(c);
   return model.StateIndex(rotor) >= 0 ? rotor : std::string();
+}
+
+/// The identifier's identification as published: its values once it has a line fitted to data
+/// (not the nameplate, not from invalid input).
+PublishedIdentification IdentifiedBy(const ResistanceEstimate& r) {
+  PublishedIdentification id;
+  id.status = r.status;
+  // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
+  id.flux_status =
+      r.status == ResistanceStatus::kNotIdentifiable ? ResistanceStatus::kTracking : r.status;
+  if (r.status == ResistanceStatus::kInitialising || r.status == ResistanceStatus::kInvalidInput)
+    return id;
+  id.resistance_ohm = r.resistance_ohm;
+  id.resistance_sd_ohm = r.resistance_sigma_ohm;
+  id.flux_Wb = r.flux_Wb;
+  id.flux_sd_Wb = r.flux_sd_Wb;
+  return id;
+}
+
+/// sqrt(a^2 var_x + b^2 var_y + 2 a b cov_xy), the first-order sd of a product's value.
+double ProductSd(double a, double var_x, double b, double var_y, double cov_xy) {
+  return std::sqrt(std::max(a * a * var_x + b * b * var_y + 2.0 * a * b * cov_xy, 0.0));
 }
 
 /// Whether the disturbance-state filter takes the drive's voltage: asked for, a motor with R0
@@ -205,6 +229,9 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
   measured_state_ = model_.StateIndex(config_.measured_node);
   if (observer_->TakesVoltage())
     voltage_magnet_state_ = model_.StateIndex(VoltageMagnetNode(config_, model_));
+  voltage_magnet_weights_ = Eigen::VectorXd::Zero(observer_->NodeCount());
+  if (voltage_magnet_state_ >= 0 && voltage_magnet_state_ < observer_->NodeCount())
+    voltage_magnet_weights_(voltage_magnet_state_) = 1.0;
   const int n = model_.StateCount();
   const auto nn = static_cast<std::size_t>(n);
   x_degC_ = Eigen::VectorXd::Zero(n);
@@ -350,6 +377,8 @@ bool PumpEstimator::Step(const PumpPeriod& p) {
   frame_.Prepare(static_cast<double>(p.end_us) * 1e-6, link_silent);
   last_inputs_ = p.inputs;
   estimate_.resistance = p.identifier.estimate;
+  estimate_.identification =
+      observer_->TakesVoltage() ? PublishedIdentification{} : IdentifiedBy(estimate_.resistance);
   if (!StartIfNeeded(p)) {
     StepWithoutEstimate(p);
     return estimate_.alarm_changes != before;
@@ -434,6 +463,7 @@ void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& r
   if (observer_->TakesVoltage() && frame_.fault() == SensorFault::kNone) {
     PublishFromVoltage(p);
   } else {
+    estimate_.identification = IdentifiedBy(estimate_.resistance);
     estimate_.winding_resistance_degC = winding_.degC();
     estimate_.winding_resistance_sd_K = winding_.sd_K();
     estimate_.magnet_flux_degC = estimate_.magnet_flux_sd_K = kNaN;
@@ -472,10 +502,26 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
   PumpEstimate& e = estimate_;
   e.winding_resistance_degC = e.winding_resistance_sd_K = kNaN;
   e.magnet_flux_degC = e.magnet_flux_sd_K = kNaN;
+  e.identification = {};
+  if (!e.initialised) return;
   const bool fresh =
       voltage_fused_us_ >= 0 &&
       static_cast<double>(p.end_us - voltage_fused_us_) * 1e-6 <= config_.alarms.stale_after_s;
-  if (!fresh || !e.initialised) return;
+  if (!fresh) {
+    e.identification.status = e.identification.flux_status = ResistanceStatus::kInvalidInput;
+    return;
+  }
+  // A model without winding weights has no winding from resistance (NaN), the flux still.
+  const Eigen::VectorXd& w = model_.WindingWeights();
+  const bool has_winding = w.sum() > 0.0;
+  const double winding_degC = has_winding ? observer_->Weighted_degC(w) : kNaN;
+  const double winding_var_K2 = has_winding ? observer_->WeightedVariance_K2(w) : kNaN;
+  PublishFusedTemperatures(winding_degC, winding_var_K2);
+  PublishFusedIdentification(winding_degC, winding_var_K2);
+}
+
+void PumpEstimator::PublishFusedTemperatures(double winding_degC, double winding_var_K2) {
+  PumpEstimate& e = estimate_;
   // The flux follows the magnet: its node, as the filter has it with the voltage, while psi0 is
   // known (a flux with psi0 a nameplate's few percent off tells the magnet no better than the
   // thermal model does).
@@ -485,9 +531,6 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
   }
   // The resistance follows the copper: the winding weights, while R0 is known (a resistance
   // with R0 a nameplate's few percent off tells the winding no better than the frame does).
-  const Eigen::VectorXd& w = model_.WindingWeights();
-  if (!(w.sum() > 0.0)) return;
-  const double winding_degC = observer_->Weighted_degC(w);
   // R0's relative error as a winding temperature: R = R0 (1 + dR)(1 + alpha (Tw - T0)).
   const auto& cu = motor_.copper;
   const double calibration_sd_K =
@@ -496,7 +539,40 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
   e.winding_resistance_degC = winding_degC;
   // The nodes' sd floor (model error no state represents) applies to the winding too.
   const double floor_K = observer_->SdFloor_K();
-  e.winding_resistance_sd_K = std::sqrt(observer_->WeightedVariance_K2(w) + floor_K * floor_K);
+  e.winding_resistance_sd_K = std::sqrt(winding_var_K2 + floor_K * floor_K);
+}
+
+void PumpEstimator::PublishFusedIdentification(double winding_degC, double winding_var_K2) {
+  PublishedIdentification& id = estimate_.identification;
+  const ThermalObserver::Calibration& c = estimate_.calibration;
+  using Entry = ThermalObserver::CalibrationEntry;
+  // Rs = R0 (1 + dr)(1 + alpha (Tw - T0)) (Han 2019 eq. 2) at the filter's winding.
+  const auto& cu = motor_.copper;
+  const double copper = 1.0 + cu.alpha_per_K * (winding_degC - cu.t0_degC);
+  id.resistance_ohm = cu.r0_ohm * (1.0 + c.dr) * copper;
+  id.resistance_sd_ohm = ProductSd(
+      cu.r0_ohm * copper, c.dr_sd * c.dr_sd, cu.r0_ohm * (1.0 + c.dr) * cu.alpha_per_K,
+      winding_var_K2, observer_->CalibrationCovariance(Entry::kR0, model_.WindingWeights()));
+  // psi_f = psi0 (1 + dpsi)(1 + beta (Tm - T0)) at the filter's magnet node.
+  if (voltage_magnet_state_ >= 0 && motor_.magnet.Given()) {
+    const int m = voltage_magnet_state_;
+    const double beta = motor_.magnet.flux_temperature_coefficient_per_K;
+    const double magnet = FluxAt_Wb(motor_, observer_->State()(m)) / motor_.flux_Wb;
+    id.flux_Wb = motor_.flux_Wb * (1.0 + c.dpsi) * magnet;
+    id.flux_sd_Wb =
+        ProductSd(motor_.flux_Wb * magnet, c.dpsi_sd * c.dpsi_sd,
+                  motor_.flux_Wb * (1.0 + c.dpsi) * beta, observer_->Covariance()(m, m),
+                  observer_->CalibrationCovariance(Entry::kPsi0, voltage_magnet_weights_));
+  }
+  id.status = std::isfinite(estimate_.winding_resistance_degC) ? ResistanceStatus::kTracking
+                                                               : ResistanceStatus::kConverging;
+  id.flux_status = std::isfinite(estimate_.magnet_flux_degC) ? ResistanceStatus::kTracking
+                                                             : ResistanceStatus::kConverging;
+}
+
+void PumpEstimator::NoteIdentifier(const ResistanceEstimate& resistance) {
+  estimate_.resistance = resistance;
+  if (!observer_->TakesVoltage()) estimate_.identification = IdentifiedBy(resistance);
 }
 
 void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {

@@ -89,6 +89,24 @@ struct PumpEstimatorConfig {
   bool inside_heat_bound = true;
 };
 
+/// The identification the gateway publishes as Rs, psi_f and their status (CAN GW_IDENT, LCM,
+/// the CSV's resistance_ohm, flux_Wb, ident_status). With the drive's voltage as a reading it is
+/// the pump filter's: Rs = R0 (1 + dr)(1 + alpha (Tw - T0)) (Han 2019 eq. 2) at its winding and
+/// psi_f = psi0 (1 + dpsi)(1 + beta (Tm - T0)) at its magnet, with sds to first order;
+/// `tracking` while the winding from resistance is published, `converging` while R0 is not yet
+/// known to max_calibration_sd_K (a start with the current constant cannot tell R0 from the
+/// inverter's offset: a load change pins it), `invalid_input` while the voltage is stale. Without
+/// the voltage reading, the identifier's (Han 2019's DFRLS). NaN: not identified.
+struct PublishedIdentification {
+  double resistance_ohm = std::numeric_limits<double>::quiet_NaN();
+  double resistance_sd_ohm = std::numeric_limits<double>::quiet_NaN();
+  double flux_Wb = std::numeric_limits<double>::quiet_NaN();
+  double flux_sd_Wb = std::numeric_limits<double>::quiet_NaN();
+  ResistanceStatus status = ResistanceStatus::kInitialising;
+  /// The flux's own: tracked while the resistance is held or cannot be identified.
+  ResistanceStatus flux_status = ResistanceStatus::kInitialising;
+};
+
 /// Everything published about one pump at one moment (fields declared for CAN, LCM, CSV and
 /// state in daemon/published_fields.cpp).
 /// How the estimate last started: at rest at the ambient (its calibration learnt in the run-up),
@@ -105,7 +123,8 @@ struct PumpEstimate {
   /// The filter has converged since its (re)start, judged as the alarms judge it
   /// (ThermalObserver::SettlingSd_K below 5 K).
   bool filter_converged = false;
-  ResistanceEstimate resistance;  ///< the identifier's at the period's end
+  ResistanceEstimate resistance;           ///< the identifier's at the period's end
+  PublishedIdentification identification;  ///< what is published as Rs and psi_f
   /// The winding temperature the resistance reflects (the model's winding weights) and its sd:
   /// with the drive's voltage as a reading, the observer's (fresh voltage, R0 known to
   /// max_calibration_sd_K); else the identifier's while it tracks. NaN otherwise.
@@ -220,7 +239,7 @@ class PumpEstimator {
   /// Evidence of a second sender on this pump's CAN IDs at `t_us`: a warning, published at once.
   void RaiseSecondSender(std::int64_t t_us);
   /// The identifier's estimate published between steps (after a restart, before the first).
-  void NoteIdentifier(const ResistanceEstimate& resistance) { estimate_.resistance = resistance; }
+  void NoteIdentifier(const ResistanceEstimate& resistance);
 
   const PumpEstimate& estimate() const { return estimate_; }
   const PumpEstimatorCounters& counters() const { return counters_; }
@@ -270,6 +289,8 @@ class PumpEstimator {
   void PublishReadings(const PumpPeriod& period, const ObserverReport& report);
   /// The winding from resistance and the magnet from flux as the voltage reading gives them.
   void PublishFromVoltage(const PumpPeriod& period);
+  void PublishFusedTemperatures(double winding_degC, double winding_var_K2);
+  void PublishFusedIdentification(double winding_degC, double winding_var_K2);
   void PublishHeldMagnet();
   /// The bounds the levels act on, the alarm values and the published sds.
   void StepBounds(const PumpPeriod& period, bool diverged);
@@ -299,7 +320,8 @@ class PumpEstimator {
   MagnetFluxReading magnet_;
   WindingResistanceReading winding_;
   VoltageReading voltage_;
-  int voltage_magnet_state_ = -1;  ///< the node the flux follows (-1: no voltage reading)
+  int voltage_magnet_state_ = -1;           ///< the node the flux follows (-1: no voltage reading)
+  Eigen::VectorXd voltage_magnet_weights_;  ///< that node as weights over the nodes
   /// The magnet from the period's voltage at the held calibration, while the frame sensor has
   /// failed (invalid otherwise): fused and published instead of the identifier's line.
   VoltageMagnet held_magnet_;

@@ -13,6 +13,7 @@
 /// Step().
 
 #include <Eigen/Dense>
+#include <cstdint>
 #include <limits>
 
 #include "estimators/kalman_filter.hpp"
@@ -183,6 +184,15 @@ class ThermalObserver {
     double u0_sd_V = std::numeric_limits<double>::quiet_NaN();
   };
   virtual Calibration VoltageCalibration() const { return {}; }
+  /// The covariance of the calibration's dr (kR0) or dpsi (kPsi0) with w^T x over the nodes (w
+  /// of size NodeCount()): the resistance and flux at the filter's temperatures are products of
+  /// the two. 0 without the voltage reading. No allocation.
+  enum class CalibrationEntry : std::uint8_t { kR0, kPsi0 };
+  virtual double CalibrationCovariance(CalibrationEntry entry, const Eigen::VectorXd& w) const {
+    (void)entry;
+    (void)w;
+    return 0.0;
+  }
 };
 
 }  // namespace pumptherm::estimators

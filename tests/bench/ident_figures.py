@@ -81,7 +81,7 @@ def read_estimate(path):
         rows = csv.reader(f)
         header = next(rows)
         it, iw = column(header, ("time_s",), path), column(header, ESTIMATE_NAMES, path)
-        # `status` is the DFRLS output's; the daemon's CSV calls its identifier `ident_status`.
+        # `status` is the DFRLS output's; the daemon's CSV has a winding only while it is published.
         ist = header.index("status") if "status" in header else None
         t, w, pub = [], [], []
         for r in rows:

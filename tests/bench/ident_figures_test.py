@@ -13,7 +13,7 @@ DFRLS (`pumptherm identify --log`, status codes): rows at 0, 1.5, 2.5, 3.5, 4.5,
   With --settle-s 2 (window from 4 s: true 60 60 50, mean 56.667): errors 3 (held), 2, 1:
   dT = 3 / 56.667 = 5.294 %, largest published 2 K, published 2 of 3 = 66.7 %.
 
-Daemon CSV (published = a number; ident_status is its DFRLS and is not looked at): rows at 0.5,
+Daemon CSV (published = a number; ident_status is not looked at): rows at 0.5,
 1.5, 2.5, 3.5, 4.5, 5.5 s with nan nan nan 61 nan 53, ident_status `tracking` in every row.
   2 s, 3 s, 5 s: nan (not compared, not published); 4 s <- 3.5 s: 61, error 1; 6 s <- 5.5 s: 53,
   error 3. dT = 3 / 54 = 5.556 %, largest published 3 K, published 2 of 5 = 40 %.

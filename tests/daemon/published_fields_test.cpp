@@ -121,8 +121,11 @@ TEST(PublishedFields, OneEstimateReachesLcmAndTheCsvAlike) {
   e.winding_resistance_sd_K = 1.5;
   e.magnet_flux_degC = 61.5;
   e.magnet_flux_sd_K = 3.25;
-  e.resistance.status = estimators::ResistanceStatus::kTracking;
-  e.resistance.resistance_ohm = 0.3125;
+  // The identification as published (the pump filter's), and the identifier's own beside it.
+  e.identification.status = estimators::ResistanceStatus::kTracking;
+  e.identification.resistance_ohm = 0.3125;
+  e.resistance.status = estimators::ResistanceStatus::kHeld;
+  e.resistance.resistance_ohm = 0.2875;
   e.alarm.level = estimators::AlarmLevel::kWarning;
   e.alarm.time_to_trip_s = std::numeric_limits<double>::infinity();
   e.mismatch.state = estimators::MismatchState::kPlantChange;
@@ -162,6 +165,8 @@ TEST(PublishedFields, OneEstimateReachesLcmAndTheCsvAlike) {
   // Codes as words (docs/daemon.md, "Names"); no time to trip: an empty cell.
   EXPECT_EQ(cell("alarm_level"), "warning");
   EXPECT_EQ(cell("ident_status"), "tracking");
+  EXPECT_EQ(cell("identifier_status"), "held");
+  EXPECT_EQ(cell("resistance_ohm"), "0.312500");
   EXPECT_EQ(cell("sensor_fault"), "none");
   EXPECT_EQ(cell("alarm_active_reasons"), "");
   EXPECT_EQ(cell("time_to_trip_s"), "");

@@ -31,7 +31,7 @@ conf="$src/tools/demo/pumpthermd-demo.toml"
 cat "$tmp/ic.txt"
 grep -q "winding from resistance published" "$tmp/i.txt" || fail "no summary on stderr"
 grep -q "R0 .* ohm .*nameplate" "$tmp/ic.txt" || fail "no R0 against the nameplate in the summary"
-head -n 1 "$tmp/i.csv" | grep -qx "time_s,winding_resistance_degC,winding_resistance_sd_K,magnet_flux_degC,magnet_flux_sd_K,voltage_reading,r0_error,psi0_error,voltage_offset_V,identifier_winding_degC,ident_status" ||
+head -n 1 "$tmp/i.csv" | grep -qx "time_s,winding_resistance_degC,winding_resistance_sd_K,magnet_flux_degC,magnet_flux_sd_K,voltage_reading,ident_status,r0_error,psi0_error,voltage_offset_V,identifier_winding_degC,identifier_status" ||
   fail "header: $(head -n 1 "$tmp/i.csv")"
 python3 - "$tmp/i.csv" "$tmp/e.csv" "$tmp/ic.csv" "$tmp/ec.csv" <<'PY' || fail "identify --model against estimate --log"
 import csv, math, sys

@@ -94,18 +94,20 @@ struct Options {
 };
 
 /// The columns of the daemon's CSV that `identify --model` writes, in this order: the fused
-/// estimate, then the DFRLS identifier's own winding (NaN unless it is tracking) and its status.
+/// estimate and its identification status, then the DFRLS identifier's own winding (NaN unless it
+/// is tracking) and its status.
 const std::vector<std::string> kFusedColumns{"time_s",
                                              "winding_resistance_degC",
                                              "winding_resistance_sd_K",
                                              "magnet_flux_degC",
                                              "magnet_flux_sd_K",
                                              "voltage_reading",
+                                             "ident_status",
                                              "r0_error",
                                              "psi0_error",
                                              "voltage_offset_V",
                                              "identifier_winding_degC",
-                                             "ident_status"};
+                                             "identifier_status"};
 
 /// A file in the temporary folder, removed when this goes out of scope.
 struct TemporaryFile {
