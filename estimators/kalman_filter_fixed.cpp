@@ -7,11 +7,11 @@
 namespace pumptherm::estimators::detail {
 namespace {
 
-/// Calls f(std::integral_constant<int, N>{}) when n is one of the fixed sizes N (4 to 11);
-/// false when it is not.
-template <int N = 4, class F>
+/// Calls f(std::integral_constant<int, N>{}) when n is one of the fixed sizes N (4 to 11, or the
+/// range the build chose: the top-level CMakeLists.txt); false when it is not.
+template <int N = PUMPTHERM_KALMAN_FIXED_FIRST, class F>
 bool WithFixedSize(Eigen::Index n, F&& f) {
-  if constexpr (N > 11) {
+  if constexpr (N > PUMPTHERM_KALMAN_FIXED_LAST) {
     return false;
   } else {
     if (n != N) return WithFixedSize<N + 1>(n, f);

@@ -120,7 +120,7 @@ TEST(KalmanFilter, IndefiniteInnovationCovarianceIsReportedNotThrown) {
 // form written out here in dynamic-size Eigen (an oracle cross-check), and against counts that
 // take the dynamic path (12 states, 4 measurements) for the same equations.
 TEST(KalmanFilter, FixedSizePathsMatchTheEquationsWrittenOut) {
-  for (const int n : {4, 5, 7, 9, 10, 11, 12}) {
+  for (const int n : {4, 5, 6, 7, 9, 10, 11, 12}) {
     for (const int m : {1, 2, 3, 4}) {
       std::mt19937_64 rng(11 + static_cast<unsigned>(n) * 7 + static_cast<unsigned>(m));
       std::normal_distribution<double> nd;
@@ -177,7 +177,7 @@ TEST(KalmanFilter, FixedSizePathsMatchTheEquationsWrittenOut) {
 // A non-positive innovation covariance on a fixed-size path (scalar, and Cholesky) is reported,
 // not used.
 TEST(KalmanFilter, FixedSizePathReportsANonPositiveInnovationCovariance) {
-  for (const auto& [n, m] : {std::pair{7, 1}, std::pair{10, 2}}) {
+  for (const auto& [n, m] : {std::pair{6, 1}, std::pair{6, 2}, std::pair{7, 1}, std::pair{10, 2}}) {
     pe::KalmanFilter kf(n);
     kf.Reset(Eigen::VectorXd::Ones(n), Eigen::MatrixXd::Zero(n, n));
     Eigen::MatrixXd c = Eigen::MatrixXd::Zero(m, n);
