@@ -308,7 +308,8 @@ std::string_view StartName(estimators::EstimateStart start) {
 
 }  // namespace
 
-JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e, bool calibrated) {
+JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e, bool calibrated,
+                        bool voltage) {
   JournalEntry j;
   j.fields.push_back({"PUMP", std::string(pump)});
   j.fields.push_back({"START", std::string(StartName(e.start))});
@@ -319,7 +320,12 @@ JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e
     what = fmt::format("estimate started {} (frame {:.1f} degC, ambient {:.1f} degC, {:.0f} r/min)",
                        StartName(e.start), e.frame_measured_degC, e.ambient_degC, e.speed_rpm);
   }
-  if (calibrated) {
+  const bool fresh_cold = e.start == estimators::EstimateStart::kCold && voltage;
+  if (calibrated && fresh_cold) {
+    what +=
+        ": this pump's psi0 is learnt in the run-up, its R0 at the first load change (the "
+        "winding from resistance waits for it)";
+  } else if (calibrated) {
     what += e.calibrated_at_cold_start
                 ? ": this pump's R0 and psi0 are learnt from a cold start"
                 : ": the magnet from the flux waits for a cold start (the pump at rest at the "
@@ -327,6 +333,19 @@ JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e
                   "nameplate flux's tolerance until then";
   }
   j.text = fmt::format("{}: {}", pump, what);
+  return j;
+}
+
+JournalEntry R0LearntEntry(std::string_view pump, const estimators::PumpEstimate& e,
+                           const estimators::CopperLaw& copper) {
+  JournalEntry j;
+  j.fields.push_back({"PUMP", std::string(pump)});
+  const auto& c = e.calibration;
+  j.text = fmt::format(
+      "{}: R0 learnt: {:.4f} ohm at {:.1f} degC, {:+.1f} % against the nameplate "
+      "(sd {:.1f} %); the winding from resistance is published from now ({:.1f} degC)",
+      pump, copper.r0_ohm * (1.0 + c.dr), copper.t0_degC, 100.0 * c.dr, 100.0 * c.dr_sd,
+      e.winding_resistance_degC);
   return j;
 }
 

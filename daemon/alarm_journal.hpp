@@ -73,8 +73,17 @@ JournalEntry DiagnosisEntry(std::string_view pump, const estimators::MismatchFin
 /// and psi0 are learnt in the run-up), warm (the readings that need them wait for a cold start)
 /// or restored (with the saved calibration, or the nameplate's), e.g. "pump3: estimate started
 /// warm (frame 45.0 degC, ambient 22.0 degC, 21000 r/min): ...". `calibrated` is false for a
-/// pump whose readings do not depend on a calibration (no magnet node): no clause about it.
-/// Fields: PUMP, START (cold, warm, restored).
-JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e, bool calibrated);
+/// pump whose readings do not depend on a calibration (no magnet node): no clause about it;
+/// `voltage` is whether the pump filter fuses the drive's voltage (R0 is then learnt at the first
+/// load change after a cold start). Fields: PUMP, START (cold, warm, restored).
+JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e, bool calibrated,
+                        bool voltage = false);
+
+/// The line for R0 learnt (notice; PumpEstimate::r0_learnt): the pump filter knows this pump's R0
+/// well enough now (load changes pinned it) and publishes the winding from resistance, e.g.
+/// "pump1: R0 learnt: 0.2857 ohm at 20.0 degC, +2.0 % against the nameplate
+/// (sd 0.5 %); the winding from resistance is published from now (52.3 degC)". Fields: PUMP.
+JournalEntry R0LearntEntry(std::string_view pump, const estimators::PumpEstimate& e,
+                           const estimators::CopperLaw& copper);
 
 }  // namespace pumptherm::daemon

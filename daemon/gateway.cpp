@@ -166,7 +166,8 @@ std::int64_t Gateway::PumpDueUs(std::size_t p) const {
   if (pump.snapshot().alarm_changes != io.alarm_changes_sent ||
       pump.snapshot().mismatch_changes != io.mismatch_changes_logged ||
       pump.snapshot().sensor_steps != io.sensor_steps_logged ||
-      pump.snapshot().starts != io.starts_logged) {
+      pump.snapshot().starts != io.starts_logged ||
+      pump.snapshot().r0_learnt != io.r0_learnt_logged) {
     return kDueNow;
   }
   for (const OutputPlan& plan : io.outputs) {
@@ -229,8 +230,13 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
   }
   if (pump.snapshot().starts != io.starts_logged) {
     io.starts_logged = pump.snapshot().starts;
-    const JournalEntry entry =
-        StartEntry(name, pump.snapshot(), !pump.config().magnet_node.empty());
+    const JournalEntry entry = StartEntry(name, pump.snapshot(), !pump.config().magnet_node.empty(),
+                                          pump.estimator().observer().TakesVoltage());
+    LogLine(entry.level, entry.text, entry.fields);
+  }
+  if (pump.snapshot().r0_learnt != io.r0_learnt_logged) {
+    io.r0_learnt_logged = pump.snapshot().r0_learnt;
+    const JournalEntry entry = R0LearntEntry(name, pump.snapshot(), pump.motor().copper);
     LogLine(entry.level, entry.text, entry.fields);
   }
   if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {

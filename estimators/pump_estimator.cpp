@@ -568,6 +568,9 @@ void PumpEstimator::PublishFusedIdentification(double winding_degC, double windi
                                                                : ResistanceStatus::kConverging;
   id.flux_status = std::isfinite(estimate_.magnet_flux_degC) ? ResistanceStatus::kTracking
                                                              : ResistanceStatus::kConverging;
+  if (id.status == ResistanceStatus::kTracking && fused_status_ == ResistanceStatus::kConverging)
+    ++estimate_.r0_learnt;
+  fused_status_ = id.status;
 }
 
 void PumpEstimator::NoteIdentifier(const ResistanceEstimate& resistance) {

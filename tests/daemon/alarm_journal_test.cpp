@@ -266,6 +266,12 @@ TEST_F(AlarmJournal, AStartSaysWhetherTheCalibrationCameFromAColdStart) {
   EXPECT_EQ(e.text,
             "pump1: estimate started cold (frame 22.0 degC, ambient 22.0 degC, 0 r/min): this "
             "pump's R0 and psi0 are learnt from a cold start");
+  // With the voltage fused, the run-up at a constant current learns psi0; R0 needs a load change.
+  e = StartEntry("pump1", s, true, true);
+  EXPECT_EQ(e.text,
+            "pump1: estimate started cold (frame 22.0 degC, ambient 22.0 degC, 0 r/min): this "
+            "pump's psi0 is learnt in the run-up, its R0 at the first load change (the winding "
+            "from resistance waits for it)");
 
   s.start = estimators::EstimateStart::kRestored;
   e = StartEntry("pump1", s, true);
@@ -273,6 +279,22 @@ TEST_F(AlarmJournal, AStartSaysWhetherTheCalibrationCameFromAColdStart) {
             "pump1: estimate restored from the saved state: this pump's R0 and psi0 are learnt "
             "from a cold start");
   EXPECT_EQ(Fields(e).at("START"), "restored");
+}
+
+TEST_F(AlarmJournal, R0LearntSaysTheResistanceAgainstTheNameplate) {
+  estimators::PumpEstimate s;
+  s.calibration.dr = 0.0203;
+  s.calibration.dr_sd = 0.0048;
+  s.winding_resistance_degC = 52.34;
+  estimators::CopperLaw cu;
+  cu.r0_ohm = 0.28;
+  cu.t0_degC = 20.0;
+  const JournalEntry e = R0LearntEntry("pump1", s, cu);
+  EXPECT_EQ(e.text,
+            "pump1: R0 learnt: 0.2857 ohm at 20.0 degC, +2.0 % against the nameplate (sd 0.5 %); "
+            "the winding from resistance is published from now (52.3 degC)");
+  EXPECT_EQ(e.level, LogLevel::kNotice);
+  EXPECT_EQ(Fields(e).at("PUMP"), "pump1");
 }
 
 TEST_F(AlarmJournal, DiagnosisSaysTheCauseFirstAndTheTestLast) {

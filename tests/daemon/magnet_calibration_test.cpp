@@ -295,6 +295,7 @@ TEST_F(MagnetCalibration, ThePublishedIdentificationIsTheFiltersAndALoadChangePi
         << flux_Wb;
     if (k < 660) {
       ASSERT_EQ(id.status, S::kConverging) << "t " << k << " s";
+      ASSERT_EQ(s.r0_learnt, 0u) << "t " << k << " s";
       ASSERT_TRUE(std::isnan(s.winding_resistance_degC)) << "t " << k << " s";
       ASSERT_EQ(s.resistance.status, S::kHeld) << "the identifier's own, t " << k << " s";
     } else if (k >= 720) {
@@ -303,6 +304,7 @@ TEST_F(MagnetCalibration, ThePublishedIdentificationIsTheFiltersAndALoadChangePi
     }
   }
   EXPECT_GT(tracking, 0.9 * judged) << "of " << judged << " periods after the first change";
+  EXPECT_EQ(pump.snapshot().r0_learnt, 1u) << "R0 learnt once: the journal says it once";
 }
 
 }  // namespace
