@@ -336,16 +336,25 @@ JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e
   return j;
 }
 
-JournalEntry R0LearntEntry(std::string_view pump, const estimators::PumpEstimate& e,
-                           const estimators::CopperLaw& copper) {
+JournalEntry R0Entry(std::string_view pump, const estimators::PumpEstimate& e,
+                     const estimators::CopperLaw& copper, double max_calibration_sd_K,
+                     double winding_degC) {
   JournalEntry j;
   j.fields.push_back({"PUMP", std::string(pump)});
   const auto& c = e.calibration;
-  j.text = fmt::format(
-      "{}: R0 learnt: {:.4f} ohm at {:.1f} degC, {:+.1f} % against the nameplate "
-      "(sd {:.1f} %); the winding from resistance is published from now ({:.1f} degC)",
-      pump, copper.r0_ohm * (1.0 + c.dr), copper.t0_degC, 100.0 * c.dr, 100.0 * c.dr_sd,
-      e.winding_resistance_degC);
+  if (e.identification.status == estimators::ResistanceStatus::kTracking) {
+    j.text = fmt::format(
+        "{}: R0 learnt: {:.4f} ohm at {:.1f} degC, {:+.1f} % against the nameplate (sd {:.1f} %); "
+        "the winding from resistance is published from now ({:.1f} degC)",
+        pump, copper.r0_ohm * (1.0 + c.dr), copper.t0_degC, 100.0 * c.dr, 100.0 * c.dr_sd,
+        e.winding_resistance_degC);
+  } else {
+    // R = R0 (1 + dR)(1 + alpha (Tw - T0)): R0's relative sd is more kelvin in a warmer winding.
+    j.text = fmt::format(
+        "{}: R0's sd ({:.1f} %) grew past {:.1f} K of winding at {:.1f} degC: the winding from "
+        "resistance is withheld until a load change pins R0 again",
+        pump, 100.0 * c.dr_sd, max_calibration_sd_K, winding_degC);
+  }
   return j;
 }
 

@@ -79,11 +79,15 @@ JournalEntry DiagnosisEntry(std::string_view pump, const estimators::MismatchFin
 JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e, bool calibrated,
                         bool voltage = false);
 
-/// The line for R0 learnt (notice; PumpEstimate::r0_learnt): the pump filter knows this pump's R0
-/// well enough now (load changes pinned it) and publishes the winding from resistance, e.g.
-/// "pump1: R0 learnt: 0.2857 ohm at 20.0 degC, +2.0 % against the nameplate
-/// (sd 0.5 %); the winding from resistance is published from now (52.3 degC)". Fields: PUMP.
-JournalEntry R0LearntEntry(std::string_view pump, const estimators::PumpEstimate& e,
-                           const estimators::CopperLaw& copper);
+/// The line for a change of R0's calibration (notice; PumpEstimate::r0_changes). Learnt (the
+/// identification `tracking`: load changes pinned R0, the winding from resistance is published),
+/// e.g. "pump1: R0 learnt: 0.2857 ohm at 20.0 degC, +2.0 % against the nameplate (sd 0.5 %); the
+/// winding from resistance is published from now (52.3 degC)"; or R0's sd grew past
+/// `max_calibration_sd_K` of winding at the filter's `winding_degC` (`converging` again: the same
+/// relative sd is more kelvin in a warmer winding): the winding from resistance is withheld.
+/// Fields: PUMP.
+JournalEntry R0Entry(std::string_view pump, const estimators::PumpEstimate& e,
+                     const estimators::CopperLaw& copper, double max_calibration_sd_K,
+                     double winding_degC);
 
 }  // namespace pumptherm::daemon

@@ -167,7 +167,7 @@ std::int64_t Gateway::PumpDueUs(std::size_t p) const {
       pump.snapshot().mismatch_changes != io.mismatch_changes_logged ||
       pump.snapshot().sensor_steps != io.sensor_steps_logged ||
       pump.snapshot().starts != io.starts_logged ||
-      pump.snapshot().r0_learnt != io.r0_learnt_logged) {
+      pump.snapshot().r0_changes != io.r0_changes_logged) {
     return kDueNow;
   }
   for (const OutputPlan& plan : io.outputs) {
@@ -234,9 +234,11 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
                                           pump.estimator().observer().TakesVoltage());
     LogLine(entry.level, entry.text, entry.fields);
   }
-  if (pump.snapshot().r0_learnt != io.r0_learnt_logged) {
-    io.r0_learnt_logged = pump.snapshot().r0_learnt;
-    const JournalEntry entry = R0LearntEntry(name, pump.snapshot(), pump.motor().copper);
+  if (pump.snapshot().r0_changes != io.r0_changes_logged) {
+    io.r0_changes_logged = pump.snapshot().r0_changes;
+    const JournalEntry entry = R0Entry(
+        name, pump.snapshot(), pump.motor().copper, pump.estimator().config().max_calibration_sd_K,
+        pump.estimator().observer().Weighted_degC(pump.model().WindingWeights()));
     LogLine(entry.level, entry.text, entry.fields);
   }
   if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {

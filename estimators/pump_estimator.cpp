@@ -568,8 +568,13 @@ void PumpEstimator::PublishFusedIdentification(double winding_degC, double windi
                                                                : ResistanceStatus::kConverging;
   id.flux_status = std::isfinite(estimate_.magnet_flux_degC) ? ResistanceStatus::kTracking
                                                              : ResistanceStatus::kConverging;
-  if (id.status == ResistanceStatus::kTracking && fused_status_ == ResistanceStatus::kConverging)
-    ++estimate_.r0_learnt;
+  // Not yet calibrated, each is left out, as the temperature it gives: R0 or psi0 still near the
+  // nameplate's tolerance, the value would wander from the truth by more than its sd says.
+  if (id.status != ResistanceStatus::kTracking) id.resistance_ohm = id.resistance_sd_ohm = kNaN;
+  if (id.flux_status != ResistanceStatus::kTracking) id.flux_Wb = id.flux_sd_Wb = kNaN;
+  if (fused_status_ != id.status && (fused_status_ == ResistanceStatus::kConverging ||
+                                     fused_status_ == ResistanceStatus::kTracking))
+    ++estimate_.r0_changes;
   fused_status_ = id.status;
 }
 

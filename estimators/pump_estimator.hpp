@@ -168,10 +168,10 @@ struct PumpEstimate {
   /// start, in this run or the restored one's (docs/virtual-sensor.md).
   bool calibrated_at_cold_start = false;
   std::uint64_t starts = 0;  ///< increments at every start, restart after a reset, or restore
-  /// Increments when the identification turns from `converging` to `tracking` with the voltage
-  /// fused: R0 became known to max_calibration_sd_K (a load change pinned it) and the winding
-  /// from resistance is published from then on.
-  std::uint64_t r0_learnt = 0;
+  /// Increments when the fused identification turns from `converging` to `tracking` (R0 became
+  /// known to max_calibration_sd_K: a load change pinned it, and the winding from resistance is
+  /// published from then on) or back (R0's sd, as a winding temperature, grew past it again).
+  std::uint64_t r0_changes = 0;
 };
 
 /// Counters of what the estimator refused (never silent).
@@ -330,7 +330,7 @@ class PumpEstimator {
   /// failed (invalid otherwise): fused and published instead of the identifier's line.
   VoltageMagnet held_magnet_;
   std::int64_t voltage_fused_us_ = -1;  ///< the last step that fused the voltage
-  /// The last of `converging` and `tracking` the fused identification had (r0_learnt).
+  /// The last of `converging` and `tracking` the fused identification had (r0_changes).
   ResistanceStatus fused_status_ = ResistanceStatus::kInitialising;
   MismatchDetector mismatch_;
   AlarmMonitor alarms_;

@@ -281,20 +281,28 @@ TEST_F(AlarmJournal, AStartSaysWhetherTheCalibrationCameFromAColdStart) {
   EXPECT_EQ(Fields(e).at("START"), "restored");
 }
 
-TEST_F(AlarmJournal, R0LearntSaysTheResistanceAgainstTheNameplate) {
+TEST_F(AlarmJournal, R0LinesSayTheResistanceLearntOrLostAgain) {
   estimators::PumpEstimate s;
   s.calibration.dr = 0.0203;
   s.calibration.dr_sd = 0.0048;
   s.winding_resistance_degC = 52.34;
+  s.identification.status = estimators::ResistanceStatus::kTracking;
   estimators::CopperLaw cu;
   cu.r0_ohm = 0.28;
   cu.t0_degC = 20.0;
-  const JournalEntry e = R0LearntEntry("pump1", s, cu);
+  cu.alpha_per_K = 0.0039;
+  JournalEntry e = R0Entry("pump1", s, cu, 3.0, 52.34);
   EXPECT_EQ(e.text,
             "pump1: R0 learnt: 0.2857 ohm at 20.0 degC, +2.0 % against the nameplate (sd 0.5 %); "
             "the winding from resistance is published from now (52.3 degC)");
   EXPECT_EQ(e.level, LogLevel::kNotice);
   EXPECT_EQ(Fields(e).at("PUMP"), "pump1");
+  s.identification.status = estimators::ResistanceStatus::kConverging;
+  s.calibration.dr_sd = 0.0112;
+  e = R0Entry("pump1", s, cu, 3.0, 71.24);
+  EXPECT_EQ(e.text,
+            "pump1: R0's sd (1.1 %) grew past 3.0 K of winding at 71.2 degC: the winding from "
+            "resistance is withheld until a load change pins R0 again");
 }
 
 TEST_F(AlarmJournal, DiagnosisSaysTheCauseFirstAndTheTestLast) {
