@@ -377,8 +377,8 @@ bool PumpEstimator::Step(const PumpPeriod& p) {
   frame_.Prepare(static_cast<double>(p.end_us) * 1e-6, link_silent);
   last_inputs_ = p.inputs;
   estimate_.resistance = p.identifier.estimate;
-  estimate_.identification =
-      observer_->TakesVoltage() ? PublishedIdentification{} : IdentifiedBy(estimate_.resistance);
+  // The identifier's until the filter's is current (PublishFromVoltage).
+  estimate_.identification = IdentifiedBy(estimate_.resistance);
   if (!StartIfNeeded(p)) {
     StepWithoutEstimate(p);
     return estimate_.alarm_changes != before;
@@ -502,15 +502,14 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
   PumpEstimate& e = estimate_;
   e.winding_resistance_degC = e.winding_resistance_sd_K = kNaN;
   e.magnet_flux_degC = e.magnet_flux_sd_K = kNaN;
-  e.identification = {};
+  // Without a fresh voltage (a silent drive) nothing of the filter's is current: the identifier's
+  // view stays published (its held value flagged `held`), as while the frame sensor has failed.
+  e.identification = IdentifiedBy(e.resistance);
   if (!e.initialised) return;
   const bool fresh =
       voltage_fused_us_ >= 0 &&
       static_cast<double>(p.end_us - voltage_fused_us_) * 1e-6 <= config_.alarms.stale_after_s;
-  if (!fresh) {
-    e.identification.status = e.identification.flux_status = ResistanceStatus::kInvalidInput;
-    return;
-  }
+  if (!fresh) return;
   // A model without winding weights has no winding from resistance (NaN), the flux still.
   const Eigen::VectorXd& w = model_.WindingWeights();
   const bool has_winding = w.sum() > 0.0;
@@ -544,6 +543,7 @@ void PumpEstimator::PublishFusedTemperatures(double winding_degC, double winding
 
 void PumpEstimator::PublishFusedIdentification(double winding_degC, double winding_var_K2) {
   PublishedIdentification& id = estimate_.identification;
+  id = {};
   const ThermalObserver::Calibration& c = estimate_.calibration;
   using Entry = ThermalObserver::CalibrationEntry;
   // Rs = R0 (1 + dr)(1 + alpha (Tw - T0)) (Han 2019 eq. 2) at the filter's winding.
@@ -580,7 +580,7 @@ void PumpEstimator::PublishFusedIdentification(double winding_degC, double windi
 
 void PumpEstimator::NoteIdentifier(const ResistanceEstimate& resistance) {
   estimate_.resistance = resistance;
-  if (!observer_->TakesVoltage()) estimate_.identification = IdentifiedBy(resistance);
+  estimate_.identification = IdentifiedBy(resistance);
 }
 
 void PumpEstimator::StepBounds(const PumpPeriod& p, bool diverged) {

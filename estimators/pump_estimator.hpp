@@ -95,8 +95,9 @@ struct PumpEstimatorConfig {
 /// psi_f = psi0 (1 + dpsi)(1 + beta (Tm - T0)) at its magnet, with sds to first order;
 /// `tracking` while the winding from resistance is published, `converging` while R0 is not yet
 /// known to max_calibration_sd_K (a start with the current constant cannot tell R0 from the
-/// inverter's offset: a load change pins it), `invalid_input` while the voltage is stale. Without
-/// the voltage reading, the identifier's (Han 2019's DFRLS). NaN: not identified.
+/// inverter's offset: a load change pins it). Without the voltage reading, while the voltage is
+/// stale or the frame sensor has failed, and before the first step after a restart: the
+/// identifier's (Han 2019's DFRLS; its held value flagged `held`). NaN: not identified.
 struct PublishedIdentification {
   double resistance_ohm = std::numeric_limits<double>::quiet_NaN();
   double resistance_sd_ohm = std::numeric_limits<double>::quiet_NaN();
