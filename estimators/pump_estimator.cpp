@@ -463,7 +463,6 @@ void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& r
   if (observer_->TakesVoltage() && frame_.fault() == SensorFault::kNone) {
     PublishFromVoltage(p);
   } else {
-    estimate_.identification = IdentifiedBy(estimate_.resistance);
     estimate_.winding_resistance_degC = winding_.degC();
     estimate_.winding_resistance_sd_K = winding_.sd_K();
     estimate_.magnet_flux_degC = estimate_.magnet_flux_sd_K = kNaN;
@@ -503,8 +502,7 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
   e.winding_resistance_degC = e.winding_resistance_sd_K = kNaN;
   e.magnet_flux_degC = e.magnet_flux_sd_K = kNaN;
   // Without a fresh voltage (a silent drive) nothing of the filter's is current: the identifier's
-  // view stays published (its held value flagged `held`), as while the frame sensor has failed.
-  e.identification = IdentifiedBy(e.resistance);
+  // view, set at the step's start, stays published (its held value flagged `held`).
   if (!e.initialised) return;
   const bool fresh =
       voltage_fused_us_ >= 0 &&
