@@ -38,20 +38,25 @@ std::string VoltageMagnetNode(const PumpEstimatorConfig& c, const ThermalModel& 
   return model.StateIndex(rotor) >= 0 ? rotor : std::string();
 }
 
-/// The identifier's identification as published: its values once it has a line fitted to data
-/// (not the nameplate, not from invalid input).
+/// The identifier's identification as published: its status always, each value only while the
+/// identifier tracks it. A held Rs is the winding's resistance at the hold, and the winding
+/// warms on; a converging or held line's flux carries the inverter's offset, which its sd does
+/// not count: neither lies within its sd of the truth for long, so neither is published (as the
+/// filter's, PublishFusedIdentification).
 PublishedIdentification IdentifiedBy(const ResistanceEstimate& r) {
   PublishedIdentification id;
   id.status = r.status;
   // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
   id.flux_status =
       r.status == ResistanceStatus::kNotIdentifiable ? ResistanceStatus::kTracking : r.status;
-  if (r.status == ResistanceStatus::kInitialising || r.status == ResistanceStatus::kInvalidInput)
-    return id;
-  id.resistance_ohm = r.resistance_ohm;
-  id.resistance_sd_ohm = r.resistance_sigma_ohm;
-  id.flux_Wb = r.flux_Wb;
-  id.flux_sd_Wb = r.flux_sd_Wb;
+  if (id.status == ResistanceStatus::kTracking) {
+    id.resistance_ohm = r.resistance_ohm;
+    id.resistance_sd_ohm = r.resistance_sigma_ohm;
+  }
+  if (id.flux_status == ResistanceStatus::kTracking) {
+    id.flux_Wb = r.flux_Wb;
+    id.flux_sd_Wb = r.flux_sd_Wb;
+  }
   return id;
 }
 

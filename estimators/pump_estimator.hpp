@@ -97,7 +97,8 @@ struct PumpEstimatorConfig {
 /// known to max_calibration_sd_K (a start with the current constant cannot tell R0 from the
 /// inverter's offset: a load change pins it). Without the voltage reading, while the voltage is
 /// stale or the frame sensor has failed, and before the first step after a restart: the
-/// identifier's (Han 2019's DFRLS; its held value flagged `held`). NaN: not identified.
+/// identifier's (Han 2019's DFRLS), its values only while it tracks them (a held or converging
+/// line's status is published, its values are not). NaN: not identified.
 struct PublishedIdentification {
   double resistance_ohm = std::numeric_limits<double>::quiet_NaN();
   double resistance_sd_ohm = std::numeric_limits<double>::quiet_NaN();
