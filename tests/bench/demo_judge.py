@@ -7,13 +7,14 @@ Runs `pumptherm plant demo` (unless --reuse), the gateway offline on its recordi
     which the truth lies within estimate +- 2 sd (coverage);
   - the same for the winding temperature from resistance (against the truth's winding_resistance_degC)
     and, when the CSV has it, the magnet temperature from the flux (against the truth of the
-    magnet node, by its sd);
+    magnet node, by its sd), and for the published identification, Rs in milliohm and psi_f in
+    microweber (resistance_mohm, flux_uWb; its errors are in those units, not K);
   - the first warning and trip against the truth's first crossings (summary.json).
 Prints a table and writes judge.json into the output directory. Standard library only.
 With --check it exits 1 when a goal of the demo is missed (docs/virtual-sensor.md, "The demo
 judged node by node"): a node more than --max-error-K off or covered less than --min-coverage
 of the time, the winding from resistance published less than 80 % of the time or covered less
-than --min-coverage of it, or an alarm on a pump whose truth never crosses the level, or a warning or trip
+than --min-coverage of it, Rs or psi_f covered less than --min-coverage where published, or an alarm on a pump whose truth never crosses the level, or a warning or trip
 later than 30 s after (or earlier than 120 s before) the true crossing.
 
 Example:
@@ -162,6 +163,13 @@ def main():
         if "magnet_flux_degC" in est and a.magnet_node + "_degC" in truth:
             extra["magnet_from_flux"] = judge_series(et, est["magnet_flux_degC"], est["magnet_flux_sd_K"], tt,
                                                      truth[a.magnet_node + "_degC"], a.skip_s)
+        # The published identification where it is published (the DFRLS identifier publishes its
+        # values only while it tracks them): milliohm and microweber, so two decimals show it.
+        for col, sd_col, scale, key in (("resistance_ohm", "resistance_sd_ohm", 1e3, "resistance_mohm"),
+                                        ("flux_Wb", "flux_sd_Wb", 1e6, "flux_uWb")):
+            if col in est and sd_col in est and col in truth:
+                extra[key] = judge_series(et, [v * scale for v in est[col]], [v * scale for v in est[sd_col]],
+                                          tt, [v * scale for v in truth[col]], a.skip_s)
         level = est.get("alarm_level", [])
         alarms = {"warning_s": first_at_or_above(et, level, 1.0), "trip_s": first_at_or_above(et, level, 2.0),
                   "true_warning_s": p.get("warning_crossed_s"), "true_trip_s": p.get("trip_crossed_s")}
@@ -228,6 +236,12 @@ def Missed(report, max_error_K, min_coverage, node_max_error_K=None, resistance_
                 out.append(f"{p['name']} winding from resistance: available {w and w['available']} < 0.8")
             elif w["coverage_2sd"] is None or w["coverage_2sd"] < min_coverage:
                 out.append(f"{p['name']} winding from resistance: coverage {w['coverage_2sd']} < {min_coverage}")
+        # Rs and psi_f as published: honest wherever they are published, how often is not a goal.
+        for key in ("resistance_mohm", "flux_uWb"):
+            v = p["extra"].get(key)
+            if v and v["samples"] and v["coverage_2sd"] < min_coverage:
+                out.append(f"{p['name']} {key}: coverage {v['coverage_2sd']} < {min_coverage} "
+                           f"where published ({v['samples']} rows)")
         al = p["alarms"]
         for level in ("warning", "trip"):
             got, truth = al[level + "_s"], al["true_" + level + "_s"]
