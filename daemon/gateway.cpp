@@ -167,7 +167,8 @@ std::int64_t Gateway::PumpDueUs(std::size_t p) const {
       pump.snapshot().mismatch_changes != io.mismatch_changes_logged ||
       pump.snapshot().sensor_steps != io.sensor_steps_logged ||
       pump.snapshot().starts != io.starts_logged ||
-      pump.snapshot().r0_changes != io.r0_changes_logged) {
+      pump.snapshot().r0_changes != io.r0_changes_logged ||
+      pump.snapshot().magnet_law_changes != io.magnet_law_logged) {
     return kDueNow;
   }
   for (const OutputPlan& plan : io.outputs) {
@@ -239,6 +240,12 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
     const JournalEntry entry = R0Entry(
         name, pump.snapshot(), pump.motor().copper, pump.estimator().config().max_calibration_sd_K,
         pump.estimator().observer().Weighted_degC(pump.model().WindingWeights()));
+    LogLine(entry.level, entry.text, entry.fields);
+  }
+  if (pump.snapshot().magnet_law_changes != io.magnet_law_logged) {
+    io.magnet_law_logged = pump.snapshot().magnet_law_changes;
+    const JournalEntry entry = MagnetLawEntry(
+        name, pump.snapshot(), pump.motor().magnet.flux_temperature_coefficient_per_K);
     LogLine(entry.level, entry.text, entry.fields);
   }
   if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {

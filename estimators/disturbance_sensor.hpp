@@ -196,7 +196,13 @@ class DisturbanceThermalSensor : public ThermalObserver {
   void AddFoundHeat(ThermalLinearModel& lin) const override;
   bool ModelsSensorLag() const override { return sensor_model_.has_lag(); }
   double FrameHeat_W() const { return filter_.State()(df_); }
-  double RotorHeat_W() const { return dr_ >= 0 ? filter_.State()(dr_) : 0.0; }
+  double RotorHeat_W() const override {
+    return dr_ >= 0 ? filter_.State()(dr_) : std::numeric_limits<double>::quiet_NaN();
+  }
+  double RotorHeatSd_W() const override {
+    return dr_ >= 0 ? std::sqrt(std::max(filter_.Covariance()(dr_, dr_), 0.0))
+                    : std::numeric_limits<double>::quiet_NaN();
+  }
   bool EstimatesSensorOffset() const override { return true; }
   double SensorOffset_K() const override { return filter_.State()(sensor_model_.offset()); }
   double SensorOffsetSd_K() const override {

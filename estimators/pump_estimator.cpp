@@ -403,6 +403,7 @@ bool PumpEstimator::Step(const PumpPeriod& p) {
   CheckModel(p, frame_.offered_degC());
   const bool diverged = Diverged();
   PublishNodes(diverged);
+  MagnetLawCheck(p.dt_s);
   PublishReadings(p, report);
   StepBounds(p, diverged);
   StepAlarms(p, diverged);
@@ -479,6 +480,7 @@ void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& r
       magnet_.Publish(*observer_, estimate_.magnet_flux_degC, estimate_.magnet_flux_sd_K);
     }
   }
+  if (estimate_.magnet_law_suspect) estimate_.magnet_flux_degC = estimate_.magnet_flux_sd_K = kNaN;
   estimate_.frame_measured_degC = frame_.offered_degC();
   estimate_.sensor_fault = frame_.fault();
   estimate_.ambient_degC = p.inputs.ambient_degC;
@@ -491,6 +493,28 @@ void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& r
   estimate_.sensor_steps = static_cast<std::uint64_t>(observer_->SensorSteps());
   estimate_.last_sensor_step_K = observer_->LastSensorStep_K();
   estimate_.stepped_offset_K = observer_->SteppedOffset_K();
+}
+
+void PumpEstimator::MagnetLawCheck(double dt_s) {
+  const double heat_W = observer_->RotorHeat_W();
+  const double sd_W = observer_->RotorHeatSd_W();
+  estimate_.rotor_heat_W = heat_W;
+  estimate_.rotor_heat_sd_W = sd_W;
+  // Heat the model lacks warms the rotor; nothing inside a pump in vacuum cools it by watts
+  // the model does not have. A rotor the magnet reads colder than that is a magnet whose flux
+  // falls less per kelvin than the motor file says: each kelvin it warms reads as less.
+  // Beyond rotor_heat_found_sds of its prior sd, d_r's variance is held at (d_r / that)^2 by
+  // design: a heat that large is beyond doubt without counting its sds.
+  const DisturbanceSensorConfig& d = config_.disturbance;
+  const bool beyond = heat_W < -config_.magnet_law_sds * sd_W ||
+                      heat_W < -d.rotor_heat_found_sds * d.rotor_heat_sd_W;
+  const bool colder = observer_->TakesVoltage() && frame_.fault() == SensorFault::kNone &&
+                      heat_W < -config_.magnet_law_heat_W && beyond;
+  magnet_colder_s_ = colder ? magnet_colder_s_ + dt_s : 0.0;
+  if (!estimate_.magnet_law_suspect && magnet_colder_s_ >= config_.magnet_law_after_s) {
+    estimate_.magnet_law_suspect = true;
+    ++estimate_.magnet_law_changes;
+  }
 }
 
 void PumpEstimator::PublishHeldMagnet() {

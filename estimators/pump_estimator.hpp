@@ -87,6 +87,13 @@ struct PumpEstimatorConfig {
   /// The inside-heat bound (InsideHeatBound, estimators/alarm_bounds.hpp) with the
   /// disturbance-state filter; off only to measure what it does.
   bool inside_heat_bound = true;
+  /// The magnet law check (MagnetLawCheck): with the voltage fused, a rotor heat below
+  /// -magnet_law_heat_W and below -magnet_law_sds of its sd (or beyond the disturbance filter's
+  /// found-heat limit, where its sd is held wide by design) for magnet_law_after_s running says
+  /// the magnet from the flux reads the rotor colder than any heat can make it.
+  double magnet_law_heat_W = 3.0;
+  double magnet_law_sds = 3.0;
+  double magnet_law_after_s = 300.0;
 };
 
 /// The identification the gateway publishes as Rs, psi_f and their status (CAN GW_IDENT, LCM,
@@ -174,6 +181,16 @@ struct PumpEstimate {
   /// known to max_calibration_sd_K: a load change pinned it, and the winding from resistance is
   /// published from then on) or back (R0's sd, as a winding temperature, grew past it again).
   std::uint64_t r0_changes = 0;
+  /// The heat inside the rotor the filter finds beyond the model's, W, and its sd (NaN without
+  /// the disturbance states).
+  double rotor_heat_W = std::numeric_limits<double>::quiet_NaN();
+  double rotor_heat_sd_W = std::numeric_limits<double>::quiet_NaN();
+  /// With the voltage fused, the filter has needed a negative rotor heat beyond its sd for
+  /// magnet_law_after_s: the magnet from the flux reads the rotor colder than the model lets it
+  /// be, as a motor file's magnet law steeper than the magnet's does (NdFeB's -0.1 %/K on a
+  /// SmCo magnet). From then on, for this run, no magnet from the flux is published.
+  bool magnet_law_suspect = false;
+  std::uint64_t magnet_law_changes = 0;  ///< increments when magnet_law_suspect is set
 };
 
 /// Counters of what the estimator refused (never silent).
@@ -298,6 +315,8 @@ class PumpEstimator {
   void PublishFusedTemperatures(double winding_degC, double winding_var_K2);
   void PublishFusedIdentification(double winding_degC, double winding_var_K2);
   void PublishHeldMagnet();
+  /// Runs the magnet law check over a period of `dt_s` (PumpEstimatorConfig::magnet_law_*).
+  void MagnetLawCheck(double dt_s);
   /// The bounds the levels act on, the alarm values and the published sds.
   void StepBounds(const PumpPeriod& period, bool diverged);
   /// The observer's frame-path heat, W (NaN: not the disturbance-state filter).
@@ -334,6 +353,7 @@ class PumpEstimator {
   std::int64_t voltage_fused_us_ = -1;  ///< the last step that fused the voltage
   /// The last of `converging` and `tracking` the fused identification had (r0_changes).
   ResistanceStatus fused_status_ = ResistanceStatus::kInitialising;
+  double magnet_colder_s_ = 0.0;  ///< how long the magnet law check has run negative
   MismatchDetector mismatch_;
   AlarmMonitor alarms_;
   AlarmValues values_;

@@ -169,6 +169,11 @@ class ThermalObserver {
     return std::numeric_limits<double>::quiet_NaN();
   }
 
+  /// The heat inside the rotor the filter finds beyond the model's, W, and its sd (NaN for a
+  /// filter without such a state).
+  virtual double RotorHeat_W() const { return std::numeric_limits<double>::quiet_NaN(); }
+  virtual double RotorHeatSd_W() const { return std::numeric_limits<double>::quiet_NaN(); }
+
   /// Whether the filter takes the drive's q-axis voltage as a reading (ThermalReadings::uq_V).
   virtual bool TakesVoltage() const { return false; }
   /// Its calibration as estimated: the relative errors of R0 and psi0 and the voltage offset

@@ -305,6 +305,23 @@ TEST_F(AlarmJournal, R0LinesSayTheResistanceLearntOrLostAgain) {
             "resistance is withheld until a load change pins R0 again");
 }
 
+TEST_F(AlarmJournal, MagnetLawLineSaysWhatTheFilterNeedsAndWhatToSet) {
+  estimators::PumpEstimate s;
+  s.rotor_heat_W = -6.62;
+  s.rotor_heat_sd_W = 1.51;
+  const JournalEntry e = MagnetLawEntry("pump1", s, -0.001);
+  EXPECT_EQ(e.text,
+            "pump1: the magnet from the flux reads the rotor colder than any heat can make it "
+            "(the filter needs -6.6 W, sd 1.5 W, of rotor heat to follow it): the motor file's "
+            "magnet law (-0.100 %/K) is likely steeper than this magnet's (NdFeB about -0.09 to "
+            "-0.13 %/K, SmCo -0.03 to -0.05 %/K), and the rotor estimate is then too cold. The "
+            "magnet from the flux is no longer published in this run; set the magnet's "
+            "flux_temperature_coefficient_per_K in the motor file, or voltage_reading = false for "
+            "this pump");
+  EXPECT_EQ(e.level, LogLevel::kWarning);
+  EXPECT_EQ(Fields(e).at("PUMP"), "pump1");
+}
+
 TEST_F(AlarmJournal, DiagnosisSaysTheCauseFirstAndTheTestLast) {
   JournalEntry e = DiagnosisEntry("pump3", CoolingLost(), "frame", 0);
   EXPECT_EQ(e.text,

@@ -65,7 +65,7 @@ class MagnetCalibration : public ::testing::Test {
     // The inverter's dead time: the drive reports more voltage than the motor sees, along the
     // current (realistic-signals.md).
     const double dead_time_V = plant_voltage_error_V * std::tanh(in.iq_A / 0.5);
-    const double uq_V = pe::QAxisVoltage_V(law_, {in.iq_A, w}, at) +
+    const double uq_V = pe::QAxisVoltage_V(plant_law_, {in.iq_A, w}, at) +
                         pe::QAxisKnownTerms_V(motor_, 0.0, in.iq_A, w) + dead_time_V;
     const std::int64_t t_us = static_cast<std::int64_t>(k) * 1'000'000;
     for (int j = 10; j > 0; --j) {
@@ -79,6 +79,7 @@ class MagnetCalibration : public ::testing::Test {
 
   const pe::MotorDescription motor_ = pe::MotorPreset("han2019-tmp");
   const pe::VoltageLaw law_ = pe::VoltageLawOf(motor_);
+  pe::VoltageLaw plant_law_ = law_;  ///< the plant's own (its magnet's law may differ)
   const std::shared_ptr<const pe::ThermalModel> model_ = TmpGeneric();
   const int frame_ = model_->StateIndex("frame");
   const int winding_ = model_->StateIndex("winding");
@@ -349,6 +350,41 @@ TEST_F(MagnetCalibration, WithoutTheVoltageTheIdentifiersValuesArePublishedOnlyW
     }
   }
   EXPECT_GT(held, 300) << "the case this test is about: the identifier's line held";
+}
+
+// A motor file whose magnet law is steeper than the magnet's (the plant's flux falls 0.05 %/K,
+// the file says 0.1 %/K): the magnet from the flux reads the rotor colder than its losses let it
+// be, the filter needs a negative rotor heat to follow it, and the magnet law check says so and
+// stops publishing the magnet from the flux. With the file's own law it never does.
+TEST_F(MagnetCalibration, AMagnetLawSteeperThanTheMagnetsIsFoundAndItsMagnetLeftOut) {
+  plant_load_step_A = 0.5;
+  for (const double plant_law_scale : {1.0, 0.5}) {
+    SCOPED_TRACE(plant_law_scale);
+    pe::MotorDescription plant_motor = motor_;
+    plant_motor.magnet.flux_temperature_coefficient_per_K *= plant_law_scale;
+    plant_law_ = pe::VoltageLawOf(plant_motor);
+    x_degC.setConstant(22.0);
+    pd::Pump pump(Config(), motor_, model_, 1.0);
+    for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+    int found_s = -1;
+    for (int k = 4; k <= 1500; ++k) {
+      Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
+      const auto& s = pump.snapshot();
+      if (s.magnet_law_suspect && found_s < 0) found_s = k;
+      if (found_s >= 0) {
+        ASSERT_TRUE(std::isnan(s.magnet_flux_degC)) << "t " << k << " s";
+        ASSERT_EQ(s.magnet_law_changes, 1u) << "t " << k << " s";
+      }
+    }
+    const auto& s = pump.snapshot();
+    if (plant_law_scale == 1.0) {
+      EXPECT_EQ(found_s, -1) << "rotor heat " << s.rotor_heat_W << " W, sd " << s.rotor_heat_sd_W;
+      EXPECT_TRUE(std::isfinite(s.magnet_flux_degC));
+    } else {
+      EXPECT_GT(found_s, 0) << "rotor heat " << s.rotor_heat_W << " W, sd " << s.rotor_heat_sd_W;
+      EXPECT_LT(s.rotor_heat_W, -3.0);
+    }
+  }
 }
 
 }  // namespace
