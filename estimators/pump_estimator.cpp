@@ -531,7 +531,8 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
   e.winding_resistance_degC = e.winding_resistance_sd_K = kNaN;
   e.magnet_flux_degC = e.magnet_flux_sd_K = kNaN;
   // Without a fresh voltage (a silent drive) nothing of the filter's is current: the identifier's
-  // view, set at the step's start, stays published (its held value flagged `held`).
+  // identification, set at the step's start, stays published (IdentifiedBy: its status, and its
+  // values only while it tracks them).
   if (!e.initialised) return;
   const bool fresh =
       voltage_fused_us_ >= 0 &&
