@@ -92,9 +92,10 @@ JournalEntry R0Entry(std::string_view pump, const estimators::PumpEstimate& e,
 
 /// The line for the magnet law check (warning; PumpEstimate::magnet_law_suspect): the magnet from
 /// the flux reads the rotor colder than the model lets it be, e.g. "pump1: the magnet from the
-/// flux reads the rotor colder than any heat can make it (the filter needs -6.6 W, sd 1.5 W, of
-/// rotor heat to follow it): the motor file's magnet law (-0.100 %/K) is likely steeper than this
-/// magnet's ...". `law_per_K` is the motor file's flux temperature coefficient. Fields: PUMP.
+/// flux reads the rotor colder than the thermal model's rotor losses make it (the filter needs
+/// -6.6 W, sd 1.5 W, of rotor heat to follow it): either the motor file's magnet law (-0.100 %/K)
+/// is steeper than this magnet's ... or the thermal model's rotor losses are too high ...".
+/// `law_per_K` is the motor file's flux temperature coefficient. Fields: PUMP.
 JournalEntry MagnetLawEntry(std::string_view pump, const estimators::PumpEstimate& e,
                             double law_per_K);
 

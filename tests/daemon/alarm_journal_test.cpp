@@ -311,13 +311,14 @@ TEST_F(AlarmJournal, MagnetLawLineSaysWhatTheFilterNeedsAndWhatToSet) {
   s.rotor_heat_sd_W = 1.51;
   const JournalEntry e = MagnetLawEntry("pump1", s, -0.001);
   EXPECT_EQ(e.text,
-            "pump1: the magnet from the flux reads the rotor colder than any heat can make it "
-            "(the filter needs -6.6 W, sd 1.5 W, of rotor heat to follow it): the motor file's "
-            "magnet law (-0.100 %/K) is likely steeper than this magnet's (NdFeB about -0.09 to "
-            "-0.13 %/K, SmCo -0.03 to -0.05 %/K), and the rotor estimate is then too cold. The "
-            "magnet from the flux is no longer published in this run; set the magnet's "
-            "flux_temperature_coefficient_per_K in the motor file, or voltage_reading = false for "
-            "this pump");
+            "pump1: the magnet from the flux reads the rotor colder than the thermal model's "
+            "rotor losses make it (the filter needs -6.6 W, sd 1.5 W, of rotor heat to follow "
+            "it): either the motor file's magnet law (-0.100 %/K) is steeper than this magnet's "
+            "(NdFeB about -0.09 to -0.13 %/K, SmCo -0.03 to -0.05 %/K), and the rotor estimate "
+            "is then too cold, or the thermal model's rotor losses are too high. The magnet from "
+            "the flux is no longer published in this run; check the magnet's "
+            "flux_temperature_coefficient_per_K in the motor file and the rotor's losses in the "
+            "thermal model, or set voltage_reading = false for this pump");
   EXPECT_EQ(e.level, LogLevel::kWarning);
   EXPECT_EQ(Fields(e).at("PUMP"), "pump1");
 }
