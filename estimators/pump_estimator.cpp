@@ -38,25 +38,17 @@ std::string VoltageMagnetNode(const PumpEstimatorConfig& c, const ThermalModel& 
   return model.StateIndex(rotor) >= 0 ? rotor : std::string();
 }
 
-/// The identifier's identification as published: its status always, each value only while the
-/// identifier tracks it. A held Rs is the winding's resistance at the hold, and the winding
-/// warms on; a converging or held line's flux carries the inverter's offset, which its sd does
-/// not count: neither lies within its sd of the truth for long, so neither is published (as the
-/// filter's, PublishFusedIdentification).
+/// The identifier's identification as published: its status, no values. A held Rs is the
+/// winding's resistance at the hold, and the winding warms on; a converging or held line's flux
+/// carries the inverter's offset, which its sd does not count; and while it tracks, its Rs can
+/// still lie outside its +-2 sd most of the time (a warming magnet, the inverter's error) and its
+/// flux always: they are a diagnostic (the CSV's identifier columns), not the identification.
 PublishedIdentification IdentifiedBy(const ResistanceEstimate& r) {
   PublishedIdentification id;
   id.status = r.status;
   // While Rs cannot be told apart from psi_f, Rs is held and the flux is still tracked.
   id.flux_status =
       r.status == ResistanceStatus::kNotIdentifiable ? ResistanceStatus::kTracking : r.status;
-  if (id.status == ResistanceStatus::kTracking) {
-    id.resistance_ohm = r.resistance_ohm;
-    id.resistance_sd_ohm = r.resistance_sigma_ohm;
-  }
-  if (id.flux_status == ResistanceStatus::kTracking) {
-    id.flux_Wb = r.flux_Wb;
-    id.flux_sd_Wb = r.flux_sd_Wb;
-  }
   return id;
 }
 
@@ -469,8 +461,10 @@ void PumpEstimator::PublishReadings(const PumpPeriod& p, const ObserverReport& r
   if (observer_->TakesVoltage() && frame_.fault() == SensorFault::kNone) {
     PublishFromVoltage(p);
   } else {
-    estimate_.winding_resistance_degC = winding_.degC();
-    estimate_.winding_resistance_sd_K = winding_.sd_K();
+    // The identifier's own winding temperature takes the nameplate's R0, and its Rs while it
+    // tracks can be off by several of its sds as the magnet warms: a diagnostic only (the CSV's
+    // identifier_winding_degC), never the published winding from resistance.
+    estimate_.winding_resistance_degC = estimate_.winding_resistance_sd_K = kNaN;
     estimate_.magnet_flux_degC = estimate_.magnet_flux_sd_K = kNaN;
     // With the voltage taken, the line (the nameplate's flux) is never published: a period
     // without the held magnet (a load change inside it) publishes none.
@@ -531,8 +525,7 @@ void PumpEstimator::PublishFromVoltage(const PumpPeriod& p) {
   e.winding_resistance_degC = e.winding_resistance_sd_K = kNaN;
   e.magnet_flux_degC = e.magnet_flux_sd_K = kNaN;
   // Without a fresh voltage (a silent drive) nothing of the filter's is current: the identifier's
-  // identification, set at the step's start, stays published (IdentifiedBy: its status, and its
-  // values only while it tracks them).
+  // identification, set at the step's start, stays published (IdentifiedBy: its status alone).
   if (!e.initialised) return;
   const bool fresh =
       voltage_fused_us_ >= 0 &&

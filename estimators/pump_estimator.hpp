@@ -105,8 +105,8 @@ struct PumpEstimatorConfig {
 /// known to max_calibration_sd_K (a start with the current constant cannot tell R0 from the
 /// inverter's offset: a load change pins it). Without the voltage reading, while the voltage is
 /// stale or the frame sensor has failed, and before the first step after a restart: the
-/// identifier's (Han 2019's DFRLS), its values only while it tracks them (a held or converging
-/// line's status is published, its values are not). NaN: not identified.
+/// identifier's (Han 2019's DFRLS) status, and no values (they are not within their sds of the
+/// truth, even while it tracks). NaN: not identified.
 struct PublishedIdentification {
   double resistance_ohm = std::numeric_limits<double>::quiet_NaN();
   double resistance_sd_ohm = std::numeric_limits<double>::quiet_NaN();
@@ -137,7 +137,7 @@ struct PumpEstimate {
   PublishedIdentification identification;  ///< what is published as Rs and psi_f
   /// The winding temperature the resistance reflects (the model's winding weights) and its sd:
   /// with the drive's voltage as a reading, the observer's (fresh voltage, R0 known to
-  /// max_calibration_sd_K); else the identifier's while it tracks. NaN otherwise.
+  /// max_calibration_sd_K). NaN otherwise (the identifier's own is identifier_winding_degC).
   double winding_resistance_degC = std::numeric_limits<double>::quiet_NaN();
   double winding_resistance_sd_K = std::numeric_limits<double>::quiet_NaN();
   /// The magnet's temperature from its flux and its sd: with the voltage reading, the

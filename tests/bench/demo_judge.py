@@ -163,8 +163,8 @@ def main():
         if "magnet_flux_degC" in est and a.magnet_node + "_degC" in truth:
             extra["magnet_from_flux"] = judge_series(et, est["magnet_flux_degC"], est["magnet_flux_sd_K"], tt,
                                                      truth[a.magnet_node + "_degC"], a.skip_s)
-        # The published identification where it is published (the DFRLS identifier publishes its
-        # values only while it tracks them): milliohm and microweber, so two decimals show it.
+        # The published identification where it is published (the fused filter's; the DFRLS
+        # identifier's status carries none): milliohm and microweber, so two decimals show it.
         for col, sd_col, scale, key in (("resistance_ohm", "resistance_sd_ohm", 1e3, "resistance_mohm"),
                                         ("flux_Wb", "flux_sd_Wb", 1e6, "flux_uWb")):
             if col in est and sd_col in est and col in truth:

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <string>
 
@@ -74,7 +75,8 @@ class MagnetCalibration : public ::testing::Test {
       pump.OnCurrents(t, 0.0, in.iq_A, w, 3.0);
       pump.OnVoltages(t + 1'000, -0.01, uq_V, 3.0);
     }
-    pump.OnStatus(t_us - 10'000, speed_rpm, 2.0, std::round(10.0 * x_degC(frame_)) / 10.0, 22.0);
+    const double frame_degC = std::isfinite(frame_stuck_degC) ? frame_stuck_degC : x_degC(frame_);
+    pump.OnStatus(t_us - 10'000, speed_rpm, 2.0, std::round(10.0 * frame_degC) / 10.0, 22.0);
     pump.Advance(t_us);
   }
 
@@ -93,6 +95,8 @@ class MagnetCalibration : public ::testing::Test {
   double plant_voltage_error_V = 0.0;     ///< the reported uq less the motor's, at full current
   double plant_rotor_heat_W = 0.0;        ///< heat on the rotor the model does not have
   double plant_rotor_heat_W_per_A = 0.0;  ///< and more of it per ampere of iq
+  /// The frame sensor's reading when it is stuck (NaN: it reads the plant's frame).
+  double frame_stuck_degC = std::numeric_limits<double>::quiet_NaN();
   /// psi0's prior sd (2 %) through the motor's magnet law (-0.1 %/K).
   const double tolerance_K = 0.02 / std::abs(motor_.magnet.flux_temperature_coefficient_per_K);
 };
@@ -313,47 +317,6 @@ TEST_F(MagnetCalibration, ThePublishedIdentificationIsTheFiltersAndALoadChangePi
   EXPECT_EQ(pump.snapshot().r0_changes, 1u) << "R0 learnt once: the journal says it once";
 }
 
-// Without the voltage reading the identification is the DFRLS identifier's: its status always,
-// its values only while it tracks them. On this plant (R0 2 % and psi0 1.6 % off, 0.15 V of dead
-// time, load changes of 1 A) its line is held or converging, its Rs the winding's at the hold and
-// its flux off by the inverter's offset: neither is published, and what is published lies within
-// +-2 sd of the truth.
-TEST_F(MagnetCalibration, WithoutTheVoltageTheIdentifiersValuesArePublishedOnlyWhileTracking) {
-  pd::PumpConfig config = Config();
-  config.voltage_reading = false;
-  plant_dr = 0.02;
-  plant_dpsi = -0.016;
-  plant_voltage_error_V = 0.15;
-  plant_load_step_A = 0.5;
-  pd::Pump pump(config, motor_, model_, 1.0);
-  for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
-  using S = pe::ResistanceStatus;
-  const auto& cu = motor_.copper;
-  const double beta = motor_.magnet.flux_temperature_coefficient_per_K;
-  int held = 0;
-  for (int k = 4; k <= 900; ++k) {
-    Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
-    const auto& s = pump.snapshot();
-    const pe::PublishedIdentification& id = s.identification;
-    ASSERT_EQ(id.status, s.resistance.status) << "t " << k << " s";
-    held += id.status == S::kHeld;
-    ASSERT_EQ(std::isfinite(id.resistance_ohm), id.status == S::kTracking) << "t " << k << " s";
-    const bool flux_tracked = id.status == S::kTracking || id.status == S::kNotIdentifiable;
-    ASSERT_EQ(std::isfinite(id.flux_Wb), flux_tracked) << "t " << k << " s";
-    const double r_ohm =
-        cu.r0_ohm * (1.0 + plant_dr) * (1.0 + cu.alpha_per_K * (x_degC(winding_) - cu.t0_degC));
-    const double flux_Wb = motor_.flux_Wb * (1.0 + plant_dpsi) *
-                           (1.0 + beta * (x_degC(rotor_) - motor_.magnet.t0_degC));
-    if (std::isfinite(id.resistance_ohm)) {
-      ASSERT_LE(std::abs(id.resistance_ohm - r_ohm), 2.0 * id.resistance_sd_ohm) << "t " << k;
-    }
-    if (std::isfinite(id.flux_Wb)) {
-      ASSERT_LE(std::abs(id.flux_Wb - flux_Wb), 2.0 * id.flux_sd_Wb) << "t " << k << " s";
-    }
-  }
-  EXPECT_GT(held, 300) << "the case this test is about: the identifier's line held";
-}
-
 // A motor file whose magnet law is steeper than the magnet's (the plant's flux falls 0.05 %/K,
 // the file says 0.1 %/K): the magnet from the flux reads the rotor colder than its losses let it
 // be, the filter needs a negative rotor heat to follow it, and the magnet law check says so and
@@ -416,6 +379,48 @@ TEST_F(MagnetCalibration, RotorLossesTheModelLacksStayOffTheWinding) {
   EXPECT_LT(largest_K, 5.0);
   EXPECT_GT(s.rotor_heat_W, 3.0) << "sd " << s.rotor_heat_sd_W;
   EXPECT_FALSE(s.magnet_law_suspect);
+}
+
+// Where the filter does not fuse the voltage (no voltage rows, or a failed frame sensor) the
+// published identification is the DFRLS identifier's status alone. On this plant (R0 3 % above the
+// nameplate, load steps of 2 A) the identifier tracks for minutes, but its Rs is then inside its
+// +-2 sd about a quarter of the time, and the winding it gives (Han 2019 eq. 3, the nameplate's R0)
+// up to 17 K off: its values are a diagnostic (the CSV's identifier_winding_degC), neither the
+// identification nor the winding from resistance.
+TEST_F(MagnetCalibration, TheIdentifiersValuesAreADiagnosticOnly) {
+  const auto& cu = motor_.copper;
+  for (const bool voltage : {false, true}) {
+    SCOPED_TRACE(voltage);
+    pd::PumpConfig config = Config();
+    config.voltage_reading = voltage;
+    plant_dr = 0.03;
+    plant_load_step_A = 1.0;
+    x_degC.setConstant(22.0);
+    frame_stuck_degC = std::numeric_limits<double>::quiet_NaN();
+    pd::Pump pump(config, motor_, model_, 1.0);
+    for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+    int tracking = 0, rs_covered = 0;
+    for (int k = 4; k <= 2400; ++k) {
+      if (voltage && k == 1200) frame_stuck_degC = x_degC(frame_);  // the RTD sticks
+      Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
+      const auto& s = pump.snapshot();
+      if (voltage && s.sensor_fault == pe::SensorFault::kNone) continue;
+      const pe::PublishedIdentification& id = s.identification;
+      ASSERT_EQ(id.status, s.resistance.status) << "t " << k << " s";
+      ASSERT_TRUE(std::isnan(id.resistance_ohm)) << "t " << k << " s";
+      ASSERT_TRUE(std::isnan(id.flux_Wb)) << "t " << k << " s";
+      ASSERT_TRUE(std::isnan(s.winding_resistance_degC)) << "t " << k << " s";
+      if (s.resistance.status != pe::ResistanceStatus::kTracking) continue;
+      ++tracking;
+      EXPECT_TRUE(std::isfinite(s.identifier_winding_degC)) << "t " << k << " s";
+      const double r_ohm =
+          cu.r0_ohm * (1.0 + plant_dr) * (1.0 + cu.alpha_per_K * (x_degC(winding_) - cu.t0_degC));
+      rs_covered +=
+          std::abs(s.resistance.resistance_ohm - r_ohm) <= 2.0 * s.resistance.resistance_sigma_ohm;
+    }
+    EXPECT_GT(tracking, 100) << "the case this test is about: the identifier tracks";
+    EXPECT_LT(rs_covered, 0.5 * tracking) << "and its Rs is then outside its band";
+  }
 }
 
 }  // namespace
