@@ -96,6 +96,7 @@ struct LiveLoop::Impl : OutputSink {
   // The signed digest of what went out on LCM (docs/threat-model.md, "Readers misled").
   PublishDigest digest;
   std::int64_t next_digest_us = std::numeric_limits<std::int64_t>::max();  // none: never
+  std::int64_t last_digest_us = std::numeric_limits<std::int64_t>::min() / 2;
   std::string state_path;
   std::string safety_path;  // the safety state (latched trips, clear counters); empty: none
   FailureReport lcm_report{kFailureReminderUs};
@@ -360,6 +361,23 @@ struct LiveLoop::Impl : OutputSink {
     gateway->Advance(ClockUs(CLOCK_MONOTONIC), *this);
     if (mqtt) mqtt->Offer(*gateway);
     SaveIfTripLatched();
+    DigestWhatWasPublished();
+  }
+
+  /// What the pumps just published is signed at once, so that a reader's table shows it signed
+  /// rather than pending until the next period's digest; at most ten digests per LCM period
+  /// (closer ones wait for the tenth: the timer is armed for it). The period's digest still goes
+  /// out when nothing was published (it says the gateway is there).
+  void DigestWhatWasPublished() {
+    if (!digest.Pending()) return;
+    const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
+    const std::int64_t earliest_us =
+        last_digest_us + static_cast<std::int64_t>(config.lcm.period_s * 1e5);
+    if (mono >= earliest_us) {
+      PublishDigestNow(mono);
+    } else {
+      next_digest_us = std::min(next_digest_us, earliest_us);
+    }
   }
 
   /// A trip that latched is written at once (the safety state first, then the estimator
@@ -602,6 +620,7 @@ struct LiveLoop::Impl : OutputSink {
   /// Publishes the signed digest of what went out since the last one (with a gateway key).
   void PublishDigestNow(std::int64_t mono) {
     next_digest_us = mono + static_cast<std::int64_t>(config.lcm.period_s * 1e6);
+    last_digest_us = mono;
     const SigningKey* key = gateway->clear_auth().gateway_key();
     if (!lcm || key == nullptr) return;
     const pumptherm::gateway_digest_t d =
@@ -777,7 +796,7 @@ int LiveLoop::Run() {
     // Frames, commands and reloads can make work due at once or sooner than the timer.
     const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
     if (frames || m.gateway->NextDueUs() <= mono) m.AdvanceGateway();
-    if (m.gateway->NextDueUs() < m.armed_us) m.ArmTimer(mono);
+    if (std::min(m.gateway->NextDueUs(), m.next_digest_us) < m.armed_us) m.ArmTimer(mono);
   }
   m.notifier.Stopping();
   m.gateway->FlushClearAudit();

@@ -41,6 +41,8 @@ class PublishDigest {
   /// the gateway is there and published nothing).
   pumptherm::gateway_digest_t Take(const std::string& gateway, std::string_view prefix,
                                    std::int64_t utime, const SigningKey& key);
+  /// Whether a message was added since the last Take.
+  bool Pending() const { return !channels_.empty() || left_out_ > 0; }
 
  private:
   std::vector<std::string> channels_;

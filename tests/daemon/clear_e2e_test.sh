@@ -407,11 +407,15 @@ case_readers() {
   stop
   echo "$out" | tail -n 8
   # A table printed between a message and the digest that lists it shows the message pending.
-  # The digest goes out once per LCM period on a timer of its own, and pump1's TEMPS may follow
-  # it closely in every period, leaving a short window in which everything is listed: on a
-  # loaded machine four tables 2 s apart all missed it. pump1 must show as signed in one of 28
-  # tables 0.35 s apart (a phase that walks through the period).
-  echo "$out" | grep -q "^pump1 .*  signed$" || failed "pump1 is never shown as signed"
+  # The gateway publishes its digest right after the pumps publish (at most ten per period), so
+  # that window is short: pump1 must show as signed in most of 28 tables 0.35 s apart (a phase
+  # that walks through the period). With a digest once per period on a timer of its own, pump1's
+  # TEMPS could follow it closely in every period and stay pending almost all the time.
+  local signed pending
+  signed=$(echo "$out" | grep -c "^pump1 .*  signed$" || true)
+  pending=$(echo "$out" | grep -c "^pump1 .*signature pending" || true)
+  echo "readers: pump1 signed in $signed tables, pending in $pending"
+  [ "$signed" -ge 14 ] || failed "pump1 is shown as signed in $signed of 28 tables (pending in $pending)"
   echo "$out" | tail -n 8 | grep -q "^phantom .*NOT FROM THE GATEWAY" || failed "the phantom pump is not marked"
 }
 
