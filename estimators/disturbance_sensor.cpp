@@ -360,10 +360,12 @@ void DisturbanceThermalSensor::LossColumns() {
       heat_in_.col(2).head(n_) = loss_rates_.speed_K_per_s;
       heat_in_.col(2).head(n_) +=
           (config_.copper_loss_sd_rel / config_.loss_scale_max_sd) * heat_in_.col(3).head(n_);
-      // The rotor node's losses are the rotor heat state's, which the rows' magnet observes.
-      // Scaled by s as well, a rotor hotter than the model would be explained as every loss
-      // higher, and the stator and winding warmed with it.
-      if (dr_ >= 0) heat_in_(rotor_, 2) = 0.0;
+      // Once the rows' magnet observes the rotor (psi0 calibrated), the rotor node's losses are
+      // the rotor heat state's. Scaled by s as well, a rotor hotter than the model would be
+      // explained as every loss higher, and the stator and winding warmed with it. Before (a
+      // warm start: the magnet known to psi0's tolerance), nothing tells the rotor's heat from
+      // the stator's, and s keeps both.
+      if (dr_ >= 0 && magnet_observed_) heat_in_(rotor_, 2) = 0.0;
     }
   } else if (ls_ >= 0) {
     heat_in_.col(2).head(n_) = loss_rates_.current_K_per_s + loss_rates_.speed_K_per_s;

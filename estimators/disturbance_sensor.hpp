@@ -236,6 +236,9 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// fused none (a sensor back from a fault that left it out, such as a jump beyond physics).
   void ReopenSensorOffset() override { reopen_offset_ = true; }
   bool TakesVoltage() const override { return row_v_ >= 0; }
+  /// While the voltage observes the rotor the rotor node's losses are the rotor heat state's,
+  /// not the loss scale's (LossColumns).
+  void SetMagnetObserved(bool observed) override { magnet_observed_ = observed; }
   Calibration VoltageCalibration() const override;
   double CalibrationCovariance(CalibrationEntry entry, const Eigen::VectorXd& w) const override;
   double MagnetBias_K(double voltage_gain_K_per_V) const override;
@@ -291,6 +294,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
   double uq_sd_V_ = 0.0;                   ///< its sd
   int voltage_rejected_run_ = 0;           ///< voltage rows beyond the gate in a row
   bool frame_fused_last_ = false;          ///< the previous step fused a frame reading
+  bool magnet_observed_ = false;           ///< SetMagnetObserved
   /// The last fused frame reading, the filter's reading of it after that update and its variance.
   double last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
   double last_predicted_degC_ = 0.0;

@@ -383,6 +383,7 @@ bool PumpEstimator::Step(const PumpPeriod& p) {
   PrepareReadings(p);
   // A sensor back from a jump beyond physics may read at a new offset.
   if (frame_.BackFromJump()) observer_->ReopenSensorOffset();
+  observer_->SetMagnetObserved(observer_->TakesVoltage() && UncalibratedMagnetSd_K() == 0.0);
   const ObserverReport& report = observer_->Step(p.inputs, p.dt_s, readings_);
   counters_.rejected_readings += static_cast<std::uint64_t>(report.rejected_readings);
   if (report.refused) {

@@ -176,6 +176,9 @@ class ThermalObserver {
 
   /// Whether the filter takes the drive's q-axis voltage as a reading (ThermalReadings::uq_V).
   virtual bool TakesVoltage() const { return false; }
+  /// Whether the magnet the voltage gives is calibrated (psi0 learnt against known
+  /// temperatures), so that the voltage observes the rotor; until then it does not.
+  virtual void SetMagnetObserved(bool observed) { (void)observed; }
   /// Its calibration as estimated: the relative errors of R0 and psi0 and the voltage offset
   /// (V), with their sds (NaN without the voltage reading).
   struct Calibration {
