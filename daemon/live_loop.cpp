@@ -371,8 +371,7 @@ struct LiveLoop::Impl : OutputSink {
   void DigestWhatWasPublished() {
     if (!digest.Pending()) return;
     const std::int64_t mono = ClockUs(CLOCK_MONOTONIC);
-    const std::int64_t earliest_us =
-        last_digest_us + static_cast<std::int64_t>(config.lcm.period_s * 1e5);
+    const std::int64_t earliest_us = last_digest_us + DigestPeriodUs() / 10;
     if (mono >= earliest_us) {
       PublishDigestNow(mono);
     } else {
@@ -617,9 +616,14 @@ struct LiveLoop::Impl : OutputSink {
         gateway->pumps().size(), carried);
   }
 
+  /// The longest time between two digests: the LCM period.
+  std::int64_t DigestPeriodUs() const {
+    return static_cast<std::int64_t>(config.lcm.period_s * 1e6);
+  }
+
   /// Publishes the signed digest of what went out since the last one (with a gateway key).
   void PublishDigestNow(std::int64_t mono) {
-    next_digest_us = mono + static_cast<std::int64_t>(config.lcm.period_s * 1e6);
+    next_digest_us = mono + DigestPeriodUs();
     last_digest_us = mono;
     const SigningKey* key = gateway->clear_auth().gateway_key();
     if (!lcm || key == nullptr) return;
@@ -756,7 +760,7 @@ int LiveLoop::Run() {
   m.next_save_us = start + static_cast<std::int64_t>(m.config.gateway.state_save_period_s * 1e6);
   if (m.options.table)
     m.next_table_us = start + static_cast<std::int64_t>(m.options.table_period_s * 1e6);
-  if (m.lcm) m.next_digest_us = start + static_cast<std::int64_t>(m.config.lcm.period_s * 1e6);
+  if (m.lcm) m.next_digest_us = start + m.DigestPeriodUs();
   std::string names;
   for (const auto& s : m.sockets) names += (names.empty() ? "" : ", ") + s.name();
   Log(LogLevel::kNotice, "listening on {} for {} pump(s){}", names, m.gateway->pumps().size(),

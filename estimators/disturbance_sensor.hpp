@@ -7,8 +7,9 @@
 ///  - a frame-path disturbance heat d_f (W, a random walk): lost or changed cooling, an
 ///    unmeasured ambient, anything that heats or cools the frame from outside the model,
 ///  - optionally a relative loss scale s (every loss times 1 + s, first-order Gauss-Markov:
-///    a short-term random walk with a stationary sd; with the voltage rows and a rotor heat
-///    state, every loss but the rotor node's, which are that state's),
+///    a short-term random walk with a stationary sd; with the voltage rows, a rotor heat state
+///    and the magnet calibrated (SetMagnetObserved), every loss but the rotor node's, which are
+///    that state's),
 ///  - a rotor disturbance heat d_r (W, first-order Gauss-Markov with a stationary sd): heat inside
 ///    that the frame barely sees, so its sd (and the rotor's) says how little is known,
 ///  - for each slow reading fused besides the frame (the winding from resistance, the magnet
@@ -63,8 +64,8 @@ struct DisturbanceSensorConfig {
   /// explains the readings (the magnet reading's bias, the loss scale, the calibration). 0 = off.
   double rotor_heat_found_sds = 2.0;
   /// Short-term random walk of a relative loss scale s (every loss times 1 + s; with the voltage
-  /// rows and a rotor heat state, not the rotor node's losses: those are d_r's), per sqrt(s);
-  /// 0 = no state.
+  /// rows, a rotor heat state and the magnet calibrated, not the rotor node's losses: those are
+  /// d_r's), per sqrt(s); 0 = no state.
   double loss_scale_sd = 0.003;
   /// Stationary sd of s (a first-order Gauss-Markov state whose short-term walk is
   /// loss_scale_sd): how far the model's losses may be off. As a pure random walk, a load that
