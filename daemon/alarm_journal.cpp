@@ -367,11 +367,13 @@ JournalEntry MagnetLawEntry(std::string_view pump, const estimators::PumpEstimat
       "{}: the magnet from the flux reads the rotor colder than the thermal model's rotor "
       "losses make it (the filter needs {:.1f} W, sd {:.1f} W, of rotor heat to follow it): "
       "either the motor file's magnet law ({:+.3f} %/K) is steeper than this magnet's (NdFeB "
-      "about -0.09 to -0.13 %/K, SmCo -0.03 to -0.05 %/K), and the rotor estimate is then too "
-      "cold, or the thermal model's rotor losses are too high. The magnet from the flux is no "
-      "longer published in this run; check the magnet's flux_temperature_coefficient_per_K in "
-      "the motor file and the rotor's losses in the thermal model, or set voltage_reading = "
-      "false for this pump",
+      "about -0.09 to -0.13 %/K, SmCo -0.03 to -0.05 %/K), or the thermal model's rotor "
+      "losses are too high. The estimate gives that law up from now on (kept across restarts "
+      "while the motor file states it): the voltage reads the winding through its resistance "
+      "alone, the rotor is the thermal model's with a wider sd, and no magnet from the flux is "
+      "published (a failed frame sensor then leaves the pump blind); check the magnet's "
+      "flux_temperature_coefficient_per_K in the motor file and the rotor's losses in the "
+      "thermal model",
       pump, e.rotor_heat_W, e.rotor_heat_sd_W, 100.0 * law_per_K);
   return j;
 }

@@ -59,6 +59,9 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
     t.insert("disturbance_s", Flattened(s.observer_s));
     // Whether that calibration was learnt from a cold start (absent in older files: not).
     t.insert("disturbance_cold_started", s.cold_started);
+    // The magnet law the check gave up (absent: none).
+    if (!std::isnan(s.magnet_law_given_up_per_K))
+      t.insert("disturbance_magnet_law_given_up_per_K", s.magnet_law_given_up_per_K);
   }
   // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
   // consecutive rejections.
@@ -212,6 +215,10 @@ bool ReadDisturbances(const toml::table& t, int count, PumpSavedState& s) {
       Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
           vs.data(), count, count);
   s.cold_started = t["disturbance_cold_started"].value_or(false);
+  if (const auto* law = t["disturbance_magnet_law_given_up_per_K"].as_floating_point()) {
+    if (!std::isfinite(law->get())) return false;
+    s.magnet_law_given_up_per_K = law->get();
+  }
   return true;
 }
 

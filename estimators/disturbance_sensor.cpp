@@ -47,7 +47,7 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
       !(c.calibration_walk_per_sqrt_h >= 0.0) || !(c.voltage_offset_sd_V > 0.0) ||
       !(c.voltage_offset_tau_s > 0.0) || !(c.uq_min_sd_V > 0.0) || !(c.voltage_gate_sd >= 0.0) ||
       !(c.line_voltage_error_sd_V >= 0.0) || !(c.line_voltage_error_tau_s > 0.0) ||
-      !(c.rotor_heat_found_sds >= 0.0)) {
+      !(c.rotor_heat_found_sds >= 0.0) || !(c.free_flux_walk_per_sqrt_s >= 0.0)) {
     throw std::invalid_argument(
         "disturbance sensor: standard deviations and times must be positive");
   }
@@ -417,6 +417,7 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   if (dr_state_ >= 0) {
     const double walk = c.calibration_walk_per_sqrt_h * c.calibration_walk_per_sqrt_h / 3600.0;
     sp_(dr_state_) = sp_(dpsi_) = walk * dt_s;
+    if (law_free_) sp_(dpsi_) = c.free_flux_walk_per_sqrt_s * c.free_flux_walk_per_sqrt_s * dt_s;
     sp_(dbeta_) = c.magnet_law_sd_rel > 0.0 ? walk * dt_s : 0.0;
     GaussMarkov(u0_, c.voltage_offset_sd_V, c.voltage_offset_tau_s, dt_s);
   }
@@ -521,10 +522,62 @@ bool DisturbanceThermalSensor::VoltageRow(const ThermalReadings& r) {
   // Released: the magnet's variance raised by what puts the row's innovation at the gate. With
   // the calibration learnt, a voltage that stays beyond the gate is heat the model lacks on the
   // magnet's side (the frame watches the rest); the rotor-heat state then follows the magnet.
-  const double gm = cv_row_(vmagnet_);
-  if (!(std::abs(gm) > 0.0)) return false;
-  filter_.AddVariance(vmagnet_, beyond / (gate * gate * gm * gm));
+  // Without the magnet law the flux is psi0's error alone, and that takes the release.
+  const int k = law_free_ ? dpsi_ : vmagnet_;
+  const double gk = cv_row_(k);
+  if (!(std::abs(gk) > 0.0)) return false;
+  filter_.AddVariance(k, beyond / (gate * gate * gk * gk));
   return true;
+}
+
+void DisturbanceThermalSensor::FreeMagnetLaw() {
+  if (dr_state_ < 0 || law_free_) return;
+  Eigen::VectorXd x = filter_.State();
+  Eigen::MatrixXd s = filter_.Covariance();
+  FoldFluxLaw(x, s);
+  if (dr_ >= 0) ForgetRotorHeat(x, s);
+  filter_.Reset(x, 0.5 * (s + s.transpose()));
+  RestoreMagnetLawGivenUp();
+}
+
+void DisturbanceThermalSensor::RestoreMagnetLawGivenUp() {
+  if (dr_state_ < 0) return;
+  config_.voltage_law.beta_per_K = 0.0;
+  law_free_ = true;
+  magnet_observed_ = false;
+  voltage_rejected_run_ = 0;
+}
+
+void DisturbanceThermalSensor::FoldFluxLaw(Eigen::VectorXd& x, Eigen::MatrixXd& s) const {
+  // psi0 (1 + dpsi) (1 + beta (1 + dbeta) (Tm - T0m)) = psi0 (1 + dpsi'): the new dpsi' and its
+  // gradient in dpsi, Tm and dbeta (estimators/voltage_equation.hpp).
+  const VoltageLaw& law = config_.voltage_law;
+  const double beta = law.beta_per_K * (1.0 + x(dbeta_));
+  const double rise_K = x(vmagnet_) - law.magnet_t0_degC;
+  const double factor = 1.0 + beta * rise_K;
+  Eigen::MatrixXd t = Eigen::MatrixXd::Identity(n_aug_, n_aug_);
+  t.row(dpsi_).setZero();
+  t(dpsi_, dpsi_) = factor;
+  t(dpsi_, vmagnet_) = (1.0 + x(dpsi_)) * beta;
+  t(dpsi_, dbeta_) = (1.0 + x(dpsi_)) * law.beta_per_K * rise_K;
+  x(dpsi_) = (1.0 + x(dpsi_)) * factor - 1.0;
+  s = t * s * t.transpose();
+}
+
+void DisturbanceThermalSensor::ForgetRotorHeat(Eigen::VectorXd& x, Eigen::MatrixXd& s) const {
+  // The nodes' steady-state answer to the heat d_r had, from the last period's transition:
+  // x = A x + b d_r at rest gives (I - A) dx = b d_r.
+  const double heat_W = x(dr_);
+  const Eigen::MatrixXd a = ad_.topLeftCorner(n_, n_);
+  const Eigen::VectorXd b = ad_.col(dr_).head(n_);
+  const Eigen::VectorXd dev_K =
+      (Eigen::MatrixXd::Identity(n_, n_) - a).partialPivLu().solve(b) * heat_W;
+  if (dev_K.allFinite()) s.topLeftCorner(n_, n_) += dev_K * dev_K.transpose();
+  x(dr_) = 0.0;
+  s.row(dr_).setZero();
+  s.col(dr_).setZero();
+  const double sd_W = config_.rotor_heat_sd_W;
+  s(dr_, dr_) = sd_W * sd_W + heat_W * heat_W;
 }
 
 double DisturbanceThermalSensor::RowVariance(double sd) {

@@ -143,6 +143,13 @@ struct DisturbanceSensorConfig {
   /// magnet node's variance is raised until the row's innovation sits at the gate and the row is
   /// fused, so the estimate follows the voltage instead of never taking it again. 0 = never.
   int voltage_gate_release_periods = 10;
+  /// Random walk of psi0's relative error once the magnet law is given up (FreeMagnetLaw), per
+  /// sqrt(s): the flux then follows whatever the magnet does. It must outrun the fastest drift
+  /// of the flux a magnet can make (0.13 %/K at 2 K/min: 4e-5 per s) within a few periods, for
+  /// a flux change the walk does not cover reads as winding (1 % of the flux is about 100 K of
+  /// winding at 3 A), while a load step still reads as resistance (0.3 V per A against a walk of
+  /// 4 mV per period).
+  double free_flux_walk_per_sqrt_s = 1e-4;
 };
 
 /// The readings of one period (the observer interface's).
@@ -239,7 +246,17 @@ class DisturbanceThermalSensor : public ThermalObserver {
   bool TakesVoltage() const override { return row_v_ >= 0; }
   /// While the voltage observes the rotor the rotor node's losses are the rotor heat state's,
   /// not the loss scale's (LossColumns).
-  void SetMagnetObserved(bool observed) override { magnet_observed_ = observed; }
+  void SetMagnetObserved(bool observed) override { magnet_observed_ = observed && !law_free_; }
+  /// The motor file's magnet law is given up for the rest of the run: the flux the voltage row
+  /// reads no longer follows the magnet node (its law's coefficient 0 in the row, the present
+  /// law's factor folded into psi0's error, which then walks at free_flux_walk_per_sqrt_s), so
+  /// the voltage measures the winding through the resistance its load changes show and no
+  /// longer the rotor. The rotor heat that the law made the filter find is forgotten: its state
+  /// goes back to 0, with its prior variance plus its square, and the nodes' covariance takes
+  /// the steady-state effect of the heat it had, so the rotor's sd covers what it had held.
+  void FreeMagnetLaw() override;
+  void RestoreMagnetLawGivenUp() override;
+  bool MagnetLawFree() const { return law_free_; }
   Calibration VoltageCalibration() const override;
   double CalibrationCovariance(CalibrationEntry entry, const Eigen::VectorXd& w) const override;
   double MagnetBias_K(double voltage_gain_K_per_V) const override;
@@ -276,6 +293,10 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// Every node and the lag at `x0_degC` with a common sd and one of each's own; the rest at its
   /// prior.
   void InitialiseWith(double x0_degC, double common_sd_K, double spread_sd_K);
+  /// FreeMagnetLaw's two changes of the state: the flux law's present factor into psi0's error
+  /// (a linear change of variables, covariance included), and the rotor heat forgotten.
+  void FoldFluxLaw(Eigen::VectorXd& x, Eigen::MatrixXd& s) const;
+  void ForgetRotorHeat(Eigen::VectorXd& x, Eigen::MatrixXd& s) const;
   /// The priors of the voltage reading's states into `x`, `s`.
   void VoltagePriors(Eigen::VectorXd& x, Eigen::MatrixXd& s) const;
   /// The sensor-offset step test on the predicted state (sensor_step_gate_sd).
@@ -296,6 +317,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
   int voltage_rejected_run_ = 0;           ///< voltage rows beyond the gate in a row
   bool frame_fused_last_ = false;          ///< the previous step fused a frame reading
   bool magnet_observed_ = false;           ///< SetMagnetObserved
+  bool law_free_ = false;                  ///< FreeMagnetLaw
   /// The last fused frame reading, the filter's reading of it after that update and its variance.
   double last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
   double last_predicted_degC_ = 0.0;

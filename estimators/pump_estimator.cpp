@@ -320,12 +320,16 @@ void PumpEstimator::PrepareReadings(const PumpPeriod& p) {
       return;
     }
   }
+  // The line gives the magnet through the motor file's law too: once that law is given up
+  // (MagnetLawCheck), nothing reads the magnet from the flux.
   const bool gated = observer_->TakesVoltage() && voltage_.status().state == ReadingState::kGated;
-  if (!voltage_.Offered() && !(gated && FluxKnownBetterThanTheLine())) magnet_.Offer(readings_);
+  if (!voltage_.Offered() && !(gated && FluxKnownBetterThanTheLine()) &&
+      !estimate_.magnet_law_suspect)
+    magnet_.Offer(readings_);
 }
 
 void PumpEstimator::HoldMagnet() {
-  if (voltage_magnet_state_ < 0) return;
+  if (voltage_magnet_state_ < 0 || estimate_.magnet_law_suspect) return;
   held_magnet_ = voltage_.CalibratedMagnet(observer_->VoltageCalibration(),
                                            observer_->Weighted_degC(model_.WindingWeights()));
 }
@@ -335,9 +339,10 @@ double PumpEstimator::UncalibratedMagnetSd_K() const {
   // the saved one), the back-EMF line anchors it to the nameplate within the line's bias sd and
   // the filter's sd says psi0 is known; but this pump's flux may be anywhere within the
   // nameplate's tolerance, so the flux tells the magnet no better than psi0_sd_rel through the
-  // magnet law (20 K for 2 % at -0.1 %/K). A law without temperature coefficient makes the
-  // voltage no measurement of the magnet, and the filter's own sd stands.
-  if (!observer_->TakesVoltage() ||
+  // magnet law (20 K for 2 % at -0.1 %/K). A law without temperature coefficient, or one given
+  // up (MagnetLawCheck), makes the voltage no measurement of the magnet, and the filter's own sd
+  // stands.
+  if (!observer_->TakesVoltage() || estimate_.magnet_law_suspect ||
       (estimate_.calibrated_at_cold_start && FluxKnownBetterThanTheLine()))
     return 0.0;
   const double law_per_K = std::abs(motor_.magnet.flux_temperature_coefficient_per_K);
@@ -406,8 +411,10 @@ bool PumpEstimator::Step(const PumpPeriod& p) {
 void PumpEstimator::CheckModel(const PumpPeriod& p, double measured_degC) {
   // The magnet temperature of this step's back-EMF row at the filter's winding estimate; with
   // the voltage reading, the magnet it gives at the filter's winding and calibration.
+  // None once the magnet law is given up (MagnetLawCheck): the flux no longer gives the magnet.
   const double magnet_degC =
-      observer_->TakesVoltage()
+      estimate_.magnet_law_suspect ? kNaN
+      : observer_->TakesVoltage()
           ? voltage_.MagnetAt_degC(*observer_, model_, voltage_magnet_state_)
           : magnet_.MagnetAt_degC(observer_->Weighted_degC(model_.WindingWeights()));
   const std::uint64_t refused = mismatch_.refused_steps();
@@ -509,6 +516,7 @@ void PumpEstimator::MagnetLawCheck(double dt_s) {
   if (!estimate_.magnet_law_suspect && magnet_colder_s_ >= config_.magnet_law_after_s) {
     estimate_.magnet_law_suspect = true;
     ++estimate_.magnet_law_changes;
+    observer_->FreeMagnetLaw();
   }
 }
 
@@ -758,6 +766,8 @@ PumpEstimatorState PumpEstimator::Save() const {
     s.observer_x = observer_->State();
     s.observer_s = observer_->Covariance();
     s.cold_started = estimate_.calibrated_at_cold_start;
+    if (estimate_.magnet_law_suspect)
+      s.magnet_law_given_up_per_K = motor_.magnet.flux_temperature_coefficient_per_K;
   }
   const auto& names = model_.StateNames();
   for (const auto& t : alarms_.LatchedTrips()) {
@@ -801,10 +811,16 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   const int n = model_.StateCount();
   // The observer's whole state: taken when it fits this configuration (another count of states
   // is another configuration: the nodes alone are restored); damaged, refused.
+  // A state saved after the magnet law was given up holds a flux that no longer follows the
+  // magnet: it fits only while the motor file states the law given up (a corrected file starts
+  // its calibration afresh).
+  const bool law_given_up = !std::isnan(state.magnet_law_given_up_per_K);
+  const bool law_kept = !law_given_up || state.magnet_law_given_up_per_K ==
+                                             motor_.magnet.flux_temperature_coefficient_per_K;
   const bool whole = observer_->StateCount() > n &&
                      state.observer_x.size() == observer_->StateCount() &&
                      state.observer_s.rows() == observer_->StateCount() &&
-                     state.observer_s.cols() == observer_->StateCount();
+                     state.observer_s.cols() == observer_->StateCount() && law_kept;
   if (whole && !observer_->CanRestore(state.observer_x, state.observer_s)) return false;
   std::vector<AlarmMonitor::LatchedTrip> trips;
   if (!TripIndices(state, trips)) return false;
@@ -818,8 +834,12 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   }
   if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
   // A calibration from a cold start holds only while the state that carries it was kept.
-  estimate_.calibrated_at_cold_start =
-      RestoreObserver(state, whole, gap_s, x, s) && state.cold_started;
+  const bool restored_whole = RestoreObserver(state, whole, gap_s, x, s);
+  estimate_.calibrated_at_cold_start = restored_whole && state.cold_started;
+  if (restored_whole && law_given_up) {
+    estimate_.magnet_law_suspect = true;
+    observer_->RestoreMagnetLawGivenUp();
+  }
   estimate_.start = EstimateStart::kRestored;
   ++estimate_.starts;
   // The time the daemon was down is a telemetry silence: the load may have risen in it.

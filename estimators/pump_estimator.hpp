@@ -228,6 +228,10 @@ struct PumpEstimatorState {
   /// Whether the filter's calibration (R0, psi0) was learnt from a cold start (with the whole
   /// state only).
   bool cold_started = false;
+  /// The magnet law the check gave up (MagnetLawCheck), per K (NaN: none): with it, the saved
+  /// state's flux no longer follows the magnet. Restored only while the motor file still states
+  /// that law; once it states another, the saved calibration is not taken.
+  double magnet_law_given_up_per_K = std::numeric_limits<double>::quiet_NaN();
 };
 
 class PumpEstimator {

@@ -179,6 +179,11 @@ class ThermalObserver {
   /// Whether the magnet the voltage gives is calibrated (psi0 learnt against known
   /// temperatures), so that the voltage observes the rotor; until then it does not.
   virtual void SetMagnetObserved(bool observed) { (void)observed; }
+  /// The motor file's magnet law is wrong for this pump: from now on the voltage reads the
+  /// winding through its resistance alone and leaves the magnet to the thermal model.
+  virtual void FreeMagnetLaw() {}
+  /// The same for a state restored from one saved after FreeMagnetLaw (its flux already free).
+  virtual void RestoreMagnetLawGivenUp() {}
   /// Its calibration as estimated: the relative errors of R0 and psi0 and the voltage offset
   /// (V), with their sds (NaN without the voltage reading).
   struct Calibration {

@@ -314,11 +314,13 @@ TEST_F(AlarmJournal, MagnetLawLineSaysWhatTheFilterNeedsAndWhatToSet) {
             "pump1: the magnet from the flux reads the rotor colder than the thermal model's "
             "rotor losses make it (the filter needs -6.6 W, sd 1.5 W, of rotor heat to follow "
             "it): either the motor file's magnet law (-0.100 %/K) is steeper than this magnet's "
-            "(NdFeB about -0.09 to -0.13 %/K, SmCo -0.03 to -0.05 %/K), and the rotor estimate "
-            "is then too cold, or the thermal model's rotor losses are too high. The magnet from "
-            "the flux is no longer published in this run; check the magnet's "
-            "flux_temperature_coefficient_per_K in the motor file and the rotor's losses in the "
-            "thermal model, or set voltage_reading = false for this pump");
+            "(NdFeB about -0.09 to -0.13 %/K, SmCo -0.03 to -0.05 %/K), or the thermal model's "
+            "rotor losses are too high. The estimate gives that law up from now on (kept across "
+            "restarts while the motor file states it): the voltage reads the winding through its "
+            "resistance alone, the rotor is the thermal model's with a wider sd, and no magnet "
+            "from the flux is published (a failed frame sensor then leaves the pump blind); "
+            "check the magnet's flux_temperature_coefficient_per_K in the motor file and the "
+            "rotor's losses in the thermal model");
   EXPECT_EQ(e.level, LogLevel::kWarning);
   EXPECT_EQ(Fields(e).at("PUMP"), "pump1");
 }
