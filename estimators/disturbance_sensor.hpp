@@ -256,7 +256,6 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// the steady-state effect of the heat it had, so the rotor's sd covers what it had held.
   void FreeMagnetLaw() override;
   void RestoreMagnetLawGivenUp() override;
-  bool MagnetLawFree() const { return law_free_; }
   Calibration VoltageCalibration() const override;
   double CalibrationCovariance(CalibrationEntry entry, const Eigen::VectorXd& w) const override;
   double MagnetBias_K(double voltage_gain_K_per_V) const override;
