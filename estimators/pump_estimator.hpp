@@ -92,8 +92,8 @@ struct PumpEstimatorConfig {
   /// found-heat limit, where its sd is held wide by design) for magnet_law_after_s running says
   /// the magnet from the flux reads the rotor colder than the model's rotor losses make it (a
   /// magnet law steeper than the magnet's, or rotor losses the model has too high).
-  double magnet_law_heat_W = 3.0;
-  double magnet_law_sds = 3.0;
+  double magnet_law_heat_W = 2.0;
+  double magnet_law_sds = 2.0;
   double magnet_law_after_s = 300.0;
 };
 
