@@ -189,9 +189,13 @@ struct PumpEstimate {
   /// With the voltage fused, the filter has needed a negative rotor heat beyond its sd for
   /// magnet_law_after_s: the magnet from the flux reads the rotor colder than the model lets it
   /// be, as a motor file's magnet law steeper than the magnet's does (NdFeB's -0.1 %/K on a
-  /// SmCo magnet). From then on, for this run, no magnet from the flux is published.
+  /// SmCo magnet). From then on the filter gives that law up (ThermalObserver::FreeMagnetLaw)
+  /// and no magnet from the flux is published; a state saved after it restores it set while the
+  /// motor file states the same law.
   bool magnet_law_suspect = false;
-  std::uint64_t magnet_law_changes = 0;  ///< increments when magnet_law_suspect is set
+  /// Increments when the check sets magnet_law_suspect (not when a restore does: the journal
+  /// said it in the run that found it).
+  std::uint64_t magnet_law_changes = 0;
 };
 
 /// Counters of what the estimator refused (never silent).
