@@ -47,7 +47,8 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
       !(c.calibration_walk_per_sqrt_h >= 0.0) || !(c.voltage_offset_sd_V > 0.0) ||
       !(c.voltage_offset_tau_s > 0.0) || !(c.uq_min_sd_V > 0.0) || !(c.voltage_gate_sd >= 0.0) ||
       !(c.line_voltage_error_sd_V >= 0.0) || !(c.line_voltage_error_tau_s > 0.0) ||
-      !(c.rotor_heat_found_sds >= 0.0) || !(c.free_flux_walk_per_sqrt_s >= 0.0)) {
+      !(c.rotor_heat_found_sds >= 0.0) || !(c.free_flux_walk_per_sqrt_s >= 0.0) ||
+      !(c.uq_noise_learn_periods >= 0.0)) {
     throw std::invalid_argument(
         "disturbance sensor: standard deviations and times must be positive");
   }
@@ -188,6 +189,7 @@ void DisturbanceThermalSensor::InitialiseWith(double x0_degC, double common_sd_K
   filter_.Reset(x, s);
   frame_fused_last_ = reopen_offset_ = false;
   voltage_rejected_run_ = 0;
+  ForgetVoltageNoise();
   stepped_offset_K_ = 0.0;
   last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
 }
@@ -445,6 +447,7 @@ const ObserverReport& DisturbanceThermalSensor::Step(const ThermalInputs& in, do
   used.magnet = row_m_ >= 0 && std::isfinite(r.magnet_degC) && std::isfinite(r.magnet_winding_gain);
   const bool voltage =
       row_v_ >= 0 && std::isfinite(r.uq_V) && std::isfinite(r.iq_A) && std::isfinite(r.w_rad_per_s);
+  if (!voltage) last_innovation_V_ = std::numeric_limits<double>::quiet_NaN();
   used.voltage = voltage && VoltageRow(r);
   report_.rejected_readings += voltage && !used.voltage;
   if (!used.Any()) {
@@ -507,8 +510,7 @@ bool DisturbanceThermalSensor::VoltageRow(const ThermalReadings& r) {
   cv_row_(u0_) = g.u0;
   const double innovation_V = r.uq_V - QAxisVoltage_V(config_.voltage_law, p, q);
   yv_ = innovation_V + cv_row_.dot(x);
-  uq_sd_V_ =
-      std::isfinite(r.uq_sd_V) ? std::max(r.uq_sd_V, config_.uq_min_sd_V) : config_.uq_min_sd_V;
+  uq_sd_V_ = LearnVoltageNoise(innovation_V, r.uq_sd_V);
   const double gate = config_.voltage_gate_sd;
   if (!(gate > 0.0)) return true;
   const double variance = RowVariance(uq_sd_V_);
@@ -528,6 +530,57 @@ bool DisturbanceThermalSensor::VoltageRow(const ThermalReadings& r) {
   if (!(std::abs(gk) > 0.0)) return false;
   filter_.AddVariance(k, beyond / (gate * gate * gk * gk));
   return true;
+}
+
+namespace {
+/// White noise of sd s has a mean absolute value of sqrt(2 / pi) s; its successive differences
+/// have sd sqrt(2) s and a mean absolute value of 2 s / sqrt(pi).
+constexpr double kAbsPerSd = 0.7978845608028654;
+constexpr double kStepPerSd = 1.1283791670955126;
+/// One value moves a learnt mean by at most this many times the mean (over the learning
+/// periods): a single jump of the estimate (a released gate, a sensor step) is no noise, while a
+/// noise ten times the assumed one is learnt within ten periods.
+constexpr double kClip = 10.0;
+/// The weight of uq_min_sd_V at a start, in periods: the run-up, where psi0 is learnt, takes the
+/// noise its first periods show rather than the assumed one.
+constexpr double kAssumedPeriods = 2.0;
+}  // namespace
+
+void DisturbanceThermalSensor::AbsMean::Reset(double assumed) {
+  mean = assumed;
+  count = 0.0;
+}
+
+void DisturbanceThermalSensor::AbsMean::Add(double value, double periods) {
+  // The mean of the values so far while they are fewer than the periods (the assumed one
+  // counting as kAssumedPeriods of them), then an exponential average.
+  count += 1.0;
+  const double weight = std::min(count + kAssumedPeriods, periods);
+  mean += (std::min(std::abs(value), kClip * mean) - mean) / weight;
+}
+
+double DisturbanceThermalSensor::LearnVoltageNoise(double innovation_V, double reading_sd_V) {
+  const double least_V = std::isfinite(reading_sd_V) ? std::max(reading_sd_V, config_.uq_min_sd_V)
+                                                     : config_.uq_min_sd_V;
+  const double periods = config_.uq_noise_learn_periods;
+  if (!(periods > 0.0) || !std::isfinite(innovation_V)) return least_V;
+  uq_innovation_.Add(innovation_V, periods);
+  if (std::isfinite(last_innovation_V_)) {
+    uq_innovation_step_.Add(innovation_V - last_innovation_V_, periods);
+  }
+  last_innovation_V_ = innovation_V;
+  // The innovations themselves overstate the noise by the estimate's slow error; their
+  // differences overstate a noise whose successive periods pull apart (a ripple of a few
+  // seconds) and cancel the slow error. The smaller of the two.
+  const double noise_V =
+      std::min(uq_innovation_.mean / kAbsPerSd, uq_innovation_step_.mean / kStepPerSd);
+  return std::max(least_V, noise_V);
+}
+
+void DisturbanceThermalSensor::ForgetVoltageNoise() {
+  uq_innovation_.Reset(kAbsPerSd * config_.uq_min_sd_V);
+  uq_innovation_step_.Reset(kStepPerSd * config_.uq_min_sd_V);
+  last_innovation_V_ = std::numeric_limits<double>::quiet_NaN();
 }
 
 void DisturbanceThermalSensor::FreeMagnetLaw() {

@@ -135,6 +135,14 @@ struct DisturbanceSensorConfig {
   /// Least white sd of one period's mean uq: the reading's noise, quantisation and the ripple
   /// that a second's mean does not remove.
   double uq_min_sd_V = 0.003;
+  /// Periods over which the voltage's own noise is learnt (0 = not learnt: uq_min_sd_V and the
+  /// reading's sd). A drive's report can carry more than its quantisation and sample noise (a
+  /// mechanical speed ripple the speed estimate does not show moves the back-EMF by tens of mV
+  /// at a fraction of a hertz), and a row trusted beyond its noise teaches the calibration and
+  /// the magnet that noise. Learnt from the innovations and from the differences of successive
+  /// ones, whichever is smaller: a slow error of the estimate (heat it has not found yet)
+  /// cancels in the differences, the noise does not.
+  double uq_noise_learn_periods = 30.0;
   /// A voltage row whose innovation lies beyond this many of its sds is left out (an outlier:
   /// a transient the steady-state equation does not describe).
   double voltage_gate_sd = 5.0;
@@ -275,6 +283,10 @@ class DisturbanceThermalSensor : public ThermalObserver {
     bool frame = false, winding = false, magnet = false, voltage = false;
     bool Any() const { return frame || winding || magnet || voltage; }
   };
+  /// This period's voltage innovation into the learnt noise; the row's sd: at least that noise.
+  double LearnVoltageNoise(double innovation_V, double reading_sd_V);
+  /// The learnt noise back at uq_min_sd_V (a start; no innovation remembered).
+  void ForgetVoltageNoise();
   /// The update rows of this step's readings into c_all_, y_all_, sm_all_.
   void FillRows(const ThermalReadings& r, const Used& used);
   /// The voltage row (extended: linearised at the predicted state); false when its innovation
@@ -314,9 +326,20 @@ class DisturbanceThermalSensor : public ThermalObserver {
   double yv_ = 0.0;                        ///< its linearised observation
   double uq_sd_V_ = 0.0;                   ///< its sd
   int voltage_rejected_run_ = 0;           ///< voltage rows beyond the gate in a row
-  bool frame_fused_last_ = false;          ///< the previous step fused a frame reading
-  bool magnet_observed_ = false;           ///< SetMagnetObserved
-  bool law_free_ = false;                  ///< FreeMagnetLaw
+  /// A mean of absolute values learnt over uq_noise_learn_periods (LearnVoltageNoise).
+  struct AbsMean {
+    double mean = 0.0;
+    double count = 0.0;  ///< values added since the start
+    void Reset(double assumed);
+    void Add(double value, double periods);
+  };
+  /// The voltage's learnt noise: the mean |innovation| and |difference of successive
+  /// innovations|, V, and the last period's innovation (NaN: that period had no voltage row).
+  AbsMean uq_innovation_, uq_innovation_step_;
+  double last_innovation_V_ = std::numeric_limits<double>::quiet_NaN();
+  bool frame_fused_last_ = false;  ///< the previous step fused a frame reading
+  bool magnet_observed_ = false;   ///< SetMagnetObserved
+  bool law_free_ = false;          ///< FreeMagnetLaw
   /// The last fused frame reading, the filter's reading of it after that update and its variance.
   double last_reading_degC_ = std::numeric_limits<double>::quiet_NaN();
   double last_predicted_degC_ = 0.0;
