@@ -148,6 +148,11 @@ void Pump::Identify(const protocol::DqPair& pair) {
   drive_.id += s.id_A;
   drive_.iq += s.iq_A;
   drive_.iq2 += s.iq_A * s.iq_A;
+  if (std::isfinite(drive_.last_iq)) {
+    drive_.diq2 += (s.iq_A - drive_.last_iq) * (s.iq_A - drive_.last_iq);
+    ++drive_.differences;
+  }
+  drive_.last_iq = s.iq_A;
   drive_.ud += s.ud_V;
   drive_.uq += s.uq_V;
   drive_.w += s.w_r_rad_per_s;
@@ -235,7 +240,14 @@ estimators::DriveAverages Pump::TakeDriveAverages() {
     a.ud_V = drive_.ud / n;
     a.uq_V = drive_.uq / n;
     a.w_rad_per_s = drive_.w / n;
-    a.iq_sd_A = std::sqrt(std::max(drive_.iq2 / n - a.iq_A * a.iq_A, 0.0));
+    // A load change moves iq between the period's first and last samples; the current's noise
+    // (and a ripple faster than the samples) moves it from one sample to the next. Successive
+    // differences of white noise of sd s have a mean square of 2 s^2 (von Neumann's ratio): what
+    // the period's variance has beyond that is the change.
+    const double variance_A2 = std::max(drive_.iq2 / n - a.iq_A * a.iq_A, 0.0);
+    const double noise_A2 =
+        drive_.differences > 0 ? 0.5 * drive_.diq2 / static_cast<double>(drive_.differences) : 0.0;
+    a.iq_change_sd_A = std::sqrt(std::max(variance_A2 - noise_A2, 0.0));
   }
   drive_ = DriveSums{};
   return a;

@@ -179,6 +179,10 @@ class Pump {
   struct DriveSums {
     int n = 0;
     double id = 0.0, iq = 0.0, iq2 = 0.0, ud = 0.0, uq = 0.0, w = 0.0;
+    /// Successive samples' squared iq differences and their count, and the last sample's iq.
+    double diq2 = 0.0;
+    int differences = 0;
+    double last_iq = std::numeric_limits<double>::quiet_NaN();
   };
   DriveSums drive_;
   /// The period's drive averages (and the sums back to zero).

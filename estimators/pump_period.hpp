@@ -31,8 +31,9 @@ struct DriveAverages {
   double ud_V = std::numeric_limits<double>::quiet_NaN();
   double uq_V = std::numeric_limits<double>::quiet_NaN();
   double w_rad_per_s = std::numeric_limits<double>::quiet_NaN();  ///< electrical
-  /// The sd of iq over the period's samples, A: a load change inside the period.
-  double iq_sd_A = std::numeric_limits<double>::quiet_NaN();
+  /// The sd of iq over the period's samples beyond their sample-to-sample noise, A: a load
+  /// change inside the period.
+  double iq_change_sd_A = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct PumpPeriod {

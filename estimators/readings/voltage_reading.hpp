@@ -6,9 +6,9 @@
 /// the copper law, eq. 2, and the magnet law).
 ///
 /// Start: a period with enough paired samples (min_samples) and a finite speed. Gate: no load
-/// change inside the period (the sd of iq over it at most max_iq_sd_A: the steady-state
-/// equation does not hold through the current loop's transient), and the observer's own
-/// innovation gate. Stop: either lost.
+/// change inside the period (the sd of iq over it beyond its noise at most max_iq_change_sd_A: the
+/// steady-state equation does not hold through the current loop's transient), and the observer's
+/// own innovation gate. Stop: either lost.
 
 #include <cmath>
 #include <limits>
@@ -34,10 +34,10 @@ struct VoltageMagnet {
 };
 
 struct VoltageReadingConfig {
-  bool fuse = true;           ///< offered to an observer that takes it
-  int min_samples = 10;       ///< paired samples a period needs
-  double max_iq_sd_A = 0.05;  ///< a load change inside the period: left out
-  double uq_noise_V = 0.01;   ///< rms noise of one sample of the reported uq
+  bool fuse = true;                  ///< offered to an observer that takes it
+  int min_samples = 10;              ///< paired samples a period needs
+  double max_iq_change_sd_A = 0.05;  ///< a load change inside the period: left out
+  double uq_noise_V = 0.01;          ///< rms noise of one sample of the reported uq
 };
 
 class VoltageReading {

@@ -64,7 +64,7 @@ TEST(VoltageEquation, GradientMatchesFiniteDifferences) {
   EXPECT_GT(std::abs(g.magnet_V_per_K), 5.0 * std::abs(g.winding_V_per_K));
 }
 
-pe::DriveAverages Steady(int samples, double iq_sd_A) {
+pe::DriveAverages Steady(int samples, double iq_change_sd_A) {
   pe::DriveAverages d;
   d.samples = samples;
   d.id_A = 0.0;
@@ -72,7 +72,7 @@ pe::DriveAverages Steady(int samples, double iq_sd_A) {
   d.ud_V = -1.0;
   d.uq_V = 24.0;
   d.w_rad_per_s = 2000.0;
-  d.iq_sd_A = iq_sd_A;
+  d.iq_change_sd_A = iq_change_sd_A;
   return d;
 }
 
