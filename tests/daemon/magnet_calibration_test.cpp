@@ -89,6 +89,24 @@ class MagnetCalibration : public ::testing::Test {
     pump.Advance(t_us);
   }
 
+  /// At rest, at the ambient, when the estimate starts (seconds 1-3): a cold start.
+  void ColdStart(pd::Pump& pump) {
+    for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+  }
+  /// The speed at second `k` of the run-up after ColdStart: rated after two minutes.
+  static double RunUp_rpm(int k) { return 21000.0 * std::min((k - 3) / 120.0, 1.0); }
+
+  /// How often a node's estimate lies inside its +-2 sd, and its largest error.
+  struct Band {
+    int judged = 0, inside = 0;
+    double largest_K = 0.0;
+    void Add(double error_K, double sd_K) {
+      ++judged;
+      inside += std::abs(error_K) <= 2.0 * sd_K;
+      largest_K = std::max(largest_K, std::abs(error_K));
+    }
+  };
+
   const pe::MotorDescription motor_ = pe::MotorPreset("han2019-tmp");
   const pe::VoltageLaw law_ = pe::VoltageLawOf(motor_);
   pe::VoltageLaw plant_law_ = law_;  ///< the plant's own (its magnet's law may differ)
@@ -136,8 +154,7 @@ TEST_F(MagnetCalibration, AWarmStartPublishesNoMagnetAndTheNameplatesToleranceOn
 
 TEST_F(MagnetCalibration, AColdStartLearnsPsi0AndTheSavedStateKeepsIt) {
   pd::Pump pump(Config(), motor_, model_, 1.0);
-  // At rest, at the ambient, when the estimate starts: a cold start.
-  for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+  ColdStart(pump);
   ASSERT_TRUE(pump.snapshot().initialised);
   for (int k = 4; k <= 300; ++k) Period(pump, k, 21000.0);
   const auto& s = pump.snapshot();
@@ -265,13 +282,13 @@ TEST_F(MagnetCalibration, WithoutTheVoltageTwoSpeedsTellTheInvertersErrorFromThe
 TEST_F(MagnetCalibration, AVoltageBeyondItsGateForLongIsFusedAgain) {
   pd::Pump pump(Config(), motor_, model_, 1.0);
   plant_load_step_A = 0.5;
-  for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+  ColdStart(pump);
   const auto rotor = static_cast<std::size_t>(rotor_);
   int fused = 0, judged = 0;
   double largest_K = 0.0;
   for (int k = 4; k <= 1800; ++k) {
     if (k == 600) plant_rotor_heat_W = 40.0;
-    Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
+    Period(pump, k, RunUp_rpm(k));
     const auto& s = pump.snapshot();
     if (k < 700) continue;
     ++judged;
@@ -291,22 +308,18 @@ TEST_F(MagnetCalibration, AVoltageNoisierThanAssumedIsLearntAndTheMagnetStaysCov
   plant_dpsi = -0.016;
   plant_load_step_A = 0.5;
   plant_ripple_rpm = 30.0;
-  for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+  ColdStart(pump);
   const auto rotor = static_cast<std::size_t>(rotor_);
-  int covered = 0, judged = 0;
-  double largest_K = 0.0;
+  Band band;
   for (int k = 4; k <= 1200; ++k) {
-    Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
+    Period(pump, k, RunUp_rpm(k));
     const auto& s = pump.snapshot();
     if (k < 300) continue;
     ASSERT_TRUE(s.initialised);
-    const double error_K = std::abs(s.node_degC[rotor] - x_degC(rotor_));
-    ++judged;
-    covered += error_K <= 2.0 * s.node_sd_K[rotor];
-    largest_K = std::max(largest_K, error_K);
+    band.Add(s.node_degC[rotor] - x_degC(rotor_), s.node_sd_K[rotor]);
   }
-  EXPECT_GE(covered, 0.9 * judged) << "rotor inside +-2 sd";
-  EXPECT_LT(largest_K, 4.0) << "the rotor, truth " << x_degC(rotor_);
+  EXPECT_GE(band.inside, 0.9 * band.judged) << "rotor inside +-2 sd";
+  EXPECT_LT(band.largest_K, 4.0) << "the rotor, truth " << x_degC(rotor_);
 }
 
 // A load change inside a period is left out (the steady-state equation does not hold through the
@@ -317,10 +330,10 @@ TEST_F(MagnetCalibration, AVoltageNoisierThanAssumedIsLearntAndTheMagnetStaysCov
 TEST_F(MagnetCalibration, ANoisyCurrentIsNoLoadChangeButAStepInsideThePeriodIs) {
   pd::Pump pump(Config(), motor_, model_, 1.0);
   plant_current_noise_A = 0.06;
-  for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+  ColdStart(pump);
   int fused = 0, judged = 0;
   for (int k = 4; k <= 300; ++k) {
-    Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
+    Period(pump, k, RunUp_rpm(k));
     if (k < 10) continue;
     ++judged;
     fused += pump.snapshot().voltage_reading.state == pe::ReadingState::kFused;
@@ -342,7 +355,7 @@ TEST_F(MagnetCalibration, ThePublishedIdentificationIsTheFiltersAndALoadChangePi
   plant_load_step_A = 0.5;
   load_steps_from_s = 600;  // the first change at 660 s
   pd::Pump pump(Config(), motor_, model_, 1.0);
-  for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+  ColdStart(pump);
   using S = pe::ResistanceStatus;
   const auto& cu = motor_.copper;
   const double beta = motor_.magnet.flux_temperature_coefficient_per_K;
@@ -350,7 +363,7 @@ TEST_F(MagnetCalibration, ThePublishedIdentificationIsTheFiltersAndALoadChangePi
   // Until 18 min: later the noise-free plant's frame reads flat long enough to be taken as a
   // stuck sensor (its reading is rounded to 0.1 K).
   for (int k = 4; k <= 1080; ++k) {
-    Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
+    Period(pump, k, RunUp_rpm(k));
     const auto& s = pump.snapshot();
     if (k < 150) continue;
     const pe::PublishedIdentification& id = s.identification;
@@ -394,11 +407,11 @@ TEST_F(MagnetCalibration, AMagnetLawSteeperThanTheMagnetsIsFoundAndItsMagnetLeft
     plant_law_ = pe::VoltageLawOf(plant_motor);
     x_degC.setConstant(22.0);
     pd::Pump pump(Config(), motor_, model_, 1.0);
-    for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+    ColdStart(pump);
     int found_s = -1;
     double found_heat_W = 0.0;  // the rotor heat that made the check say so
     for (int k = 4; k <= 1500; ++k) {
-      Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
+      Period(pump, k, RunUp_rpm(k));
       const auto& s = pump.snapshot();
       if (s.magnet_law_suspect && found_s < 0) {
         found_s = k;
@@ -440,26 +453,25 @@ TEST_F(MagnetCalibration, AfterTheMagnetLawIsGivenUpTheVoltageReadsTheWindingAlo
     x_degC.setConstant(warm ? 30.0 : 22.0);
     pd::Pump pump(Config(), motor_, model_, 1.0);
     for (int k = 1; k <= 3; ++k) Period(pump, k, warm ? 21000.0 : 0.0);
-    int found_s = -1, judged = 0, winding_covered = 0, rotor_covered = 0;
-    double winding_largest_K = 0.0;
+    int found_s = -1;
+    Band winding_band, rotor_band;
     for (int k = 4; k <= 2400; ++k) {
-      Period(pump, k, warm ? 21000.0 : 21000.0 * std::min((k - 3) / 120.0, 1.0));
+      Period(pump, k, warm ? 21000.0 : RunUp_rpm(k));
       const auto& s = pump.snapshot();
       if (s.magnet_law_suspect && found_s < 0) found_s = k;
       if (found_s < 0 || k < found_s + 60) continue;
-      const double winding_error_K = s.node_degC[winding] - x_degC(winding_);
-      ++judged;
-      winding_covered += std::abs(winding_error_K) <= 2.0 * s.node_sd_K[winding];
-      rotor_covered += std::abs(s.node_degC[rotor] - x_degC(rotor_)) <= 2.0 * s.node_sd_K[rotor];
-      winding_largest_K = std::max(winding_largest_K, std::abs(winding_error_K));
+      winding_band.Add(s.node_degC[winding] - x_degC(winding_), s.node_sd_K[winding]);
+      rotor_band.Add(s.node_degC[rotor] - x_degC(rotor_), s.node_sd_K[rotor]);
     }
     const auto& s = pump.snapshot();
     ASSERT_GT(found_s, 0) << "rotor heat " << s.rotor_heat_W << " W";
     EXPECT_LT(found_s, 900);
-    EXPECT_GE(winding_covered, 0.9 * judged) << "largest winding error " << winding_largest_K;
-    EXPECT_LT(winding_largest_K, 3.0);
-    EXPECT_GE(rotor_covered, 0.9 * judged) << "rotor " << s.node_degC[rotor] << " sd "
-                                           << s.node_sd_K[rotor] << " truth " << x_degC(rotor_);
+    EXPECT_GE(winding_band.inside, 0.9 * winding_band.judged)
+        << "largest winding error " << winding_band.largest_K;
+    EXPECT_LT(winding_band.largest_K, 3.0);
+    EXPECT_GE(rotor_band.inside, 0.9 * rotor_band.judged)
+        << "rotor " << s.node_degC[rotor] << " sd " << s.node_sd_K[rotor] << " truth "
+        << x_degC(rotor_);
     EXPECT_LT(s.node_sd_K[rotor], tolerance_K) << "the filter's own sd, not psi0's tolerance";
     EXPECT_EQ(s.magnet_law_changes, 1u);
     if (warm) continue;
@@ -499,22 +511,18 @@ TEST_F(MagnetCalibration, RotorLossesTheModelLacksStayOffTheWinding) {
   plant_load_step_A = 1.0;
   plant_rotor_heat_W_per_A = 3.0;
   pd::Pump pump(Config(), motor_, model_, 1.0);
-  for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+  ColdStart(pump);
   const auto winding = static_cast<std::size_t>(winding_);
-  int judged = 0, covered = 0;
-  double largest_K = 0.0;
+  Band band;
   for (int k = 4; k <= 1800; ++k) {
-    Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
+    Period(pump, k, RunUp_rpm(k));
     const auto& s = pump.snapshot();
     if (k < 300) continue;
-    const double error_K = s.node_degC[winding] - x_degC(winding_);
-    ++judged;
-    covered += std::abs(error_K) <= 2.0 * s.node_sd_K[winding];
-    largest_K = std::max(largest_K, std::abs(error_K));
+    band.Add(s.node_degC[winding] - x_degC(winding_), s.node_sd_K[winding]);
   }
   const auto& s = pump.snapshot();
-  EXPECT_GE(covered, 0.9 * judged) << "largest winding error " << largest_K << " K";
-  EXPECT_LT(largest_K, 5.0);
+  EXPECT_GE(band.inside, 0.9 * band.judged) << "largest winding error " << band.largest_K << " K";
+  EXPECT_LT(band.largest_K, 5.0);
   EXPECT_GT(s.rotor_heat_W, 3.0) << "sd " << s.rotor_heat_sd_W;
   EXPECT_FALSE(s.magnet_law_suspect);
 }
@@ -536,11 +544,11 @@ TEST_F(MagnetCalibration, TheIdentifiersValuesAreADiagnosticOnly) {
     x_degC.setConstant(22.0);
     frame_stuck_degC = std::numeric_limits<double>::quiet_NaN();
     pd::Pump pump(config, motor_, model_, 1.0);
-    for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
+    ColdStart(pump);
     int tracking = 0, rs_covered = 0;
     for (int k = 4; k <= 2400; ++k) {
       if (voltage && k == 1200) frame_stuck_degC = x_degC(frame_);  // the RTD sticks
-      Period(pump, k, 21000.0 * std::min((k - 3) / 120.0, 1.0));
+      Period(pump, k, RunUp_rpm(k));
       const auto& s = pump.snapshot();
       if (voltage && s.sensor_fault == pe::SensorFault::kNone) continue;
       const pe::PublishedIdentification& id = s.identification;
