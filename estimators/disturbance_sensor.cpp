@@ -397,6 +397,8 @@ bool DisturbanceThermalSensor::Predict(const ThermalInputs& in, double dt_s) {
   // Disturbances held over the step: x(k+1) += Phi b d (eq. 21 with d as an input).
   PhiTimesColumn(d.phi_s, heat_in_, 0, ad_, df_);
   if (dr_ >= 0) {
+    const bool turning = std::abs(in.speed_rpm) >= c.rotor_heat_min_speed_rpm;
+    heat_in_(rotor_, 1) = turning ? 1.0 / model_.Capacities_J_per_K()(rotor_) : 0.0;
     PhiTimesColumn(d.phi_s, heat_in_, 1, ad_, dr_);
     ad_(dr_, dr_) = std::exp(-dt_s / c.rotor_heat_tau_s);
   }

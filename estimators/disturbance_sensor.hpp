@@ -57,6 +57,11 @@ struct DisturbanceSensorConfig {
   double frame_heat_sd_W = 3.0;      ///< random walk of d_f, W per sqrt(s)
   double rotor_heat_sd_W = 5.0;      ///< stationary sd of d_r, W
   double rotor_heat_tau_s = 1800.0;  ///< its correlation time
+  /// Below this |speed| d_r does not heat the rotor: the heat the model may lack there (gas
+  /// friction, eddy currents in the rotor, magnet losses) comes with its turning. At rest d_r's
+  /// prior would otherwise spread the rotor's temperature for as long as the pump stands, and the
+  /// run-up that follows could learn psi0 no better than that spread. 0 = at every speed.
+  double rotor_heat_min_speed_rpm = 0.0;
   /// Once the filter finds more rotor heat than this many of d_r's stationary sds, d_r's variance
   /// is held at least at (d_r / this)^2 (an added process noise): heat beyond the prior says the
   /// prior was too narrow for this pump, and a d_r held at the prior's width would keep the

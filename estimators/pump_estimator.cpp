@@ -89,6 +89,8 @@ std::unique_ptr<ThermalObserver> MakeObserver(const PumpEstimatorConfig& c,
     d.measured_node = c.measured_node;
     d.sensor_lag_s = c.frame_sensor_lag_s;
     d.rotor_node = RotorNode(c);
+    // Not turning: below a hundredth of rated speed, where a drive's speed estimate at rest reads.
+    d.rotor_heat_min_speed_rpm = 0.01 * std::max(motor.rated_speed_rpm, 0.0);
     d.winding_measurement_sd_K = c.winding.model_sd_K;
     // The identified winding is not fused here: its errors while tracking (7-9 K on the demo)
     // are beyond a bias state (docs/virtual-sensor.md). The magnet reading's error is mostly a

@@ -48,8 +48,9 @@ void VoltageReading::Prepare(const DriveAverages& d, bool frame_failed) {
   if (d.samples < config_.min_samples || !std::isfinite(d.uq_V) || !std::isfinite(d.iq_A) ||
       !std::isfinite(d.w_rad_per_s) || !std::isfinite(d.id_A)) {
     state = ReadingState::kStale;
-  } else if (!(d.iq_change_sd_A <= config_.max_iq_change_sd_A)) {
-    state = ReadingState::kGated;  // a load change inside the period
+  } else if (!(d.iq_change_sd_A <= config_.max_iq_change_sd_A) ||
+             !(std::abs(d.iq_A) >= config_.min_current_A)) {
+    state = ReadingState::kGated;  // a load change inside the period, or too little current
   } else {
     uq_V_ = d.uq_V - QAxisKnownTerms_V(motor_, d.id_A, d.iq_A, d.w_rad_per_s);
     uq_sd_V_ = config_.uq_noise_V / std::sqrt(static_cast<double>(d.samples));

@@ -7,8 +7,8 @@
 ///
 /// Start: a period with enough paired samples (min_samples) and a finite speed. Gate: no load
 /// change inside the period (the sd of iq over it beyond its noise at most max_iq_change_sd_A: the
-/// steady-state equation does not hold through the current loop's transient), and the observer's
-/// own innovation gate. Stop: either lost.
+/// steady-state equation does not hold through the current loop's transient), a current of at
+/// least min_current_A, and the observer's own innovation gate. Stop: either lost.
 
 #include <cmath>
 #include <limits>
@@ -37,7 +37,14 @@ struct VoltageReadingConfig {
   bool fuse = true;                  ///< offered to an observer that takes it
   int min_samples = 10;              ///< paired samples a period needs
   double max_iq_change_sd_A = 0.05;  ///< a load change inside the period: left out
-  double uq_noise_V = 0.01;          ///< rms noise of one sample of the reported uq
+  /// A period whose mean |iq| is below this is left out. The equation's residual offset stands
+  /// for the inverter's dead-time error, which follows the current's sign at its full size only
+  /// above the drive's knee (tenths of an ampere) and is zero without current. A pump at rest
+  /// (no current, no speed) would teach the offset that the error is zero, and the run-up's error
+  /// along its current would then read as resistance; nor does a row without current carry the
+  /// winding (R iq).
+  double min_current_A = 0.5;
+  double uq_noise_V = 0.01;  ///< rms noise of one sample of the reported uq
 };
 
 class VoltageReading {
