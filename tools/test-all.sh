@@ -5,7 +5,8 @@
 # build (unit + vcan). Run tools/setup.sh first (the README's command does).
 #
 # Environment: PUMPTHERM_JOBS (default: number of cores), PUMPTHERM_GUEST_JOBS (tests at a time in
-# the last stage; default 1.5 x PUMPTHERM_JOBS), PUMPTHERM_FUZZ_SECONDS (default 60), CI=true makes a vcan test that can run neither natively nor in the guest fail, not skip.
+# the last stage; default 1.5 x PUMPTHERM_JOBS), PUMPTHERM_FUZZ_SECONDS (default 60), CI=true
+# makes a vcan test that can run neither natively nor in the guest fail, not skip.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=${PUMPTHERM_JOBS:-$(nproc)}

@@ -95,8 +95,11 @@ class MagnetCalibration : public ::testing::Test {
   void ColdStart(pd::Pump& pump) {
     for (int k = 1; k <= 3; ++k) Period(pump, k, 0.0);
   }
-  /// The speed at second `k` of the run-up after ColdStart: rated after two minutes.
-  static double RunUp_rpm(int k) { return 21000.0 * std::min((k - 3) / 120.0, 1.0); }
+  /// The speed at second `k` of a run-up that starts at second `start_s` (after ColdStart: 3):
+  /// at rest before it, rated two minutes later.
+  static double RunUp_rpm(int k, int start_s = 3) {
+    return 21000.0 * std::clamp((k - start_s) / 120.0, 0.0, 1.0);
+  }
 
   /// How often a node's estimate lies inside its +-2 sd, and its largest error.
   struct Band {
@@ -422,7 +425,7 @@ TEST_F(MagnetCalibration, APumpAtRestBeforeItsRunUpLearnsR0FromTheRunUp) {
   const auto& cu = motor_.copper;
   Band resistance, magnet;
   for (int k = 4; k <= 1500; ++k) {
-    Period(pump, k, k < 600 ? 0.0 : 21000.0 * std::min((k - 600) / 120.0, 1.0));
+    Period(pump, k, RunUp_rpm(k, current_from_s));
     const auto& s = pump.snapshot();
     if (k == 599) {
       EXPECT_NE(s.voltage_reading.state, pe::ReadingState::kFused) << "at rest, no current";
@@ -436,7 +439,7 @@ TEST_F(MagnetCalibration, APumpAtRestBeforeItsRunUpLearnsR0FromTheRunUp) {
         cu.r0_ohm * (1.0 + plant_dr) * (1.0 + cu.alpha_per_K * (x_degC(winding_) - cu.t0_degC));
     const pe::PublishedIdentification& id = s.identification;
     if (std::isfinite(id.resistance_ohm)) {
-      resistance.Add((id.resistance_ohm - r_ohm) / id.resistance_sd_ohm, 1.0);
+      resistance.Add(id.resistance_ohm - r_ohm, id.resistance_sd_ohm);
     }
     magnet.Add(s.node_degC[rotor] - x_degC(rotor_), s.node_sd_K[rotor]);
   }
