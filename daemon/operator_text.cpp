@@ -89,6 +89,11 @@ std::string CauseText(estimators::MismatchState state, estimators::MismatchEffec
     case E::kSensorStuck:
       return fmt::format("{} sensor stuck at {:.1f} degC (the sensor, not the plant)",
                          measured_node, v);
+    case E::kSensorLag:
+      return fmt::format(
+          "{} sensor lags about {:.0f} s, not as configured (its frame_sensor_lag_s; the sensor, "
+          "not the plant)",
+          measured_node, v);
     case E::kNone:
       break;
   }

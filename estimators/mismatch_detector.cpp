@@ -16,7 +16,20 @@ constexpr double kMaxResistanceScale = 20.0;
 
 /// Hypotheses of the naming fit, in column-block order.
 /// kAmbientRamp is the unmeasured ambient reaching its size linearly over `ambient_ramp_s`.
-enum Hypothesis : int { kCooling = 0, kRotor, kLoss, kAmbient, kAmbientRamp, kOffset, kHypotheses };
+enum Hypothesis : int {
+  kCooling = 0,
+  kRotor,
+  kLoss,
+  kAmbient,
+  kAmbientRamp,
+  kOffset,
+  kLag,
+  kHypotheses
+};
+
+/// Longest lag reported, as a multiple of the configured one: beyond it the fitted change of the
+/// lag's rate (theta -> -1/tau) no longer tells the size.
+constexpr double kMaxLagScale = 10.0;
 
 MismatchEffect EffectOf(int h) {
   switch (h) {
@@ -29,6 +42,8 @@ MismatchEffect EffectOf(int h) {
     case kAmbient:
     case kAmbientRamp:
       return MismatchEffect::kUnmeasuredAmbient;
+    case kLag:
+      return MismatchEffect::kSensorLag;
     default:
       return MismatchEffect::kSensorOffset;
   }
@@ -81,6 +96,8 @@ const char* MismatchEffectName(MismatchEffect effect) {
       return "sensor_offset";
     case MismatchEffect::kSensorStuck:
       return "sensor_stuck";
+    case MismatchEffect::kSensorLag:
+      return "sensor_lag";
   }
   return "unknown";
 }
@@ -109,6 +126,8 @@ std::string DescribeFinding(const MismatchFinding& f) {
       return fmt::format("sensor offset {:+.1f} K (sensor fault suspected: offset or jump)", v);
     case MismatchEffect::kSensorStuck:
       return fmt::format("sensor stuck at {:.1f} degC (sensor fault suspected)", v);
+    case MismatchEffect::kSensorLag:
+      return fmt::format("sensor lag {:.0f} s (not the configured one)", v);
     case MismatchEffect::kNone:
       break;
   }
@@ -140,7 +159,7 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
       !(c.initial_sd_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) || !(c.window_s > 0.0) ||
       !(c.false_alarm_probability > 0.0 && c.false_alarm_probability < 0.5) ||
       !(c.fit_window_s > c.window_s) || !(c.fit_onset_step_s > 0.0) || !(c.refit_period_s > 0.0) ||
-      !(c.ambient_ramp_s >= 0.0) || c.stuck_samples < 2) {
+      !(c.ambient_ramp_s >= 0.0) || c.stuck_samples < 2 || !(c.lag_min_ratio >= 1.0)) {
     throw std::invalid_argument(
         "mismatch detector: settings must be positive (window < fit window)");
   }
@@ -175,6 +194,7 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
   y_ = Eigen::VectorXd::Zero(1);
   x_nodes_ = Eigen::VectorXd::Zero(n_);
   filter_ = KalmanFilter(n_aug_);
+  fit_filter_ = KalmanFilter(n_aug_);
   Initialise(25.0, 0.0);
 }
 
@@ -395,6 +415,7 @@ void MismatchDetector::Fit(double now_s) {
     ++refused_steps_;  // the history met an operating point the model cannot linearise: no name
     last_fit_s_ = now_s;
   }
+  sensor_model_.AddLagRow(lin_block_.a_per_s);  // the configured lag again, after FitLag's
 }
 
 void MismatchDetector::FitNow(double now_s) {
@@ -494,7 +515,74 @@ void MismatchDetector::FitNow(double now_s) {
     }
   }
   AddMagnetChannel(onsets * kHypotheses, magnet_sum_r, magnet_sum_rr, magnet_samples);
+  FitLag(oldest);
   Choose(onsets, oldest);
+}
+
+double MismatchDetector::HistoryNis(double lag_s, int oldest) {
+  // The nominal filter re-run over the history with the sensor's lag row at `lag_s`, from the
+  // state it had at the history's start and its present covariance.
+  fit_filter_.Reset(h_xpre_.col(oldest), filter_.Covariance());
+  const int nb = n_aug_ - 1;
+  fit_ad_ = ad_;
+  double sum = 0.0;
+  for (int i = 0; i < size_; ++i) {
+    const auto ks = static_cast<std::size_t>((oldest + i) % cap_);
+    Linearise(h_in_[ks], fit_filter_.State());
+    lin_block_.a_per_s(lag_, frame_) = 1.0 / lag_s;
+    lin_block_.a_per_s(lag_, lag_) = -1.0 / lag_s;
+    fit_disc_.Update(lin_block_, h_dt_[ks]);
+    const ThermalDiscreteModel& d = fit_disc_.Current();
+    fit_ad_.topLeftCorner(nb, nb) = d.ad;
+    fit_bu_.setZero(n_aug_);
+    fit_bu_.head(nb).noalias() = d.phi_s * lin_block_.f_K_per_s;
+    const double q = config_.process_sd_K * config_.process_sd_K * h_dt_[ks];
+    for (int j = 0; j < n_; ++j) sp_(j, j) = q;
+    fit_filter_.Predict(fit_ad_, fit_bu_, sp_);
+    if (!std::isfinite(h_y_[ks])) continue;
+    y_(0) = h_y_[ks];
+    const KalmanUpdateReport& r = fit_filter_.Update(c_, y_, sm_);
+    if (r.ok && r.measurements == 1) sum += r.nis;
+  }
+  return sum;
+}
+
+void MismatchDetector::FitLag(int oldest) {
+  // The lag is no onset effect (a wrong lag acts on every ramp of the reading) and no small one
+  // (90 s for 30 s configured is 1/tau two thirds smaller): its size is found by the lag that
+  // minimises the history's NIS (golden section on log tau), and its likelihood ratio is the NIS
+  // it removes, the same sum the other hypotheses' l approximates to first order.
+  lag_fit_s_ = std::numeric_limits<double>::quiet_NaN();
+  lag_l_ = -1.0;
+  if (lag_ < 0 || size_ < 2) return;
+  const double tau = config_.sensor_lag_s;
+  const double base = HistoryNis(tau, oldest);
+  constexpr double kGolden = 0.6180339887498949;
+  double lo = std::log(tau / 4.0), hi = std::log(kMaxLagScale * tau);
+  double a = hi - kGolden * (hi - lo), b = lo + kGolden * (hi - lo);
+  double fa = HistoryNis(std::exp(a), oldest), fb = HistoryNis(std::exp(b), oldest);
+  for (int it = 0; it < 12; ++it) {
+    if (fa <= fb) {
+      hi = b;
+      b = a;
+      fb = fa;
+      a = hi - kGolden * (hi - lo);
+      fa = HistoryNis(std::exp(a), oldest);
+    } else {
+      lo = a;
+      a = b;
+      fa = fb;
+      b = lo + kGolden * (hi - lo);
+      fb = HistoryNis(std::exp(b), oldest);
+    }
+  }
+  const double best = std::min(fa, fb);
+  lag_fit_s_ = std::exp(fa <= fb ? a : b);
+  // A lag within lag_min_ratio of the configured one is the configured one: the fit is not told
+  // from whatever else the model misses (a lost cooling's first minutes fit 24-39 s for 30 s).
+  const double ratio = lag_fit_s_ / tau;
+  if (ratio < config_.lag_min_ratio && ratio > 1.0 / config_.lag_min_ratio) return;
+  lag_l_ = std::max(base - best, 0.0);
 }
 
 void MismatchDetector::AddMagnetChannel(int columns, double sum_r, double sum_rr, int samples) {
@@ -531,13 +619,17 @@ void MismatchDetector::Choose(int onsets, int oldest) {
   }
   for (int col = 0; col < onsets * kHypotheses; ++col) {
     const int h = col % kHypotheses;
-    if ((h == kRotor && rotor_ < 0) || !(fit_b_(col) > 0.0)) continue;
+    if ((h == kRotor && rotor_ < 0) || h == kLag || !(fit_b_(col) > 0.0)) continue;
     if (any_kept && fit_veto_[static_cast<std::size_t>(col)]) continue;
     const double l = fit_a_(col) * fit_a_(col) / fit_b_(col);
     if (l > best_per_h[h]) {
       best_per_h[h] = l;
       col_per_h[h] = col;
     }
+  }
+  if (lag_l_ > 0.0) {  // FitLag's, its onset the history's start (column kLag of onset 0)
+    best_per_h[kLag] = lag_l_;
+    col_per_h[kLag] = kLag;
   }
   int h = -1;
   for (int j = 0; j < kHypotheses; ++j) {
@@ -551,10 +643,10 @@ void MismatchDetector::Choose(int onsets, int oldest) {
     if (second < 0 || best_per_h[j] > best_per_h[second]) second = j;
   }
   const int best = col_per_h[h];
-  const double theta = fit_a_(best) / fit_b_(best);
+  const double theta = fit_b_(best) > 0.0 ? fit_a_(best) / fit_b_(best) : 0.0;
   finding_.effect = EffectOf(h);
-  finding_.state =
-      h == kOffset ? MismatchState::kSensorFaultSuspected : MismatchState::kPlantChange;
+  finding_.state = h == kOffset || h == kLag ? MismatchState::kSensorFaultSuspected
+                                             : MismatchState::kPlantChange;
   finding_.likelihood_ratio = best_per_h[h];
   finding_.runner_up = second >= 0 ? EffectOf(second) : MismatchEffect::kNone;
   finding_.runner_up_ratio = second >= 0 ? best_per_h[second] : 0.0;
@@ -566,6 +658,9 @@ void MismatchDetector::Choose(int onsets, int oldest) {
       break;  // R'/R = G/G'
     case kLoss:
       finding_.value = 1.0 + theta;
+      break;
+    case kLag:
+      finding_.value = lag_fit_s_;
       break;
     default:
       finding_.value = theta;

@@ -72,8 +72,9 @@ enum class MismatchEffect : std::uint8_t {
   kUnmeasuredAmbient = 4,       ///< value: boundary temperature offset, K
   kSensorOffset = 5,            ///< value: offset of the reading, K
   kSensorStuck = 6,             ///< value: the frozen reading, degC
+  kSensorLag = 7,               ///< value: the sensor's lag the readings fit, s
 };
-inline constexpr int kMismatchEffectCount = 7;
+inline constexpr int kMismatchEffectCount = 8;
 
 const char* MismatchStateName(MismatchState state);
 /// Vocabulary name ("frame_ambient_resistance", ...).
@@ -110,6 +111,9 @@ struct MismatchDetectorConfig {
   double magnet_sd_K = 2.0;
   double magnet_period_s = 10.0;          ///< one magnet sample per this period enters the fit
   double magnet_veto_probability = 1e-3;  ///< of a right effect being vetoed, per fit
+  /// The sensor-lag hypothesis is named only for a fitted lag at least this many times longer
+  /// (or shorter) than `sensor_lag_s`: closer, a lag is not told from the other effects' misfit.
+  double lag_min_ratio = 1.5;
 };
 
 /// The detector's verdict.
@@ -166,6 +170,12 @@ class MismatchDetector {
   void Fit(double now_s);
   void FitNow(double now_s);
   void FitOnsets(int window);
+  /// The sensor-lag hypothesis: the lag that best fits the history (lag_fit_s_) and the NIS it
+  /// removes against the configured one (lag_l_; -1: not tried, no lag configured).
+  void FitLag(int oldest);
+  /// The sum of the NIS over the history of the nominal filter re-run with the sensor's lag at
+  /// `lag_s`, from the state at history slot `oldest`.
+  double HistoryNis(double lag_s, int oldest);
   /// Names the effect of largest likelihood ratio over the fit's `onsets` columns.
   void Choose(int onsets, int oldest);
   bool Stuck(int* first) const;
@@ -213,6 +223,11 @@ class MismatchDetector {
   Eigen::VectorXd fit_onset_offset_K_;  ///< per onset: the sensor offset estimated before it
   Eigen::VectorXd fit_me_, fit_mee_, fit_mre_;  ///< magnet channel: sums of e, e^2, r e per column
   std::vector<char> fit_veto_;                  ///< per column: contradicted by the magnet
+  KalmanFilter fit_filter_{0};                  ///< FitLag's re-run of the nominal filter
+  Eigen::MatrixXd fit_ad_;
+  Eigen::VectorXd fit_bu_;
+  double lag_fit_s_ = std::numeric_limits<double>::quiet_NaN();
+  double lag_l_ = -1.0;
   MismatchFinding finding_;
 };
 

@@ -156,6 +156,8 @@ struct CaseSpec {
   double dt_s = 1.0;
   std::uint64_t seed = 1;
   double sensor_lag_s = 30.0;
+  /// The lag the estimator is configured with (negative: sensor_lag_s, the truth's).
+  double configured_lag_s = -1.0;
   double truth_process_sd_K = 0.005;  ///< per sqrt(s), as the plant simulator's default
   /// The resistance-based winding temperature for the disturbance filter: the truth's winding
   /// (ThermalModel::WindingWeights) plus white noise of this sd, once per step; 0 = not fused.
@@ -257,7 +259,7 @@ inline pe::PumpEstimatorConfig EstimatorConfig(const CaseSpec& spec,
                                                const pe::DisturbanceSensorConfig& dc) {
   pe::PumpEstimatorConfig c;
   c.measured_node = frame_node;
-  c.frame_sensor_lag_s = spec.sensor_lag_s;
+  c.frame_sensor_lag_s = spec.configured_lag_s >= 0.0 ? spec.configured_lag_s : spec.sensor_lag_s;
   c.rotor_node = rotor_node;
   c.disturbance_states = disturbance;
   if (spec.magnet_noise_sd_K > 0.0) c.magnet.magnet_node = rotor_node;

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <string>
 
@@ -132,6 +133,29 @@ TEST(MismatchDetector, TellsAStuckSensor) {
   ASSERT_FALSE(std::isnan(r.name_delay_s));
   EXPECT_EQ(r.at_naming.state, pe::MismatchState::kSensorFaultSuspected);
   EXPECT_EQ(r.at_naming.effect, pe::MismatchEffect::kSensorStuck);
+}
+
+TEST(MismatchDetector, NamesAFrameSensorLagOtherThanConfigured) {
+  // RTDs lagging 90 s and 150 s (a deeper well, a loose fit), configured as 30 s, no fault: the
+  // first name is the lag, with its size. Without the lag hypothesis the demo recorded with a
+  // 90 s sensor named its healthy pumps' mismatch an unmeasured ambient (+1.6 and +2.1 K).
+  for (const double lag_s : {90.0, 150.0}) {
+    for (const int seed : {1, 2}) {
+      mc::CaseSpec spec;
+      spec.sensor_lag_s = lag_s;
+      spec.configured_lag_s = 30.0;
+      spec.fault_s = 0.0;
+      spec.duration_s = 3600.0;
+      spec.seed = static_cast<std::uint64_t>(seed);
+      const mc::CaseResult r = mc::RunCase(spec, ModelDir());
+      SCOPED_TRACE(testing::Message() << "lag " << lag_s << " s, seed " << seed << ": "
+                                      << pe::DescribeFinding(r.at_naming));
+      ASSERT_FALSE(std::isnan(r.name_delay_s));
+      EXPECT_EQ(r.at_naming.state, pe::MismatchState::kSensorFaultSuspected);
+      EXPECT_EQ(r.at_naming.effect, pe::MismatchEffect::kSensorLag);
+      EXPECT_NEAR(r.at_naming.value, lag_s, 0.2 * lag_s);
+    }
+  }
 }
 
 TEST(MismatchDetector, RejectsAnUnknownNode) {
