@@ -27,9 +27,13 @@ enum Hypothesis : int {
   kHypotheses
 };
 
-/// Longest lag reported, as a multiple of the configured one: beyond it the fitted change of the
-/// lag's rate (theta -> -1/tau) no longer tells the size.
+/// The lag fit's range: a quarter to ten times the configured lag, or, with none configured,
+/// kShortestLag_s to kLongestLag_s (an RTD in a housing lags some 5 to 120 s); kNoLag_s stands
+/// for no lag (far below a period: the lag state is the node).
 constexpr double kMaxLagScale = 10.0;
+constexpr double kShortestLag_s = 1.0;
+constexpr double kLongestLag_s = 600.0;
+constexpr double kNoLag_s = 0.05;
 
 MismatchEffect EffectOf(int h) {
   switch (h) {
@@ -159,7 +163,8 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
       !(c.initial_sd_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) || !(c.window_s > 0.0) ||
       !(c.false_alarm_probability > 0.0 && c.false_alarm_probability < 0.5) ||
       !(c.fit_window_s > c.window_s) || !(c.fit_onset_step_s > 0.0) || !(c.refit_period_s > 0.0) ||
-      !(c.ambient_ramp_s >= 0.0) || c.stuck_samples < 2 || !(c.lag_min_ratio >= 1.0)) {
+      !(c.ambient_ramp_s >= 0.0) || c.stuck_samples < 2 || !(c.lag_min_ratio >= 1.0) ||
+      !(c.lag_min_s > 0.0) || !(c.lag_fit_probability > 0.0 && c.lag_fit_probability < 0.5)) {
     throw std::invalid_argument(
         "mismatch detector: settings must be positive (window < fit window)");
   }
@@ -194,7 +199,23 @@ MismatchDetector::MismatchDetector(const ThermalModel& model, MismatchDetectorCo
   y_ = Eigen::VectorXd::Zero(1);
   x_nodes_ = Eigen::VectorXd::Zero(n_);
   filter_ = KalmanFilter(n_aug_);
-  fit_filter_ = KalmanFilter(n_aug_);
+  // FitLag's layout: the nodes, a lag state, the offset; each mapped to the filter's state that
+  // starts it (the lag state to the sensor's state: the lag, or the node without one).
+  const int nl = n_ + 2;
+  fit_map_.resize(static_cast<std::size_t>(nl));
+  for (int j = 0; j < n_; ++j) fit_map_[static_cast<std::size_t>(j)] = j;
+  fit_map_[static_cast<std::size_t>(n_)] = sensor_;
+  fit_map_[static_cast<std::size_t>(n_ + 1)] = bias_;
+  fit_lag_lin_.a_per_s = Eigen::MatrixXd::Zero(n_ + 1, n_ + 1);
+  fit_lag_lin_.f_K_per_s = Eigen::VectorXd::Zero(n_ + 1);
+  fit_ad_ = Eigen::MatrixXd::Identity(nl, nl);
+  fit_bu_ = Eigen::VectorXd::Zero(nl);
+  fit_sp_ = Eigen::MatrixXd::Zero(nl, nl);
+  fit_c_ = Eigen::MatrixXd::Zero(1, nl);
+  fit_c_(0, n_) = fit_c_(0, n_ + 1) = 1.0;
+  fit_x0_ = Eigen::VectorXd::Zero(nl);
+  fit_p0_ = Eigen::MatrixXd::Zero(nl, nl);
+  fit_filter_ = KalmanFilter(nl);
   Initialise(25.0, 0.0);
 }
 
@@ -415,7 +436,6 @@ void MismatchDetector::Fit(double now_s) {
     ++refused_steps_;  // the history met an operating point the model cannot linearise: no name
     last_fit_s_ = now_s;
   }
-  sensor_model_.AddLagRow(lin_block_.a_per_s);  // the configured lag again, after FitLag's
 }
 
 void MismatchDetector::FitNow(double now_s) {
@@ -520,30 +540,45 @@ void MismatchDetector::FitNow(double now_s) {
 }
 
 double MismatchDetector::HistoryNis(double lag_s, int oldest) {
-  // The nominal filter re-run over the history with the sensor's lag row at `lag_s`, from the
-  // state it had at the history's start and its present covariance.
-  fit_filter_.Reset(h_xpre_.col(oldest), filter_.Covariance());
-  const int nb = n_aug_ - 1;
-  fit_ad_ = ad_;
+  // The nominal filter re-run over the history with its sensor given the lag `lag_s` (states:
+  // the nodes, the lag, the offset, whether or not the configuration has a lag), from the state
+  // it had at the history's start and its present covariance; the lag state starts where the
+  // filter's sensor state was.
+  const int nl = n_ + 2;
+  for (int j = 0; j < nl; ++j) {
+    fit_x0_(j) = h_xpre_(fit_map_[static_cast<std::size_t>(j)], oldest);
+    for (int k = 0; k < nl; ++k) {
+      fit_p0_(j, k) = filter_.Covariance()(fit_map_[static_cast<std::size_t>(j)],
+                                           fit_map_[static_cast<std::size_t>(k)]);
+    }
+  }
+  fit_filter_.Reset(fit_x0_, fit_p0_);
+  fit_lag_lin_.a_per_s(n_, frame_) = 1.0 / lag_s;
+  fit_lag_lin_.a_per_s(n_, n_) = -1.0 / lag_s;
   double sum = 0.0;
+  int readings = 0;
   for (int i = 0; i < size_; ++i) {
     const auto ks = static_cast<std::size_t>((oldest + i) % cap_);
-    Linearise(h_in_[ks], fit_filter_.State());
-    lin_block_.a_per_s(lag_, frame_) = 1.0 / lag_s;
-    lin_block_.a_per_s(lag_, lag_) = -1.0 / lag_s;
-    fit_disc_.Update(lin_block_, h_dt_[ks]);
-    const ThermalDiscreteModel& d = fit_disc_.Current();
-    fit_ad_.topLeftCorner(nb, nb) = d.ad;
-    fit_bu_.setZero(n_aug_);
-    fit_bu_.head(nb).noalias() = d.phi_s * lin_block_.f_K_per_s;
+    x_nodes_ = fit_filter_.State().head(n_);
+    model_.Linearise(h_in_[ks], x_nodes_, fit_lin_);
+    fit_lag_lin_.a_per_s.topLeftCorner(n_, n_) = fit_lin_.a_per_s;
+    fit_lag_lin_.f_K_per_s.head(n_) = fit_lin_.f_K_per_s;
+    fit_lag_disc_.Update(fit_lag_lin_, h_dt_[ks]);
+    const ThermalDiscreteModel& d = fit_lag_disc_.Current();
+    fit_ad_.topLeftCorner(n_ + 1, n_ + 1) = d.ad;
+    fit_bu_.head(n_ + 1).noalias() = d.phi_s * fit_lag_lin_.f_K_per_s;
     const double q = config_.process_sd_K * config_.process_sd_K * h_dt_[ks];
-    for (int j = 0; j < n_; ++j) sp_(j, j) = q;
-    fit_filter_.Predict(fit_ad_, fit_bu_, sp_);
+    for (int j = 0; j < n_; ++j) fit_sp_(j, j) = q;
+    fit_filter_.Predict(fit_ad_, fit_bu_, fit_sp_);
     if (!std::isfinite(h_y_[ks])) continue;
     y_(0) = h_y_[ks];
-    const KalmanUpdateReport& r = fit_filter_.Update(c_, y_, sm_);
-    if (r.ok && r.measurements == 1) sum += r.nis;
+    const KalmanUpdateReport& r = fit_filter_.Update(fit_c_, y_, sm_);
+    if (r.ok && r.measurements == 1) {
+      sum += r.nis;
+      ++readings;
+    }
   }
+  lag_readings_ = readings;
   return sum;
 }
 
@@ -554,11 +589,14 @@ void MismatchDetector::FitLag(int oldest) {
   // it removes, the same sum the other hypotheses' l approximates to first order.
   lag_fit_s_ = std::numeric_limits<double>::quiet_NaN();
   lag_l_ = -1.0;
-  if (lag_ < 0 || size_ < 2) return;
+  if (size_ < 2) return;
   const double tau = config_.sensor_lag_s;
-  const double base = HistoryNis(tau, oldest);
+  const bool configured = tau > 0.0;
+  // Without a lag configured the baseline is a lag far below the step (the same reading).
+  const double base = HistoryNis(configured ? tau : kNoLag_s, oldest);
   constexpr double kGolden = 0.6180339887498949;
-  double lo = std::log(tau / 4.0), hi = std::log(kMaxLagScale * tau);
+  double lo = std::log(configured ? tau / 4.0 : kShortestLag_s);
+  double hi = std::log(configured ? kMaxLagScale * tau : kLongestLag_s);
   double a = hi - kGolden * (hi - lo), b = lo + kGolden * (hi - lo);
   double fa = HistoryNis(std::exp(a), oldest), fb = HistoryNis(std::exp(b), oldest);
   for (int it = 0; it < 12; ++it) {
@@ -578,10 +616,17 @@ void MismatchDetector::FitLag(int oldest) {
   }
   const double best = std::min(fa, fb);
   lag_fit_s_ = std::exp(fa <= fb ? a : b);
+
   // A lag within lag_min_ratio of the configured one is the configured one: the fit is not told
   // from whatever else the model misses (a lost cooling's first minutes fit 24-39 s for 30 s).
+  // Without one configured, a fitted lag below lag_min_s is none.
   const double ratio = lag_fit_s_ / tau;
-  if (ratio < config_.lag_min_ratio && ratio > 1.0 / config_.lag_min_ratio) return;
+  if (configured && ratio < config_.lag_min_ratio && ratio > 1.0 / config_.lag_min_ratio) return;
+  if (!configured && lag_fit_s_ < config_.lag_min_s) return;
+  // And the history must fit that lag as a model that holds (its NIS within the chi-square
+  // quantile of its readings): a plant change present since before the history (a cooling lost
+  // from the start) is fitted best by some lag too, but far from well.
+  if (best > ChiSquareQuantile(std::max(lag_readings_, 1), config_.lag_fit_probability)) return;
   lag_l_ = std::max(base - best, 0.0);
 }
 

@@ -114,6 +114,11 @@ struct MismatchDetectorConfig {
   /// The sensor-lag hypothesis is named only for a fitted lag at least this many times longer
   /// (or shorter) than `sensor_lag_s`: closer, a lag is not told from the other effects' misfit.
   double lag_min_ratio = 1.5;
+  /// With no lag configured (sensor_lag_s 0), a fitted lag shorter than this is none.
+  double lag_min_s = 5.0;
+  /// The fitted lag is named only while the history's NIS with it stays within its chi-square
+  /// quantile at this upper probability (the lag explains the readings, not a part of them).
+  double lag_fit_probability = 1e-3;
 };
 
 /// The detector's verdict.
@@ -171,7 +176,7 @@ class MismatchDetector {
   void FitNow(double now_s);
   void FitOnsets(int window);
   /// The sensor-lag hypothesis: the lag that best fits the history (lag_fit_s_) and the NIS it
-  /// removes against the configured one (lag_l_; -1: not tried, no lag configured).
+  /// removes against the configured one (lag_l_; -1: not named, too close to the configured).
   void FitLag(int oldest);
   /// The sum of the NIS over the history of the nominal filter re-run with the sensor's lag at
   /// `lag_s`, from the state at history slot `oldest`.
@@ -223,11 +228,16 @@ class MismatchDetector {
   Eigen::VectorXd fit_onset_offset_K_;  ///< per onset: the sensor offset estimated before it
   Eigen::VectorXd fit_me_, fit_mee_, fit_mre_;  ///< magnet channel: sums of e, e^2, r e per column
   std::vector<char> fit_veto_;                  ///< per column: contradicted by the magnet
-  KalmanFilter fit_filter_{0};                  ///< FitLag's re-run of the nominal filter
-  Eigen::MatrixXd fit_ad_;
-  Eigen::VectorXd fit_bu_;
+  // FitLag's re-run of the nominal filter, its sensor always with a lag state.
+  KalmanFilter fit_filter_{0};
+  std::vector<int> fit_map_;  ///< its states' sources in the filter's state
+  ThermalLinearModel fit_lag_lin_;
+  ThermalDiscretiser fit_lag_disc_{1e-3};
+  Eigen::MatrixXd fit_ad_, fit_sp_, fit_c_, fit_p0_;
+  Eigen::VectorXd fit_bu_, fit_x0_;
   double lag_fit_s_ = std::numeric_limits<double>::quiet_NaN();
   double lag_l_ = -1.0;
+  int lag_readings_ = 0;  ///< readings in the last HistoryNis
   MismatchFinding finding_;
 };
 
