@@ -615,6 +615,7 @@ void MismatchDetector::FitLag(int oldest) {
     }
   }
   const double best = std::min(fa, fb);
+  if (!std::isfinite(base) || !std::isfinite(best)) return;  // a history the filter cannot run
   lag_fit_s_ = std::exp(fa <= fb ? a : b);
 
   // A lag within lag_min_ratio of the configured one is the configured one: the fit is not told
