@@ -168,7 +168,8 @@ std::int64_t Gateway::PumpDueUs(std::size_t p) const {
       pump.snapshot().sensor_steps != io.sensor_steps_logged ||
       pump.snapshot().starts != io.starts_logged ||
       pump.snapshot().r0_changes != io.r0_changes_logged ||
-      pump.snapshot().magnet_law_changes != io.magnet_law_logged) {
+      pump.snapshot().magnet_law_changes != io.magnet_law_logged ||
+      pump.snapshot().sensor_lag_changes != io.sensor_lag_logged) {
     return kDueNow;
   }
   for (const OutputPlan& plan : io.outputs) {
@@ -251,6 +252,15 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
   if (pump.snapshot().mismatch_changes != io.mismatch_changes_logged) {
     io.mismatch_changes_logged = pump.snapshot().mismatch_changes;
     LogMismatch(pump);
+  }
+  if (pump.snapshot().sensor_lag_changes != io.sensor_lag_logged) {
+    io.sensor_lag_logged = pump.snapshot().sensor_lag_changes;
+    const std::string& sensor = pump.config().measured_node;
+    LogFields(LogLevel::kWarning, {{"PUMP", name}, {"NODE", sensor}},
+              "{}: {} sensor read with a lag of {:.0f} s from now, the lag the model diagnosis "
+              "fitted (configured {:g} s; until a restart): set frame_sensor_lag_s = {:.0f}",
+              name, sensor, pump.snapshot().frame_sensor_lag_s, pump.config().frame_sensor_lag_s,
+              pump.snapshot().frame_sensor_lag_s);
   }
   if (pump.snapshot().sensor_steps != io.sensor_steps_logged) {
     io.sensor_steps_logged = pump.snapshot().sensor_steps;

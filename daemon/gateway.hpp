@@ -243,6 +243,7 @@ class Gateway {
     std::uint64_t starts_logged = 0;
     std::uint64_t r0_changes_logged = 0;
     std::uint64_t magnet_law_logged = 0;
+    std::uint64_t sensor_lag_logged = 0;
     // Latest decoded inputs, for telemetry_t.
     double inputs[protocol::kMappingInputCount];
     std::int64_t inputs_us = -1;

@@ -169,6 +169,12 @@ void DisturbanceThermalSensor::Initialise(double x0_degC) {
   InitialiseWith(x0_degC, config_.initial_sd_K, config_.initial_spread_sd_K);
 }
 
+bool DisturbanceThermalSensor::AdoptSensorLag(double lag_s) {
+  if (!sensor_model_.SetLag(lag_s)) return false;
+  sensor_model_.AddLagRow(lin_block_.a_per_s);  // the next step's discretisation takes it
+  return true;
+}
+
 void DisturbanceThermalSensor::InitialiseKnown(double x0_degC, double sd_K) {
   InitialiseWith(x0_degC, 0.0, sd_K);
 }

@@ -218,6 +218,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// forecast with the nominal model carries the heat the filter has found.
   void AddFoundHeat(ThermalLinearModel& lin) const override;
   bool ModelsSensorLag() const override { return sensor_model_.has_lag(); }
+  bool AdoptSensorLag(double lag_s) override;
   double FrameHeat_W() const { return filter_.State()(df_); }
   double RotorHeat_W() const override {
     return dr_ >= 0 ? filter_.State()(dr_) : std::numeric_limits<double>::quiet_NaN();

@@ -7,6 +7,7 @@
 /// Pure library; no allocation after construction.
 
 #include <Eigen/Dense>
+#include <cmath>
 #include <string>
 
 #include "estimators/thermal_model.hpp"
@@ -26,6 +27,14 @@ class FrameSensorModel {
   int sensor() const { return sensor_; }  ///< the state the reading follows: lag or node
   int offset() const { return offset_; }  ///< the offset state, once placed (-1 before)
   bool has_lag() const { return lag_ >= 0; }
+  double lag_s() const { return lag_s_; }  ///< the lag, s (0: none)
+  /// A sensor with a lag gets `lag_s` (> 0) from now (AddLagRow writes it); false, nothing
+  /// changed, for a sensor without a lag state or a lag that is not positive.
+  bool SetLag(double lag_s) {
+    if (lag_ < 0 || !(lag_s > 0.0) || !std::isfinite(lag_s)) return false;
+    lag_s_ = lag_s;
+    return true;
+  }
   /// The nodes and the lag: the block discretised together (the lag is part of the ZOH).
   int TemperatureStates() const { return lag_ >= 0 ? nodes_ + 1 : nodes_; }
   /// Places the offset state at `index` (past the temperature states).

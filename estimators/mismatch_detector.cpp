@@ -227,6 +227,7 @@ void MismatchDetector::Initialise(double x0_degC, double now_s) {
   filter_.Reset(x, s);
   start_s_ = now_s;
   passing_since_s_ = now_s;
+  refilling_ = false;
   nis_count_ = nis_next_ = 0;
   nis_sum_ = 0.0;
   size_ = head_ = 0;
@@ -332,6 +333,10 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
 
   finding_.window_nis = nis_sum_;
   finding_.threshold = threshold_;
+  if (refilling_) {  // a lag adopted: the verdict stands until a window of it is judged
+    if (nis_count_ < window) return finding_;
+    refilling_ = false;
+  }
   if (now_s - start_s_ < config_.settle_s || nis_count_ < window) {
     finding_.state = MismatchState::kLearning;
     return finding_;
@@ -364,6 +369,38 @@ const MismatchFinding& MismatchDetector::Step(const ThermalInputs& in, double dt
     finding_.threshold = threshold_;
   }
   return finding_;
+}
+
+bool MismatchDetector::AdoptSensorLag(double lag_s) {
+  if (!sensor_model_.SetLag(lag_s)) return false;
+  config_.sensor_lag_s = lag_s;
+  sensor_model_.AddLagRow(lin_block_.a_per_s);
+  // The filter as it would be had it read the history with this lag (its lag state and frame
+  // were estimated with the other one), and a history that starts now: the stored gains and
+  // innovations belong to the other lag, and a fit on them would name its misfit.
+  if (size_ >= 2) {
+    try {
+      HistoryNis(lag_s, (head_ - size_ + cap_) % cap_);
+      Eigen::VectorXd x = filter_.State();
+      Eigen::MatrixXd p = filter_.Covariance();
+      const int nl = n_ + 2;
+      for (int j = 0; j < nl; ++j) {
+        const int a = fit_map_[static_cast<std::size_t>(j)];
+        x(a) = fit_filter_.State()(j);
+        for (int k = 0; k < nl; ++k)
+          p(a, fit_map_[static_cast<std::size_t>(k)]) = fit_filter_.Covariance()(j, k);
+      }
+      if (x.allFinite() && p.allFinite()) filter_.Reset(x, p);
+    } catch (const std::exception&) {
+      ++refused_steps_;  // the history met an operating point the model cannot linearise
+    }
+  }
+  size_ = head_ = 0;
+  std::fill(nis_.begin(), nis_.end(), 0.0);
+  nis_count_ = nis_next_ = 0;
+  nis_sum_ = 0.0;
+  refilling_ = true;
+  return true;
 }
 
 bool MismatchDetector::Stuck(int* first) const {

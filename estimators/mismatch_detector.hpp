@@ -161,6 +161,10 @@ class MismatchDetector {
                               double magnet_degC = std::numeric_limits<double>::quiet_NaN());
 
   const MismatchFinding& Finding() const { return finding_; }
+  /// Takes `lag_s` (> 0) as the sensor's lag from now, as the estimator's filter does once the
+  /// lag is named: the NIS window starts afresh, and the verdict stands until it is full again.
+  /// False, nothing changed, for a sensor configured without a lag.
+  bool AdoptSensorLag(double lag_s);
   /// The nominal filter's node estimates (n) and sensor offset, for reports and tests.
   Eigen::VectorXd Nodes_degC() const { return filter_.State().head(n_); }
   double SensorOffset_K() const { return filter_.State()(bias_); }
@@ -235,6 +239,7 @@ class MismatchDetector {
   ThermalDiscretiser fit_lag_disc_{1e-3};
   Eigen::MatrixXd fit_ad_, fit_sp_, fit_c_, fit_p0_;
   Eigen::VectorXd fit_bu_, fit_x0_;
+  bool refilling_ = false;  ///< the NIS window restarted by AdoptSensorLag, not full yet
   double lag_fit_s_ = std::numeric_limits<double>::quiet_NaN();
   double lag_l_ = -1.0;
   int lag_readings_ = 0;  ///< readings in the last HistoryNis

@@ -219,6 +219,7 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
               config.period_s, SilenceWorstLoad{motor.max_current_A, motor.rated_speed_rpm},
               InsideNodes(config, model, disturbance_states_)),
       forecast_(model.StateCount()) {
+  estimate_.frame_sensor_lag_s = config_.frame_sensor_lag_s;
   if (!(config_.period_s > 0.0)) throw std::invalid_argument("thermal period must be positive");
   if (!config_.rotor_node.empty() && model_.StateIndex(config_.rotor_node) < 0) {
     throw std::invalid_argument(
@@ -425,6 +426,22 @@ void PumpEstimator::CheckModel(const PumpPeriod& p, double measured_degC) {
   counters_.mismatch_refused += mismatch_.refused_steps() - refused;
   if (NewVerdict(f, estimate_.mismatch)) ++estimate_.mismatch_changes;
   estimate_.mismatch = f;
+  AdoptNamedSensorLag();
+}
+
+void PumpEstimator::AdoptNamedSensorLag() {
+  // A lag the diagnosis fitted against the whole history (docs/virtual-sensor.md, "The sensor's
+  // lag") is the sensor's: read with the configured one, a fast rise of the frame reads late.
+  const MismatchFinding& f = estimate_.mismatch;
+  if (!config_.adopt_named_sensor_lag || f.effect != MismatchEffect::kSensorLag ||
+      f.state != MismatchState::kSensorFaultSuspected || !(f.value > 0.0) ||
+      f.value == estimate_.frame_sensor_lag_s) {
+    return;
+  }
+  if (!observer_->AdoptSensorLag(f.value)) return;
+  mismatch_.AdoptSensorLag(f.value);
+  estimate_.frame_sensor_lag_s = f.value;
+  ++estimate_.sensor_lag_changes;
 }
 
 // A filter driven outside any physical range is no estimate. The copper loss grows with the

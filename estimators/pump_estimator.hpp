@@ -52,6 +52,10 @@ inline constexpr const char* kStateLostNode = "safety_state_lost";
 struct PumpEstimatorConfig {
   std::string measured_node = "frame";  ///< the node the frame sensor measures
   double frame_sensor_lag_s = 0.0;      ///< its first-order lag
+  /// Once the model diagnosis names the sensor's lag (`sensor_lag`), the filter and the
+  /// diagnosis read the sensor with the fitted lag (a filter that models the lag; until a
+  /// restart: it is not saved).
+  bool adopt_named_sensor_lag = true;
   /// The observer: the disturbance-state filter (true), the standard one (false), or (unset)
   /// the disturbance-state filter where its frame-path heat can stand for every change on the
   /// cooling path (BoundaryOnlyThrough), else the standard one.
@@ -173,6 +177,11 @@ struct PumpEstimate {
   std::uint64_t alarm_changes = 0;     ///< increments whenever `alarm` changes
   MismatchFinding mismatch;            ///< is the model right? (docs/daemon.md)
   std::uint64_t mismatch_changes = 0;  ///< increments when its state or effect changes
+  /// The frame sensor's lag the filter reads it with, s: the configured one, or the one the
+  /// diagnosis named and the filter took (adopt_named_sensor_lag); sensor_lag_changes counts
+  /// those.
+  double frame_sensor_lag_s = 0.0;
+  std::uint64_t sensor_lag_changes = 0;
   EstimateStart start = EstimateStart::kNone;
   /// R0 and psi0 (or, without the voltage rows, the back-EMF line's bias) were learnt at a cold
   /// start, in this run or the restored one's (docs/virtual-sensor.md).
@@ -302,6 +311,8 @@ class PumpEstimator {
   /// Starts the observer and the mismatch test when they have not (false: nothing to start
   /// from yet).
   bool StartIfNeeded(const PumpPeriod& period);
+  /// Takes a sensor lag the diagnosis named into the filter and the diagnosis.
+  void AdoptNamedSensorLag();
   /// The filter's psi0 is known more closely than the back-EMF line's nameplate anchor.
   bool FluxKnownBetterThanTheLine() const;
   /// Whether the back-EMF line's magnet is published without the voltage rows: its bias was

@@ -130,6 +130,12 @@ class ThermalObserver {
   /// Whether the filter models the frame sensor's first-order lag (a state of its own): a
   /// filter that does not fuses the lagging reading as the node itself.
   virtual bool ModelsSensorLag() const { return false; }
+  /// Reads the frame sensor with the lag `lag_s` from now (the model diagnosis fitted it): true
+  /// when the filter models the lag and took it, false (nothing changed) otherwise.
+  virtual bool AdoptSensorLag(double lag_s) {
+    (void)lag_s;
+    return false;
+  }
 
   /// Adds the heat the filter has found (frame path, rotor) to the forcing of `lin` (n nodes),
   /// so that a forecast with the nominal model carries it. Nothing for a filter without such

@@ -156,8 +156,10 @@ struct CaseSpec {
   double dt_s = 1.0;
   std::uint64_t seed = 1;
   double sensor_lag_s = 30.0;
-  /// The lag the estimator is configured with (negative: sensor_lag_s, the truth's).
+  /// The lag the estimator is configured with (negative: sensor_lag_s, the truth's), and
+  /// whether it takes a lag its diagnosis names (PumpEstimatorConfig::adopt_named_sensor_lag).
   double configured_lag_s = -1.0;
+  bool adopt_named_sensor_lag = true;
   double truth_process_sd_K = 0.005;  ///< per sqrt(s), as the plant simulator's default
   /// The resistance-based winding temperature for the disturbance filter: the truth's winding
   /// (ThermalModel::WindingWeights) plus white noise of this sd, once per step; 0 = not fused.
@@ -260,6 +262,7 @@ inline pe::PumpEstimatorConfig EstimatorConfig(const CaseSpec& spec,
   pe::PumpEstimatorConfig c;
   c.measured_node = frame_node;
   c.frame_sensor_lag_s = spec.configured_lag_s >= 0.0 ? spec.configured_lag_s : spec.sensor_lag_s;
+  c.adopt_named_sensor_lag = spec.adopt_named_sensor_lag;
   c.rotor_node = rotor_node;
   c.disturbance_states = disturbance;
   if (spec.magnet_noise_sd_K > 0.0) c.magnet.magnet_node = rotor_node;
