@@ -27,7 +27,6 @@ class FrameSensorModel {
   int sensor() const { return sensor_; }  ///< the state the reading follows: lag or node
   int offset() const { return offset_; }  ///< the offset state, once placed (-1 before)
   bool has_lag() const { return lag_ >= 0; }
-  double lag_s() const { return lag_s_; }  ///< the lag, s (0: none)
   /// A sensor with a lag gets `lag_s` (> 0) from now (AddLagRow writes it); false, nothing
   /// changed, for a sensor without a lag state or a lag that is not positive.
   bool SetLag(double lag_s) {

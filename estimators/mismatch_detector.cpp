@@ -418,6 +418,11 @@ bool MismatchDetector::Stuck(int* first) const {
   return count >= config_.stuck_samples;
 }
 
+bool MismatchDetector::LinearColumn(int h) const {
+  // The lag is fitted by FitLag, not as a column; the ambient ramp only when configured.
+  return h != kLag && (h != kAmbientRamp || config_.ambient_ramp_s > 0.0);
+}
+
 double MismatchDetector::AmbientRamp(double since_onset_s) const {
   if (!(config_.ambient_ramp_s > 0.0)) return 0.0;
   return std::clamp(since_onset_s / config_.ambient_ramp_s, 0.0, 1.0);
@@ -530,6 +535,7 @@ void MismatchDetector::FitNow(double now_s) {
     const double y = h_y_[ks];
     const bool reading = std::isfinite(y);
     for (int h = 0; h < kHypotheses; ++h) {
+      if (!LinearColumn(h)) continue;
       EffectForcing(h, in, fit_x_, reading ? y : fit_x_(frame_), fit_u_col_);
       fit_phiu_.col(h).setZero();
       fit_phiu_.col(h).head(nb).noalias() = d.phi_s * fit_u_col_.head(nb);
@@ -543,7 +549,7 @@ void MismatchDetector::FitNow(double now_s) {
     for (int o = 0; o < active; ++o) {
       const double ramp = AmbientRamp(h_t_[ks] - onset_t_s(o));
       for (int h = 0; h < kHypotheses; ++h) {
-        if (h == kAmbientRamp && !(config_.ambient_ramp_s > 0.0)) continue;  // not fitted
+        if (!LinearColumn(h)) continue;
         const int col = o * kHypotheses + h;
         auto e = fit_e_.col(col);
         fit_tmp_ = e.head(nb);

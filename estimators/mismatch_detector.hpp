@@ -191,6 +191,8 @@ class MismatchDetector {
   /// Adds the magnet channel's sums (de-meaned over the window) to fit_a_, fit_b_, and marks in
   /// fit_veto_ the columns whose fitted size the magnet samples contradict.
   void AddMagnetChannel(int columns, double sum_r, double sum_rr, int samples);
+  /// Whether hypothesis `h` is a column of the linear naming fit.
+  bool LinearColumn(int h) const;
   /// The ramp hypothesis's share of its size `since_onset_s` after its onset (0..1).
   double AmbientRamp(double since_onset_s) const;
   /// Heat per unit effect size of hypothesis h at `in`, with the pre-step state `x_aug`.
