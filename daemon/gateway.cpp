@@ -257,10 +257,12 @@ void Gateway::AdvancePump(std::size_t p, std::int64_t now_us, OutputSink& sink) 
     io.sensor_lag_logged = pump.snapshot().sensor_lag_changes;
     const std::string& sensor = pump.config().measured_node;
     LogFields(LogLevel::kWarning, {{"PUMP", name}, {"NODE", sensor}},
-              "{}: {} sensor read with a lag of {:.0f} s from now, the lag the model diagnosis "
-              "fitted (configured {:g} s; until a restart): set frame_sensor_lag_s = {:.0f}",
-              name, sensor, pump.snapshot().frame_sensor_lag_s, pump.config().frame_sensor_lag_s,
-              pump.snapshot().frame_sensor_lag_s);
+              "{}: {} sensor read with a lag of {:.0f} s {}, the lag the model diagnosis "
+              "fitted (configured {:g} s; kept across restarts while that is configured): set "
+              "frame_sensor_lag_s = {:.0f}",
+              name, sensor, pump.snapshot().frame_sensor_lag_s,
+              pump.snapshot().frame_sensor_lag_restored ? "as before the restart" : "from now",
+              pump.config().frame_sensor_lag_s, pump.snapshot().frame_sensor_lag_s);
   }
   if (pump.snapshot().sensor_steps != io.sensor_steps_logged) {
     io.sensor_steps_logged = pump.snapshot().sensor_steps;

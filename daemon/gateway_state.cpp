@@ -62,6 +62,12 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
     // The magnet law the check gave up (absent: none).
     if (!std::isnan(s.magnet_law_given_up_per_K))
       t.insert("disturbance_magnet_law_given_up_per_K", s.magnet_law_given_up_per_K);
+    // The frame sensor's lag taken from the diagnosis and the lag configured then, s (absent:
+    // none taken).
+    if (!std::isnan(s.taken_sensor_lag_s)) {
+      t.insert("disturbance_frame_sensor_lag_s",
+               toml::array{s.taken_sensor_lag_s, s.taken_over_configured_lag_s});
+    }
   }
   // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
   // consecutive rejections.
@@ -218,6 +224,12 @@ bool ReadDisturbances(const toml::table& t, int count, PumpSavedState& s) {
   if (const auto* law = t["disturbance_magnet_law_given_up_per_K"].as_floating_point()) {
     if (!std::isfinite(law->get())) return false;
     s.magnet_law_given_up_per_K = law->get();
+  }
+  if (t["disturbance_frame_sensor_lag_s"]) {  // present: two numbers, else damaged
+    std::vector<double> lag;
+    if (!Numbers(t, "disturbance_frame_sensor_lag_s", 2, lag)) return false;
+    s.taken_sensor_lag_s = lag[0];
+    s.taken_over_configured_lag_s = lag[1];
   }
   return true;
 }

@@ -441,6 +441,7 @@ void PumpEstimator::AdoptNamedSensorLag() {
   if (!observer_->AdoptSensorLag(f.value)) return;
   mismatch_.AdoptSensorLag(f.value);
   estimate_.frame_sensor_lag_s = f.value;
+  estimate_.frame_sensor_lag_restored = false;
   ++estimate_.sensor_lag_changes;
 }
 
@@ -787,6 +788,10 @@ PumpEstimatorState PumpEstimator::Save() const {
     s.cold_started = estimate_.calibrated_at_cold_start;
     if (estimate_.magnet_law_suspect)
       s.magnet_law_given_up_per_K = motor_.magnet.flux_temperature_coefficient_per_K;
+    if (estimate_.frame_sensor_lag_s != config_.frame_sensor_lag_s) {
+      s.taken_sensor_lag_s = estimate_.frame_sensor_lag_s;
+      s.taken_over_configured_lag_s = config_.frame_sensor_lag_s;
+    }
   }
   const auto& names = model_.StateNames();
   for (const auto& t : alarms_.LatchedTrips()) {
@@ -815,6 +820,13 @@ bool PlausibleState(const PumpEstimatorState& state, const ThermalModel& model) 
   if (!InEstimateRange(state.x_degC) || (n > 0 && state.s_K2.diagonal().minCoeff() < 0.0) ||
       !std::isfinite(in.speed_rpm) || !std::isfinite(in.id_A) || !std::isfinite(in.iq_A) ||
       !std::isfinite(in.ambient_degC) || !std::isfinite(in.coolant_degC)) {
+    return false;
+  }
+  const bool lag_saved =
+      !std::isnan(state.taken_sensor_lag_s) || !std::isnan(state.taken_over_configured_lag_s);
+  if (lag_saved &&
+      !(state.taken_sensor_lag_s > 0.0 && state.taken_sensor_lag_s <= 3600.0 &&
+        state.taken_over_configured_lag_s >= 0.0 && state.taken_over_configured_lag_s <= 3600.0)) {
     return false;
   }
   const bool offset_saved = !std::isnan(state.sensor_offset_K);
@@ -852,6 +864,11 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
     return false;
   }
   if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
+  // A lag taken before the restart is the sensor's while the configuration still says the lag
+  // it was taken over; read over the time down with it.
+  const bool lag_kept = whole && config_.adopt_named_sensor_lag && state.taken_sensor_lag_s > 0.0 &&
+                        state.taken_over_configured_lag_s == config_.frame_sensor_lag_s &&
+                        observer_->AdoptSensorLag(state.taken_sensor_lag_s);
   // A calibration from a cold start holds only while the state that carries it was kept.
   const bool restored_whole = RestoreObserver(state, whole, gap_s, x, s);
   estimate_.calibrated_at_cold_start = restored_whole && state.cold_started;
@@ -867,6 +884,12 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   // The mismatch test starts afresh (learning) from the restored level, and with it the
   // inside-heat bound it latched.
   values_.ForgetInsideHeat();
+  if (lag_kept) {
+    mismatch_.AdoptSensorLag(state.taken_sensor_lag_s);
+    estimate_.frame_sensor_lag_s = state.taken_sensor_lag_s;
+    estimate_.frame_sensor_lag_restored = true;
+    ++estimate_.sensor_lag_changes;
+  }
   mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0,
                        static_cast<double>(now_us) * 1e-6);
   last_inputs_ = state.inputs;

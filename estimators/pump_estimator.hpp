@@ -182,6 +182,8 @@ struct PumpEstimate {
   /// those.
   double frame_sensor_lag_s = 0.0;
   std::uint64_t sensor_lag_changes = 0;
+  /// The lag taken came from a saved state (the run before the restart named it).
+  bool frame_sensor_lag_restored = false;
   EstimateStart start = EstimateStart::kNone;
   /// R0 and psi0 (or, without the voltage rows, the back-EMF line's bias) were learnt at a cold
   /// start, in this run or the restored one's (docs/virtual-sensor.md).
@@ -245,6 +247,11 @@ struct PumpEstimatorState {
   /// state's flux no longer follows the magnet. Restored only while the motor file still states
   /// that law; once it states another, the saved calibration is not taken.
   double magnet_law_given_up_per_K = std::numeric_limits<double>::quiet_NaN();
+  /// The frame sensor's lag the filter took from the diagnosis, s, and the lag configured when
+  /// it did (NaN: none taken). Restored with the whole state while that lag is still the one
+  /// configured: a configuration changed since (to the lag named, or another) is the operator's.
+  double taken_sensor_lag_s = std::numeric_limits<double>::quiet_NaN();
+  double taken_over_configured_lag_s = std::numeric_limits<double>::quiet_NaN();
 };
 
 class PumpEstimator {

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <random>
 #include <sstream>
 #include <stdexcept>
@@ -148,8 +149,14 @@ struct CaseSpec {
   /// again from its own node estimate and covariance with its disturbances at their priors, as
   /// Pump::Restore does with a state file that lacks them (no time down).
   double restart_s = 0.0;
-  double ambient_ramp_s = 600.0;    ///< the unmeasured ambient's rise time (0: a step)
-  double fit_ambient_ramp_s = 0.0;  ///< the detector's ramp hypothesis (0: the step only)
+  /// The restart at restart_s is a new process instead: the disturbance-state filter's whole
+  /// saved state restored into a new pump estimator (time down 0), configured with the lag
+  /// `restart_configured_lag_s` (negative: as before).
+  bool restart_whole = false;
+  double restart_configured_lag_s = -1.0;
+  bool restart_forgets_lag = false;  ///< the saved state without the lag taken (an older file)
+  double ambient_ramp_s = 600.0;     ///< the unmeasured ambient's rise time (0: a step)
+  double fit_ambient_ramp_s = 0.0;   ///< the detector's ramp hypothesis (0: the step only)
   Fault fault = Fault::kNone;
   double fault_s = 3600.0;
   double duration_s = 10800.0;
@@ -202,6 +209,10 @@ struct CaseResult {
   /// node, after 300 s: what a trip level at x + 2 sd would see on this run.
   std::vector<double> dist_max_upper_degC;
   std::vector<double> truth_max_degC;
+  /// The lag the disturbance filter reads the sensor with at the end, s, and whether a restart
+  /// restored it (PumpEstimate::frame_sensor_lag_s, frame_sensor_lag_restored).
+  double dist_sensor_lag_at_end_s = 0.0;
+  bool dist_sensor_lag_restored = false;
   int dist_sensor_steps = 0;          ///< steps of the sensor's offset the disturbance filter found
   double detector_step_max_us = 0.0;  ///< not filled here (timed by the benchmark)
 };
@@ -375,8 +386,8 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
   const pe::MotorDescription motor = pe::MotorPreset("han2019-tmp");
   pe::PumpEstimator standard(
       EstimatorConfig(spec, motor, frame_node, rotor_node, false, vts_config, dc), motor, nominal);
-  pe::PumpEstimator dist(EstimatorConfig(spec, motor, frame_node, rotor_node, true, vts_config, dc),
-                         motor, nominal);
+  auto dist = std::make_unique<pe::PumpEstimator>(
+      EstimatorConfig(spec, motor, frame_node, rotor_node, true, vts_config, dc), motor, nominal);
   const int rotor = nominal.StateIndex(rotor_node);
   const int frame = nominal.StateIndex(frame_node);
   std::mt19937_64 magnet_rng(spec.seed * 104729 +
@@ -455,9 +466,25 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
     p.fast_age_s = 0.0;
     p.identifier = EmulatedIdentifier(motor, winding, spec.winding_noise_sd_K, magnet,
                                       spec.magnet_noise_sd_K, winding_true);
-    if (spec.restart_s > 0.0 && t >= spec.restart_s && t < spec.restart_s + spec.dt_s) {
+    const bool restart =
+        spec.restart_s > 0.0 && t >= spec.restart_s && t < spec.restart_s + spec.dt_s;
+    if (restart && spec.restart_whole) {
+      pe::PumpEstimatorState saved = dist->Save();
+      if (spec.restart_forgets_lag) {
+        saved.taken_sensor_lag_s = saved.taken_over_configured_lag_s =
+            std::numeric_limits<double>::quiet_NaN();
+      }
+      CaseSpec again = spec;
+      if (spec.restart_configured_lag_s >= 0.0)
+        again.configured_lag_s = spec.restart_configured_lag_s;
+      dist = std::make_unique<pe::PumpEstimator>(
+          EstimatorConfig(again, motor, frame_node, rotor_node, true, vts_config, dc), motor,
+          nominal);
+      if (!dist->Restore(saved, saved.time_us))
+        throw std::runtime_error("the saved state was not restored");
+    } else if (restart) {
       // A restart from the nodes alone (a state file without the filter's whole state).
-      for (pe::PumpEstimator* e : {&standard, &dist}) {
+      for (pe::PumpEstimator* e : {&standard, dist.get()}) {
         pe::PumpEstimatorState saved = e->Save();
         saved.observer_x.resize(0);
         saved.observer_s.resize(0, 0);
@@ -465,11 +492,11 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
         e->Restore(saved, saved.time_us);
       }
     }
-    for (pe::PumpEstimator* e : {&standard, &dist}) {
+    for (pe::PumpEstimator* e : {&standard, dist.get()}) {
       e->OnFrameReading(p.end_us, y);
       e->Step(p);
     }
-    const pe::MismatchFinding& f = dist.estimate().mismatch;
+    const pe::MismatchFinding& f = dist->estimate().mismatch;
     const bool named = f.state == pe::MismatchState::kPlantChange ||
                        f.state == pe::MismatchState::kSensorFaultSuspected;
     const bool fault_state = named || f.state == pe::MismatchState::kUnexplained;
@@ -505,7 +532,7 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
         auto& m = r.max_error_K[k];
         m = std::max(m, std::abs(err));
         if (std::abs(err) <= 2.0 * se.node_sd_K[k]) ++covered[k];
-        const auto& de = dist.estimate();
+        const auto& de = dist->estimate();
         const double derr = de.node_degC[k] - x(i);
         auto& dm = r.dist_max_error_K[k];
         dm = std::max(dm, std::abs(derr));
@@ -536,8 +563,10 @@ inline CaseResult RunCase(const CaseSpec& spec, const std::string& model_dir,
           std::numeric_limits<double>::quiet_NaN();
     }
   }
-  r.at_end = dist.estimate().mismatch;
-  r.dist_sensor_steps = static_cast<int>(dist.estimate().sensor_steps);
+  r.at_end = dist->estimate().mismatch;
+  r.dist_sensor_lag_at_end_s = dist->estimate().frame_sensor_lag_s;
+  r.dist_sensor_lag_restored = dist->estimate().frame_sensor_lag_restored;
+  r.dist_sensor_steps = static_cast<int>(dist->estimate().sensor_steps);
   return r;
 }
 

@@ -1,6 +1,7 @@
 // The gateway pipeline on recorded frames: a pump's telemetry, synthesised from a thermal truth
 // through the shipped DBC, goes through decode, resistance identification, the virtual thermal
 // sensor, alarms, CAN encoding and LCM encoding.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <toml++/toml.h>
 
@@ -16,6 +17,7 @@
 
 #include "daemon/gateway.hpp"
 #include "daemon/lcm_bridge.hpp"
+#include "daemon/log.hpp"
 #include "daemon/resources.hpp"
 #include "protocol/codec.hpp"
 #include "protocol/dbc.hpp"
@@ -603,6 +605,75 @@ TEST(Pipeline, WhatTheFilterFoundAboutThePlantOutlivesARestart) {
   };
   EXPECT_EQ(edited(1.0, true), 1);
   EXPECT_EQ(edited(-1.0, false), 0);
+}
+
+// A frame sensor lag the diagnosis named and the filter took is saved with the filter's state
+// and read again after a restart, said once in the journal, while the configuration still says
+// the lag it was taken over; once the configuration names a lag, that one is read.
+TEST(Pipeline, ALagTakenBeforeARestartIsReadAfterItWhileConfigured) {
+  const auto config = [](double lag_s) {
+    return Config(fmt::format("frame_sensor_lag_s = {}\n", lag_s));
+  };
+  Bench b(config(30.0));
+  b.Run(120.0, 40.0);
+  const std::string plain = b.gateway_.SaveState();
+  ASSERT_NE(plain.find("disturbance_x"), std::string::npos);
+  ASSERT_EQ(plain.find("disturbance_frame_sensor_lag_s"), std::string::npos) << "none taken";
+  const auto with_lag = [&](const std::string& value) {
+    std::string text = plain;
+    text.insert(text.find("disturbance_x"), "disturbance_frame_sensor_lag_s = " + value + "\n");
+    return text;
+  };
+  // restored RESTART_TEXT CONFIGURED_LAG: the bench restarted from it, its journal lines.
+  struct Restarted {
+    std::unique_ptr<Bench> bench;
+    int pumps = 0;
+    std::vector<std::string> lines;
+  };
+  const auto restored = [&](const std::string& text, double configured_s) {
+    Restarted r;
+    r.bench = std::make_unique<Bench>(config(configured_s), b.truth_);
+    r.bench->t_us_ = b.t_us_ + 5'000'000;
+    std::string warning;
+    r.pumps = r.bench->gateway_.RestoreState(text, r.bench->t_us_, &warning);
+    const LogCapture capture([&](LogLevel, std::string_view line) { r.lines.emplace_back(line); });
+    r.bench->Run(10.0, 40.0);
+    return r;
+  };
+  const auto lag_lines = [](const Restarted& r) {
+    return std::count_if(r.lines.begin(), r.lines.end(), [](const std::string& l) {
+      return l.find("sensor read with a lag") != std::string::npos;
+    });
+  };
+
+  const Restarted kept = restored(with_lag("[ 86.0, 30.0 ]"), 30.0);
+  ASSERT_EQ(kept.pumps, 1);
+  const PumpSnapshot& s = kept.bench->gateway_.pumps()[0]->snapshot();
+  EXPECT_EQ(s.frame_sensor_lag_s, 86.0);
+  EXPECT_TRUE(s.frame_sensor_lag_restored);
+  ASSERT_EQ(lag_lines(kept), 1);
+  const std::string line = *std::find_if(kept.lines.begin(), kept.lines.end(), [](const auto& l) {
+    return l.find("sensor read with a lag") != std::string::npos;
+  });
+  EXPECT_NE(line.find("tmp1: frame sensor read with a lag of 86 s as before the restart"),
+            std::string::npos)
+      << line;
+  EXPECT_NE(line.find("set frame_sensor_lag_s = 86"), std::string::npos) << line;
+  const std::string again = kept.bench->gateway_.SaveState();
+  EXPECT_NE(again.find("disturbance_frame_sensor_lag_s = [ 86.0, 30.0 ]"), std::string::npos)
+      << again;
+
+  // The configuration set to the lag named, or to another: the operator's lag, no line.
+  for (const double configured_s : {86.0, 60.0}) {
+    const Restarted set = restored(with_lag("[ 86.0, 30.0 ]"), configured_s);
+    ASSERT_EQ(set.pumps, 1);
+    EXPECT_EQ(set.bench->gateway_.pumps()[0]->snapshot().frame_sensor_lag_s, configured_s);
+    EXPECT_FALSE(set.bench->gateway_.pumps()[0]->snapshot().frame_sensor_lag_restored);
+    EXPECT_EQ(lag_lines(set), 0);
+  }
+  // Damaged: one number, a lag of zero, a string. The pump starts afresh.
+  for (const std::string bad : {"[ 86.0 ]", "[ 0.0, 30.0 ]", "\"86\""})
+    EXPECT_EQ(restored(with_lag(bad), 30.0).pumps, 0) << bad;
 }
 
 TEST(Pipeline, NothingIsPublishedAsATemperatureBeforeTheFirstEstimate) {

@@ -218,6 +218,49 @@ TEST(MismatchDetector, ANamedLagIsTakenAndALaterLostCoolingIsReadInTime) {
   }
 }
 
+TEST(MismatchDetector, ATakenLagOutlivesARestartWhileItsConfigurationStands) {
+  // The RTD of 90 s configured as 30 s, its lag named and taken in the first quarter hour; the
+  // daemon restarts at 30 min from its whole saved state, and the cooling is lost (x4) ten
+  // minutes later, before the diagnosis could name the lag again.
+  const auto node = [](const mc::CaseResult& r, const std::string& name) {
+    const auto it = std::find(r.nodes.begin(), r.nodes.end(), name);
+    return static_cast<std::size_t>(it - r.nodes.begin());
+  };
+  const auto run = [](int seed, double configured_after_s, bool forget) {
+    mc::CaseSpec spec;
+    spec.sensor_lag_s = 90.0;
+    spec.configured_lag_s = 30.0;
+    spec.restart_s = 1800.0;
+    spec.restart_whole = true;
+    spec.restart_configured_lag_s = configured_after_s;
+    spec.restart_forgets_lag = forget;
+    spec.fault = mc::Fault::kCoolingLost;
+    spec.fault_s = 2400.0;
+    spec.duration_s = 2400.0 + 1800.0;
+    spec.seed = static_cast<std::uint64_t>(seed);
+    return mc::RunCase(spec, ModelDir());
+  };
+  for (const int seed : {1, 2}) {
+    const mc::CaseResult kept = run(seed, 30.0, false);
+    SCOPED_TRACE(testing::Message() << "seed " << seed << ": " << pe::DescribeFinding(kept.at_end));
+    const std::size_t frame = node(kept, "frame"), winding = node(kept, "winding");
+    ASSERT_LT(winding, kept.nodes.size());
+    EXPECT_TRUE(kept.dist_sensor_lag_restored);
+    EXPECT_NEAR(kept.dist_sensor_lag_at_end_s, 90.0, 18.0);
+    EXPECT_GE(kept.dist_coverage_after_fault[frame], 0.95);
+    EXPECT_LE(kept.dist_max_error_after_fault_K[frame], 2.0);
+    EXPECT_LE(kept.dist_max_error_after_fault_K[winding], 1.0);
+    // A state without it (an older file): the configured lag again, the fault read late.
+    const mc::CaseResult lost = run(seed, 30.0, true);
+    EXPECT_GT(lost.dist_max_error_after_fault_K[winding], 3.0);
+    // The configuration changed to the lag the journal named: the operator's lag is read.
+    const mc::CaseResult set = run(seed, 90.0, false);
+    EXPECT_FALSE(set.dist_sensor_lag_restored);
+    EXPECT_EQ(set.dist_sensor_lag_at_end_s, 90.0);
+    EXPECT_LE(set.dist_max_error_after_fault_K[winding], 1.0);
+  }
+}
+
 TEST(MismatchDetector, RejectsAnUnknownNode) {
   const std::string text = mc::ReadFile(ModelDir() + "/tmp-generic.toml");
   const auto model = pe::ThermalModel::Parse(text, "tmp-generic");
