@@ -317,8 +317,17 @@ JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e
   if (e.start == estimators::EstimateStart::kRestored) {
     what = "estimate restored from the saved state";
   } else {
-    what = fmt::format("estimate started {} (frame {:.1f} degC, ambient {:.1f} degC, {:.0f} r/min)",
-                       StartName(e.start), e.frame_measured_degC, e.ambient_degC, e.speed_rpm);
+    // A frame still warm from a run: the nodes that cool slower start warmer than it.
+    const std::string warm_frame =
+        e.start == estimators::EstimateStart::kCold && e.cold_start_span_K > 0.0
+            ? fmt::format(
+                  "; the frame still warm from a run, so the nodes that cool slower are "
+                  "taken between its temperature and up to {:.1f} K above it",
+                  e.cold_start_span_K)
+            : std::string();
+    what = fmt::format(
+        "estimate started {} (frame {:.1f} degC, ambient {:.1f} degC, {:.0f} r/min{})",
+        StartName(e.start), e.frame_measured_degC, e.ambient_degC, e.speed_rpm, warm_frame);
   }
   const bool fresh_cold = e.start == estimators::EstimateStart::kCold && voltage;
   if (calibrated && fresh_cold) {

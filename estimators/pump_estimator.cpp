@@ -2,14 +2,43 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <stdexcept>
 
 #include "estimators/magnet.hpp"
 
 namespace pumptherm::estimators {
 namespace {
+
+/// Per state, its excess over the ambient per kelvin of the measured node's along the model's
+/// slowest decay at rest (speed and currents 0): the shape a pump's temperatures take as it
+/// cools after a stop, once the faster modes have died out. Empty where the model gives none (no
+/// measured node, a slowest mode that is no real decay, or one the measured node has no part in).
+Eigen::VectorXd RestDecayShape(const ThermalModel& model, int measured) {
+  const int n = model.StateCount();
+  if (measured < 0 || measured >= n) return {};
+  ThermalLinearModel lin;
+  const ThermalInputs rest;
+  try {
+    model.Linearise(rest, Eigen::VectorXd::Constant(n, rest.ambient_degC), lin);
+  } catch (const std::exception&) {
+    return {};
+  }
+  if (!lin.a_per_s.allFinite()) return {};
+  const Eigen::EigenSolver<Eigen::MatrixXd> eig(lin.a_per_s);
+  if (eig.info() != Eigen::Success) return {};
+  Eigen::Index slowest = 0;
+  eig.eigenvalues().real().maxCoeff(&slowest);
+  const std::complex<double> rate = eig.eigenvalues()(slowest);
+  if (!(rate.real() < 0.0) || std::abs(rate.imag()) > 1e-9 * std::abs(rate.real())) return {};
+  const Eigen::VectorXd v = eig.eigenvectors().col(slowest).real();
+  if (!(std::abs(v(measured)) > 1e-6 * v.cwiseAbs().maxCoeff())) return {};
+  const Eigen::VectorXd shape = v / v(measured);
+  return shape.allFinite() ? shape : Eigen::VectorXd{};
+}
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -227,6 +256,7 @@ PumpEstimator::PumpEstimator(const PumpEstimatorConfig& config, const MotorDescr
                     config_.rotor_node, model_.Name()));
   }
   measured_state_ = model_.StateIndex(config_.measured_node);
+  rest_decay_shape_ = RestDecayShape(model_, measured_state_);
   if (observer_->TakesVoltage())
     voltage_magnet_state_ = model_.StateIndex(VoltageMagnetNode(config_, model_));
   voltage_magnet_weights_ = Eigen::VectorXd::Zero(observer_->NodeCount());
@@ -279,10 +309,11 @@ bool PumpEstimator::StartIfNeeded(const PumpPeriod& p) {
                     std::abs(measured - p.ambient_degC) <= config_.cold_start_band_K &&
                     rated_rpm > 0.0 && std::abs(p.inputs.speed_rpm) < 0.1 * rated_rpm;
   estimate_.start = cold ? EstimateStart::kCold : EstimateStart::kWarm;
+  voltage_fused_us_ = -1;
   estimate_.calibrated_at_cold_start = cold;
   ++estimate_.starts;
   if (cold) {
-    observer_->InitialiseKnown(x0, config_.cold_start_sd_K);
+    StartCold(x0, measured - p.ambient_degC);
   } else {
     observer_->Initialise(x0);
   }
@@ -325,10 +356,34 @@ void PumpEstimator::PrepareReadings(const PumpPeriod& p) {
   }
   // The line gives the magnet through the motor file's law too: once that law is given up
   // (MagnetLawCheck), nothing reads the magnet from the flux.
+  // After a cold start the rows learnt psi0 against known temperatures, however closely: the
+  // line's anchor is the nameplate's flux, which is no closer than its tolerance.
   const bool gated = observer_->TakesVoltage() && voltage_.status().state == ReadingState::kGated;
-  if (!voltage_.Offered() && !(gated && FluxKnownBetterThanTheLine()) &&
-      !estimate_.magnet_law_suspect)
+  const bool rows_anchor = FluxKnownBetterThanTheLine() || estimate_.calibrated_at_cold_start;
+  if (!voltage_.Offered() && !(gated && rows_anchor) && !estimate_.magnet_law_suspect)
     magnet_.Offer(readings_);
+}
+
+void PumpEstimator::StartCold(double frame_degC, double frame_excess_K) {
+  // A frame warmer than the ambient by more than the sensors disagree is still cooling from a
+  // run, and the nodes that cool slower than it (a rotor in vacuum) are warmer still: taken at
+  // the frame's temperature, a rotor 10 K warm teaches psi0 a flux 1 % low, and the magnet reads
+  // 10 K cold until the magnet law check blames the motor file. Each node lies between the
+  // frame's temperature (a pump that never ran) and the model's decay at rest (one that
+  // stopped): the middle, within half that span, one unknown for all of them (how long ago it
+  // stopped: the decay's amplitude), besides the cold start's own sd per node.
+  const int n = model_.StateCount();
+  estimate_.cold_start_span_K = 0.0;
+  if (rest_decay_shape_.size() != n || !(frame_excess_K > config_.cold_start_warm_frame_K)) {
+    observer_->InitialiseKnown(frame_degC, config_.cold_start_sd_K);
+    return;
+  }
+  const Eigen::VectorXd half_span_K = 0.5 * (rest_decay_shape_.array() - 1.0) * frame_excess_K;
+  const double sd2 = config_.cold_start_sd_K * config_.cold_start_sd_K;
+  const Eigen::MatrixXd s_K2 =
+      sd2 * Eigen::MatrixXd::Identity(n, n) + half_span_K * half_span_K.transpose();
+  observer_->InitialiseNodes(Eigen::VectorXd::Constant(n, frame_degC) + half_span_K, s_K2);
+  estimate_.cold_start_span_K = 2.0 * half_span_K.maxCoeff();
 }
 
 void PumpEstimator::HoldMagnet() {
@@ -345,8 +400,13 @@ double PumpEstimator::UncalibratedMagnetSd_K() const {
   // magnet law (20 K for 2 % at -0.1 %/K). A law without temperature coefficient, or one given
   // up (MagnetLawCheck), makes the voltage no measurement of the magnet, and the filter's own sd
   // stands.
+  // After a cold start the filter's own sd stands once the voltage has measured the flux (the
+  // line's nameplate anchor is not fused then: PrepareReadings), however closely the rows pinned
+  // psi0 (a frame still warm from a run leaves the magnet's temperature, and psi0, only as known
+  // as the cold start's span).
+  const bool flux_measured = voltage_fused_us_ >= 0 || FluxKnownBetterThanTheLine();
   if (!observer_->TakesVoltage() || estimate_.magnet_law_suspect ||
-      (estimate_.calibrated_at_cold_start && FluxKnownBetterThanTheLine()))
+      (estimate_.calibrated_at_cold_start && flux_measured))
     return 0.0;
   const double law_per_K = std::abs(motor_.magnet.flux_temperature_coefficient_per_K);
   return law_per_K > 0.0 ? config_.psi0_sd_rel / law_per_K : 0.0;

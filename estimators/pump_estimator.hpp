@@ -73,6 +73,12 @@ struct PumpEstimatorConfig {
   /// the ambient is a cold start: every node at the frame's temperature within cold_start_sd_K.
   double cold_start_band_K = 3.0;
   double cold_start_sd_K = 2.0;
+  /// A frame warmer than the ambient by more than this at a cold start is still cooling from a
+  /// run: the nodes that cool slowest (a rotor in vacuum) are warmer than it by the model's
+  /// decay at rest (RestDecayShape), and each node's prior spans from the frame's temperature
+  /// (a pump that never ran, the two sensors disagreeing) to that. Within it, the two sensors'
+  /// disagreement alone (the frame sensor's offset prior, 2 sd).
+  double cold_start_warm_frame_K = 1.0;
   MagnetFluxReadingConfig magnet;  ///< magnet_node, min_sd_K, max_winding_gain (the rest set here)
   /// The node of the rotor-heat state and of the rotor-loss hypothesis; empty: the magnet's
   /// node, else "rotor" where the model has it.
@@ -188,6 +194,9 @@ struct PumpEstimate {
   /// R0 and psi0 (or, without the voltage rows, the back-EMF line's bias) were learnt at a cold
   /// start, in this run or the restored one's (docs/virtual-sensor.md).
   bool calibrated_at_cold_start = false;
+  /// At a cold start with the frame still warm from a run (cold_start_warm_frame_K), the most
+  /// any node was taken warmer than the frame at its end of the span, K (0: none).
+  double cold_start_span_K = 0.0;
   std::uint64_t starts = 0;  ///< increments at every start, restart after a reset, or restore
   /// Increments when the fused identification turns from `converging` to `tracking` (R0 became
   /// known to max_calibration_sd_K: a load change pinned it, and the winding from resistance is
@@ -329,6 +338,8 @@ class PumpEstimator {
   /// voltage reading).
   double UncalibratedMagnetSd_K() const;
   void PrepareReadings(const PumpPeriod& period);
+  /// A cold start from the frame's reading and its excess over the ambient.
+  void StartCold(double frame_degC, double frame_excess_K);
   void HoldMagnet();
   void RecordReadings(const ObserverReport& report);
   /// The mismatch test on this step; counts a changed verdict.
@@ -387,6 +398,9 @@ class PumpEstimator {
   TripForecast forecast_;
   std::vector<double> trip_degC_;  ///< per node, for the forecast (infinity: no trip level)
   int measured_state_ = -1;
+  /// Per node, its excess over the ambient per kelvin of the frame's along the model's slowest
+  /// decay at rest (empty: the model has none to give).
+  Eigen::VectorXd rest_decay_shape_;
   bool initialised_ = false;
   ThermalInputs last_inputs_;  ///< the last step's (saved: held while the daemon is down)
   ThermalReadings readings_;
