@@ -318,12 +318,13 @@ JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e
     what = "estimate restored from the saved state";
   } else {
     // A frame still warm from a run: the nodes that cool slower start warmer than it.
+    const bool cold = e.start == estimators::EstimateStart::kCold;
     const std::string warm_frame =
-        e.start == estimators::EstimateStart::kCold && e.cold_start_span_K > 0.0
+        e.start_span_K > 0.0
             ? fmt::format(
-                  "; the frame still warm from a run, so the nodes that cool slower are "
-                  "taken between its temperature and up to {:.1f} K above it",
-                  e.cold_start_span_K)
+                  "; the frame still warm from a run, so the nodes that cool slower {} "
+                  "up to {:.1f} K above it",
+                  cold ? "are taken between its temperature and" : "may be", e.start_span_K)
             : std::string();
     what = fmt::format(
         "estimate started {} (frame {:.1f} degC, ambient {:.1f} degC, {:.0f} r/min{})",

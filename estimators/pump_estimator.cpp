@@ -305,10 +305,11 @@ bool PumpEstimator::StartIfNeeded(const PumpPeriod& p) {
   // A pump at rest whose frame is at the ambient has been off long enough to be at the frame's
   // temperature throughout: the natural moment to learn its R0 and psi0 from the run-up.
   const double rated_rpm = motor_.rated_speed_rpm;
+  const bool at_rest = rated_rpm > 0.0 && std::abs(p.inputs.speed_rpm) < 0.1 * rated_rpm;
   const bool cold = std::isfinite(measured) && std::isfinite(p.ambient_degC) &&
-                    std::abs(measured - p.ambient_degC) <= config_.cold_start_band_K &&
-                    rated_rpm > 0.0 && std::abs(p.inputs.speed_rpm) < 0.1 * rated_rpm;
+                    std::abs(measured - p.ambient_degC) <= config_.cold_start_band_K && at_rest;
   estimate_.start = cold ? EstimateStart::kCold : EstimateStart::kWarm;
+  estimate_.start_span_K = 0.0;
   voltage_fused_us_ = -1;
   estimate_.calibrated_at_cold_start = cold;
   ++estimate_.starts;
@@ -316,6 +317,9 @@ bool PumpEstimator::StartIfNeeded(const PumpPeriod& p) {
     StartCold(x0, measured - p.ambient_degC);
   } else {
     observer_->Initialise(x0);
+    if (at_rest && !observer_->TakesVoltage() && std::isfinite(measured) &&
+        std::isfinite(p.ambient_degC))
+      WidenForARun(measured - p.ambient_degC);
   }
   mismatch_.Initialise(x0, static_cast<double>(p.end_us) * 1e-6);
   initialised_ = true;
@@ -373,7 +377,6 @@ void PumpEstimator::StartCold(double frame_degC, double frame_excess_K) {
   // stopped): the middle, within half that span, one unknown for all of them (how long ago it
   // stopped: the decay's amplitude), besides the cold start's own sd per node.
   const int n = model_.StateCount();
-  estimate_.cold_start_span_K = 0.0;
   if (rest_decay_shape_.size() != n || !(frame_excess_K > config_.cold_start_warm_frame_K)) {
     observer_->InitialiseKnown(frame_degC, config_.cold_start_sd_K);
     return;
@@ -383,7 +386,24 @@ void PumpEstimator::StartCold(double frame_degC, double frame_excess_K) {
   const Eigen::MatrixXd s_K2 =
       sd2 * Eigen::MatrixXd::Identity(n, n) + half_span_K * half_span_K.transpose();
   observer_->InitialiseNodes(Eigen::VectorXd::Constant(n, frame_degC) + half_span_K, s_K2);
-  estimate_.cold_start_span_K = 2.0 * half_span_K.maxCoeff();
+  estimate_.start_span_K = 2.0 * half_span_K.maxCoeff();
+}
+
+void PumpEstimator::WidenForARun(double frame_excess_K) {
+  // A warm start at rest: the frame warm from a run, or a pump warm throughout (a bake, a
+  // uniform start). The nodes stay at the frame's temperature, as a warm start takes them, but
+  // the slower ones may be warmer by up to the model's decay at rest: their sd spans it. Not with
+  // the voltage rows: their magnet is published with the nameplate's tolerance until a cold
+  // start, which covers a warm rotor, and a rotor that open lets the run-up take the flux's
+  // deficit for heat.
+  const int n = model_.StateCount();
+  if (rest_decay_shape_.size() != n || !(frame_excess_K > config_.cold_start_warm_frame_K)) return;
+  const Eigen::VectorXd half_span_K = 0.5 * (rest_decay_shape_.array() - 1.0) * frame_excess_K;
+  const Eigen::VectorXd x = observer_->State();  // copies: Restore starts the filter afresh
+  Eigen::MatrixXd s = observer_->Covariance();
+  s.topLeftCorner(n, n) += half_span_K * half_span_K.transpose();
+  observer_->Restore(x, s);
+  estimate_.start_span_K = 2.0 * half_span_K.maxCoeff();
 }
 
 void PumpEstimator::HoldMagnet() {

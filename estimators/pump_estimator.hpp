@@ -194,9 +194,10 @@ struct PumpEstimate {
   /// R0 and psi0 (or, without the voltage rows, the back-EMF line's bias) were learnt at a cold
   /// start, in this run or the restored one's (docs/virtual-sensor.md).
   bool calibrated_at_cold_start = false;
-  /// At a cold start with the frame still warm from a run (cold_start_warm_frame_K), the most
-  /// any node was taken warmer than the frame at its end of the span, K (0: none).
-  double cold_start_span_K = 0.0;
+  /// At a start at rest with the frame still warm from a run (cold_start_warm_frame_K), the most
+  /// any node may be warmer than the frame, K (0: none): a cold start's nodes start within that
+  /// span, a warm start's (without the voltage rows) have their sd widened by it.
+  double start_span_K = 0.0;
   std::uint64_t starts = 0;  ///< increments at every start, restart after a reset, or restore
   /// Increments when the fused identification turns from `converging` to `tracking` (R0 became
   /// known to max_calibration_sd_K: a load change pinned it, and the winding from resistance is
@@ -340,6 +341,8 @@ class PumpEstimator {
   void PrepareReadings(const PumpPeriod& period);
   /// A cold start from the frame's reading and its excess over the ambient.
   void StartCold(double frame_degC, double frame_excess_K);
+  /// At a warm start at rest, the slower nodes' sd widened by the model's decay at rest.
+  void WidenForARun(double frame_excess_K);
   void HoldMagnet();
   void RecordReadings(const ObserverReport& report);
   /// The mismatch test on this step; counts a changed verdict.

@@ -274,13 +274,24 @@ TEST_F(AlarmJournal, AStartSaysWhetherTheCalibrationCameFromAColdStart) {
             "from resistance waits for it)");
   // The frame still warm from a run (PumpEstimatorConfig::cold_start_warm_frame_K).
   s.frame_measured_degC = 24.9;
-  s.cold_start_span_K = 10.83;
+  s.start_span_K = 10.83;
   e = StartEntry("pump1", s, true, true);
   EXPECT_EQ(e.text,
             "pump1: estimate started cold (frame 24.9 degC, ambient 22.0 degC, 0 r/min; the frame "
             "still warm from a run, so the nodes that cool slower are taken between its "
             "temperature and up to 10.8 K above it): this pump's psi0 is learnt in the run-up, "
             "its R0 at the first load change (the winding from resistance waits for it)");
+
+  s.start = estimators::EstimateStart::kWarm;
+  s.calibrated_at_cold_start = false;
+  s.frame_measured_degC = 29.0;
+  s.start_span_K = 25.12;
+  e = StartEntry("pump1", s, false);
+  EXPECT_EQ(e.text,
+            "pump1: estimate started warm (frame 29.0 degC, ambient 22.0 degC, 0 r/min; the frame "
+            "still warm from a run, so the nodes that cool slower may be up to 25.1 K above it)");
+  s.start_span_K = 0.0;
+  s.calibrated_at_cold_start = true;
 
   s.start = estimators::EstimateStart::kRestored;
   e = StartEntry("pump1", s, true);
