@@ -317,8 +317,7 @@ bool PumpEstimator::StartIfNeeded(const PumpPeriod& p) {
     StartCold(x0, measured - p.ambient_degC);
   } else {
     observer_->Initialise(x0);
-    if (at_rest && !observer_->TakesVoltage() && std::isfinite(measured) &&
-        std::isfinite(p.ambient_degC))
+    if (at_rest && std::isfinite(measured) && std::isfinite(p.ambient_degC))
       WidenForARun(measured - p.ambient_degC);
   }
   mismatch_.Initialise(x0, static_cast<double>(p.end_us) * 1e-6);
@@ -368,6 +367,13 @@ void PumpEstimator::PrepareReadings(const PumpPeriod& p) {
     magnet_.Offer(readings_);
 }
 
+Eigen::VectorXd PumpEstimator::HalfRunSpan_K(double frame_excess_K) const {
+  if (rest_decay_shape_.size() != model_.StateCount() ||
+      !(frame_excess_K > config_.cold_start_warm_frame_K))
+    return {};
+  return 0.5 * (rest_decay_shape_.array() - 1.0) * frame_excess_K;
+}
+
 void PumpEstimator::StartCold(double frame_degC, double frame_excess_K) {
   // A frame warmer than the ambient by more than the sensors disagree is still cooling from a
   // run, and the nodes that cool slower than it (a rotor in vacuum) are warmer still: taken at
@@ -376,12 +382,12 @@ void PumpEstimator::StartCold(double frame_degC, double frame_excess_K) {
   // frame's temperature (a pump that never ran) and the model's decay at rest (one that
   // stopped): the middle, within half that span, one unknown for all of them (how long ago it
   // stopped: the decay's amplitude), besides the cold start's own sd per node.
-  const int n = model_.StateCount();
-  if (rest_decay_shape_.size() != n || !(frame_excess_K > config_.cold_start_warm_frame_K)) {
+  const Eigen::VectorXd half_span_K = HalfRunSpan_K(frame_excess_K);
+  if (half_span_K.size() == 0) {
     observer_->InitialiseKnown(frame_degC, config_.cold_start_sd_K);
     return;
   }
-  const Eigen::VectorXd half_span_K = 0.5 * (rest_decay_shape_.array() - 1.0) * frame_excess_K;
+  const int n = model_.StateCount();
   const double sd2 = config_.cold_start_sd_K * config_.cold_start_sd_K;
   const Eigen::MatrixXd s_K2 =
       sd2 * Eigen::MatrixXd::Identity(n, n) + half_span_K * half_span_K.transpose();
@@ -396,9 +402,10 @@ void PumpEstimator::WidenForARun(double frame_excess_K) {
   // the voltage rows: their magnet is published with the nameplate's tolerance until a cold
   // start, which covers a warm rotor, and a rotor that open lets the run-up take the flux's
   // deficit for heat.
+  if (observer_->TakesVoltage()) return;
+  const Eigen::VectorXd half_span_K = HalfRunSpan_K(frame_excess_K);
+  if (half_span_K.size() == 0) return;
   const int n = model_.StateCount();
-  if (rest_decay_shape_.size() != n || !(frame_excess_K > config_.cold_start_warm_frame_K)) return;
-  const Eigen::VectorXd half_span_K = 0.5 * (rest_decay_shape_.array() - 1.0) * frame_excess_K;
   const Eigen::VectorXd x = observer_->State();  // copies: Restore starts the filter afresh
   Eigen::MatrixXd s = observer_->Covariance();
   s.topLeftCorner(n, n) += half_span_K * half_span_K.transpose();

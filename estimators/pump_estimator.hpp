@@ -339,6 +339,10 @@ class PumpEstimator {
   /// voltage reading).
   double UncalibratedMagnetSd_K() const;
   void PrepareReadings(const PumpPeriod& period);
+  /// Half of how much warmer than the frame each node may be, the frame `frame_excess_K` above
+  /// the ambient at rest after a run (the model's decay at rest); empty: none (the frame within
+  /// cold_start_warm_frame_K, or a model without that decay).
+  Eigen::VectorXd HalfRunSpan_K(double frame_excess_K) const;
   /// A cold start from the frame's reading and its excess over the ambient.
   void StartCold(double frame_degC, double frame_excess_K);
   /// At a warm start at rest, the slower nodes' sd widened by the model's decay at rest.
