@@ -911,9 +911,10 @@ bool PlausibleState(const PumpEstimatorState& state, const ThermalModel& model) 
   }
   const bool lag_saved =
       !std::isnan(state.taken_sensor_lag_s) || !std::isnan(state.taken_over_configured_lag_s);
-  if (lag_saved &&
-      !(state.taken_sensor_lag_s > 0.0 && state.taken_sensor_lag_s <= 3600.0 &&
-        state.taken_over_configured_lag_s >= 0.0 && state.taken_over_configured_lag_s <= 3600.0)) {
+  // The diagnosis names up to ten times the configured lag, beyond any lag a configuration takes.
+  if (lag_saved && !(state.taken_sensor_lag_s > 0.0 && std::isfinite(state.taken_sensor_lag_s) &&
+                     state.taken_over_configured_lag_s >= 0.0 &&
+                     std::isfinite(state.taken_over_configured_lag_s))) {
     return false;
   }
   const bool offset_saved = !std::isnan(state.sensor_offset_K);

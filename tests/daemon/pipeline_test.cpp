@@ -671,6 +671,10 @@ TEST(Pipeline, ALagTakenBeforeARestartIsReadAfterItWhileConfigured) {
     EXPECT_FALSE(set.bench->gateway_.pumps()[0]->snapshot().frame_sensor_lag_restored);
     EXPECT_EQ(lag_lines(set), 0);
   }
+  // A lag named ten times the configured one (the fit's range), beyond any configurable lag.
+  const Restarted far = restored(with_lag("[ 4000.0, 400.0 ]"), 400.0);
+  ASSERT_EQ(far.pumps, 1);
+  EXPECT_EQ(far.bench->gateway_.pumps()[0]->snapshot().frame_sensor_lag_s, 4000.0);
   // Damaged: one number, a lag of zero, a string. The pump starts afresh.
   for (const std::string bad : {"[ 86.0 ]", "[ 0.0, 30.0 ]", "\"86\""})
     EXPECT_EQ(restored(with_lag(bad), 30.0).pumps, 0) << bad;
