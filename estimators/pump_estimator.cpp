@@ -525,10 +525,14 @@ void PumpEstimator::AdoptNamedSensorLag() {
       f.value == estimate_.frame_sensor_lag_s) {
     return;
   }
-  if (!observer_->AdoptSensorLag(f.value)) return;
-  mismatch_.AdoptSensorLag(f.value);
-  estimate_.frame_sensor_lag_s = f.value;
-  estimate_.frame_sensor_lag_restored = false;
+  TakeSensorLag(f.value, false);
+}
+
+void PumpEstimator::TakeSensorLag(double lag_s, bool restored) {
+  if (!observer_->AdoptSensorLag(lag_s)) return;  // no lag state: the filter has none to set
+  mismatch_.AdoptSensorLag(lag_s);
+  estimate_.frame_sensor_lag_s = lag_s;
+  estimate_.frame_sensor_lag_restored = restored;
   ++estimate_.sensor_lag_changes;
 }
 
@@ -953,10 +957,12 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   }
   if (!x.allFinite() || !s.allFinite() || !InEstimateRange(x)) return false;
   // A lag taken before the restart is the sensor's while the configuration still says the lag
-  // it was taken over; read over the time down with it.
-  const bool lag_kept = whole && config_.adopt_named_sensor_lag && state.taken_sensor_lag_s > 0.0 &&
-                        state.taken_over_configured_lag_s == config_.frame_sensor_lag_s &&
-                        observer_->AdoptSensorLag(state.taken_sensor_lag_s);
+  // it was taken over; read over the time down with it (the mismatch test starts afresh below,
+  // with it).
+  if (whole && config_.adopt_named_sensor_lag && state.taken_sensor_lag_s > 0.0 &&
+      state.taken_over_configured_lag_s == config_.frame_sensor_lag_s) {
+    TakeSensorLag(state.taken_sensor_lag_s, true);
+  }
   // A calibration from a cold start holds only while the state that carries it was kept.
   const bool restored_whole = RestoreObserver(state, whole, gap_s, x, s);
   estimate_.calibrated_at_cold_start = restored_whole && state.cold_started;
@@ -972,12 +978,6 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   // The mismatch test starts afresh (learning) from the restored level, and with it the
   // inside-heat bound it latched.
   values_.ForgetInsideHeat();
-  if (lag_kept) {
-    mismatch_.AdoptSensorLag(state.taken_sensor_lag_s);
-    estimate_.frame_sensor_lag_s = state.taken_sensor_lag_s;
-    estimate_.frame_sensor_lag_restored = true;
-    ++estimate_.sensor_lag_changes;
-  }
   mismatch_.Initialise(n > 0 ? x(std::max(measured_state_, 0)) : 25.0,
                        static_cast<double>(now_us) * 1e-6);
   last_inputs_ = state.inputs;

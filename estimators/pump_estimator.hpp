@@ -330,6 +330,9 @@ class PumpEstimator {
   bool StartIfNeeded(const PumpPeriod& period);
   /// Takes a sensor lag the diagnosis named into the filter and the diagnosis.
   void AdoptNamedSensorLag();
+  /// Reads the frame sensor with `lag_s` from now, in the filter and the mismatch test (a filter
+  /// without a lag state: nothing); `restored`: the lag came from a saved state.
+  void TakeSensorLag(double lag_s, bool restored);
   /// The filter's psi0 is known more closely than the back-EMF line's nameplate anchor.
   bool FluxKnownBetterThanTheLine() const;
   /// Whether the back-EMF line's magnet is published without the voltage rows: its bias was

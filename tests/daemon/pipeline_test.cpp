@@ -640,10 +640,11 @@ TEST(Pipeline, ALagTakenBeforeARestartIsReadAfterItWhileConfigured) {
     r.bench->Run(10.0, 40.0);
     return r;
   };
-  const auto lag_lines = [](const Restarted& r) {
-    return std::count_if(r.lines.begin(), r.lines.end(), [](const std::string& l) {
-      return l.find("sensor read with a lag") != std::string::npos;
-    });
+  const auto is_lag_line = [](const std::string& l) {
+    return l.find("sensor read with a lag") != std::string::npos;
+  };
+  const auto lag_lines = [&](const Restarted& r) {
+    return std::count_if(r.lines.begin(), r.lines.end(), is_lag_line);
   };
 
   const Restarted kept = restored(with_lag("[ 86.0, 30.0 ]"), 30.0);
@@ -652,9 +653,7 @@ TEST(Pipeline, ALagTakenBeforeARestartIsReadAfterItWhileConfigured) {
   EXPECT_EQ(s.frame_sensor_lag_s, 86.0);
   EXPECT_TRUE(s.frame_sensor_lag_restored);
   ASSERT_EQ(lag_lines(kept), 1);
-  const std::string line = *std::find_if(kept.lines.begin(), kept.lines.end(), [](const auto& l) {
-    return l.find("sensor read with a lag") != std::string::npos;
-  });
+  const std::string line = *std::find_if(kept.lines.begin(), kept.lines.end(), is_lag_line);
   EXPECT_NE(line.find("tmp1: frame sensor read with a lag of 86 s as before the restart"),
             std::string::npos)
       << line;
