@@ -472,6 +472,7 @@ DaemonConfig ParseConfig(const std::string& text, const std::string& source) {
       pc.disturbance_states = r.Bool("disturbance_states", pc.disturbance_states);
       pc.disturbance_states_explicit = t->get("disturbance_states") != nullptr;
       pc.voltage_reading = r.Bool("voltage_reading", pc.voltage_reading);
+      pc.model_losses_sd_rel = r.Number("model_losses_sd_rel", pc.model_losses_sd_rel, 0.01, 1.0);
       pc.alarms = config.alarms;
       if (const toml::table* at = r.Table("alarms")) {
         TableReader ar(*at, r.Join("alarms"), source);

@@ -181,6 +181,10 @@ struct PumpConfig {
   /// the magnet from flux come out of the filter. It trusts the motor file's copper and magnet
   /// laws; false for a motor whose magnet law is not known.
   bool voltage_reading = true;
+  /// How far this pump's losses may be off the thermal model's at a start, relative (the filter's
+  /// loss scale; with the voltage rows the losses nothing measures: iron, friction): 0.1 for a
+  /// model checked against this pump's data, more for one that was not.
+  double model_losses_sd_rel = 0.1;
   AlarmsConfig alarms;  ///< the gateway's [alarms] with this pump's overrides
   int line = 0;         ///< line of the [[pump]] table
   /// Line of each key given in the [[pump]] table, for messages about its value.

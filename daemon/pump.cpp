@@ -35,6 +35,10 @@ estimators::PumpEstimatorConfig EstimatorConfig(const PumpConfig& c, double ther
   e.magnet.max_winding_gain = c.magnet_max_winding_gain;
   e.rotor_node = c.rotor_node;
   e.voltage.fuse = c.voltage_reading;
+  // The loss scale starts at the stated sd and may stay that wide (its stationary sd).
+  e.disturbance.loss_scale_initial_sd = c.model_losses_sd_rel;
+  e.disturbance.loss_scale_max_sd =
+      std::max(e.disturbance.loss_scale_max_sd, c.model_losses_sd_rel);
   e.alarms = c.alarms.monitor;
   for (const auto& [node, levels] : c.alarms.levels) e.levels[node] = levels.limits;
   e.period_s = thermal_period_s;

@@ -39,16 +39,16 @@ DisturbanceThermalSensor::DisturbanceThermalSensor(const ThermalModel& model,
       !(c.sensor_offset_sd_K > 0.0) || !(c.node_process_sd_K > 0.0) || !(c.frame_heat_sd_W > 0.0) ||
       !(c.rotor_heat_sd_W > 0.0) || !(c.rotor_heat_tau_s > 0.0) ||
       !(c.winding_measurement_sd_K > 0.0) || !(c.loss_scale_sd >= 0.0) ||
-      !(c.loss_scale_max_sd > 0.0) || !(c.copper_loss_sd_rel >= 0.0) || !(c.sd_floor_K >= 0.0) ||
-      !(c.initial_spread_sd_K > 0.0) || !(c.winding_bias_sd_K >= 0.0) ||
-      !(c.winding_bias_tau_s > 0.0) || !(c.magnet_bias_sd_K >= 0.0) ||
-      !(c.magnet_bias_tau_s > 0.0) || !(c.magnet_min_white_sd_K > 0.0) ||
-      !(c.sensor_step_gate_sd >= 0.0) || !(c.r0_sd_rel > 0.0) || !(c.psi0_sd_rel > 0.0) ||
-      !(c.calibration_walk_per_sqrt_h >= 0.0) || !(c.voltage_offset_sd_V > 0.0) ||
-      !(c.voltage_offset_tau_s > 0.0) || !(c.uq_min_sd_V > 0.0) || !(c.voltage_gate_sd >= 0.0) ||
-      !(c.line_voltage_error_sd_V >= 0.0) || !(c.line_voltage_error_tau_s > 0.0) ||
-      !(c.rotor_heat_found_sds >= 0.0) || !(c.free_flux_walk_per_sqrt_s >= 0.0) ||
-      !(c.uq_noise_learn_periods >= 0.0)) {
+      !(c.loss_scale_max_sd > 0.0) || !(c.loss_scale_initial_sd > 0.0) ||
+      !(c.copper_loss_sd_rel >= 0.0) || !(c.sd_floor_K >= 0.0) || !(c.initial_spread_sd_K > 0.0) ||
+      !(c.winding_bias_sd_K >= 0.0) || !(c.winding_bias_tau_s > 0.0) ||
+      !(c.magnet_bias_sd_K >= 0.0) || !(c.magnet_bias_tau_s > 0.0) ||
+      !(c.magnet_min_white_sd_K > 0.0) || !(c.sensor_step_gate_sd >= 0.0) || !(c.r0_sd_rel > 0.0) ||
+      !(c.psi0_sd_rel > 0.0) || !(c.calibration_walk_per_sqrt_h >= 0.0) ||
+      !(c.voltage_offset_sd_V > 0.0) || !(c.voltage_offset_tau_s > 0.0) || !(c.uq_min_sd_V > 0.0) ||
+      !(c.voltage_gate_sd >= 0.0) || !(c.line_voltage_error_sd_V >= 0.0) ||
+      !(c.line_voltage_error_tau_s > 0.0) || !(c.rotor_heat_found_sds >= 0.0) ||
+      !(c.free_flux_walk_per_sqrt_s >= 0.0) || !(c.uq_noise_learn_periods >= 0.0)) {
     throw std::invalid_argument(
         "disturbance sensor: standard deviations and times must be positive");
   }
@@ -187,7 +187,7 @@ void DisturbanceThermalSensor::InitialiseWith(double x0_degC, double common_sd_K
   sensor_model_.SetInitial(x0_degC, common_sd_K, spread_sd_K, c.sensor_offset_sd_K, x, s);
   s(df_, df_) = 1.0;  // W^2: a watt either way at the start
   if (dr_ >= 0) s(dr_, dr_) = c.rotor_heat_sd_W * c.rotor_heat_sd_W;
-  if (ls_ >= 0) s(ls_, ls_) = 0.01;  // 10 % either way at the start
+  if (ls_ >= 0) s(ls_, ls_) = c.loss_scale_initial_sd * c.loss_scale_initial_sd;
   if (wb_ >= 0) s(wb_, wb_) = c.winding_bias_sd_K * c.winding_bias_sd_K;
   if (mb_ >= 0) s(mb_, mb_) = c.magnet_bias_sd_K * c.magnet_bias_sd_K;
   if (mu_ >= 0) s(mu_, mu_) = c.line_voltage_error_sd_V * c.line_voltage_error_sd_V;

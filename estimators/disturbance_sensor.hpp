@@ -78,6 +78,12 @@ struct DisturbanceSensorConfig {
   /// s, and the interior's sd with it, grow without bound, and x + 2 sd reach a trip level on a
   /// healthy pump.
   double loss_scale_max_sd = 0.3;
+  /// sd of s at a start: how far this pump's losses may be off the model's before any reading
+  /// says so. A model whose losses were checked against this pump's data (docs/operator-guide.md,
+  /// commissioning) is known to about a tenth; one that was not may be off by half (iron losses
+  /// x1.5-2), and at a tenth the filter then puts the stator's extra heat on the frame path and
+  /// into R0, and the interior runs several kelvin cold inside a narrow band.
+  double loss_scale_initial_sd = 0.1;
   /// With the voltage rows: how far the copper loss may still be off, relative, at the loss
   /// scale's stationary sd (the rows measure the resistance; left are the skin and proximity
   /// losses a DC resistance misses, the winding's hot spot against its mean, and dR's own

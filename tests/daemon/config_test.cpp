@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include "daemon/pump.hpp"
+
 namespace pumptherm::daemon {
 namespace {
 
@@ -66,6 +68,28 @@ TEST(Config, ReceiveBufferRange) {
             "p.toml:3: key 'can[0].rx_buffer_bytes': -1 is outside [0, 268435456]");
   EXPECT_EQ(ErrorOf("[[can]]\ninterface = \"can0\"\nrx_buffer_bytes = 1.5e6\n"),
             "p.toml:3: key 'can[0].rx_buffer_bytes': expected an integer");
+}
+
+TEST(Config, ModelLossesSdReachesTheLossScaleAndIsRanged) {
+  const std::string pump = "[[pump]]\nname = \"p\"\nnode_id = 1\n";
+  const auto c = ParseConfig(pump + "model_losses_sd_rel = 0.3\n", "p.toml");
+  const estimators::PumpEstimatorConfig e = EstimatorConfig(c.pumps[0], 1.0);
+  EXPECT_DOUBLE_EQ(e.disturbance.loss_scale_initial_sd, 0.3);
+  EXPECT_DOUBLE_EQ(e.disturbance.loss_scale_max_sd, 0.3);
+  // The default: a model checked against this pump; the stationary sd stays the filter's own.
+  const estimators::PumpEstimatorConfig d =
+      EstimatorConfig(ParseConfig(pump, "p.toml").pumps[0], 1.0);
+  EXPECT_DOUBLE_EQ(d.disturbance.loss_scale_initial_sd, 0.1);
+  EXPECT_DOUBLE_EQ(d.disturbance.loss_scale_max_sd,
+                   estimators::DisturbanceSensorConfig{}.loss_scale_max_sd);
+  EXPECT_DOUBLE_EQ(
+      EstimatorConfig(ParseConfig(pump + "model_losses_sd_rel = 0.6\n", "p.toml").pumps[0], 1.0)
+          .disturbance.loss_scale_max_sd,
+      0.6);
+  EXPECT_EQ(ErrorOf(pump + "model_losses_sd_rel = 0\n"),
+            "p.toml:4: key 'pump[0].model_losses_sd_rel': 0 is outside [0.01, 1]");
+  EXPECT_EQ(ErrorOf(pump + "model_losses_sd_rel = 1.5\n"),
+            "p.toml:4: key 'pump[0].model_losses_sd_rel': 1.5 is outside [0.01, 1]");
 }
 
 TEST(Config, EmptyFileGivesDefaults) {
