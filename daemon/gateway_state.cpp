@@ -68,6 +68,8 @@ void InsertEstimate(const PumpSavedState& s, std::int64_t wall_offset_us, toml::
       t.insert("disturbance_frame_sensor_lag_s",
                toml::array{s.taken_sensor_lag_s, s.taken_over_configured_lag_s});
     }
+    // How far the losses were stated to be off the model's (absent in older files: 0.1).
+    if (!std::isnan(s.losses_sd_rel)) t.insert("disturbance_model_losses_sd_rel", s.losses_sd_rel);
   }
   // Per magnet hypothesis (steady, then drifting): x (4), P (16, row-major), probability,
   // consecutive rejections.
@@ -230,6 +232,11 @@ bool ReadDisturbances(const toml::table& t, int count, PumpSavedState& s) {
     if (!Numbers(t, "disturbance_frame_sensor_lag_s", 2, lag)) return false;
     s.taken_sensor_lag_s = lag[0];
     s.taken_over_configured_lag_s = lag[1];
+  }
+  if (t["disturbance_model_losses_sd_rel"]) {  // present: a positive number, else damaged
+    const auto sd = t["disturbance_model_losses_sd_rel"].value<double>();
+    if (!sd || !(*sd > 0.0) || !std::isfinite(*sd)) return false;
+    s.losses_sd_rel = *sd;
   }
   return true;
 }

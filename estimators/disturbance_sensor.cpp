@@ -591,6 +591,12 @@ void DisturbanceThermalSensor::ForgetVoltageNoise() {
   last_innovation_V_ = std::numeric_limits<double>::quiet_NaN();
 }
 
+void DisturbanceThermalSensor::WidenLossScale(double sd) {
+  if (ls_ < 0 || !(sd > 0.0)) return;
+  const double var = filter_.Covariance()(ls_, ls_);
+  if (sd * sd > var) filter_.AddVariance(ls_, sd * sd - var);
+}
+
 void DisturbanceThermalSensor::FreeMagnetLaw() {
   if (dr_state_ < 0 || law_free_) return;
   Eigen::VectorXd x = filter_.State();

@@ -275,6 +275,7 @@ class DisturbanceThermalSensor : public ThermalObserver {
   /// goes back to 0, with its prior variance plus its square, and the nodes' covariance takes
   /// the steady-state effect of the heat it had, so the rotor's sd covers what it had held.
   void FreeMagnetLaw() override;
+  void WidenLossScale(double sd) override;
   void RestoreMagnetLawGivenUp() override;
   Calibration VoltageCalibration() const override;
   double CalibrationCovariance(CalibrationEntry entry, const Eigen::VectorXd& w) const override;

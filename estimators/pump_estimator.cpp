@@ -883,6 +883,7 @@ PumpEstimatorState PumpEstimator::Save() const {
       s.taken_sensor_lag_s = estimate_.frame_sensor_lag_s;
       s.taken_over_configured_lag_s = config_.frame_sensor_lag_s;
     }
+    s.losses_sd_rel = config_.disturbance.loss_scale_initial_sd;
   }
   const auto& names = model_.StateNames();
   for (const auto& t : alarms_.LatchedTrips()) {
@@ -919,6 +920,10 @@ bool PlausibleState(const PumpEstimatorState& state, const ThermalModel& model) 
   if (lag_saved && !(state.taken_sensor_lag_s > 0.0 && std::isfinite(state.taken_sensor_lag_s) &&
                      state.taken_over_configured_lag_s >= 0.0 &&
                      std::isfinite(state.taken_over_configured_lag_s))) {
+    return false;
+  }
+  if (!std::isnan(state.losses_sd_rel) &&
+      !(state.losses_sd_rel > 0.0 && std::isfinite(state.losses_sd_rel))) {
     return false;
   }
   const bool offset_saved = !std::isnan(state.sensor_offset_K);
@@ -970,6 +975,13 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
     estimate_.magnet_law_suspect = true;
     observer_->RestoreMagnetLawGivenUp();
   }
+  // Losses stated to be further off the model's than when the state was saved: the operator's
+  // word for this pump's model, which the saved loss scale did not have.
+  const double stated = config_.disturbance.loss_scale_initial_sd;
+  const double saved = std::isnan(state.losses_sd_rel)
+                           ? DisturbanceSensorConfig{}.loss_scale_initial_sd
+                           : state.losses_sd_rel;
+  if (restored_whole && stated > saved) observer_->WidenLossScale(stated);
   estimate_.start = EstimateStart::kRestored;
   ++estimate_.starts;
   // The time the daemon was down is a telemetry silence: the load may have risen in it.

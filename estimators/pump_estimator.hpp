@@ -262,6 +262,10 @@ struct PumpEstimatorState {
   /// configured: a configuration changed since (to the lag named, or another) is the operator's.
   double taken_sensor_lag_s = std::numeric_limits<double>::quiet_NaN();
   double taken_over_configured_lag_s = std::numeric_limits<double>::quiet_NaN();
+  /// How far the losses were stated to be off the model's when it was saved (the loss scale's
+  /// start sd, DisturbanceSensorConfig::loss_scale_initial_sd; NaN: an older file, which had
+  /// 0.1). A configuration that states more since widens the restored loss scale to it.
+  double losses_sd_rel = std::numeric_limits<double>::quiet_NaN();
 };
 
 class PumpEstimator {

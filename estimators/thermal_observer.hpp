@@ -185,6 +185,9 @@ class ThermalObserver {
   /// Whether the magnet the voltage gives is calibrated (psi0 learnt against known
   /// temperatures), so that the voltage observes the rotor; until then it does not.
   virtual void SetMagnetObserved(bool observed) { (void)observed; }
+  /// Widens the loss scale's sd to at least `sd` (relative): losses stated to be further off the
+  /// model's than when the state was saved. Nothing for a filter without a loss scale.
+  virtual void WidenLossScale(double sd) { (void)sd; }
   /// The motor file's magnet law is wrong for this pump: from now on the voltage reads the
   /// winding through its resistance alone and leaves the magnet to the thermal model.
   virtual void FreeMagnetLaw() {}

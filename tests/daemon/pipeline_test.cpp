@@ -607,6 +607,34 @@ TEST(Pipeline, WhatTheFilterFoundAboutThePlantOutlivesARestart) {
   EXPECT_EQ(edited(-1.0, false), 0);
 }
 
+// The losses' stated sd is saved with the filter's state; a damaged value refuses that pump's
+// state, a file without it (written before the key) is read as 0.1.
+TEST(Pipeline, TheStatedLossesSdIsSavedAndAFileWithoutItIsRead) {
+  Bench b(Config("model_losses_sd_rel = 0.3\n"));
+  b.Run(60.0, 40.0);
+  const std::string text = b.gateway_.SaveState();
+  const std::string key = "disturbance_model_losses_sd_rel = ";
+  const auto at = text.find(key);
+  ASSERT_NE(at, std::string::npos) << text;
+  const auto line_end = text.find('\n', at);
+  EXPECT_NEAR(std::stod(text.substr(at + key.size(), line_end - at - key.size())), 0.3, 1e-12);
+  const auto restored = [&](const std::string& t) {
+    Bench r(Config("model_losses_sd_rel = 0.3\n"), b.truth_);
+    r.t_us_ = b.t_us_ + 5'000'000;
+    std::string warning;
+    return r.gateway_.RestoreState(t, r.t_us_, &warning);
+  };
+  EXPECT_EQ(restored(text), 1);
+  const auto with_value = [&](const std::string& value) {
+    std::string t = text;
+    return t.replace(at, line_end - at, value.empty() ? "" : key + value);
+  };
+  EXPECT_EQ(restored(with_value("")), 1) << "a file written before the key";
+  for (const char* damaged : {"-0.3", "\"0.3\"", "nan"}) {
+    EXPECT_EQ(restored(with_value(damaged)), 0) << damaged;
+  }
+}
+
 // A frame sensor lag the diagnosis named and the filter took is saved with the filter's state
 // and read again after a restart, said once in the journal, while the configuration still says
 // the lag it was taken over; once the configuration names a lag, that one is read.

@@ -211,4 +211,40 @@ TEST_F(PumpEstimatorTest, ASavedStateRestoredAtOnceGivesTheSameEstimate) {
   EXPECT_FALSE(b.Restore(other, s.time_us));
 }
 
+// The loss scale's start sd as the configuration states it (model_losses_sd_rel): a state saved
+// under 0.1 and restored where 0.3 is stated has its loss scale widened to 0.3, nothing else of it
+// changed; restored under the same statement, or from an older file under 0.1, it is as saved.
+TEST_F(PumpEstimatorTest, LossesStatedFurtherOffSinceTheSaveWidenTheRestoredLossScale) {
+  pe::PumpEstimatorConfig c;
+  c.magnet.magnet_node = "rotor";
+  pe::PumpEstimator a(c, motor_, model_);
+  for (int k = 1; k <= 600; ++k) {
+    a.OnFrameReading(static_cast<std::int64_t>(k) * 1'000'000 - 1, 25.0 + 0.02 * k);
+    a.Step(Period(k));
+  }
+  const pe::PumpEstimatorState s = a.Save();
+  ASSERT_DOUBLE_EQ(s.losses_sd_rel, 0.1);
+  const Eigen::MatrixXd& saved = a.observer().Covariance();
+  pe::PumpEstimatorConfig wider = c;
+  wider.disturbance.loss_scale_initial_sd = 0.3;
+  pe::PumpEstimator b(wider, motor_, model_), same(c, motor_, model_), older(c, motor_, model_);
+  ASSERT_TRUE(b.Restore(s, s.time_us));
+  const Eigen::MatrixXd diff = b.observer().Covariance() - saved;
+  Eigen::Index row = 0, col = 0;
+  const double grown = diff.cwiseAbs().maxCoeff(&row, &col);
+  EXPECT_EQ(row, col) << "one variance grew, no covariance";
+  EXPECT_LT(saved(row, row), 0.09) << "the saved loss scale narrower than stated now";
+  EXPECT_NEAR(b.observer().Covariance()(row, row), 0.09, 1e-12);
+  EXPECT_NEAR(diff.cwiseAbs().sum(), grown, 1e-12) << "nothing else changed";
+  ASSERT_TRUE(same.Restore(s, s.time_us));
+  EXPECT_EQ(same.observer().Covariance(), saved);
+  pe::PumpEstimatorState old_file = s;
+  old_file.losses_sd_rel = std::nan("");  // written before the key: 0.1
+  ASSERT_TRUE(older.Restore(old_file, s.time_us));
+  EXPECT_EQ(older.observer().Covariance(), saved);
+  pe::PumpEstimatorState damaged = s;
+  damaged.losses_sd_rel = -0.1;
+  EXPECT_FALSE(pe::PumpEstimator(c, motor_, model_).Restore(damaged, s.time_us));
+}
+
 }  // namespace
