@@ -316,6 +316,13 @@ JournalEntry StartEntry(std::string_view pump, const estimators::PumpEstimate& e
   std::string what;
   if (e.start == estimators::EstimateStart::kRestored) {
     what = "estimate restored from the saved state";
+    // What the filter had found about the losses stays; only their sd widens.
+    if (std::isfinite(e.losses_sd_widened_to)) {
+      what += fmt::format(
+          ", its loss scale widened to the {:g} now stated (model_losses_sd_rel; saved with {:g}); "
+          "what the filter had learnt stays, so it covers less than a start at {:g} would",
+          e.losses_sd_widened_to, e.losses_sd_widened_from, e.losses_sd_widened_to);
+    }
   } else {
     // A frame still warm from a run: the nodes that cool slower start warmer than it.
     const bool cold = e.start == estimators::EstimateStart::kCold;

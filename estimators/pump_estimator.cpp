@@ -981,7 +981,10 @@ bool PumpEstimator::Restore(const PumpEstimatorState& state, std::int64_t now_us
   const double saved = std::isnan(state.losses_sd_rel)
                            ? DisturbanceSensorConfig{}.loss_scale_initial_sd
                            : state.losses_sd_rel;
-  if (restored_whole && stated > saved) observer_->WidenLossScale(stated);
+  const bool widen = restored_whole && stated > saved;
+  if (widen) observer_->WidenLossScale(stated);
+  estimate_.losses_sd_widened_from = widen ? saved : kNaN;
+  estimate_.losses_sd_widened_to = widen ? stated : kNaN;
   estimate_.start = EstimateStart::kRestored;
   ++estimate_.starts;
   // The time the daemon was down is a telemetry silence: the load may have risen in it.

@@ -190,6 +190,11 @@ struct PumpEstimate {
   std::uint64_t sensor_lag_changes = 0;
   /// The lag taken came from a saved state (the run before the restart named it).
   bool frame_sensor_lag_restored = false;
+  /// At a restore where the configuration states the losses further off the model's than the
+  /// saved state did (model_losses_sd_rel): the sd it was saved with and the one the loss scale
+  /// was widened to; NaN otherwise.
+  double losses_sd_widened_from = std::numeric_limits<double>::quiet_NaN();
+  double losses_sd_widened_to = std::numeric_limits<double>::quiet_NaN();
   EstimateStart start = EstimateStart::kNone;
   /// R0 and psi0 (or, without the voltage rows, the back-EMF line's bias) were learnt at a cold
   /// start, in this run or the restored one's (docs/virtual-sensor.md).

@@ -299,6 +299,14 @@ TEST_F(AlarmJournal, AStartSaysWhetherTheCalibrationCameFromAColdStart) {
             "pump1: estimate restored from the saved state: this pump's R0 and psi0 are learnt "
             "from a cold start");
   EXPECT_EQ(Fields(e).at("START"), "restored");
+  // A configuration that states the losses further off than the saved state did.
+  s.losses_sd_widened_from = 0.1;
+  s.losses_sd_widened_to = 0.3;
+  e = StartEntry("pump1", s, false);
+  EXPECT_EQ(e.text,
+            "pump1: estimate restored from the saved state, its loss scale widened to the 0.3 now "
+            "stated (model_losses_sd_rel; saved with 0.1); what the filter had learnt stays, so "
+            "it covers less than a start at 0.3 would");
 }
 
 TEST_F(AlarmJournal, R0LinesSayTheResistanceLearntOrLostAgain) {

@@ -618,20 +618,34 @@ TEST(Pipeline, TheStatedLossesSdIsSavedAndAFileWithoutItIsRead) {
   ASSERT_NE(at, std::string::npos) << text;
   const auto line_end = text.find('\n', at);
   EXPECT_NEAR(std::stod(text.substr(at + key.size(), line_end - at - key.size())), 0.3, 1e-12);
+  // restored(TEXT): the pumps restored, and the journal's start line if one was written.
   const auto restored = [&](const std::string& t) {
     Bench r(Config("model_losses_sd_rel = 0.3\n"), b.truth_);
     r.t_us_ = b.t_us_ + 5'000'000;
-    std::string warning;
-    return r.gateway_.RestoreState(t, r.t_us_, &warning);
+    std::string warning, start_line;
+    const int pumps = r.gateway_.RestoreState(t, r.t_us_, &warning);
+    const LogCapture capture([&](LogLevel, std::string_view line) {
+      if (line.find("estimate restored") != std::string_view::npos) start_line = line;
+    });
+    r.Run(5.0, 40.0);
+    return std::make_pair(pumps, start_line);
   };
-  EXPECT_EQ(restored(text), 1);
+  const auto same = restored(text);
+  EXPECT_EQ(same.first, 1);
+  EXPECT_EQ(same.second.find("widened"), std::string::npos) << same.second;
   const auto with_value = [&](const std::string& value) {
     std::string t = text;
     return t.replace(at, line_end - at, value.empty() ? "" : key + value);
   };
-  EXPECT_EQ(restored(with_value("")), 1) << "a file written before the key";
+  const auto older = restored(with_value(""));
+  EXPECT_EQ(older.first, 1) << "a file written before the key";
+  EXPECT_NE(older.second.find("tmp1: estimate restored from the saved state, its loss scale "
+                              "widened to the 0.3 now stated (model_losses_sd_rel; saved with "
+                              "0.1)"),
+            std::string::npos)
+      << older.second;
   for (const char* damaged : {"-0.3", "\"0.3\"", "nan"}) {
-    EXPECT_EQ(restored(with_value(damaged)), 0) << damaged;
+    EXPECT_EQ(restored(with_value(damaged)).first, 0) << damaged;
   }
 }
 
