@@ -12,6 +12,8 @@
 ///   motor's rated speed), with the first line where it happens;
 /// - clocks that jump (stamps going back, whole-bus silences) and relative stamps;
 /// - the frame sensor's first-order lag fitted per pump (below);
+/// - the heat balance: the frame-path heat each pump's disturbance-state filter needed beyond
+///   the model, against the model's losses (much of it: model_losses_sd_rel = 0.3 proposed);
 /// - every warning the daemon logs on the recording, and the alarms it raises.
 /// The result is a short text report: findings marked "change" (the configuration does not fit
 /// the bus) or "note", each saying what to change.

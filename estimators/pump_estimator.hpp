@@ -312,6 +312,8 @@ class PumpEstimator {
   const PumpEstimatorCounters& counters() const { return counters_; }
   /// The observer the estimate is published from (whichever it is).
   const ThermalObserver& observer() const { return *observer_; }
+  /// The inputs of the last thermal step.
+  const ThermalInputs& last_inputs() const { return last_inputs_; }
   /// Whether it is the disturbance-state filter (the configuration's choice, resolved).
   bool disturbance_states() const { return disturbance_states_; }
   const ThermalModel& model() const { return model_; }

@@ -63,4 +63,67 @@ for pump in pump1 pump2; do
   fi
   grep -q "change: $pump: set frame_sensor_lag_s = " "$tmp/lag.txt" || { echo "FAIL: no change for $pump's lag"; fail=1; }
 done
+
+# The heat balance: beside a pump that matches the model, one whose iron makes 1.8 times the
+# model's losses (15 minutes at 21000 r/min, gas-load changes): its filter needs about 40 % of the
+# model's losses on the frame path, and model_losses_sd_rel = 0.3 is proposed for it alone.
+cat > "$tmp/losses.toml" <<'EOF'
+[scenario]
+name = "losses"
+description = "a pump whose iron makes 1.8 times the model's losses beside one that matches it"
+duration_s = 900
+seed = 7
+
+[defaults]
+model = "tmp-generic"
+motor = "han2019-tmp"
+interface = "can0"
+ambient_C = 22.0
+frame_sensor = { node = "frame", lag_s = 30.0 }
+drive = { magnet_node = "rotor" }
+
+[profile.gas]
+segments = [
+  { duration_s = 120, speed_rpm = 21000, iq_A = 3.0, iq_end_A = 3.0 },
+  { duration_s = 200, iq_A = 2.2, iq_end_A = 2.4 },
+  { duration_s = 260, iq_A = 3.4, iq_end_A = 3.2 },
+  { duration_s = 320, iq_A = 2.7, iq_end_A = 2.9 },
+]
+
+[[pump]]
+name = "nominal"
+node_id = 1
+profile = "gas"
+
+[[pump]]
+name = "iron"
+node_id = 2
+profile = "gas"
+effects = [ { name = "iron_loss_scale", values = [1.8] } ]
+EOF
+"$pumptherm" plant "$tmp/losses.toml" --out "$tmp/losses" --quiet || { echo "FAIL: plant losses"; exit 1; }
+cat > "$tmp/losses_pumpthermd.toml" <<'EOF'
+[[can]]
+interface = "can0"
+
+[[pump]]
+name = "nominal"
+node_id = 1
+frame_sensor_lag_s = 30.0
+magnet_node = "rotor"
+
+[[pump]]
+name = "iron"
+node_id = 2
+frame_sensor_lag_s = 30.0
+magnet_node = "rotor"
+EOF
+check=("$bin" --check-config "$tmp/losses_pumpthermd.toml" --against "$tmp/losses/losses.log" --no-lag-fit)
+expect 2 "change: iron: set model_losses_sd_rel = 0.3 \(in the \[\[pump\]\] of line 10\): the filter needed \+[3-5][0-9] % of the model's losses on the frame path" -- "${check[@]}"
+expect 2 "^  nominal +[-+][0-9.]+ W, [-+][0-9] % of [0-9.]+ W" -- "${check[@]}"
+"${check[@]}" > "$tmp/losses.txt" 2>&1
+if grep -q "change: nominal" "$tmp/losses.txt"; then echo "FAIL: a change proposed for the nominal pump"; fail=1; fi
+# Stated, it is not proposed again; the balance is still listed.
+echo 'model_losses_sd_rel = 0.3' >> "$tmp/losses_pumpthermd.toml"
+expect 0 "^  iron +\+[0-9.]+ W, \+[3-5][0-9] % of [0-9.]+ W" -- "${check[@]}"
 exit $fail
