@@ -226,15 +226,13 @@ class DisturbanceThermalSensor : public ThermalObserver {
   bool ModelsSensorLag() const override { return sensor_model_.has_lag(); }
   bool AdoptSensorLag(double lag_s) override;
   double FrameHeat_W() const override { return filter_.State()(df_); }
-  double FrameHeatSd_W() const override { return StateSd(df_); }
-  double LossScale() const override {
-    return ls_ >= 0 ? filter_.State()(ls_) : std::numeric_limits<double>::quiet_NaN();
-  }
-  double LossScaleSd() const override { return StateSd(ls_); }
   double RotorHeat_W() const override {
     return dr_ >= 0 ? filter_.State()(dr_) : std::numeric_limits<double>::quiet_NaN();
   }
-  double RotorHeatSd_W() const override { return StateSd(dr_); }
+  double RotorHeatSd_W() const override {
+    return dr_ >= 0 ? std::sqrt(std::max(filter_.Covariance()(dr_, dr_), 0.0))
+                    : std::numeric_limits<double>::quiet_NaN();
+  }
   bool EstimatesSensorOffset() const override { return true; }
   double SensorOffset_K() const override { return filter_.State()(sensor_model_.offset()); }
   double SensorOffsetSd_K() const override {
@@ -291,11 +289,6 @@ class DisturbanceThermalSensor : public ThermalObserver {
   FrameSensorModel sensor_model_;
   void BuildRows();
   void GaussMarkov(int state, double sd, double tau_s, double dt_s);
-  /// The sd of state `i` (NaN for a state the filter does not have, i < 0).
-  double StateSd(int i) const {
-    return i >= 0 ? std::sqrt(std::max(filter_.Covariance()(i, i), 0.0))
-                  : std::numeric_limits<double>::quiet_NaN();
-  }
   /// The time update of one period (false: refused, nothing changed).
   bool Predict(const ThermalInputs& in, double dt_s);
   /// Which readings of `r` enter this step's update.

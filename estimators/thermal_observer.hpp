@@ -175,13 +175,9 @@ class ThermalObserver {
     return std::numeric_limits<double>::quiet_NaN();
   }
 
-  /// The heat on the frame path the filter finds beyond the model's, W, and its sd; the losses'
-  /// relative error it finds (the loss scale s: the losses nothing measures are (1 + s) times the
-  /// model's), and its sd. NaN for a filter without such states.
+  /// The heat on the frame path the filter finds beyond the model's, W (NaN for a filter
+  /// without such a state).
   virtual double FrameHeat_W() const { return std::numeric_limits<double>::quiet_NaN(); }
-  virtual double FrameHeatSd_W() const { return std::numeric_limits<double>::quiet_NaN(); }
-  virtual double LossScale() const { return std::numeric_limits<double>::quiet_NaN(); }
-  virtual double LossScaleSd() const { return std::numeric_limits<double>::quiet_NaN(); }
   /// The heat inside the rotor the filter finds beyond the model's, W, and its sd (NaN for a
   /// filter without such a state).
   virtual double RotorHeat_W() const { return std::numeric_limits<double>::quiet_NaN(); }
